@@ -1,0 +1,23 @@
+"""From scene-linear values to display: exposure and the sRGB display transform."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) of linear values, clipped to [0, 1]."""
+    x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25) -> np.ndarray:
+    """Display-referred sRGB picture of a ground irradiance raster (rows, cols, 3).
+
+    The open-sky irradiance maps to ``1 / white`` of full scale, grey-balanced by its luminance,
+    so sunlit ground is a light grey and shade keeps its depth. [dimensionless]
+    """
+    unshadowed = np.asarray(unshadowed, dtype=np.float64)
+    luminance = float(unshadowed @ np.array([0.2126, 0.7152, 0.0722]))
+    scale = 1.0 / (white * luminance) if luminance > 0 else 1.0
+    return srgb_encode(np.asarray(irradiance, dtype=np.float32) * np.float32(scale))

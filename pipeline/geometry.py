@@ -1,0 +1,133 @@
+"""Units, the sky-plane mapping, the raster ``Grid`` and the unshadowed irradiance ``I0``.
+
+Conventions (DESIGN.md section 3): world axes x east, y north, z up; azimuth from north
+towards east; zenith angle ``theta`` from +z. Every planar raster is indexed ``[row, col]``
+with ``col`` growing with +x and ``row`` growing with -y (north-up), pixel centres at
+``origin + (col + 0.5, -(row + 0.5)) * pixel`` where ``origin`` is the north-west corner.
+
+The sky plane is ``z = 1``: a direction ``w`` maps to ``s = (wx / wz, wy / wz)``
+(Max 1991, Fig. 2), so ``|s| = tan(theta)`` and a solid-angle element is
+``d_omega = cos^3(theta) dA``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A north-up raster on a plane: ground, canopy or sky plane.
+
+    origin : (float, float) -- x and y of the north-west corner of pixel [0, 0].
+        [m] on the ground and canopy planes, [tan] (dimensionless) on the sky plane.
+    pixel : float -- side of a square pixel, in the units of ``origin``.
+    shape : (int, int) -- (rows, cols).
+    """
+
+    origin: tuple[float, float]
+    pixel: float
+    shape: tuple[int, int]
+
+    @classmethod
+    def from_window(cls, window, pixel: float) -> "Grid":
+        """The grid of pixel ``pixel`` [m] whose north-west corner is that of ``window``
+        ``(x_min, y_min, x_max, y_max)`` [m]; its size is the window's rounded to whole pixels."""
+        x_min, y_min, x_max, y_max = (float(v) for v in window)
+        cols = max(1, int(round((x_max - x_min) / pixel)))
+        rows = max(1, int(round((y_max - y_min) / pixel)))
+        return cls((x_min, y_max), float(pixel), (rows, cols))
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x_min, y_min, x_max, y_max) covered by the raster, in the units of ``origin``."""
+        x0, y0 = self.origin
+        rows, cols = self.shape
+        return (x0, y0 - rows * self.pixel, x0 + cols * self.pixel, y0)
+
+    def ground_from_raster(self, row, col):
+        """Plane coordinates (x, y) of fractional raster indices; integers give pixel centres."""
+        x = self.origin[0] + (np.asarray(col, dtype=np.float64) + 0.5) * self.pixel
+        y = self.origin[1] - (np.asarray(row, dtype=np.float64) + 0.5) * self.pixel
+        return x, y
+
+    def raster_from_ground(self, x, y):
+        """Fractional raster indices (row, col) of plane coordinates; inverse of ``ground_from_raster``."""
+        col = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.pixel - 0.5
+        row = (self.origin[1] - np.asarray(y, dtype=np.float64)) / self.pixel - 0.5
+        return row, col
+
+
+def lattice_offset(grid: Grid, lattice: Grid) -> tuple[int, int]:
+    """Whole-pixel position (row, col) of ``grid``'s pixel [0, 0] in ``lattice``'s indices.
+
+    Raises ValueError if the two grids do not share pixel size and pixel edges.
+    """
+    if not np.isclose(grid.pixel, lattice.pixel, rtol=1e-9):
+        raise ValueError(f"pixel sizes differ: {grid.pixel} and {lattice.pixel}")
+    col = (grid.origin[0] - lattice.origin[0]) / lattice.pixel
+    row = (lattice.origin[1] - grid.origin[1]) / lattice.pixel
+    if abs(col - round(col)) > 1e-6 or abs(row - round(row)) > 1e-6:
+        raise ValueError("grids are not aligned to the same pixel lattice")
+    return int(round(row)), int(round(col))
+
+
+def sky_plane_from_direction(azimuth, zenith):
+    """Sky-plane point s = tan(zenith) * (sin(azimuth), cos(azimuth)) of a direction.
+
+    azimuth : angle from north towards east. [rad]
+    zenith : angle from the zenith, below pi/2. [rad]
+    Returns (sx, sy). [tan]
+    """
+    t = np.tan(zenith)
+    return t * np.sin(azimuth), t * np.cos(azimuth)
+
+
+def direction_from_sky_plane(sx, sy):
+    """(azimuth, zenith) [rad] of the direction through sky-plane point (sx, sy) [tan]."""
+    azimuth = np.mod(np.arctan2(sx, sy), 2.0 * np.pi)
+    zenith = np.arctan(np.hypot(sx, sy))
+    return azimuth, zenith
+
+
+def cos4_antiderivative(x, y):
+    """F(x, y) with d2F/dx dy = 1 / (1 + x^2 + y^2)^2 = cos^4(theta), F(0, y) = F(x, 0) = 0.
+
+    The integral of cos^4(theta) dA over a sky-plane rectangle is the projected solid angle
+    (integral of cos(theta) d_omega) of that patch of sky. [sr]
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    rx = np.sqrt(1.0 + x * x)
+    ry = np.sqrt(1.0 + y * y)
+    return 0.5 * (x / rx * np.arctan(y / rx) + y / ry * np.arctan(x / ry))
+
+
+def projected_solid_angle(grid: Grid) -> np.ndarray:
+    """Exact projected solid angle of every cell of a sky-plane grid (float64, grid.shape). [sr]
+
+    Cell (r, c) weight is the integral of cos^4(theta) over the cell (Max 1991, eq. 1), so a sky
+    of uniform radiance L contributes exactly L times this to the unshadowed irradiance.
+    """
+    rows, cols = grid.shape
+    x0, y0 = grid.origin
+    xe = x0 + np.arange(cols + 1) * grid.pixel
+    ye = y0 - np.arange(rows + 1) * grid.pixel
+    f = cos4_antiderivative(xe[None, :], ye[:, None])
+    return f[:-1, 1:] - f[:-1, :-1] - f[1:, 1:] + f[1:, :-1]
+
+
+def unshadowed_fraction_square(alpha) -> np.ndarray:
+    """I0(alpha) = 4 sin(alpha) atan(sin(alpha)): projected solid angle of the sky square.
+
+    alpha : half-angle of the square on the sky plane, |s|_inf <= tan(alpha). [rad]
+    Returns the irradiance under a sky of radiance 1 restricted to the square (Max 1991,
+    section "Error analysis", Fig. 16); pi at alpha = pi/2. [sr]
+    """
+    sa = np.sin(alpha)
+    return 4.0 * sa * np.arctan(sa)
+
+
+I0 = unshadowed_fraction_square

@@ -1,0 +1,158 @@
+"""Sky models and their weighted sky-plane rasters ``e`` (Max 1991, eq. 1 and Fig. 6).
+
+A sky raster cell holds the integral of ``L(s) cos^4(theta) dA`` over the cell: radiance times
+projected solid angle, so that the unshadowed irradiance of the ground is the plain sum of the
+raster plus ``outside``, the irradiance of all the sky the raster does not cover. No hidden
+normalising factor: radiance in, irradiance [radiance x sr] out.
+
+Equirectangular skies (DESIGN.md section 3): the top row touches the zenith, the centre column
+looks north, east is at three quarters of the width, texel centres at
+``((col + 0.5) / width, (row + 0.5) / height)``. ``rotation`` turns the sky about the zenith
+towards the east: a feature at image azimuth ``phi`` is seen at azimuth ``phi + rotation``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import Grid, projected_solid_angle
+
+
+@dataclass(frozen=True)
+class SkyRaster:
+    """The weighted sky on a sky-plane grid.
+
+    grid : Grid -- sky-plane grid [tan]; cell (r, c) is the sky offset s = grid centre.
+    weighted : ndarray (channels, rows, cols) float32 -- radiance x projected solid angle per cell.
+    outside : ndarray (channels,) float64 -- irradiance of the sky outside the raster. [radiance x sr]
+    """
+
+    grid: Grid
+    weighted: np.ndarray
+    outside: np.ndarray
+
+    @property
+    def total(self) -> np.ndarray:
+        """Irradiance of the whole unshadowed sky per channel (float64). [radiance x sr]"""
+        return self.weighted.sum(axis=(1, 2), dtype=np.float64) + self.outside
+
+
+@dataclass(frozen=True)
+class UniformSky:
+    """A sky of the same radiance in every direction.
+
+    radiance : ndarray (3,) -- linear RGB radiance. [scene-linear radiance]
+    """
+
+    radiance: np.ndarray
+
+    def raster(self, grid: Grid) -> SkyRaster:
+        """Exact cell integrals of the uniform sky on ``grid``."""
+        radiance = np.asarray(self.radiance, dtype=np.float64)
+        weights = projected_solid_angle(grid)
+        weighted = (radiance[:, None, None] * weights[None]).astype(np.float32)
+        outside = radiance * np.pi - weighted.sum(axis=(1, 2), dtype=np.float64)
+        return SkyRaster(grid, weighted, outside)
+
+
+@dataclass(frozen=True)
+class EquirectSky:
+    """A sky from an equirectangular image (HDRI), texels taken as piecewise constant.
+
+    image : ndarray (height, width, 3) float32 -- linear RGB radiance, finite, not negative.
+    rotation : float -- turn about the zenith towards the east. [rad]
+    """
+
+    image: np.ndarray
+    rotation: float = 0.0
+
+    def total_irradiance(self) -> np.ndarray:
+        """Exact irradiance of the upper hemisphere of the piecewise-constant image. [radiance x sr]"""
+        height, width, _ = self.image.shape
+        theta0, theta1 = _row_bounds(height)
+        weight = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
+        rows = len(weight)
+        return np.einsum("r,rcn->n", weight, self.image[:rows].astype(np.float64))
+
+    def raster(self, grid: Grid) -> SkyRaster:
+        """Area-averaged resampling onto ``grid`` that keeps every texel's energy.
+
+        Each texel is cut into sub-texels no larger than half a cell on the sky plane; each
+        sub-texel's energy (radiance x its exact projected solid angle) is spread bilinearly
+        over the four nearest cells. A small bright sun keeps its energy exactly; what lands
+        off the grid is counted in ``outside``.
+        """
+        height, width, channels = self.image.shape
+        rows, cols = grid.shape
+        q = grid.pixel
+        x_min, y_min, x_max, y_max = grid.extent
+        reach = np.hypot(max(abs(x_min), abs(x_max)), max(abs(y_min), abs(y_max)))
+        theta_reach = np.arctan(reach)
+        accum = np.zeros((channels, rows * cols), dtype=np.float64)
+        step = 0.5 * q
+        theta0, theta1 = _row_bounds(height)
+        for row in range(len(theta0)):
+            if theta0[row] >= theta_reach:
+                break
+            t0 = np.tan(theta0[row])
+            t1 = np.tan(min(theta1[row], theta_reach))
+            n_theta = max(1, int(np.ceil((t1 - t0) / step)))
+            n_phi = max(1, int(np.ceil(t1 * (2.0 * np.pi / width) / step)))
+            edges = np.arctan(np.linspace(t0, t1, n_theta + 1))
+            centres = 0.5 * (np.tan(edges[:-1]) + np.tan(edges[1:]))
+            weight = 0.5 * (np.sin(edges[1:]) ** 2 - np.sin(edges[:-1]) ** 2) * (
+                2.0 * np.pi / (width * n_phi)
+            )
+            u = (np.arange(width * n_phi) + 0.5) / (width * n_phi)
+            phi = (u - 0.5) * 2.0 * np.pi + self.rotation
+            sx = centres[:, None] * np.sin(phi)[None, :]
+            sy = centres[:, None] * np.cos(phi)[None, :]
+            energy = np.repeat(self.image[row].astype(np.float64), n_phi, axis=0)  # (W*n_phi, C)
+            _splat_bilinear(accum, grid, sx, sy, weight[:, None], energy)
+        weighted = accum.reshape(channels, rows, cols).astype(np.float32)
+        outside = self.total_irradiance() - weighted.sum(axis=(1, 2), dtype=np.float64)
+        return SkyRaster(grid, weighted, outside)
+
+
+def _row_bounds(height: int):
+    """Zenith-angle bounds [rad] of the equirectangular rows that reach above the horizon."""
+    edges = np.arange(height + 1) * (np.pi / height)
+    upper = edges[:-1] < np.pi / 2
+    return edges[:-1][upper], np.minimum(edges[1:][upper], np.pi / 2)
+
+
+def _splat_bilinear(accum, grid: Grid, sx, sy, weight, energy):
+    """Add ``weight * energy`` at sky-plane points (sx, sy) to ``accum`` (channels, rows*cols),
+    spread bilinearly between the four nearest cell centres; shares off the grid are dropped."""
+    rows, cols = grid.shape
+    rowf, colf = grid.raster_from_ground(sx, sy)
+    r0 = np.floor(rowf)
+    c0 = np.floor(colf)
+    fr = rowf - r0
+    fc = colf - c0
+    r0 = r0.astype(np.int64)
+    c0 = c0.astype(np.int64)
+    for dr, dc, share in (
+        (0, 0, (1 - fr) * (1 - fc)),
+        (0, 1, (1 - fr) * fc),
+        (1, 0, fr * (1 - fc)),
+        (1, 1, fr * fc),
+    ):
+        r = r0 + dr
+        c = c0 + dc
+        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        if not inside.any():
+            continue
+        index = (r * cols + c)[inside]
+        base = (share * weight)[inside]
+        # which sub-texel column each point came from, for its radiance
+        col_of_point = np.broadcast_to(np.arange(sx.shape[1])[None, :], sx.shape)[inside]
+        for ch in range(accum.shape[0]):
+            accum[ch] += np.bincount(
+                index, weights=base * energy[col_of_point, ch], minlength=rows * cols
+            )
+
+
+MODELS = {"uniform": UniformSky, "hdri": EquirectSky}
