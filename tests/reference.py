@@ -81,6 +81,7 @@ def image_transmittance(image, *, center, size, outside=1.0, periodic=False):
     y1 = center[1] + size[1] / 2
 
     def f(x, y):
+        x, y = np.broadcast_arrays(x, y)
         c = np.floor((x - x0) / size[0] * cols).astype(np.int64)
         r = np.floor((y1 - y) / size[1] * rows).astype(np.int64)
         if periodic:
@@ -91,3 +92,40 @@ def image_transmittance(image, *, center, size, outside=1.0, periodic=False):
         return out
 
     return f
+
+
+def monte_carlo_patch(points, *, height, transmittance, azimuth, zenith, radiance, rays, rng):
+    """Irradiance at ground points from a patch of sky of constant radiance, sampling the patch.
+
+    azimuth, zenith : (low, high) bounds of the patch. [rad]
+    radiance : (channels,) radiance of the patch.
+    Directions uniform in solid angle over the patch: E = Omega * mean(L cos(theta) T). [radiance x sr]
+    """
+    points = np.asarray(points, dtype=np.float64)
+    n = points.shape[0]
+    phi = rng.uniform(azimuth[0], azimuth[1], (n, rays))
+    cos_theta = rng.uniform(np.cos(zenith[1]), np.cos(zenith[0]), (n, rays))
+    tan_theta = np.sqrt(1.0 - cos_theta**2) / cos_theta
+    omega = (azimuth[1] - azimuth[0]) * (np.cos(zenith[0]) - np.cos(zenith[1]))
+    x = points[:, 0:1] + height * tan_theta * np.sin(phi)
+    y = points[:, 1:2] + height * tan_theta * np.cos(phi)
+    t = transmittance(x, y)
+    return omega * (cos_theta * t).mean(axis=1)[:, None] * np.asarray(radiance)[None, :]
+
+
+def equirect_patch(width, height, *, azimuth, zenith, radiance, background=0.0):
+    """An equirectangular sky (height, width, 3) that is ``radiance`` over whole texels whose
+    centres fall in the azimuth and zenith bounds [rad], ``background`` elsewhere.
+    Centre column north, east at three quarters of the width, top row at the zenith.
+    Returns (image, the exact texel-aligned azimuth bounds, zenith bounds)."""
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    phi = (u - 0.5) * 2 * np.pi
+    theta = v * np.pi
+    cols = np.nonzero((phi >= azimuth[0]) & (phi <= azimuth[1]))[0]
+    rows = np.nonzero((theta >= zenith[0]) & (theta <= zenith[1]))[0]
+    image = np.full((height, width, 3), background, dtype=np.float32)
+    image[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1] = radiance
+    az = ((cols[0] / width) - 0.5) * 2 * np.pi, (((cols[-1] + 1) / width) - 0.5) * 2 * np.pi
+    zen = rows[0] * np.pi / height, (rows[-1] + 1) * np.pi / height
+    return image, az, zen

@@ -1,0 +1,221 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from pipeline import io
+from pipeline.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write_inputs(folder: Path):
+    """A small leafy mask PNG and a uniform sky EXR in ``folder``."""
+    rng = np.random.default_rng(0)
+    mask = np.where(rng.random((40, 40)) < 0.4, 0.0, 1.0).astype(np.float32)[..., None]
+    io.write_png(folder / "mask.png", mask)
+    io.write_exr(folder / "sky.exr", np.ones((32, 64, 3), np.float32))
+
+
+def base_config():
+    return {
+        "canopy": {"mask": "mask.png", "size": [4.0, 4.0], "center": [0.0, 0.0], "height": 3.0,
+                   "layout": "isolated"},
+        "sky": {"model": "uniform", "radiance": 1.0, "alpha": 80.0},
+        "ground": {"window": [-4, -4, 4, 4], "pixel": 0.1},
+    }
+
+
+def write_config(folder: Path, config, name="config.yaml") -> Path:
+    path = folder / name
+    path.write_text(yaml.safe_dump(config) if not isinstance(config, str) else config)
+    return path
+
+
+@pytest.fixture
+def inputs(tmp_path):
+    write_inputs(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    return tmp_path, out
+
+
+def test_ground_writes_exr_with_metadata_and_png(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    g = io.read_image(out / "g.exr")
+    assert g.shape == (80, 80, 3) and g.dtype == np.float32
+    attrs = io.read_attributes(out / "g.exr", ["sunshade:window", "sunshade:pixel_size",
+                                               "sunshade:config_hash"])
+    assert attrs["sunshade:window"] == pytest.approx((-4, -4, 4, 4))
+    assert attrs["sunshade:pixel_size"] == pytest.approx(0.1)
+    assert len(attrs["sunshade:config_hash"]) == 16
+    assert g.max() <= np.pi * 1.001 and g.min() < 0.9 * np.pi
+    png = io.read_image(out / "g.png")
+    assert png.shape == (80, 80, 3)
+    assert sorted(p.name for p in out.iterdir()) == ["g.exr", "g.png"]  # no temporaries left
+
+
+def test_uniform_hdri_config_equals_uniform_model(inputs):
+    folder, out = inputs
+    uniform = write_config(folder, base_config(), "u.yaml")
+    cfg = base_config()
+    cfg["sky"] = {"model": "hdri", "hdri": "sky.exr", "alpha": 80.0}
+    hdri = write_config(folder, cfg, "h.yaml")
+    assert main(["ground", str(uniform), "-o", str(out / "u.exr")]) == 0
+    assert main(["ground", str(hdri), "-o", str(out / "h.exr")]) == 0
+    a, b = io.read_image(out / "u.exr"), io.read_image(out / "h.exr")
+    assert np.abs(a / b - 1).max() < 0.005
+
+
+def test_config_hash_follows_the_inputs(inputs):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    main(["ground", str(config), "-o", str(out / "a.exr")])
+    io.write_png(folder / "mask.png", np.ones((40, 40, 1), np.float32))  # same config, new mask
+    main(["ground", str(config), "-o", str(out / "b.exr")])
+    names = ["sunshade:config_hash"]
+    assert io.read_attributes(out / "a.exr", names) != io.read_attributes(out / "b.exr", names)
+
+
+def test_layers_multiply(inputs):
+    folder, out = inputs
+    cfg = base_config()
+    cfg["canopy"]["layers"] = [{"height": 3.0}, {"height": 2.0, "center": [1.0, 0.0]}]
+    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "l.exr")]) == 0
+    single = base_config()
+    main(["ground", str(write_config(folder, single, "s.yaml")), "-o", str(out / "s.exr")])
+    assert io.read_image(out / "l.exr").mean() < io.read_image(out / "s.exr").mean()
+
+
+def set_key(config, dotted, value):
+    node = config
+    keys = dotted.split(".")
+    for key in keys[:-1]:
+        node = node[key]
+    if value is DELETE:
+        del node[keys[-1]]
+    else:
+        node[keys[-1]] = value
+    return config
+
+
+DELETE = object()
+
+BAD_CONFIGS = [
+    ("unknown top-level key", "colour", 3, "colour: unknown key"),
+    ("unknown canopy key", "canopy.hieght", 3.0, "canopy.hieght: unknown key"),
+    ("negative height", "canopy.height", -1.0, "canopy.height: must be above 0"),
+    ("zero height", "canopy.height", 0, "canopy.height: must be above 0"),
+    ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
+    ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
+    ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
+    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: uniform, hdri"),
+    ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
+    ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
+    ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
+    ("negative pixel", "ground.pixel", -0.1, "ground.pixel: must be above 0"),
+    ("huge window", "ground.pixel", 1e-5, "ground.pixel: the window would be"),
+    ("bad layout", "canopy.layout", "tiled", "canopy.layout: unknown value"),
+    ("negative radiance", "sky.radiance", [1, -1, 1], "sky.radiance: must not be negative"),
+    ("hdri key with uniform", "sky.hdri", "sky.exr", "sky.hdri: only used with model: hdri"),
+    ("size of zero", "canopy.size", [0, 4], "canopy.size: both sides must be above 0"),
+    ("NaN height", "canopy.height", float("nan"), "canopy.height: must be a finite number"),
+]
+
+
+@pytest.mark.parametrize("name,key,value,message", BAD_CONFIGS, ids=[b[0] for b in BAD_CONFIGS])
+def test_bad_config_exits_2_names_the_key_and_writes_nothing(inputs, capsys, name, key, value, message):
+    folder, out = inputs
+    config = write_config(folder, set_key(base_config(), key, value))
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert list(out.iterdir()) == []
+
+
+def test_error_names_the_yaml_line(inputs, capsys):
+    folder, out = inputs
+    text = "ground:\n  window: [-4, -4, 4, 4]\n  pixel: 0.1\ncanopy:\n  mask: mask.png\n  height: -2\n"
+    config = write_config(folder, text)
+    assert main(["ground", str(config), "-o", str(out / "g.exr")]) == 2
+    assert f"{config}:6: canopy.height" in capsys.readouterr().err
+
+
+BAD_FILES = [
+    ("corrupt mask", "canopy", {"mask": "corrupt.png"}, "corrupt.png"),
+    ("mask out of range", "canopy", {"mask": "bright.exr"}, "mask values must lie in [0, 1]"),
+    ("NaN in hdri", "sky", {"model": "hdri", "hdri": "nan.exr"}, "NaN"),
+    ("hdri not an image", "sky", {"model": "hdri", "hdri": "config.txt"}, "config.txt"),
+    ("periodic tile not whole pixels", "canopy", {"layout": "periodic", "size": [4.05, 4.0]},
+     "whole number of ground pixels"),
+    ("duplicate key", None, "ground:\n  pixel: 0.1\n  pixel: 0.2\n", "duplicate key"),
+    ("not a mapping", None, "- 1\n- 2\n", "must be a mapping"),
+    ("invalid yaml", None, "canopy: [1, 2\n", "not valid YAML"),
+    ("empty layers", "canopy", {"layers": []}, "canopy.layers: must be a non-empty list"),
+]
+
+
+@pytest.mark.parametrize("name,section,change,message", BAD_FILES, ids=[b[0] for b in BAD_FILES])
+def test_bad_input_file_exits_2_and_writes_nothing(inputs, capsys, name, section, change, message):
+    folder, out = inputs
+    (folder / "corrupt.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"garbage" * 20)
+    io.write_exr(folder / "bright.exr", np.full((8, 8, 1), 2.0, np.float32))
+    nan = np.ones((16, 32, 3), np.float32)
+    nan[3, 4, 1] = np.nan
+    io.write_exr(folder / "nan.exr", nan)
+    (folder / "config.txt").write_text("not an image")
+    if section is None:
+        config = write_config(folder, change)
+    else:
+        cfg = base_config()
+        if section == "sky":
+            cfg["sky"] = {"alpha": 80.0}
+        cfg[section].update(change)
+        config = write_config(folder, cfg)
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert list(out.iterdir()) == []
+
+
+def test_bad_output_paths(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    assert main(["ground", str(config), "-o", str(folder / "missing" / "g.exr")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    assert main(["ground", str(config), "-o", str(out / "g.png")]) == 2
+    assert "must be a .exr file" in capsys.readouterr().err
+    assert main(["ground", str(folder / "absent.yaml"), "-o", str(out / "g.exr")]) == 2
+    assert "cannot read the config" in capsys.readouterr().err
+    if os.geteuid() != 0:  # root writes anywhere
+        locked = folder / "locked"
+        locked.mkdir(mode=0o500)
+        assert main(["ground", str(config), "-o", str(locked / "g.exr")]) == 2
+    assert list(out.iterdir()) == []
+
+
+def test_shipped_example_config_is_valid():
+    from pipeline.config import load_config
+
+    config = load_config(ROOT / "configs" / "ground.yaml")
+    assert config.sky.model == "hdri" and config.canopy.layers[0].mask.is_file()
+
+
+def test_console_script_runs_as_a_real_process(inputs):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    done = subprocess.run([sys.executable, "-m", "pipeline.cli", "ground", str(config), "-o",
+                           str(out / "g.exr")], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    bad = write_config(folder, set_key(base_config(), "canopy.height", -1), "bad.yaml")
+    done = subprocess.run([sys.executable, "-m", "pipeline.cli", "ground", str(bad), "-o",
+                           str(out / "h.exr")], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 2 and "canopy.height" in done.stderr
+    assert not (out / "h.exr").exists()

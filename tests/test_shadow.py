@@ -1,0 +1,203 @@
+import numpy as np
+import pytest
+
+from pipeline import canopy, shadow
+from pipeline.geometry import Grid
+from pipeline.sky import EquirectSky, SkyRaster, UniformSky
+
+from reference import (
+    direct_sum,
+    equirect_patch,
+    image_transmittance,
+    monte_carlo_irradiance,
+    monte_carlo_patch,
+)
+
+
+def random_case(rng, channels):
+    """A small random window, canopy position and size, and a sky square that may crop."""
+    p, h = 0.5, 2.0
+    window = Grid((0.0, 0.0), p, (int(rng.integers(3, 9)), int(rng.integers(3, 9))))
+    start = (int(rng.integers(-4, 6)), int(rng.integers(-4, 6)))
+    shape = (int(rng.integers(2, 7)), int(rng.integers(2, 7)))
+    canopy_grid = Grid((start[1] * p, -start[0] * p), p, shape)
+    alpha = np.arctan(rng.uniform(0.5, 6) * p / h)
+    half = shadow.sky_half_cells(h, p, alpha)
+    full = shadow.sky_grid((-half, -half), (2 * half + 1, 2 * half + 1), p / h)
+    e = rng.random((channels, 2 * half + 1, 2 * half + 1)).astype(np.float32)
+    mask = rng.random(shape).astype(np.float32)
+    return window, canopy_grid, start, h, alpha, half, full, e, mask
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_isolated_fft_equals_direct_sum(channels):
+    rng = np.random.default_rng(10 + channels)
+    for _ in range(5):
+        window, canopy_grid, start, h, alpha, half, full, e, mask = random_case(rng, channels)
+        plan = shadow.plan_isolated(window, canopy_grid, height=h, alpha=alpha)
+        outside = rng.random(channels)
+        if plan.sky is None:
+            sub_grid, sub = shadow.sky_grid((0, 0), (1, 1), full.pixel), np.zeros((channels, 1, 1), np.float32)
+        else:
+            sub_grid = plan.sky
+            r0 = round(0.5 - sub_grid.origin[1] / sub_grid.pixel) + half
+            c0 = round(sub_grid.origin[0] / sub_grid.pixel + 0.5) + half
+            sub = np.ascontiguousarray(e[:, r0 : r0 + sub_grid.shape[0], c0 : c0 + sub_grid.shape[1]])
+        rest = outside + e.sum(axis=(1, 2), dtype=np.float64) - sub.sum(axis=(1, 2), dtype=np.float64)
+        sky = SkyRaster(sub_grid, sub, rest)
+        g = shadow.ground_isolated(sky, shadow.occlusion_spectrum(1 - mask, plan), plan)
+        reference = direct_sum(e, (-half, -half), mask, start, window.shape, 1.0)
+        reference += outside[:, None, None]
+        assert g.dtype == np.float32 and g.shape == (channels,) + window.shape
+        assert np.abs(g - reference).max() <= 1e-5 * reference.max()
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_periodic_fft_equals_direct_sum(channels):
+    rng = np.random.default_rng(20 + channels)
+    for _ in range(5):
+        window, tile, start, h, alpha, half, full, e, mask = random_case(rng, channels)
+        plan = shadow.plan_periodic(window, tile, height=h, alpha=alpha)
+        outside = rng.random(channels)
+        g = shadow.ground_periodic(SkyRaster(full, e, outside), shadow.transmittance_spectrum(mask),
+                                   plan, float(mask.mean()))
+        reference = direct_sum(e, (-half, -half), mask, start, window.shape, None)
+        reference += outside[:, None, None] * mask.mean()
+        assert np.abs(g - reference).max() <= 1e-5 * reference.max()
+
+
+def test_fold_accumulates_modulo_the_period():
+    rng = np.random.default_rng(5)
+    e = rng.random((2, 11, 7))
+    start, period = (-5, -3), (4, 3)
+    folded = shadow.fold(e, start, period)
+    expected = np.zeros((2,) + period)
+    for r in range(11):
+        for c in range(7):
+            expected[:, (start[0] + r) % 4, (start[1] + c) % 3] += e[:, r, c]
+    assert np.allclose(folded, expected)
+
+
+def test_open_sky_of_radiance_one_gives_pi():
+    window = Grid.from_window((-5, -5, 5, 5), 0.1)
+    sky = UniformSky(np.ones(3))
+    open_mask = np.ones((40, 40), np.float32)
+    occlusion, grid = canopy.occlusion_on_lattice(open_mask, center=(0, 0), size=(4, 4), lattice=window)
+    plan = shadow.plan_isolated(window, grid, height=3.0, alpha=np.radians(80))
+    g = shadow.ground_isolated(sky.raster(plan.sky), shadow.occlusion_spectrum(occlusion, plan), plan)
+    assert np.abs(g / np.pi - 1).max() < 0.005
+    tile, grid = canopy.tile_on_lattice(open_mask, center=(0, 0), size=(4, 4), lattice=window)
+    pplan = shadow.plan_periodic(window, grid, height=3.0, alpha=np.radians(80))
+    g = shadow.ground_periodic(sky.raster(pplan.sky), shadow.transmittance_spectrum(tile), pplan, 1.0)
+    assert np.abs(g / np.pi - 1).max() < 0.005
+
+
+def test_periodic_tile_mean_is_total_sky_times_mean_transmittance():
+    rng = np.random.default_rng(6)
+    window = Grid.from_window((0, 0, 6.4, 6.4), 0.1)  # exactly one 64 x 64 tile
+    mask = rng.random((32, 32)).astype(np.float32) ** 3
+    tile, grid = canopy.tile_on_lattice(mask, center=(3.2, 3.2), size=(6.4, 6.4), lattice=window)
+    plan = shadow.plan_periodic(window, grid, height=4.0, alpha=np.radians(75))
+    image = rng.random((64, 128, 3)).astype(np.float32)
+    sky = EquirectSky(image).raster(plan.sky)
+    g = shadow.ground_periodic(sky, shadow.transmittance_spectrum(tile), plan, float(tile.mean()))
+    assert g.mean(axis=(1, 2)) == pytest.approx(sky.total * tile.mean(), rel=1e-5)
+
+
+def test_layers_combine_by_the_product_rule():
+    rng = np.random.default_rng(7)
+    i0 = np.array([3.0, 2.0, 1.0])
+    a = rng.random((3, 4, 5)).astype(np.float32) * i0[:, None, None]
+    b = rng.random((3, 4, 5)).astype(np.float32) * i0[:, None, None]
+    open_layer = np.broadcast_to(i0[:, None, None], a.shape).astype(np.float32)
+    assert np.allclose(shadow.combine_layers([a, open_layer], i0), a)
+    assert np.allclose(shadow.combine_layers([a, b], i0), a * b / i0[:, None, None])
+    assert np.allclose(shadow.combine_layers([a], i0), a)
+
+
+def ground_from_hdri(image, mask, *, center, size, height, window, alpha=np.radians(85)):
+    """Ground irradiance (channels, rows, cols) of an isolated canopy under an equirect sky."""
+    occlusion, grid = canopy.occlusion_on_lattice(mask, center=center, size=size, lattice=window)
+    plan = shadow.plan_isolated(window, grid, height=height, alpha=alpha)
+    sky = EquirectSky(image).raster(plan.sky)
+    return shadow.ground_isolated(sky, shadow.occlusion_spectrum(occlusion, plan), plan)
+
+
+def test_low_sun_in_the_east_throws_the_shadow_west_in_world_coordinates():
+    # a bright patch of sky 30 degrees above the eastern horizon, an opaque 2 m square at 8 m
+    image, az, zen = equirect_patch(1024, 512, azimuth=(np.radians(88), np.radians(92)),
+                                    zenith=(np.radians(58), np.radians(62)), radiance=100.0)
+    h, p = 8.0, 0.1
+    mask = np.zeros((20, 20), np.float32)
+    window = Grid.from_window((-20, -4, 4, 4), p)
+    g = ground_from_hdri(image, mask, center=(0, 0), size=(2, 2), height=h, window=window)
+    # the shadow is the deficit from the open-sky value, along the row through y = 0
+    rows, cols = window.shape
+    x, _ = window.ground_from_raster(np.zeros(cols), np.arange(cols))
+    deficit = g[0].max() - g[0, rows // 2]
+    shadow_x = (deficit * x).sum() / deficit.sum()
+    # independent: rays traced from world points to the patch through the square
+    points = np.stack([x, np.zeros_like(x)], axis=1)
+    square = image_transmittance(mask, center=(0, 0), size=(2, 2))
+    mc = monte_carlo_patch(points, height=h, transmittance=square, azimuth=az, zenith=zen,
+                           radiance=[100.0], rays=20000, rng=np.random.default_rng(0))[:, 0]
+    open_patch = 100.0 * (az[1] - az[0]) * 0.5 * (np.sin(zen[1]) ** 2 - np.sin(zen[0]) ** 2)
+    mc_deficit = open_patch - mc
+    mc_x = (mc_deficit * x).sum() / mc_deficit.sum()
+    expected = -h * np.tan(np.mean(zen))
+    assert shadow_x < -10  # west
+    assert abs(shadow_x - mc_x) < p
+    assert abs(shadow_x - expected) < p
+    # and north-south: a patch in the south throws the shadow north
+    image_s, az_s, zen_s = equirect_patch(1024, 512, azimuth=(np.radians(178), np.radians(182)),
+                                          zenith=(np.radians(43), np.radians(47)), radiance=100.0)
+    window_ns = Grid.from_window((-4, -4, 4, 12), p)
+    g = ground_from_hdri(image_s, mask, center=(0, 0), size=(2, 2), height=h, window=window_ns)
+    _, y = window_ns.ground_from_raster(np.arange(window_ns.shape[0]), np.zeros(window_ns.shape[0]))
+    deficit = g[0].max() - g[0, :, window_ns.shape[1] // 2]
+    assert (deficit * y).sum() / deficit.sum() == pytest.approx(h * np.tan(np.mean(zen_s)), abs=p)
+
+
+def smooth_gradient_sky(azimuth, zenith):
+    """A smooth sky: brighter towards the horizon and towards the south-east. [radiance]"""
+    base = 0.6 + 0.8 * (1 - np.cos(zenith)) + 0.3 * np.sin(zenith) * np.cos(azimuth - np.radians(135))
+    return np.stack([base, 1.1 * base, 1.4 * base], axis=-1)
+
+
+def equirect_of(function, width, height):
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    zen, az = np.meshgrid(v * np.pi, (u - 0.5) * 2 * np.pi, indexing="ij")
+    return function(az, zen).astype(np.float32)
+
+
+@pytest.mark.parametrize("sky_name", ["uniform", "gradient"])
+def test_leafy_canopy_matches_world_monte_carlo_within_one_percent(sky_name):
+    rng = np.random.default_rng(8)
+    h, p = 8.0, 0.1
+    # 20 m of leaves: random blobs, texels of the ground pixel
+    n = 200
+    yy, xx = np.mgrid[0:n, 0:n]
+    mask = np.ones((n, n), np.float32)
+    for cx, cy, r in zip(rng.uniform(20, 180, 150), rng.uniform(20, 180, 150), rng.uniform(2, 9, 150)):
+        mask[(xx - cx) ** 2 + (yy - cy) ** 2 < r * r] *= 0.3
+    window = Grid.from_window((-20, -20, 20, 20), p)
+    if sky_name == "uniform":
+        radiance = lambda az, zen: np.ones(np.shape(az) + (1,))  # noqa: E731
+        image = np.ones((256, 512, 3), np.float32)
+    else:
+        radiance = smooth_gradient_sky
+        image = equirect_of(smooth_gradient_sky, 1024, 512)
+    g = ground_from_hdri(image, mask, center=(0, 0), size=(20, 20), height=h, window=window)
+    # Monte Carlo at 60 ground pixels, each averaged over its area by jittered ray origins
+    pick = rng.integers(0, window.shape[0], (60, 2))
+    rays = 128 * 128
+    cx, cy = window.ground_from_raster(pick[:, 0], pick[:, 1])
+    jitter = rng.uniform(-p / 2, p / 2, (60, rays, 2))
+    origins = np.stack([cx, cy], axis=1)[:, None, :] + jitter
+    leaves = image_transmittance(mask, center=(0, 0), size=(20, 20))
+    mc = monte_carlo_irradiance(origins, height=h, transmittance=leaves, radiance=radiance,
+                                rays=rays, rng=rng)
+    ours = g[:, pick[:, 0], pick[:, 1]].T[:, : mc.shape[1]]
+    relative_rms = np.sqrt(np.mean((ours - mc) ** 2)) / np.mean(mc)
+    assert relative_rms < 0.01
