@@ -91,6 +91,7 @@ class EquirectSky:
         reach = np.hypot(max(abs(x_min), abs(x_max)), max(abs(y_min), abs(y_max)))
         theta_reach = np.arctan(reach)
         accum = np.zeros((channels, rows * cols), dtype=np.float64)
+        pending: list = []
         step = 0.5 * q
         theta0, theta1 = _row_bounds(height)
         for row in range(len(theta0)):
@@ -109,8 +110,12 @@ class EquirectSky:
             phi = (u - 0.5) * 2.0 * np.pi + self.rotation
             sx = centres[:, None] * np.sin(phi)[None, :]
             sy = centres[:, None] * np.cos(phi)[None, :]
-            energy = np.repeat(self.image[row].astype(np.float64), n_phi, axis=0)  # (W*n_phi, C)
-            _splat_bilinear(accum, grid, sx, sy, weight[:, None], energy)
+            index, share, sub_row, sub_col = _bilinear_shares(grid, sx, sy)
+            texel = self.image[row, sub_col // n_phi].astype(np.float64)  # (deposits, C)
+            pending.append((index, texel * (share * weight[sub_row])[:, None]))
+            if sum(len(i) for i, _ in pending) > 1 << 22:
+                _flush(accum, pending)
+        _flush(accum, pending)
         weighted = accum.reshape(channels, rows, cols).astype(np.float32)
         outside = self.total_irradiance() - weighted.sum(axis=(1, 2), dtype=np.float64)
         return SkyRaster(grid, weighted, outside)
@@ -123,36 +128,41 @@ def _row_bounds(height: int):
     return edges[:-1][upper], np.minimum(edges[1:][upper], np.pi / 2)
 
 
-def _splat_bilinear(accum, grid: Grid, sx, sy, weight, energy):
-    """Add ``weight * energy`` at sky-plane points (sx, sy) to ``accum`` (channels, rows*cols),
-    spread bilinearly between the four nearest cell centres; shares off the grid are dropped."""
+def _bilinear_shares(grid: Grid, sx, sy):
+    """Bilinear deposits of sky-plane points (sx, sy) (2-D arrays) on the cells of ``grid``.
+
+    Returns the flat cell index, the share (the four shares of a point sum to 1), and the row and
+    column of the point each deposit came from; shares falling off the grid are left out.
+    """
     rows, cols = grid.shape
     rowf, colf = grid.raster_from_ground(sx, sy)
     r0 = np.floor(rowf)
     c0 = np.floor(colf)
-    fr = rowf - r0
-    fc = colf - c0
-    r0 = r0.astype(np.int64)
-    c0 = c0.astype(np.int64)
+    fr, fc = rowf - r0, colf - c0
+    r0, c0 = r0.astype(np.int64), c0.astype(np.int64)
+    point_row, point_col = np.indices(sx.shape)
+    parts = []
     for dr, dc, share in (
         (0, 0, (1 - fr) * (1 - fc)),
         (0, 1, (1 - fr) * fc),
         (1, 0, fr * (1 - fc)),
         (1, 1, fr * fc),
     ):
-        r = r0 + dr
-        c = c0 + dc
+        r, c = r0 + dr, c0 + dc
         inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        if not inside.any():
-            continue
-        index = (r * cols + c)[inside]
-        base = (share * weight)[inside]
-        # which sub-texel column each point came from, for its radiance
-        col_of_point = np.broadcast_to(np.arange(sx.shape[1])[None, :], sx.shape)[inside]
-        for ch in range(accum.shape[0]):
-            accum[ch] += np.bincount(
-                index, weights=base * energy[col_of_point, ch], minlength=rows * cols
-            )
+        parts.append((r[inside] * cols + c[inside], share[inside], point_row[inside], point_col[inside]))
+    return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
+def _flush(accum, pending: list) -> None:
+    """Add the pending (flat index, values (n, channels)) deposits to ``accum`` and empty the list."""
+    if not pending:
+        return
+    index = np.concatenate([i for i, _ in pending])
+    values = np.concatenate([v for _, v in pending])
+    for ch in range(accum.shape[0]):
+        accum[ch] += np.bincount(index, weights=values[:, ch], minlength=accum.shape[1])
+    pending.clear()
 
 
 MODELS = {"uniform": UniformSky, "hdri": EquirectSky}
