@@ -1,0 +1,327 @@
+"""Topocentric sun and moon: positions, angular radii, eclipse obscuration and contact times.
+
+Positions come from PyEphem (``ephem``, libastro; offline, no data download). Conventions
+(DESIGN.md section 3): radians everywhere, azimuth from north towards east, elevation from the
+horizon. Elevations are *geometric* topocentric ones: the observer's pressure is set to 0 so
+that ephem applies no atmospheric refraction, and the sun and moon keep their true shapes and
+relative positions (refraction would lift both by about the same amount and squash the discs
+near the horizon, which the renderer does not model).
+
+Angular radii are computed here, not taken from ephem, from the topocentric distances ephem
+gives and the radii adopted for eclipse predictions (Espenak & Meeus 2006, *Five Millennium
+Canon of Solar Eclipses*, NASA/TP-2006-214141, section 1.2): the sun's radius is 959.63 arcsec
+at 1 au, the moon's is k = 0.2725076 Earth equatorial radii (its mean limb, used there for the
+partial-phase contacts). One radius per body is used for every contact and for the obscured
+fraction, so ``obscured_fraction`` is exactly 1 between the C2 and C3 that ``contact_times``
+returns. The lunar limb profile (valleys, mountains; a few seconds at C2 and C3) is ignored.
+
+Times are UTC, taken as UT1 (|UT1 - UTC| < 0.9 s). ephem's own Delta T = TT - UT model is used;
+in ephem 4.2.1 it is an extrapolation after about 2017 (72.4 s for 2024 April 8 against the
+observed 69.2 s), which makes 2024 contacts about 3 s early. Accuracy of contact times against
+published local circumstances: a few seconds (tests/test_ephemeris.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+
+import ephem
+import numpy as np
+from scipy.optimize import brentq, minimize_scalar
+
+AU = 149_597_870_700.0
+"""Astronomical unit (IAU 2012 resolution B2). [m]"""
+
+SUN_RADIUS = AU * np.sin(np.deg2rad(959.63 / 3600.0))
+"""Solar radius giving 959.63 arcsec at 1 au, the eclipse-prediction value (Espenak & Meeus 2006). [m]"""
+
+EARTH_EQUATORIAL_RADIUS = 6_378_137.0
+"""WGS84 / IERS equatorial radius of the Earth. [m]"""
+
+MOON_RADIUS = 0.2725076 * EARTH_EQUATORIAL_RADIUS
+"""Mean lunar radius k = 0.2725076 Earth radii (IAU 1982; Espenak & Meeus 2006). [m]"""
+
+_EPHEM_EPOCH = datetime(1899, 12, 31, 12, 0, 0, tzinfo=timezone.utc)  # ephem.Date(0)
+_SECONDS_PER_DAY = 86400.0
+_CONTACTS = ("C1", "C2", "C3", "C4")
+
+
+@dataclass(frozen=True)
+class Site:
+    """A place on the Earth.
+
+    latitude : geodetic latitude, north positive, in [-pi/2, pi/2]. [rad]
+    longitude : longitude, east positive (Dallas is about -1.689). [rad]
+    elevation : height above mean sea level. [m]
+    """
+
+    latitude: float
+    longitude: float
+    elevation: float = 0.0
+
+    def __post_init__(self):
+        for name in ("latitude", "longitude", "elevation"):
+            value = getattr(self, name)
+            if not np.isfinite(value):
+                raise ValueError(f"Site.{name} must be finite, got {value!r}")
+        if abs(self.latitude) > np.pi / 2:
+            raise ValueError(
+                f"Site.latitude must lie in [-pi/2, pi/2] rad, got {self.latitude!r} "
+                "(use Site.from_degrees for degrees)"
+            )
+
+    @classmethod
+    def from_degrees(cls, latitude: float, longitude: float, elevation: float = 0.0) -> "Site":
+        """The site at ``latitude`` [deg] (north positive), ``longitude`` [deg] (east positive)
+        and ``elevation`` [m] above sea level; the config boundary, where degrees are allowed."""
+        return cls(float(np.deg2rad(latitude)), float(np.deg2rad(longitude)), float(elevation))
+
+
+@dataclass(frozen=True)
+class BodyPosition:
+    """Where a body's disc is on the observer's sky.
+
+    azimuth : direction of the centre, from north towards east, in [0, 2 pi). [rad]
+    elevation : topocentric elevation of the centre above the horizon, without refraction. [rad]
+    angular_radius : topocentric angular radius of the disc, arcsin(R / distance). [rad]
+    """
+
+    azimuth: float
+    elevation: float
+    angular_radius: float
+
+
+def _utc(when: datetime, name: str = "when") -> datetime:
+    """``when`` converted to UTC; ValueError for a naive datetime."""
+    if not isinstance(when, datetime):
+        raise TypeError(f"{name} must be a datetime, got {type(when).__name__}")
+    if when.tzinfo is None or when.tzinfo.utcoffset(when) is None:
+        raise ValueError(
+            f"{name} is a naive datetime ({when.isoformat()}); give an aware one, "
+            "e.g. datetime(..., tzinfo=timezone.utc)"
+        )
+    return when.astimezone(timezone.utc)
+
+
+def _ephem_date(when_utc: datetime) -> float:
+    """ephem's Dublin Julian date (days since 1899-12-31 12:00 UT) of an aware datetime. [day]"""
+    return (when_utc - _EPHEM_EPOCH).total_seconds() / _SECONDS_PER_DAY
+
+
+def _observer(site: Site) -> ephem.Observer:
+    observer = ephem.Observer()
+    observer.lat = float(site.latitude)  # floats are radians to ephem
+    observer.lon = float(site.longitude)
+    observer.elevation = float(site.elevation)
+    observer.pressure = 0.0  # no refraction: geometric topocentric positions
+    return observer
+
+
+class _Sky:
+    """A reusable ephem observer with the sun and moon, evaluated at ephem dates."""
+
+    def __init__(self, site: Site):
+        self.observer = _observer(site)
+        self.sun = ephem.Sun()
+        self.moon = ephem.Moon()
+
+    def at(self, date: float) -> tuple[BodyPosition, BodyPosition]:
+        self.observer.date = date
+        self.sun.compute(self.observer)
+        self.moon.compute(self.observer)
+        # earth_distance is topocentric when computed for an Observer. [au]
+        sun = BodyPosition(
+            float(self.sun.az),
+            float(self.sun.alt),
+            float(np.arcsin(SUN_RADIUS / (self.sun.earth_distance * AU))),
+        )
+        moon = BodyPosition(
+            float(self.moon.az),
+            float(self.moon.alt),
+            float(np.arcsin(MOON_RADIUS / (self.moon.earth_distance * AU))),
+        )
+        return sun, moon
+
+
+def sun_and_moon(site: Site, when: datetime) -> tuple[BodyPosition, BodyPosition]:
+    """Topocentric (sun, moon) seen from ``site`` at ``when``.
+
+    site : Site -- latitude, longitude [rad] and elevation [m] of the observer.
+    when : datetime -- an aware datetime (any time zone; converted to UTC). A naive datetime
+        raises ValueError rather than being guessed as UTC or local time.
+    Returns two BodyPosition: azimuth, elevation (no refraction) and angular radius. [rad]
+    """
+    return _Sky(site).at(_ephem_date(_utc(when)))
+
+
+def _unit_vector(azimuth, elevation) -> np.ndarray:
+    """Unit vector(s) (..., 3) in world axes x east, y north, z up of a direction. [1]"""
+    azimuth = np.asarray(azimuth, dtype=np.float64)
+    elevation = np.asarray(elevation, dtype=np.float64)
+    ce = np.cos(elevation)
+    return np.stack([ce * np.sin(azimuth), ce * np.cos(azimuth), np.sin(elevation)], axis=-1)
+
+
+def separation(sun: BodyPosition, moon: BodyPosition) -> float:
+    """Great-circle angle between the centres of two bodies. [rad]
+
+    Vincenty's form atan2(|u x v|, u . v) of the unit vectors, accurate at all angles
+    (arccos of the dot product loses half the digits near 0, i.e. near mid-eclipse).
+    Works on arrays of azimuths and elevations too; exactly symmetric in its arguments.
+    """
+    u = _unit_vector(sun.azimuth, sun.elevation)
+    v = _unit_vector(moon.azimuth, moon.elevation)
+    cross = np.cross(u, v)  # swapping u and v negates it exactly: the result is symmetric
+    out = np.arctan2(np.sqrt(np.sum(cross * cross, axis=-1)), np.sum(u * v, axis=-1))
+    return float(out) if out.ndim == 0 else out
+
+
+def obscured_fraction(separation, sun_radius, moon_radius):
+    """Fraction of the sun's disc area covered by the moon's disc, in [0, 1].
+
+    separation : angle between the centres, >= 0. [rad]
+    sun_radius, moon_radius : angular radii, > 0. [rad]
+    Arrays broadcast; a float comes back for scalar inputs.
+
+    Exact area of the lens where two circles of radii r (sun) and R (moon) with centres d apart
+    intersect, over pi r^2:
+        A = r^2 acos((d^2 + r^2 - R^2) / (2 d r)) + R^2 acos((d^2 + R^2 - r^2) / (2 d R))
+            - 1/2 sqrt((-d + r + R)(d + r - R)(d - r + R)(d + r + R)),
+    with the cases d >= r + R (no overlap: 0), d <= R - r (total: 1) and d <= r - R (annular,
+    moon inside the sun: R^2 / r^2). The discs are treated as flat circles of radius equal to
+    their angular radii (error of order radius^2, about 2e-5 relative). No limb darkening: this is
+    an area fraction, and the uneclipsed sun fraction is S = 1 - obscured_fraction.
+    """
+    d = np.asarray(separation, dtype=np.float64)
+    r = np.asarray(sun_radius, dtype=np.float64)
+    big_r = np.asarray(moon_radius, dtype=np.float64)
+    if np.any(~(r > 0)) or np.any(~(big_r > 0)):
+        raise ValueError("sun_radius and moon_radius must be positive [rad]")
+    if np.any(~(d >= 0)):
+        raise ValueError("separation must be non-negative [rad]")
+    d, r, big_r = np.broadcast_arrays(d, r, big_r)
+
+    inside = d <= np.abs(big_r - r)
+    apart = d >= r + big_r
+    partial = ~(inside | apart)
+    # Lens area, evaluated where the circles cross; safe placeholders elsewhere.
+    ds = np.where(partial, d, 1.0)
+    rs = np.where(partial, r, 1.0)
+    rm = np.where(partial, big_r, 1.0)
+    cos_sun = np.clip((ds * ds + rs * rs - rm * rm) / (2.0 * ds * rs), -1.0, 1.0)
+    cos_moon = np.clip((ds * ds + rm * rm - rs * rs) / (2.0 * ds * rm), -1.0, 1.0)
+    kite = (-ds + rs + rm) * (ds + rs - rm) * (ds - rs + rm) * (ds + rs + rm)
+    lens = (
+        rs * rs * np.arccos(cos_sun)
+        + rm * rm * np.arccos(cos_moon)
+        - 0.5 * np.sqrt(np.maximum(kite, 0.0))
+    ) / (np.pi * rs * rs)
+
+    contained = np.minimum(big_r * big_r / (r * r), 1.0)
+    out = np.where(apart, 0.0, np.where(inside, contained, np.clip(lens, 0.0, 1.0)))
+    return float(out) if out.ndim == 0 else out
+
+
+def moon_offset_from_sun(sun: BodyPosition, moon: BodyPosition) -> tuple[float, float]:
+    """The moon's centre relative to the sun's, on the plane tangent to the sky at the sun. [rad]
+
+    Gnomonic projection centred on the sun: with s the sun's unit vector (world x east,
+    y north, z up), e_az = (cos a, -sin a, 0) the direction of increasing azimuth and
+    e_el = (-sin h sin a, -sin h cos a, cos h) that of increasing elevation at the sun
+    (azimuth a, elevation h), and m the moon's unit vector,
+        dx = (m . e_az) / (m . s),    dy = (m . e_el) / (m . s).
+    dx grows towards increasing azimuth along the horizon direction (to the observer's right
+    when facing the sun), dy towards the zenith. Within a degree of the sun these are angles on
+    the sky to better than 1e-4 relative, so a moon disc of angular radius R is drawn as a
+    circle of radius R at (dx, dy) on a tangent-plane grid centred on the sun. The frame is
+    tied to the sun's azimuth, so it is undefined with the sun exactly at the zenith.
+    """
+    a, h = sun.azimuth, sun.elevation
+    s = _unit_vector(a, h)
+    m = _unit_vector(moon.azimuth, moon.elevation)
+    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
+    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    depth = float(m @ s)
+    if depth <= 0.0:
+        raise ValueError("the moon is 90 degrees or more from the sun; no gnomonic offset")
+    return float(m @ e_az) / depth, float(m @ e_el) / depth
+
+
+def contact_times(
+    site: Site,
+    start: datetime,
+    end: datetime,
+    *,
+    step: float = 30.0,
+    tolerance: float = 0.05,
+) -> dict[str, datetime | None]:
+    """Local contact times of the solar eclipse seen from ``site`` between ``start`` and ``end``.
+
+    site : Site -- the observer.
+    start, end : aware datetimes bounding the search, start < end.
+    step : spacing of the coarse scan. [s]
+    tolerance : accuracy of the returned times. [s]
+    Returns {'C1', 'C2', 'C3', 'C4'} -> aware UTC datetime, or None when that contact is not in
+    the window (no eclipse, a partial eclipse has no C2/C3, an eclipse under way at ``start``
+    has no C1). C1 and C4 are the roots of d - (r_sun + r_moon) (external contacts), C2 and C3
+    those of d - |r_moon - r_sun| (internal contacts: totality for a larger moon, the annulus
+    for a smaller one), d being ``separation`` and r the angular radii of ``sun_and_moon``.
+
+    Each function is sampled every ``step``, its minimum refined with a bounded Brent search
+    (so a totality shorter than ``step`` is still found) and the roots on either side bracketed
+    from the samples and solved with Brent's method (scipy.optimize.brentq). Only the eclipse of
+    closest approach in the window is reported. Contacts are geometric: they are returned even
+    when the sun is below the horizon; check ``sun_and_moon(...)[0].elevation``.
+    """
+    start_utc, end_utc = _utc(start, "start"), _utc(end, "end")
+    span = (end_utc - start_utc).total_seconds()
+    if not span > 0:
+        raise ValueError(f"end ({end_utc.isoformat()}) must be after start ({start_utc.isoformat()})")
+    if not (step > 0 and tolerance > 0):
+        raise ValueError("step and tolerance must be positive [s]")
+
+    sky = _Sky(site)
+    date0 = _ephem_date(start_utc)
+
+    def gaps(t: float) -> tuple[float, float]:
+        sun, moon = sky.at(date0 + t / _SECONDS_PER_DAY)
+        d = separation(sun, moon)
+        return (
+            d - (sun.angular_radius + moon.angular_radius),
+            d - abs(moon.angular_radius - sun.angular_radius),
+        )
+
+    times = np.append(np.arange(0.0, span, step), span)
+    sampled = np.array([gaps(t) for t in times])  # (n, 2): external, internal
+
+    result: dict[str, datetime | None] = dict.fromkeys(_CONTACTS)
+    for column, (first, last) in enumerate((("C1", "C4"), ("C2", "C3"))):
+
+        def gap(t, column=column):
+            return gaps(t)[column]
+
+        values = sampled[:, column]
+        i = int(np.argmin(values))
+        lo, hi = times[max(i - 1, 0)], times[min(i + 1, len(times) - 1)]
+        t_min, g_min = times[i], values[i]
+        if hi > lo:
+            found = minimize_scalar(gap, bounds=(lo, hi), method="bounded", options={"xatol": tolerance})
+            if found.fun < g_min:
+                t_min, g_min = float(found.x), float(found.fun)
+        if not g_min < 0:
+            continue
+        # Before the minimum: the last sample still outside the contact brackets the root.
+        before = np.flatnonzero((times < t_min) & (values > 0))
+        if before.size:
+            j = before[-1]
+            right = min(times[j + 1], t_min)
+            root = brentq(gap, times[j], right, xtol=tolerance)
+            result[first] = start_utc + timedelta(seconds=root)
+        after = np.flatnonzero((times > t_min) & (values > 0))
+        if after.size:
+            j = after[0]
+            left = max(times[j - 1], t_min)
+            root = brentq(gap, left, times[j], xtol=tolerance)
+            result[last] = start_utc + timedelta(seconds=root)
+    return result
