@@ -1,0 +1,595 @@
+"""The on-disk store of cycle products: named numpy arrays keyed by a hash of their inputs.
+
+DESIGN.md section 6. A product of the cycle phase (mask spectra per level, fine masks,
+foreground passes) is an *item*: a ``dict[str, numpy.ndarray]`` computed from a small set of
+parameters. Its key is the SHA-256 of a canonical JSON of its kind, its parameters and
+``CODE_VERSION``; keys are made from parameters, never from big arrays (DESIGN.md section 8:
+hashing a 16 MiB argument costs 20 ms per call).
+
+Layout under the cache root (``cache_dir``)::
+
+    <root>/<kind>/<key[:2]>/<key>/<name>.npy    one .npy file per named array (C order)
+    <root>/<kind>/<key[:2]>/<key>/meta.json     kind, key, params, created, and per array:
+                                                dtype, shape, data bytes, file bytes, CRC-32
+    <root>/<kind>/<key[:2]>/.tmp-<key>-...      an item being written (or left by a killed writer)
+    <root>/<kind>/<key[:2]>/.del-<key>-...      an item being removed
+    <root>/locks/<key>.lock                     one file lock per key
+
+Writes are atomic: the arrays, then ``meta.json``, are written into a temporary folder beside
+the final one, which is then renamed into place (``os.rename`` of a folder is atomic on POSIX),
+so an item folder that exists is complete or was damaged afterwards. Removal is the reverse:
+rename to a ``.del-`` name, then delete. A writer holds the key's file lock from its re-check
+to the rename, so concurrent processes sharing a cache compute each item once.
+
+Checks. Every hit compares each file's size with ``meta.json`` and parses the ``.npy``
+headers (a few microseconds per file: truncation and header damage are always caught).
+``verify=True`` and ``Cache.verify`` also recompute the CRC-32 of the data (``zlib.crc32``,
+about 4 ms per 16 MiB on this machine kind; SHA-256 takes 9 ms and BLAKE2b 18 ms, and a
+checksum here guards against accidents, not adversaries). A broken item is removed and
+recomputed, never reported to the caller as an error.
+
+Last use is the modification time of ``meta.json``, touched on every hit; ``Cache.prune``
+removes the least recently used items first. Times are seconds since the Unix epoch. [s]
+
+Assumes a POSIX file system with working ``flock`` (local disks; NFSv4 emulates it with
+POSIX locks).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import json
+import math
+import os
+import re
+import secrets
+import shutil
+import time
+import warnings
+import zlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path, PurePath
+from typing import Any
+
+import numpy as np
+from filelock import FileLock, Timeout
+
+#: Mixed into every key. Change it whenever the code that computes any cached product changes
+#: its result, so that old items are never read for new code (they age out through ``prune``).
+CODE_VERSION = "sunshade-cycle-1"
+
+#: Layout version of an item folder and its ``meta.json``; items of another format are broken.
+FORMAT = 1
+
+#: Environment variable naming the cache root when no explicit folder is given.
+ENV_VAR = "SUNSHADE_CACHE"
+
+#: Largest numpy array accepted inside ``params`` (elements); bigger ones must be described
+#: by the parameters that made them instead.
+MAX_PARAM_ARRAY_SIZE = 1024
+
+META = "meta.json"
+LOCKS = "locks"
+_TMP = ".tmp-"
+_DEL = ".del-"
+_KEY_RE = re.compile(r"^[0-9a-f]{64}$")
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+_ALLOWED_DTYPE_KINDS = "biufc"
+_CRC_CHUNK = 1 << 24  # [B]
+
+
+def cache_dir(explicit: str | os.PathLike[str] | None = None) -> Path:
+    """The cache root: ``explicit`` if given, else ``$SUNSHADE_CACHE`` if set and not empty,
+    else ``./cache``; returned absolute (workers may run in another folder), ``~`` expanded.
+
+    The folder is not created here; ``Cache`` creates what it writes.
+    """
+    if explicit is not None and str(explicit) != "":
+        path = Path(explicit)
+    elif os.environ.get(ENV_VAR):
+        path = Path(os.environ[ENV_VAR])
+    else:
+        path = Path("cache")
+    return path.expanduser().absolute()
+
+
+def parse_size(text: str | int) -> int:
+    """Bytes in a size such as ``"2G"``, ``"512M"``, ``"1.5GiB"`` or ``"1000"``. [B]
+
+    Units are binary, powers of 1024, whatever their spelling: K, M, G, T, optionally followed
+    by ``iB`` or ``B`` (so ``"2GB"`` is also 2 * 1024**3, as in ``du -h``), case-insensitive;
+    no unit or ``B`` means bytes. Fractions are rounded down to whole bytes. A non-negative
+    int is returned as it is.
+
+    Raises ValueError naming the text if it is not a non-negative size.
+    """
+    if isinstance(text, (int, np.integer)) and not isinstance(text, bool):
+        if text < 0:
+            raise ValueError(f"invalid size {text!r}: must not be negative")
+        return int(text)
+    if not isinstance(text, str):
+        raise ValueError(f"invalid size {text!r}: expected text such as '2G'")
+    match = re.fullmatch(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([kmgt]?)(i?b)?\s*", text, re.IGNORECASE)
+    if match is None or (match.group(3) and match.group(3).lower() == "ib" and not match.group(2)):
+        raise ValueError(
+            f"invalid size {text!r}: expected a number with an optional unit K, M, G or T "
+            "(powers of 1024), e.g. '2G'"
+        )
+    number, unit = float(match.group(1)), match.group(2).upper()
+    return int(number * 1024 ** " KMGT".index(unit or " "))
+
+
+def _canonical(value: Any, where: str) -> Any:
+    """A JSON-able, canonical form of a parameter value; ``where`` names it in errors."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        # float64 repr round-trips exactly; float32 values widen exactly. NaN and infinities
+        # are spelled as strings so that the JSON stays standard.
+        v = float(value)
+        return v if math.isfinite(v) else {"__float__": repr(v)}
+    if isinstance(value, enum.Enum):
+        return {"__enum__": type(value).__qualname__, "value": _canonical(value.value, where)}
+    if isinstance(value, PurePath):
+        return str(value)
+    if isinstance(value, Mapping):
+        out = {}
+        for k in value:
+            if not isinstance(k, str):
+                raise TypeError(f"{where}: keys must be str, not {type(k).__name__} ({k!r})")
+            out[k] = _canonical(value[k], f"{where}[{k!r}]")
+        return dict(sorted(out.items()))
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, np.ndarray):
+        if value.size > MAX_PARAM_ARRAY_SIZE or value.dtype.kind not in _ALLOWED_DTYPE_KINDS:
+            raise TypeError(
+                f"{where}: a {value.dtype} array of {value.size} elements is not a cache "
+                f"parameter (at most {MAX_PARAM_ARRAY_SIZE} numbers); key on the parameters "
+                "that made it"
+            )
+        values = _canonical(value.tolist(), where)
+        return {"__ndarray__": value.dtype.str, "shape": list(value.shape), "values": values}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = {f.name: _canonical(getattr(value, f.name), f"{where}.{f.name}")
+                  for f in dataclasses.fields(value)}
+        return {"__dataclass__": type(value).__qualname__, "fields": fields}
+    raise TypeError(f"{where}: unsupported parameter type {type(value).__name__}")
+
+
+def _check_name(text: str, what: str) -> None:
+    if not isinstance(text, str) or not _NAME_RE.fullmatch(text):
+        raise ValueError(
+            f"invalid {what} {text!r}: use letters, digits, '_', '-' or '.', "
+            "starting with a letter or digit"
+        )
+
+
+def key_of(kind: str, params: Mapping[str, Any]) -> str:
+    """The cache key of an item: SHA-256 (64 hex digits) of its kind, params and CODE_VERSION.
+
+    kind : the product's name, also its folder: letters, digits, ``_ - .``; not ``locks``.
+    params : everything the product depends on, as str-keyed mappings, lists or tuples (the
+        same key), str, bool, int, float (exact: 0.1 and the next float differ, and so do 1
+        and 1.0), None, numpy scalars (as their Python values), Paths, enums, dataclasses
+        (such as ``geometry.Grid``) and numpy arrays of at most ``MAX_PARAM_ARRAY_SIZE``
+        numbers. Anything else raises TypeError naming its place in ``params``.
+
+    The same inputs give the same key in any process and on any machine.
+    """
+    _check_name(kind, "cache kind")
+    if kind == LOCKS:
+        raise ValueError(f"invalid cache kind {kind!r}: reserved")
+    if not isinstance(params, Mapping):
+        raise TypeError(f"params must be a mapping, not {type(params).__name__}")
+    document = {
+        "code_version": CODE_VERSION,
+        "kind": kind,
+        "params": _canonical(params, "params"),
+    }
+    text = json.dumps(document, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
+                      allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def _crc32(array: np.ndarray) -> int:
+    """CRC-32 of the bytes of a C-contiguous array (zlib.crc32, chunked)."""
+    flat = array.reshape(-1).view(np.uint8)
+    crc = 0
+    for start in range(0, flat.size, _CRC_CHUNK):
+        crc = zlib.crc32(flat[start:start + _CRC_CHUNK], crc)
+    return crc
+
+
+@dataclass(frozen=True)
+class CacheItem:
+    """One item folder as found on disk.
+
+    kind : str -- the product kind (first folder level).
+    key : str -- 64 hex digits.
+    path : Path -- the item folder.
+    bytes : int -- total size of its files. [B]
+    created : float | None -- when it was written, from meta.json; None if unreadable.
+        [s since epoch]
+    last_used : float -- modification time of meta.json (of the folder if none). [s since epoch]
+    params : dict | None -- the canonical parameters it was computed from (None if unreadable).
+    """
+
+    kind: str
+    key: str
+    path: Path
+    bytes: int
+    created: float | None
+    last_used: float
+    params: dict | None = None
+
+
+class _Broken(Exception):
+    """An item folder that exists but cannot be trusted; the message says why."""
+
+
+class Cache:
+    """The store under one root folder. Cheap to create and to pickle (joblib workers).
+
+    root : the cache folder, usually ``cache_dir(...)``; created on first write.
+
+    ``hits``, ``misses`` and ``repaired`` count, in this process, the items read, computed
+    (absent or broken) and of those the broken ones that were removed and recomputed.
+    """
+
+    def __init__(self, root: str | os.PathLike[str]):
+        self.root = Path(root)
+        self.hits = 0
+        self.misses = 0
+        self.repaired = 0
+
+    def __repr__(self) -> str:
+        return f"Cache({str(self.root)!r})"
+
+    # -- paths -------------------------------------------------------------------------
+
+    def item_path(self, kind: str, key: str) -> Path:
+        """The folder of item ``key`` of ``kind`` (it may not exist)."""
+        return self.root / kind / key[:2] / key
+
+    def _lock(self, key: str) -> FileLock:
+        return FileLock(str(self.root / LOCKS / f"{key}.lock"))
+
+    # -- reading -----------------------------------------------------------------------
+
+    def _open(self, path: Path, kind: str | None, key: str, *, verify: bool):
+        """(meta, arrays) of a complete item, None if absent; raises _Broken otherwise."""
+        meta_path = path / META
+        try:
+            with open(meta_path, "rb") as f:
+                meta = json.loads(f.read())
+        except FileNotFoundError:
+            if path.is_dir():
+                raise _Broken(f"{META} is missing") from None
+            return None
+        except (OSError, ValueError) as e:
+            raise _Broken(f"{META} is unreadable: {e}") from None
+        try:
+            if meta.get("format") != FORMAT:
+                raise _Broken(f"format {meta.get('format')!r}, expected {FORMAT}")
+            if meta.get("key") != key or (kind is not None and meta.get("kind") != kind):
+                raise _Broken(f"{META} names another item ({meta.get('kind')}/{meta.get('key')})")
+            specs = meta["arrays"]
+            for name, spec in specs.items():
+                size = os.stat(path / spec["file"]).st_size
+                if size != spec["file_bytes"]:
+                    raise _Broken(f"{spec['file']} has {size} bytes, expected {spec['file_bytes']}")
+            arrays = {}
+            for name, spec in specs.items():
+                a = np.load(path / spec["file"], mmap_mode="r", allow_pickle=False)
+                if a.dtype.str != spec["dtype"] or list(a.shape) != spec["shape"] \
+                        or not a.flags.c_contiguous:
+                    raise _Broken(f"{spec['file']} holds {a.dtype.str} {list(a.shape)}, "
+                                  f"expected {spec['dtype']} {spec['shape']}")
+                if verify and _crc32(a) != spec["crc32"]:
+                    raise _Broken(f"{spec['file']}: checksum mismatch (corrupted data)")
+                arrays[name] = a
+        except _Broken:
+            raise
+        except FileNotFoundError as e:
+            raise _Broken(f"{Path(e.filename).name} is missing") from None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            raise _Broken(f"unreadable: {type(e).__name__}: {e}") from None
+        return meta, arrays
+
+    def _hit(self, path: Path, arrays: dict) -> dict[str, np.ndarray]:
+        self.hits += 1
+        try:
+            os.utime(path / META)  # last use, for prune
+        except OSError:
+            pass  # a read-only or concurrently pruned cache still serves this hit
+        return arrays
+
+    def get(self, kind: str, params: Mapping[str, Any], *, verify: bool = False
+            ) -> dict[str, np.ndarray] | None:
+        """The item's arrays, memory-mapped read-only, or None if it is absent or broken.
+
+        Does not compute, lock or repair anything; ``verify=True`` adds the full checksums.
+        """
+        key = key_of(kind, params)
+        path = self.item_path(kind, key)
+        try:
+            found = self._open(path, kind, key, verify=verify)
+        except _Broken:
+            return None
+        return None if found is None else self._hit(path, found[1])
+
+    def get_or_compute(self, kind: str, params: Mapping[str, Any],
+                       compute: Callable[[], Mapping[str, np.ndarray]], *,
+                       verify: bool = False) -> dict[str, np.ndarray]:
+        """The item ``(kind, params)``: read back if stored and sound, else computed and stored.
+
+        kind, params : as for ``key_of``; ``params`` must name everything ``compute`` depends on.
+        compute : called with no arguments on a miss; returns ``{name: array}`` with names as
+            for ``kind`` and numeric or bool arrays (stored C-contiguous).
+        verify : also check the CRC-32 of every array on a hit (reads all the data: about
+            4 ms per 16 MiB); sizes and headers are always checked.
+
+        Returns ``{name: numpy.memmap}`` opened read-only (``mmap_mode='r'``), in the order
+        ``compute`` returned them. A broken item (truncated, corrupted, without meta) is
+        removed and recomputed. On a miss the key's file lock is held while computing, so
+        concurrent processes compute each key once; the others wait and then read it. If the
+        store cannot be written (disk full, read-only), a warning is issued and the computed
+        arrays are returned as they are. Exceptions of ``compute`` propagate; nothing is stored.
+        """
+        key = key_of(kind, params)
+        path = self.item_path(kind, key)
+        try:
+            found = self._open(path, kind, key, verify=verify)
+            if found is not None:
+                return self._hit(path, found[1])
+        except _Broken:
+            pass  # repaired below, under the lock, after a re-check
+        lock = self._lock(key)
+        try:
+            (self.root / LOCKS).mkdir(parents=True, exist_ok=True)
+            lock.acquire()
+        except OSError as e:  # a read-only or unreachable cache: still render
+            warnings.warn(f"cache item {kind}/{key[:12]} not stored: cannot lock in "
+                          f"{self.root}: {e}", RuntimeWarning, stacklevel=2)
+            self.misses += 1
+            return _normalize(compute(), kind)
+        try:
+            try:
+                found = self._open(path, kind, key, verify=verify)
+                if found is not None:  # another process wrote it while we waited
+                    return self._hit(path, found[1])
+            except _Broken:
+                _remove(path)
+                self.repaired += 1
+            self.misses += 1
+            arrays = _normalize(compute(), kind)
+            try:
+                self._write(path, kind, key, params, arrays)
+                found = self._open(path, kind, key, verify=False)
+            except (OSError, _Broken) as e:
+                warnings.warn(f"cache item {kind}/{key[:12]} not stored in {self.root}: {e}",
+                              RuntimeWarning, stacklevel=2)
+                return arrays
+            return found[1]
+        finally:
+            lock.release()
+
+    # -- writing -----------------------------------------------------------------------
+
+    def _write(self, path: Path, kind: str, key: str, params, arrays: dict) -> None:
+        """Write ``arrays`` as item ``path`` atomically: temp folder, arrays, meta, rename."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.parent / f"{_TMP}{key}-{os.getpid()}-{secrets.token_hex(4)}"
+        os.mkdir(tmp)
+        try:
+            specs = {}
+            for name, a in arrays.items():
+                file = f"{name}.npy"
+                with open(tmp / file, "wb") as f:
+                    np.lib.format.write_array(f, a, allow_pickle=False)
+                    file_bytes = f.tell()
+                specs[name] = {"file": file, "dtype": a.dtype.str, "shape": list(a.shape),
+                               "nbytes": int(a.nbytes), "file_bytes": int(file_bytes),
+                               "crc32": _crc32(a)}
+            meta = {"format": FORMAT, "code_version": CODE_VERSION, "kind": kind, "key": key,
+                    "created": time.time(), "checksum": "crc32", "arrays": specs,
+                    "params": _canonical(params, "params")}
+            with open(tmp / META, "w", encoding="ascii") as f:
+                json.dump(meta, f, indent=1, allow_nan=False)
+            try:
+                os.rename(tmp, path)
+            except OSError:
+                # Only if an item appeared without the lock (a lock file removed by ``clear``
+                # while held): keep a sound one, else replace it.
+                try:
+                    if self._open(path, kind, key, verify=False) is not None:
+                        return
+                except _Broken:
+                    pass
+                _remove(path)
+                os.rename(tmp, path)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+
+    # -- maintenance -------------------------------------------------------------------
+
+    def _walk(self):
+        """Yield ("item", kind, key, path), and (".tmp-" or ".del-", kind, key or None, path)
+        for temporary folders; anything not in the cache's layout is skipped."""
+        if not self.root.is_dir():
+            return
+        for kind_dir in sorted(self.root.iterdir()):
+            if kind_dir.name == LOCKS or not kind_dir.is_dir() or kind_dir.is_symlink() \
+                    or not _NAME_RE.fullmatch(kind_dir.name):
+                continue
+            for prefix_dir in sorted(kind_dir.iterdir()):
+                if not re.fullmatch(r"[0-9a-f]{2}", prefix_dir.name) or not prefix_dir.is_dir():
+                    continue
+                for entry in sorted(prefix_dir.iterdir()):
+                    name = entry.name
+                    if _KEY_RE.fullmatch(name) and name[:2] == prefix_dir.name and entry.is_dir():
+                        yield "item", kind_dir.name, name, entry
+                    elif name.startswith((_TMP, _DEL)) and entry.is_dir():
+                        key = name[5:69] if _KEY_RE.fullmatch(name[5:69]) else None
+                        yield name[:5], kind_dir.name, key, entry
+
+    def _info(self, kind: str, key: str, path: Path) -> CacheItem:
+        size = 0
+        try:
+            for entry in os.scandir(path):
+                if entry.is_file(follow_symlinks=False):
+                    size += entry.stat(follow_symlinks=False).st_size
+        except OSError:
+            pass
+        created = params = None
+        try:
+            last_used = os.stat(path / META).st_mtime
+            with open(path / META, "rb") as f:
+                meta = json.loads(f.read())
+            created, params = float(meta["created"]), meta.get("params")
+        except (OSError, ValueError, KeyError, TypeError):
+            try:
+                last_used = os.stat(path).st_mtime
+            except OSError:
+                last_used = 0.0
+        return CacheItem(kind, key, path, size, created, last_used, params)
+
+    def list(self) -> list[CacheItem]:
+        """Every item folder, complete or not, by kind then key; temporary folders are left out."""
+        return [self._info(kind, key, path) for what, kind, key, path in self._walk()
+                if what == "item"]
+
+    def verify(self, *, remove: bool = False) -> list[tuple[CacheItem, str]]:
+        """Check every item fully (sizes, headers, CRC-32 of all data): the broken ones, each
+        with its problem in words. ``remove=True`` also removes them (they would be
+        recomputed when next needed anyway). Reads the whole cache."""
+        problems = []
+        for item in self.list():
+            try:
+                self._open(item.path, item.kind, item.key, verify=True)
+            except _Broken as e:
+                problems.append((item, str(e)))
+                if remove:
+                    _remove(item.path)
+        return problems
+
+    def _remove_stale(self) -> None:
+        """Remove ``.del-`` folders, and ``.tmp-`` folders whose key lock is free (their
+        writer is dead: a live writer holds the lock until its rename)."""
+        for what, _kind, key, path in list(self._walk()):
+            (self.root / LOCKS).mkdir(exist_ok=True)
+            if what == _DEL or (what == _TMP and key is None):
+                shutil.rmtree(path, ignore_errors=True)
+            elif what == _TMP:
+                lock = self._lock(key)
+                try:
+                    lock.acquire(timeout=0)
+                except (Timeout, OSError):
+                    continue
+                try:
+                    shutil.rmtree(path, ignore_errors=True)
+                finally:
+                    lock.release()
+
+    def _remove_empty_folders(self) -> None:
+        """Remove empty ``<kind>/<xx>`` folders, and kind folders they leave empty."""
+        if not self.root.is_dir():
+            return
+        for kind_dir in self.root.iterdir():
+            if kind_dir.name == LOCKS or not _NAME_RE.fullmatch(kind_dir.name) \
+                    or not kind_dir.is_dir() or kind_dir.is_symlink():
+                continue
+            emptied = False
+            for prefix_dir in kind_dir.iterdir():
+                if re.fullmatch(r"[0-9a-f]{2}", prefix_dir.name) and prefix_dir.is_dir():
+                    emptied |= _rmdir_if_empty(prefix_dir)
+            if emptied:
+                _rmdir_if_empty(kind_dir)
+
+    def clear(self) -> list[CacheItem]:
+        """Remove every item, leftover temporary folder and free lock file; returns the items
+        removed. Files in the root that are not the cache's (e.g. FFTW wisdom) are kept."""
+        self._remove_stale()
+        removed = [item for item in self.list() if _remove(item.path)]
+        locks = self.root / LOCKS
+        if locks.is_dir():
+            for path in locks.glob("*.lock"):
+                lock = FileLock(str(path))
+                try:
+                    lock.acquire(timeout=0)
+                except (Timeout, OSError):
+                    continue  # in use by a writer
+                try:
+                    path.unlink(missing_ok=True)
+                finally:
+                    lock.release()
+            _rmdir_if_empty(locks)
+        self._remove_empty_folders()
+        return removed
+
+    def prune(self, max_bytes: int) -> list[CacheItem]:
+        """Remove leftover temporary folders, then the least recently used items until the
+        items total at most ``max_bytes`` [B]; returns the items removed, oldest first."""
+        if max_bytes < 0:
+            raise ValueError(f"max_bytes must not be negative, got {max_bytes}")
+        self._remove_stale()
+        items = sorted(self.list(), key=lambda item: (item.last_used, item.key))
+        total = sum(item.bytes for item in items)
+        removed = []
+        for item in items:
+            if total <= max_bytes:
+                break
+            if _remove(item.path):
+                removed.append(item)
+            total -= item.bytes
+        self._remove_empty_folders()
+        return removed
+
+
+def _normalize(arrays: Any, kind: str) -> dict[str, np.ndarray]:
+    """Check what ``compute`` returned; arrays made C-contiguous (not copied if they are)."""
+    if not isinstance(arrays, Mapping) or not arrays:
+        raise TypeError(f"compute for cache kind {kind!r} must return a non-empty dict of "
+                        f"arrays, not {type(arrays).__name__}")
+    out = {}
+    for name, a in arrays.items():
+        _check_name(name, "array name")
+        if name == META.removesuffix(".json"):
+            raise ValueError(f"invalid array name {name!r}: reserved")
+        if not isinstance(a, np.ndarray):
+            raise TypeError(f"compute for {kind!r} returned {type(a).__name__} for {name!r}, "
+                            "not a numpy array")
+        if a.dtype.kind not in _ALLOWED_DTYPE_KINDS:
+            raise TypeError(f"array {name!r} has dtype {a.dtype}; only bool and numeric "
+                            "arrays are stored")
+        out[name] = a if a.flags.c_contiguous else np.array(a, order="C")
+    return out
+
+
+def _remove(path: Path) -> bool:
+    """Remove an item folder: rename it to a ``.del-`` name (atomic), then delete it.
+    False if it was not there (someone else removed it)."""
+    trash = path.parent / f"{_DEL}{path.name}-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        os.rename(path, trash)
+    except FileNotFoundError:
+        return False
+    shutil.rmtree(trash, ignore_errors=True)
+    return True
+
+
+def _rmdir_if_empty(path: Path) -> bool:
+    try:
+        path.rmdir()
+    except OSError:
+        return False
+    return True
