@@ -119,14 +119,12 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
     g = total - (e correlated with o): exact for the discrete sum, no periodic copies.
     [radiance x sr]
     """
-    total = sky.total.astype(np.float32)
-    g = np.empty((len(total),) + plan.window_shape, dtype=np.float32)
-    g[:] = total[:, None, None]
+    total = sky.total.astype(np.float32)[:, None, None]
     if plan.sky is None:
-        return g
+        return np.broadcast_to(total, (len(total),) + plan.window_shape).copy()
     blocked = _correlate(sky.weighted, spectrum, plan.fft_shape, workers)
-    g -= _take_wrapped(blocked, plan.start, plan.window_shape)
-    return g
+    g = _take_wrapped(blocked, plan.start, plan.window_shape)
+    return np.subtract(total, g, out=g)
 
 
 @dataclass(frozen=True)
@@ -168,16 +166,11 @@ def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) 
     weighted : (channels, rows, cols) with cell [0, 0] at offset ``start``.
     Returns (channels, period rows, period cols), cell [0, 0] at offset 0.
     """
-    out = np.asarray(weighted)
-    for axis, (s, n) in enumerate(zip(start, period), start=1):
-        shift = s % n
-        length = out.shape[axis]
-        blocks = -(-(shift + length) // n)
-        pad = [(0, 0)] * out.ndim
-        pad[axis] = (shift, blocks * n - shift - length)
-        padded = np.pad(out, pad)
-        shape = padded.shape[:axis] + (blocks, n) + padded.shape[axis + 1 :]
-        out = padded.reshape(shape).sum(axis=axis)
+    weighted = np.asarray(weighted)
+    out = np.zeros(weighted.shape[:-2] + tuple(period), dtype=weighted.dtype)
+    for src_r, dst_r in _spans(start[0], weighted.shape[-2], period[0]):
+        for src_c, dst_c in _spans(start[1], weighted.shape[-1], period[1]):
+            out[..., dst_r, dst_c] += weighted[..., src_r, src_c]
     return out
 
 
@@ -229,8 +222,25 @@ def _correlate(sky, spectrum, fft_shape, workers):
 
 
 def _take_wrapped(raster, start, shape):
-    """raster[..., (start + arange(shape)) mod size] on the last two axes."""
-    rows = np.arange(shape[0]) + start[0]
-    cols = np.arange(shape[1]) + start[1]
-    out = raster.take(rows, axis=-2, mode="wrap")
-    return out.take(cols, axis=-1, mode="wrap")
+    """raster[..., (start + arange(shape)) mod size] on the last two axes, as a new array
+    (the raster itself when that is the identity: callers pass fresh arrays)."""
+    size = raster.shape[-2:]
+    if tuple(shape) == size and start[0] % size[0] == 0 and start[1] % size[1] == 0:
+        return raster
+    out = np.empty(raster.shape[:-2] + tuple(shape), dtype=raster.dtype)
+    for dst_r, src_r in _spans(start[0], shape[0], size[0]):
+        for dst_c, src_c in _spans(start[1], shape[1], size[1]):
+            out[..., dst_r, dst_c] = raster[..., src_r, src_c]
+    return out
+
+
+def _spans(start: int, length: int, period: int):
+    """Runs of ``u -> (start + u) mod period`` for u in [0, length), as pairs of slices
+    (u-slice, wrapped slice): the pieces a wrapped copy or fold moves in one go."""
+    spans, u = [], 0
+    while u < length:
+        d = (start + u) % period
+        run = min(period - d, length - u)
+        spans.append((slice(u, u + run), slice(d, d + run)))
+        u += run
+    return spans

@@ -14,6 +14,7 @@ towards the east: a feature at image azimuth ``phi`` is seen at azimuth ``phi + 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -33,7 +34,7 @@ class SkyRaster:
     weighted: np.ndarray
     outside: np.ndarray
 
-    @property
+    @cached_property
     def total(self) -> np.ndarray:
         """Irradiance of the whole unshadowed sky per channel (float64). [radiance x sr]"""
         return self.weighted.sum(axis=(1, 2), dtype=np.float64) + self.outside
