@@ -56,6 +56,17 @@ def _parser():
     ground.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside it")
     ground.add_argument("--threads", type=int, default=None, help="FFT threads (default: all cores)")
     ground.set_defaults(run=_run_ground)
+
+    cache = commands.add_parser(
+        "cache",
+        help="look after the on-disk cache of cycle products",
+        description="The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.",
+    )
+    cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
+    cache.add_argument("--cache", default=None, help="cache folder")
+    cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
+    cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
+    cache.set_defaults(run=_run_cache)
     return parser
 
 
@@ -107,6 +118,44 @@ def _run_ground(args) -> int:
         f"wrote {', '.join(str(p) for p in written)}"
     )
     return 0
+
+
+def _run_cache(args) -> int:
+    from .cache import Cache, cache_dir, parse_size
+
+    store = Cache(cache_dir(args.cache))
+    if args.action == "prune":
+        if args.max_size is None:
+            raise BadInput("cache prune needs --max-size, e.g. --max-size 2G")
+        try:
+            limit = parse_size(args.max_size)
+        except ValueError as exc:
+            raise BadInput(f"--max-size: {exc}") from None
+    elif args.max_size is not None:
+        raise BadInput("--max-size is only for cache prune")
+    if args.action == "list":
+        items = store.list()
+        for item in items:
+            print(f"{item.kind:<12} {item.key[:16]}  {_size(item.bytes):>9}  "
+                  f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(item.last_used))}")
+        print(f"{len(items)} items, {_size(sum(i.bytes for i in items))} in {store.root}")
+        return 0
+    if args.action == "verify":
+        broken = store.verify(remove=args.remove)
+        for item, problem in broken:
+            print(f"{item.kind} {item.key[:16]}: {problem}" + (" (removed)" if args.remove else ""))
+        print(f"{len(broken)} broken of {len(store.list()) + (len(broken) if args.remove else 0)} items")
+        return 1 if broken and not args.remove else 0
+    removed = store.clear() if args.action == "clear" else store.prune(limit)
+    print(f"removed {len(removed)} items, {_size(sum(i.bytes for i in removed))}")
+    return 0
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
 
 
 if __name__ == "__main__":

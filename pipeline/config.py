@@ -285,9 +285,8 @@ def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
                 ls.fail("mask", "missing: give canopy.mask or a mask for every layer")
             ls.done()
             layers.append(layer)
-    for name in ("size",):
-        if min(base[name]) <= 0 or any(min(layer["size"]) <= 0 for layer in layers):
-            s.fail(name, "both sides must be above 0")
+    if min(base["size"]) <= 0 or any(min(layer["size"]) <= 0 for layer in layers):
+        s.fail("size", "both sides must be above 0")
     if layout == "periodic":
         for layer in layers:
             for side in layer["size"]:

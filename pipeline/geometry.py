@@ -119,7 +119,7 @@ def projected_solid_angle(grid: Grid) -> np.ndarray:
     return f[:-1, 1:] - f[:-1, :-1] - f[1:, 1:] + f[1:, :-1]
 
 
-def unshadowed_fraction_square(alpha) -> np.ndarray:
+def sky_square_irradiance(alpha) -> np.ndarray:
     """I0(alpha) = 4 sin(alpha) atan(sin(alpha)): projected solid angle of the sky square.
 
     alpha : half-angle of the square on the sky plane, |s|_inf <= tan(alpha). [rad]
@@ -130,4 +130,4 @@ def unshadowed_fraction_square(alpha) -> np.ndarray:
     return 4.0 * sa * np.arctan(sa)
 
 
-I0 = unshadowed_fraction_square
+I0 = sky_square_irradiance

@@ -219,3 +219,25 @@ def test_console_script_runs_as_a_real_process(inputs):
                            str(out / "h.exr")], capture_output=True, text=True, cwd=ROOT)
     assert done.returncode == 2 and "canopy.height" in done.stderr
     assert not (out / "h.exr").exists()
+
+
+def test_cache_command_lists_verifies_and_prunes(tmp_path, capsys):
+    from pipeline.cache import Cache
+
+    store = Cache(tmp_path / "c")
+    for seed in range(3):
+        store.get_or_compute("spectrum", {"seed": seed}, lambda: {"a": np.zeros(4096, np.float32)})
+    assert main(["cache", "list", "--cache", str(tmp_path / "c")]) == 0
+    assert "3 items" in capsys.readouterr().out
+    item = store.list()[0]
+    npy = next(item.path.glob("*.npy"))
+    npy.write_bytes(npy.read_bytes()[:-100])  # truncate one item
+    assert main(["cache", "verify", "--cache", str(tmp_path / "c")]) == 1
+    out = capsys.readouterr().out
+    assert "1 broken of 3 items" in out and item.key[:16] in out
+    assert main(["cache", "prune", "--max-size", "20K", "--cache", str(tmp_path / "c")]) == 0
+    assert len(store.list()) == 1
+    assert main(["cache", "prune", "--max-size", "2X", "--cache", str(tmp_path / "c")]) == 2
+    assert "--max-size" in capsys.readouterr().err
+    assert main(["cache", "clear", "--cache", str(tmp_path / "c")]) == 0
+    assert store.list() == []
