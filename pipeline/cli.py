@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from . import __version__, io
 from .composite import display_ground
 from .config import ConfigError, load_config
@@ -30,6 +32,10 @@ def main(argv=None) -> int:
         return args.run(args)
     except (ConfigError, io.ImageError, BadInput) as exc:
         print(f"sunshade: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except MemoryError:
+        print("sunshade: error: not enough memory for this config; raise ground.pixel, or lower "
+              "sky.alpha or the canopy size", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("sunshade: interrupted", file=sys.stderr)
@@ -74,6 +80,8 @@ def _checked_output(path: str, suffix: str) -> Path:
     out = Path(path)
     if out.suffix.lower() != suffix:
         raise BadInput(f"{out}: the output must be a {suffix} file")
+    if out.is_dir():
+        raise BadInput(f"{out}: is a folder, not a file")
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
         raise BadInput(f"{out}: no such folder: {folder}")
@@ -86,6 +94,7 @@ def _run_ground(args) -> int:
     from .render import render_ground
 
     output = _checked_output(args.output, ".exr")
+    png = _checked_output(str(output.with_suffix(".png")), ".png") if args.png else None
     if args.threads is not None and args.threads < 1:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
     config = load_config(args.config)
@@ -93,6 +102,8 @@ def _run_ground(args) -> int:
     started = time.perf_counter()
     result = render_ground(config, workers=args.threads)
     elapsed = time.perf_counter() - started
+    if not np.all(np.isfinite(result.irradiance)):
+        raise BadInput(f"{args.config}: the ground irradiance overflowed; lower the sky's radiance")
     if not result.exact:
         print(
             "sunshade: note: the sky square (sky.alpha) does not span the canopy from every "
@@ -107,8 +118,7 @@ def _run_ground(args) -> int:
     }
     io.write_exr(output, result.irradiance, attributes)
     written = [output]
-    if args.png:
-        png = output.with_suffix(".png")
+    if png is not None:
         io.write_png(png, display_ground(result.irradiance, result.unshadowed))
         written.append(png)
     rows, cols = result.grid.shape

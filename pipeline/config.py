@@ -21,6 +21,9 @@ from .sky import MODELS as SKY_MODELS
 
 LAYOUTS = ("isolated", "periodic")
 MAX_GROUND_PIXELS = 64_000_000
+MAX_FFT_CELLS = 128_000_000
+MAX_RADIANCE = 1e30
+"""Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
 
 
 class ConfigError(ValueError):
@@ -260,12 +263,7 @@ def _parse_ground(s: _Section) -> GroundConfig:
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
     layout = s.choice("layout", LAYOUTS, "isolated")
-    base = {
-        "mask": s.file("mask") if s.has("mask") or not s.has("layers") else None,
-        "size": s.numbers("size", 2, (20.0, 20.0)),
-        "center": s.numbers("center", 2, (0.0, 0.0)),
-        "height": s.number("height", 8.0, above=0.0),
-    }
+    base = _parse_layer(s, {}, ground, layout, mask_required=not s.has("layers"))
     if not s.has("layers"):
         layers = [base]
     else:
@@ -275,46 +273,63 @@ def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
         layers = []
         for i, item in enumerate(items):
             ls = _Section(item, s.key(f"layers[{i}]"), s.ctx)
-            layer = {
-                "mask": ls.file("mask") if ls.has("mask") else base["mask"],
-                "size": ls.numbers("size", 2, base["size"]),
-                "center": ls.numbers("center", 2, base["center"]),
-                "height": ls.number("height", base["height"], above=0.0),
-            }
-            if layer["mask"] is None:
-                ls.fail("mask", "missing: give canopy.mask or a mask for every layer")
+            layers.append(_parse_layer(ls, base, ground, layout, mask_required=base["mask"] is None))
             ls.done()
-            layers.append(layer)
-    if min(base["size"]) <= 0 or any(min(layer["size"]) <= 0 for layer in layers):
-        s.fail("size", "both sides must be above 0")
-    if layout == "periodic":
-        for layer in layers:
-            for side in layer["size"]:
-                ratio = side / ground.pixel
-                if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
-                    s.fail("size", f"a periodic tile must be a whole number of ground pixels "
-                           f"({side:g} / {ground.pixel:g} = {ratio:.4g})")
     s.done()
     return CanopyConfig(layout, tuple(CanopyLayer(**layer) for layer in layers))
 
 
+def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, mask_required):
+    """One canopy plane's keys, each defaulting to ``base``'s; its rasters checked for size."""
+    if s.has("mask") or mask_required:
+        mask = s.file("mask")
+    else:
+        mask = base.get("mask")
+    size = s.numbers("size", 2, base.get("size", (20.0, 20.0)))
+    if min(size) <= 0:
+        s.fail("size", f"both sides must be above 0 (got {list(size)})")
+    layer = {
+        "mask": mask,
+        "size": size,
+        "center": s.numbers("center", 2, base.get("center", (0.0, 0.0))),
+        "height": s.number("height", base.get("height", 8.0), above=0.0),
+    }
+    pixels = [side / ground.pixel for side in size]
+    if pixels[0] * pixels[1] > MAX_GROUND_PIXELS:
+        s.fail("size", f"the canopy would be {pixels[0] * pixels[1]:.3g} pixels at ground.pixel "
+               f"{ground.pixel:g} m; the most is {MAX_GROUND_PIXELS:.3g}")
+    if layout == "periodic":
+        for ratio in pixels:
+            if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
+                s.fail("size", f"a periodic tile must be a whole number of ground pixels "
+                       f"({ratio * ground.pixel:g} / {ground.pixel:g} = {ratio:.4g})")
+    else:
+        window = ground.window
+        fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
+            (window[3] - window[1]) / ground.pixel + pixels[1])
+        if fft > MAX_FFT_CELLS:
+            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform; "
+                   f"the most is {MAX_FFT_CELLS:.3g}: raise ground.pixel")
+    return layer
+
+
 def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyConfig:
     model = s.choice("model", tuple(SKY_MODELS), "uniform")
-    for key, owner in (("radiance", "uniform"), ("hdri", "hdri")):
+    for key, owner in (("radiance", "uniform"), ("hdri", "hdri"), ("rotation", "hdri")):
         if s.has(key) and model != owner:
             s.fail(key, f"only used with model: {owner} (model is {model})")
     radiance = (1.0, 1.0, 1.0)
     hdri = None
     if model == "uniform":
         if _is_number(s.raw("radiance", 1.0)):
-            radiance = (s.number("radiance", 1.0, at_least=0.0),) * 3
+            radiance = (s.number("radiance", 1.0),) * 3
         else:
             radiance = s.numbers("radiance", 3)
-        if min(radiance) < 0:
-            s.fail("radiance", f"must not be negative (got {list(radiance)})")
+        if min(radiance) < 0 or max(radiance) > MAX_RADIANCE:
+            s.fail("radiance", f"must lie in [0, {MAX_RADIANCE:g}] (got {list(radiance)})")
     if model == "hdri":
         hdri = s.file("hdri")
-    rotation = math.radians(s.number("rotation", 0.0))
+    rotation = math.radians(s.number("rotation", 0.0) % 360.0)
     alpha_deg = s.number("alpha", 80.0, above=0.0, below=90.0)
     alpha = math.radians(alpha_deg)
     if canopy.layout == "periodic":

@@ -24,13 +24,16 @@ class ImageError(ValueError):
 def read_image(path) -> np.ndarray:
     """Pixels of an image file as float32 (rows, cols, channels), values as stored.
 
-    Integer formats are scaled to [0, 1] (8- and 16-bit PNG); no colour conversion is done,
-    so a mask is read as the linear numbers it holds. Raises ImageError naming the file.
+    Integer formats are scaled to [0, 1] (8- and 16-bit PNG); no colour conversion is done and
+    colour is not multiplied by alpha, so a mask is read as the linear numbers it holds.
+    Raises ImageError naming the file.
     """
     path = Path(path)
     if not path.is_file():
         raise ImageError(path, "no such file")
-    inp = oiio.ImageInput.open(str(path))
+    as_stored = oiio.ImageSpec()
+    as_stored.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), as_stored)
     if inp is None:
         raise ImageError(path, f"cannot read image ({oiio.geterror().strip() or 'unknown format'})")
     try:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import canopy, io, shadow
-from .config import CanopyLayer, Config, SkyConfig
+from .config import MAX_RADIANCE, CanopyLayer, Config, SkyConfig
 from .geometry import Grid
 from .sky import EquirectSky, UniformSky
 
@@ -37,7 +37,8 @@ def default_workers() -> int:
 
 
 def load_sky(sky: SkyConfig):
-    """The sky model of a config, its image read and checked. Raises io.ImageError."""
+    """The sky model of a config, its image read and checked (negative radiance is taken as 0).
+    Raises io.ImageError."""
     if sky.model == "uniform":
         return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
     image = io.read_image(sky.hdri)
@@ -46,6 +47,8 @@ def load_sky(sky: SkyConfig):
     image = image[..., :3]
     if not np.all(np.isfinite(image)):
         raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
+    if image.max() > MAX_RADIANCE:
+        raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
     return EquirectSky(np.maximum(image, 0.0), sky.rotation)
 
 

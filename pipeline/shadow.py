@@ -203,7 +203,7 @@ def combine_layers(grounds, unshadowed):
     i0 = np.asarray(unshadowed, dtype=np.float32)[:, None, None]
     out = grounds[0].copy()
     for g in grounds[1:]:
-        out *= g / i0
+        out *= np.divide(g, i0, out=np.zeros_like(g), where=i0 > 0)  # a dark channel stays 0
     return out
 
 

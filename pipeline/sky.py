@@ -87,19 +87,17 @@ class EquirectSky:
         """
         height, width, channels = self.image.shape
         rows, cols = grid.shape
-        q = grid.pixel
-        x_min, y_min, x_max, y_max = grid.extent
-        reach = np.hypot(max(abs(x_min), abs(x_max)), max(abs(y_min), abs(y_max)))
-        theta_reach = np.arctan(reach)
+        step = 0.5 * grid.pixel
+        near, reach, keep_phi = _grid_footprint(grid)
         accum = np.zeros((channels, rows * cols), dtype=np.float64)
         pending: list = []
-        step = 0.5 * q
         theta0, theta1 = _row_bounds(height)
         for row in range(len(theta0)):
-            if theta0[row] >= theta_reach:
-                break
-            t0 = np.tan(theta0[row])
-            t1 = np.tan(min(theta1[row], theta_reach))
+            # only the band of the row that can land on the grid (one cell of bilinear reach)
+            t0 = max(np.tan(theta0[row]), near - 2 * step)
+            t1 = min(np.tan(theta1[row]) if theta1[row] < np.pi / 2 else np.inf, reach)
+            if t1 <= t0:
+                continue
             n_theta = max(1, int(np.ceil((t1 - t0) / step)))
             n_phi = max(1, int(np.ceil(t1 * (2.0 * np.pi / width) / step)))
             edges = np.arctan(np.linspace(t0, t1, n_theta + 1))
@@ -107,19 +105,49 @@ class EquirectSky:
             weight = 0.5 * (np.sin(edges[1:]) ** 2 - np.sin(edges[:-1]) ** 2) * (
                 2.0 * np.pi / (width * n_phi)
             )
-            u = (np.arange(width * n_phi) + 0.5) / (width * n_phi)
-            phi = (u - 0.5) * 2.0 * np.pi + self.rotation
-            sx = centres[:, None] * np.sin(phi)[None, :]
-            sy = centres[:, None] * np.cos(phi)[None, :]
-            index, share, sub_row, sub_col = _bilinear_shares(grid, sx, sy)
-            texel = self.image[row, sub_col // n_phi].astype(np.float64)  # (deposits, C)
-            pending.append((index, texel * (share * weight[sub_row])[:, None]))
-            if sum(len(i) for i, _ in pending) > 1 << 22:
-                _flush(accum, pending)
+            sub_cols = np.arange(width * n_phi)
+            phi = ((sub_cols + 0.5) / (width * n_phi) - 0.5) * 2.0 * np.pi + self.rotation
+            kept = keep_phi(phi, 2.0 * np.pi / (width * n_phi))
+            sub_cols, phi = sub_cols[kept], phi[kept]
+            chunk = max(1, (1 << 21) // max(1, len(phi)))  # bounded memory per pass
+            for lo in range(0, n_theta, chunk):
+                sx = centres[lo : lo + chunk, None] * np.sin(phi)[None, :]
+                sy = centres[lo : lo + chunk, None] * np.cos(phi)[None, :]
+                index, share, sub_row, sub_col = _bilinear_shares(grid, sx, sy)
+                texel = self.image[row, sub_cols[sub_col] // n_phi].astype(np.float64)
+                pending.append((index, texel * (share * weight[lo + sub_row])[:, None]))
+                if sum(len(i) for i, _ in pending) > 1 << 22:
+                    _flush(accum, pending)
         _flush(accum, pending)
         weighted = accum.reshape(channels, rows, cols).astype(np.float32)
         outside = self.total_irradiance() - weighted.sum(axis=(1, 2), dtype=np.float64)
         return SkyRaster(grid, weighted, outside)
+
+
+def _grid_footprint(grid: Grid):
+    """Where a sky-plane grid lies as seen from the zenith, with one cell of margin.
+
+    Returns (near, reach, keep_phi): the nearest and farthest distances [tan] of the grid from
+    the origin, and keep_phi(phi, dphi) -> bool mask of the azimuths [rad] (each of width dphi)
+    whose rays can cross the grid.
+    """
+    x_min, y_min, x_max, y_max = grid.extent
+    margin = grid.pixel
+    x_min, y_min, x_max, y_max = x_min - margin, y_min - margin, x_max + margin, y_max + margin
+    reach = np.hypot(max(abs(x_min), abs(x_max)), max(abs(y_min), abs(y_max)))
+    near = np.hypot(max(0.0, x_min, -x_max), max(0.0, y_min, -y_max))
+    if near == 0.0:
+        return near, reach, lambda phi, dphi: np.ones(len(phi), dtype=bool)
+    corners = np.arctan2([x_min, x_min, x_max, x_max], [y_min, y_max, y_min, y_max])
+    middle = np.arctan2((x_min + x_max) / 2, (y_min + y_max) / 2)
+    spread = np.angle(np.exp(1j * (corners - middle)))  # within (-pi/2, pi/2): the grid is off the origin
+    lo, hi = spread.min(), spread.max()
+
+    def keep_phi(phi, dphi):
+        off = np.angle(np.exp(1j * (phi - middle)))
+        return (off >= lo - dphi) & (off <= hi + dphi)
+
+    return near, reach, keep_phi
 
 
 def _row_bounds(height: int):

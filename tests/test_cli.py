@@ -123,7 +123,10 @@ BAD_CONFIGS = [
     ("negative pixel", "ground.pixel", -0.1, "ground.pixel: must be above 0"),
     ("huge window", "ground.pixel", 1e-5, "ground.pixel: the window would be"),
     ("bad layout", "canopy.layout", "tiled", "canopy.layout: unknown value"),
-    ("negative radiance", "sky.radiance", [1, -1, 1], "sky.radiance: must not be negative"),
+    ("negative radiance", "sky.radiance", [1, -1, 1], "sky.radiance: must lie in [0, 1e+30]"),
+    ("overflowing radiance", "sky.radiance", 1e38, "sky.radiance: must lie in [0, 1e+30]"),
+    ("rotation with uniform", "sky.rotation", 10.0, "sky.rotation: only used with model: hdri"),
+    ("huge canopy", "canopy.size", [2000, 2000], "canopy.size: the canopy would be"),
     ("hdri key with uniform", "sky.hdri", "sky.exr", "sky.hdri: only used with model: hdri"),
     ("size of zero", "canopy.size", [0, 4], "canopy.size: both sides must be above 0"),
     ("NaN height", "canopy.height", float("nan"), "canopy.height: must be a finite number"),
@@ -241,3 +244,53 @@ def test_cache_command_lists_verifies_and_prunes(tmp_path, capsys):
     assert "--max-size" in capsys.readouterr().err
     assert main(["cache", "clear", "--cache", str(tmp_path / "c")]) == 0
     assert store.list() == []
+
+
+def test_layer_errors_name_the_layer_key(inputs, capsys):
+    folder, out = inputs
+    cfg = base_config()
+    cfg["canopy"]["layers"] = [{"height": 3.0}, {"size": [0, 4]}]
+    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 2
+    assert "canopy.layers[1].size: both sides must be above 0" in capsys.readouterr().err
+    cfg = base_config()
+    cfg["canopy"].update(layout="periodic", size=[1e-7, 1e-7])
+    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 2
+    assert "whole number of ground pixels" in capsys.readouterr().err
+    assert list(out.iterdir()) == []
+
+
+def test_output_that_is_a_folder_writes_nothing(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    (out / "g.png").mkdir()
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["g.png"]
+
+
+def test_mask_alpha_is_ignored_not_premultiplied(inputs):
+    folder, out = inputs
+    import OpenImageIO as oiio
+
+    rgba = np.zeros((40, 40, 4), np.uint8)
+    rgba[..., :3] = 255  # open sky everywhere, alpha 0: a painter's transparent layer
+    spec = oiio.ImageSpec(40, 40, 4, "uint8")
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    image = oiio.ImageOutput.create(str(folder / "rgba.png"))
+    image.open(str(folder / "rgba.png"), spec)
+    image.write_image(rgba)
+    image.close()
+    cfg = base_config()
+    cfg["canopy"]["mask"] = "rgba.png"
+    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 0
+    assert np.allclose(io.read_image(out / "g.exr"), np.pi, rtol=1e-4)
+
+
+def test_layers_with_a_dark_channel_stay_finite(inputs):
+    folder, out = inputs
+    cfg = base_config()
+    cfg["sky"]["radiance"] = [1.0, 0.0, 0.0]
+    cfg["canopy"]["layers"] = [{"height": 3.0}, {"height": 2.0}]
+    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 0
+    g = io.read_image(out / "g.exr")
+    assert np.all(np.isfinite(g)) and np.all(g[..., 1:] == 0) and g[..., 0].max() > 3.0
