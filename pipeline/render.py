@@ -93,7 +93,7 @@ def _ground_of_layer(layer, mask, sky, window, layout, alpha, workers):
         return g, raster.total, plan.exact
     tile, grid = canopy.tile_on_lattice(mask, center=layer.center, size=layer.size, lattice=window)
     plan = shadow.plan_periodic(window, grid, height=layer.height, alpha=alpha)
-    raster = sky.raster(plan.sky)
+    raster = sky.raster(plan.sky, fold_period=plan.tile_shape)
     spectrum = shadow.transmittance_spectrum(tile, workers=workers)
     g = shadow.ground_periodic(raster, spectrum, plan, float(tile.mean()), workers=workers)
     return g, raster.total, True

@@ -30,12 +30,15 @@ Spectra are complex64 (float32 rasters); ``workers`` is the FFT thread count.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.fft as sfft
 
 from .geometry import Grid, lattice_offset
-from .sky import SkyRaster
+
+if TYPE_CHECKING:
+    from .sky import SkyRaster
 
 MAX_SKY_CELLS = 25_000_000
 
@@ -167,6 +170,8 @@ def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) 
     Returns (channels, period rows, period cols), cell [0, 0] at offset 0.
     """
     weighted = np.asarray(weighted)
+    if tuple(start) == (0, 0) and weighted.shape[-2:] == tuple(period):
+        return weighted  # already folded
     out = np.zeros(weighted.shape[:-2] + tuple(period), dtype=weighted.dtype)
     for src_r, dst_r in _spans(start[0], weighted.shape[-2], period[0]):
         for src_c, dst_c in _spans(start[1], weighted.shape[-1], period[1]):
@@ -179,11 +184,12 @@ def ground_periodic(
 ):
     """Ground irradiance (channels, rows, cols) float32 under a periodic canopy tile.
 
-    The sky square is folded onto one tile and correlated circularly (exact for the discrete
+    The sky square is folded onto one tile (unless the raster comes folded already, made with
+    ``raster(plan.sky, fold_period=plan.tile_shape)``) and correlated circularly (exact for the discrete
     sum over the square); the sky outside the square reaches the ground times the tile's mean
     transmittance. [radiance x sr]
     """
-    sky_start = _offset_of_cell0(sky.grid)
+    sky_start = sky_offset(sky.grid)
     folded = fold(sky.weighted, sky_start, plan.tile_shape)
     lit = _correlate(folded, spectrum, plan.tile_shape, workers)
     start = (-plan.tile_start[0], -plan.tile_start[1])
@@ -207,7 +213,7 @@ def combine_layers(grounds, unshadowed):
     return out
 
 
-def _offset_of_cell0(grid: Grid) -> tuple[int, int]:
+def sky_offset(grid: Grid) -> tuple[int, int]:
     """Sky offset (dr, dc) of cell [0, 0] of a sky-plane grid made by ``sky_grid``."""
     q = grid.pixel
     return int(round(0.5 - grid.origin[1] / q)), int(round(grid.origin[0] / q + 0.5))

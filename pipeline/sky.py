@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from .geometry import Grid, projected_solid_angle
+from .shadow import fold, sky_grid, sky_offset
 
 
 @dataclass(frozen=True)
@@ -49,10 +50,14 @@ class UniformSky:
 
     radiance: np.ndarray
 
-    def raster(self, grid: Grid) -> SkyRaster:
-        """Exact cell integrals of the uniform sky on ``grid``."""
+    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+        """Exact cell integrals of the uniform sky on ``grid``; with ``fold_period`` (rows, cols)
+        folded modulo that period (see ``EquirectSky.raster``)."""
         radiance = np.asarray(self.radiance, dtype=np.float64)
         weights = projected_solid_angle(grid)
+        if fold_period is not None:
+            weights = fold(weights[None], sky_offset(grid), fold_period)[0]
+            grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
         weighted = (radiance[:, None, None] * weights[None]).astype(np.float32)
         outside = radiance * np.pi - weighted.sum(axis=(1, 2), dtype=np.float64)
         return SkyRaster(grid, weighted, outside)
@@ -77,16 +82,23 @@ class EquirectSky:
         rows = len(weight)
         return np.einsum("r,rcn->n", weight, self.image[:rows].astype(np.float64))
 
-    def raster(self, grid: Grid) -> SkyRaster:
+    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """Area-averaged resampling onto ``grid`` that keeps every texel's energy.
 
         Each texel is cut into sub-texels no larger than half a cell on the sky plane; each
         sub-texel's energy (radiance x its exact projected solid angle) is spread bilinearly
         over the four nearest cells. A small bright sun keeps its energy exactly; what lands
         off the grid is counted in ``outside``.
+
+        fold_period : (rows, cols) or None -- deposit each cell at its offset modulo this period
+            (a periodic canopy tile): the raster returned is the folded one, on the grid of
+            offsets 0..period-1, and the full ``grid`` never exists in memory.
         """
         height, width, channels = self.image.shape
-        rows, cols = grid.shape
+        wrap = None
+        if fold_period is not None:
+            wrap = (sky_offset(grid), tuple(fold_period))
+        rows, cols = grid.shape if wrap is None else wrap[1]
         step = 0.5 * grid.pixel
         near, reach, keep_phi = _grid_footprint(grid)
         accum = np.zeros((channels, rows * cols), dtype=np.float64)
@@ -113,7 +125,7 @@ class EquirectSky:
             for lo in range(0, n_theta, chunk):
                 sx = centres[lo : lo + chunk, None] * np.sin(phi)[None, :]
                 sy = centres[lo : lo + chunk, None] * np.cos(phi)[None, :]
-                index, share, sub_row, sub_col = _bilinear_shares(grid, sx, sy)
+                index, share, sub_row, sub_col = _bilinear_shares(grid, sx, sy, wrap)
                 texel = self.image[row, sub_cols[sub_col] // n_phi].astype(np.float64)
                 pending.append((index, texel * (share * weight[lo + sub_row])[:, None]))
                 if sum(len(i) for i, _ in pending) > 1 << 22:
@@ -121,6 +133,8 @@ class EquirectSky:
         _flush(accum, pending)
         weighted = accum.reshape(channels, rows, cols).astype(np.float32)
         outside = self.total_irradiance() - weighted.sum(axis=(1, 2), dtype=np.float64)
+        if wrap is not None:
+            grid = sky_grid((0, 0), wrap[1], grid.pixel)
         return SkyRaster(grid, weighted, outside)
 
 
@@ -157,11 +171,13 @@ def _row_bounds(height: int):
     return edges[:-1][upper], np.minimum(edges[1:][upper], np.pi / 2)
 
 
-def _bilinear_shares(grid: Grid, sx, sy):
+def _bilinear_shares(grid: Grid, sx, sy, wrap=None):
     """Bilinear deposits of sky-plane points (sx, sy) (2-D arrays) on the cells of ``grid``.
 
     Returns the flat cell index, the share (the four shares of a point sum to 1), and the row and
-    column of the point each deposit came from; shares falling off the grid are left out.
+    column of the point each deposit came from; shares falling off the grid are left out. With
+    ``wrap`` = (offset of grid cell [0, 0], period), the index is that of the offset modulo
+    the period, on a (period rows, period cols) raster.
     """
     rows, cols = grid.shape
     rowf, colf = grid.raster_from_ground(sx, sy)
@@ -179,7 +195,13 @@ def _bilinear_shares(grid: Grid, sx, sy):
     ):
         r, c = r0 + dr, c0 + dc
         inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        parts.append((r[inside] * cols + c[inside], share[inside], point_row[inside], point_col[inside]))
+        r, c = r[inside], c[inside]
+        if wrap is not None:
+            (r_start, c_start), (r_period, c_period) = wrap
+            r, c, cols_out = (r + r_start) % r_period, (c + c_start) % c_period, c_period
+        else:
+            cols_out = cols
+        parts.append((r * cols_out + c, share[inside], point_row[inside], point_col[inside]))
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
 
 

@@ -201,3 +201,24 @@ def test_leafy_canopy_matches_world_monte_carlo_within_one_percent(sky_name):
     ours = g[:, pick[:, 0], pick[:, 1]].T[:, : mc.shape[1]]
     relative_rms = np.sqrt(np.mean((ours - mc) ** 2)) / np.mean(mc)
     assert relative_rms < 0.01
+
+
+@pytest.mark.parametrize("model", ["uniform", "hdri"])
+def test_sky_rasterized_folded_equals_the_folded_raster(model):
+    rng = np.random.default_rng(9)
+    window = Grid.from_window((0, 0, 3.0, 2.0), 0.1)
+    tile, grid = canopy.tile_on_lattice(rng.random((8, 8)).astype(np.float32), center=(0.35, 0.2),
+                                        size=(1.7, 1.3), lattice=window)
+    plan = shadow.plan_periodic(window, grid, height=1.5, alpha=np.radians(70))
+    sky = UniformSky(np.array([1.0, 0.5, 2.0])) if model == "uniform" else EquirectSky(
+        rng.random((64, 128, 3)).astype(np.float32))
+    full = sky.raster(plan.sky)
+    folded = sky.raster(plan.sky, fold_period=plan.tile_shape)
+    assert folded.weighted.shape == (3,) + plan.tile_shape
+    expected = shadow.fold(full.weighted, shadow.sky_offset(plan.sky), plan.tile_shape)
+    assert np.allclose(folded.weighted, expected, rtol=1e-5, atol=1e-7 * expected.max())
+    assert folded.total == pytest.approx(full.total, rel=1e-6)
+    spectrum = shadow.transmittance_spectrum(tile)
+    a = shadow.ground_periodic(full, spectrum, plan, float(tile.mean()))
+    b = shadow.ground_periodic(folded, spectrum, plan, float(tile.mean()))
+    assert np.abs(a - b).max() <= 1e-5 * a.max()
