@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sparse
 
+from .composite import REC709_LUMINANCE
 from .geometry import Grid
-
-REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 
 
 def transmittance_from_image(image: np.ndarray) -> np.ndarray:

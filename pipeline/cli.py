@@ -151,10 +151,11 @@ def _run_cache(args) -> int:
         print(f"{len(items)} items, {_size(sum(i.bytes for i in items))} in {store.root}")
         return 0
     if args.action == "verify":
+        count = len(store.list())
         broken = store.verify(remove=args.remove)
         for item, problem in broken:
             print(f"{item.kind} {item.key[:16]}: {problem}" + (" (removed)" if args.remove else ""))
-        print(f"{len(broken)} broken of {len(store.list()) + (len(broken) if args.remove else 0)} items")
+        print(f"{len(broken)} broken of {count} items")
         return 1 if broken and not args.remove else 0
     removed = store.clear() if args.action == "clear" else store.prune(limit)
     print(f"removed {len(removed)} items, {_size(sum(i.bytes for i in removed))}")

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+"""Luminance weights of linear Rec.709 RGB."""
+
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """The sRGB transfer function (IEC 61966-2-1) of linear values, clipped to [0, 1]."""
@@ -18,6 +21,6 @@ def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25
     so sunlit ground is a light grey and shade keeps its depth. [dimensionless]
     """
     unshadowed = np.asarray(unshadowed, dtype=np.float64)
-    luminance = float(unshadowed @ np.array([0.2126, 0.7152, 0.0722]))
+    luminance = float(unshadowed @ REC709_LUMINANCE)
     scale = 1.0 / (white * luminance) if luminance > 0 else 1.0
     return srgb_encode(np.asarray(irradiance, dtype=np.float32) * np.float32(scale))

@@ -113,8 +113,7 @@ def load_config(path) -> Config:
     lines: dict[str, int] = {}
     _key_lines(node, "", lines, path)
     root = _Section(data if data is not None else {}, "", _Context(path, lines))
-    config = _parse(root, path)
-    return config
+    return _parse(root, path)
 
 
 @dataclass(frozen=True)
