@@ -1,0 +1,503 @@
+"""Drifting layers of fractal cloud: their transmittance and the light they scatter.
+
+A ``CloudLayer`` is a horizontal, geometrically thin sheet of cloud at ``altitude`` [m] whose
+vertical optical depth ``tau(x)`` varies over the horizontal plane and drifts with the wind.
+Seen from the observer, a sky-plane direction ``s = (wx / wz, wy / wz)`` (DESIGN.md section 4,
+Max 1991 Fig. 2) meets the layer at the horizontal point ``altitude * s``; the layer then
+
+- dims whatever lies behind it (clear sky, sun disc) by ``exp(-tau / cos(theta))``, and
+- adds the sunlight and skylight it scatters towards the observer (``radiance``).
+
+The sky model composes the two: ``L(s) = T(s) L_clear(s) + L_cloud(s)``, and dims the sun disc by
+``T(sun_s)``, as clouds drifting over the sun do in Max's film "Sun and Shade".
+
+Pattern
+-------
+White noise from ``numpy.random.default_rng(seed)`` on a periodic ``texels x texels`` lattice is
+filtered once with a von Karman power-law spectrum (spectral synthesis; Saupe 1988, "Algorithms
+for random fractals", in Peitgen & Saupe, *The Science of Fractal Images*, ch. 2.4.4)
+
+    P(k) ~ (k^2 + k0^2)^(-(beta + 1) / 2),     k0 = 1 / (2 scale),
+
+so that a straight transect has the 1-D spectrum ``k^-beta`` (``beta = 5/3``, the slope
+measured in marine stratocumulus: Cahalan & Snider 1989, "Marine stratocumulus structure",
+Remote Sens. Environ. 28, 95-107) for wavelengths shorter than ``2 scale``, and no more power at
+longer ones: clouds and gaps are about ``scale`` across, with about six octaves of detail down to
+the lattice spacing ``period * scale / texels``. The texture is cached per
+``(seed, texels, period, spectral_slope)`` and sampled bilinearly with wrap-around, so that the
+field is continuous in ``x`` and its drift is continuous and unbounded in time.
+
+Cover: the field is turned into a coverage ``c`` in [0, 1] by a smoothstep over the ranks
+``[u0 - h, u0 + h]`` of the lattice values, with ``u0 = 1 - cover`` (the field's ``1 - cover``
+quantile is where ``c = 1/2``) and half-width ``h = softness * min(cover, 1 - cover)``. Over the
+plane, ``c >= 1/2`` on a fraction ``cover`` and the mean of ``c`` is ``cover`` too; edges are soft
+and the soft band narrows with small clouds or small holes. ``tau = thickness * c``: thinnest at
+the edges, ``thickness`` in the cores. ``cover = 0`` gives ``tau = 0``, ``cover = 1`` a uniform
+overcast of ``thickness``.
+
+Light
+-----
+Each sky-plane point is treated as a plane-parallel slab of its own optical depth (independent
+column approximation). With ``mu = cos(theta_view)``, ``mu0 = cos(theta_sun)``, single-scattering
+albedo ``w``, Henyey-Greenstein phase ``p`` [1/sr] at the scattering angle between sun and view,
+sun normal irradiance ``F`` and clear-sky horizontal irradiance ``E``:
+
+    L = w F p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)          (single)
+      + [F mu0 m_sun(tau, mu0) + E m_sky(tau)] / pi                                 (multiple)
+
+with ``phi(x) = (1 - exp(-x)) / x``. The first line is Blinn's (1982) transmitted single
+scattering, ``w F p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``, written so that it is
+stable at ``mu = mu0`` and for any ``tau``. The second line sends the rest of the diffusely
+transmitted flux out of the cloud base uniformly (Lambertian):
+
+- ``m_sun = max(0, T_dE(tau, mu0) - exp(-tau/mu0) - S1(tau, mu0))``: the conservative
+  delta-Eddington total transmittance (Joseph, Wiscombe & Weinman 1976) less the direct beam and
+  less the singly scattered flux ``S1`` that the first line already carries (its hemispheric
+  integral at ``w = 1``, by Gauss-Legendre quadrature, tabulated per call over ``tau``);
+- ``m_sky = max(0, T_2s(tau) - 2 E3(tau))``: the two-stream transmittance of diffuse light
+  (hemispheric-mean closure, Meador & Weaver 1980) less its unscattered part ``2 E3(tau)``, which
+  the sky model already shows as ``T(s) L_clear(s)``;
+- both scaled, for ``w < 1``, by the two-stream ratio of diffusely transmitted flux with and
+  without absorption.
+
+Energy: below the layer, direct + single + multiple is at most ``max(T_dE, exp(-tau/mu0) + S1)``
+of the sun's ``F mu0`` plus at most ``T_2s`` of the sky's ``E``: never more than comes in.
+Neglected: light reflected by the ground onto the cloud base, skylight above the cloud differing
+from ``E``, horizontal transport between columns (cloud sides), the limb darkening of the base.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy import ndimage, special
+
+__all__ = [
+    "CloudLayer",
+    "henyey_greenstein",
+    "single_scattering_transmission",
+    "single_scattering_flux_transmittance",
+    "delta_eddington_transmittance",
+    "two_stream_diffuse_transmittance",
+    "diffuse_direct_transmittance",
+    "fractal_noise",
+]
+
+_TAU_NODES = 48  # optical-depth nodes of the per-call multiple-scattering table
+_QUAD_NODES = 192  # Gauss-Legendre nodes per angle in the single-scattering flux quadrature
+
+
+# --------------------------------------------------------------------------- physics functions
+
+
+def _phi(x):
+    """(1 - exp(-x)) / x for x >= 0, with phi(0) = 1. [dimensionless]"""
+    x = np.asarray(x)
+    if x.dtype != np.float32:
+        x = x.astype(np.float64)
+    x = np.maximum(x, np.finfo(x.dtype).tiny)  # expm1 is exact there: phi = 1
+    return -np.expm1(-x) / x
+
+
+def henyey_greenstein(cos_scattering_angle, asymmetry):
+    """Henyey-Greenstein phase function, normalised to 1 over the sphere.
+
+    p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos(Theta))^(3/2))  (Henyey & Greenstein 1941,
+    "Diffuse radiation in the galaxy", ApJ 93, 70-83; used for clouds by Blinn 1982).
+
+    cos_scattering_angle : cosine of the angle between the incident propagation direction and
+        the scattered one; 1 is straight on (forward). [dimensionless]
+    asymmetry : g, the mean cosine of the scattering angle, in (-1, 1). [dimensionless]
+    Returns p. [1/sr]
+    """
+    c = np.asarray(cos_scattering_angle)
+    if c.dtype != np.float32:
+        c = c.astype(np.float64)
+    g = float(asymmetry)
+    d = c * c.dtype.type(-2.0 * g)
+    d += c.dtype.type(1.0 + g * g)
+    d *= np.sqrt(d)
+    return c.dtype.type((1.0 - g * g) / (4.0 * np.pi)) / d
+
+
+def single_scattering_transmission(optical_depth, view_cosine, sun_cosine, phase, *, albedo):
+    """Singly scattered radiance below a slab lit from above, per unit sun normal irradiance.
+
+    Blinn 1982 ("Light reflection functions for simulation of clouds and dusty surfaces",
+    SIGGRAPH 82), transmitted light of a low-albedo layer:
+    ``L / F = w p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``, evaluated in the form
+    ``w p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)``, which is exact and
+    stable at ``mu = mu0``.
+
+    optical_depth : tau, vertical optical depth of the slab, >= 0. [dimensionless]
+    view_cosine : mu, cosine of the zenith angle of the viewing direction, in (0, 1].
+        [dimensionless]
+    sun_cosine : mu0, cosine of the sun's zenith angle, in (0, 1]. [dimensionless]
+    phase : p, phase function at the scattering angle, normalised to 1 over the sphere. [1/sr]
+    albedo : w, single-scattering albedo in [0, 1]. [dimensionless]
+    Returns L / F. [1/sr]
+    """
+    tau = np.asarray(optical_depth, dtype=np.float64)
+    inv_mu = 1.0 / np.asarray(view_cosine, dtype=np.float64)
+    inv_mu0 = 1.0 / np.asarray(sun_cosine, dtype=np.float64)
+    return albedo * np.asarray(phase, dtype=np.float64) * inv_mu * _slab_path(tau, inv_mu, inv_mu0)
+
+
+def _slab_path(tau, inv_mu, inv_mu0):
+    """tau exp(-tau m) phi(tau d), m = min(1/mu, 1/mu0), d = |1/mu0 - 1/mu|: the integral over
+    the depth t in [0, tau] of exp(-t / mu0 - (tau - t) / mu). [dimensionless]"""
+    near = np.minimum(inv_mu, inv_mu0)
+    x = np.abs(inv_mu0 - inv_mu)
+    x = x * tau
+    result = np.exp(-tau * near)
+    result *= tau
+    result *= _phi(x)
+    return result
+
+
+def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry, albedo,
+                                         nodes=_QUAD_NODES):
+    """S1: the singly scattered flux leaving the base of a slab over the sun's flux F mu0.
+
+    The hemispheric integral of ``single_scattering_transmission`` times ``mu`` over the lower
+    hemisphere, by Gauss-Legendre quadrature in zenith (``nodes``) and azimuth (``nodes``);
+    the azimuth integral of the Henyey-Greenstein phase is done once for all depths.
+
+    optical_depth : tau, array of vertical optical depths >= 0. [dimensionless]
+    sun_cosine : mu0 in (0, 1]. [dimensionless]
+    asymmetry : g of the Henyey-Greenstein phase. [dimensionless]
+    albedo : single-scattering albedo. [dimensionless]
+    Returns S1 with the shape of ``optical_depth``, in [0, albedo]. [dimensionless]
+    """
+    tau = np.asarray(optical_depth, dtype=np.float64)
+    mu0 = float(sun_cosine)
+    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    theta = 0.25 * np.pi * (x + 1.0)  # zenith of the view, (0, pi/2)
+    w_theta = 0.25 * np.pi * w
+    phi = 0.5 * np.pi * (x + 1.0)  # azimuth from the sun, (0, pi); the integrand is even
+    w_phi = np.pi * w  # twice 0.5 pi w: both halves of the circle
+    sin0 = np.sqrt(max(0.0, 1.0 - mu0 * mu0))
+    cos_scatter = (np.cos(theta)[:, None] * mu0
+                   + np.sin(theta)[:, None] * sin0 * np.cos(phi)[None, :])
+    phase_ring = henyey_greenstein(cos_scatter, asymmetry) @ w_phi  # (nodes,) [1/sr x rad]
+    mu = np.cos(theta)
+    inv_mu, inv_mu0 = 1.0 / mu, 1.0 / mu0
+    t = tau.reshape(-1, 1)
+    path = _slab_path(t, inv_mu[None, :], inv_mu0)
+    # integral of L mu d_omega = F w  int p path sin(theta) d_theta d_phi
+    s1 = albedo * (path @ (w_theta * np.sin(theta) * phase_ring)) / mu0
+    return s1.reshape(tau.shape)
+
+
+def delta_eddington_transmittance(optical_depth, sun_cosine, *, asymmetry):
+    """Total (direct + diffuse) flux transmittance of a non-absorbing slab under a collimated sun.
+
+    Delta-Eddington (Joseph, Wiscombe & Weinman 1976, J. Atmos. Sci. 33, 2452-2459): the forward
+    peak ``f = g^2`` is folded into the direct beam, ``tau' = (1 - g^2) tau``, ``g' = g / (1 + g)``;
+    then the conservative Eddington two-stream solution (Meador & Weaver 1980, J. Atmos. Sci. 37,
+    630-643; ``gamma1 = 3 (1 - g') / 4``, ``gamma3 = (2 - 3 g' mu0) / 4``):
+    ``R = (gamma1 tau' + (gamma3 - gamma1 mu0)(1 - exp(-tau'/mu0))) / (1 + gamma1 tau')``,
+    ``T = 1 - R``.
+
+    optical_depth : tau, vertical optical depth >= 0. [dimensionless]
+    sun_cosine : mu0 in (0, 1]. [dimensionless]
+    asymmetry : g in [0, 1). [dimensionless]
+    Returns T, the transmitted flux over the incident ``F mu0``. [dimensionless]
+    """
+    tau = np.asarray(optical_depth, dtype=np.float64)
+    mu0 = np.asarray(sun_cosine, dtype=np.float64)
+    g = float(asymmetry)
+    tau_s = (1.0 - g * g) * tau
+    g_s = g / (1.0 + g)
+    gamma1 = 0.75 * (1.0 - g_s)
+    gamma3 = 0.25 * (2.0 - 3.0 * g_s * mu0)
+    reflectance = ((gamma1 * tau_s + (gamma3 - gamma1 * mu0) * -np.expm1(-tau_s / mu0))
+                   / (1.0 + gamma1 * tau_s))
+    return 1.0 - reflectance
+
+
+def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
+    """Flux transmittance of a slab under uniform diffuse light, two-stream (hemispheric mean).
+
+    ``dF+/dtau = g1 F+ - g2 F-``, ``dF-/dtau = g2 F+ - g1 F-``, ``g1 = 2 - w (1 + g)``,
+    ``g2 = w (1 - g)`` (Meador & Weaver 1980, Table 1); with ``k = sqrt(g1^2 - g2^2)`` and
+    ``r = g2 / (g1 + k)``, ``T = (1 - r^2) exp(-k tau) / (1 - r^2 exp(-2 k tau))``, written to
+    stay finite as ``k -> 0`` (conservative limit ``T = 1 / (1 + (1 - g) tau)``, Bohren 1987,
+    Am. J. Phys. 55, 524).
+
+    optical_depth : tau >= 0. [dimensionless]
+    albedo : w in [0, 1]. [dimensionless]
+    asymmetry : g in (-1, 1). [dimensionless]
+    Returns T, direct and diffuse together. [dimensionless]
+    """
+    tau = np.asarray(optical_depth, dtype=np.float64)
+    g1 = 2.0 - albedo * (1.0 + asymmetry)
+    g2 = albedo * (1.0 - asymmetry)
+    k = np.sqrt(max(0.0, g1 * g1 - g2 * g2))
+    r = g2 / (g1 + k)
+    # (1 - r^2) = 2k / (g1 + k); divide numerator and denominator by 2k.
+    return np.exp(-k * tau) / (1.0 + (g1 + k) * r * r * tau * _phi(2.0 * k * tau))
+
+
+def diffuse_direct_transmittance(optical_depth):
+    """Unscattered fraction of uniform diffuse light through a slab: 2 E3(tau). [dimensionless]
+
+    optical_depth : tau >= 0. [dimensionless]
+    """
+    return 2.0 * special.expn(3, np.asarray(optical_depth, dtype=np.float64))
+
+
+# --------------------------------------------------------------------------- noise texture
+
+
+@lru_cache(maxsize=16)
+def _noise(seed: int, texels: int, period: float, spectral_slope: float):
+    """(texture, sorted values), both read-only float64 (texels, texels); see ``fractal_noise``."""
+    n = int(texels)
+    white = np.random.default_rng(seed).standard_normal((n, n))
+    ky = np.fft.fftfreq(n, d=1.0 / n)[:, None]  # cycles per tile
+    kx = np.fft.rfftfreq(n, d=1.0 / n)[None, :]
+    k0 = 0.5 * float(period)  # 1 / (2 scale) in cycles per tile of period * scale
+    amplitude = (kx * kx + ky * ky + k0 * k0) ** (-(spectral_slope + 1.0) / 4.0)
+    amplitude[0, 0] = 0.0
+    field = np.fft.irfft2(np.fft.rfft2(white) * amplitude, s=(n, n))
+    field -= field.mean()
+    field /= field.std()
+    ordered = np.sort(field, axis=None)
+    field.setflags(write=False)
+    ordered.setflags(write=False)
+    return field, ordered
+
+
+def fractal_noise(seed, texels=1024, *, period=16.0, spectral_slope=5.0 / 3.0):
+    """The periodic fractal noise lattice of a cloud layer (zero mean, unit variance).
+
+    seed : seed of ``numpy.random.default_rng`` for the white noise. [int]
+    texels : lattice side; one tile is ``texels x texels``. [count]
+    period : tile side in units of the feature size ``scale``. [dimensionless]
+    spectral_slope : beta, slope of the 1-D transect power spectrum ``k^-beta``. [dimensionless]
+    Returns a read-only float64 array (texels, texels), indexed [row, col] with col along +x and
+    row along -y. Cached: the same arguments return the same array.
+    """
+    return _noise(int(seed), int(texels), float(period), float(spectral_slope))[0]
+
+
+@lru_cache(maxsize=64)
+def _knots(seed, texels, period, spectral_slope, cover, softness):
+    """Field values and coverages of the rank-space smoothstep (see the module docstring)."""
+    ordered = _noise(seed, texels, period, spectral_slope)[1]
+    u0 = 1.0 - cover
+    h = softness * min(cover, 1.0 - cover)
+    t = np.linspace(0.0, 1.0, 33)
+    ranks = u0 - h + 2.0 * h * t
+    values = np.interp(ranks * (ordered.size - 1), np.arange(ordered.size), ordered)
+    if h <= 0.0 or not np.all(np.diff(values) > 0.0):
+        values = np.array([values[16], values[16] + 1e-12])
+        return values, np.array([0.0, 1.0])
+    return values, t * t * (3.0 - 2.0 * t)
+
+
+# --------------------------------------------------------------------------- the layer
+
+
+@dataclass(frozen=True)
+class CloudLayer:
+    """A horizontal layer of drifting fractal cloud (see the module docstring for the model).
+
+    cover : fraction of the sky plane covered, in [0, 1]. [dimensionless]
+    scale : feature size of the pattern: clouds and gaps are about this wide. [m]
+    altitude : height of the layer above the observer, > 0. [m]
+    wind : (2,) velocity of the pattern, x east, y north: the density at x at time t is that at
+        ``x - wind t`` at time 0. [m/s]
+    thickness : vertical optical depth of a full cloud, >= 0. [dimensionless]
+    seed : seed of the noise. [int]
+    albedo : single-scattering albedo; water droplets absorb almost nothing in the visible.
+        [dimensionless]
+    asymmetry : g of the Henyey-Greenstein phase; 0.85 for water clouds in the visible
+        (Hansen & Travis 1974, Space Sci. Rev. 16, 527). [dimensionless]
+    softness : width of the soft edge, as a fraction of the smaller of cover and 1 - cover, in
+        [0, 1]; 0 gives hard edges. [dimensionless]
+    spectral_slope : slope of the 1-D power spectrum of a transect (5/3: Cahalan & Snider
+        1989). [dimensionless]
+    period : side of the repeating tile in units of ``scale``. [dimensionless]
+    texels : lattice side of the noise tile. [count]
+    """
+
+    cover: float
+    scale: float
+    altitude: float
+    wind: tuple[float, float]
+    thickness: float
+    seed: int = 0
+    albedo: float = 1.0
+    asymmetry: float = 0.85
+    softness: float = 0.5
+    spectral_slope: float = 5.0 / 3.0
+    period: float = 16.0
+    texels: int = 1024
+
+    def __post_init__(self):
+        wind = np.asarray(self.wind, dtype=np.float64).reshape(-1)
+        if wind.shape != (2,):
+            raise ValueError(f"wind must have 2 components, got {wind.shape}")
+        object.__setattr__(self, "wind", (float(wind[0]), float(wind[1])))
+        for name in ("cover", "scale", "altitude", "thickness", "albedo", "asymmetry",
+                     "softness", "spectral_slope", "period"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "texels", int(self.texels))
+        if not 0.0 <= self.cover <= 1.0:
+            raise ValueError(f"cover must be in [0, 1], got {self.cover}")
+        if self.scale <= 0.0 or self.altitude <= 0.0:
+            raise ValueError("scale and altitude must be positive")
+        if self.thickness < 0.0:
+            raise ValueError("thickness must be >= 0")
+        if not 0.0 <= self.albedo <= 1.0:
+            raise ValueError("albedo must be in [0, 1]")
+        if not -1.0 < self.asymmetry < 1.0:
+            raise ValueError("asymmetry must be in (-1, 1)")
+        if not 0.0 <= self.softness <= 1.0:
+            raise ValueError("softness must be in [0, 1]")
+        if self.texels < 4 or self.period <= 0.0:
+            raise ValueError("texels must be >= 4 and period positive")
+
+    @property
+    def texel(self) -> float:
+        """Lattice spacing of the noise on the layer. [m]"""
+        return self.period * self.scale / self.texels
+
+    def _noise_key(self):
+        return (self.seed, self.texels, self.period, self.spectral_slope)
+
+    def field(self, s, time) -> np.ndarray:
+        """The noise (zero mean, unit variance on the lattice) where directions ``s`` (..., 2)
+        [tan] meet the layer at ``time`` [s], bilinearly interpolated. [dimensionless]"""
+        s = np.asarray(s, dtype=np.float64)
+        texture = _noise(*self._noise_key())[0]
+        n = self.texels
+        per_texel = self.altitude / self.texel
+        # Drift reduced modulo the tile first, so that late frames keep full precision.
+        shift_col = np.mod(self.wind[0] * float(time) / self.texel, n)
+        shift_row = np.mod(-self.wind[1] * float(time) / self.texel, n)
+        shape = s.shape[:-1]
+        s = s.reshape(-1, 2)  # map_coordinates wants at least one axis
+        coords = np.empty((2, s.shape[0]))
+        np.multiply(s[:, 1], -per_texel, out=coords[0])
+        coords[0] -= shift_row
+        np.multiply(s[:, 0], per_texel, out=coords[1])
+        coords[1] -= shift_col
+        return ndimage.map_coordinates(texture, coords, order=1, mode="grid-wrap").reshape(shape)
+
+    def coverage(self, s, time) -> np.ndarray:
+        """Cloud coverage c in [0, 1] at directions ``s`` (..., 2) [tan] at ``time`` [s]:
+        1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane.
+        [dimensionless]"""
+        s = np.asarray(s, dtype=np.float64)
+        if self.cover <= 0.0:
+            return np.zeros(s.shape[:-1])
+        if self.cover >= 1.0:
+            return np.ones(s.shape[:-1])
+        values, levels = _knots(*self._noise_key(), self.cover, self.softness)
+        return np.interp(self.field(s, time), values, levels)
+
+    def optical_depth(self, s, time) -> np.ndarray:
+        """Vertical optical depth tau = thickness x coverage where ``s`` (..., 2) [tan] meets the
+        layer at ``time`` [s]. [dimensionless]"""
+        return self.thickness * self.coverage(s, time)
+
+    def transmittance(self, s, time) -> np.ndarray:
+        """Direct transmittance exp(-tau / cos(theta)) along directions ``s`` (..., 2) [tan] at
+        ``time`` [s], with cos(theta) = 1 / sqrt(1 + |s|^2). [dimensionless]"""
+        s = np.asarray(s, dtype=np.float64)
+        tau = self.optical_depth(s, time)
+        return np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
+
+    def _multiple_tables(self, sun_cosine):
+        """(tau nodes, m_sun, m_sky) of the multiple-scattering term for this sun."""
+        t = np.linspace(0.0, 1.0, _TAU_NODES)
+        tau = self.thickness * t * t  # denser near 0, where S1 bends most
+        g, w = self.asymmetry, self.albedo
+        s1_conservative = single_scattering_flux_transmittance(
+            tau, sun_cosine, asymmetry=g, albedo=1.0)
+        m_sun = np.maximum(0.0, delta_eddington_transmittance(tau, sun_cosine, asymmetry=g)
+                           - np.exp(-tau / sun_cosine) - s1_conservative)
+        direct = diffuse_direct_transmittance(tau)
+        diffuse = two_stream_diffuse_transmittance(tau, albedo=1.0, asymmetry=g) - direct
+        m_sky = np.maximum(0.0, diffuse)
+        if w < 1.0:
+            absorbing = two_stream_diffuse_transmittance(tau, albedo=w, asymmetry=g) - direct
+            ratio = np.where(diffuse > 1e-300, np.clip(absorbing, 0.0, None)
+                             / np.where(diffuse > 1e-300, diffuse, 1.0), w)
+            ratio = np.minimum(ratio, 1.0)
+            m_sun = m_sun * ratio
+            m_sky = m_sky * ratio
+        return tau, m_sun, m_sky
+
+    def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance,
+                 multiple_scattering=True, tau=None) -> np.ndarray:
+        """Light the layer scatters towards the observer along directions ``s`` (..., 2) [tan].
+
+        time : [s]
+        sun_s : (2,) sky-plane point of the sun (above the horizon). [tan]
+        sun_irradiance : (3,) RGB normal irradiance of the sun above the cloud. [klx]
+        sky_irradiance : (3,) RGB horizontal irradiance of the clear sky. [klx]
+        multiple_scattering : False keeps Blinn's single scattering alone.
+        tau : optional (...) optical depth already sampled at ``s`` and ``time`` (as by
+            ``optical_depth``), to save sampling the pattern twice. [dimensionless]
+        Returns (..., 3) float32 RGB radiance, 0 where there is no cloud. [kcd/m^2]
+        """
+        s = np.asarray(s, dtype=np.float64)
+        sun_s = np.asarray(sun_s, dtype=np.float64).reshape(2)
+        sun_rgb = np.asarray(sun_irradiance, dtype=np.float64).reshape(3)
+        sky_rgb = np.asarray(sky_irradiance, dtype=np.float64).reshape(3)
+        if tau is None:
+            tau = self.optical_depth(s, time)
+        if self.cover <= 0.0 or self.thickness <= 0.0:
+            return np.zeros(s.shape[:-1] + (3,), dtype=np.float32)
+        # float32 from here on: twice as fast, and far finer than any image needs.
+        f32 = np.float32
+        sx, sy = s[..., 0].astype(f32), s[..., 1].astype(f32)
+        tau32 = np.asarray(tau, dtype=f32)
+        inv_mu = sx * sx
+        inv_mu += sy * sy
+        inv_mu += f32(1.0)
+        np.sqrt(inv_mu, out=inv_mu)  # 1 / cos(theta_view)
+        inv_mu0 = float(np.sqrt(1.0 + sun_s @ sun_s))
+        mu0 = 1.0 / inv_mu0
+        cos_scatter = sx * f32(sun_s[0])
+        cos_scatter += sy * f32(sun_s[1])
+        cos_scatter += f32(1.0)
+        cos_scatter /= inv_mu
+        cos_scatter *= f32(mu0)
+        np.clip(cos_scatter, f32(-1.0), f32(1.0), out=cos_scatter)
+        sun_weight = henyey_greenstein(cos_scatter, self.asymmetry).astype(f32, copy=False)
+        sun_weight *= f32(self.albedo)
+        sun_weight *= inv_mu
+        sun_weight *= _slab_path(tau32, inv_mu, f32(inv_mu0))  # Blinn single scattering / F [1/sr]
+        out = np.empty(s.shape[:-1] + (3,), dtype=f32)
+        if multiple_scattering:
+            nodes, m_sun, m_sky = self._multiple_tables(mu0)
+            sun_weight += np.interp(tau, nodes, m_sun * (mu0 / np.pi)).astype(f32)
+            sky_weight = np.interp(tau, nodes, m_sky / np.pi).astype(f32)
+            for c in range(3):
+                np.multiply(sun_weight, f32(sun_rgb[c]), out=out[..., c])
+                out[..., c] += sky_weight * f32(sky_rgb[c])
+        else:
+            np.multiply(sun_weight[..., None], sun_rgb.astype(f32), out=out)
+        return out
+
+    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True):
+        """``(transmittance(s, time), radiance(s, time, ...))`` sampling the pattern once.
+
+        Same arguments and units as ``radiance``; returns ((...), (..., 3)).
+        [dimensionless], [kcd/m^2]
+        """
+        s = np.asarray(s, dtype=np.float64)
+        tau = self.optical_depth(s, time)
+        transmittance = np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
+        radiance = self.radiance(s, time, sun_s=sun_s, sun_irradiance=sun_irradiance,
+                                 sky_irradiance=sky_irradiance,
+                                 multiple_scattering=multiple_scattering, tau=tau)
+        return transmittance, radiance

@@ -1,0 +1,334 @@
+import numpy as np
+import pytest
+from scipy import integrate
+
+from pipeline import clouds
+from pipeline.clouds import (
+    CloudLayer,
+    delta_eddington_transmittance,
+    fractal_noise,
+    single_scattering_flux_transmittance,
+    two_stream_diffuse_transmittance,
+)
+
+SUN = np.array([80.0, 78.0, 75.0])  # normal irradiance above the cloud [klx]
+SKY = np.array([14.0, 17.0, 22.0])  # clear-sky horizontal irradiance [klx]
+
+
+def layer(**kw):
+    args = dict(cover=0.5, scale=400.0, altitude=1500.0, wind=(9.0, -4.0), thickness=8.0,
+                seed=3, texels=256)
+    args.update(kw)
+    return CloudLayer(**args)
+
+
+def sky_points(n, half=2.5):
+    g = np.linspace(-half, half, n)
+    return np.stack(np.meshgrid(g, -g), axis=-1)  # (n, n, 2), north-up
+
+
+def unit(s):
+    """Unit direction vector of sky-plane point s (independent of the module)."""
+    v = np.array([s[0], s[1], 1.0])
+    return v / np.linalg.norm(v)
+
+
+def hg(cos_angle, g):
+    return (1 - g**2) / (4 * np.pi * (1 + g**2 - 2 * g * cos_angle) ** 1.5)
+
+
+def direction_at(zenith_deg, azimuth_deg):
+    """Sky-plane point of a direction; azimuth from north towards east."""
+    z, a = np.radians(zenith_deg), np.radians(azimuth_deg)
+    return np.tan(z) * np.array([np.sin(a), np.cos(a)])
+
+
+# 1. drift ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("t", [0.0, 7.3, 3600.0 * 5])
+def test_drift_is_the_pattern_moving_with_the_wind(t):
+    cl = layer()
+    s = sky_points(64)
+    dt = 12.5
+    wind = np.array(cl.wind)
+    moved = cl.optical_depth(s, t + dt)
+    shifted = cl.optical_depth(s - wind * dt / cl.altitude, t)
+    np.testing.assert_allclose(moved, shifted, rtol=0, atol=1e-9 * cl.thickness)
+    assert moved.std() > 0.1  # the test sees a real pattern, not a constant
+
+
+def test_drift_is_continuous_from_frame_to_frame():
+    cl = layer(wind=(15.0, 5.0))
+    s = sky_points(200)
+    t = 100.0
+    base = cl.optical_depth(s, t)
+    steps = (1 / 24, 1 / 240, 1 / 2400)
+    changes = [np.abs(cl.optical_depth(s, t + dt) - base).max() for dt in steps]
+    # one 24 fps frame (0.66 m of drift, 1/40 of a 25 m texel) moves the field very little
+    assert changes[0] < 0.1 * cl.thickness
+    # and the change goes to 0 with dt, linearly (Lipschitz: bilinear noise, piecewise-linear ramp)
+    assert changes[1] < 0.15 * changes[0] and changes[2] < 0.15 * changes[1]
+    assert changes[0] > 0.0
+
+
+# 2. cover --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("cover", [0.2, 0.5, 0.8])
+def test_covered_fraction_is_cover(cover):
+    cl = layer(cover=cover, scale=50.0, altitude=1000.0)
+    s = sky_points(600, half=3.0)  # 6 km across, 7.5 tiles of 800 m
+    assert 2 * 3.0 * cl.altitude > 5 * cl.period * cl.scale
+    c = cl.coverage(s, 42.0)
+    assert abs((c >= 0.5).mean() - cover) < 0.05
+    assert abs(c.mean() - cover) < 0.05
+    tau = cl.optical_depth(s, 42.0)
+    assert abs((tau >= 0.5 * cl.thickness).mean() - cover) < 0.05
+    assert c.max() == 1.0 and c.min() == 0.0  # clear sky and cloud cores both present
+    assert ((c > 0.05) & (c < 0.95)).mean() > 0.05  # soft edges
+    rad = cl.radiance(s[::10, ::10], 42.0, sun_s=direction_at(30, 100), sun_irradiance=SUN,
+                      sky_irradiance=SKY)
+    clear = tau[::10, ::10] == 0.0
+    assert clear.any() and (rad[clear] == 0.0).all() and (rad[~clear] > 0.0).all()
+
+
+def test_softness_zero_gives_hard_edges():
+    cl = layer(cover=0.4, softness=0.0)
+    c = cl.coverage(sky_points(200), 1.0)
+    assert set(np.unique(c)) == {0.0, 1.0}
+    assert abs(c.mean() - 0.4) < 0.1
+
+
+def test_no_cover_is_clear():
+    s = sky_points(32)
+    for cl in (layer(cover=0.0), layer(thickness=0.0)):
+        np.testing.assert_array_equal(cl.transmittance(s, 3.0), 1.0)
+        rad = cl.radiance(s, 3.0, sun_s=direction_at(30, 120), sun_irradiance=SUN,
+                          sky_irradiance=SKY)
+        assert rad.shape == (32, 32, 3)
+        np.testing.assert_array_equal(rad, 0.0)
+
+
+def test_full_cover_is_a_uniform_overcast():
+    cl = layer(cover=1.0, thickness=12.0)
+    s = sky_points(32)
+    np.testing.assert_array_equal(cl.optical_depth(s, 5.0), 12.0)
+    cos_theta = 1.0 / np.linalg.norm(np.concatenate([s, np.ones(s.shape[:-1] + (1,))], -1), axis=-1)
+    np.testing.assert_allclose(cl.transmittance(s, 5.0), np.exp(-12.0 / cos_theta), rtol=1e-12)
+    rad = cl.radiance(s, 5.0, sun_s=direction_at(40, 200), sun_irradiance=SUN, sky_irradiance=SKY)
+    assert (rad > 0).all()
+    # grey-white: the colour of the light that comes in, no more than it
+    assert rad.max() < (SUN.max() + SKY.max()) / np.pi
+
+
+# 3. seeds --------------------------------------------------------------------------------------
+
+
+def test_seed_determinism():
+    s = sky_points(64)
+    a = layer(seed=11).optical_depth(s, 4.0)
+    clouds._noise.cache_clear()
+    clouds._knots.cache_clear()
+    b = layer(seed=11).optical_depth(s, 4.0)
+    np.testing.assert_array_equal(a, b)
+    c = layer(seed=12).optical_depth(s, 4.0)
+    assert np.abs(a - c).mean() > 0.1 * layer().thickness
+
+
+def test_noise_is_cached_read_only_and_fractal():
+    tex = fractal_noise(5, 256, period=16.0)
+    assert fractal_noise(5, 256, period=16.0) is tex
+    assert not tex.flags.writeable
+    assert abs(tex.mean()) < 1e-12 and abs(tex.std() - 1.0) < 1e-12
+    # 1-D transect spectrum ~ k^-5/3 above the outer scale (k0 = 8 cycles per tile here)
+    power = (np.abs(np.fft.rfft(tex, axis=1)) ** 2).mean(axis=0)
+    k = np.arange(power.size)
+    band = (k >= 24) & (k <= 96)
+    slope = np.polyfit(np.log(k[band]), np.log(power[band]), 1)[0]
+    assert abs(slope + 5.0 / 3.0) < 0.25
+    # and flat for wavelengths longer than 2 scale (k < 8): features are about `scale` wide
+    assert power[1:4].mean() / power[4:8].mean() < 2.0
+
+
+# 4. Blinn single scattering, glow and energy ---------------------------------------------------
+
+
+def slab_quadrature(tau, s_view, s_sun, *, albedo, g, altitude=1500.0, depth=300.0):
+    """Single scattering along the view ray through a slab [altitude, altitude + depth]:
+    sun attenuated from the top, scattered (sigma w p), attenuated to the viewer."""
+    v, u = unit(s_view), unit(s_sun)
+    mu, mu0 = v[2], u[2]
+    sigma = tau / depth
+    p = hg(v @ u, g)
+
+    def integrand(length):
+        z = length * mu
+        return (sigma * albedo * p * np.exp(-sigma * (altitude + depth - z) / mu0)
+                * np.exp(-sigma * (z - altitude) / mu))
+
+    value, _ = integrate.quad(integrand, altitude / mu, (altitude + depth) / mu, epsabs=0,
+                              epsrel=1e-10)
+    return value
+
+
+@pytest.mark.parametrize("tau", [0.05, 0.6, 3.0])
+def test_blinn_single_scattering_matches_slab_quadrature(tau):
+    cl = layer(cover=1.0, thickness=tau, albedo=0.7, asymmetry=0.8)
+    s_sun = direction_at(35, 150)
+    views = np.array([direction_at(z, a) for z, a in
+                      [(0, 0), (35, 150), (36, 152), (60, 150), (70, 300), (20, 10), (80, 90)]])
+    rad = cl.radiance(views, 0.0, sun_s=s_sun, sun_irradiance=SUN, sky_irradiance=SKY,
+                      multiple_scattering=False)
+    for view, got in zip(views, rad):
+        expected = SUN * slab_quadrature(tau, view, s_sun, albedo=0.7, g=0.8)
+        np.testing.assert_allclose(got, expected, rtol=0.01)
+
+
+def test_forward_glow_follows_the_phase_function():
+    g = 0.85
+    cl = layer(cover=1.0, thickness=0.4, asymmetry=g)
+    zen = 40.0
+    s_sun = direction_at(zen, 0.0)
+    # views at the same zenith angle as the sun, at 5, 60 and 120 degrees from it
+    views, angles = [], (5.0, 60.0, 80.0)
+    for ang in angles:
+        z = np.radians(zen)
+        cos_az = (np.cos(np.radians(ang)) - np.cos(z) ** 2) / np.sin(z) ** 2
+        views.append(direction_at(zen, np.degrees(np.arccos(cos_az))))
+        assert np.isclose(unit(views[-1]) @ unit(s_sun), np.cos(np.radians(ang)))
+    views = np.array(views)
+    p = hg(np.cos(np.radians(angles)), g)
+    single = cl.radiance(views, 0.0, sun_s=s_sun, sun_irradiance=SUN, sky_irradiance=SKY,
+                         multiple_scattering=False)[:, 1]
+    np.testing.assert_allclose(single[0] / single[1], p[0] / p[1], rtol=1e-4)
+    assert single[0] / single[1] > 30  # thin cloud around the sun glows
+    full = cl.radiance(views, 0.0, sun_s=s_sun, sun_irradiance=SUN, sky_irradiance=SKY)[:, 1]
+    assert full[0] > full[1] > full[2]
+    # the multiple-scattered part is the same at equal zenith: differences follow HG
+    np.testing.assert_allclose((full[0] - full[1]) / (full[1] - full[2]),
+                               (p[0] - p[1]) / (p[1] - p[2]), rtol=1e-3)
+
+
+def hemisphere_flux(cl, s_sun, n_theta=300, n_phi=600):
+    """Midpoint quadrature of radiance cos(theta) d_omega over the lower sky hemisphere."""
+    theta = (np.arange(n_theta) + 0.5) * (0.5 * np.pi / n_theta)
+    phi = (np.arange(n_phi) + 0.5) * (2 * np.pi / n_phi)
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    s = np.stack([np.tan(th) * np.sin(ph), np.tan(th) * np.cos(ph)], -1)
+    rad = cl.radiance(s, 0.0, sun_s=s_sun, sun_irradiance=SUN, sky_irradiance=SKY).astype(float)
+    weight = np.cos(th) * np.sin(th) * (0.5 * np.pi / n_theta) * (2 * np.pi / n_phi)
+    return (rad * weight[..., None]).sum(axis=(0, 1))
+
+
+@pytest.mark.parametrize("tau", [0.3, 3.0, 30.0])
+@pytest.mark.parametrize("sun_zenith", [0.0, 60.0, 80.0])
+@pytest.mark.parametrize("albedo", [1.0, 0.5])
+def test_energy_is_bounded_by_what_comes_in(tau, sun_zenith, albedo):
+    cl = layer(cover=1.0, thickness=tau, albedo=albedo)
+    s_sun = direction_at(sun_zenith, 70.0)
+    mu0 = np.cos(np.radians(sun_zenith))
+    scattered = hemisphere_flux(cl, s_sun)
+    direct_sun = SUN * mu0 * np.exp(-tau / mu0)
+    # unscattered skylight (uniform sky): E * 2 E3(tau), computed here by quadrature
+    e3, _ = integrate.quad(lambda mu: np.exp(-tau / mu) * 2 * mu, 0, 1)
+    incoming = SUN * mu0 + SKY
+    below = scattered + direct_sun + SKY * e3
+    assert (below <= 1.01 * incoming).all()
+    if albedo == 1.0:
+        # nothing absorbed: below the cloud is what two-stream theory lets through
+        expected = (SUN * mu0 * max(delta_eddington_transmittance(tau, mu0, asymmetry=0.85),
+                                    np.exp(-tau / mu0) + single_scattering_flux_transmittance(
+                                        tau, mu0, asymmetry=0.85, albedo=1.0))
+                    + SKY * two_stream_diffuse_transmittance(tau, albedo=1.0, asymmetry=0.85))
+        np.testing.assert_allclose(below, expected, rtol=0.02)
+    else:
+        assert (below < incoming).all()
+
+
+def test_delta_eddington_and_two_stream_match_their_equations():
+    """Closed forms against a numerical solution of the two-stream ODEs (Meador & Weaver 1980,
+    Eddington coefficients after delta scaling; hemispheric mean for diffuse light)."""
+    g = 0.85
+
+    def solve(tau, g1, g2, g3, g4, mu0, source, top):
+        def rhs(t, y):
+            e = source * np.exp(-t / mu0)
+            return np.vstack([g1 * y[0] - g2 * y[1] - g3 * e, g2 * y[0] - g1 * y[1] + g4 * e])
+
+        def bc(ya, yb):
+            return np.array([ya[1] - top, yb[0]])
+
+        t = np.linspace(0, tau, 200)
+        sol = integrate.solve_bvp(rhs, bc, t, np.zeros((2, t.size)), tol=1e-8, max_nodes=100000)
+        assert sol.success
+        return sol.sol(tau)[1]
+
+    for tau in (0.2, 2.0, 15.0):
+        for mu0 in (1.0, 0.5, 0.2):
+            ts, gs = (1 - g * g) * tau, g / (1 + g)
+            g1 = g2 = 0.75 * (1 - gs)
+            g3 = 0.25 * (2 - 3 * gs * mu0)
+            down = solve(ts, g1, g2, g3, 1 - g3, mu0, 1.0, 0.0)  # diffuse flux at the base / F
+            expected = (down + mu0 * np.exp(-ts / mu0)) / mu0
+            got = delta_eddington_transmittance(tau, mu0, asymmetry=g)
+            np.testing.assert_allclose(got, expected, rtol=1e-5)
+        for w in (1.0, 0.9):
+            down = solve(tau, 2 - w * (1 + g), w * (1 - g), 0, 0, 1.0, 0.0, 1.0)
+            np.testing.assert_allclose(two_stream_diffuse_transmittance(tau, albedo=w, asymmetry=g),
+                                       down, rtol=1e-5)
+        np.testing.assert_allclose(two_stream_diffuse_transmittance(tau, albedo=1.0, asymmetry=g),
+                                   1 / (1 + (1 - g) * tau), rtol=1e-12)
+
+
+def test_single_scattering_flux_for_isotropic_scattering():
+    """S1 with g = 0: the azimuth integral is 1/2, leaving a double integral over mu and depth."""
+    for tau, mu0 in [(0.1, 0.9), (1.0, 0.5), (4.0, 0.3)]:
+        def inner(mu):
+            return integrate.quad(lambda t: np.exp(-t / mu0 - (tau - t) / mu), 0, tau)[0]
+
+        expected = 0.8 / (2 * mu0) * integrate.quad(inner, 0, 1, limit=200)[0]
+        got = single_scattering_flux_transmittance(tau, mu0, asymmetry=0.0, albedo=0.8)
+        np.testing.assert_allclose(got, expected, rtol=1e-4)
+
+
+# 5. slant ---------------------------------------------------------------------------------------
+
+
+def test_transmittance_decreases_with_slant_through_the_same_cloud_point():
+    cl = layer(cover=0.7, wind=(30.0, 10.0))
+    s = sky_points(40, half=0.4)
+    t = 60.0
+    # at time t the direction s + wind t / altitude meets the pattern point that s met at 0
+    s_slant = s + np.array(cl.wind) * t / cl.altitude
+    tau = cl.optical_depth(s, 0.0)
+    np.testing.assert_allclose(cl.optical_depth(s_slant, t), tau, atol=1e-9)
+    assert (np.hypot(*np.moveaxis(s_slant, -1, 0)) > np.hypot(*np.moveaxis(s, -1, 0))).all()
+    t_near, t_far = cl.transmittance(s, 0.0), cl.transmittance(s_slant, t)
+    cloudy = tau > 0.1
+    assert cloudy.mean() > 0.3
+    assert (t_far[cloudy] < t_near[cloudy]).all()
+    cos_far = np.array([unit(p)[2] for p in s_slant.reshape(-1, 2)]).reshape(tau.shape)
+    np.testing.assert_allclose(t_far, np.exp(-tau / cos_far), rtol=1e-9)
+
+
+# API details -------------------------------------------------------------------------------------
+
+
+def test_shapes_inputs_and_shade():
+    cl = layer(wind=np.array([3.0, 1.0]))
+    assert cl.wind == (3.0, 1.0) and hash(cl) == hash(layer(wind=(3.0, 1.0)))
+    s = sky_points(12).reshape(3, 4, 12, 2)
+    s_copy = s.copy()
+    sun_s = direction_at(30, 200)
+    kw = dict(sun_s=sun_s, sun_irradiance=SUN, sky_irradiance=SKY)
+    t, r = cl.shade(s, 9.0, **kw)
+    assert t.shape == (3, 4, 12) and r.shape == (3, 4, 12, 3)
+    np.testing.assert_array_equal(t, cl.transmittance(s, 9.0))
+    np.testing.assert_array_equal(r, cl.radiance(s, 9.0, **kw))
+    np.testing.assert_array_equal(s, s_copy)
+    assert cl.optical_depth(np.zeros(2), 0.0).shape == ()
+    with pytest.raises(ValueError):
+        layer(cover=1.5)
+    with pytest.raises(ValueError):
+        layer(wind=(1.0, 2.0, 3.0))
