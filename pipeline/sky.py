@@ -18,6 +18,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .composite import REC709_LUMINANCE
 from .geometry import Grid, projected_solid_angle
 from .shadow import fold, sky_grid, sky_offset
 
@@ -216,4 +217,601 @@ def _flush(accum, pending: list) -> None:
     pending.clear()
 
 
-MODELS = {"uniform": UniformSky, "hdri": EquirectSky}
+
+
+# ---------------------------------------------------------------------------------------------
+# Procedural sky: Preetham, Shirley & Smits (1999) clear sky, an attenuated limb-darkened sun,
+# a dark moon and duck-typed clouds.
+#
+# Units: radiance in kcd/m^2 per linear Rec.709 channel (the channels' Rec.709 luminance is the
+# photometric luminance), so irradiances [radiance x sr] come out in klx. Directions: azimuth from
+# north towards east, zenith angle from +z [rad]; sky-plane points s = (wx/wz, wy/wz) [tan].
+#
+# Clouds protocol (implemented in ``pipeline/clouds.py``, used here by duck typing):
+#   clouds.transmittance(s (..., 2), time) -> (...) in [0, 1], direct transmittance along s;
+#   clouds.radiance(s (..., 2), time, *, sun_s (2,), sun_irradiance (3,), sky_irradiance (3,))
+#       -> (..., 3) light scattered towards the observer [kcd/m^2], given the sun's sky-plane
+#       point, its normal irradiance above the clouds after the atmosphere and the moon [klx], and
+#       the clear sky's horizontal irradiance [klx].
+#   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
+# ---------------------------------------------------------------------------------------------
+
+LUMINOUS_SOLAR_CONSTANT = 133.8
+"""Extraterrestrial normal illuminance of the sun at 1 au (Darula, Kittler & Gueymard 2005,
+"Reference luminous solar constant and solar luminance for illuminance calculations", Solar
+Energy 79(5), 559-565). [klx]"""
+
+SUN_ANGULAR_RADIUS = float(np.deg2rad(959.63 / 3600.0))
+"""Angular radius of the sun at 1 au, 959.63 arcsec (Espenak & Meeus 2006, as in ephemeris). [rad]"""
+
+SUN_LUMINANCE = LUMINOUS_SOLAR_CONSTANT / (np.pi * SUN_ANGULAR_RADIUS**2)
+"""Disc-mean luminance of the sun above the atmosphere, E_v0 / (pi r^2) = 1.97e6 kcd/m^2
+(1.96e9 cd/m^2 in Darula et al. 2005). Independent of the sun's distance. [kcd/m^2]"""
+
+RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
+"""Representative wavelengths of the R, G, B channels for the sun's attenuation. [um]"""
+
+LIMB_DARKENING = (0.52, 0.59, 0.68)
+"""Linear limb-darkening coefficients u of I(mu) / I(1) = 1 - u (1 - mu) for R, G, B. G: the
+linear law with the disc-mean of Allen's quadratic law at 550 nm, I/I(1) = 0.30 + 0.93 mu -
+0.23 mu^2 (Cox 2000, Allen's Astrophysical Quantities, 4th ed., sec. 14.7), i.e. 1 - u/3 = 0.805;
+R and B follow the stronger darkening at shorter wavelengths (Hestroffer & Magnan 1998, A&A 333,
+338); approximate. [1]"""
+
+XYZ_TO_REC709 = np.array(
+    [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]]
+)
+"""CIE XYZ to linear Rec.709 RGB (D65 white), IEC 61966-2-1."""
+
+# Preetham et al. 1999, appendix A.2: Perez coefficients (A..E) = slope * T + intercept, rows Y, x, y.
+_PEREZ_SLOPE = np.array(
+    [[0.1787, -0.3554, -0.0227, 0.1206, -0.0670],
+     [-0.0193, -0.0665, -0.0004, -0.0641, -0.0033],
+     [-0.0167, -0.0950, -0.0079, -0.0441, -0.0109]]
+)
+_PEREZ_INTERCEPT = np.array(
+    [[-1.4630, 0.4275, 5.3251, -2.5771, 0.3703],
+     [-0.2592, 0.0008, 0.2125, -0.8989, 0.0452],
+     [-0.2608, 0.0092, 0.2102, -1.6537, 0.0529]]
+)
+# zenith chromaticity x_z, y_z = [T^2 T 1] M [theta_s^3 theta_s^2 theta_s 1]^T (appendix A.2)
+_ZENITH_X = np.array(
+    [[0.00166, -0.00375, 0.00209, 0.0], [-0.02903, 0.06377, -0.03202, 0.00394], [0.11693, -0.21196, 0.06052, 0.25886]]
+)
+_ZENITH_Y = np.array(
+    [[0.00275, -0.00610, 0.00317, 0.0], [-0.04214, 0.08970, -0.04153, 0.00516], [0.15346, -0.26756, 0.06670, 0.26688]]
+)
+TURBIDITY_RANGE = (1.7, 10.0)
+"""Turbidities accepted: Preetham's fits are meant for about 2..10; below 1.21 the luminance
+coefficient B turns positive and the sky blows up at the horizon. [1]"""
+
+CLEAR_SKY_NODE_SPACING = 0.02
+"""Largest spacing of the nodes on which ``ProceduralSky.raster`` evaluates the clear sky. [tan]"""
+
+MAX_KERNEL_CELLS = 4_000_000
+"""Largest sun kernel block, in cells: a low sun on a fine grid is refused rather than ground out."""
+
+
+def perez_coefficients(turbidity: float) -> np.ndarray:
+    """Perez distribution coefficients A..E for Y, x and y (Preetham et al. 1999, appendix A.2).
+
+    turbidity : atmospheric turbidity T. [1]
+    Returns (3, 5): rows Y, x, y; columns A, B, C, D, E. [1]
+    """
+    return _PEREZ_SLOPE * float(turbidity) + _PEREZ_INTERCEPT
+
+
+def zenith_luminance(turbidity: float, sun_zenith: float) -> float:
+    """Zenith luminance Y_z = (4.0453 T - 4.9710) tan(chi) - 0.2155 T + 2.4192 with
+    chi = (4/9 - T/120)(pi - 2 theta_s) (Preetham et al. 1999, appendix A.2). [kcd/m^2]
+
+    turbidity : T. [1]   sun_zenith : theta_s, in [0, pi/2]. [rad]
+    """
+    chi = (4.0 / 9.0 - turbidity / 120.0) * (np.pi - 2.0 * sun_zenith)
+    return float((4.0453 * turbidity - 4.9710) * np.tan(chi) - 0.2155 * turbidity + 2.4192)
+
+
+def zenith_chromaticity(turbidity: float, sun_zenith: float) -> tuple[float, float]:
+    """CIE xy chromaticity of the zenith (Preetham et al. 1999, appendix A.2). [1]
+
+    turbidity : T. [1]   sun_zenith : theta_s. [rad]
+    """
+    t = np.array([turbidity**2, turbidity, 1.0])
+    a = np.array([sun_zenith**3, sun_zenith**2, sun_zenith, 1.0])
+    return float(t @ _ZENITH_X @ a), float(t @ _ZENITH_Y @ a)
+
+
+def preetham_radiance(cos_zenith, cos_gamma, *, turbidity: float, sun_zenith: float) -> np.ndarray:
+    """Clear-sky radiance of the Preetham, Shirley & Smits (1999) model, no sun disc.
+
+    For each of Y, x, y: value = zenith value * F(theta, gamma) / F(0, theta_s), with the Perez
+    function F = (1 + A exp(B / cos(theta))) (1 + C exp(D gamma) + E cos^2(gamma)) (eq. 3 of the
+    paper); then xyY -> XYZ -> linear Rec.709.
+
+    cos_zenith : cos(theta) of the viewing directions, in (0, 1]. [1]
+    cos_gamma : cosine of the angle between the directions and the sun. [1]
+    turbidity : T, in TURBIDITY_RANGE. [1]
+    sun_zenith : theta_s, in [0, pi/2). [rad]
+    Returns (..., 3) float64 linear Rec.709 radiance. [kcd/m^2]
+    """
+    cos_zenith = np.asarray(cos_zenith, dtype=np.float64)
+    cos_gamma = np.clip(np.asarray(cos_gamma, dtype=np.float64), -1.0, 1.0)
+    coef = perez_coefficients(turbidity)
+    gamma = np.arccos(cos_gamma)
+    inv_cos = 1.0 / np.maximum(cos_zenith, 1e-6)
+    x_z, y_z = zenith_chromaticity(turbidity, sun_zenith)
+    zenith = (zenith_luminance(turbidity, sun_zenith), x_z, y_z)
+    Y, x, y = (
+        z * _perez(coef[k], inv_cos, gamma, cos_gamma) / _perez(coef[k], 1.0, sun_zenith, np.cos(sun_zenith))
+        for k, z in enumerate(zenith)
+    )
+    return _rgb_from_xyY(x, y, Y)
+
+
+def _perez(c, inv_cos, gamma, cos_gamma):
+    A, B, C, D, E = c
+    return (1.0 + A * np.exp(B * inv_cos)) * (1.0 + C * np.exp(D * gamma) + E * cos_gamma * cos_gamma)
+
+
+def _rgb_from_xyY(x, y, Y):
+    """Linear Rec.709 (..., 3) from CIE xyY."""
+    X = x / y * Y
+    Z = (1.0 - x - y) / y * Y
+    M = XYZ_TO_REC709
+    return np.stack([M[i, 0] * X + M[i, 1] * Y + M[i, 2] * Z for i in range(3)], axis=-1)
+
+
+def relative_airmass(zenith) -> np.ndarray:
+    """Relative optical air mass, Kasten & Young (1989), Applied Optics 28(22), 4735:
+    m = 1 / (cos z + 0.50572 (96.07995 - z_deg)^-1.6364); 1 at the zenith, about 38 at the horizon.
+
+    zenith : zenith angle, in [0, pi/2]. [rad]   Returns m. [1]
+    """
+    z = np.asarray(zenith, dtype=np.float64)
+    return 1.0 / (np.cos(z) + 0.50572 * (96.07995 - np.degrees(z)) ** -1.6364)
+
+
+def sun_transmittance(zenith: float, turbidity: float) -> np.ndarray:
+    """Direct transmittance of the atmosphere for R, G, B (Preetham et al. 1999, appendix A.1).
+
+    Rayleigh tau_R = exp(-0.008735 lambda^-4.08 m) and Angstrom aerosol
+    tau_a = exp(-beta lambda^-1.3 m), beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um], with
+    the Kasten & Young air mass m. Ozone, water vapour and mixed gases are left out (a few per cent
+    in the visible).
+
+    zenith : sun zenith angle. [rad]   turbidity : T. [1]
+    Returns (3,) float64. [1]
+    """
+    m = relative_airmass(zenith)
+    lam = RGB_WAVELENGTHS
+    beta = 0.04608 * turbidity - 0.04586
+    return np.exp(-m * (0.008735 * lam**-4.08 + beta * lam**-1.3))
+
+
+def sun_disc_radiance(angular_distance, *, angular_radius: float, normal_irradiance, limb_darkening):
+    """Radiance of a limb-darkened disc, linear law I(mu) = I(1) (1 - u (1 - mu)),
+    mu = sqrt(1 - (rho / r)^2) (e.g. Cox 2000, Allen's Astrophysical Quantities, sec. 14.7).
+
+    angular_distance : rho, from the disc centre; 0 beyond the limb. [rad]
+    angular_radius : r. [rad]
+    normal_irradiance : (3,) integral of the radiance over the flat disc, pi r^2 I(1) (1 - u/3). [klx]
+    limb_darkening : (3,) u, 0 for a uniform disc. [1]
+    Returns (..., 3) float64. [kcd/m^2]
+    """
+    rho = np.asarray(angular_distance, dtype=np.float64)[..., None]
+    u = np.asarray(limb_darkening, dtype=np.float64)
+    centre = np.asarray(normal_irradiance, dtype=np.float64) / (np.pi * angular_radius**2 * (1.0 - u / 3.0))
+    mu = np.sqrt(np.clip(1.0 - (rho / angular_radius) ** 2, 0.0, 1.0))
+    return np.where(rho <= angular_radius, centre * (1.0 - u * (1.0 - mu)), 0.0)
+
+
+@dataclass(frozen=True)
+class SunDisc:
+    """The sun as seen from the ground.
+
+    azimuth : from north towards east. [rad]
+    elevation : above the horizon (geometric). [rad]
+    angular_radius : radius of the disc; its normal irradiance scales as its square. [rad]
+    limb_darkening : (3,) linear-law coefficients u for R, G, B; (0, 0, 0) for a uniform disc. [1]
+    """
+
+    azimuth: float
+    elevation: float
+    angular_radius: float = SUN_ANGULAR_RADIUS
+    limb_darkening: tuple = LIMB_DARKENING
+
+    def __post_init__(self):
+        _check_disc(self, "sun")
+        u = np.asarray(self.limb_darkening, dtype=np.float64)
+        if u.shape != (3,) or np.any(~((u >= 0) & (u <= 1))):
+            raise ValueError(f"sun limb_darkening must be three numbers in [0, 1], got {self.limb_darkening}")
+
+
+@dataclass(frozen=True)
+class MoonDisc:
+    """The new moon: a dark disc that cuts the sun (it does not hide the sky, which is lit in front of it).
+
+    azimuth, elevation, angular_radius : as for SunDisc. [rad]
+    """
+
+    azimuth: float
+    elevation: float
+    angular_radius: float
+
+    def __post_init__(self):
+        _check_disc(self, "moon")
+
+
+def _check_disc(disc, name):
+    if not (np.isfinite(disc.azimuth) and np.isfinite(disc.elevation) and abs(disc.elevation) <= np.pi / 2):
+        raise ValueError(f"{name} azimuth and elevation must be finite, |elevation| <= pi/2 [rad]")
+    if not (0.0 < disc.angular_radius < 0.1):
+        raise ValueError(f"{name} angular_radius must be in (0, 0.1) [rad], got {disc.angular_radius}")
+
+
+def _unit(azimuth, elevation) -> np.ndarray:
+    """Unit vector (x east, y north, z up) of a direction. [1]"""
+    return np.array([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth), np.sin(elevation)])
+
+
+def _angle(w, c):
+    """Angle [rad] between unit vectors w (..., 3) and c (3,), stable for small angles."""
+    return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(w - c, axis=-1), 0.0, 1.0))
+
+
+def _gauss_legendre(a, b, n):
+    """Nodes and weights of n-point Gauss-Legendre on [a, b] (arrays broadcast, nodes on the last axis)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    a, b = np.asarray(a, dtype=np.float64)[..., None], np.asarray(b, dtype=np.float64)[..., None]
+    return a + (b - a) * (x + 1.0) / 2.0, (b - a) / 2.0 * w
+
+
+@dataclass(frozen=True)
+class ProceduralSky:
+    """Clear sky (Preetham et al. 1999) with the sun, an optional moon and optional clouds.
+
+    turbidity : T, in TURBIDITY_RANGE. [1]
+    sun : SunDisc -- elevation must be above 0: the model has no twilight (ValueError).
+    moon : MoonDisc or None.
+    clouds : an object with the clouds protocol (module comment above), or None.
+    time : passed to the clouds. [s]
+
+    Radiance in kcd/m^2, irradiance in klx (linear Rec.709 channels). The moon cuts the sun and
+    dims the clear sky and the clouds' glow by the same (limb-weighted) factor, since skylight is
+    scattered sunlight; below the horizon there is no light (0).
+    """
+
+    turbidity: float
+    sun: SunDisc
+    moon: MoonDisc | None = None
+    clouds: object | None = None
+    time: float = 0.0
+
+    def __post_init__(self):
+        lo, hi = TURBIDITY_RANGE
+        if not (lo <= self.turbidity <= hi):
+            raise ValueError(f"turbidity must be in [{lo}, {hi}], got {self.turbidity}")
+        if not self.sun.elevation > 0.0:
+            raise ValueError(f"sun elevation must be above 0 for the Preetham sky, got {self.sun.elevation} [rad]")
+
+    # --- the sun ------------------------------------------------------------------------------
+    @cached_property
+    def sun_direction(self) -> np.ndarray:
+        """Unit vector towards the sun's centre. [1]"""
+        return _unit(self.sun.azimuth, self.sun.elevation)
+
+    @cached_property
+    def sun_point(self) -> np.ndarray:
+        """Sky-plane point of the sun's centre (2,). [tan]"""
+        return self.sun_direction[:2] / self.sun_direction[2]
+
+    @cached_property
+    def sun_normal_irradiance(self) -> np.ndarray:
+        """Clear, uneclipsed normal irradiance of the sun after the atmosphere (3,): the extraterrestrial
+        E_v0 (r / r_1au)^2 as white light times ``sun_transmittance``. [klx]"""
+        zenith = np.pi / 2 - self.sun.elevation
+        return SUN_LUMINANCE * np.pi * self.sun.angular_radius**2 * sun_transmittance(zenith, self.turbidity)
+
+    def total_sun_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance of the clear, uneclipsed sun (3,): the sun kernel's sum without moon
+        or cloud, E_n cos(zenith) (to O(r^2)). [klx]"""
+        return self.sun_normal_irradiance * self.sun_direction[2]
+
+    @cached_property
+    def moon_visible(self) -> np.ndarray:
+        """Fraction of the limb-darkened sun's power the moon leaves visible, per channel (3,). [1]
+
+        Ring by ring: the ring of radius rho about the sun's centre is covered by the moon (centre d
+        away, radius R) over arccos((rho^2 + d^2 - R^2) / (2 rho d)) / pi of its length; the rings
+        are summed with Gauss-Legendre between the radii where that fraction has kinks. The discs
+        are flat circles of their angular radii (error O(r^2)).
+        """
+        if self.moon is None:
+            return np.ones(3)
+        r, big_r = self.sun.angular_radius, self.moon.angular_radius
+        d = float(_angle(_unit(self.moon.azimuth, self.moon.elevation), self.sun_direction))
+        if d >= r + big_r:
+            return np.ones(3)
+        cuts = np.unique(np.clip([0.0, abs(d - big_r), d + big_r, r], 0.0, r))
+        rho, w = _gauss_legendre(cuts[:-1], cuts[1:], 48)
+        rho, w = rho.ravel(), w.ravel()
+        k = (rho**2 + d**2 - big_r**2) / (2.0 * rho * max(d, 1e-300))
+        covered = np.arccos(np.clip(k, -1.0, 1.0)) / np.pi
+        ring = sun_disc_radiance(rho, angular_radius=r, normal_irradiance=np.ones(3),
+                                 limb_darkening=self.sun.limb_darkening) * (w * rho)[:, None]
+        return 1.0 - (ring * covered[:, None]).sum(axis=0) / ring.sum(axis=0)
+
+    @cached_property
+    def sun_cloud_transmittance(self) -> float:
+        """Cloud transmittance towards the sun's centre, 1 without clouds. [1]"""
+        if self.clouds is None:
+            return 1.0
+        return float(np.clip(self.clouds.transmittance(self.sun_point[None], self.time)[0], 0.0, 1.0))
+
+    def sun_fraction(self) -> float:
+        """S: direct sun power reaching the ground after moon and clouds over that of the clear,
+        uneclipsed sun (DESIGN.md section 4), weighted by Rec.709 luminance. [1]"""
+        e = self.sun_normal_irradiance * REC709_LUMINANCE
+        return float(self.sun_cloud_transmittance * (e @ self.moon_visible) / e.sum())
+
+    def sun_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance of the sun after moon and clouds (3,). [klx]"""
+        return self.total_sun_irradiance() * self.moon_visible * self.sun_cloud_transmittance
+
+    def _sun_samples(self, w, footprint):
+        """Visible sun radiance (..., 3) [kcd/m^2] at unit vectors w (..., 3), the disc edges (sun
+        limb and moon limb) anti-aliased by a linear ramp over ``footprint(centre)`` [rad], the
+        sample spacing measured along the angular distance from ``centre``; cloud not included."""
+        r = self.sun.angular_radius
+        rho = _angle(w, self.sun_direction)
+        value = sun_disc_radiance(np.minimum(rho, r), angular_radius=r, normal_irradiance=self.sun_normal_irradiance,
+                                  limb_darkening=self.sun.limb_darkening)
+        cover = np.clip(0.5 - (rho - r) / footprint(self.sun_direction, rho), 0.0, 1.0)
+        if self.moon is not None:
+            centre = _unit(self.moon.azimuth, self.moon.elevation)
+            rho_m = _angle(w, centre)
+            cover *= np.clip(0.5 + (rho_m - self.moon.angular_radius) / footprint(centre, rho_m), 0.0, 1.0)
+        return value * cover[..., None]
+
+    # --- the sky ------------------------------------------------------------------------------
+    @cached_property
+    def _sky_dimming(self) -> np.ndarray:
+        """Eclipse dimming of skylight (3,): the sun's visible fraction. [1]"""
+        return self.moon_visible
+
+    def clear_radiance(self, s) -> np.ndarray:
+        """Clear-sky radiance at sky-plane points s (..., 2) [tan], eclipse-dimmed, no sun disc. [kcd/m^2]"""
+        s = np.asarray(s, dtype=np.float64)
+        cos_zenith = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+        c = self.sun_direction
+        cos_gamma = (s[..., 0] * c[0] + s[..., 1] * c[1] + c[2]) * cos_zenith
+        L = preetham_radiance(cos_zenith, cos_gamma, turbidity=self.turbidity, sun_zenith=np.pi / 2 - self.sun.elevation)
+        return L * self._sky_dimming
+
+    def radiance(self, s) -> np.ndarray:
+        """Sky radiance without the sun disc at sky-plane points s (..., 2) [tan]:
+        L_clear T + cloud glow. [kcd/m^2]"""
+        L = self.clear_radiance(s)
+        if self.clouds is None:
+            return L
+        s = np.asarray(s, dtype=np.float64)
+        L *= np.clip(self.clouds.transmittance(s, self.time), 0.0, 1.0)[..., None]
+        return L + self.clouds.radiance(s, self.time, **self._cloud_light)
+
+    @cached_property
+    def _cloud_light(self) -> dict:
+        return dict(sun_s=self.sun_point.copy(), sun_irradiance=self.sun_normal_irradiance * self.moon_visible,
+                    sky_irradiance=self.clear_sky_irradiance)
+
+    @cached_property
+    def clear_sky_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance of the clear sky (3,), no sun disc, eclipse-dimmed. [klx]"""
+        return self._outside(None, self.clear_radiance)
+
+    @cached_property
+    def sky_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance of the sky with clouds (3,), no sun disc. [klx]"""
+        return self._outside(None, self.radiance)
+
+    def unshadowed(self) -> np.ndarray:
+        """Horizontal irradiance of the open sky and sun (3,): any raster's total plus the sun kernel's sum. [klx]"""
+        return self.sky_irradiance + self.sun_irradiance()
+
+    def _outside(self, extent, radiance, *, n_azimuth=1024, n_zenith=32) -> np.ndarray:
+        """Irradiance [klx] of the sky outside the sky-plane rectangle ``extent`` (x_min, y_min, x_max,
+        y_max) [tan] (None: the whole hemisphere): for each azimuth (midpoint rule) the ray from the
+        zenith leaves the rectangle at exact zenith angles; the outside parts of the ray are integrated
+        with Gauss-Legendre in theta of L cos(theta) sin(theta)."""
+        phi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
+        d = np.stack([np.sin(phi), np.cos(phi)], axis=-1)
+        t_in = np.zeros(n_azimuth)
+        t_out = np.zeros(n_azimuth)
+        if extent is not None:
+            lo = np.array(extent[:2])
+            hi = np.array(extent[2:])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                a, b = lo / d, hi / d
+            near, far = np.minimum(a, b), np.maximum(a, b)
+            parallel = d == 0.0
+            inside = (lo <= 0.0) & (hi >= 0.0)
+            near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
+            far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
+            t_in = np.maximum(near.max(axis=1), 0.0)
+            t_out = far.min(axis=1)
+            hit = t_out > t_in
+            t_in, t_out = np.where(hit, t_in, 0.0), np.where(hit, t_out, 0.0)
+        a = np.stack([np.zeros(n_azimuth), np.arctan(t_out)], axis=1)
+        b = np.stack([np.arctan(t_in), np.full(n_azimuth, np.pi / 2)], axis=1)
+        theta, w = _gauss_legendre(a, b, n_zenith)  # (n_azimuth, 2, n_zenith)
+        tan = np.tan(theta)
+        s = np.stack([tan * d[:, None, None, 0], tan * d[:, None, None, 1]], axis=-1)
+        weight = w * np.cos(theta) * np.sin(theta) * (2.0 * np.pi / n_azimuth)
+        return (radiance(s) * weight[..., None]).sum(axis=(0, 1, 2))
+
+    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+        """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
+        exact projected solid angles (Max 1991, eq. 2); ``outside`` by quadrature of the rest of the
+        hemisphere (``_outside``, about 1e-4). With ``fold_period`` (rows, cols), folded as in
+        ``EquirectSky.raster``. Units: [klx].
+
+        The smooth clear sky is evaluated on every k-th cell centre, nodes at most
+        ``CLEAR_SKY_NODE_SPACING`` apart, and interpolated bilinearly (relative error about 3e-4,
+        up to about 1% in the few cells at the sun where the Perez circumsolar term has a cusp);
+        clouds are evaluated at every cell centre.
+        """
+        rows, cols = grid.shape
+        k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
+        row_nodes, row_at, row_frac = _lerp_nodes(rows, k)
+        col_nodes, col_at, col_frac = _lerp_nodes(cols, k)
+        x, y = grid.ground_from_raster(row_nodes[:, None], col_nodes[None, :])
+        nodes = np.moveaxis(self.clear_radiance(np.stack(np.broadcast_arrays(x, y), axis=-1)), -1, 0)
+        nodes = nodes.astype(np.float32)
+        along = nodes[:, :, col_at] * (1 - col_frac) + nodes[:, :, col_at + 1] * col_frac  # (3, nodes, cols)
+        weights = projected_solid_angle(grid).astype(np.float32)
+        weighted = np.empty((3, rows, cols), dtype=np.float32)
+        x, y = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
+        step = max(1, (1 << 20) // cols)
+        for lo in range(0, rows, step):  # bounded memory
+            part = slice(lo, lo + step)
+            f = row_frac[part, None]
+            L = along[:, row_at[part]] * (1 - f) + along[:, row_at[part] + 1] * f
+            if self.clouds is not None:
+                s = np.stack(np.broadcast_arrays(x, y[part]), axis=-1)
+                L *= np.clip(self.clouds.transmittance(s, self.time), 0.0, 1.0).astype(np.float32)
+                L += np.moveaxis(self.clouds.radiance(s, self.time, **self._cloud_light), -1, 0)
+            weighted[:, part] = L * weights[part]
+        outside = self._outside(grid.extent, self.radiance)
+        if fold_period is not None:
+            weighted = fold(weighted, sky_offset(grid), fold_period)
+            grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
+        return SkyRaster(grid, weighted, outside)
+
+    def equirect(self, width: int) -> np.ndarray:
+        """Equirectangular radiance image (width / 2, width, 3) float32 [kcd/m^2] in the module's
+        convention (top row at the zenith, centre column north, east at three quarters), with the
+        sun disc deposited area-correctly: each of many small samples of the disc carries
+        L cos(theta) d_omega into the texel it falls in, divided by that texel's exact projected
+        solid angle, so the image's irradiance equals ``unshadowed()``. Below the horizon: 0."""
+        if width < 4 or width % 2:
+            raise ValueError(f"width must be even and at least 4, got {width}")
+        height = width // 2
+        upper = height // 2
+        theta = (np.arange(upper) + 0.5) * (np.pi / height)
+        phi = ((np.arange(width) + 0.5) / width - 0.5) * 2.0 * np.pi
+        tan = np.tan(theta)[:, None]
+        s = np.stack([tan * np.sin(phi), tan * np.cos(phi)], axis=-1)
+        image = np.zeros((height, width, 3), dtype=np.float64)
+        image[:upper] = self.radiance(s)
+        # the sun: samples on a square grid of the plane tangent at the sun (gnomonic)
+        r = self.sun.angular_radius
+        spacing = min(r / 64.0, np.pi / height / 4.0)
+        n = int(np.ceil((r + 2 * spacing) / spacing))
+        g = (np.arange(-n, n + 1)) * spacing
+        gx, gy = np.meshgrid(g, g)
+        a, h = self.sun.azimuth, self.sun.elevation
+        e1 = np.array([np.cos(a), -np.sin(a), 0.0])
+        e2 = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+        p = self.sun_direction + gx[..., None] * e1 + gy[..., None] * e2
+        norm = np.linalg.norm(p, axis=-1)
+        w = p / norm[..., None]
+        d_omega = spacing**2 / norm**3
+        L = self._sun_samples(w, lambda centre, rho: spacing) * self.sun_cloud_transmittance
+        energy = L * (d_omega * np.maximum(w[..., 2], 0.0))[..., None]
+        row = np.minimum((np.arccos(np.clip(w[..., 2], -1, 1)) / np.pi * height).astype(np.int64), height - 1)
+        col = np.floor((np.arctan2(w[..., 0], w[..., 1]) / (2 * np.pi) + 0.5) * width).astype(np.int64) % width
+        keep = (row < upper) & (energy.sum(axis=-1) > 0)
+        row, col, energy = row[keep], col[keep], energy[keep]
+        theta0, theta1 = row * np.pi / height, (row + 1) * np.pi / height
+        texel = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
+        np.add.at(image, (row, col), energy / texel[:, None])
+        return image.astype(np.float32)
+
+
+def _lerp_nodes(n: int, k: int):
+    """Nodes every k of n indices (the last one included) and, for each index, the node interval it
+    falls in (``at``, ``at + 1`` valid) and its fraction along it (float32)."""
+    nodes = np.arange(0, n, k)
+    if nodes[-1] != n - 1:
+        nodes = np.append(nodes, n - 1)
+    if len(nodes) == 1:
+        nodes = np.array([0, 0])
+    index = np.arange(n)
+    at = np.minimum(np.searchsorted(nodes, index, side="right") - 1, len(nodes) - 2)
+    span = np.maximum(nodes[at + 1] - nodes[at], 1)
+    return nodes, at, ((index - nodes[at]) / span).astype(np.float32)
+
+
+def sun_kernel(sky: ProceduralSky, q: float) -> SkyRaster:
+    """The sun disc for the two-scale method (DESIGN.md section 4) on a fine sky-plane grid of cell q.
+
+    Limb-darkened, cut by the moon, dimmed by the clouds' transmittance towards the sun's centre,
+    rasterized directly on the sky plane (a low sun is an ellipse stretched radially by about
+    1 / cos^2(theta)). Each cell holds the integral of L_sun(s) cos^4(theta) dA over it: n x n
+    sub-samples per cell (n >= 8, more when the disc spans few cells), the sun and moon limbs
+    anti-aliased by a linear ramp one sub-sample wide measured along the gradient of the angular
+    distance (|grad_s rho| = cos(theta) |u_xy|, u the unit tangent away from the disc centre),
+    which keeps the disc's energy to about 1e-4 (3e-4 at worst, from the limb-darkening law's
+    square root at the limb) with no renormalisation.
+
+    sky : ProceduralSky -- the whole sun disc must be above the horizon.
+    q : sky-plane cell. [tan]
+    Returns a SkyRaster (outside = 0) on ``shadow.sky_grid(start, shape, q)``: the block covers
+    the disc with a margin of one cell; ``shadow.sky_offset(kernel.grid)`` is its offset ``start``.
+    Units [klx]; its sum is ``sky.sun_irradiance()``.
+    """
+    sun = sky.sun
+    r = sun.angular_radius
+    if not q > 0:
+        raise ValueError(f"q must be positive [tan], got {q}")
+    if sun.elevation - r <= 1e-3:
+        raise ValueError("the sun disc must lie wholly above the horizon for its sky-plane kernel")
+    # the disc's bounding box on the sky plane, from points on its limb
+    a, h = sun.azimuth, sun.elevation
+    e1 = np.array([np.cos(a), -np.sin(a), 0.0])
+    e2 = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
+    limb = np.cos(r) * sky.sun_direction + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    limb = limb[:, :2] / limb[:, 2:]
+    (x_min, y_min), (x_max, y_max) = limb.min(axis=0), limb.max(axis=0)
+    c0, c1 = int(np.floor(x_min / q + 0.5)) - 1, int(np.floor(x_max / q + 0.5)) + 1
+    r0, r1 = int(np.floor(-y_max / q + 0.5)) - 1, int(np.floor(-y_min / q + 0.5)) + 1
+    shape = (r1 - r0 + 1, c1 - c0 + 1)
+    if shape[0] * shape[1] > MAX_KERNEL_CELLS:
+        raise ValueError(f"the sun kernel would be {shape[0]} x {shape[1]} cells: raise q or the sun")
+    grid = sky_grid((r0, c0), shape, q)
+    minor = min(x_max - x_min, y_max - y_min) / q
+    n = int(min(128, max(8, np.ceil(128.0 / minor))))
+    h_sub = q / n
+    # cells that can hold any of the disc: centre within r + half a cell diagonal (in angle)
+    rr, cc = np.indices(shape)
+    cx, cy = grid.ground_from_raster(rr, cc)
+    centres = np.stack([cx, cy, np.ones_like(cx)], axis=-1)
+    centres /= np.linalg.norm(centres, axis=-1, keepdims=True)
+    reach = r + q * 0.75 * centres[..., 2]  # a cell spans at most q cos(theta) x sqrt(2)/2 in angle
+    near = _angle(centres, sky.sun_direction) <= reach
+    cells = np.flatnonzero(near.ravel())
+    offsets = (np.arange(n) + 0.5) / n - 0.5
+    ox, oy = np.meshgrid(offsets * q, -offsets * q)
+    out = np.zeros((3, shape[0] * shape[1]))
+
+    def footprint(centre, rho):
+        # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho
+        away = w * np.cos(rho)[..., None] - centre
+        norm = np.maximum(np.linalg.norm(away, axis=-1), 1e-300)
+        return h_sub * cos_t * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
+
+    chunk = max(1, (1 << 20) // (n * n))
+    for lo in range(0, len(cells), chunk):
+        idx = cells[lo : lo + chunk]
+        sx = cx.ravel()[idx, None, None] + ox
+        sy = cy.ravel()[idx, None, None] + oy
+        cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
+        w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
+        L = sky._sun_samples(w, footprint)
+        out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
+    weighted = (out * sky.sun_cloud_transmittance).reshape(3, *shape).astype(np.float32)
+    return SkyRaster(grid, weighted, np.zeros(3))
+
+
+MODELS = {"procedural": ProceduralSky, "uniform": UniformSky, "hdri": EquirectSky}
+"""The sky models a config may name (sky.model)."""

@@ -86,3 +86,284 @@ def test_raster_off_the_sky_counts_as_outside():
     raster = EquirectSky(image).raster(grid)
     assert raster.total == pytest.approx(np.full(3, np.pi), rel=1e-9)
     assert raster.outside[0] > 3.0
+
+
+# --- the procedural sky (Preetham et al. 1999), sun kernel, moon, clouds --------------------------
+
+from scipy.integrate import quad
+
+from pipeline.ephemeris import obscured_fraction
+from pipeline.shadow import sky_offset
+from pipeline.sky import (
+    REC709_LUMINANCE,
+    MoonDisc,
+    ProceduralSky,
+    SunDisc,
+    preetham_radiance,
+    sun_disc_radiance,
+    sun_kernel,
+    zenith_chromaticity,
+    zenith_luminance,
+)
+
+LUMA = np.asarray(REC709_LUMINANCE, dtype=np.float64)
+NO_LIMB = (0.0, 0.0, 0.0)
+
+
+def sun_sky(elevation_deg, azimuth_deg=135.0, *, turbidity=2.5, limb=None, moon=None, clouds=None):
+    sun = SunDisc(np.radians(azimuth_deg), np.radians(elevation_deg))
+    if limb is not None:
+        sun = SunDisc(sun.azimuth, sun.elevation, limb_darkening=limb)
+    return ProceduralSky(turbidity, sun, moon=moon, clouds=clouds)
+
+
+def disc_horizontal_irradiance(sky):
+    """Independent: radial quadrature of the limb-darkened disc in the sun's own frame,
+    2 pi int L(rho) sin(rho) d rho, times cos(zenith). [klx]"""
+    sun = sky.sun
+    out = []
+    for ch in range(3):
+        def f(rho):
+            L = sun_disc_radiance(rho, angular_radius=sun.angular_radius,
+                                  normal_irradiance=sky.sun_normal_irradiance, limb_darkening=sun.limb_darkening)
+            return L[ch] * 2 * np.pi * np.sin(rho)
+        out.append(quad(f, 0.0, sun.angular_radius, epsabs=0, epsrel=1e-10, limit=200)[0])
+    return np.array(out) * np.sin(sun.elevation)
+
+
+def lens_fraction(d, r, big_r):
+    """Area of the sun (radius r) covered by the moon (radius big_r, centres d apart) over pi r^2:
+    two circular segments, each a sector minus a triangle."""
+    if d >= r + big_r:
+        return 0.0
+    if d <= big_r - r:
+        return 1.0
+    if d <= r - big_r:
+        return big_r**2 / r**2
+    x = (d * d + r * r - big_r * big_r) / (2 * d)  # chord's distance from the sun's centre
+    seg = lambda rad, a: rad * rad * np.arccos(a / rad) - a * np.sqrt(rad * rad - a * a)
+    return (seg(r, x) + seg(big_r, d - x)) / (np.pi * r * r)
+
+
+def moon_at(sun, separation, position_angle=0.7, radius=None):
+    """A moon whose centre is ``separation`` [rad] from the sun's, on a great circle through it."""
+    c = np.array([np.cos(sun.elevation) * np.sin(sun.azimuth), np.cos(sun.elevation) * np.cos(sun.azimuth),
+                  np.sin(sun.elevation)])
+    e1 = np.array([np.cos(sun.azimuth), -np.sin(sun.azimuth), 0.0])
+    e2 = np.cross(c, e1)
+    m = np.cos(separation) * c + np.sin(separation) * (np.cos(position_angle) * e1 + np.sin(position_angle) * e2)
+    radius = sun.angular_radius * 1.03 if radius is None else radius
+    return MoonDisc(float(np.arctan2(m[0], m[1])), float(np.arcsin(m[2])), radius)
+
+
+def test_preetham_zenith_values_and_units():
+    T, theta_s = 3.0, np.radians(40.0)
+    # zenith luminance, Preetham et al. 1999, appendix A.2, by hand: chi = (4/9 - T/120)(pi - 2 theta_s)
+    chi = (4 / 9 - 3 / 120) * (np.pi - 2 * theta_s)
+    assert zenith_luminance(T, theta_s) == pytest.approx((4.0453 * 3 - 4.9710) * np.tan(chi) - 0.2155 * 3 + 2.4192)
+    x, y = zenith_chromaticity(T, theta_s)
+    assert 0.22 < x < 0.3127 and 0.22 < y < 0.329  # bluer than D65 (0.3127, 0.3290)
+    L = preetham_radiance(1.0, np.cos(theta_s), turbidity=T, sun_zenith=theta_s)
+    assert L @ LUMA == pytest.approx(zenith_luminance(T, theta_s), rel=1e-4)  # kcd/m^2 in, luminance out (rounded weights)
+    assert L[2] > L[0]  # blue sky
+
+
+def test_clear_day_illuminance_is_in_the_measured_range():
+    # Clear skies, high sun: direct horizontal about 60-100 klx, diffuse about 10-25 klx (e.g. CIE 110-1994
+    # standard clear sky and the luminous-efficacy data reviewed by Littlefair 1985, Lighting Res. Technol. 17).
+    sky = sun_sky(60.0, turbidity=2.0)
+    direct = sky.total_sun_irradiance() @ LUMA
+    diffuse = sky.sky_irradiance @ LUMA
+    assert 60.0 < direct < 100.0
+    assert 10.0 < diffuse < 25.0
+    assert sky.unshadowed() @ LUMA == pytest.approx(direct + diffuse)
+    # more haze: less direct, more diffuse, a smaller direct share
+    shares = []
+    for T in (2.0, 3.0, 5.0, 8.0):
+        s = sun_sky(60.0, turbidity=T)
+        shares.append(s.total_sun_irradiance() @ LUMA / (s.unshadowed() @ LUMA))
+    assert np.all(np.diff(shares) < 0)
+    # a low sun is redder
+    low = sun_sky(8.0, turbidity=2.0).sun_normal_irradiance
+    assert low[0] / low[2] > sky.sun_normal_irradiance[0] / sky.sun_normal_irradiance[2]
+
+
+@pytest.mark.parametrize("limb", [None, NO_LIMB])
+def test_sun_kernel_keeps_the_disc_energy(limb):
+    rng = np.random.default_rng(7)
+    for elevation in (15.0, 30.0, 50.0, 75.0, 90.0):
+        for _ in range(3):  # random sub-cell positions of the sun's centre
+            sky = sun_sky(elevation + rng.uniform(-0.5, 0.0), rng.uniform(0.0, 360.0), limb=limb)
+            zenith = np.pi / 2 - sky.sun.elevation
+            minor = 2 * sky.sun.angular_radius / np.cos(zenith)  # tangential diameter on the sky plane
+            q = minor / 16 * rng.uniform(0.9, 1.1)  # 16 cells across, as in intended use
+            kernel = sun_kernel(sky, q)
+            assert kernel.weighted.dtype == np.float32
+            total = kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+            assert total == pytest.approx(disc_horizontal_irradiance(sky), rel=1e-3)
+            assert total == pytest.approx(sky.sun_irradiance(), rel=1e-3)
+
+
+def test_sun_kernel_keeps_its_energy_when_the_disc_spans_few_cells():
+    sky = sun_sky(40.0, 20.0)
+    ref = disc_horizontal_irradiance(sky)
+    for cells in (1.0, 1.7, 3.0):
+        q = 2 * sky.sun.angular_radius / np.cos(np.radians(50.0)) / cells
+        total = sun_kernel(sky, q).weighted.sum(axis=(1, 2), dtype=np.float64)
+        assert total == pytest.approx(ref, rel=1e-3)
+
+
+def test_sun_kernel_lies_at_the_sun_and_a_low_sun_is_a_radial_ellipse():
+    sky = sun_sky(20.0, 90.0, limb=NO_LIMB)  # low in the east
+    q = 4e-3
+    kernel = sun_kernel(sky, q)
+    e = kernel.weighted[1].astype(np.float64)
+    start = sky_offset(kernel.grid)
+    assert kernel.grid == sky_grid(start, e.shape, q)
+    sx, sy = centroid(kernel.weighted, kernel.grid)
+    assert sx == pytest.approx(sky.sun_point[0], abs=0.05 * q) and sy == pytest.approx(sky.sun_point[1], abs=0.05 * q)
+    assert sx > 2.0 and abs(sy) < 1e-9 + 0.05 * q  # east
+    # the block holds the whole disc: its border is empty
+    assert e[0].max() == 0 and e[-1].max() == 0 and e[:, 0].max() == 0 and e[:, -1].max() == 0
+    # extent along x (radial, east) over extent along y (tangential): 1 / cos(theta) = 1 / sin(20 deg)
+    cols = np.flatnonzero(e.sum(axis=0) > 0)
+    rows = np.flatnonzero(e.sum(axis=1) > 0)
+    assert (len(cols) / len(rows)) == pytest.approx(1 / np.sin(np.radians(20.0)), rel=0.1)
+
+
+def test_sun_fraction_clear_partial_total():
+    clear = sun_sky(50.0, limb=NO_LIMB)
+    assert clear.sun_fraction() == 1.0
+    sun = clear.sun
+    for separation in (0.3, 1.0, 1.6):
+        d = separation * sun.angular_radius
+        moon = moon_at(sun, d)
+        sky = sun_sky(50.0, limb=NO_LIMB, moon=moon)
+        area = lens_fraction(d, sun.angular_radius, moon.angular_radius)
+        assert obscured_fraction(d, sun.angular_radius, moon.angular_radius) == pytest.approx(area, abs=1e-9)
+        assert sky.sun_fraction() == pytest.approx(1.0 - area, abs=1e-4)
+        # the kernel with the moon holds S times the clear kernel's energy
+        q = sun.angular_radius / 10
+        ratio = sun_kernel(sky, q).weighted.sum(dtype=np.float64) / sun_kernel(clear, q).weighted.sum(dtype=np.float64)
+        assert ratio == pytest.approx(sky.sun_fraction(), abs=2e-3)
+    total = sun_sky(50.0, moon=moon_at(sun, 0.0, radius=1.05 * sun.angular_radius))
+    assert total.sun_fraction() == 0.0
+    assert sun_kernel(total, sun.angular_radius / 10).weighted.max() == 0.0
+    # limb darkening on: a moon over the bright centre hides more than its area's share
+    annular = moon_at(sun, 0.1 * sun.angular_radius, radius=0.6 * sun.angular_radius)
+    dark = sun_sky(50.0, moon=annular)
+    area = lens_fraction(0.1 * sun.angular_radius, sun.angular_radius, annular.angular_radius)
+    assert dark.sun_fraction() < 1.0 - area - 0.05
+
+
+def test_procedural_raster_total_outside_and_folding():
+    sky = sun_sky(35.0, 200.0)
+    full = sky.sky_irradiance
+    for grid in (square(300, np.tan(np.radians(70.0)) / 300), sky_grid((40, -80), (50, 70), 0.01)):
+        raster = sky.raster(grid)
+        assert raster.weighted.dtype == np.float32 and raster.weighted.shape == (3,) + grid.shape
+        assert raster.total == pytest.approx(full, rel=1e-3)
+        # outside, independently: a fine midpoint rule over the hemisphere, less the grid's rectangle
+        theta = (np.arange(1500) + 0.5) * (np.pi / 2 / 1500)
+        phi = (np.arange(3000) + 0.5) * (2 * np.pi / 3000)
+        tan = np.tan(theta)[:, None]
+        s = np.stack(np.broadcast_arrays(tan * np.sin(phi), tan * np.cos(phi)), axis=-1)
+        x0, y0, x1, y1 = grid.extent
+        out = ~((s[..., 0] >= x0) & (s[..., 0] <= x1) & (s[..., 1] >= y0) & (s[..., 1] <= y1))
+        w = (np.cos(theta) * np.sin(theta))[:, None] * (np.pi / 2 / 1500) * (2 * np.pi / 3000) * out
+        expected = np.einsum("tpc,tp->c", sky.radiance(s), w)
+        assert raster.outside == pytest.approx(expected, rel=5e-3)
+    grid = square(60, 0.02)
+    folded = sky.raster(grid, fold_period=(32, 48))
+    assert folded.weighted.shape == (3, 32, 48) and sky_offset(folded.grid) == (0, 0)
+    assert folded.total == pytest.approx(sky.raster(grid).total, rel=1e-6)
+
+
+def test_procedural_raster_cells_are_radiance_times_projected_solid_angle():
+    from pipeline.geometry import projected_solid_angle
+
+    sky = sun_sky(45.0, 30.0)
+    grid = square(100, 0.02)  # interpolated nodes every 0.02 / 0.02 = 1 cell: exact centres
+    raster = sky.raster(grid)
+    rows, cols = np.indices(grid.shape)
+    s = np.stack(grid.ground_from_raster(rows, cols), axis=-1)
+    expected = np.moveaxis(sky.radiance(s), -1, 0) * projected_solid_angle(grid)
+    np.testing.assert_allclose(raster.weighted, expected, rtol=1e-5)
+    coarse = sky.raster(square(400, 0.005))  # nodes every 4 cells, interpolated
+    assert coarse.weighted.sum(axis=(1, 2), dtype=np.float64) == pytest.approx(
+        sky.raster(square(400, 0.005)).weighted.sum(axis=(1, 2), dtype=np.float64))
+
+
+def test_unshadowed_is_raster_total_plus_sun_kernel():
+    sky = sun_sky(55.0, 300.0, moon=moon_at(SunDisc(np.radians(300.0), np.radians(55.0)), 0.004))
+    raster = sky.raster(square(200, 0.015))
+    kernel = sun_kernel(sky, 4e-4)
+    total = raster.total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+    assert total == pytest.approx(sky.unshadowed(), rel=1e-3)
+
+
+class Overcast:
+    """A test-only cloud layer: transmittance 0.5 everywhere and a uniform grey glow."""
+
+    def __init__(self, glow):
+        self.glow = glow
+        self.calls = []
+
+    def transmittance(self, s, time):
+        return np.full(np.shape(s)[:-1], 0.5)
+
+    def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance):
+        self.calls.append((np.array(sun_s), np.array(sun_irradiance), np.array(sky_irradiance), time))
+        return np.full(np.shape(s)[:-1] + (3,), self.glow)
+
+
+def test_clouds_compose_by_the_protocol():
+    clear = sun_sky(40.0, 100.0)
+    clouds = Overcast(glow=2.0)
+    cloudy = ProceduralSky(clear.turbidity, clear.sun, clouds=clouds, time=12.5)
+    grid = square(150, 0.02)
+    a, b = clear.raster(grid), cloudy.raster(grid)
+    from pipeline.geometry import projected_solid_angle
+
+    np.testing.assert_allclose(b.weighted, 0.5 * a.weighted + 2.0 * projected_solid_angle(grid)[None], rtol=1e-5)
+    assert b.total == pytest.approx(0.5 * a.total + 2.0 * np.pi, rel=1e-3)
+    assert cloudy.sun_fraction() == pytest.approx(0.5)
+    q = 5e-4
+    np.testing.assert_allclose(sun_kernel(cloudy, q).weighted, 0.5 * sun_kernel(clear, q).weighted, rtol=1e-6)
+    sun_s, sun_e, sky_e, time = clouds.calls[-1]
+    np.testing.assert_allclose(sun_s, clear.sun_point)
+    np.testing.assert_allclose(sun_e, clear.sun_normal_irradiance)
+    np.testing.assert_allclose(sky_e, clear.sky_irradiance)
+    assert time == 12.5
+
+
+def test_equirect_integral_and_orientation():
+    sky = sun_sky(30.0, 90.0)  # east
+    width = 1024
+    image = sky.equirect(width)
+    assert image.shape == (512, 1024, 3) and image.dtype == np.float32
+    assert np.all(image[256:] == 0)  # below the horizon
+    total = EquirectSky(image).total_irradiance()
+    assert total == pytest.approx(sky.unshadowed(), rel=1e-2)
+    row, col = np.unravel_index(np.argmax(image[..., 1]), image.shape[:2])
+    assert col == int(0.75 * width) or col == int(0.75 * width) - 1
+    assert (row + 0.5) / 512 * 180 == pytest.approx(60.0, abs=0.5)  # zenith angle 60 degrees
+    eclipsed = sun_sky(30.0, 90.0, moon=moon_at(sky.sun, 0.0, radius=1.05 * sky.sun.angular_radius))
+    assert EquirectSky(eclipsed.equirect(width)).total_irradiance() == pytest.approx(eclipsed.unshadowed(), rel=1e-2)
+    assert eclipsed.equirect(width).max() < 0.01 * image.max()
+
+
+def test_procedural_sky_refuses_bad_input():
+    sun = SunDisc(0.0, 0.5)
+    with pytest.raises(ValueError, match="turbidity"):
+        ProceduralSky(1.0, sun)
+    with pytest.raises(ValueError, match="elevation"):
+        ProceduralSky(2.0, SunDisc(0.0, -0.01))
+    with pytest.raises(ValueError, match="limb_darkening"):
+        SunDisc(0.0, 0.5, limb_darkening=(0.5, 1.5, 0.5))
+    with pytest.raises(ValueError, match="angular_radius"):
+        MoonDisc(0.0, 0.5, 0.0)
+    with pytest.raises(ValueError, match="horizon"):
+        sun_kernel(ProceduralSky(2.0, SunDisc(0.0, 0.003)), 1e-3)
+    with pytest.raises(ValueError, match="cells"):
+        sun_kernel(ProceduralSky(2.0, SunDisc(0.0, 0.03)), 1e-5)
