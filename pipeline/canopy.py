@@ -3,9 +3,16 @@
 A mask image is linear transparency (1 = open sky), north-up, covering ``size`` [m] around
 ``center`` [m]; its texels are taken as piecewise constant, so resampling by exact overlap
 areas (a box filter) is exact for any ratio of texel to ground pixel.
+
+Masks can also be drawn: ``grow_grove`` grows a seeded procedural grove (trunks and branches as
+capsules, elliptical leaves), ``leaves_at`` makes its leaves flutter periodically, ``project``
+casts them along the sun onto the canopy plane and ``rasterize_transmittance`` draws the
+anti-aliased transmittance (``grove_mask`` does all three).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sparse
@@ -38,6 +45,36 @@ def transmittance_from_image(image: np.ndarray) -> np.ndarray:
     return np.clip(mask, 0.0, 1.0)
 
 
+def lattice_grid(center, size, lattice: Grid, *, periodic: bool = False) -> Grid:
+    """The grid of ``lattice``'s pixels for a canopy area ``size`` [m] around ``center`` [m]:
+    the whole cells it touches (isolated), or one period of whole cells starting at the cell
+    of its north-west corner (periodic; ``size`` must be whole pixels)."""
+    p = lattice.pixel
+    x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
+    if periodic:
+        n_cols, n_rows = (int(round(s / p)) for s in size)
+        col_lo = int(np.floor((x0 - lattice.origin[0]) / p + 1e-9))
+        row_lo = int(np.floor((lattice.origin[1] - y1) / p + 1e-9))
+    else:
+        col_lo, col_hi = _cells_spanning(x0 - lattice.origin[0], size[0], p)
+        row_lo, row_hi = _cells_spanning(lattice.origin[1] - y1, size[1], p)
+        n_cols, n_rows = col_hi - col_lo, row_hi - row_lo
+    return Grid((lattice.origin[0] + col_lo * p, lattice.origin[1] - row_lo * p), p, (n_rows, n_cols))
+
+
+def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: bool = False):
+    """A mask image area-averaged onto every pixel of ``grid`` (any pixel, any position):
+    exact overlap areas of its texels, open sky (1) beyond an isolated image, the image
+    repeating with period ``size`` [m] for a periodic one. Returns float32 grid.shape."""
+    x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
+    occlusion = 1.0 - np.asarray(transmittance, dtype=np.float64)
+    rows = _overlap(y1 - grid.origin[1], grid.shape[0], grid.pixel, occlusion.shape[0], size[1],
+                    periodic=periodic)
+    cols = _overlap(grid.origin[0] - x0, grid.shape[1], grid.pixel, occlusion.shape[1], size[0],
+                    periodic=periodic)
+    return 1.0 - _apply(rows, cols, occlusion)
+
+
 def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
     """Occlusion ``1 - m`` of an isolated canopy, area-averaged onto the cells of ``lattice``'s
     pixel lattice that the mask touches.
@@ -45,19 +82,8 @@ def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
     transmittance : (rows, cols) in [0, 1]. center, size : (x, y) of the mask's area. [m]
     Returns (occlusion float32 (rows, cols), its Grid on the lattice).
     """
-    x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
-    p = lattice.pixel
-    col_lo, col_hi = _cells_spanning(x0 - lattice.origin[0], size[0], p)
-    row_lo, row_hi = _cells_spanning(lattice.origin[1] - y1, size[1], p)
-    grid = Grid(
-        (lattice.origin[0] + col_lo * p, lattice.origin[1] - row_lo * p),
-        p,
-        (row_hi - row_lo, col_hi - col_lo),
-    )
-    occlusion = 1.0 - np.asarray(transmittance, dtype=np.float64)
-    rows = _overlap(row_lo * p, row_hi - row_lo, p, lattice.origin[1] - y1, occlusion.shape[0], size[1])
-    cols = _overlap(col_lo * p, col_hi - col_lo, p, x0 - lattice.origin[0], occlusion.shape[1], size[0])
-    return _apply(rows, cols, occlusion), grid
+    grid = lattice_grid(center, size, lattice)
+    return 1.0 - transmittance_on_grid(transmittance, center=center, size=size, grid=grid), grid
 
 
 def tile_on_lattice(transmittance, *, center, size, lattice: Grid):
@@ -66,16 +92,8 @@ def tile_on_lattice(transmittance, *, center, size, lattice: Grid):
     The period ``size`` [m] must be a whole number of lattice pixels on both axes.
     Returns (transmittance float32 (rows, cols), the tile's Grid on the lattice).
     """
-    p = lattice.pixel
-    n_cols, n_rows = (int(round(s / p)) for s in size)
-    x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
-    col_lo = int(np.floor((x0 - lattice.origin[0]) / p + 1e-9))
-    row_lo = int(np.floor((lattice.origin[1] - y1) / p + 1e-9))
-    grid = Grid((lattice.origin[0] + col_lo * p, lattice.origin[1] - row_lo * p), p, (n_rows, n_cols))
-    m = np.asarray(transmittance, dtype=np.float64)
-    rows = _overlap(row_lo * p, n_rows, p, lattice.origin[1] - y1, m.shape[0], size[1], periodic=True)
-    cols = _overlap(col_lo * p, n_cols, p, x0 - lattice.origin[0], m.shape[1], size[0], periodic=True)
-    return _apply(rows, cols, m), grid
+    grid = lattice_grid(center, size, lattice, periodic=True)
+    return transmittance_on_grid(transmittance, center=center, size=size, grid=grid, periodic=True), grid
 
 
 def _cells_spanning(start: float, length: float, pixel: float) -> tuple[int, int]:
@@ -85,25 +103,523 @@ def _cells_spanning(start: float, length: float, pixel: float) -> tuple[int, int
     return lo, max(hi, lo + 1)
 
 
-def _overlap(t0, n_target, t_step, s0, n_source, s_length, *, periodic=False):
+def _overlap(t0, n_target, t_step, n_source, s_length, *, periodic=False):
     """Sparse (n_target, n_source) matrix: the share of each target cell covered by each source
     texel, along one axis (coordinates increasing with the index). [dimensionless]
 
-    Targets are [t0 + j t_step, t0 + (j+1) t_step); sources split [s0, s0 + s_length) evenly.
+    Targets are [t0 + j t_step, t0 + (j+1) t_step); sources split [0, s_length) evenly.
     With ``periodic`` the source repeats with period ``s_length``.
     """
     t_edges = t0 + np.arange(n_target + 1) * t_step
     s_step = s_length / n_source
-    shifts = (-1, 0, 1) if periodic else (0,)
-    weights = np.zeros((n_target, n_source))
+    shifts = range(int(np.floor(t_edges[0] / s_length)), int(np.ceil(t_edges[-1] / s_length)) + 1) \
+        if periodic else (0,)
+    weights = sparse.csr_matrix((n_target, n_source))
     for k in shifts:
-        s_edges = s0 + k * s_length + np.arange(n_source + 1) * s_step
+        s_edges = k * s_length + np.arange(n_source + 1) * s_step
         lo = np.maximum(t_edges[:-1, None], s_edges[None, :-1])
         hi = np.minimum(t_edges[1:, None], s_edges[None, 1:])
-        weights += np.clip(hi - lo, 0.0, None) / t_step
-    return sparse.csr_matrix(weights)
+        weights = weights + sparse.csr_matrix(np.clip(hi - lo, 0.0, None) / t_step)
+    return weights
 
 
 def _apply(rows, cols, image):
     """rows @ image @ cols.T as float32, with sparse overlap matrices."""
     return np.asarray((cols @ (rows @ image).T).T, dtype=np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Procedural grove: trees with wood (capsules) and fluttering elliptical leaves, projected along
+# the sun onto the canopy plane and rasterized with anti-aliasing into a transmittance mask.
+#
+# The projection (Max 1991, Fig. 1): a ray from ground point x towards the sun crosses height z
+# at x + z s, s = (wx / wz, wy / wz) the sun's sky-plane point, so a point P lands on the canopy
+# plane z = h at P_xy - (P_z - h) s. The map is affine: a flat elliptical leaf (centre C,
+# semi-axes U, V) becomes the ellipse of centre proj(C) and conjugate semi-axes
+# U_xy - U_z s, V_xy - V_z s.
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GroveParams:
+    """A seeded procedural grove.
+
+    count : number of trees. seed : random seed (every tree draws from default_rng([seed, 1, i])).
+    crown_radius : horizontal half-axis of each crown ellipsoid. [m]
+    leaves_per_tree : leaves of each tree.
+    leaf_length : mean leaf length; lengths vary by +-30 %, width/length 0.4 to 0.7. [m]
+    leaves_per_cluster : mean leaves per cluster (Gaussian, sigma 0.06 crown_radius); 1 scatters
+        the leaves evenly over the crown's shell.
+    height : height of the crowns' centres, the canopy plane. [m]
+    layout : "isolated" (a clump around ``center``) or "periodic" (trees in a square ``tile``,
+        every shape wrapped into it).
+    tile : period of the periodic layout, required for it. [m]
+    center : (x, y) of the clump or of the tile's centre. [m]
+    spread : radius of the disc the trunks stand in; default 0.8 crown_radius sqrt(count - 1),
+        which makes neighbouring crowns overlap a little. [m]
+    """
+
+    count: int = 3
+    seed: int = 7
+    crown_radius: float = 4.0
+    leaves_per_tree: int = 12000
+    leaf_length: float = 0.08
+    leaves_per_cluster: int = 40
+    height: float = 8.0
+    layout: str = "isolated"
+    tile: float | None = None
+    center: tuple[float, float] = (0.0, 0.0)
+    spread: float | None = None
+
+
+@dataclass(frozen=True)
+class FlutterParams:
+    """Leaf flutter: every leaf swings about a horizontal axis through its stem and twists about
+    its own length axis, each by amplitude sin(2 pi frame / cycle + its own phase).
+
+    cycle : frames of one exactly periodic cycle. [frames]
+    swing, twist : amplitudes. [rad]
+    """
+
+    cycle: int = 48
+    swing: float = float(np.radians(12.0))
+    twist: float = float(np.radians(20.0))
+
+
+@dataclass(frozen=True)
+class Leaves:
+    """Flat elliptical leaves: centre (N, 3), semi-axis along the length ``axis_u`` (N, 3) and
+    across ``axis_v`` (N, 3), perpendicular. [m]"""
+
+    center: np.ndarray
+    axis_u: np.ndarray
+    axis_v: np.ndarray
+
+
+@dataclass(frozen=True)
+class Wood:
+    """Trunks and branches as capsules: segment ends ``start``, ``end`` (M, 3) and ``radius`` (M,). [m]"""
+
+    start: np.ndarray
+    end: np.ndarray
+    radius: np.ndarray
+
+
+@dataclass(frozen=True)
+class Grove:
+    """A grove at rest. ``leaves`` rest pose; ``pivot`` (N, 3) the stem end of each leaf [m];
+    ``swing_axis`` (N, 3) horizontal unit vectors; ``swing_phase``, ``twist_phase`` (N,) [rad];
+    ``wood``; ``bases`` (count, 3) trunk feet [m]; ``params`` the GroveParams it grew from."""
+
+    leaves: Leaves
+    pivot: np.ndarray
+    swing_axis: np.ndarray
+    swing_phase: np.ndarray
+    twist_phase: np.ndarray
+    wood: Wood
+    bases: np.ndarray
+    params: GroveParams
+
+
+@dataclass(frozen=True)
+class Shapes:
+    """Opaque shapes on the canopy plane: ellipses (centre (N, 2), conjugate semi-axes
+    ``axis_a``, ``axis_b`` (N, 2)) and capsules (``start``, ``end`` (M, 2), ``radius`` (M,)). [m]"""
+
+    center: np.ndarray
+    axis_a: np.ndarray
+    axis_b: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    radius: np.ndarray
+
+    def subset(self, leaves=slice(None), wood=slice(None)) -> "Shapes":
+        """The ellipses selected by ``leaves`` and capsules selected by ``wood`` (boolean masks,
+        index arrays or slices)."""
+        return Shapes(self.center[leaves], self.axis_a[leaves], self.axis_b[leaves],
+                      self.start[wood], self.end[wood], self.radius[wood])
+
+
+def grow_grove(params: GroveParams = GroveParams()) -> Grove:
+    """Grow the grove of ``params``, deterministic from its seed.
+
+    Each tree: a tapering trunk (radius 0.15 to 0.25 m) from the ground up to its crown centre,
+    seven two-segment branches out into the crown, and leaf clusters in a flattened crown
+    ellipsoid (half-axes about crown_radius, crown_radius, 0.35 crown_radius around ``height``).
+    Lengths in [m].
+    """
+    p = params
+    if p.layout not in ("isolated", "periodic"):
+        raise ValueError(f"layout must be 'isolated' or 'periodic', not {p.layout!r}")
+    if p.layout == "periodic" and not p.tile:
+        raise ValueError("a periodic grove needs a tile period [m]")
+    bases = _tree_bases(p)
+    trees = [_grow_tree(np.random.default_rng([p.seed, 1, i]), base, p) for i, base in enumerate(bases)]
+    cat = lambda k: np.concatenate([t[k] for t in trees])  # noqa: E731
+    center, axis_u, pivot, start, end = cat("center"), cat("axis_u"), cat("pivot"), cat("start"), cat("end")
+    if p.layout == "periodic":  # wrap every shape into the tile, whole periods at a time
+        center, shift = _wrap(center, p)
+        pivot = pivot + shift
+        start, shift = _wrap(start, p)
+        end = end + shift
+    return Grove(
+        leaves=Leaves(center, axis_u, cat("axis_v")),
+        pivot=pivot, swing_axis=cat("swing_axis"),
+        swing_phase=cat("swing_phase"), twist_phase=cat("twist_phase"),
+        wood=Wood(start, end, cat("radius")),
+        bases=np.column_stack([bases, np.zeros(len(bases))]), params=p,
+    )
+
+
+def _tree_bases(p: GroveParams) -> np.ndarray:
+    """Trunk feet (count, 2) [m], at least a crown radius apart where space allows."""
+    rng = np.random.default_rng([p.seed, 0])
+    spread = 0.8 * p.crown_radius * np.sqrt(max(p.count - 1, 0)) if p.spread is None else p.spread
+    bases = []
+    for _ in range(p.count):
+        for _attempt in range(100):
+            if p.layout == "periodic":
+                xy = np.asarray(p.center) + (rng.random(2) - 0.5) * p.tile
+                near = [np.abs((xy - b + p.tile / 2) % p.tile - p.tile / 2) for b in bases]
+            else:
+                radius, angle = spread * np.sqrt(rng.random()), 2 * np.pi * rng.random()
+                xy = np.asarray(p.center) + radius * np.array([np.cos(angle), np.sin(angle)])
+                near = [xy - b for b in bases]
+            if all(np.hypot(*d) >= p.crown_radius for d in near):
+                break
+        bases.append(xy)
+    return np.reshape(bases, (-1, 2))
+
+
+def _grow_tree(rng, base, p: GroveParams) -> dict:
+    """Wood and leaves of one tree standing at ``base`` (x, y) [m], as a dict of arrays."""
+    R, h = p.crown_radius, p.height
+    half = R * rng.uniform(0.9, 1.1, 2)
+    half_z = R * rng.uniform(0.3, 0.4)
+    crown = np.array([*(base + rng.normal(0, 0.05 * R, 2)), h])
+    # trunk: three tapering segments from the foot to the crown centre
+    r0 = rng.uniform(0.15, 0.25)
+    knots = np.linspace([*base, 0.0], crown, 4)
+    knots[1:-1, :2] += rng.normal(0, 0.03 * R, (2, 2))
+    start, end, radius = [knots[:-1]], [knots[1:]], [r0 * np.linspace(1.0, 0.6, 3)]
+    # branches: two segments each from the upper trunk out into the crown
+    n_branch = 7
+    z = rng.uniform(h - 1.2 * half_z, h - 0.2 * half_z, n_branch)
+    foot = crown + (z - h)[:, None] * (crown - knots[0]) / h
+    azimuth = 2 * np.pi * (np.arange(n_branch) + rng.random(n_branch)) / n_branch
+    reach = rng.uniform(0.55, 0.85, n_branch)
+    tip = crown + np.column_stack([reach * half[0] * np.cos(azimuth), reach * half[1] * np.sin(azimuth),
+                                   rng.uniform(-0.2, 0.6, n_branch) * half_z])
+    mid = 0.5 * (foot + tip) + rng.normal(0, 0.08 * R, (n_branch, 3))
+    start += [foot, mid]
+    end += [mid, tip]
+    radius += [np.full(n_branch, 0.4 * r0), np.full(n_branch, 0.2 * r0)]
+    # leaf clusters in a shell of the crown ellipsoid, leaves scattered around each
+    n = p.leaves_per_tree
+    n_cluster = max(1, n // p.leaves_per_cluster)
+    direction = _unit(rng.normal(size=(n_cluster, 3)))
+    cluster = crown + direction * rng.uniform(0.35, 1.0, (n_cluster, 1)) ** (1 / 3) * [*half, half_z]
+    spread = 0.06 * R * (p.leaves_per_cluster > 1)
+    center = cluster[rng.permutation(n) % n_cluster] + rng.normal(0, spread, (n, 3)) * [1, 1, 0.5]
+    length = p.leaf_length * rng.uniform(0.7, 1.3, n)
+    u = _unit(rng.normal(size=(n, 3)))
+    v = _unit(np.cross(u, rng.normal(size=(n, 3))))
+    axis_u = 0.5 * length[:, None] * u
+    axis_v = 0.5 * (length * rng.uniform(0.4, 0.7, n))[:, None] * v
+    swing_axis = _unit(np.column_stack([-u[:, 1], u[:, 0], np.zeros(n)]) + [1e-12, 0, 0])  # across the leaf
+    return dict(center=center, axis_u=axis_u, axis_v=axis_v, pivot=center - axis_u,
+                swing_axis=swing_axis, swing_phase=rng.uniform(0, 2 * np.pi, n),
+                twist_phase=rng.uniform(0, 2 * np.pi, n), start=np.concatenate(start),
+                end=np.concatenate(end), radius=np.concatenate(radius))
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _wrap(points, p: GroveParams):
+    """Points (n, 3) [m] moved by whole tiles into the tile around p.center; returns them and the shift."""
+    low = np.asarray(p.center) - p.tile / 2
+    shift = np.zeros_like(points)
+    shift[:, :2] = -np.floor((points[:, :2] - low) / p.tile) * p.tile
+    return points + shift, shift
+
+
+def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
+    """The leaves at ``frame`` (any int): each twists about its length axis by
+    twist sin(2 pi frame / cycle + twist_phase) [rad], then swings about its horizontal axis
+    through its stem by swing sin(2 pi frame / cycle + swing_phase) [rad]. Exactly periodic:
+    the frame is reduced modulo ``cycle`` first."""
+    omega = 2 * np.pi * np.mod(frame, flutter.cycle) / flutter.cycle
+    leaves = grove.leaves
+    length_axis = _unit(leaves.axis_u)
+    axis_v = _rotate(leaves.axis_v, length_axis, flutter.twist * np.sin(omega + grove.twist_phase))
+    swing = flutter.swing * np.sin(omega + grove.swing_phase)
+    center = grove.pivot + _rotate(leaves.center - grove.pivot, grove.swing_axis, swing)
+    return Leaves(center, _rotate(leaves.axis_u, grove.swing_axis, swing),
+                  _rotate(axis_v, grove.swing_axis, swing))
+
+
+def _rotate(v, axis, angle):
+    """Rodrigues: vectors v (n, 3) turned by ``angle`` (n,) [rad] about unit ``axis`` (n, 3)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=1, keepdims=True) * (1 - c)
+
+
+def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: float) -> Shapes:
+    """Leaves and wood projected along the sun onto the canopy plane z = plane_height [m].
+
+    sun : the sun's sky-plane point s = (wx / wz, wy / wz). [tan]
+    A point P lands at P_xy - (P_z - plane_height) s. Leaves stay exact ellipses. A wood capsule
+    projects to a capsule whose radius is the half-width of the cylinder's shadow,
+    r / |n_xy| with n the unit normal to both the sun and the segment (r for an upright trunk,
+    r / cos(theta) for a branch across the sun); its end caps are approximated as round. [m]
+    """
+    s = np.asarray(sun, dtype=np.float64)
+
+    def onto(points, offset=plane_height):
+        return points[..., :2] - (points[..., 2:3] - offset) * s
+
+    if wood is None:
+        wood = Wood(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    normal = np.cross(np.append(s, 1.0), wood.end - wood.start)
+    norm = np.linalg.norm(normal, axis=1)
+    stretch = np.where(norm > 1e-12, norm / np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-300), 1.0)
+    return Shapes(onto(leaves.center), onto(leaves.axis_u, 0.0), onto(leaves.axis_v, 0.0),
+                  onto(wood.start), onto(wood.end), wood.radius * stretch)
+
+
+def layer_index(grove: Grove, heights) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest of the canopy planes ``heights`` [m] for every leaf (by its rest
+    centre) and every wood segment (by its midpoint): (leaf_layer (N,), wood_layer (M,)) int."""
+    heights = np.asarray(heights, dtype=np.float64)
+    nearest = lambda z: np.argmin(np.abs(z[:, None] - heights[None, :]), axis=1)  # noqa: E731
+    wood_z = 0.5 * (grove.wood.start[:, 2] + grove.wood.end[:, 2])
+    return nearest(grove.leaves.center[:, 2]), nearest(wood_z)
+
+
+def shapes_bounds(shapes: Shapes) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) [m] enclosing every shape; NaNs when there are none."""
+    half = np.sqrt(shapes.axis_a**2 + shapes.axis_b**2)
+    low = np.concatenate([shapes.center - half, np.minimum(shapes.start, shapes.end) - shapes.radius[:, None]])
+    high = np.concatenate([shapes.center + half, np.maximum(shapes.start, shapes.end) + shapes.radius[:, None]])
+    if len(low) == 0:
+        return (np.nan,) * 4
+    return (*low.min(axis=0), *high.max(axis=0))
+
+
+def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun, plane_height: float):
+    """(x_min, y_min, x_max, y_max) [m] of the projected grove for every flutter frame.
+
+    A leaf's points stay within |U| + sqrt(|U|^2 + |V|^2) of its stem however it turns, and a
+    displacement d projects to length at most |d| sqrt(1 + |s|^2); ``flutter`` is not needed.
+    """
+    s = np.asarray(sun, dtype=np.float64)
+    leaves = grove.leaves
+    u, v = np.linalg.norm(leaves.axis_u, axis=1), np.linalg.norm(leaves.axis_v, axis=1)
+    reach = (u + np.hypot(u, v)) * np.hypot(1.0, np.hypot(*s))
+    stems = project(Leaves(grove.pivot, 0 * grove.pivot, 0 * grove.pivot), grove.wood,
+                    sun=s, plane_height=plane_height)
+    disc = np.column_stack([reach, np.zeros_like(reach)])
+    return shapes_bounds(Shapes(stems.center, disc, disc[:, ::-1], stems.start, stems.end, stems.radius))
+
+
+# ---------------------------------------------------------------------------------------------
+# Anti-aliased rasterization. Coverage of a pixel = mean over k x k sub-samples of the exact area
+# fraction of the sub-sample's square that lies inside the shape's local strip: the half-plane
+# through the nearest boundary point (signed distance d, normal n) and, for thin shapes, the
+# parallel half-plane a thickness T further in. The area fraction of a unit square cut by a
+# line is the CDF of n . u for u uniform in the square (a trapezoid of widths |nx| + |ny|,
+# ||nx| - |ny||), so straight edges at any angle are exact and only curvature is sampled.
+# ---------------------------------------------------------------------------------------------
+
+_CHUNK = 1 << 17  # samples evaluated at once [count]
+_OPAQUE = np.float32(1.0 - 2.0**-20)  # coverage clipped below 1 before -log(1 - c)
+_BUCKETS = np.unique(np.ceil(np.outer(2.0 ** np.arange(20), [1.0, 1.25, 1.5, 1.75]))).astype(np.int64)
+
+
+def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.ndarray:
+    """Transmittance (rows, cols) float32 of opaque ``shapes`` [m] on ``grid``: 1 = open sky.
+
+    Each shape covers a fraction c_i of a pixel's area (box filter; see the comment above for the
+    method). Shapes combine as independent occluders: the pixel's transmittance is the product of
+    (1 - c_i), accumulated as the sum of -log(1 - c_i) with c_i clipped just below 1, so a fully
+    covered pixel is 0 (to 1e-6) and two disjoint shapes each covering half a pixel give 0.25,
+    not 0 (a pixel-scale statistical choice: overlaps of shapes are not resolved below a pixel).
+
+    period : (Px, Py) [m] or None; if given the shapes repeat with these periods and every
+        translate that touches the grid is drawn (one tile or any window of a periodic forest).
+    """
+    rows, cols = grid.shape
+    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
+    out = []
+    for primitive in (_ellipses(shapes, grid), _capsule_pieces(shapes, grid)):
+        _scatter(*primitive, shape=grid.shape, period=period_px, out=out)
+    flat = np.concatenate([f for f, _ in out]) if out else np.zeros(0, np.int64)
+    weight = np.concatenate([w for _, w in out]) if out else np.zeros(0, np.float32)
+    optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
+    return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+
+
+def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_height: float, grid: Grid,
+               period=None, select=None) -> np.ndarray:
+    """Transmittance mask float32 (rows, cols) of the grove at ``frame`` on the canopy plane z =
+    ``plane_height`` [m] under the sun at sky-plane point ``sun`` [tan].
+
+    period : (Px, Py) [m]; None uses the grove's own tile for a periodic layout.
+    select : None or (leaf selector, wood selector) for ``Shapes.subset``, e.g. from ``layer_index``.
+    """
+    if period is None and grove.params.layout == "periodic":
+        period = (grove.params.tile, grove.params.tile)
+    shapes = project(leaves_at(grove, flutter, frame), grove.wood, sun=sun, plane_height=plane_height)
+    if select is not None:
+        shapes = shapes.subset(*select)
+    return rasterize_transmittance(shapes, grid, period=period)
+
+
+def _pixels(points, grid: Grid):
+    """Plane points (n, 2) [m] to continuous raster coordinates (u along columns, v along rows)
+    [pixel], pixel (row, col) covering [col, col + 1) x [row, row + 1)."""
+    return np.column_stack([points[:, 0] - grid.origin[0], grid.origin[1] - points[:, 1]]) / grid.pixel
+
+
+def _ellipses(shapes: Shapes, grid: Grid):
+    """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
+    feature size B, thickness 2B, distance function, no selection."""
+    a = shapes.axis_a * [1.0, -1.0] / grid.pixel
+    b = shapes.axis_b * [1.0, -1.0] / grid.pixel
+    p, s = a[:, 0] ** 2 + b[:, 0] ** 2, a[:, 1] ** 2 + b[:, 1] ** 2
+    q = a[:, 0] * a[:, 1] + b[:, 0] * b[:, 1]
+    major = np.sqrt(0.5 * (p + s) + np.hypot(0.5 * (p - s), q))
+    minor = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / np.maximum(major, 1e-30)
+    angle = 0.5 * np.arctan2(2 * q, p - s)
+    params = np.column_stack([np.cos(angle), np.sin(angle), major, np.maximum(minor, 1e-4)])
+    return (_pixels(shapes.center, grid), np.sqrt(np.column_stack([p, s])), params, minor, 2 * minor,
+            _ellipse_distance, None)
+
+
+def _ellipse_distance(dx, dy, prm):
+    """Approximate signed distance (g - 1) / |grad g| to an ellipse boundary, g the ellipse's
+    gauge (exact for circles, finite for needles), and the outward unit normal. [pixel]"""
+    ex, ey, major, minor = prm
+    p, q = dx * ex + dy * ey, dy * ex - dx * ey
+    bp, aq = minor * minor * p, major * major * q
+    gauge = np.sqrt(np.square(minor * p) + np.square(major * q))  # A B g
+    grad = np.sqrt(bp * bp + aq * aq) + 1e-3 * minor * minor
+    distance = (gauge - major * minor) * (gauge + 1e-3 * minor) / grad
+    return distance, (bp * ex - aq * ey) / grad, (bp * ey + aq * ex) / grad
+
+
+def _capsule_pieces(shapes: Shapes, grid: Grid):
+    """Capsules in pixel units, long ones cut into pieces of length <= max(4 r, 16) pixels so
+    that their boxes stay tight. A piece keeps the whole capsule's distance but only the pixels
+    whose centre projects onto its stretch of the axis, so the pieces tile the capsule exactly."""
+    p0, p1 = _pixels(shapes.start, grid), _pixels(shapes.end, grid)
+    radius = shapes.radius / grid.pixel
+    axis = p1 - p0
+    pieces = np.maximum(1, np.ceil(np.hypot(*axis.T) / np.maximum(4 * radius, 16))).astype(np.int64)
+    src = np.repeat(np.arange(len(radius)), pieces)
+    i = np.arange(len(src)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    n = pieces[src]
+    lo, hi = p0[src] + axis[src] * (i / n)[:, None], p0[src] + axis[src] * ((i + 1) / n)[:, None]
+    center = 0.5 * (lo + hi)
+    r = radius[src]
+    half = 0.5 * np.abs(hi - lo) + (r + (n > 1))[:, None]
+    inverse = 1.0 / np.maximum(np.sum(axis**2, axis=1), 1e-12)[src]
+    t_lo = np.where(i == 0, -np.inf, i / n)
+    t_hi = np.where(i == n - 1, np.inf, (i + 1) / n)
+    params = np.column_stack([p0[src] - center, axis[src], inverse, r, t_lo, t_hi])
+    return center, half, params, r, 2 * r, _capsule_distance, _capsule_select
+
+
+def _capsule_distance(dx, dy, prm):
+    """Exact signed distance to a capsule and the outward unit normal. [pixel]"""
+    x0, y0, ex, ey, inverse, radius = prm[:6]
+    rx, ry = dx - x0, dy - y0
+    t = np.clip((rx * ex + ry * ey) * inverse, 0, 1)
+    qx, qy = rx - t * ex, ry - t * ey
+    length = np.sqrt(qx * qx + qy * qy) + 1e-6
+    return length - radius, qx / length, qy / length
+
+
+def _capsule_select(dx, dy, prm):
+    """1 where a pixel centre projects onto the piece's stretch [t_lo, t_hi) of the axis."""
+    x0, y0, ex, ey, inverse, _, t_lo, t_hi = prm
+    t = ((dx - x0) * ex + (dy - y0) * ey) * inverse
+    return (t >= t_lo) & (t < t_hi)
+
+
+def _square_cdf(t, a, b):
+    """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
+    b = min(|nx|, |ny|): the CDF of a trapezoid. [dimensionless]"""
+    s = np.abs(t)
+    tail = np.where(s <= 0.5 * (a - b), 0.5 - s / a,
+                    np.square(np.maximum(0.5 * (a + b) - s, 0)) / (2 * a * b + 1e-12))
+    return np.where(t < 0, tail, 1 - tail)
+
+
+def _translates(center, half, period, shape):
+    """Indices of the shapes and their centres [pixel], one per translate by whole periods
+    ``period`` (Pu, Pv) [pixel] whose box touches the raster ``shape`` (rows, cols)."""
+    extent = np.array([shape[1], shape[0]])
+    first = np.ceil(-(center + half) / period).astype(np.int64)
+    count = np.maximum(np.floor((extent - (center - half)) / period).astype(np.int64) - first + 1, 0)
+    copies = count[:, 0] * count[:, 1]
+    src = np.repeat(np.arange(len(center)), copies)
+    m = np.arange(len(src)) - np.repeat(np.cumsum(copies) - copies, copies)
+    nu = np.maximum(count[src, 0], 1)
+    shift = np.column_stack([first[src, 0] + m % nu, first[src, 1] + m // nu]) * period
+    return src, center[src] + shift
+
+
+def _scatter(center, half, params, feature, thickness, distance, select, *, shape, period, out):
+    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage)) of every pixel of
+    every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect padding."""
+    rows, cols = shape
+    if period is not None:
+        src, center = _translates(center, half, period, shape)
+        half, params, feature, thickness = half[src], params[src], feature[src], thickness[src]
+    lo = np.clip(np.floor(center - half), 0, [cols, rows]).astype(np.int64)
+    hi = np.clip(np.ceil(center + half), 0, [cols, rows]).astype(np.int64)
+    keep = np.all(hi > lo, axis=1)
+    center, lo, size = center[keep], lo[keep], (hi - lo)[keep]
+    params, feature, thickness = params[keep], feature[keep], thickness[keep]
+    if not len(center):
+        return
+    # k x k sub-samples: k = 1 for shapes at least 2.5 pixels thick (minor semi-axis or radius),
+    # 2 down to 0.8 pixel, 4 below; thin shapes get the second edge of their strip
+    sub = np.where(feature >= 2.5, 1, np.where(feature >= 0.8, 2, 4))
+    area = size.prod(axis=1)  # and fewer for huge boxes, to bound the memory of one block
+    sub = np.where(area * sub**2 > 16 * _CHUNK, np.where(area * 4 > 16 * _CHUNK, 1, 2), sub)
+    thin = thickness * sub < 1.5
+    block = _BUCKETS[np.minimum(np.searchsorted(_BUCKETS, size), len(_BUCKETS) - 1)]
+    block = np.maximum(block, size)
+    key = ((block[:, 1] * (1 << 20) + block[:, 0]) * 8 + sub) * 2 + thin
+    order = np.argsort(key, kind="stable")
+    starts = np.flatnonzero(np.diff(key[order], prepend=-1))
+    for group in np.split(order, starts[1:]):
+        w, h = block[group[0]]
+        k = int(sub[group[0]])
+        step = max(1, _CHUNK // (int(w) * int(h) * k * k))
+        for j in range(0, len(group), step):
+            idx = group[j:j + step]
+            rel = (center[idx] - lo[idx]).astype(np.float32)
+            prm = [c[:, None, None] for c in params[idx].astype(np.float32).T]
+            xs = ((np.arange(w * k, dtype=np.float32) + 0.5) / k)[None, None, :] - rel[:, 0, None, None]
+            ys = ((np.arange(h * k, dtype=np.float32) + 0.5) / k)[None, :, None] - rel[:, 1, None, None]
+            d, nx, ny = distance(xs, ys, prm)
+            nx, ny = np.abs(nx), np.abs(ny)
+            a, b = np.maximum(np.maximum(nx, ny), np.float32(0.7071), dtype=np.float32), np.minimum(nx, ny)
+            t = d * np.float32(-k)
+            cover = _square_cdf(t, a, b)
+            if thin[group[0]]:
+                cover -= _square_cdf(t - (thickness[idx] * k).astype(np.float32)[:, None, None], a, b)
+            if k > 1:
+                cover = cover.reshape(len(idx), h, k, w, k).mean(axis=(2, 4))
+            if select is not None:  # judged at pixel centres
+                cover = cover * select(np.arange(w) + 0.5 - rel[:, 0, None, None],
+                                       (np.arange(h) + 0.5)[:, None] - rel[:, 1, None, None], prm)
+            weight = -np.log1p(-np.clip(cover, 0, _OPAQUE))
+            r = np.where(np.arange(h) < size[idx, 1, None], lo[idx, 1, None] + np.arange(h), rows)
+            c = np.where(np.arange(w) < size[idx, 0, None], lo[idx, 0, None] + np.arange(w), cols)
+            out.append(((r[:, :, None] * (cols + 1) + c[:, None, :]).ravel(), weight.ravel()))

@@ -59,3 +59,235 @@ def test_periodic_tile_wraps_and_keeps_the_mean():
     f = image_transmittance(mask, center=center, size=size, periodic=True)
     error = np.abs(tile - supersampled(f, grid))
     assert error.mean() < 0.004 and error.max() < 2.5 / 64
+
+
+# --- procedural grove, flutter, projection and anti-aliased rasterization -----------------------
+
+from pipeline.canopy import (  # noqa: E402
+    FlutterParams,
+    GroveParams,
+    Leaves,
+    Shapes,
+    Wood,
+    grove_bounds,
+    grove_mask,
+    grow_grove,
+    layer_index,
+    leaves_at,
+    project,
+    rasterize_transmittance,
+    shapes_bounds,
+)
+
+NO_WOOD = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+
+
+def inside_ellipse(center, a, b):
+    """f(x, y) [m] -> 1 inside the ellipse {center + a u + b v : u^2 + v^2 < 1} (solved by Cramer's rule)."""
+    det = a[0] * b[1] - a[1] * b[0]
+
+    def f(x, y):
+        dx, dy = x - center[0], y - center[1]
+        u, v = b[1] * dx - b[0] * dy, a[0] * dy - a[1] * dx  # det * (u, v)
+        return (u * u + v * v < det * det).astype(np.float64)
+
+    return f
+
+
+def inside_capsule(p0, p1, radius):
+    """f(x, y) [m] -> 1 within ``radius`` of the segment p0 p1 (inside the disc of either end or
+    the rectangle between them)."""
+    ex, ey = p1[0] - p0[0], p1[1] - p0[1]
+    length = np.hypot(ex, ey)
+
+    def f(x, y):
+        along = ((x - p0[0]) * ex + (y - p0[1]) * ey) / length
+        across = ((x - p0[0]) * ey - (y - p0[1]) * ex) / length
+        ends = np.minimum(np.hypot(x - p0[0], y - p0[1]), np.hypot(x - p1[0], y - p1[1]))
+        return ((ends < radius) | ((np.abs(across) < radius) & (along > 0) & (along < length))).astype(np.float64)
+
+    return f
+
+
+def reference_transmittance(shapes, grid, n=16):
+    """Product over shapes of (1 - coverage), each coverage by n x n point samples per pixel."""
+    t = np.ones(grid.shape)
+    for c, a, b in zip(shapes.center, shapes.axis_a, shapes.axis_b):
+        t *= 1 - supersampled(inside_ellipse(c, a, b), grid, n)
+    for p0, p1, r in zip(shapes.start, shapes.end, shapes.radius):
+        t *= 1 - supersampled(inside_capsule(p0, p1, r), grid, n)
+    return t
+
+
+def box_pixels(shapes, grid):
+    """Boolean raster of the pixels that meet any shape's bounding box."""
+    half = np.sqrt(shapes.axis_a**2 + shapes.axis_b**2)
+    low = np.concatenate([shapes.center - half, np.minimum(shapes.start, shapes.end) - shapes.radius[:, None]])
+    high = np.concatenate([shapes.center + half, np.maximum(shapes.start, shapes.end) + shapes.radius[:, None]])
+    x0, y0, x1, y1 = grid.extent
+    out = np.zeros(grid.shape, bool)
+    for (xa, ya), (xb, yb) in zip(low, high):
+        c0, c1 = int(np.floor((xa - x0) / grid.pixel)), int(np.ceil((xb - x0) / grid.pixel))
+        r0, r1 = int(np.floor((y1 - yb) / grid.pixel)), int(np.ceil((y1 - ya) / grid.pixel))
+        out[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    return out
+
+
+def random_shapes(rng, n_ellipses, n_capsules, *, low, high, scale):
+    """Ellipses of random size (0.05 to 1 x scale [m]), aspect (including needles and one exactly
+    degenerate), skewed conjugate axes; capsules of random length and radius."""
+    n = n_ellipses
+    length = scale * np.exp(rng.uniform(np.log(0.05), 0.0, n))
+    angle = rng.uniform(0, np.pi, n)
+    aspect = rng.uniform(0, 1, n)
+    aspect[:4] = [0.0, 1e-3, 0.02, 0.1]
+    u = np.column_stack([np.cos(angle), np.sin(angle)])
+    v = np.column_stack([-np.sin(angle), np.cos(angle)]) + rng.uniform(-0.5, 0.5, (n, 1)) * u
+    start = rng.uniform(low, high, (n_capsules, 2))
+    end = start + rng.normal(0, 0.8 * scale, (n_capsules, 2))
+    end[0] = start[0] + [2.5 * scale, 1.1 * scale]  # long enough to be cut into pieces
+    radius = scale * np.exp(rng.uniform(np.log(0.01), np.log(0.3), n_capsules))
+    radius[0] = 0.03 * scale
+    return Shapes(rng.uniform(low, high, (n, 2)), length[:, None] * u, (length * aspect)[:, None] * v,
+                  start, end, radius)
+
+
+def test_flutter_is_periodic_and_the_grove_deterministic():
+    params = GroveParams(count=2, leaves_per_tree=300, seed=11)
+    grove = grow_grove(params)
+    flutter = FlutterParams(cycle=12, swing=0.3, twist=0.5)
+    rest = leaves_at(grove, flutter, 0)
+    for later in (flutter.cycle, -flutter.cycle, 5 * flutter.cycle):
+        again = leaves_at(grove, flutter, later)
+        for field in ("center", "axis_u", "axis_v"):
+            assert np.allclose(getattr(again, field), getattr(rest, field), rtol=0, atol=1e-12)
+    moved = leaves_at(grove, flutter, 1)
+    assert np.abs(moved.axis_v - rest.axis_v).max() > 1e-3
+    assert np.abs(moved.center - rest.center).max() > 1e-3
+    # the leaf keeps its shape and its stem
+    assert np.allclose(np.linalg.norm(moved.axis_u, axis=1), np.linalg.norm(rest.axis_u, axis=1))
+    assert np.allclose(np.sum(moved.axis_u * moved.axis_v, axis=1), 0, atol=1e-15)
+    assert np.allclose(moved.center - moved.axis_u, grove.pivot)
+    # deterministic from the seed, different for another seed
+    twin, other = grow_grove(params), grow_grove(GroveParams(count=2, leaves_per_tree=300, seed=12))
+    assert np.array_equal(twin.leaves.center, grove.leaves.center)
+    assert np.array_equal(twin.wood.end, grove.wood.end)
+    assert not np.allclose(other.leaves.center, grove.leaves.center)
+    # the bounds hold for every frame of the cycle
+    sun = (0.4, -0.7)
+    x0, y0, x1, y1 = grove_bounds(grove, flutter, sun=sun, plane_height=params.height)
+    for frame in range(flutter.cycle):
+        shapes = project(leaves_at(grove, flutter, frame), grove.wood, sun=sun, plane_height=params.height)
+        a0, b0, a1, b1 = shapes_bounds(shapes)
+        assert x0 <= a0 and y0 <= b0 and a1 <= x1 and b1 <= y1
+    # a periodic grove lies in its tile
+    tiled = grow_grove(GroveParams(count=4, leaves_per_tree=200, layout="periodic", tile=10.0, center=(1.0, 2.0)))
+    assert np.all(np.abs(tiled.leaves.center[:, :2] - [1.0, 2.0]) <= 5.0)
+    assert np.all(np.abs(tiled.wood.start[:, :2] - [1.0, 2.0]) <= 5.0)
+
+
+@pytest.mark.parametrize("seed, scale", [(0, 1.0), (1, 0.3), (2, 0.1)])
+def test_coverage_matches_supersampling(seed, scale):
+    grid = Grid((0.0, 4.0), 0.1, (40, 40))
+    shapes = random_shapes(np.random.default_rng(seed), 24, 6, low=-0.3, high=4.3, scale=scale)
+    mask = rasterize_transmittance(shapes, grid)
+    assert mask.dtype == np.float32 and mask.shape == grid.shape
+    reference = reference_transmittance(shapes, grid)
+    near = box_pixels(shapes, grid)
+    assert np.abs(mask - reference)[near].mean() <= 0.01
+    assert np.all(mask[~near] == 1.0)
+
+
+def test_periodic_raster_wraps_every_translate():
+    rng = np.random.default_rng(5)
+    period = (3.2, 2.4)
+    tile = Grid((0.0, 2.4), 0.1, (24, 32))
+    shapes = random_shapes(rng, 12, 3, low=-0.5, high=3.0, scale=0.5)
+    shapes = Shapes(np.vstack([shapes.center, [[3.15, 1.2]]]), np.vstack([shapes.axis_a, [[0.3, 0.0]]]),
+                    np.vstack([shapes.axis_b, [[0.0, 0.2]]]), shapes.start, shapes.end, shapes.radius)
+    shifts = [(i * period[0], j * period[1]) for i in range(-3, 4) for j in range(-3, 4)]
+
+    def translates(s):
+        def cat(v, sh=True):
+            return np.concatenate([v + (np.array(d) if sh else 0) for d in shifts])
+        return Shapes(cat(s.center), cat(s.axis_a, False), cat(s.axis_b, False),
+                      cat(s.start), cat(s.end), np.tile(s.radius, len(shifts)))
+
+    wrapped = rasterize_transmittance(shapes, tile, period=period)
+    assert np.allclose(wrapped, rasterize_transmittance(translates(shapes), tile), atol=1e-5)
+    # the ellipse across the east edge (x = 3.2) shows on the west side too
+    row = int((2.4 - 1.2) / 0.1)
+    assert wrapped[row, 0] < 0.01 and wrapped[row, -1] < 0.01
+    # an arbitrary window larger than a period, not aligned with it
+    window = Grid((-2.03, 3.71), 0.07, (90, 110))
+    assert np.allclose(rasterize_transmittance(shapes, window, period=period),
+                       rasterize_transmittance(translates(shapes), window), atol=1e-5)
+
+
+@pytest.mark.parametrize("dz", [0.4, -0.3])
+def test_projection_moves_leaves_away_from_the_sun(dz):
+    height, zenith, azimuth = 6.0, np.radians(35.0), np.radians(110.0)
+    towards_sun = np.array([np.sin(azimuth), np.cos(azimuth)])  # east, north
+    sun = np.tan(zenith) * towards_sun
+    leaf_centre = np.array([0.3, -0.2, height + dz])
+    leaves = Leaves(leaf_centre[None], np.array([[0.05, 0.0, 0.02]]), np.array([[0.0, 0.03, 0.0]]))
+    grid = Grid((-0.4, 0.5), 0.005, (200, 240))
+    mask = rasterize_transmittance(project(leaves, sun=sun, plane_height=height), grid)
+    occlusion = 1.0 - mask.astype(np.float64)
+    x, y = grid.ground_from_raster(*np.indices(grid.shape))
+    centroid = np.array([(occlusion * x).sum(), (occlusion * y).sum()]) / occlusion.sum()
+    # the ray towards the sun from the ground point behind the centroid passes through the leaf
+    ground = centroid - height * np.tan(zenith) * towards_sun
+    w = np.array([np.sin(zenith) * towards_sun[0], np.sin(zenith) * towards_sun[1], np.cos(zenith)])
+    hit = np.append(ground, 0.0) + w * (height + dz) / np.cos(zenith)
+    assert np.allclose(hit, leaf_centre, atol=1e-3)
+    shift = centroid - leaf_centre[:2]
+    assert np.dot(shift, towards_sun) == pytest.approx(-dz * np.tan(zenith), abs=1e-3)
+    # wood: an upright trunk keeps its radius, a branch across the sun widens by 1 / cos(zenith)
+    across = np.array([towards_sun[1], -towards_sun[0], 0.0])
+    wood = Wood(np.array([[0, 0, 0], [0, 0, height]]), np.array([[0, 0, height], [0, 0, height] + across]),
+                np.array([0.2, 0.1]))
+    shapes = project(leaves, wood, sun=sun, plane_height=height)
+    assert np.allclose(shapes.radius, [0.2, 0.1 / np.cos(zenith)])
+
+
+@pytest.mark.parametrize("zenith, azimuth", [(0.0, 0.0), (np.radians(50.0), np.radians(250.0))])
+def test_sparse_grove_transmittance_is_one_minus_projected_leaf_area(zenith, azimuth):
+    # leaves scattered one by one over the crown's shell: they rarely overlap (about 1 % of their area)
+    grove = grow_grove(GroveParams(count=1, leaves_per_tree=200, crown_radius=3.0, leaf_length=0.1,
+                                   leaves_per_cluster=1, seed=3))
+    flutter = FlutterParams()
+    height = grove.params.height
+    w = np.array([np.sin(zenith) * np.sin(azimuth), np.sin(zenith) * np.cos(azimuth), np.cos(zenith)])
+    sun = w[:2] / w[2]
+    x0, y0, x1, y1 = grove_bounds(grove, flutter, sun=sun, plane_height=height)
+    grid = Grid.from_window((x0 - 0.1, y0 - 0.1, x1 + 0.1, y1 + 0.1), 0.01)
+    mask = grove_mask(grove, flutter, 7, sun=sun, plane_height=height, grid=grid, select=(slice(None), []))
+    leaves = leaves_at(grove, flutter, 7)
+    # a flat leaf of area pi |U x V| seen along w covers pi |(U x V) . w| / w_z of a horizontal plane
+    area = np.pi * np.abs(np.cross(leaves.axis_u, leaves.axis_v) @ w) / w[2]
+    covered = area.sum() / (grid.shape[0] * grid.shape[1] * grid.pixel**2)
+    assert 0.002 < covered < 0.05
+    assert 1.0 - mask.mean(dtype=np.float64) == pytest.approx(covered, rel=0.02)
+
+
+def test_layers_split_the_grove_by_nearest_plane():
+    grove = grow_grove(GroveParams(count=2, leaves_per_tree=400, crown_radius=2.0, seed=5))
+    heights = [7.2, 8.0, 8.5]
+    leaf_layer, wood_layer = layer_index(grove, heights)
+    for z, layer in [(grove.leaves.center[:, 2], leaf_layer), (0.5 * (grove.wood.start + grove.wood.end)[:, 2], wood_layer)]:
+        distance = np.abs(z[:, None] - np.array(heights)[None, :])
+        assert np.all(distance[np.arange(len(z)), layer] <= distance.min(axis=1))
+    assert set(leaf_layer) == {0, 1, 2} and wood_layer[0] == 0  # the trunk's foot goes lowest
+    sun, flutter = (0.2, 0.3), FlutterParams()
+    shapes = project(leaves_at(grove, flutter, 3), grove.wood, sun=sun, plane_height=8.0)
+    parts = [shapes.subset(leaf_layer == i, wood_layer == i) for i in range(3)]
+    assert sum(len(p.center) for p in parts) == len(shapes.center)
+    assert sum(len(p.radius) for p in parts) == len(shapes.radius)
+    assert np.array_equal(np.sort(np.concatenate([p.center for p in parts]), axis=0), np.sort(shapes.center, axis=0))
+    # with the product rule the layers' masks multiply to the whole grove's
+    grid = Grid.from_window(grove_bounds(grove, flutter, sun=sun, plane_height=8.0), 0.04)
+    whole = grove_mask(grove, flutter, 3, sun=sun, plane_height=8.0, grid=grid)
+    product = np.prod([grove_mask(grove, flutter, 3, sun=sun, plane_height=8.0, grid=grid,
+                                  select=(leaf_layer == i, wood_layer == i)) for i in range(3)], axis=0)
+    assert np.allclose(product, whole, atol=1e-5)
