@@ -198,6 +198,101 @@ def ground_periodic(
     return g
 
 
+@dataclass(frozen=True)
+class SunPlan:
+    """Index bookkeeping of the fine sun correlation over one ground window (DESIGN.md
+    section 4, two scales): the sun disc as a small kernel of fine sky cells ``q = p / h``,
+    correlated with a fine transmittance mask of the canopy plane.
+
+    window_shape : (rows, cols) of the fine ground window, the lattice origin.
+    offset_lo, offset_hi : the fine sky offsets (dr, dc) the kernel may occupy, both inclusive.
+    mask : Grid -- the fine canopy mask this needs: the window moved by ``offset_lo`` and
+        grown by the range, so no ray from the window through the kernel leaves it. [m]
+    fft_shape : (rows, cols) of the transforms; the correlation never wraps.
+    """
+
+    window_shape: tuple[int, int]
+    offset_lo: tuple[int, int]
+    offset_hi: tuple[int, int]
+    mask: Grid
+    fft_shape: tuple[int, int]
+
+
+def sun_offset_range(centres, *, reach: float, q: float):
+    """The fine sky offsets (lo, hi), inclusive, that cover a sun disc centred at each of
+    ``centres`` (n, 2) [tan] on the sky plane and reaching ``reach`` [tan] from its centre,
+    with two cells to spare."""
+    centres = np.atleast_2d(np.asarray(centres, dtype=np.float64))
+    rows = -centres[:, 1] / q
+    cols = centres[:, 0] / q
+    span = reach / q + 2.0
+    lo = (int(np.floor(rows.min() - span)), int(np.floor(cols.min() - span)))
+    hi = (int(np.ceil(rows.max() + span)), int(np.ceil(cols.max() + span)))
+    return lo, hi
+
+
+def plan_sun(window: Grid, *, offset_lo, offset_hi) -> SunPlan:
+    """Plan the fine sun correlation of ``window`` (fine ground grid [m]) for kernels inside the
+    offsets ``offset_lo``..``offset_hi`` (inclusive, fine sky cells)."""
+    p = window.pixel
+    extra = tuple(hi - lo for lo, hi in zip(offset_lo, offset_hi))
+    shape = tuple(n + e for n, e in zip(window.shape, extra))
+    origin = (window.origin[0] + offset_lo[1] * p, window.origin[1] - offset_lo[0] * p)
+    fft_shape = tuple(sfft.next_fast_len(n, real=True) for n in shape)
+    return SunPlan(window.shape, tuple(offset_lo), tuple(offset_hi), Grid(origin, p, shape), fft_shape)
+
+
+def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int = 1):
+    """rfft2 of the fine mask ``m`` on ``plan.mask``, zero-padded to the plan (complex64);
+    the padding is never read."""
+    m = np.asarray(transmittance, dtype=np.float32)
+    if m.shape != plan.mask.shape:
+        raise ValueError(f"the fine mask is {m.shape}; the plan needs {plan.mask.shape}")
+    return sfft.rfft2(m, s=plan.fft_shape, axes=(-2, -1), workers=workers)
+
+
+def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
+    """Ground irradiance (channels, rows, cols) float32 of the sun kernel through the fine mask.
+
+    kernel : the sun disc on a fine sky grid (``sky_grid(start, shape, q)``, q = fine pixel /
+    height); it must lie inside the plan's offsets. Exact for the discrete sum: every ray from
+    the window through the kernel meets the fine mask. [radiance x sr]
+    """
+    start = sky_offset(kernel.grid)
+    u0 = tuple(s - lo for s, lo in zip(start, plan.offset_lo))
+    room = tuple(hi - lo + 1 for lo, hi in zip(plan.offset_lo, plan.offset_hi))
+    shape = kernel.weighted.shape[-2:]
+    if min(u0) < 0 or any(u + n > r for u, n, r in zip(u0, shape, room)):
+        raise ValueError(
+            f"the sun kernel at offsets {start} size {shape} lies outside the planned "
+            f"offsets {plan.offset_lo}..{plan.offset_hi}"
+        )
+    e = np.zeros(kernel.weighted.shape[:-2] + plan.fft_shape, dtype=np.float32)
+    e[..., u0[0]:u0[0] + shape[0], u0[1]:u0[1] + shape[1]] = kernel.weighted
+    lit = _correlate(e, spectrum, plan.fft_shape, workers)
+    return np.ascontiguousarray(lit[..., : plan.window_shape[0], : plan.window_shape[1]])
+
+
+def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarray:
+    """``raster`` (channels, rows, cols) on ``grid`` sampled bilinearly at the pixel centres of
+    ``target`` (same units, axes aligned), edges held: the coarse sky light under the fine sun
+    window. Separable: rows, then columns."""
+    x, _ = target.ground_from_raster(0.0, np.arange(target.shape[1]))
+    _, y = target.ground_from_raster(np.arange(target.shape[0]), 0.0)
+    r, _ = grid.raster_from_ground(0.0, y)
+    _, c = grid.raster_from_ground(x, 0.0)
+
+    def weights(u, n):
+        u = np.clip(u, 0, n - 1)
+        u0 = np.minimum(np.floor(u).astype(np.intp), max(n - 2, 0))
+        return u0, np.minimum(u0 + 1, n - 1), (u - u0).astype(np.float32)
+
+    r0, r1, fr = weights(r, grid.shape[0])
+    c0, c1, fc = weights(c, grid.shape[1])
+    rows = raster[..., r0, :] * (1 - fr)[:, None] + raster[..., r1, :] * fr[:, None]
+    return (rows[..., c0] * (1 - fc) + rows[..., c1] * fc).astype(np.float32)
+
+
 def combine_layers(grounds, unshadowed):
     """Several canopy layers, assumed uncorrelated (Max 1991, "Extensions to multiple shadow
     casting planes"): the product of the layers' ground rasters over ``I0^(n - 1)``.

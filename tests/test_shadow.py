@@ -222,3 +222,58 @@ def test_sky_rasterized_folded_equals_the_folded_raster(model):
     a = shadow.ground_periodic(full, spectrum, plan, float(tile.mean()))
     b = shadow.ground_periodic(folded, spectrum, plan, float(tile.mean()))
     assert np.abs(a - b).max() <= 1e-5 * a.max()
+
+
+def test_sun_kernel_correlation_equals_direct_sum():
+    """The fine sun path: a small kernel anywhere inside the planned offsets, through the fine
+    mask of the plan, is the brute-force sum of eq. 2."""
+    rng = np.random.default_rng(5)
+    p, h = 0.1, 2.0
+    window = Grid((1.0, 3.0), p, (6, 7))
+    centres = rng.uniform(-0.4, 0.4, (3, 2))
+    lo, hi = shadow.sun_offset_range(centres, reach=0.1, q=p / h)
+    plan = shadow.plan_sun(window, offset_lo=lo, offset_hi=hi)
+    assert plan.mask.shape == (6 + hi[0] - lo[0], 7 + hi[1] - lo[1])
+    mask = rng.random(plan.mask.shape).astype(np.float32)
+    spectrum = shadow.fine_mask_spectrum(mask, plan)
+    for _ in range(4):
+        start = (int(rng.integers(lo[0], hi[0] - 2)), int(rng.integers(lo[1], hi[1] - 2)))
+        shape = (int(rng.integers(1, hi[0] - start[0] + 2)), int(rng.integers(1, hi[1] - start[1] + 2)))
+        e = rng.random((3,) + shape).astype(np.float32)
+        kernel = SkyRaster(shadow.sky_grid(start, shape, p / h), e, np.zeros(3))
+        g = shadow.ground_sun(kernel, spectrum, plan)
+        # the mask grid's pixel [0, 0] sits at lattice offset lo from the window's
+        expected = direct_sum(e, start, mask, lo, window.shape, outside_value=np.nan)
+        np.testing.assert_allclose(g, expected, rtol=1e-4, atol=1e-5)
+
+
+def test_sun_kernel_outside_the_plan_is_refused():
+    window = Grid((0.0, 0.0), 0.1, (4, 4))
+    plan = shadow.plan_sun(window, offset_lo=(-2, -2), offset_hi=(2, 2))
+    spectrum = shadow.fine_mask_spectrum(np.ones(plan.mask.shape, np.float32), plan)
+    kernel = SkyRaster(shadow.sky_grid((1, 1), (3, 3), 0.05), np.ones((3, 3, 3), np.float32), np.zeros(3))
+    with pytest.raises(ValueError, match="outside the planned offsets"):
+        shadow.ground_sun(kernel, spectrum, plan)
+
+
+def test_fine_mask_sits_under_the_sun():
+    """World check: a sun to the south-east at height h is seen through the canopy point
+    h * s_sun away from the ground point, which is where plan.mask lies."""
+    p, h = 0.05, 4.0
+    window = Grid.from_window((-1, -1, 1, 1), p)
+    s_sun = np.array([0.3, -0.2])  # east and south
+    lo, hi = shadow.sun_offset_range(s_sun, reach=0.01, q=p / h)
+    plan = shadow.plan_sun(window, offset_lo=lo, offset_hi=hi)
+    x0, y0, x1, y1 = plan.mask.extent
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    assert abs(cx - h * s_sun[0]) < 2 * p and abs(cy - h * s_sun[1]) < 2 * p
+
+
+def test_resample_bilinear_reproduces_a_linear_field():
+    coarse = Grid((-2.0, 2.0), 0.5, (8, 8))
+    fine = Grid((-1.3, 1.1), 0.07, (20, 25))
+    xc, yc = coarse.ground_from_raster(np.arange(8)[:, None], np.arange(8)[None, :])
+    field = np.stack([2 * xc - 3 * yc + 1, xc + yc]).astype(np.float32)
+    out = shadow.resample_bilinear(field, coarse, fine)
+    xf, yf = fine.ground_from_raster(np.arange(20)[:, None], np.arange(25)[None, :])
+    np.testing.assert_allclose(out, np.stack([2 * xf - 3 * yf + 1, xf + yf]), atol=1e-5)
