@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, io
-from .composite import display_ground
+from .cache import Cache, cache_dir, parse_size
+from .composite import display_ground, display_sky
 from .config import ConfigError, load_config
 
 EXIT_BAD_INPUT = 2
@@ -60,8 +61,39 @@ def _parser():
     ground.add_argument("config", help="YAML config file")
     ground.add_argument("-o", "--output", required=True, help="output EXR file")
     ground.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside it")
+    ground.add_argument("--frame", type=int, default=0, help="output frame (default 0): the "
+                        "sun, moon and clouds of that moment, the canopy at frame mod cycle")
     ground.add_argument("--threads", type=int, default=None, help="FFT threads (default: all cores)")
+    ground.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
     ground.set_defaults(run=_run_ground)
+
+    mask = commands.add_parser(
+        "mask",
+        help="write the canopy mask of a cycle frame (Max 1991, Fig. 4)",
+        description="Write the transmittance mask (1 = open sky) of one canopy layer at one "
+        "cycle frame, the leaves projected along the sun onto the canopy plane, north-up: the "
+        "coarse mask of the whole canopy, or with --fine the fine mask under the sun window.",
+    )
+    mask.add_argument("config", help="YAML config file")
+    mask.add_argument("--frame", type=int, default=0, help="cycle frame (default 0)")
+    mask.add_argument("--layer", type=int, default=0, help="canopy layer (default 0)")
+    mask.add_argument("--fine", action="store_true", help="the fine mask of the sun window")
+    mask.add_argument("-o", "--output", required=True, help="output PNG or EXR file")
+    mask.set_defaults(run=_run_mask)
+
+    sky = commands.add_parser(
+        "sky",
+        help="write the sky of a frame as an equirectangular EXR",
+        description="Write the sky (sun, moon, clouds) of a frame as linear RGB radiance, "
+        "equirectangular: top row at the zenith, centre column north, east at three quarters "
+        "of the width; the lower half is below the horizon.",
+    )
+    sky.add_argument("config", help="YAML config file")
+    sky.add_argument("--frame", type=int, default=0, help="output frame (default 0)")
+    sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
+    sky.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside it")
+    sky.add_argument("-o", "--output", required=True, help="output EXR file")
+    sky.set_defaults(run=_run_sky)
 
     cache = commands.add_parser(
         "cache",
@@ -98,9 +130,11 @@ def _run_ground(args) -> int:
     if args.threads is not None and args.threads < 1:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
     config = load_config(args.config)
+    _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     digest = config.digest()
     started = time.perf_counter()
-    result = render_ground(config, workers=args.threads)
+    store = Cache(cache_dir(args.cache))
+    result = render_ground(config, frame=args.frame, store=store, workers=args.threads)
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.irradiance)):
         raise BadInput(f"{args.config}: the ground irradiance overflowed; lower the sky's radiance")
@@ -115,6 +149,7 @@ def _run_ground(args) -> int:
         "sunshade:pixel_size": float(result.grid.pixel),
         "sunshade:config_hash": digest,
         "sunshade:version": __version__,
+        "sunshade:frame": int(args.frame),
     }
     io.write_exr(output, result.irradiance, attributes)
     written = [output]
@@ -130,8 +165,70 @@ def _run_ground(args) -> int:
     return 0
 
 
+def _check_frame(frame: int, count: int, flag: str, key: str) -> None:
+    if not 0 <= frame < count:
+        raise BadInput(f"{flag} {frame} is outside 0..{count - 1} ({key} is {count})")
+
+
+def _run_mask(args) -> int:
+    from .render import layer_masks, plan_run
+
+    suffix = Path(args.output).suffix.lower()
+    output = _checked_output(args.output, suffix if suffix in (".png", ".exr") else ".png")
+    config = load_config(args.config)
+    _check_frame(args.frame, config.canopy.cycle, "--frame", "the canopy's cycle")
+    _check_frame(args.layer, len(config.canopy.layers), "--layer", "the number of canopy layers")
+    plan = plan_run(config)
+    layer = plan.layers[args.layer]
+    if args.fine and layer.sun is None:
+        raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: procedural)")
+    started = time.perf_counter()
+    coarse, fine = layer_masks(config, plan, args.layer, args.frame)
+    mask, grid = (fine, layer.sun.mask) if args.fine else (coarse, layer.canopy)
+    elapsed = time.perf_counter() - started
+    if suffix == ".exr":
+        io.write_exr(output, mask[..., None], {"sunshade:window": grid.extent,
+                                               "sunshade:pixel_size": float(grid.pixel)})
+    else:
+        io.write_png(output, mask[..., None])
+    rows, cols = mask.shape
+    x0, y0, x1, y1 = grid.extent
+    print(f"sunshade: mask {cols} x {rows} px at {grid.pixel:g} m over x {x0:.2f}..{x1:.2f}, "
+          f"y {y0:.2f}..{y1:.2f} m; mean transmittance {mask.mean():.3f}; {elapsed:.2f} s; "
+          f"wrote {output}")
+    return 0
+
+
+def _run_sky(args) -> int:
+    from .render import load_sky, scene_at
+
+    output = _checked_output(args.output, ".exr")
+    png = _checked_output(str(output.with_suffix(".png")), ".png") if args.png else None
+    if not 8 <= args.width <= 16384 or args.width % 2:
+        raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
+    config = load_config(args.config)
+    _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
+    scene = scene_at(config, args.frame)
+    sky = load_sky(config.sky, scene)
+    if not hasattr(sky, "equirect"):
+        raise BadInput(f"{args.config}: sunshade sky writes procedural skies (sky.model is "
+                       f"{config.sky.model}; an hdri sky is its image)")
+    image = sky.equirect(args.width)
+    attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),
+                  "sunshade:version": __version__}
+    if scene.sun is not None:
+        attributes["sunshade:sun_azimuth_elevation"] = (np.degrees(scene.sun.azimuth),
+                                                        np.degrees(scene.sun.elevation))
+    io.write_exr(output, image, attributes)
+    written = [output]
+    if png is not None:
+        io.write_png(png, display_sky(image))
+        written.append(png)
+    print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
+    return 0
+
+
 def _run_cache(args) -> int:
-    from .cache import Cache, cache_dir, parse_size
 
     store = Cache(cache_dir(args.cache))
     if args.action == "prune":

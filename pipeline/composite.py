@@ -24,3 +24,16 @@ def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25
     luminance = float(unshadowed @ REC709_LUMINANCE)
     scale = 1.0 / (white * luminance) if luminance > 0 else 1.0
     return srgb_encode(np.asarray(irradiance, dtype=np.float32) * np.float32(scale))
+
+
+def display_sky(radiance: np.ndarray) -> np.ndarray:
+    """Display-referred sRGB picture of an equirectangular sky (rows, cols, 3).
+
+    Exposure puts the median luminance of the upper hemisphere at 0.4, then ``x / (1 + x)``
+    compresses the sun and the glow around it instead of clipping them flat. [dimensionless]
+    """
+    radiance = np.asarray(radiance, dtype=np.float32)
+    upper = radiance[: radiance.shape[0] // 2] @ REC709_LUMINANCE
+    median = float(np.median(upper))
+    exposed = radiance * np.float32(0.4 / median if median > 0 else 1.0)
+    return srgb_encode(exposed / (1.0 + exposed))

@@ -11,17 +11,26 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 
 import yaml
 
-from . import __version__
+from . import __version__, ephemeris
 from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
 
 LAYOUTS = ("isolated", "periodic")
 MAX_GROUND_PIXELS = 64_000_000
 MAX_FFT_CELLS = 128_000_000
+MAX_SUN_PIXELS = 16_000_000
+MIN_SUN_ELEVATION = math.radians(2.0)
+"""Lowest sun a site and time may give: below it the sun disc's sky-plane image explodes. [rad]"""
+MAX_LEAVES = 1_000_000
+SUN_RADIUS_DEG = 0.2666
+"""Mean angular radius of the sun (959.63 arcsec at 1 au). [deg]"""
+MOON_RADIUS_DEG = 0.2725
+"""Angular radius of the moon for explicit-angle eclipses: a little larger than the sun. [deg]"""
 MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
 
@@ -37,42 +46,144 @@ class ConfigError(ValueError):
 class CanopyLayer:
     """One canopy plane.
 
-    mask : Path -- transparency image (1 = open sky), north-up.
-    size : (float, float) -- metres covered by the image, x then y. [m]
+    mask : tuple of Path -- transparency images (1 = open sky), north-up: one, or the frames of
+        a numbered sequence (the flutter cycle); empty for a procedural grove.
+    size : (float, float) -- metres covered by the image, x then y (the tile of a periodic
+        layout). [m]
     center : (float, float) -- world x, y of the image centre. [m]
     height : float -- height of the plane above the ground. [m]
     """
 
-    mask: Path
+    mask: tuple[Path, ...]
     size: tuple[float, float]
     center: tuple[float, float]
     height: float
 
 
 @dataclass(frozen=True)
+class TreesConfig:
+    """A seeded procedural grove (canopy.GroveParams): ``count`` trees of ``leaves_per_tree``
+    leaves of mean length ``leaf_length`` [m] in crowns of ``crown_radius`` [m], bases within
+    ``spread`` [m] of the canopy centre (None: chosen from the crowns)."""
+
+    count: int
+    seed: int
+    crown_radius: float
+    leaves_per_tree: int
+    leaf_length: float
+    spread: float | None
+
+
+@dataclass(frozen=True)
+class FlutterConfig:
+    """cycle : frames per flutter cycle; swing, twist : leaf amplitudes. [rad]"""
+
+    cycle: int
+    swing: float
+    twist: float
+
+
+@dataclass(frozen=True)
 class CanopyConfig:
+    """layout : 'isolated' or 'periodic'; layers : the canopy planes; trees : the procedural
+    grove (None when the layers have mask images); flutter : its motion."""
+
     layout: str
     layers: tuple[CanopyLayer, ...]
+    trees: TreesConfig | None
+    flutter: FlutterConfig
+
+    @property
+    def cycle(self) -> int:
+        """Frames in the canopy's cycle: the flutter cycle, or the length of the mask sequence."""
+        if self.trees is not None:
+            return self.flutter.cycle
+        return len(self.layers[0].mask)
+
+
+@dataclass(frozen=True)
+class SunConfig:
+    """The sun by explicit angles: elevation, azimuth (from north towards east), angular
+    radius. [rad]"""
+
+    elevation: float
+    azimuth: float
+    radius: float
+
+
+@dataclass(frozen=True)
+class SiteConfig:
+    """A place and a span of time: the sun and moon follow the ephemeris from ``start`` over
+    the first frame to ``end`` over the last. latitude, longitude [rad]; elevation [m]."""
+
+    latitude: float
+    longitude: float
+    elevation: float
+    start: datetime
+    end: datetime
+
+
+@dataclass(frozen=True)
+class MoonConfig:
+    """The moon's centre relative to the sun's, moving linearly from ``offset_start`` over the
+    first frame to ``offset_end`` over the last: (to the right, up) as the observer faces the
+    sun; its angular radius. [rad]"""
+
+    offset_start: tuple[float, float]
+    offset_end: tuple[float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class CloudsConfig:
+    """cover : fraction of sky covered; scale : feature size [m]; altitude [m]; wind : (east,
+    north) [m/s]; thickness : optical depth of a full cloud; seed."""
+
+    cover: float
+    scale: float
+    altitude: float
+    wind: tuple[float, float]
+    thickness: float
+    seed: int
 
 
 @dataclass(frozen=True)
 class SkyConfig:
     """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
-    hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad]."""
+    hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
+    Procedural: turbidity; the sun by angles or by site and time; moon (with angles; implied by
+    site and time); clouds."""
 
     model: str
     radiance: tuple[float, float, float]
     hdri: Path | None
     rotation: float
     alpha: float
+    turbidity: float = 3.0
+    sun: SunConfig | None = None
+    site: SiteConfig | None = None
+    moon: MoonConfig | None = None
+    clouds: CloudsConfig | None = None
 
 
 @dataclass(frozen=True)
 class GroundConfig:
-    """window : (x_min, y_min, x_max, y_max) [m]; pixel : ground pixel [m]."""
+    """window : (x_min, y_min, x_max, y_max) [m]; pixel : ground pixel [m]. The sun's fine
+    raster: sun_window (None: the window) and sun_pixel (None: chosen so the sun disc spans
+    16 cells, within MAX_SUN_PIXELS). [m]"""
 
     window: tuple[float, float, float, float]
     pixel: float
+    sun_window: tuple[float, float, float, float] | None = None
+    sun_pixel: float | None = None
+
+
+@dataclass(frozen=True)
+class AnimationConfig:
+    """frames : number of output frames; fps : frames per second of film time. [1/s]"""
+
+    frames: int
+    fps: float
 
 
 @dataclass(frozen=True)
@@ -81,12 +192,13 @@ class Config:
     canopy: CanopyConfig
     sky: SkyConfig
     ground: GroundConfig
+    animation: AnimationConfig
 
     def digest(self) -> str:
         """Hash of every value and every input file's bytes, with the package version (16 hex)."""
         values = asdict(self)
         values.pop("path")
-        files = sorted({str(layer.mask) for layer in self.canopy.layers} | (
+        files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask} | (
             {str(self.sky.hdri)} if self.sky.hdri else set()))
         h = hashlib.sha256()
         h.update(json.dumps(values, sort_keys=True, default=str).encode())
@@ -201,6 +313,45 @@ class _Section:
                 self.fail(name, f"must be a list of {count} finite numbers (got {value})")
         return tuple(float(v) for v in value)
 
+    def integer(self, name, default=_MISSING, *, at_least=None):
+        value = self.raw(name, default)
+        if not (_is_number(value) and float(value).is_integer()):
+            self.fail(name, f"must be a whole number, not {_kind(value)}")
+        if at_least is not None and value < at_least:
+            self.fail(name, f"must be at least {at_least} (got {int(value)})")
+        return int(value)
+
+    def utc(self, name):
+        value = self.raw(name)
+        if isinstance(value, str):
+            try:
+                value = datetime.fromisoformat(value.replace("Z", "+00:00"))
+            except ValueError:
+                self.fail(name, f"must be a time like \"2024-04-08T18:20:00Z\" (got {value!r})")
+        if not isinstance(value, datetime):
+            self.fail(name, f"must be a time like \"2024-04-08T18:20:00Z\", not {_kind(value)}")
+        if value.tzinfo is None:
+            self.fail(name, "must say its time zone, e.g. end in Z for UTC")
+        return value.astimezone(timezone.utc)
+
+    def mask_files(self, name):
+        """One image, or a numbered sequence ``leaves.%04d.png`` from frame 0 (or 1) on."""
+        value = self.raw(name)
+        if not isinstance(value, str) or "%" not in value:
+            return (self.file(name),)
+        pattern = (self.ctx.path.parent / value).resolve()
+        try:
+            names = [Path(str(pattern) % i) for i in range(2)]
+        except (TypeError, ValueError):
+            self.fail(name, f"a sequence needs one number field like %04d (got {value!r})")
+        first = next((i for i, n in enumerate(names) if n.is_file()), None)
+        if first is None:
+            self.fail(name, f"no such files: {names[0]} or {names[1]}")
+        frames = []
+        while Path(str(pattern) % (first + len(frames))).is_file():
+            frames.append(Path(str(pattern) % (first + len(frames))))
+        return tuple(frames)
+
     def choice(self, name, choices, default=_MISSING):
         value = self.raw(name, default)
         if value not in choices:
@@ -241,28 +392,60 @@ def _kind(value) -> str:
 
 
 def _parse(root: _Section, path: Path) -> Config:
+    animation = _parse_animation(root.section("animation"))
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)
     sky = _parse_sky(root.section("sky"), canopy, ground)
     root.done()
-    return Config(path.resolve(), canopy, sky, ground)
+    return Config(path.resolve(), canopy, sky, ground, animation)
+
+
+def _parse_animation(s: _Section) -> AnimationConfig:
+    frames = s.integer("frames", 48, at_least=1)
+    fps = s.number("fps", 24.0, above=0.0)
+    s.done()
+    return AnimationConfig(frames, fps)
+
+
+def _parse_window(s: _Section, name, default):
+    window = s.numbers(name, 4, default)
+    if not (window[2] > window[0] and window[3] > window[1]):
+        s.fail(name, f"must be [x_min, y_min, x_max, y_max] with max above min (got {list(window)})")
+    return window
 
 
 def _parse_ground(s: _Section) -> GroundConfig:
-    window = s.numbers("window", 4, (-20.0, -20.0, 20.0, 20.0))
-    if not (window[2] > window[0] and window[3] > window[1]):
-        s.fail("window", f"must be [x_min, y_min, x_max, y_max] with max above min (got {list(window)})")
+    window = _parse_window(s, "window", (-20.0, -20.0, 20.0, 20.0))
     pixel = s.number("pixel", 0.05, above=0.0)
-    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
-    if cells > MAX_GROUND_PIXELS:
-        s.fail("pixel", f"the window would be {cells:.3g} pixels; the most is {MAX_GROUND_PIXELS:.3g}")
+    _check_pixels(s, "pixel", window, pixel, MAX_GROUND_PIXELS)
+    sun_window = _parse_window(s, "sun_window", None) if s.has("sun_window") else None
+    sun_pixel = s.number("sun_pixel", above=0.0) if s.has("sun_pixel") else None
+    if sun_pixel is not None:
+        if sun_pixel > pixel:
+            s.fail("sun_pixel", f"must not be above ground.pixel ({sun_pixel:g} > {pixel:g})")
+        _check_pixels(s, "sun_pixel", sun_window or window, sun_pixel, MAX_SUN_PIXELS)
     s.done()
-    return GroundConfig(window, pixel)
+    return GroundConfig(window, pixel, sun_window, sun_pixel)
+
+
+def _check_pixels(s: _Section, name, window, pixel, most):
+    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
+    if cells > most:
+        s.fail(name, f"the window would be {cells:.3g} pixels; the most is {most:.3g}")
 
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
     layout = s.choice("layout", LAYOUTS, "isolated")
-    base = _parse_layer(s, {}, ground, layout, mask_required=not s.has("layers"))
+    images = s.has("mask") or (
+        s.has("layers") and isinstance(s.data["layers"], list)
+        and any(isinstance(item, dict) and "mask" in item for item in s.data["layers"]))
+    if images and s.has("trees"):
+        s.fail("trees", "give either trees (a procedural grove) or mask images, not both")
+    trees = None if images else _parse_trees(s.section("trees"))
+    flutter = _parse_flutter(s.section("flutter")) if trees else None
+    if not trees and s.has("flutter"):
+        s.fail("flutter", "only used with trees (a mask sequence flutters by its own frames)")
+    base = _parse_layer(s, {}, ground, layout, images=images, mask_required=not s.has("layers"))
     if not s.has("layers"):
         layers = [base]
     else:
@@ -272,20 +455,56 @@ def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
         layers = []
         for i, item in enumerate(items):
             ls = _Section(item, s.key(f"layers[{i}]"), s.ctx)
-            layers.append(_parse_layer(ls, base, ground, layout, mask_required=base["mask"] is None))
+            layers.append(_parse_layer(ls, base, ground, layout, images=images,
+                                       mask_required=not base["mask"]))
             ls.done()
+        counts = {len(layer["mask"]) for layer in layers}
+        if len(counts) > 1:
+            s.fail("layers", f"mask sequences of every layer must have the same length (got {sorted(counts)})")
     s.done()
-    return CanopyConfig(layout, tuple(CanopyLayer(**layer) for layer in layers))
+    return CanopyConfig(layout, tuple(CanopyLayer(**layer) for layer in layers), trees,
+                        flutter or FlutterConfig(1, 0.0, 0.0))
 
 
-def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, mask_required):
+def _parse_trees(s: _Section) -> TreesConfig:
+    trees = TreesConfig(
+        count=s.integer("count", 3, at_least=1),
+        seed=s.integer("seed", 7, at_least=0),
+        crown_radius=s.number("crown_radius", 4.0, above=0.0),
+        leaves_per_tree=s.integer("leaves_per_tree", 12000, at_least=1),
+        leaf_length=s.number("leaf_length", 0.08, above=0.0),
+        spread=s.number("spread", at_least=0.0) if s.has("spread") else None,
+    )
+    if trees.count * trees.leaves_per_tree > MAX_LEAVES:
+        s.fail("leaves_per_tree", f"{trees.count} trees of {trees.leaves_per_tree} leaves is "
+               f"{trees.count * trees.leaves_per_tree} leaves; the most is {MAX_LEAVES}")
+    s.done()
+    return trees
+
+
+def _parse_flutter(s: _Section) -> FlutterConfig:
+    flutter = FlutterConfig(
+        cycle=s.integer("cycle", 48, at_least=1),
+        swing=math.radians(s.number("swing", 12.0, at_least=0.0, below=90.0)),
+        twist=math.radians(s.number("twist", 20.0, at_least=0.0, below=90.0)),
+    )
+    s.done()
+    return flutter
+
+
+def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, images, mask_required):
     """One canopy plane's keys, each defaulting to ``base``'s; its rasters checked for size."""
-    if s.has("mask") or mask_required:
-        mask = s.file("mask")
+    if images and (s.has("mask") or mask_required):
+        mask = s.mask_files("mask")
     else:
-        mask = base.get("mask")
-    size = s.numbers("size", 2, base.get("size", (20.0, 20.0)))
-    if min(size) <= 0:
+        mask = base.get("mask", ())
+    default_size = (20.0, 20.0) if images or layout == "periodic" else None
+    default_size = base.get("size", default_size)
+    if default_size is None and not s.has("size"):
+        size = (0.0, 0.0)  # an isolated grove sizes itself
+    else:
+        size = s.numbers("size", 2, default_size)
+    if min(size) <= 0 and (images or layout == "periodic" or s.has("size")):
         s.fail("size", f"both sides must be above 0 (got {list(size)})")
     layer = {
         "mask": mask,
@@ -302,7 +521,7 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
             if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
                 s.fail("size", f"a periodic tile must be a whole number of ground pixels "
                        f"({ratio * ground.pixel:g} / {ground.pixel:g} = {ratio:.4g})")
-    else:
+    elif images:
         window = ground.window
         fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
             (window[3] - window[1]) / ground.pixel + pixels[1])
@@ -313,8 +532,11 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
 
 
 def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyConfig:
-    model = s.choice("model", tuple(SKY_MODELS), "uniform")
-    for key, owner in (("radiance", "uniform"), ("hdri", "hdri"), ("rotation", "hdri")):
+    model = s.choice("model", tuple(SKY_MODELS), "procedural")
+    owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "turbidity": "procedural",
+              "sun": "procedural", "site": "procedural", "time": "procedural", "moon": "procedural",
+              "clouds": "procedural"}
+    for key, owner in owners.items():
         if s.has(key) and model != owner:
             s.fail(key, f"only used with model: {owner} (model is {model})")
     radiance = (1.0, 1.0, 1.0)
@@ -337,5 +559,69 @@ def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyCo
             if n * n > MAX_SKY_CELLS:
                 s.fail("alpha", f"the sky square at {alpha_deg:g} degrees would be {n} x {n} cells "
                        f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
+    extra = {}
+    if model == "procedural":
+        extra = _parse_procedural(s)
     s.done()
-    return SkyConfig(model, radiance, hdri, rotation, alpha)
+    return SkyConfig(model, radiance, hdri, rotation, alpha, **extra)
+
+
+def _parse_procedural(s: _Section) -> dict:
+    turbidity = s.number("turbidity", 3.0, at_least=1.7, below=10.0)
+    sun = site = moon = None
+    if s.has("site") or s.has("time"):
+        if s.has("sun"):
+            s.fail("sun", "give the sun either by angles or by site and time, not both")
+        if s.has("moon"):
+            s.fail("moon", "the moon is implied by site and time")
+        site = _parse_site(s.section("site"), s.section("time"))
+    else:
+        ss = s.section("sun")
+        sun = SunConfig(
+            elevation=math.radians(ss.number("elevation", 60.0, at_least=2.0, below=90.0 + 1e-9)),
+            azimuth=math.radians(ss.number("azimuth", 180.0) % 360.0),
+            radius=math.radians(ss.number("radius", SUN_RADIUS_DEG, above=0.0, below=5.0)),
+        )
+        ss.done()
+        if s.has("moon"):
+            ms = s.section("moon")
+            moon = MoonConfig(
+                offset_start=tuple(math.radians(v) for v in ms.numbers("offset_start", 2)),
+                offset_end=tuple(math.radians(v) for v in ms.numbers("offset_end", 2)),
+                radius=math.radians(ms.number("radius", MOON_RADIUS_DEG, above=0.0, below=5.0)),
+            )
+            ms.done()
+    clouds = None
+    if s.has("clouds"):
+        cs = s.section("clouds")
+        clouds = CloudsConfig(
+            cover=cs.number("cover", 0.4, at_least=0.0, below=1.0 + 1e-9),
+            scale=cs.number("scale", 800.0, above=0.0),
+            altitude=cs.number("altitude", 2000.0, above=0.0),
+            wind=cs.numbers("wind", 2, (8.0, 2.0)),
+            thickness=cs.number("thickness", 1.0, at_least=0.0),
+            seed=cs.integer("seed", 1, at_least=0),
+        )
+        cs.done()
+    return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds}
+
+
+def _parse_site(s: _Section, t: _Section) -> SiteConfig:
+    site = SiteConfig(
+        latitude=math.radians(s.number("latitude", at_least=-90.0, below=90.0 + 1e-9)),
+        longitude=math.radians(s.number("longitude", at_least=-180.0, below=360.0)),
+        elevation=s.number("elevation", 0.0, at_least=-500.0, below=10_000.0),
+        start=t.utc("start"),
+        end=t.utc("end"),
+    )
+    if site.end < site.start:
+        t.fail("end", f"must not be before time.start ({site.end.isoformat()} < {site.start.isoformat()})")
+    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
+    for key, when in (("start", site.start), ("end", site.end)):
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            t.fail(key, f"the sun is {math.degrees(sun.elevation):.1f} degrees above the horizon "
+                   f"then; the least is {math.degrees(MIN_SUN_ELEVATION):g}")
+    s.done()
+    t.done()
+    return site

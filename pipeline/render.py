@@ -5,14 +5,20 @@ For now one product: the ground irradiance raster (Max 1991, Fig. 7) of ``sunsha
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from datetime import datetime
 
+import joblib
 import numpy as np
 
-from . import canopy, io, shadow
-from .config import MAX_RADIANCE, CanopyLayer, Config, SkyConfig
-from .geometry import Grid
+from . import cache, canopy, ephemeris, io, shadow
+from . import sky as sky_models
+from .config import MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, SkyConfig
+from .clouds import CloudLayer
+from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
 
 
@@ -36,11 +42,19 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def load_sky(sky: SkyConfig):
-    """The sky model of a config, its image read and checked (negative radiance is taken as 0).
-    Raises io.ImageError."""
+def load_sky(sky: SkyConfig, scene: Scene | None = None):
+    """The sky model of a config at a scene (procedural skies), its image read and checked
+    (negative radiance is taken as 0). Raises io.ImageError."""
     if sky.model == "uniform":
         return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
+    if sky.model == "procedural":
+        clouds = None
+        if sky.clouds is not None:
+            c = sky.clouds
+            clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
+                                wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
+        return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=scene.sun, moon=scene.moon,
+                                        clouds=clouds, time=scene.time)
     image = io.read_image(sky.hdri)
     if image.shape[2] < 3:
         image = np.repeat(image[..., :1], 3, axis=2)
@@ -52,48 +66,310 @@ def load_sky(sky: SkyConfig):
     return EquirectSky(np.maximum(image, 0.0), sky.rotation)
 
 
-def load_mask(layer: CanopyLayer) -> np.ndarray:
-    """Transmittance (rows, cols) of a layer's mask image. Raises io.ImageError."""
-    image = io.read_image(layer.mask)
+SUN_CELLS = 16
+"""Cells across the sun disc's diameter on the fine sky grid, by default (crescents need 16)."""
+
+
+def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
+    """Transmittance (rows, cols) of a layer's mask image at ``frame`` of its sequence.
+    Raises io.ImageError."""
+    path = layer.mask[frame % len(layer.mask)]
+    image = io.read_image(path)
     try:
         return canopy.transmittance_from_image(image)
     except ValueError as exc:
-        raise io.ImageError(layer.mask, str(exc)) from None
+        raise io.ImageError(path, str(exc)) from None
 
 
-def render_ground(config: Config, *, workers: int | None = None) -> GroundResult:
-    """Ground irradiance of every canopy layer under the sky, layers combined by the paper's
-    product rule."""
-    workers = workers or default_workers()
+@dataclass(frozen=True)
+class Scene:
+    """The sky's state at one output frame.
+
+    frame : output frame index; time : film time frame / fps [s]; when : UTC time (site and
+    time configs) or None; sun, moon : their discs (procedural skies) or None.
+    """
+
+    frame: int
+    time: float
+    when: datetime | None
+    sun: sky_models.SunDisc | None
+    moon: sky_models.MoonDisc | None
+
+
+def scene_at(config: Config, frame: int) -> Scene:
+    """Where the sun and moon are at output ``frame``: from the ephemeris for a site and time
+    span (spread evenly over the frames), or from the explicit angles, the moon sliding from
+    ``offset_start`` to ``offset_end``."""
+    sky, frames = config.sky, config.animation.frames
+    fraction = frame / (frames - 1) if frames > 1 else 0.0
+    time = frame / config.animation.fps
+    if sky.model != "procedural":
+        return Scene(frame, time, None, None, None)
+    if sky.site is not None:
+        site = sky.site
+        when = site.start + (site.end - site.start) * fraction
+        sun, moon = ephemeris.sun_and_moon(
+            ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
+        return Scene(frame, time, when,
+                     sky_models.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                     sky_models.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+    s = sky.sun
+    sun = sky_models.SunDisc(s.azimuth, s.elevation, s.radius)
+    moon = None
+    if sky.moon is not None:
+        m = sky.moon
+        dx, dy = (a + (b - a) * fraction for a, b in zip(m.offset_start, m.offset_end))
+        azimuth, elevation = _offset_direction(s.azimuth, s.elevation, dx, dy)
+        moon = sky_models.MoonDisc(azimuth, elevation, m.radius)
+    return Scene(frame, time, None, sun, moon)
+
+
+def _offset_direction(azimuth, elevation, dx, dy):
+    """The direction at gnomonic offset (dx to the right, dy up) [rad] from (azimuth,
+    elevation) [rad]: the inverse of ``ephemeris.moon_offset_from_sun``."""
+    a, h = azimuth, elevation
+    s = np.array([np.cos(h) * np.sin(a), np.cos(h) * np.cos(a), np.sin(h)])
+    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
+    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    w = s + dx * e_az + dy * e_el
+    w /= np.linalg.norm(w)
+    return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))
+
+
+@dataclass(frozen=True)
+class LayerPlan:
+    """One canopy plane's correlation plans, fixed for a whole run.
+
+    height [m]; canopy : its coarse mask Grid on the window's lattice [m]; coarse : the
+    IsolatedPlan or PeriodicPlan; sun : the SunPlan of the fine sun window, or None.
+    """
+
+    height: float
+    canopy: Grid
+    coarse: shadow.IsolatedPlan | shadow.PeriodicPlan
+    sun: shadow.SunPlan | None
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """Everything about the rasters that does not change from frame to frame.
+
+    window : the coarse ground Grid (sky light) [m]; sun_window : the fine ground Grid of the
+    sun, or None without a sun kernel [m]; projection : the sky-plane point of the sun the
+    leaves are projected along (Max 1991, Fig. 1) [tan]; layers : per canopy plane.
+    """
+
+    window: Grid
+    sun_window: Grid | None
+    projection: tuple[float, float]
+    layers: tuple[LayerPlan, ...]
+
+
+def plan_run(config: Config) -> RunPlan:
+    """The grids and correlation plans of a run, from the config alone (no image is read)."""
     window = Grid.from_window(config.ground.window, config.ground.pixel)
-    sky = load_sky(config.sky)
-    masks = [load_mask(layer) for layer in config.canopy.layers]
+    scenes = [scene_at(config, f) for f in range(config.animation.frames)]
+    has_sun = scenes[0].sun is not None
+    projection = (0.0, 0.0)
+    if has_sun:
+        middle = scenes[len(scenes) // 2].sun
+        projection = tuple(float(v) for v in sky_plane_from_direction(
+            middle.azimuth, np.pi / 2 - middle.elevation))
+    heights = [layer.height for layer in config.canopy.layers]
+    sun_window = _sun_window(config, scenes, min(heights)) if has_sun else None
+    layers = []
+    for layer in config.canopy.layers:
+        grid = _canopy_grid(config, layer, window, projection)
+        if config.canopy.layout == "isolated":
+            coarse = shadow.plan_isolated(window, grid, height=layer.height, alpha=config.sky.alpha)
+        else:
+            coarse = shadow.plan_periodic(window, grid, height=layer.height, alpha=config.sky.alpha)
+        sun = None
+        if has_sun:
+            q = sun_window.pixel / layer.height
+            centres = [sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation)
+                       for sc in scenes]
+            reach = max(_sun_reach(sc.sun) for sc in scenes)
+            lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
+            sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
+        layers.append(LayerPlan(layer.height, grid, coarse, sun))
+    return RunPlan(window, sun_window, projection, tuple(layers))
+
+
+def _sun_reach(sun) -> float:
+    """How far the sun disc reaches from its centre on the sky plane, with 10% to spare. [tan]"""
+    zenith = np.pi / 2 - sun.elevation
+    return 1.1 * sun.angular_radius / np.cos(min(zenith + sun.angular_radius, np.radians(89.0))) ** 2
+
+
+def _sun_window(config: Config, scenes, lowest: float) -> Grid:
+    """The fine ground grid of the sun: ``ground.sun_pixel`` or a pixel small enough for the
+    sun disc to span SUN_CELLS cells under the lowest canopy plane, unless the window would then
+    pass MAX_SUN_PIXELS (the pixel grows) or the pixel would pass ground.pixel."""
+    ground = config.ground
+    window = ground.sun_window or ground.window
+    pixel = ground.sun_pixel
+    if pixel is None:
+        radius = min(sc.sun.angular_radius for sc in scenes)
+        pixel = lowest * 2 * np.tan(radius) / SUN_CELLS
+        area = (window[2] - window[0]) * (window[3] - window[1])
+        pixel = min(max(pixel, np.sqrt(area / MAX_SUN_PIXELS)), ground.pixel)
+    return Grid.from_window(window, pixel)
+
+
+def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -> Grid:
+    """The coarse mask grid of a layer on the window's lattice: the image's area, or the
+    grove's bounds over the whole flutter cycle, or one periodic tile."""
+    periodic = config.canopy.layout == "periodic"
+    if config.canopy.trees is None or periodic:
+        return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
+    grove, flutter = _grove(config.canopy, heights=None)
+    bounds = canopy.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
+    size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
+    center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
+    return canopy.lattice_grid(center, size, window, periodic=False)
+
+
+@functools.lru_cache(maxsize=4)
+def _grove(canopy_config: CanopyConfig, heights):
+    """The grove of a canopy config and its flutter, grown once per process."""
+    trees, layer0 = canopy_config.trees, canopy_config.layers[0]
+    params = canopy.GroveParams(
+        count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
+        leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
+        height=max(layer.height for layer in canopy_config.layers),
+        layout=canopy_config.layout,
+        tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
+        center=layer0.center, spread=trees.spread)
+    f = canopy_config.flutter
+    return canopy.grow_grove(params), canopy.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+
+
+def layer_masks(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int):
+    """Transmittance masks (coarse, fine or None) of one canopy plane at one cycle frame."""
+    layer, lp = config.canopy.layers[layer_index], plan.layers[layer_index]
+    periodic = config.canopy.layout == "periodic"
+    grids = [lp.canopy] + ([lp.sun.mask] if lp.sun else [])
+    if config.canopy.trees is None:
+        image = load_mask(layer, cycle_frame)
+        masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
+                                              grid=g, periodic=periodic) for g in grids]
+    else:
+        grove, flutter = _grove(config.canopy, None)
+        heights = tuple(l.height for l in config.canopy.layers)
+        leaf_layer, wood_layer = canopy.layer_index(grove, heights)
+        shapes = canopy.project(
+            canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
+            sun=np.array(plan.projection), plane_height=layer.height,
+        ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
+        period = layer.size if periodic else None
+        masks = [canopy.rasterize_transmittance(shapes, g, period=period) for g in grids]
+    return masks[0], (masks[1] if lp.sun else None)
+
+
+def cycle_params(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
+    """Everything a layer's cycle products at ``cycle_frame`` depend on (DESIGN.md section 6)."""
+    c = config.canopy
+    lp = plan.layers[layer_index]
+    if c.trees is None:
+        source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
+    else:
+        source = {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+                  "heights": [l.height for l in c.layers]}
+    layer = c.layers[layer_index]
+    return {
+        "source": source, "layout": c.layout, "layer": layer_index, "height": layer.height,
+        "center": layer.center, "size": layer.size, "frame": cycle_frame,
+        "projection": plan.projection, "canopy": asdict(lp.canopy),
+        "fft": getattr(lp.coarse, "fft_shape", None),
+        "sun": None if lp.sun is None else {"mask": asdict(lp.sun.mask), "fft": lp.sun.fft_shape},
+    }
+
+
+@functools.lru_cache(maxsize=64)
+def _file_digest(path) -> str:
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+def cycle_item(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
+               *, workers: int = 1) -> dict:
+    """A layer's cached cycle products at ``cycle_frame``, computed on a miss: ``coarse`` (the
+    occlusion or tile spectrum), ``mean`` (mean transmittance of a tile), ``fine`` (the fine
+    mask spectrum, when there is a sun kernel). Memory-mapped, read-only."""
+    lp = plan.layers[layer_index]
+
+    def compute():
+        coarse, fine = layer_masks(config, plan, layer_index, cycle_frame)
+        if isinstance(lp.coarse, shadow.IsolatedPlan):
+            spectrum = shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=workers)
+        else:
+            spectrum = shadow.transmittance_spectrum(coarse, workers=workers)
+        item = {"coarse": spectrum.astype(np.complex64),
+                "mean": np.array([coarse.mean(dtype=np.float64)])}
+        if fine is not None:
+            item["fine"] = shadow.fine_mask_spectrum(fine, lp.sun, workers=workers).astype(np.complex64)
+        return item
+
+    return store.get_or_compute("spectra", cycle_params(config, plan, layer_index, cycle_frame), compute)
+
+
+def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: int = 1):
+    """Every layer's cycle products for every cycle frame, in parallel over cycle frames with
+    joblib processes (each with ``workers`` FFT threads). Returns the number of items computed."""
+    tasks = [(layer, frame) for frame in range(config.canopy.cycle)
+             for layer in range(len(config.canopy.layers))]
+    results = joblib.Parallel(n_jobs=jobs)(
+        joblib.delayed(_cycle_task)(config, plan, layer, frame, str(store.root), workers)
+        for layer, frame in tasks)
+    return sum(results)
+
+
+def _cycle_task(config, plan, layer, frame, root, workers) -> int:
+    store = cache.Cache(root)
+    cycle_item(config, plan, layer, frame, store, workers=workers)
+    return store.misses
+
+
+def render_ground(config: Config, *, frame: int = 0, store: cache.Cache | None = None,
+                  plan: RunPlan | None = None, workers: int | None = None) -> GroundResult:
+    """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
+    raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
+    product rule. Cycle products come from ``store`` (computed on a miss)."""
+    workers = workers or default_workers()
+    plan = plan or plan_run(config)
+    store = store or cache.Cache(cache.cache_dir(None))
+    sky = load_sky(config.sky, scene_at(config, frame))
+    cycle_frame = frame % config.canopy.cycle
     grounds, totals, exact = [], [], True
-    for layer, mask in zip(config.canopy.layers, masks):
-        g, total, layer_exact = _ground_of_layer(
-            layer, mask, sky, window, config.canopy.layout, config.sky.alpha, workers
-        )
+    for index, layer_plan in enumerate(plan.layers):
+        item = cycle_item(config, plan, index, cycle_frame, store, workers=workers)
+        g, total, layer_exact = _ground_of_layer(sky, layer_plan, item, plan, workers)
         grounds.append(g)
         totals.append(total)
         exact &= layer_exact
     combined = shadow.combine_layers(grounds, totals[0])
-    return GroundResult(np.moveaxis(combined, 0, -1), window, totals[0], exact)
+    grid = plan.sun_window or plan.window
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact)
 
 
-def _ground_of_layer(layer, mask, sky, window, layout, alpha, workers):
-    if layout == "isolated":
-        occlusion, grid = canopy.occlusion_on_lattice(
-            mask, center=layer.center, size=layer.size, lattice=window
-        )
-        plan = shadow.plan_isolated(window, grid, height=layer.height, alpha=alpha)
-        sky_grid = plan.sky or shadow.sky_grid((0, 0), (1, 1), window.pixel / layer.height)
-        raster = sky.raster(sky_grid)  # a 1 x 1 stand-in when no ray reaches the canopy
-        spectrum = shadow.occlusion_spectrum(occlusion, plan, workers=workers)
-        g = shadow.ground_isolated(raster, spectrum, plan, workers=workers)
-        return g, raster.total, plan.exact
-    tile, grid = canopy.tile_on_lattice(mask, center=layer.center, size=layer.size, lattice=window)
-    plan = shadow.plan_periodic(window, grid, height=layer.height, alpha=alpha)
-    raster = sky.raster(plan.sky, fold_period=plan.tile_shape)
-    spectrum = shadow.transmittance_spectrum(tile, workers=workers)
-    g = shadow.ground_periodic(raster, spectrum, plan, float(tile.mean()), workers=workers)
-    return g, raster.total, True
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers):
+    """(ground raster, unshadowed total, exact) of one layer: the coarse sky light, plus the
+    fine sun kernel on the sun window."""
+    coarse = lp.coarse
+    if isinstance(coarse, shadow.IsolatedPlan):
+        grid = coarse.sky or shadow.sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
+        raster = sky.raster(grid)  # a 1 x 1 stand-in when no ray reaches the canopy
+        g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+        exact = coarse.exact
+    else:
+        raster = sky.raster(coarse.sky, fold_period=coarse.tile_shape)
+        g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]),
+                                   workers=workers)
+        exact = True
+    total = raster.total
+    if lp.sun is not None:
+        kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
+        g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
+        g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
+        total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+    return g, total, exact

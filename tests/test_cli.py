@@ -116,7 +116,7 @@ BAD_CONFIGS = [
     ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
     ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
     ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
-    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: uniform, hdri"),
+    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: procedural, uniform, hdri"),
     ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
     ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
     ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
@@ -208,7 +208,7 @@ def test_shipped_example_config_is_valid():
     from pipeline.config import load_config
 
     config = load_config(ROOT / "configs" / "ground.yaml")
-    assert config.sky.model == "hdri" and config.canopy.layers[0].mask.is_file()
+    assert config.sky.model == "hdri" and config.canopy.layers[0].mask[0].is_file()
 
 
 def test_console_script_runs_as_a_real_process(inputs):
