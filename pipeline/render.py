@@ -313,15 +313,31 @@ def cycle_item(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int
     return store.get_or_compute("spectra", cycle_params(config, plan, layer_index, cycle_frame), compute)
 
 
-def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: int = 1):
-    """Every layer's cycle products for every cycle frame, in parallel over cycle frames with
-    joblib processes (each with ``workers`` FFT threads). Returns the number of items computed."""
+def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
+                workers: int = 1, progress=None) -> int:
+    """Every layer's cycle products for every cycle frame: those already stored are checked
+    here, the missing ones computed in parallel over cycle frames by joblib processes (each
+    with ``workers`` FFT threads). ``progress(done, total)`` is called as items finish.
+    Returns the number of items computed."""
     tasks = [(layer, frame) for frame in range(config.canopy.cycle)
              for layer in range(len(config.canopy.layers))]
-    results = joblib.Parallel(n_jobs=jobs)(
+    missing = [(layer, frame) for layer, frame in tasks
+               if store.get("spectra", cycle_params(config, plan, layer, frame)) is None]
+    done = len(tasks) - len(missing)
+    if progress:
+        progress(done, len(tasks))
+    if not missing:
+        return 0
+    computed = 0
+    results = joblib.Parallel(n_jobs=min(jobs, len(missing)), return_as="generator")(
         joblib.delayed(_cycle_task)(config, plan, layer, frame, str(store.root), workers)
-        for layer, frame in tasks)
-    return sum(results)
+        for layer, frame in missing)
+    for misses in results:
+        computed += misses
+        done += 1
+        if progress:
+            progress(done, len(tasks))
+    return computed
 
 
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:

@@ -294,3 +294,58 @@ def test_layers_with_a_dark_channel_stay_finite(inputs):
     assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 0
     g = io.read_image(out / "g.exr")
     assert np.all(np.isfinite(g)) and np.all(g[..., 1:] == 0) and g[..., 0].max() > 3.0
+
+
+def grove_config():
+    return {
+        "canopy": {"height": 4.0, "trees": {"count": 1, "seed": 3, "crown_radius": 1.5,
+                                             "leaves_per_tree": 300, "leaf_length": 0.15},
+                   "flutter": {"cycle": 4}},
+        "sky": {"model": "procedural", "sun": {"elevation": 50.0, "azimuth": 90.0}, "alpha": 70.0},
+        "ground": {"window": [-3, -3, 3, 3], "pixel": 0.1, "sun_window": [-1, -1, 1, 1],
+                   "sun_pixel": 0.05},
+        "animation": {"frames": 4},
+    }
+
+
+def test_mask_writes_the_cycle_frame_mask(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, grove_config())
+    assert main(["mask", str(config), "--frame", "1", "-o", str(out / "m.png")]) == 0
+    assert "mean transmittance" in capsys.readouterr().out
+    m = io.read_image(out / "m.png")
+    assert m.ndim == 3 and 0.05 < m.mean() < 0.999 and m.max() == 1.0
+    assert main(["mask", str(config), "--frame", "1", "--fine", "-o", str(out / "f.exr")]) == 0
+    fine = io.read_image(out / "f.exr")
+    attrs = io.read_attributes(out / "f.exr", ["sunshade:pixel_size"])
+    assert attrs["sunshade:pixel_size"] == pytest.approx(0.05)
+    assert fine.shape[0] > 40  # the 2 m sun window at 0.05 m, grown by the sun's offsets
+
+
+def test_mask_frame_outside_the_cycle_is_refused(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, grove_config())
+    assert main(["mask", str(config), "--frame", "4", "-o", str(out / "m.png")]) == 2
+    assert "--frame 4 is outside 0..3" in capsys.readouterr().err
+    assert list(out.iterdir()) == []
+
+
+def test_sky_writes_an_equirect_with_the_sun_in_the_east(inputs):
+    folder, out = inputs
+    config = write_config(folder, grove_config())
+    assert main(["sky", str(config), "--width", "256", "-o", str(out / "s.exr"), "--png"]) == 0
+    sky = io.read_image(out / "s.exr")
+    assert sky.shape == (128, 256, 3)
+    row, col = np.unravel_index(np.argmax(sky[..., 1]), sky.shape[:2])
+    assert abs(col - 0.75 * 256) <= 2  # azimuth 90 degrees: three quarters of the width
+    assert abs(row - (90 - 50) / 180 * 128) <= 2  # elevation 50 degrees
+    assert sky[64:].max() == 0  # nothing below the horizon
+    assert (out / "s.png").is_file()
+
+
+def test_ground_frame_outside_the_animation_is_refused(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, grove_config())
+    assert main(["ground", str(config), "--frame", "9", "-o", str(out / "g.exr")]) == 2
+    assert "--frame 9 is outside 0..3 (animation.frames is 4)" in capsys.readouterr().err
+    assert list(out.iterdir()) == []

@@ -14,3 +14,106 @@ def test_moon_offsets_invert_the_ephemeris_tangent_plane(azimuth, elevation):
         az, el = _offset_direction(sun.azimuth, sun.elevation, dx, dy)
         moon = ephemeris.BodyPosition(az, el, 0.0047)
         assert ephemeris.moon_offset_from_sun(sun, moon) == pytest.approx((dx, dy), abs=1e-12)
+
+
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import yaml  # noqa: E402
+
+from pipeline import cache, render  # noqa: E402
+from pipeline.config import load_config  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def tiny_grove(**changes):
+    """A small grove under a procedural sun: a few hundred leaves, coarse pixels."""
+    config = {
+        "canopy": {"height": 4.0, "trees": {"count": 1, "seed": 3, "crown_radius": 1.5,
+                                             "leaves_per_tree": 400, "leaf_length": 0.15},
+                   "flutter": {"cycle": 3}},
+        "sky": {"model": "procedural", "sun": {"elevation": 55.0, "azimuth": 150.0},
+                "alpha": 70.0},
+        "ground": {"window": [-3, -3, 3, 3], "pixel": 0.1, "sun_window": [-1, -1, 1, 1],
+                   "sun_pixel": 0.04},
+        "animation": {"frames": 6},
+    }
+    for key, value in changes.items():
+        node = config
+        *path, last = key.split(".")
+        for part in path:
+            node = node[part]
+        node[last] = value
+    return config
+
+
+def load(tmp_path, config, name="grove.yaml"):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(config))
+    return load_config(path)
+
+
+def run_cycle(config, store):
+    return render.cycle_phase(config, render.plan_run(config), store, jobs=1)
+
+
+def test_cycle_phase_is_computed_once_and_again_only_for_what_changes(tmp_path):
+    store = cache.Cache(tmp_path / "cache")
+    base = load(tmp_path, tiny_grove())
+    assert run_cycle(base, store) == 3
+    assert run_cycle(base, store) == 0
+    # the sky's own settings do not touch the canopy's products
+    assert run_cycle(load(tmp_path, tiny_grove(**{"sky.turbidity": 5.0})), store) == 0
+    for change in ({"canopy.trees.leaves_per_tree": 401}, {"canopy.trees.seed": 4},
+                   {"ground.pixel": 0.125}, {"sky.sun": {"elevation": 50.0, "azimuth": 150.0}},
+                   {"canopy.flutter": {"cycle": 3, "swing": 5.0}}):
+        assert run_cycle(load(tmp_path, tiny_grove(**change)), store) == 3, change
+
+
+def test_a_truncated_cycle_item_is_recomputed_not_used(tmp_path):
+    store = cache.Cache(tmp_path / "cache")
+    config = load(tmp_path, tiny_grove())
+    first = render.render_ground(config, frame=4, store=store, workers=1).irradiance
+    items = store.list()
+    assert len(items) == 1
+    spectrum = store.item_path(items[0].kind, items[0].key) / "fine.npy"
+    with open(spectrum, "r+b") as f:
+        f.truncate(spectrum.stat().st_size // 2)
+    fresh = cache.Cache(tmp_path / "cache")
+    again = render.render_ground(config, frame=4, store=fresh, workers=1).irradiance
+    assert fresh.repaired == 1
+    np.testing.assert_array_equal(first, again)
+
+
+def test_two_processes_rendering_the_same_frame_share_one_item(tmp_path):
+    load(tmp_path, tiny_grove())
+    env = {**__import__("os").environ, "SUNSHADE_CACHE": str(tmp_path / "cache")}
+    runs = [subprocess.Popen([sys.executable, "-m", "pipeline.cli", "ground", str(tmp_path / "grove.yaml"),
+                              "-o", str(tmp_path / f"g{i}.exr"), "--threads", "1"],
+                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            for i in range(2)]
+    for run in runs:
+        _, err = run.communicate(timeout=120)
+        assert run.returncode == 0, err.decode()
+    store = cache.Cache(tmp_path / "cache")
+    assert len(store.list()) == 1 and store.verify() == []
+    from pipeline import io
+    np.testing.assert_array_equal(io.read_image(tmp_path / "g0.exr"), io.read_image(tmp_path / "g1.exr"))
+
+
+def test_scene_moves_the_moon_across_the_frames(tmp_path):
+    config = load(tmp_path, tiny_grove(**{"sky.moon": {"offset_start": [-0.6, 0.0],
+                                                       "offset_end": [0.6, 0.0]}}))
+    first, middle, last = (render.scene_at(config, f) for f in (0, 3, 5))
+    sun = ephemeris.BodyPosition(first.sun.azimuth, first.sun.elevation, 0.0)
+
+    def offset(scene):
+        moon = ephemeris.BodyPosition(scene.moon.azimuth, scene.moon.elevation, 0.0)
+        return np.degrees(ephemeris.moon_offset_from_sun(sun, moon))
+
+    assert offset(first) == pytest.approx((-0.6, 0.0), abs=1e-9)
+    assert offset(last) == pytest.approx((0.6, 0.0), abs=1e-9)
+    assert offset(middle)[0] == pytest.approx(-0.6 + 1.2 * 3 / 5, abs=1e-9)
+    assert last.time == pytest.approx(5 / 24)
