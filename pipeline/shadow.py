@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.fft as sfft
+import scipy.sparse as sparse
 
 from .geometry import Grid, lattice_offset
 
@@ -276,21 +277,28 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
 def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarray:
     """``raster`` (channels, rows, cols) on ``grid`` sampled bilinearly at the pixel centres of
     ``target`` (same units, axes aligned), edges held: the coarse sky light under the fine sun
-    window. Separable: rows, then columns."""
+    window. Separable: a sparse interpolation matrix per axis, ``R @ raster @ C.T``."""
     x, _ = target.ground_from_raster(0.0, np.arange(target.shape[1]))
     _, y = target.ground_from_raster(np.arange(target.shape[0]), 0.0)
     r, _ = grid.raster_from_ground(0.0, y)
     _, c = grid.raster_from_ground(x, 0.0)
+    rows, cols = _interpolation(r, grid.shape[0]), _interpolation(c, grid.shape[1])
+    out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
+    for channel, image in zip(out.reshape(-1, *target.shape), raster.reshape(-1, *grid.shape)):
+        channel[...] = (cols @ (rows @ image).T).T
+    return out
 
-    def weights(u, n):
-        u = np.clip(u, 0, n - 1)
-        u0 = np.minimum(np.floor(u).astype(np.intp), max(n - 2, 0))
-        return u0, np.minimum(u0 + 1, n - 1), (u - u0).astype(np.float32)
 
-    r0, r1, fr = weights(r, grid.shape[0])
-    c0, c1, fc = weights(c, grid.shape[1])
-    rows = raster[..., r0, :] * (1 - fr)[:, None] + raster[..., r1, :] * fr[:, None]
-    return (rows[..., c0] * (1 - fc) + rows[..., c1] * fc).astype(np.float32)
+def _interpolation(u, n: int):
+    """Sparse (len(u), n) matrix of linear interpolation at fractional indices ``u``, held at
+    the ends."""
+    u = np.clip(u, 0, n - 1)
+    u0 = np.minimum(np.floor(u).astype(np.intp), max(n - 2, 0))
+    u1 = np.minimum(u0 + 1, n - 1)
+    f = (u - u0).astype(np.float32)
+    at = np.arange(len(u))
+    return sparse.csr_matrix((np.concatenate([1 - f, f]), (np.concatenate([at, at]),
+                              np.concatenate([u0, u1]))), shape=(len(u), n))
 
 
 def combine_layers(grounds, unshadowed):
