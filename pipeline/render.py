@@ -63,7 +63,13 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
         raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
     if image.max() > MAX_RADIANCE:
         raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
-    return EquirectSky(np.maximum(image, 0.0), sky.rotation)
+    return sky_models.cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
+
+
+@functools.lru_cache(maxsize=4)
+def _hdri_sun(sky: SkyConfig):
+    """The sun cut out of an HDRI sky (None if it has none), found once per process."""
+    return load_sky(sky).sun
 
 
 SUN_CELLS = 16
@@ -103,6 +109,8 @@ def scene_at(config: Config, frame: int) -> Scene:
     sky, frames = config.sky, config.animation.frames
     fraction = frame / (frames - 1) if frames > 1 else 0.0
     time = frame / config.animation.fps
+    if sky.model == "hdri":
+        return Scene(frame, time, None, _hdri_sun(sky), None)
     if sky.model != "procedural":
         return Scene(frame, time, None, None, None)
     if sky.site is not None:
@@ -166,7 +174,8 @@ class RunPlan:
 
 
 def plan_run(config: Config) -> RunPlan:
-    """The grids and correlation plans of a run, from the config alone (no image is read)."""
+    """The grids and correlation plans of a run, from the config alone (an HDRI sky is read
+    for its sun; no mask image is read)."""
     window = Grid.from_window(config.ground.window, config.ground.pixel)
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
     has_sun = scenes[0].sun is not None

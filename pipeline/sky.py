@@ -9,6 +9,7 @@ Equirectangular skies (DESIGN.md section 3): the top row touches the zenith, the
 looks north, east is at three quarters of the width, texel centres at
 ``((col + 0.5) / width, (row + 0.5) / height)``. ``rotation`` turns the sky about the zenith
 towards the east: a feature at image azimuth ``phi`` is seen at azimuth ``phi + rotation``.
+``cut_sun`` moves an HDRI's sun out of the image into a disc for the fine kernel (``sun_kernel``).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from scipy import ndimage
 
 from .composite import REC709_LUMINANCE
 from .geometry import Grid, projected_solid_angle
@@ -70,10 +72,42 @@ class EquirectSky:
 
     image : ndarray (height, width, 3) float32 -- linear RGB radiance, finite, not negative.
     rotation : float -- turn about the zenith towards the east. [rad]
+    sun : SunDisc or None -- the sun cut out of the image (``cut_sun``), drawn by ``sun_kernel``
+        on the fine grid of the two-scale method; the image then holds the sky without it.
+    sun_normal_irradiance : ndarray (3,) or None -- the cut sun's normal irradiance, given with
+        ``sun``. [radiance x sr]
     """
 
     image: np.ndarray
     rotation: float = 0.0
+    sun: SunDisc | None = None
+    sun_normal_irradiance: np.ndarray | None = None
+
+    def __post_init__(self):
+        if (self.sun is None) != (self.sun_normal_irradiance is None):
+            raise ValueError("sun and sun_normal_irradiance come together, or neither")
+        if self.sun is not None and np.shape(self.sun_normal_irradiance) != (3,):
+            raise ValueError(f"sun_normal_irradiance must be (3,), got {np.shape(self.sun_normal_irradiance)}")
+
+    @cached_property
+    def sun_direction(self) -> np.ndarray:
+        """Unit vector towards the cut sun's centre (with a sun only). [1]"""
+        return _unit(self.sun.azimuth, self.sun.elevation)
+
+    def sun_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance of the cut sun (3,), E_n cos(zenith): the sun kernel's sum; 0
+        without a sun. ``total_irradiance() + sun_irradiance()`` is the uncut image's. [radiance x sr]"""
+        if self.sun is None:
+            return np.zeros(3)
+        return np.asarray(self.sun_normal_irradiance, dtype=np.float64) * self.sun_direction[2]
+
+    def sun_fraction(self) -> float:
+        """S = 1: a photographed sun is what it is (clouds and moon are already in the image). [1]"""
+        return 1.0
+
+    def _sun_samples(self, w, footprint):
+        """Radiance (..., 3) of the cut sun at unit vectors w (..., 3) (see ``_disc_samples``). [radiance]"""
+        return _disc_samples(w, footprint, self.sun, self.sun_direction, self.sun_normal_irradiance)
 
     def total_irradiance(self) -> np.ndarray:
         """Exact irradiance of the upper hemisphere of the piecewise-constant image. [radiance x sr]"""
@@ -459,6 +493,28 @@ def _angle(w, c):
     return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(w - c, axis=-1), 0.0, 1.0))
 
 
+def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon: MoonDisc | None = None):
+    """Radiance (..., 3) of the limb-darkened sun disc at unit vectors w (..., 3), optionally cut
+    by a dark moon, the disc edges (sun limb, moon limb) anti-aliased by a linear ramp over
+    ``footprint(centre, rho)`` [rad]: the sample spacing measured along the angular distance rho
+    from ``centre``.
+
+    sun : SunDisc (its radius and limb darkening); direction : (3,) unit vector of its centre. [1]
+    normal_irradiance : (3,) of the whole disc. [radiance x sr]
+    Returns (..., 3) float64. [radiance]
+    """
+    r = sun.angular_radius
+    rho = _angle(w, direction)
+    value = sun_disc_radiance(np.minimum(rho, r), angular_radius=r, normal_irradiance=normal_irradiance,
+                              limb_darkening=sun.limb_darkening)
+    cover = np.clip(0.5 - (rho - r) / footprint(direction, rho), 0.0, 1.0)
+    if moon is not None:
+        centre = _unit(moon.azimuth, moon.elevation)
+        rho_m = _angle(w, centre)
+        cover *= np.clip(0.5 + (rho_m - moon.angular_radius) / footprint(centre, rho_m), 0.0, 1.0)
+    return value * cover[..., None]
+
+
 def _gauss_legendre(a, b, n):
     """Nodes and weights of n-point Gauss-Legendre on [a, b] (arrays broadcast, nodes on the last axis)."""
     x, w = np.polynomial.legendre.leggauss(n)
@@ -559,19 +615,10 @@ class ProceduralSky:
         return self.total_sun_irradiance() * self.moon_visible * self.sun_cloud_transmittance
 
     def _sun_samples(self, w, footprint):
-        """Visible sun radiance (..., 3) [kcd/m^2] at unit vectors w (..., 3), the disc edges (sun
-        limb and moon limb) anti-aliased by a linear ramp over ``footprint(centre)`` [rad], the
-        sample spacing measured along the angular distance from ``centre``; cloud not included."""
-        r = self.sun.angular_radius
-        rho = _angle(w, self.sun_direction)
-        value = sun_disc_radiance(np.minimum(rho, r), angular_radius=r, normal_irradiance=self.sun_normal_irradiance,
-                                  limb_darkening=self.sun.limb_darkening)
-        cover = np.clip(0.5 - (rho - r) / footprint(self.sun_direction, rho), 0.0, 1.0)
-        if self.moon is not None:
-            centre = _unit(self.moon.azimuth, self.moon.elevation)
-            rho_m = _angle(w, centre)
-            cover *= np.clip(0.5 + (rho_m - self.moon.angular_radius) / footprint(centre, rho_m), 0.0, 1.0)
-        return value * cover[..., None]
+        """Visible sun radiance (..., 3) [kcd/m^2] at unit vectors w (..., 3), cut by the moon and
+        dimmed by the clouds' transmittance towards the sun's centre (see ``_disc_samples``)."""
+        return _disc_samples(w, footprint, self.sun, self.sun_direction, self.sun_normal_irradiance,
+                             self.moon) * self.sun_cloud_transmittance
 
     # --- the sky ------------------------------------------------------------------------------
     @cached_property
@@ -715,7 +762,7 @@ class ProceduralSky:
         norm = np.linalg.norm(p, axis=-1)
         w = p / norm[..., None]
         d_omega = spacing**2 / norm**3
-        L = self._sun_samples(w, lambda centre, rho: spacing) * self.sun_cloud_transmittance
+        L = self._sun_samples(w, lambda centre, rho: spacing)
         energy = L * (d_omega * np.maximum(w[..., 2], 0.0))[..., None]
         row = np.minimum((np.arccos(np.clip(w[..., 2], -1, 1)) / np.pi * height).astype(np.int64), height - 1)
         col = np.floor((np.arctan2(w[..., 0], w[..., 1]) / (2 * np.pi) + 0.5) * width).astype(np.int64) % width
@@ -741,7 +788,7 @@ def _lerp_nodes(n: int, k: int):
     return nodes, at, ((index - nodes[at]) / span).astype(np.float32)
 
 
-def sun_kernel(sky: ProceduralSky, q: float) -> SkyRaster:
+def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     """The sun disc for the two-scale method (DESIGN.md section 4) on a fine sky-plane grid of cell q.
 
     Limb-darkened, cut by the moon, dimmed by the clouds' transmittance towards the sun's centre,
@@ -753,13 +800,16 @@ def sun_kernel(sky: ProceduralSky, q: float) -> SkyRaster:
     which keeps the disc's energy to about 1e-4 (3e-4 at worst, from the limb-darkening law's
     square root at the limb) with no renormalisation.
 
-    sky : ProceduralSky -- the whole sun disc must be above the horizon.
+    sky : ProceduralSky, or EquirectSky with a sun (``cut_sun``; no moon, no cloud dimming) --
+        the whole sun disc must be above the horizon.
     q : sky-plane cell. [tan]
     Returns a SkyRaster (outside = 0) on ``shadow.sky_grid(start, shape, q)``: the block covers
     the disc with a margin of one cell; ``shadow.sky_offset(kernel.grid)`` is its offset ``start``.
-    Units [klx]; its sum is ``sky.sun_irradiance()``.
+    Units: the sky's irradiance ([klx] for ProceduralSky); its sum is ``sky.sun_irradiance()``.
     """
     sun = sky.sun
+    if sun is None:
+        raise ValueError("the sky has no sun to draw a kernel of (cut_sun finds an HDRI's)")
     r = sun.angular_radius
     if not q > 0:
         raise ValueError(f"q must be positive [tan], got {q}")
@@ -809,8 +859,85 @@ def sun_kernel(sky: ProceduralSky, q: float) -> SkyRaster:
         w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
         L = sky._sun_samples(w, footprint)
         out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
-    weighted = (out * sky.sun_cloud_transmittance).reshape(3, *shape).astype(np.float32)
+    weighted = out.reshape(3, *shape).astype(np.float32)
     return SkyRaster(grid, weighted, np.zeros(3))
+
+
+def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: int = 3,
+            max_radius: float = float(np.radians(3.0)), min_elevation: float = float(np.radians(2.0)),
+            angular_radius: float = SUN_ANGULAR_RADIUS, limb_darkening: tuple = LIMB_DARKENING) -> EquirectSky:
+    """The HDRI's sun cut out into the fine kernel of the two-scale method (DESIGN.md section 4).
+
+    Detection, on the Rec.709 luminance Y of the texels above the horizon: the peak texel must
+    stand out, Y_max >= ``contrast`` x the median Y; the core is the texels brighter than
+    max(sqrt(Y_max median), 1e-3 Y_max) (the log-midpoint) connected to the peak (8-neighbours,
+    the image turned so that the peak lies mid-width); the region is the core grown by ``margin``
+    texels (the partly covered, blurred edge); the background is the per-channel median of the
+    ``ring`` texels around the region. The sun carries the region's radiance above the
+    background away, and the region's texels are set to the background: total_irradiance() +
+    sun_irradiance() of the result is the input's total_irradiance() (to rounding), and the sun
+    kernel's sum is sun_irradiance() (to about 2e-4). Direction: the unit-vector mean of the
+    texel centres weighted by the excess luminance times solid angle, ``rotation`` included. The
+    disc takes ``angular_radius`` and ``limb_darkening``, not the image's (a photographed sun is
+    blurred); its normal irradiance is the excess horizontal irradiance over cos(zenith).
+
+    The sky comes back as it is when it already has a sun, when no texel stands out (overcast,
+    a bare gradient), when the core reaches farther than max(``max_radius``, two texel heights)
+    from the peak (not compact), when the excess is not positive in every channel, or when the
+    sun is lower than ``min_elevation`` (its sky-plane kernel would be huge: it stays in the
+    coarse raster).
+
+    contrast : peak over median luminance needed. [1]   margin, ring : widths. [texels]
+    max_radius, min_elevation, angular_radius : [rad]   limb_darkening : (3,) u. [1]
+    Returns an EquirectSky (a new image; the input is not changed).
+    """
+    if sky.sun is not None:
+        return sky
+    height, width, _ = sky.image.shape
+    theta0, theta1 = _row_bounds(height)
+    rows = len(theta0)
+    luminance = sky.image[:rows].astype(np.float64) @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
+    peak_row, peak_col = np.unravel_index(np.argmax(luminance), luminance.shape)
+    peak, level = luminance[peak_row, peak_col], np.median(luminance)
+    if not peak > 0 or peak < contrast * level:
+        return sky
+    shift = width // 2 - peak_col  # the peak mid-image, the seam opposite: no region crosses it
+    bright = np.roll(luminance, shift, axis=1) > max(np.sqrt(peak * level), 1e-3 * peak)
+    square = np.ones((3, 3), dtype=bool)
+    labels, _ = ndimage.label(bright, structure=square)
+    core = labels == labels[peak_row, width // 2]
+    region = ndimage.binary_dilation(core, square, iterations=margin) if margin > 0 else core
+    around = ndimage.binary_dilation(region, square, iterations=ring) & ~region
+    r_core, c_core = np.nonzero(core)
+    r_idx, c_idx = np.nonzero(region)
+    r_ring, c_ring = np.nonzero(around)
+    c_core, c_idx, c_ring = ((c - shift) % width for c in (c_core, c_idx, c_ring))
+
+    def unit(r, c):
+        theta = (r + 0.5) * (np.pi / height)
+        phi = ((c + 0.5) / width - 0.5) * 2.0 * np.pi + sky.rotation
+        return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
+
+    if _angle(unit(r_core, c_core), unit(peak_row, peak_col)).max() > max(max_radius, 2.0 * np.pi / height):
+        return sky
+    background = np.median(sky.image[r_ring, c_ring], axis=0).astype(sky.image.dtype)
+    excess = sky.image[r_idx, c_idx].astype(np.float64) - background  # what the image loses, exactly
+    horizontal = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
+    solid = (np.cos(theta0) - np.cos(theta1)) * (2.0 * np.pi / width)
+    energy = np.einsum("k,kn->n", horizontal[r_idx], excess)
+    if not np.all(energy > 0):
+        return sky
+    weight = np.maximum(excess @ np.asarray(REC709_LUMINANCE, dtype=np.float64), 0.0) * solid[r_idx]
+    direction = weight @ unit(r_idx, c_idx)
+    direction /= np.linalg.norm(direction)
+    elevation = float(np.arcsin(np.clip(direction[2], -1.0, 1.0)))
+    if elevation < max(min_elevation, 2.0 * angular_radius):
+        return sky
+    image = sky.image.copy()
+    image[r_idx, c_idx] = background
+    sun = SunDisc(float(np.arctan2(direction[0], direction[1]) % (2.0 * np.pi)), elevation,
+                  angular_radius, tuple(limb_darkening))
+    return EquirectSky(image, sky.rotation, sun, energy / direction[2])
 
 
 MODELS = {"procedural": ProceduralSky, "uniform": UniformSky, "hdri": EquirectSky}

@@ -367,3 +367,86 @@ def test_procedural_sky_refuses_bad_input():
         sun_kernel(ProceduralSky(2.0, SunDisc(0.0, 0.003)), 1e-3)
     with pytest.raises(ValueError, match="cells"):
         sun_kernel(ProceduralSky(2.0, SunDisc(0.0, 0.03)), 1e-5)
+
+
+# --- an HDRI's sun cut out into the fine kernel (cut_sun) --------------------------------------
+
+from pipeline.sky import SUN_ANGULAR_RADIUS, cut_sun
+
+from reference import unit_vector
+
+
+def texel_directions(height, width, rotation=0.0):
+    """Unit vectors (height // 2, width, 3) of the upper texel centres, ``rotation`` included."""
+    theta = (np.arange(height // 2)[:, None] + 0.5) * np.pi / height
+    phi = ((np.arange(width)[None, :] + 0.5) / width - 0.5) * 2 * np.pi + rotation
+    theta, phi = np.broadcast_arrays(theta, phi)
+    return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
+
+
+def angle_between(a, b):
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+@pytest.mark.parametrize("azimuth, elevation, rotation", [(200.0, 35.0, 0.4), (180.0, 20.0, 0.0), (90.0, 85.0, -1.0)])
+def test_cut_sun_finds_the_sun_of_an_hdri(azimuth, elevation, rotation):
+    sky = sun_sky(elevation, azimuth)
+    image = sky.equirect(1024)  # the limb-darkened disc deposited area-correctly on a Preetham sky
+    hdri = EquirectSky(image.copy(), rotation=rotation)
+    cut = cut_sun(hdri)
+    assert np.array_equal(hdri.image, image) and hdri.sun is None  # the input is left alone
+    assert cut.rotation == rotation and cut.sun.angular_radius == SUN_ANGULAR_RADIUS
+    texel = np.pi / 512
+    truth = unit_vector(sky.sun.azimuth + rotation, sky.sun.elevation)
+    assert angle_between(cut.sun_direction, truth) < 0.25 * texel  # (180, 20): on the seam of the image
+    assert cut.sun_irradiance() == pytest.approx(sky.sun_irradiance(), rel=1e-3)
+    # exact bookkeeping: the image lost what the sun carries away
+    assert cut.total_irradiance() + cut.sun_irradiance() == pytest.approx(hdri.total_irradiance(), rel=1e-9)
+    assert cut_sun(cut) is cut
+
+
+def test_cut_sun_kernel_and_coarse_sky_balance_the_original():
+    hdri = EquirectSky(sun_sky(35.0, 200.0).equirect(1024), rotation=0.4)
+    cut = cut_sun(hdri)
+    minor = 2 * cut.sun.angular_radius / np.sin(cut.sun.elevation)
+    kernel = sun_kernel(cut, minor / 16)
+    e = kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+    assert e == pytest.approx(cut.sun_irradiance(), rel=1e-3)
+    assert cut.total_irradiance() + e == pytest.approx(hdri.total_irradiance(), rel=1e-3)  # measured 1e-4
+    assert cut.total_irradiance()[1] < 0.5 * hdri.total_irradiance()[1]  # the sun was most of the light
+    sx, sy = centroid(kernel.weighted, kernel.grid)
+    tx, ty = cut.sun_direction[:2] / cut.sun_direction[2]
+    assert sx == pytest.approx(tx, abs=0.05 * minor / 16) and sy == pytest.approx(ty, abs=0.05 * minor / 16)
+
+
+def test_cut_sun_leaves_no_bright_texel_near_the_old_peak():
+    hdri = EquirectSky(sun_sky(35.0, 200.0).equirect(1024))
+    cut = cut_sun(hdri)
+    luminance = hdri.image[:256] @ LUMA
+    peak = np.unravel_index(np.argmax(luminance), luminance.shape)
+    after = cut.image[:256] @ LUMA
+    background = after[peak]
+    assert luminance[peak] > 1e4 * background
+    near = angle_between(texel_directions(512, 1024), cut.sun_direction) < np.radians(3.0)
+    assert after[near].max() < 1.2 * background  # only the circumsolar glow's slope is left
+    changed = np.any(cut.image != hdri.image, axis=-1)
+    assert 0 < changed.sum() < 50 and np.all(near[changed[:256]]) and not changed[256:].any()
+
+
+def test_cut_sun_leaves_skies_without_a_sun_alone():
+    height, width = 256, 512
+    elevation = np.pi / 2 - (np.arange(height) + 0.5) * np.pi / height
+    gradient = np.repeat((1.0 + 9.0 * np.exp(-np.abs(elevation) / 0.2))[:, None, None], width, axis=1)
+    clear = sun_sky(10.0, 200.0)  # Preetham's circumsolar glow of a low sun, about 15 x the median
+    s = texel_directions(height, width)
+    glow = np.zeros((height, width, 3))
+    glow[: height // 2] = clear.radiance(s[..., :2] / s[..., 2:])
+    wide, _, _ = equirect_patch(width, height, azimuth=(0.0, 0.2), zenith=(0.6, 0.8), radiance=1e4, background=1.0)
+    low = sun_sky(1.5, 200.0).equirect(1024)  # a sun this low stays in the coarse raster
+    for image in (np.ones((height, width, 3)), gradient * [0.3, 0.5, 1.0], glow, wide, low):
+        sky = EquirectSky(image.astype(np.float32))
+        assert cut_sun(sky) is sky
+    with pytest.raises(ValueError, match="no sun"):
+        sun_kernel(EquirectSky(np.ones((height, width, 3), np.float32)), 1e-3)
+    with pytest.raises(ValueError, match="together"):
+        EquirectSky(np.ones((height, width, 3), np.float32), sun=SunDisc(0.0, 0.5))
