@@ -232,7 +232,7 @@ def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -
     periodic = config.canopy.layout == "periodic"
     if config.canopy.trees is None or periodic:
         return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
-    grove, flutter = _grove(config.canopy, heights=None)
+    grove, flutter = _grove(config.canopy)
     bounds = canopy.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
     size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
     center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
@@ -240,7 +240,7 @@ def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -
 
 
 @functools.lru_cache(maxsize=4)
-def _grove(canopy_config: CanopyConfig, heights):
+def _grove(canopy_config: CanopyConfig):
     """The grove of a canopy config and its flutter, grown once per process."""
     trees, layer0 = canopy_config.trees, canopy_config.layers[0]
     params = canopy.GroveParams(
@@ -264,7 +264,7 @@ def layer_masks(config: Config, plan: RunPlan, layer_index: int, cycle_frame: in
         masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
                                               grid=g, periodic=periodic) for g in grids]
     else:
-        grove, flutter = _grove(config.canopy, None)
+        grove, flutter = _grove(config.canopy)
         heights = tuple(l.height for l in config.canopy.layers)
         leaf_layer, wood_layer = canopy.layer_index(grove, heights)
         shapes = canopy.project(

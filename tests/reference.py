@@ -129,3 +129,149 @@ def equirect_patch(width, height, *, azimuth, zenith, radiance, background=0.0):
     az = ((cols[0] / width) - 0.5) * 2 * np.pi, (((cols[-1] + 1) / width) - 0.5) * 2 * np.pi
     zen = rows[0] * np.pi / height, (rows[-1] + 1) * np.pi / height
     return image, az, zen
+
+
+# ---------------------------------------------------------------------------------------------
+# The sun through pinholes, in world coordinates (tests/test_sun.py, benchmarks/accuracy_sun.py).
+# Directions are unit vectors (x east, y north, z up); the discs are sampled on the plane tangent
+# to the sky at the sun's centre. Nothing here knows about rasters, kernels or FFTs.
+# ---------------------------------------------------------------------------------------------
+
+
+def unit_vector(azimuth, elevation):
+    """Unit vector (x east, y north, z up) of a direction; azimuth from north towards east. [rad]"""
+    return np.array([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth),
+                     np.sin(elevation)])
+
+
+def tangent_frame(azimuth, elevation):
+    """(centre, right, up) unit vectors at a direction: ``right`` is horizontal, to the right of an
+    observer facing that direction (increasing azimuth), ``up`` towards the zenith. [1]"""
+    centre = unit_vector(azimuth, elevation)
+    right = np.array([np.cos(azimuth), -np.sin(azimuth), 0.0])
+    return centre, right, np.cross(right, centre)
+
+
+def offset_direction(azimuth, elevation, dx, dy):
+    """Unit vector of the point (dx right, dy up) [rad] on the gnomonic plane tangent at (azimuth,
+    elevation): the convention of a config's moon offsets."""
+    centre, right, up = tangent_frame(azimuth, elevation)
+    w = centre + dx * right + dy * up
+    return w / np.linalg.norm(w)
+
+
+def angle_between(w, c):
+    """Angle [rad] between unit vectors w (..., 3) and c (3,), stable for small angles."""
+    return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(w - np.asarray(c), axis=-1), 0.0, 1.0))
+
+
+def limb_darkened_profile(rho, radius, limb_darkening):
+    """Relative radiance (..., channels) of a disc under the linear law I / I(centre) =
+    1 - u (1 - mu), mu = sqrt(1 - (rho / radius)^2); 0 beyond the limb. [1]"""
+    u = np.asarray(limb_darkening, dtype=np.float64)
+    rho = np.asarray(rho, dtype=np.float64)[..., None]
+    mu = np.sqrt(np.clip(1.0 - (rho / radius) ** 2, 0.0, 1.0))
+    return np.where(rho <= radius, 1.0 - u * (1.0 - mu), 0.0)
+
+
+def sun_radiance_function(sun_direction, radius, centre_radiance, limb_darkening,
+                          moon_direction=None, moon_radius=None):
+    """L(w) -> (..., channels): a limb-darkened disc of angular ``radius`` [rad] about
+    ``sun_direction``, ``centre_radiance`` (channels,) at its centre, 0 where the dark disc of the
+    moon covers it. Sharp edges, no anti-aliasing."""
+    centre_radiance = np.asarray(centre_radiance, dtype=np.float64)
+
+    def radiance(w):
+        L = limb_darkened_profile(angle_between(w, sun_direction), radius, limb_darkening) * centre_radiance
+        if moon_direction is not None:
+            L = L * (angle_between(w, moon_direction) > moon_radius)[..., None]
+        return L
+
+    return radiance
+
+
+def disc_directions(sun_direction, right, up, radius, *, n, rng=None):
+    """Directions stratified over the gnomonic disc of radius tan(radius) about ``sun_direction``:
+    an n x n grid of cells on the tangent plane (jittered with ``rng``, else at cell centres),
+    those inside the disc. Returns w (k, 3) and the solid angle each stands for (k,). [sr]"""
+    t = np.tan(radius)
+    step = 2.0 * t / n
+    grid = (np.arange(n) + 0.5) * step - t
+    a, b = np.meshgrid(grid, grid, indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    if rng is not None:
+        a = a + rng.uniform(-0.5, 0.5, a.shape) * step
+        b = b + rng.uniform(-0.5, 0.5, b.shape) * step
+    inside = a * a + b * b <= t * t * (1 + 1e-12)
+    a, b = a[inside], b[inside]
+    p = sun_direction + a[:, None] * right + b[:, None] * up
+    norm = np.linalg.norm(p, axis=1)
+    return p / norm[:, None], step * step / norm**3
+
+
+def pinhole_spot_moments(hole_points, *, height, directions, weights):
+    """Weighted mean (2,) and covariance (2, 2) [m, m^2] of the light spot a canopy hole throws
+    on the ground: light arriving along direction w through hole point p lands at
+    x = p - height * (wx, wy) / wz, with weight L(w) cos(theta) d_omega (the irradiance E(x)
+    integrates to exactly this: E(x) dx = sum over w of L cos d_omega over the hole's area).
+
+    hole_points : (m, 2) points spread evenly over the hole [m] (the hole's own spread enters
+        the covariance); directions : (k, 3); weights : (k,) L cos(theta) d_omega.
+    """
+    shift = height * directions[:, :2] / directions[:, 2:3]
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    mean_shift = w @ shift
+    cov_shift = (shift - mean_shift).T @ ((shift - mean_shift) * w[:, None])
+    hole = np.asarray(hole_points, dtype=np.float64)
+    mean_hole = hole.mean(axis=0)
+    cov_hole = np.cov(hole.T, bias=True)
+    return mean_hole - mean_shift, cov_hole + cov_shift
+
+
+def pinhole_irradiance(points, *, height, hole_points, hole_area, radiance):
+    """Irradiance [radiance x sr] at ground points (n, 2) [m] of light through a small canopy hole,
+    by integrating over the hole: a hole element dA at p seen from x subtends
+    d_omega = cos^3(theta) dA / height^2, so E(x) = sum L(w) cos^4(theta) dA / height^2 with
+    w the unit vector from x to (p, height).
+
+    hole_points : (m, 2) points spread evenly over the hole [m]; hole_area [m^2];
+    radiance : L(w (..., 3)) -> (..., channels).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    hole = np.asarray(hole_points, dtype=np.float64)
+    out = []
+    for lo in range(0, len(points), 64):  # bounded memory
+        d = hole[None, :, :] - points[lo : lo + 64, None, :]
+        v = np.concatenate([d, np.full(d.shape[:2] + (1,), float(height))], axis=-1)
+        norm = np.linalg.norm(v, axis=-1)
+        w = v / norm[..., None]
+        cos4 = w[..., 2] ** 4
+        out.append((radiance(w) * cos4[..., None]).sum(axis=1) * hole_area / len(hole) / height**2)
+    return np.concatenate(out)
+
+
+def monte_carlo_sun(points, *, height, transmittance, radiance, sun_direction, right, up, radius,
+                    n, rng):
+    """Direct-sun irradiance [radiance x sr] at ground points by sampling the sun's disc.
+
+    points : (k, 2) or (k, rays, 2) world x, y [m]: per-ray positions (jittered over pixels)
+        with ``rays`` = the number of directions inside the disc for this n.
+    The disc of angular ``radius`` (a little beyond the sun's, so the moon's and sun's limbs are
+    inside) is sampled stratified on the tangent plane, n x n jittered cells, independently per
+    point; each direction w is traced from the ground point to the canopy plane at ``height``
+    (x + height (wx, wy) / wz) and weighted by radiance(w) cos(theta) d_omega times the canopy's
+    ``transmittance`` there. E = sum of the weights.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    out = []
+    for i in range(points.shape[0]):
+        w, d_omega = disc_directions(sun_direction, right, up, radius, n=n, rng=rng)
+        x = points[i] if points.ndim == 2 else points[i, : len(w)]
+        if points.ndim == 3 and points.shape[1] < len(w):
+            raise ValueError("fewer per-ray positions than directions")
+        tx = x[..., 0] + height * w[:, 0] / w[:, 2]
+        ty = x[..., 1] + height * w[:, 1] / w[:, 2]
+        weight = transmittance(tx, ty) * w[:, 2] * d_omega
+        out.append(weight @ radiance(w))
+    return np.array(out)
