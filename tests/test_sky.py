@@ -176,7 +176,7 @@ def test_clear_day_illuminance_is_in_the_measured_range():
     diffuse = sky.sky_irradiance @ LUMA
     assert 60.0 < direct < 100.0
     assert 10.0 < diffuse < 25.0
-    assert sky.unshadowed() @ LUMA == pytest.approx(direct + diffuse)
+    assert sky.unshadowed() @ LUMA == pytest.approx(direct + diffuse, rel=5e-4)  # the kernel sum, to 2e-4
     # more haze: less direct, more diffuse, a smaller direct share
     shares = []
     for T in (2.0, 3.0, 5.0, 8.0):
