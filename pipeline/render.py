@@ -55,6 +55,13 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
                                 wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
         return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=scene.sun, moon=scene.moon,
                                         clouds=clouds, time=scene.time)
+    return _load_hdri(sky)
+
+
+@functools.lru_cache(maxsize=4)
+def _load_hdri(sky: SkyConfig) -> EquirectSky:
+    """An HDRI sky read, checked and its sun cut out once per process (the plan needs its sun,
+    every frame its image)."""
     image = io.read_image(sky.hdri)
     if image.shape[2] < 3:
         image = np.repeat(image[..., :1], 3, axis=2)
@@ -64,12 +71,6 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
     if image.max() > MAX_RADIANCE:
         raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
     return sky_models.cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
-
-
-@functools.lru_cache(maxsize=4)
-def _hdri_sun(sky: SkyConfig):
-    """The sun cut out of an HDRI sky (None if it has none), found once per process."""
-    return load_sky(sky).sun
 
 
 SUN_CELLS = 16
@@ -110,7 +111,7 @@ def scene_at(config: Config, frame: int) -> Scene:
     fraction = frame / (frames - 1) if frames > 1 else 0.0
     time = frame / config.animation.fps
     if sky.model == "hdri":
-        return Scene(frame, time, None, _hdri_sun(sky), None)
+        return Scene(frame, time, None, _load_hdri(sky).sun, None)
     if sky.model != "procedural":
         return Scene(frame, time, None, None, None)
     if sky.site is not None:
