@@ -1,4 +1,5 @@
-"""From scene-linear values to display: exposure and the sRGB display transform."""
+"""The finished frame: blending the foreground passes by S, over the background, the haze,
+exposure and the display transforms (sRGB, filmic). EXR output stays scene-linear."""
 
 from __future__ import annotations
 
@@ -37,3 +38,93 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
     median = float(np.median(upper))
     exposed = radiance * np.float32(0.4 / median if median > 0 else 1.0)
     return srgb_encode(exposed / (1.0 + exposed))
+
+
+DISPLAYS = ("srgb", "filmic")
+"""Display transforms from exposed scene-linear values to sRGB code values."""
+
+
+def composite_frame(background: np.ndarray, *, sun_pass: np.ndarray, sky_pass: np.ndarray,
+                    alpha: np.ndarray, sun_fraction: float, sky_scale: float = 1.0,
+                    atmosphere: np.ndarray | None = None) -> np.ndarray:
+    """The finished frame (Max 1991, implementation section):
+
+        frame = k F_sky + S (F_sun - F_sky) + (1 - A) (B + S atmosphere)
+
+    background B (rows, cols, 3) and the premultiplied foreground passes F_sun, F_sky
+    (rows, cols, 3) are radiances [kcd/m^2]; alpha A (rows, cols); sun_fraction S [1];
+    sky_scale k [1]: the skylight now over the skylight the passes were lit by (1 in the
+    paper; below 1 when clouds or the moon dim the sky too); atmosphere (rows, cols, 3): the
+    sun-lit haze in front of the background [kcd/m^2], behind the trees (they are near; the
+    paper adds it over everything). Returns float32 radiance.
+    """
+    sun_pass = np.asarray(sun_pass, dtype=np.float32)
+    sky_pass = np.asarray(sky_pass, dtype=np.float32)
+    alpha = np.asarray(alpha, dtype=np.float32)[..., None]
+    frame = np.float32(sky_scale) * sky_pass + np.float32(sun_fraction) * (sun_pass - sky_pass)
+    behind = np.asarray(background, dtype=np.float32)
+    if atmosphere is not None:
+        behind = behind + np.float32(sun_fraction) * np.asarray(atmosphere, dtype=np.float32)
+    frame += (1.0 - alpha) * behind
+    return frame
+
+
+def henyey_greenstein(cos_angle, g: float) -> np.ndarray:
+    """Henyey-Greenstein phase function at the cosine of the scattering angle, normalised over
+    the sphere. [1/sr]"""
+    cos_angle = np.asarray(cos_angle, dtype=np.float64)
+    return (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * cos_angle) ** 1.5)
+
+
+def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float, sun_direction,
+                       sun_irradiance, sky_irradiance, albedo: float = 0.9, g: float = 0.6):
+    """A homogeneous haze between the camera and the ground (single scattering, no shadows).
+
+    distance (rows, cols) [m] to the ground (inf where the sky is seen: the sky model already
+    holds its haze); view (rows, cols, 3) unit directions from the camera; length: extinction
+    length, so a thing at distance d keeps exp(-d / length) of its radiance [m]; sun_direction
+    (3,) unit, towards the sun; sun_irradiance (3,) normal irradiance of the clear sun [klx];
+    sky_irradiance (3,) horizontal irradiance of the clear sky [klx]; albedo: single-scattering
+    albedo of the haze [1]; g: its Henyey-Greenstein asymmetry [1].
+
+    Returns (transmittance (rows, cols) [1], sky-lit haze (rows, cols, 3), sun-lit haze
+    (rows, cols, 3) [kcd/m^2]): the ground seen through it is T B + sky haze, and the sun-lit
+    haze is the paper's atmosphere, added times S. Sky light is taken as scattered evenly:
+    radiance albedo E_sky / (2 pi) per unit of optical depth.
+    """
+    distance = np.asarray(distance, dtype=np.float64)
+    ground = np.isfinite(distance)
+    depth = np.where(ground, distance, 0.0) / length if length > 0 else np.zeros_like(distance)
+    transmittance = np.where(ground, np.exp(-depth), 1.0)
+    veil = (1.0 - transmittance)[..., None]
+    phase = henyey_greenstein(np.asarray(view, dtype=np.float64) @ np.asarray(sun_direction), g)
+    sun_haze = veil * (albedo * phase)[..., None] * np.asarray(sun_irradiance)
+    sky_haze = veil * (albedo / (2.0 * np.pi)) * np.asarray(sky_irradiance)
+    return (transmittance.astype(np.float32), sky_haze.astype(np.float32), sun_haze.astype(np.float32))
+
+
+def aces_filmic(x: np.ndarray) -> np.ndarray:
+    """The ACES filmic tone curve as fitted by Narkowicz (2015): scene-linear [0, inf) to
+    display-linear [0, 1), a toe that keeps shadows rich and a shoulder that rolls the sun
+    and bright cloud off instead of clipping them. [1]"""
+    x = np.maximum(np.asarray(x, dtype=np.float32), 0.0)
+    return np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
+
+
+def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic") -> np.ndarray:
+    """sRGB display values in [0, 1] of scene-linear ``radiance`` [kcd/m^2] times ``exposure``
+    [m^2/kcd]: ``srgb`` clips at 1, ``filmic`` rolls off with ``aces_filmic`` first."""
+    if transform not in DISPLAYS:
+        raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
+    exposed = np.asarray(radiance, dtype=np.float32) * np.float32(exposure)
+    if transform == "filmic":
+        exposed = aces_filmic(exposed)
+    return srgb_encode(exposed)
+
+
+def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
+    """The exposure [m^2/kcd] at which a white Lambertian ground under the open clear sky and
+    sun (horizontal irradiance ``unshadowed`` (3,) [klx]) is 1, times 2^stops: fixed for a
+    whole run, so an eclipse or a cloud darkens the picture as it darkens the day."""
+    luminance = float(np.asarray(unshadowed, dtype=np.float64) @ REC709_LUMINANCE)
+    return float(2.0**stops * np.pi / luminance) if luminance > 0 else float(2.0**stops)

@@ -1,4 +1,4 @@
-"""Images through OpenImageIO, written atomically with their metadata.
+"""Images through OpenImageIO, written atomically with their metadata; video through imageio.
 
 Every file is written under a temporary name in its final folder and renamed into place, so a
 crash never leaves a half-written file under the real name.
@@ -93,9 +93,74 @@ def write_png(path, pixels: np.ndarray) -> None:
     _write_atomic(path, spec, data)
 
 
+VIDEO_FORMATS = (".mp4", ".gif")
+
+
+def write_video(path, frames, *, fps: float) -> int:
+    """Write display-referred frames (each (rows, cols, 3), floats in [0, 1] or uint8) as a
+    video, atomically; returns the number of frames.
+
+    ``.mp4``: H.264 in yuv420p, which browsers play; frames of odd width or height are padded
+    by repeating their last column or row (yuv420p needs even sizes). One encoder thread and
+    no time stamps in the header, so the same frames give the same bytes.
+    ``.gif``: through Pillow, an adaptive palette per frame, looping.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in VIDEO_FORMATS:
+        raise ImageError(path, f"unknown video format; valid: {', '.join(VIDEO_FORMATS)}")
+    temporary = _temporary(path)
+    count = 0
+    try:
+        if path.suffix.lower() == ".gif":
+            from PIL import Image
+
+            images = [Image.fromarray(_codes(f)) for f in frames]
+            if not images:
+                raise ImageError(path, "no frames to write")
+            images[0].save(temporary, save_all=True, append_images=images[1:], loop=0,
+                           duration=int(round(1000.0 / fps)), optimize=False)
+            count = len(images)
+        else:
+            import imageio.v2 as imageio
+
+            writer = imageio.get_writer(
+                temporary, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
+                macro_block_size=1, quality=None, output_params=[
+                    "-crf", "18", "-threads", "1", "-movflags", "+faststart",
+                    "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact"])
+            try:
+                for frame in frames:
+                    codes = _codes(frame)
+                    pad = ((0, codes.shape[0] % 2), (0, codes.shape[1] % 2), (0, 0))
+                    writer.append_data(np.pad(codes, pad, mode="edge"))
+                    count += 1
+            finally:
+                writer.close()
+            if not count:
+                raise ImageError(path, "no frames to write")
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
+    return count
+
+
+def _codes(frame) -> np.ndarray:
+    """8-bit RGB codes of a frame given as uint8 or as floats in [0, 1]."""
+    frame = np.asarray(frame)
+    if frame.dtype != np.uint8:
+        frame = np.clip(np.floor(frame.astype(np.float32) * 255.0 + 0.5), 0, 255).astype(np.uint8)
+    return np.ascontiguousarray(frame[..., :3])
+
+
+def _temporary(path: Path) -> Path:
+    """A temporary name beside ``path`` with its suffix (writers pick the format by suffix)."""
+    return path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+
+
 def _write_atomic(path, spec, data) -> None:
     path = Path(path)
-    temporary = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+    temporary = _temporary(path)
     out = oiio.ImageOutput.create(str(path))
     if out is None:
         raise ImageError(path, f"cannot write this format ({oiio.geterror().strip()})")

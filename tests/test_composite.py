@@ -1,0 +1,90 @@
+"""The finished frame's arithmetic: blending by S, over, haze, exposure and display."""
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from pipeline import composite
+
+
+@pytest.fixture
+def images():
+    rng = np.random.default_rng(3)
+    shape = (12, 17)
+    background = rng.random((*shape, 3), dtype=np.float32) * 5
+    sky = rng.random((*shape, 3), dtype=np.float32)
+    sun = sky + rng.random((*shape, 3), dtype=np.float32) * 4
+    return background, sun, sky, shape
+
+
+def test_alpha_zero_leaves_the_background_untouched(images):
+    background, _, _, shape = images
+    zero = np.zeros_like(background)
+    for s in (0.0, 0.3, 1.0):
+        frame = composite.composite_frame(background, sun_pass=zero, sky_pass=zero,
+                                          alpha=np.zeros(shape), sun_fraction=s)
+        np.testing.assert_array_equal(frame, background)
+
+
+def test_alpha_one_hides_the_background_and_its_haze(images):
+    background, sun, sky, shape = images
+    one = np.ones(shape, dtype=np.float32)
+    a = composite.composite_frame(background, sun_pass=sun, sky_pass=sky, alpha=one, sun_fraction=0.4,
+                                  atmosphere=background)
+    b = composite.composite_frame(7 * background + 1, sun_pass=sun, sky_pass=sky, alpha=one,
+                                  sun_fraction=0.4, atmosphere=3 * background)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_sun_fraction_zero_and_one_give_the_two_passes(images):
+    background, sun, sky, shape = images
+    one = np.ones(shape, dtype=np.float32)
+    np.testing.assert_allclose(composite.composite_frame(background, sun_pass=sun, sky_pass=sky, alpha=one,
+                                                         sun_fraction=0.0), sky, rtol=1e-6)
+    np.testing.assert_allclose(composite.composite_frame(background, sun_pass=sun, sky_pass=sky, alpha=one,
+                                                         sun_fraction=1.0), sun, rtol=1e-6)
+    half = composite.composite_frame(background, sun_pass=sun, sky_pass=sky, alpha=0.5 * one,
+                                     sun_fraction=0.25, sky_scale=0.5)
+    np.testing.assert_allclose(half, 0.5 * sky + 0.25 * (sun - sky) + 0.5 * background, rtol=1e-5)
+
+
+def test_henyey_greenstein_is_normalised_and_forward():
+    for g in (0.0, 0.6, 0.85):
+        total, _ = integrate.quad(lambda mu: 2 * np.pi * composite.henyey_greenstein(mu, g), -1, 1)
+        assert total == pytest.approx(1.0, rel=1e-6)
+    assert composite.henyey_greenstein(1.0, 0.6) > 10 * composite.henyey_greenstein(-1.0, 0.6)
+
+
+def test_aerial_perspective_follows_beer_lambert_and_spares_the_sky():
+    distance = np.array([[0.0, 1000.0, np.inf]])
+    view = np.array([[[0.0, 1.0, 0.0]] * 3])
+    sun_dir = np.array([0.0, 0.0, 1.0])
+    t, sky_haze, sun_haze = composite.aerial_perspective(
+        distance, view, length=2000.0, sun_direction=sun_dir, sun_irradiance=np.array([100.0] * 3),
+        sky_irradiance=np.array([20.0] * 3), albedo=0.9, g=0.6)
+    np.testing.assert_allclose(t[0], [1.0, np.exp(-0.5), 1.0], rtol=1e-6)
+    veil = 1 - np.exp(-0.5)
+    np.testing.assert_allclose(sun_haze[0, 1], veil * 0.9 * composite.henyey_greenstein(0.0, 0.6) * 100, rtol=1e-5)
+    np.testing.assert_allclose(sky_haze[0, 1], veil * 0.9 * 20 / (2 * np.pi), rtol=1e-5)
+    assert not sun_haze[0, [0, 2]].any() and not sky_haze[0, [0, 2]].any()
+
+
+def test_exposure_puts_white_ground_under_the_open_sky_at_one():
+    unshadowed = np.array([110.0, 100.0, 90.0])
+    exposure = composite.exposure_for(unshadowed)
+    white = unshadowed / np.pi  # radiance of a white Lambertian ground [kcd/m^2]
+    assert float(white @ composite.REC709_LUMINANCE) * exposure == pytest.approx(1.0)
+    assert composite.exposure_for(unshadowed, stops=1) == pytest.approx(2 * exposure)
+
+
+def test_display_transforms():
+    ramp = np.linspace(0, 4, 400, dtype=np.float32)[None, :, None] * np.ones(3, np.float32)
+    srgb = composite.display(ramp, exposure=1.0, transform="srgb")
+    filmic = composite.display(ramp, exposure=1.0, transform="filmic")
+    assert srgb.min() >= 0 and srgb.max() == pytest.approx(1.0)
+    assert np.all(np.diff(filmic[0, :, 0]) > 0), "filmic keeps highlights apart instead of clipping"
+    assert filmic.max() < 0.99
+    assert composite.display(np.full((1, 1, 3), 0.18), exposure=1, transform="srgb")[0, 0, 0] == pytest.approx(
+        1.055 * 0.18 ** (1 / 2.4) - 0.055, rel=1e-5)
+    with pytest.raises(ValueError, match="filmic"):
+        composite.display(ramp, exposure=1.0, transform="log")

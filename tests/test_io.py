@@ -1,0 +1,62 @@
+"""Images and video written to real files and read back."""
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+
+from pipeline import io
+
+
+@pytest.mark.parametrize("half", [False, True])
+def test_exr_metadata_round_trip(tmp_path, half):
+    pixels = np.random.default_rng(0).random((5, 7, 3), dtype=np.float32) * 100
+    attributes = {"sunshade:config_hash": "0123abcd", "sunshade:frame": 17,
+                  "sunshade:sun_fraction": 0.4845, "sunshade:sun_azimuth_elevation": (180.0, 60.0)}
+    path = tmp_path / "f.exr"
+    io.write_exr(path, pixels, attributes, half=half)
+    back = io.read_attributes(path, list(attributes))
+    assert back["sunshade:config_hash"] == "0123abcd"
+    assert back["sunshade:frame"] == 17
+    assert back["sunshade:sun_fraction"] == pytest.approx(0.4845)
+    assert tuple(back["sunshade:sun_azimuth_elevation"]) == pytest.approx((180.0, 60.0))
+    np.testing.assert_allclose(io.read_image(path), pixels, rtol=1e-3 if half else 0)
+    assert [p.name for p in tmp_path.iterdir()] == ["f.exr"]
+
+
+def _frames(n, shape):
+    return [np.full((*shape, 3), (i + 1) / (n + 1), dtype=np.float32) for i in range(n)]
+
+
+def test_mp4_decodes_back_to_its_frames(tmp_path):
+    path = tmp_path / "v.mp4"
+    assert io.write_video(path, _frames(4, (48, 64)), fps=24) == 4
+    frames = imageio.mimread(path)
+    assert len(frames) == 4 and frames[0].shape == (48, 64, 3)
+    means = [f.mean() / 255 for f in frames]
+    np.testing.assert_allclose(means, [0.2, 0.4, 0.6, 0.8], atol=0.02)
+    meta = imageio.get_reader(path).get_meta_data()
+    assert meta["codec"] == "h264" and meta["pix_fmt"].startswith("yuv420p")
+    assert [p.name for p in tmp_path.iterdir()] == ["v.mp4"]
+
+
+def test_mp4_is_deterministic_and_pads_odd_sizes(tmp_path):
+    a, b = tmp_path / "a.mp4", tmp_path / "b.mp4"
+    io.write_video(a, _frames(3, (45, 63)), fps=24)
+    io.write_video(b, _frames(3, (45, 63)), fps=24)
+    assert a.read_bytes() == b.read_bytes()
+    assert imageio.mimread(a)[0].shape == (46, 64, 3)
+
+
+def test_gif_round_trip(tmp_path):
+    path = tmp_path / "v.gif"
+    io.write_video(path, _frames(4, (20, 30)), fps=10)
+    frames = imageio.mimread(path)
+    assert len(frames) == 4 and frames[0].shape[:2] == (20, 30)
+
+
+def test_bad_video_format_or_no_frames_writes_nothing(tmp_path):
+    with pytest.raises(io.ImageError, match="valid: .mp4, .gif"):
+        io.write_video(tmp_path / "v.avi", _frames(2, (8, 8)), fps=24)
+    with pytest.raises(io.ImageError, match="no frames"):
+        io.write_video(tmp_path / "v.mp4", [], fps=24)
+    assert list(tmp_path.iterdir()) == []
