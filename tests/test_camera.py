@@ -1,0 +1,347 @@
+"""Tests of pipeline/camera.py: mip maps, footprint filtering, the ground and sky views.
+
+References are independent of the code under test: ray geometry written out by hand or through
+``image_rays`` / ``project_points`` (the camera's contract), and brute-force supersampling with
+scipy.ndimage.map_coordinates.
+"""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from pipeline.camera import (
+    Camera,
+    background,
+    ground_hits,
+    ground_view,
+    image_rays,
+    mipmap,
+    project_points,
+    sample_footprint,
+    sky_view,
+)
+from pipeline.geometry import Grid
+from pipeline.sky import EquirectSky, ProceduralSky, SunDisc, UniformSky
+
+ONE = Grid((0.0, 1.0), 1.0, (1, 1))
+
+
+def constant_mip(value, channels=3):
+    """A MipMap that is ``value`` everywhere."""
+    v = np.full(channels, value, dtype=np.float32)
+    return mipmap(v[None, None, :], ONE, outside="constant", value=v)
+
+
+def straight_down(grid: Grid, height: float) -> Camera:
+    """A camera over the centre of ``grid`` whose image pixels are the raster's pixels."""
+    rows, cols = grid.shape
+    x_min, y_min, x_max, y_max = grid.extent
+    focal = height / grid.pixel  # one image pixel spans one raster pixel on the ground
+    vfov = 2.0 * np.arctan(0.5 * rows / focal)
+    return Camera((0.5 * (x_min + x_max), 0.5 * (y_min + y_max), height), 0.0, -np.pi / 2, vfov, cols, rows)
+
+
+def supersampled_ground(camera: Camera, texture: np.ndarray, grid: Grid, n: int):
+    """Brute force: n x n rays per pixel, each hitting the ground and reading the periodic texture
+    (rows, cols) bilinearly at level 0. Returns (mean over the pixel's ground rays, ground ray
+    count / n^2, pixel-centre point sample)."""
+    h, w = camera.height, camera.width
+    offsets = (np.arange(n) + 0.5) / n
+    v = (np.arange(h)[:, None] + offsets).ravel()
+    u = (np.arange(w)[:, None] + offsets).ravel()
+
+    def read(uu, vv):
+        rays = image_rays(camera, uu, vv)
+        down = rays[..., 2] < 0
+        t = np.where(down, -camera.position[2] / np.where(down, rays[..., 2], -1.0), 0.0)
+        row, col = grid.raster_from_ground(camera.position[0] + t * rays[..., 0], camera.position[1] + t * rays[..., 1])
+        values = ndimage.map_coordinates(texture.astype(np.float64), [row.ravel(), col.ravel()],
+                                         order=1, mode="grid-wrap").reshape(row.shape)
+        return np.where(down, values, 0.0), down
+
+    values, down = read(u[None, :], v[:, None])
+    total = values.reshape(h, n, w, n).sum(axis=(1, 3))
+    count = down.reshape(h, n, w, n).sum(axis=(1, 3))
+    centre, _ = read(np.arange(w)[None, :] + 0.5, np.arange(h)[:, None] + 0.5)
+    return total / np.maximum(count, 1), count / n**2, centre
+
+
+# --- mip maps ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("shape", [(16, 16), (27, 45), (1, 7)])
+def test_constant_levels_keep_the_integral(shape):
+    rng = np.random.default_rng(1)
+    raster = rng.random(shape + (3,)).astype(np.float32)
+    grid = Grid((3.0, -2.0), 0.25, shape)
+    value = np.array([0.2, 0.5, 0.9], dtype=np.float32)
+    mip = mipmap(raster, grid, outside="constant", value=value)
+    # the integral of (f - value) over the infinite plane, level by level
+    expected = (raster - value).sum(axis=(0, 1), dtype=np.float64) * grid.pixel**2
+    for k in range(mip.count):
+        px, py = mip.pixels[k]
+        got = (mip.level(k) - value).sum(axis=(0, 1), dtype=np.float64) * px * py
+        np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
+    assert mip.shapes[-1] == (1, 1)
+
+
+@pytest.mark.parametrize("shape, period_px", [((32, 32), (32, 32)), ((27, 45), (45, 27)),
+                                               ((30, 40), (21.5, 13.25))])
+def test_periodic_levels_keep_the_mean(shape, period_px):
+    rng = np.random.default_rng(2)
+    raster = rng.random(shape + (2,)).astype(np.float32)
+    grid = Grid((0.0, 0.0), 0.1, shape)
+    mip = mipmap(raster, grid, outside="periodic", period=(period_px[0] * 0.1, period_px[1] * 0.1))
+    # the fundamental cell is the raster's south-west corner, fractional texels weighted by area
+    lx, ly = period_px
+    wx = np.clip(lx - np.arange(shape[1]), 0.0, 1.0)
+    wy = np.clip(ly - np.arange(shape[0])[::-1], 0.0, 1.0)
+    weight = wy[:, None] * wx[None, :]
+    expected = np.einsum("rc,rcn->n", weight, raster.astype(np.float64)) / weight.sum()
+    for k in range(mip.count):
+        np.testing.assert_allclose(mip.level(k).mean(axis=(0, 1), dtype=np.float64), expected, rtol=1e-5)
+    assert mip.shapes[-1] == (1, 1)
+
+
+def test_mipmap_checks_its_input_and_does_not_change_it():
+    raster = np.ones((4, 6, 3), dtype=np.float32)
+    grid = Grid((0.0, 0.0), 1.0, (4, 6))
+    before = raster.copy()
+    mipmap(raster, grid, outside="constant", value=0.5)
+    np.testing.assert_array_equal(raster, before)
+    with pytest.raises(ValueError, match="outside"):
+        mipmap(raster, grid, outside="mirror", value=0.5)
+    with pytest.raises(ValueError, match="shape"):
+        mipmap(raster[:3], grid, outside="constant", value=0.5)
+    with pytest.raises(ValueError, match="cover one period"):
+        mipmap(raster, grid, outside="periodic", period=(7.0, 4.0))
+    with pytest.raises(ValueError, match="value"):
+        mipmap(raster, grid, outside="constant")
+
+
+# --- footprint sampling ------------------------------------------------------------------------
+
+def test_constant_outside_gives_the_value():
+    rng = np.random.default_rng(3)
+    grid = Grid((-1.0, 1.0), 0.1, (20, 20))  # x, y in [-1, 1]
+    value = np.array([7.0, 8.0, 9.0], dtype=np.float32)
+    mip = mipmap(rng.random((20, 20, 3)).astype(np.float32), grid, outside="constant", value=value)
+    x = np.array([5.0, -3.0, 0.0, 1.0e6, 1.15])
+    y = np.array([0.0, 2.0, -1.2, 3.0, 0.0])
+    for scale in (0.05, 0.5, 20.0):  # fine, middling and coarse levels
+        jac = np.tile(np.diag([scale, scale]), (len(x), 1, 1))
+        got = sample_footprint(mip, x, y, jac)
+        far = np.hypot(np.maximum(np.abs(x) - 1, 0), np.maximum(np.abs(y) - 1, 0)) > 2 * scale + 0.1
+        np.testing.assert_allclose(got[far], np.broadcast_to(value, got[far].shape), rtol=1e-6)
+    # a straight-down view wider than the raster: the raster inside, the value all round it
+    wide = Grid((-2.0, 2.0), 0.1, (40, 40))
+    image, _, _ = ground_view(straight_down(wide, 2.0), irradiance=mip, albedo=constant_mip(np.pi))
+    np.testing.assert_allclose(image[10:30, 10:30], mip.level(0), rtol=1e-5)
+    np.testing.assert_allclose(image[:9], np.broadcast_to(value, image[:9].shape), rtol=1e-6)
+    np.testing.assert_allclose(image[:, 31:], np.broadcast_to(value, image[:, 31:].shape), rtol=1e-6)
+
+
+@pytest.mark.parametrize("period", [(2.0, 1.5), (1.37, 1.05)])
+def test_periodic_points_moved_by_whole_periods_agree(period):
+    rng = np.random.default_rng(4)
+    grid = Grid((-1.0, 0.6), 0.1, (16, 24))  # covers 2.4 x 1.6 m
+    mip = mipmap(rng.random((16, 24, 3)).astype(np.float32), grid, outside="periodic", period=period)
+    n = 200
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-5, 5, n)
+    jac = rng.normal(0, 0.3, (n, 2, 2))
+    shift_x = rng.integers(-50, 50, n) * period[0]
+    shift_y = rng.integers(-50, 50, n) * period[1]
+    a = sample_footprint(mip, x, y, jac)
+    b = sample_footprint(mip, x + shift_x, y + shift_y, jac)
+    np.testing.assert_allclose(a, b, atol=2e-5)
+
+
+def test_periodic_period_of_a_fractional_number_of_pixels():
+    # a cosine of period 1.05 m on 0.1 m pixels, the raster covering more than two periods
+    period = 1.05
+    grid = Grid((0.0, 1.0), 0.1, (10, 25))
+    x, _ = grid.ground_from_raster(0, np.arange(25))
+    raster = np.broadcast_to(np.cos(2 * np.pi * x / period)[None, :, None], (10, 25, 1)).astype(np.float32)
+    mip = mipmap(raster, grid, outside="periodic", period=(period, 1.0))
+    xs = np.linspace(-7.0, 9.0, 500)
+    got = sample_footprint(mip, xs, np.full(500, 0.3), np.tile(np.diag([1e-4, 1e-4]), (500, 1, 1)))[:, 0]
+    # bilinear reading of a cosine sampled 10.5 times a period: within a pixel's worth of it
+    np.testing.assert_allclose(got, np.cos(2 * np.pi * xs / period), atol=0.12)
+    assert np.abs(got - np.cos(2 * np.pi * xs / period)).mean() < 0.05
+
+
+def test_footprint_average_of_a_linear_ramp_is_its_centre_value():
+    # any filter symmetric about the centre reads a linear function at the centre, exactly
+    grid = Grid((-50.0, 50.0), 0.5, (200, 200))
+    x, y = grid.ground_from_raster(*np.indices(grid.shape))
+    ramp = (2.0 + 0.01 * x + 0.02 * y)[..., None].astype(np.float32)
+    mip = mipmap(ramp, grid, outside="constant", value=0.0)
+    rng = np.random.default_rng(5)
+    n = 300
+    jac = rng.normal(0, 1.0, (n, 2, 2)) * rng.uniform(0.1, 3.0, (n, 1, 1))
+    px, py = rng.uniform(-30, 30, n), rng.uniform(-30, 30, n)
+    got = sample_footprint(mip, px, py, jac)[:, 0]
+    np.testing.assert_allclose(got, 2.0 + 0.01 * px + 0.02 * py, atol=2e-3)
+
+
+# --- the ground view ---------------------------------------------------------------------------
+
+def test_straight_down_view_reproduces_the_raster():
+    rng = np.random.default_rng(6)
+    grid = Grid((-1.7, 2.3), 0.1, (24, 32))
+    raster = rng.random((24, 32, 3)).astype(np.float32)
+    raster[0, -1] = 50.0  # the north-east corner
+    camera = straight_down(grid, 3.0)
+    irradiance = mipmap(raster, grid, outside="constant", value=np.zeros(3))
+    image, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=constant_mip(np.pi))
+    np.testing.assert_allclose(image, raster, rtol=1e-5, atol=1e-6)
+    assert np.unravel_index(np.argmax(image[..., 0]), image.shape[:2]) == (0, 31)  # north up, east right
+    assert np.all(fraction == 1)
+    x, y = grid.ground_from_raster(*np.indices(grid.shape))
+    cx, cy, h = camera.position
+    np.testing.assert_allclose(distance, np.sqrt((x - cx) ** 2 + (y - cy) ** 2 + h * h), rtol=1e-6)
+    # albedo multiplies, over pi
+    albedo = mipmap(raster, grid, outside="constant", value=np.zeros(3))
+    image2, _, _ = ground_view(camera, irradiance=constant_mip(2.0), albedo=albedo)
+    np.testing.assert_allclose(image2, raster * 2.0 / np.pi, rtol=1e-5, atol=1e-6)
+
+
+def test_ground_jacobian_matches_finite_differences():
+    camera = Camera((1.0, -2.0, 1.7), 0.7, np.radians(-25), np.radians(50), 64, 48)
+    x, y, jac, distance, fraction = ground_hits(camera)
+    v, u = np.mgrid[0:48, 0:64] + 0.5
+
+    def hit(uu, vv):
+        rays = image_rays(camera, uu, vv)
+        t = -camera.position[2] / rays[..., 2]
+        return np.stack([camera.position[0] + t * rays[..., 0], camera.position[1] + t * rays[..., 1]], -1), t * np.linalg.norm(rays, axis=-1)
+
+    full = fraction == 1
+    d = 1e-4
+    du = (hit(u + d, v)[0] - hit(u - d, v)[0]) / (2 * d)
+    dv = (hit(u, v + d)[0] - hit(u, v - d)[0]) / (2 * d)
+    np.testing.assert_allclose(jac[full][:, :, 0], du[full], rtol=1e-5)
+    np.testing.assert_allclose(jac[full][:, :, 1], dv[full], rtol=1e-5)
+    centre, length = hit(u, v)
+    np.testing.assert_allclose(x[full], centre[full][:, 0], rtol=1e-9)
+    np.testing.assert_allclose(distance[full], length[full], rtol=1e-9)
+    assert np.all(np.isinf(distance[fraction == 0])) and np.all(np.isnan(x[fraction == 0]))
+
+
+def test_horizon_row_and_antialiased_coverage():
+    camera = Camera((0.0, 0.0, 1.7), 1.1, -0.2, 0.7, 8, 101)
+    # the horizon: the image of a point far away at the camera's height, straight ahead
+    far = np.array(camera.position) + 1e12 * np.array([np.sin(1.1), np.cos(1.1), 0.0])
+    _, v_horizon, _ = project_points(camera, far)
+    row = int(np.floor(v_horizon))
+    assert 0.05 < v_horizon - row < 0.95  # the test needs a partly covered row
+    _, fraction, distance = ground_view(camera, irradiance=constant_mip(1.0), albedo=constant_mip(1.0))
+    expected = np.clip(np.arange(101) + 1 - v_horizon, 0.0, 1.0)
+    np.testing.assert_allclose(fraction[:, 3], expected, atol=1e-9)
+    assert np.all(fraction[:row] == 0) and np.all(fraction[row + 1:] == 1)
+    assert np.all(fraction == fraction[:, :1])  # level camera: a level horizon
+    assert np.all(np.isinf(distance[:row])) and np.all(np.isfinite(distance[row:]))
+    # the blend: ground below, sky above, the horizon row by its coverage
+    image, _ = background(camera, irradiance=constant_mip(np.pi), albedo=constant_mip(0.5),
+                          sky=UniformSky(np.array([2.0, 2.0, 2.0])))
+    f = expected[row]
+    np.testing.assert_allclose(image[row], f * 0.5 + (1 - f) * 2.0, rtol=1e-5)
+    np.testing.assert_allclose(image[:row], 2.0)
+    np.testing.assert_allclose(image[row + 1:], 0.5, rtol=1e-6)
+
+
+def test_far_ground_does_not_alias():
+    # 1 cm random texture, tiled; a camera at 1.7 m looking 10 degrees down over it
+    rng = np.random.default_rng(7)
+    n, pixel = 256, 0.01
+    texture = rng.random((n, n)).astype(np.float32)
+    grid = Grid((0.0, n * pixel), pixel, (n, n))
+    albedo = mipmap(texture[..., None], grid, outside="periodic", period=(n * pixel, n * pixel))
+    camera = Camera((0.3, 0.7, 1.7), 0.3, np.radians(-10), np.radians(40), 96, 64)
+    image, fraction, _ = ground_view(camera, irradiance=constant_mip(np.pi, 1), albedo=albedo)
+    filtered = image[..., 0]
+    reference, coverage, point = supersampled_ground(camera, texture, grid, 16)
+    np.testing.assert_allclose(fraction, coverage, atol=1.0 / 16)
+    ground_rows = np.flatnonzero(fraction[:, 0] == 1)
+    far = ground_rows[: len(ground_rows) // 2]
+    assert len(far) >= 10
+    # per-row means of the far ground, and the energy of the whole image, within 2 %
+    np.testing.assert_allclose(filtered[far].mean(axis=1), reference[far].mean(axis=1), rtol=0.02)
+    np.testing.assert_allclose((filtered * fraction).mean(), (reference * coverage).mean(), rtol=0.02)
+    # no shimmer: pixel by pixel the filtered far ground is close to the supersampled one, while
+    # point sampling is as noisy as the texture itself
+    def rms(a):
+        return float(np.sqrt(np.mean((a[far] - reference[far]) ** 2)))
+
+    assert rms(filtered) < 0.1 * texture.std()
+    assert rms(point) > 0.5 * texture.std()
+    assert filtered[far].std() < 0.15 * texture.std()
+
+
+def test_far_ground_is_not_overblurred_across_the_view():
+    # stripes running away from the camera: the footprints are long along them and narrow across,
+    # so anisotropic filtering keeps their contrast, which isotropic filtering would wash out
+    period, pixel = 0.5, 0.01
+    grid = Grid((0.0, 0.04), pixel, (4, 50))
+    x, _ = grid.ground_from_raster(0, np.arange(50))
+    stripes = np.broadcast_to(0.5 + 0.4 * np.cos(2 * np.pi * x / period), (4, 50)).astype(np.float32)
+    albedo = mipmap(stripes[..., None], grid, outside="periodic", period=(period, 0.04))
+    camera = Camera((0.13, 0.0, 1.7), 0.0, np.radians(-10), np.radians(40), 96, 64)
+    image, fraction, _ = ground_view(camera, irradiance=constant_mip(np.pi, 1), albedo=albedo)
+    reference, _, _ = supersampled_ground(camera, stripes, grid, 16)
+    rows = np.flatnonzero(fraction[:, 0] == 1)
+    far = rows[: len(rows) // 2]
+    contrast = image[far, 20:76, 0].std(axis=1)
+    expected = reference[far, 20:76].std(axis=1)
+    resolved = expected > 0.1  # rows where the stripes are resolved across the image
+    assert resolved.sum() >= 10
+    np.testing.assert_allclose(contrast[resolved], expected[resolved], rtol=0.2)
+
+
+def test_ground_view_needs_a_camera_above_the_ground():
+    camera = Camera((0.0, 0.0, -1.0), 0.0, -0.3, 0.8, 8, 6)
+    with pytest.raises(ValueError, match="above the ground"):
+        ground_view(camera, irradiance=constant_mip(1.0), albedo=constant_mip(1.0))
+
+
+# --- the sky view ------------------------------------------------------------------------------
+
+def test_uniform_sky_is_constant_above_the_horizon():
+    camera = Camera((0.0, 0.0, 1.7), 2.0, 0.1, 1.0, 40, 30)
+    radiance = np.array([1.0, 2.0, 3.0])
+    image = sky_view(camera, UniformSky(radiance))
+    _, fraction, _ = ground_view(camera, irradiance=constant_mip(1.0), albedo=constant_mip(1.0))
+    sky = fraction < 1
+    np.testing.assert_array_equal(image[sky], np.broadcast_to(radiance, image[sky].shape).astype(np.float32))
+    np.testing.assert_array_equal(image[~sky], 0.0)
+    assert image.dtype == np.float32 and image.shape == (30, 40, 3)
+
+
+@pytest.mark.parametrize("rotation", [0.0, 0.4])
+def test_equirect_sky_texel_lands_where_geometry_says(rotation):
+    height, width = 180, 360
+    image = np.zeros((height, width, 3), dtype=np.float32)
+    row, col = 59, 270  # texel centre: zenith 59.5 deg, image azimuth 90.5 deg (east at 3/4 width)
+    image[row, col] = 100.0
+    zenith = (row + 0.5) / height * np.pi
+    azimuth = ((col + 0.5) / width - 0.5) * 2 * np.pi + rotation
+    assert abs(np.degrees(zenith) - 59.5) < 1e-9 and abs(np.degrees(azimuth - rotation) - 90.5) < 1e-9
+    camera = Camera((0.0, 0.0, 1.7), azimuth, np.pi / 2 - zenith, np.radians(10), 41, 41)
+    view = sky_view(camera, EquirectSky(image, rotation))
+    assert np.unravel_index(np.argmax(view[..., 0]), view.shape[:2]) == (20, 20)
+    np.testing.assert_allclose(view[20, 20], 100.0, rtol=1e-3)
+    # looking the other way, nothing
+    away = Camera((0.0, 0.0, 1.7), azimuth + np.pi, np.pi / 2 - zenith, np.radians(10), 41, 41)
+    assert sky_view(away, EquirectSky(image, rotation)).max() == 0.0
+
+
+def test_procedural_sky_matches_its_model():
+    sky = ProceduralSky(3.0, SunDisc(np.radians(200), np.radians(35)))
+    yaw, pitch = np.radians(120), np.radians(15)
+    camera = Camera((0.0, 0.0, 1.7), yaw, pitch, np.radians(40), 31, 21)
+    image = sky_view(camera, sky)
+    w = np.array([np.cos(pitch) * np.sin(yaw), np.cos(pitch) * np.cos(yaw), np.sin(pitch)])
+    np.testing.assert_allclose(image[10, 15], sky.radiance(w[:2] / w[2]), rtol=1e-5)
+    assert np.all(np.isfinite(image)) and np.all(image >= 0)
+    # a view down to the horizon stays finite
+    low = Camera((0.0, 0.0, 1.7), yaw, np.radians(-5), np.radians(40), 31, 21)
+    assert np.all(np.isfinite(sky_view(low, sky)))
