@@ -7,14 +7,15 @@ coordinates (u along columns to the right, v along rows downwards); its centre i
 with yaw 0 has north at the top of its image, as the ground rasters do.
 
 Below the rays, the perspective view of the ground and the sky (the background of the frame):
-``mipmap`` and ``sample_footprint`` (anisotropic, area-averaged reading of ground rasters),
-``ground_hits`` and ``ground_view`` (the Lambertian ground, its anti-aliased horizon and
-distances), ``sky_view`` and ``background``.
+``mipmap``, ``footprints`` and ``sample_footprint(s)`` (anisotropic, area-averaged reading of
+ground rasters), ``ground_hits`` and ``ground_view`` (the Lambertian ground, its anti-aliased
+horizon and distances), ``sky_view`` and ``background``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -137,8 +138,10 @@ class MipMap:
     the outside value, or area-averaged when periodic), down to a single texel; all levels are
     stored flat, one after another, in ``texels``.
 
-    texels : ndarray (texels, channels) float32 -- every level, rows first. In "constant" mode
-        each level is stored with a border of one texel of ``value`` all round.
+    texels : ndarray (texels, channels) float32 -- every level, rows first, each stored with a
+        border of one texel all round: ``value`` ("constant"), or the texels of the opposite
+        edge ("periodic"), so that a bilinear sample's four texels are always stored at the
+        same offsets from the first.
     shapes : ((rows, cols), ...) -- each level's size, without the border.
     offsets : (int, ...) -- index in ``texels`` of each level's first stored texel.
     origins : ((x, y), ...) -- north-west corner of each level's texel [0, 0]. [m]
@@ -166,13 +169,16 @@ class MipMap:
         """Number of levels."""
         return len(self.shapes)
 
+    @property
+    def mean(self) -> np.ndarray:
+        """The mean (channels,) of the raster: its coarsest level's, for a periodic map. [units of the raster]"""
+        return self.level(self.count - 1).reshape(-1, self.channels).mean(axis=0, dtype=np.float64)
+
     def level(self, k: int) -> np.ndarray:
         """Level ``k`` (rows, cols, channels) float32 without its border (a read-only view)."""
         rows, cols = self.shapes[k]
-        border = 1 if self.outside == "constant" else 0
-        stored = self.texels[self.offsets[k] : self.offsets[k] + (rows + 2 * border) * (cols + 2 * border)]
-        view = stored.reshape(rows + 2 * border, cols + 2 * border, self.channels)
-        view = view[border : border + rows, border : border + cols]
+        stored = self.texels[self.offsets[k] : self.offsets[k] + (rows + 2) * (cols + 2)]
+        view = stored.reshape(rows + 2, cols + 2, self.channels)[1 : rows + 1, 1 : cols + 1]
         view.flags.writeable = False
         return view
 
@@ -212,7 +218,6 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
         levels = _constant_levels(a, value)
         origins = (tuple(float(v) for v in grid.origin),) * len(levels)
         pixels = tuple((grid.pixel * 2.0**k,) * 2 for k in range(len(levels)))
-        border = 1
     else:
         if period is None or value is not None:
             raise ValueError('outside="periodic" takes a period and no value')
@@ -225,17 +230,17 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
         levels = _periodic_levels(a, px / grid.pixel, py / grid.pixel)
         origins = ((float(x_min), float(y_min + py)),) * len(levels)
         pixels = tuple((px / lv.shape[1], py / lv.shape[0]) for lv in levels)
-        value, period, border = None, (px, py), 0
-    sizes = [(lv.shape[0] + 2 * border) * (lv.shape[1] + 2 * border) for lv in levels]
+        value, period = None, (px, py)
+    sizes = [(lv.shape[0] + 2) * (lv.shape[1] + 2) for lv in levels]
     offsets = tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)[:-1]]))
     texels = np.empty((sum(sizes), channels), dtype=np.float32)
     for lv, start, size in zip(levels, offsets, sizes):
-        stored = texels[start : start + size].reshape(lv.shape[0] + 2 * border, lv.shape[1] + 2 * border, channels)
-        if border:
+        stored = texels[start : start + size].reshape(lv.shape[0] + 2, lv.shape[1] + 2, channels)
+        if outside == "constant":
             stored[...] = value
             stored[1:-1, 1:-1] = lv
         else:
-            stored[...] = lv
+            stored[...] = np.pad(lv, ((1, 1), (1, 1), (0, 0)), mode="wrap")
     shapes = tuple((lv.shape[0], lv.shape[1]) for lv in levels)
     return MipMap(texels, shapes, offsets, origins, pixels, outside, value, period)
 
@@ -300,6 +305,59 @@ def _box_resample(a: np.ndarray, axis: int, start: float, length: float, count: 
     return np.moveaxis(out, 0, axis).astype(np.float32)
 
 
+_CHUNK = 16384
+"""Footprints filtered together: the working arrays of one tap stay in the processor's cache."""
+
+_BLOCK = 32768
+"""Footprints a block in the per-footprint steps (``_in_blocks``)."""
+
+
+def _in_blocks(function, *arrays, size: int):
+    """``function(*arrays)`` for a function that works item by item along the arrays' first
+    axis and returns a tuple of arrays: applied to blocks of ``size`` items and the results
+    joined, so that its temporaries stay small (in the processor's cache, and no fresh pages)."""
+    starts = range(0, max(len(arrays[0]), 1), size)  # one empty block for empty arrays
+    parts = [function(*(a[i : i + size] for a in arrays)) for i in starts]
+    return tuple(np.concatenate(results) for results in zip(*parts))
+
+
+@dataclass(frozen=True, eq=False)
+class Footprints:
+    """Ground footprints of image pixels, each replaced by its ellipse of inertia (``footprints``).
+    They depend on the view only: one set serves every raster read through it.
+
+    x, y : (n,) float64 -- the centres. [m]
+    major, minor : (n,) float64 -- box widths along the ellipse's axes, major >= minor. [m]
+    ex, ey : (n,) float64 -- unit vector along the major axis. [1]
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    major: np.ndarray
+    minor: np.ndarray
+    ex: np.ndarray
+    ey: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+
+def footprints(x, y, jacobian) -> Footprints:
+    """The ellipses of the footprints of image pixels on the ground.
+
+    x, y : (n,) ground points, the footprints' centres. [m]
+    jacobian : (n, 2, 2) d(x, y)/d(u, v): column 0 is the ground step of one image pixel along
+        u, column 1 along v; the footprint is the parallelogram they span. [m per pixel]
+    """
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    jac = np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2)
+    if not (len(x) == len(y) == len(jac)):
+        raise ValueError(f"x, y and jacobian disagree in length: {len(x)}, {len(y)}, {len(jac)}")
+    entries = np.ascontiguousarray(jac.reshape(-1, 4).T)  # dx/du, dx/dv, dy/du, dy/dv
+    return Footprints(x, y, *_in_blocks(_footprint_axes, *entries, size=_BLOCK))
+
+
 def sample_footprint(mip: MipMap, x, y, jacobian, *, lod_bias: float = LOD_BIAS) -> np.ndarray:
     """Averages of a mip-mapped raster over the ground footprints of image pixels.
 
@@ -316,114 +374,270 @@ def sample_footprint(mip: MipMap, x, y, jacobian, *, lod_bias: float = LOD_BIAS)
     levels, blended) at level log2(max(w_minor, w_major / n_taps) / texel) + ``lod_bias``, never
     finer than level 0: a magnified footprint is a single bilinear sample of the raster. With
     the default bias (LOD_BIAS) the filter's width is close to the footprint's; 0 is the GPU
-    rule, blurrier. Points are grouped by level and sorted by tap count, so the work is about
-    8 gathers per tap, vectorised.
+    rule, blurrier. ``sample_footprints`` does the work; it reads several rasters through one
+    set of ``footprints``.
 
     lod_bias : added to the level. [level]
     """
-    x = np.asarray(x, dtype=np.float64).ravel()
-    y = np.asarray(y, dtype=np.float64).ravel()
-    jac = np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2)
-    if not (len(x) == len(y) == len(jac)):
-        raise ValueError(f"x, y and jacobian disagree in length: {len(x)}, {len(y)}, {len(jac)}")
-    out = np.zeros((len(x), mip.channels), dtype=np.float32)
-    if len(x) == 0:
-        return out
+    return sample_footprints(mip, footprints(x, y, jacobian), lod_bias=lod_bias)
+
+
+def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS) -> np.ndarray:
+    """``sample_footprint`` of footprints already reduced to ellipses: (n, channels) float32."""
+    return np.ascontiguousarray(_filtered(mip, fp, lod_bias).T)
+
+
+def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
+    """``sample_footprints``, channels first: (channels, n) float32.
+
+    The footprints are grouped by level (and whether they blend two) and sorted by tap count
+    within a group; each run of up to _CHUNK footprints of a group is filtered at once, tap by
+    tap (``_tap_mean``). Footprints that read only the outside value ("constant") form a group
+    of their own, which needs no samples.
+    """
+    n = len(fp)
+    if n == 0:
+        return np.zeros((mip.channels, 0), dtype=np.float32)
+    taps, level, blend = _in_blocks(functools.partial(_filter_choice, mip, lod_bias), fp.major, fp.minor,
+                                    size=_BLOCK)
+    group = 2 * level + (blend > 0)
+    if mip.outside == "constant":
+        beyond, = _in_blocks(lambda *arrays: (_beyond(mip, *arrays),), fp.x, fp.y, fp.major, fp.ex, fp.ey,
+                             taps, level + (blend > 0), size=_BLOCK)
+        group[beyond] = _BEYOND
+    key = group * (MAX_TAPS + 1) + (MAX_TAPS - taps)  # int16: under 64 levels of 17 tap counts
+    order = np.argsort(key, kind="stable")  # a radix sort
+    group, taps = group.take(order), taps.take(order)
+    starts = np.flatnonzero(np.diff(group, prepend=group[0] - 1))
+    mean = np.empty((mip.channels, n), dtype=np.float32)
+    for a, b in zip(starts, np.append(starts[1:], n)):
+        if group[a] == _BEYOND:
+            mean[:, a:b] = _outside_means(mip).take(taps[a:b], axis=1)
+            continue
+        k, blended = divmod(int(group[a]), 2)
+        for c in range(a, b, _CHUNK):
+            s = slice(c, min(c + _CHUNK, b))
+            chosen = order[s]
+            t = blend.take(chosen) if blended else None
+            x, y, major, ex, ey = (u.take(chosen) for u in (fp.x, fp.y, fp.major, fp.ex, fp.ey))
+            mean[:, s] = _tap_mean(mip, k, t, x, y, major, ex, ey, taps[s])
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(n)
+    return mean.take(inverse, axis=1)
+
+
+_BEYOND = -1
+"""The group of the footprints that read only the outside value (``_beyond``)."""
+
+
+def _beyond(mip: MipMap, x, y, major, ex, ey, taps, level) -> np.ndarray:
+    """Whether each footprint (n,) bool (``Footprints``' fields x, y, major, ex, ey) of ``taps``
+    taps has them all beyond one edge of the raster in its coarsest level read, ``level`` (n,)
+    int, by half a texel more than the border: every trilinear sample of it reads the outside
+    value alone (in the finer level too, whose texels are smaller and whose border is nearer).
+    Mode "constant"."""
+    (x0, y0), (rows, cols) = mip.origins[0], np.asarray(mip.shapes, dtype=np.float64).T
+    px, py = np.asarray(mip.pixels, dtype=np.float64).T
+    # the edges [m] a tap must lie beyond, level by level: a texel out from the raster
+    west, east = (x0 - px).take(level), (x0 + (cols + 1) * px).take(level)
+    north, south = (y0 + py).take(level), (y0 - (rows + 1) * py).take(level)
+    reach = (0.5 - 0.5 / taps) * major  # from the centre to the farthest tap [m]
+    across, along = np.abs(reach * ex), np.abs(reach * ey)
+    with np.errstate(invalid="ignore"):
+        return (x + across <= west) | (x - across >= east) | (y - along >= north) | (y + along <= south)
+
+
+def _outside_means(mip: MipMap) -> np.ndarray:
+    """(channels, MAX_TAPS + 1) float32: column n is what ``_tap_mean`` makes of n samples of
+    the outside value: their float32 sum, in order, over n (column 0 unused)."""
+    table = np.zeros((mip.channels, MAX_TAPS + 1), dtype=np.float32)
+    total = np.zeros(mip.channels, dtype=np.float32)
+    for n in range(1, MAX_TAPS + 1):
+        total += mip.value
+        table[:, n] = total / np.float32(n)
+    return table
+
+
+def _filter_choice(mip: MipMap, lod_bias: float, major, minor):
+    """Each footprint's tap count (n,) int8, level k (n,) int16 and blend t (n,) float32 in
+    [0, 1) towards level k + 1 (0: level k alone), as ``sample_footprint`` says, from its
+    ellipse's box widths ``major`` and ``minor`` (n,) [m]."""
     texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
-    major, minor, ex, ey = _footprint_axes(jac)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS)
-        taps = np.clip(np.ceil(ratio - 1e-3), 1, MAX_TAPS).astype(np.int64)
-        lod = np.log2(np.maximum(minor, major / taps) / texel) + lod_bias
-    lod = np.clip(np.nan_to_num(lod, nan=0.0), 0.0, mip.count - 1)
-    k = np.minimum(np.floor(lod).astype(np.int64), mip.count - 1)
-    t = lod - k
+        ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS, copy=False)
+        ratio -= 1e-3
+        np.ceil(ratio, out=ratio)
+        taps = np.clip(ratio, 1, MAX_TAPS, out=ratio).astype(np.int8)
+        lod = major / taps
+        np.maximum(minor, lod, out=lod)
+        lod /= texel
+        np.log2(lod, out=lod)
+        lod += lod_bias
+    lod = np.clip(np.nan_to_num(lod, nan=0.0, copy=False), 0.0, mip.count - 1, out=lod)
+    floor = np.floor(lod)
+    k = floor.astype(np.int16)
+    t = np.subtract(lod, floor, out=lod)
     done = t > 1.0 - 1e-6  # all in the next level
     k[done] += 1
     t[done | (t < 1e-6)] = 0.0
-    group = 2 * k + (t > 0)
-    order = np.argsort(group * (MAX_TAPS + 1) + (MAX_TAPS - taps), kind="stable")
-    group, taps, major = group[order], taps[order], major[order]
-    x, y, ex, ey, t = x[order], y[order], ex[order], ey[order], t[order].astype(np.float32)[:, None]
-    accumulated = np.zeros_like(out)
-    starts = np.flatnonzero(np.diff(group, prepend=-1))
-    for a, b in zip(starts, np.append(starts[1:], len(group))):
-        level, blended = divmod(int(group[a]), 2)
-        descending = -taps[a:b]
-        for i in range(int(taps[a])):
-            s = slice(a, a + int(np.searchsorted(descending, -i, side="left")))
-            step = ((i + 0.5) / taps[s] - 0.5) * major[s]
-            px, py = x[s] + step * ex[s], y[s] + step * ey[s]
-            sample = _bilinear(mip, level, px, py)
-            if blended:
-                sample += t[s] * (_bilinear(mip, level + 1, px, py) - sample)
-            accumulated[s] += sample
-    out[order] = accumulated / taps[:, None].astype(np.float32)
-    return out
+    return taps, k, t.astype(np.float32)
 
 
-def _footprint_axes(jac: np.ndarray):
-    """Box widths (major, minor) [m] and the major axis's unit vector (ex, ey) of the ellipse
-    with the second moments of the parallelogram spanned by the columns of ``jac`` (n, 2, 2)."""
-    a = jac[:, 0, 0] ** 2 + jac[:, 0, 1] ** 2
-    b = jac[:, 0, 0] * jac[:, 1, 0] + jac[:, 0, 1] * jac[:, 1, 1]
-    c = jac[:, 1, 0] ** 2 + jac[:, 1, 1] ** 2
-    half = np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    big = 0.5 * (a + c) + half
+def _tap_mean(mip: MipMap, level: int, t, x, y, major, ex, ey, taps) -> np.ndarray:
+    """Means (channels, m) float32 over each footprint's taps of its trilinear samples.
+
+    level : the finer level read; t : (m,) float32 blend towards level + 1, or None for level
+        alone. [level, 1]
+    x, y, major, ex, ey : (m,) the footprints' ellipses (``Footprints``). [m, m, 1]
+    taps : (m,) tap counts, in decreasing order.
+    The taps of footprint j lie at (x, y) + ((i + 0.5) / taps - 0.5) major (ex, ey), i < taps[j].
+    """
+    spacing = major / taps  # [m]
+    first = (0.5 - 0.5 * taps) * spacing  # the first tap's offset along the major axis [m]
+    start = (x + first * ex, y + first * ey, spacing * ex, spacing * ey)  # the first tap, the step [m]
+    finer = _texel_coords(mip, level, *start)
+    coarser = None if t is None else _texel_coords(mip, level + 1, *start)
+    descending = -taps
+    for i in range(int(taps[0])):
+        m = int(np.searchsorted(descending, -i, side="left"))  # footprints with more than i taps
+        col, row, dcol, drow = (u[:m] for u in finer)
+        sample = _bilinear(mip, level, col, row)
+        col += dcol
+        row += drow
+        if coarser is not None:
+            col, row, dcol, drow = (u[:m] for u in coarser)
+            upper = _bilinear(mip, level + 1, col, row)
+            col += dcol
+            row += drow
+            upper -= sample
+            upper *= t[:m]
+            sample += upper
+        if i == 0:
+            total = sample
+        else:
+            total[:, :m] += sample
+    total /= taps.astype(np.float32)
+    return total
+
+
+def _texel_coords(mip: MipMap, level: int, x, y, dx, dy):
+    """(col, row) [texel] in level ``level`` of ground points (x, y) [m], texel centres at whole
+    numbers, and (dcol, drow) [texel] of ground steps (dx, dy) [m]; new arrays."""
+    (x0, y0), (px, py) = mip.origins[level], mip.pixels[level]
+    col = (x - x0) * (1.0 / px) - 0.5
+    row = (y0 - y) * (1.0 / py) - 0.5
+    dcol, drow = dx * (1.0 / px), dy * (-1.0 / py)
+    # held where a float has no fraction left, so that no tap's texel overflows an integer
+    for u, limit in ((col, 2.0**52), (row, 2.0**52), (dcol, 2.0**48), (drow, 2.0**48)):
+        np.clip(u, -limit, limit, out=u)
+    return col, row, dcol, drow
+
+
+def _footprint_axes(dxdu, dxdv, dydu, dydv):
+    """Box widths (major, minor) [m] and the major axis's unit vector (ex, ey) [1], each (n,)
+    float64, of the ellipse with the second moments of the parallelogram spanned by the columns
+    (dxdu, dydu) and (dxdv, dydv) [m per pixel] (each (n,)) of the footprint's Jacobian."""
+    a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
+    b = dxdu * dydu + dxdv * dydv
+    c = dydu * dydu + dydv * dydv
+    bb = b * b
+    half = a - c
+    half *= half
+    half *= 0.25
+    half += bb
+    np.sqrt(half, out=half)
+    big = a + c  # the larger eigenvalue
+    big *= 0.5
+    big += half
     major = np.sqrt(big)
-    area = np.abs(jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0])
+    minor = dxdu * dydv
+    minor -= dxdv * dydu
+    np.abs(minor, out=minor)  # the area
     with np.errstate(divide="ignore", invalid="ignore"):
-        minor = np.where(major > 0, area / major, 0.0)
-    # eigenvector of the larger eigenvalue: the better conditioned of two equivalent forms
-    v1x, v1y = big - c, b
-    v2x, v2y = b, big - a
-    first = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
-    ex, ey = np.where(first, v1x, v2x), np.where(first, v1y, v2y)
-    norm = np.hypot(ex, ey)
+        minor /= major
+    minor[~(major > 0)] = 0.0
+    # eigenvector of the larger eigenvalue: the better conditioned of (big - c, b), (b, big - a)
+    big_c = np.subtract(big, c, out=c)
+    big_a = np.subtract(big, a, out=a)
+    first = big_c * big_c + bb >= bb + big_a * big_a
+    ex, ey = np.where(first, big_c, b), np.where(first, b, big_a)
+    norm = np.sqrt(ex * ex + ey * ey)
+    overflow = ~np.isfinite(norm)
+    if overflow.any():
+        norm[overflow] = np.hypot(ex[overflow], ey[overflow])
     round_ = norm <= 1e-12 * np.maximum(big, 1e-300)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ex = np.where(round_, 1.0, ex / norm)
-        ey = np.where(round_, 0.0, ey / norm)
+        ex /= norm
+        ey /= norm
+    ex[round_] = 1.0
+    ey[round_] = 0.0
     return major, minor, ex, ey
 
 
-def _bilinear(mip: MipMap, level: int, x, y) -> np.ndarray:
-    """Bilinear samples (m, C) float32 of one level at ground points (x, y) (m,) [m], the plane
-    beyond the raster as ``mip.outside`` says."""
-    (x0, y0), (px, py) = mip.origins[level], mip.pixels[level]
+def _bilinear(mip: MipMap, level: int, col, row) -> np.ndarray:
+    """Bilinear samples (channels, m) float32 of one level at texel coordinates (col, row) (m,)
+    [texel] (``_texel_coords``), the plane beyond the raster as ``mip.outside`` says. The four
+    texels of a sample lie at fixed offsets from the first (``_first_texel``) and are gathered
+    in one ``take``."""
+    first, fc, fr = _first_texel(mip, level, col, row)
+    flat = mip.texels.reshape(-1)
+    gathered = np.empty((4, mip.channels, len(first)), dtype=np.float32)
+    offsets = _corner_offsets(mip.shapes[level][1] + 2, mip.channels)
+    for offset, out in zip(offsets, gathered.reshape(-1, len(first))):
+        flat[offset:].take(first, out=out, mode="clip")  # no index array of all the corners
+    a, b, c, d = gathered  # each (channels, m)
+    b -= a  # the upper row, along the columns
+    b *= fc
+    a += b
+    d -= c  # the lower row
+    d *= fc
+    c += d
+    c -= a  # along the rows
+    c *= fr
+    a += c
+    return a
+
+
+def _first_texel(mip: MipMap, level: int, col, row):
+    """The first of the four texels of bilinear samples at texel coordinates (col, row) (m,)
+    [texel], the one at (floor(row), floor(col)): the index (m,) intp of its channel 0 in the
+    flat texel array, and the fractions (fc, fr) (m,) float32 of (col, row) beyond it [texel].
+
+    The texel is brought into the stored level, border included: held at the border of the
+    outside value ("constant"), or moved by whole periods ("periodic")."""
     rows, cols = mip.shapes[level]
-    limit = 2.0**52  # beyond this a float holds no fraction, and int64 must not overflow
-    col = (x - x0) * (1.0 / px) - 0.5
-    row = (y0 - y) * (1.0 / py) - 0.5
-    for u in (col, row):
-        np.minimum(u, limit, out=u)
-        np.maximum(u, -limit, out=u)
+    if mip.outside == "constant":
+        col, row = np.clip(col, -1.0, cols), np.clip(row, -1.0, rows)
     c0, r0 = np.floor(col), np.floor(row)
-    fc = (col - c0).astype(np.float32)[:, None]
-    fr = (row - r0).astype(np.float32)[:, None]
-    c0, r0 = c0.astype(np.int64), r0.astype(np.int64)
+    fc = np.empty(len(col), dtype=np.float32)
+    fr = np.empty(len(row), dtype=np.float32)
+    np.subtract(col, c0, out=fc)
+    np.subtract(row, r0, out=fr)
+    c0, r0 = c0.astype(np.intp), r0.astype(np.intp)
     if mip.outside == "periodic":
-        c0 %= cols
-        r0 %= rows
-        c1 = c0 + 1
-        c1[c1 == cols] = 0
-        r1 = r0 + 1
-        r1[r1 == rows] = 0
-        stride = cols
-    else:  # a border of the outside value all round: clip into it
-        c1 = np.clip(c0 + 1, -1, cols) + 1
-        r1 = np.clip(r0 + 1, -1, rows) + 1
-        c0 = np.clip(c0, -1, cols) + 1
-        r0 = np.clip(r0, -1, rows) + 1
-        stride = cols + 2
-    top = r0 * stride + mip.offsets[level]
-    bottom = r1 * stride + mip.offsets[level]
-    texels = mip.texels
-    a, b = np.take(texels, top + c0, axis=0), np.take(texels, top + c1, axis=0)
-    upper = a + fc * (b - a)
-    a, b = np.take(texels, bottom + c0, axis=0), np.take(texels, bottom + c1, axis=0)
-    lower = a + fc * (b - a)
-    return upper + fr * (lower - upper)
+        _wrap(c0, cols)
+        _wrap(r0, rows)
+    r0 *= cols + 2  # stored rows, one texel of border all round
+    r0 += c0
+    r0 += mip.offsets[level] + cols + 3
+    r0 *= mip.channels
+    return r0, fc, fr
+
+
+@functools.lru_cache(maxsize=256)
+def _corner_offsets(stride: int, channels: int) -> tuple:
+    """Offsets in the flat texel array of the four texels of a bilinear sample, (r0, c0),
+    (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1), channel by channel, from channel 0 of the
+    first: 4 channels ints; ``stride`` the stored texels a row."""
+    return tuple(texel * channels + k for texel in (0, 1, stride, stride + 1) for k in range(channels))
+
+
+def _wrap(i: np.ndarray, n: int) -> None:
+    """i modulo n, in place (n > 0); a mask when n is a power of two."""
+    if n & (n - 1):
+        np.remainder(i, n, out=i)
+    else:
+        np.bitwise_and(i, n - 1, out=i)
 
 
 def ground_fraction_rows(camera: Camera) -> np.ndarray:
@@ -463,42 +677,64 @@ def ground_hits(camera: Camera):
     dP/du = t (dw/du - w (dwz/du) / wz), and the same along v. Near the horizon the hit runs to
     infinity; wz is held at -MIN_DOWNWARD or below, so every number stays finite.
     """
-    height_m = float(camera.position[2])
-    if not height_m > 0:
-        raise ValueError(f"the camera must be above the ground, got z = {height_m} [m]")
     rows_total, cols_total = camera.height, camera.width
-    fraction = ground_fraction_rows(camera)
+    rows, part = _ground_rows(camera)
+    x_rows, y_rows, *jac_rows, distance_rows = _row_hits(camera, rows, part)
     x = np.full((rows_total, cols_total), np.nan)
     y = np.full((rows_total, cols_total), np.nan)
     jacobian = np.full((rows_total, cols_total, 2, 2), np.nan)
     distance = np.full((rows_total, cols_total), np.inf)
-    coverage = np.broadcast_to(fraction[:, None], (rows_total, cols_total)).copy()
-    rows = np.flatnonzero(fraction > 0)
-    if len(rows) == 0:
-        return x, y, jacobian, distance, coverage
-    part = fraction[rows][:, None]
-    v = rows[:, None] + 1.0 - 0.5 * part
-    u = np.arange(cols_total, dtype=np.float64)[None, :] + 0.5
-    w = image_rays(camera, u, v)
-    wz = np.minimum(w[..., 2], -MIN_DOWNWARD)
-    t = height_m / -wz
-    x[rows] = camera.position[0] + t * w[..., 0]
-    y[rows] = camera.position[1] + t * w[..., 1]
-    right, up, _ = camera.basis
-    f = camera.focal
-    for j, (dw, scale) in enumerate(((right / f, 1.0), (-up / f, part))):
-        slope = dw[2] / wz  # d(wz)/d(image) over wz
-        jacobian[rows, :, 0, j] = t * (dw[0] - w[..., 0] * slope) * scale
-        jacobian[rows, :, 1, j] = t * (dw[1] - w[..., 1] * slope) * scale
-    distance[rows] = t * np.linalg.norm(w, axis=-1)
+    coverage = np.broadcast_to(ground_fraction_rows(camera)[:, None], (rows_total, cols_total)).copy()
+    x[rows], y[rows], distance[rows] = x_rows, y_rows, distance_rows
+    for (i, j), entry in zip(((0, 0), (0, 1), (1, 0), (1, 1)), jac_rows):
+        jacobian[rows, :, i, j] = entry
     return x, y, jacobian, distance, coverage
 
 
-def ground_view(camera: Camera, *, irradiance: MipMap, albedo: MipMap):
+def _ground_rows(camera: Camera):
+    """The image rows that see ground, (r,) int, every pixel of which sees it, and their
+    fractions below the horizon (r,) float64 [1]; checks that the camera is above the ground."""
+    height_m = float(camera.position[2])
+    if not height_m > 0:
+        raise ValueError(f"the camera must be above the ground, got z = {height_m} [m]")
+    fraction = ground_fraction_rows(camera)
+    rows = np.flatnonzero(fraction > 0)
+    return rows, fraction[rows]
+
+
+def _row_hits(camera: Camera, rows, part):
+    """``ground_hits`` for some image rows (r,) int that see ground, of fractions ``part`` (r,)
+    below the horizon [1], without the full-image arrays: x, y [m], the Jacobian's entries
+    dx/du, dx/dv, dy/du, dy/dv [m per pixel] and distance [m], each (r, width) float64."""
+    height_m = float(camera.position[2])
+    part = part[:, None]
+    v = rows[:, None] + 1.0 - 0.5 * part
+    u = np.arange(camera.width, dtype=np.float64)[None, :] + 0.5
+    right, up, forward = camera.basis
+    f = camera.focal
+    # image_rays, one component at a time: (r, width) arrays
+    across, down = (u - 0.5 * camera.width) / f, (0.5 * camera.height - v) / f
+    wx, wy, w_z = (forward[k] + across * right[k] + down * up[k] for k in range(3))
+    wz = np.minimum(w_z, -MIN_DOWNWARD)
+    t = height_m / -wz
+    x = camera.position[0] + t * wx
+    y = camera.position[1] + t * wy
+    jacobian = {}
+    for j, (dw, scale) in enumerate(((right / f, 1.0), (-up / f, part))):
+        slope = dw[2] / wz  # d(wz)/d(image) over wz
+        jacobian[0, j] = t * (dw[0] - wx * slope) * scale
+        jacobian[1, j] = t * (dw[1] - wy * slope) * scale
+    distance = t * np.sqrt(wx * wx + wy * wy + w_z * w_z)
+    return x, y, jacobian[0, 0], jacobian[0, 1], jacobian[1, 0], jacobian[1, 1], distance
+
+
+def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     """The Lambertian ground z = 0 in the camera's image: radiance = albedo E / pi.
 
     camera : Camera above the ground (position z > 0). [m]
-    irradiance : MipMap of the ground irradiance E (channels 3, or 1 for grey). [radiance x sr]
+    irradiance : MipMap of the ground irradiance E (channels 3, or 1 for grey), or a sequence
+        of them, finest first: each but the last holds NaN beyond its raster ("constant" with
+        value NaN), and a footprint that reaches NaN is read from the next. [radiance x sr]
     albedo : MipMap of the ground's albedo (channels 3 or 1). [1]
     Returns
         radiance : (height, width, 3) float32 -- albedo E / pi over the pixel's ground part, with
@@ -512,16 +748,39 @@ def ground_view(camera: Camera, *, irradiance: MipMap, albedo: MipMap):
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
-    x, y, jacobian, distance, fraction = ground_hits(camera)
+    rows, part = _ground_rows(camera)
+    fraction = np.broadcast_to(ground_fraction_rows(camera).astype(np.float32)[:, None],
+                               (camera.height, camera.width))
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
-    seen = np.flatnonzero(np.isfinite(distance).ravel())
-    if len(seen):
-        xs, ys = x.ravel()[seen], y.ravel()[seen]
-        jac = jacobian.reshape(-1, 2, 2)[seen]
-        e = sample_footprint(irradiance, xs, ys, jac)
-        rho = sample_footprint(albedo, xs, ys, jac)
-        radiance.reshape(-1, 3)[seen] = e * rho * np.float32(1.0 / np.pi)
-    return radiance, fraction.astype(np.float32), distance.astype(np.float32)
+    distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
+    if len(rows):
+        *ellipses, distance_rows = _in_blocks(functools.partial(_row_footprints, camera), rows, part,
+                                              size=max(1, _BLOCK // camera.width))
+        fp = Footprints(*ellipses)
+        e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
+        rho = _filtered(albedo, fp, LOD_BIAS)
+        radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
+        distance[rows] = distance_rows.reshape(len(rows), camera.width)
+    return radiance, fraction.copy(), distance
+
+
+def _filtered_chain(maps, fp: Footprints) -> np.ndarray:
+    """(channels, n) samples of the first of ``maps`` whose footprint stays finite."""
+    values = _filtered(maps[0], fp, LOD_BIAS)
+    for mip in maps[1:]:
+        missing = np.flatnonzero(~np.isfinite(values).all(axis=0))
+        if not len(missing):
+            break
+        subset = Footprints(*(getattr(fp, f.name)[missing] for f in fields(Footprints)))
+        values[:, missing] = _filtered(mip, subset, LOD_BIAS)
+    return values
+
+
+def _row_footprints(camera: Camera, rows, part):
+    """The ``Footprints`` fields and the distances of the pixels of some image rows that see
+    ground (``_row_hits``), each (r width,) float64 (the distances float32)."""
+    x, y, *jacobian, distance = (u.ravel() for u in _row_hits(camera, rows, part))
+    return (x, y, *_footprint_axes(*jacobian), distance.astype(np.float32))
 
 
 def sky_view(camera: Camera, sky) -> np.ndarray:
@@ -533,7 +792,7 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     Each pixel cut by the horizon is sampled at the centre of its sky part; pixels wholly below
     the horizon are 0. [radiance]
     """
-    from .sky import EquirectSky, UniformSky
+    from .sky import EquirectSky, ProceduralSky, UniformSky
 
     fraction = ground_fraction_rows(camera)
     out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
@@ -551,7 +810,10 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     else:
         wz = np.maximum(w[..., 2], MIN_UPWARD)
         s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
-        out[rows] = sky.radiance(s)
+        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius
+            out[rows] = sky.radiance(s, footprint=1.0 / (camera.focal * wz * wz))
+        else:
+            out[rows] = sky.radiance(s)
     return out
 
 
@@ -580,7 +842,7 @@ def equirect_lookup(image, w, *, rotation: float = 0.0) -> np.ndarray:
     return (upper * (1.0 - fr) + lower * fr).astype(np.float32)
 
 
-def background(camera: Camera, *, irradiance: MipMap, albedo: MipMap, sky):
+def background(camera: Camera, *, irradiance, albedo: MipMap, sky):
     """The background B of the composite: ground and sky blended by the horizon's coverage.
 
     Returns radiance (height, width, 3) float32 = f ground + (1 - f) sky [radiance], with f the

@@ -10,14 +10,18 @@ import pytest
 from scipy import ndimage
 
 from pipeline.camera import (
+    LOD_BIAS,
+    MAX_TAPS,
     Camera,
     background,
+    footprints,
     ground_hits,
     ground_view,
     image_rays,
     mipmap,
     project_points,
     sample_footprint,
+    sample_footprints,
     sky_view,
 )
 from pipeline.geometry import Grid
@@ -183,7 +187,118 @@ def test_footprint_average_of_a_linear_ramp_is_its_centre_value():
     np.testing.assert_allclose(got, 2.0 + 0.01 * px + 0.02 * py, atol=2e-3)
 
 
+def reference_footprint_samples(mip, x, y, jacobian, lod_bias=LOD_BIAS):
+    """sample_footprint written out point by point in float64, from its docstring's rule: the
+    ellipse from an eigen-decomposition of J J^T, taps along its major axis, each a trilinear
+    sample whose texels are read one by one from ``mip.level`` (the outside value beyond a
+    "constant" raster, the texel a whole number of periods away in a "periodic" one)."""
+    texel = np.sqrt(mip.pixels[0][0] * mip.pixels[0][1])
+    levels = [mip.level(k).astype(np.float64) for k in range(mip.count)]
+
+    def texel_value(k, r, c):
+        rows, cols = mip.shapes[k]
+        if mip.outside == "periodic":
+            return levels[k][r % rows, c % cols]
+        if 0 <= r < rows and 0 <= c < cols:
+            return levels[k][r, c]
+        return mip.value.astype(np.float64)
+
+    def bilinear(k, px, py):
+        (x0, y0), (sx, sy) = mip.origins[k], mip.pixels[k]
+        col, row = (px - x0) / sx - 0.5, (y0 - py) / sy - 0.5
+        c, r = int(np.floor(col)), int(np.floor(row))
+        fc, fr = col - c, row - r
+        top = (1 - fc) * texel_value(k, r, c) + fc * texel_value(k, r, c + 1)
+        bottom = (1 - fc) * texel_value(k, r + 1, c) + fc * texel_value(k, r + 1, c + 1)
+        return (1 - fr) * top + fr * bottom
+
+    out = np.zeros((len(x), mip.channels))
+    for j, jac in enumerate(jacobian):
+        eigenvalues, vectors = np.linalg.eigh(jac @ jac.T)
+        major = np.sqrt(max(eigenvalues[1], 0.0))
+        minor = np.sqrt(max(eigenvalues[0], 0.0))
+        axis = vectors[:, 1]
+        taps = int(np.clip(np.ceil(major / max(minor, texel) - 1e-3), 1, MAX_TAPS))
+        with np.errstate(divide="ignore"):
+            lod = np.clip(np.log2(max(minor, major / taps) / texel) + lod_bias, 0, mip.count - 1)
+        k = int(np.floor(lod))
+        t = lod - k
+        if t > 1 - 1e-6:
+            k, t = k + 1, 0.0
+        elif t < 1e-6:
+            t = 0.0
+        for i in range(taps):
+            step = ((i + 0.5) / taps - 0.5) * major
+            px, py = x[j] + step * axis[0], y[j] + step * axis[1]
+            sample = bilinear(k, px, py)
+            if t > 0:
+                sample = (1 - t) * sample + t * bilinear(k + 1, px, py)
+            out[j] += sample / taps
+    return out
+
+
+@pytest.mark.parametrize("outside, shape, channels", [
+    ("constant", (32, 32), 3), ("constant", (27, 45), 1),
+    ("periodic", (32, 64), 3), ("periodic", (27, 45), 3), ("periodic", (30, 40), 1),
+])
+def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channels):
+    # every level, blended or not, one tap or many, near and across the raster's edges (or
+    # periods), far beyond it, and degenerate footprints
+    rng = np.random.default_rng(8)
+    raster = rng.random(shape + (channels,)).astype(np.float32)
+    grid = Grid((-1.3, 0.9), 0.05, shape)
+    x_min, y_min, x_max, y_max = grid.extent
+    if outside == "constant":
+        mip = mipmap(raster, grid, outside="constant", value=rng.random(channels))
+    else:  # a whole number of texels along x, a fraction of one along y
+        mip = mipmap(raster, grid, outside="periodic", period=(x_max - x_min, 0.9 * (y_max - y_min)))
+    n = 600
+    x = rng.uniform(x_min - 1.0, x_max + 1.0, n)
+    y = rng.uniform(y_min - 1.0, y_max + 1.0, n)
+    x[:40] = rng.uniform(-400.0, 400.0, 40)  # far beyond
+    scale = np.exp(rng.uniform(np.log(0.005), np.log(5.0), n))
+    jac = rng.normal(0.0, 1.0, (n, 2, 2)) * scale[:, None, None]
+    jac[40:100, :, 1] *= rng.uniform(5.0, 40.0, (60, 1))  # long, thin footprints
+    jac[100:110] = 0.0
+    jac[110:120, :, 1] = 2.0 * jac[110:120, :, 0]  # a segment
+    got = sample_footprint(mip, x, y, jac)
+    assert got.dtype == np.float32 and got.shape == (n, channels)
+    np.testing.assert_allclose(got, reference_footprint_samples(mip, x, y, jac), rtol=2e-5, atol=2e-6)
+
+
+def test_footprints_serve_several_rasters():
+    rng = np.random.default_rng(9)
+    grid = Grid((0.0, 1.6), 0.05, (32, 32))
+    constant = mipmap(rng.random((32, 32, 3)).astype(np.float32), grid, outside="constant", value=0.3)
+    periodic = mipmap(rng.random((32, 32, 1)).astype(np.float32), grid, outside="periodic", period=(1.6, 1.6))
+    n = 500
+    x, y = rng.uniform(-1.0, 3.0, n), rng.uniform(-1.0, 3.0, n)
+    jac = rng.normal(0.0, 0.2, (n, 2, 2))
+    fp = footprints(x, y, jac)
+    for mip in (constant, periodic):
+        np.testing.assert_array_equal(sample_footprints(mip, fp), sample_footprint(mip, x, y, jac))
+    assert sample_footprint(constant, [], [], np.zeros((0, 2, 2))).shape == (0, 3)
+
+
 # --- the ground view ---------------------------------------------------------------------------
+
+def test_ground_view_is_the_product_of_its_footprint_samples():
+    rng = np.random.default_rng(10)
+    grid = Grid((-3.0, 6.0), 0.05, (120, 80))
+    irradiance = mipmap(rng.random((120, 80, 3)).astype(np.float32), grid, outside="constant", value=0.7)
+    albedo = mipmap(rng.random((64, 64, 1)).astype(np.float32), Grid((0.0, 0.64), 0.01, (64, 64)),
+                    outside="periodic", period=(0.64, 0.64))
+    camera = Camera((0.2, -1.0, 1.6), 0.2, np.radians(-12), np.radians(45), 120, 70)
+    image, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
+    x, y, jac, hit_distance, coverage = ground_hits(camera)
+    seen = np.isfinite(hit_distance)
+    expected = np.zeros_like(image)
+    expected[seen] = (sample_footprint(irradiance, x[seen], y[seen], jac[seen])
+                      * sample_footprint(albedo, x[seen], y[seen], jac[seen]) * np.float32(1 / np.pi))
+    np.testing.assert_array_equal(image, expected)
+    np.testing.assert_array_equal(fraction, coverage.astype(np.float32))
+    np.testing.assert_array_equal(distance, hit_distance.astype(np.float32))
+
 
 def test_straight_down_view_reproduces_the_raster():
     rng = np.random.default_rng(6)
