@@ -284,6 +284,19 @@ def fractal_noise(seed, texels=1024, *, period=16.0, spectral_slope=5.0 / 3.0):
     return _noise(int(seed), int(texels), float(period), float(spectral_slope))[0]
 
 
+@lru_cache(maxsize=8)
+def _noise_levels(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
+    """The noise lattice and its 2 x 2 box-filtered levels down to one texel (a mip pyramid of
+    a periodic texture: every level keeps the mean and tiles). Read-only float64."""
+    levels = [_noise(seed, texels, period, spectral_slope)[0]]
+    while min(levels[-1].shape) > 1 and all(n % 2 == 0 for n in levels[-1].shape):
+        a = levels[-1]
+        coarser = 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
+        coarser.setflags(write=False)
+        levels.append(coarser)
+    return tuple(levels)
+
+
 @lru_cache(maxsize=64)
 def _knots(seed, texels, period, spectral_slope, cover, softness):
     """Field values and coverages of the rank-space smoothstep (see the module docstring)."""
@@ -371,11 +384,15 @@ class CloudLayer:
     def _noise_key(self):
         return (self.seed, self.texels, self.period, self.spectral_slope)
 
-    def field(self, s, time) -> np.ndarray:
+    def field(self, s, time, footprint=None) -> np.ndarray:
         """The noise (zero mean, unit variance on the lattice) where directions ``s`` (..., 2)
-        [tan] meet the layer at ``time`` [s], bilinearly interpolated. [dimensionless]"""
+        [tan] meet the layer at ``time`` [s], bilinearly interpolated. [dimensionless]
+
+        footprint : None, or the width (scalar or (...)) each sample stands for on the sky
+            plane [tan]: the noise is then box-filtered over about that width on the layer
+            (trilinear mip-mapping of the lattice), so that a far cloud deck seen in a camera
+            near the horizon does not alias."""
         s = np.asarray(s, dtype=np.float64)
-        texture = _noise(*self._noise_key())[0]
         n = self.texels
         per_texel = self.altitude / self.texel
         # Drift reduced modulo the tile first, so that late frames keep full precision.
@@ -388,30 +405,44 @@ class CloudLayer:
         coords[0] -= shift_row
         np.multiply(s[:, 0], per_texel, out=coords[1])
         coords[1] -= shift_col
-        return ndimage.map_coordinates(texture, coords, order=1, mode="grid-wrap").reshape(shape)
+        levels = _noise_levels(*self._noise_key())
+        if footprint is None:
+            return ndimage.map_coordinates(levels[0], coords, order=1, mode="grid-wrap").reshape(shape)
+        width = np.broadcast_to(np.asarray(footprint, dtype=np.float64), shape).reshape(-1) * per_texel
+        level = np.clip(np.log2(np.maximum(width, 1e-300)), 0.0, len(levels) - 1.0)
+        out = np.zeros(len(level))
+        for k in range(int(np.ceil(level.max())) + 1):
+            weight = np.clip(1.0 - np.abs(level - k), 0.0, 1.0)
+            used = weight > 0
+            if not used.any():
+                continue
+            at = (coords[:, used] + 0.5) / 2.0**k - 0.5  # texel centres of level k
+            out[used] += weight[used] * ndimage.map_coordinates(levels[k], at, order=1, mode="grid-wrap")
+        return out.reshape(shape)
 
-    def coverage(self, s, time) -> np.ndarray:
+    def coverage(self, s, time, footprint=None) -> np.ndarray:
         """Cloud coverage c in [0, 1] at directions ``s`` (..., 2) [tan] at ``time`` [s]:
         1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane.
-        [dimensionless]"""
+        ``footprint`` as in ``field``. [dimensionless]"""
         s = np.asarray(s, dtype=np.float64)
         if self.cover <= 0.0:
             return np.zeros(s.shape[:-1])
         if self.cover >= 1.0:
             return np.ones(s.shape[:-1])
         values, levels = _knots(*self._noise_key(), self.cover, self.softness)
-        return np.interp(self.field(s, time), values, levels)
+        return np.interp(self.field(s, time, footprint), values, levels)
 
-    def optical_depth(self, s, time) -> np.ndarray:
+    def optical_depth(self, s, time, footprint=None) -> np.ndarray:
         """Vertical optical depth tau = thickness x coverage where ``s`` (..., 2) [tan] meets the
-        layer at ``time`` [s]. [dimensionless]"""
-        return self.thickness * self.coverage(s, time)
+        layer at ``time`` [s]; ``footprint`` as in ``field``. [dimensionless]"""
+        return self.thickness * self.coverage(s, time, footprint)
 
-    def transmittance(self, s, time) -> np.ndarray:
+    def transmittance(self, s, time, footprint=None) -> np.ndarray:
         """Direct transmittance exp(-tau / cos(theta)) along directions ``s`` (..., 2) [tan] at
-        ``time`` [s], with cos(theta) = 1 / sqrt(1 + |s|^2). [dimensionless]"""
+        ``time`` [s], with cos(theta) = 1 / sqrt(1 + |s|^2); ``footprint`` as in ``field``.
+        [dimensionless]"""
         s = np.asarray(s, dtype=np.float64)
-        tau = self.optical_depth(s, time)
+        tau = self.optical_depth(s, time, footprint)
         return np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
 
     def _multiple_tables(self, sun_cosine):
@@ -436,7 +467,7 @@ class CloudLayer:
         return tau, m_sun, m_sky
 
     def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance,
-                 multiple_scattering=True, tau=None) -> np.ndarray:
+                 multiple_scattering=True, tau=None, footprint=None) -> np.ndarray:
         """Light the layer scatters towards the observer along directions ``s`` (..., 2) [tan].
 
         time : [s]
@@ -446,6 +477,7 @@ class CloudLayer:
         multiple_scattering : False keeps Blinn's single scattering alone.
         tau : optional (...) optical depth already sampled at ``s`` and ``time`` (as by
             ``optical_depth``), to save sampling the pattern twice. [dimensionless]
+        footprint : the pattern's filter width, as in ``field`` (when ``tau`` is not given). [tan]
         Returns (..., 3) float32 RGB radiance, 0 where there is no cloud. [kcd/m^2]
         """
         s = np.asarray(s, dtype=np.float64)
@@ -453,7 +485,7 @@ class CloudLayer:
         sun_rgb = np.asarray(sun_irradiance, dtype=np.float64).reshape(3)
         sky_rgb = np.asarray(sky_irradiance, dtype=np.float64).reshape(3)
         if tau is None:
-            tau = self.optical_depth(s, time)
+            tau = self.optical_depth(s, time, footprint)
         if self.cover <= 0.0 or self.thickness <= 0.0:
             return np.zeros(s.shape[:-1] + (3,), dtype=np.float32)
         # float32 from here on: twice as fast, and far finer than any image needs.

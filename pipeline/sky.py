@@ -262,8 +262,8 @@ def _flush(accum, pending: list) -> None:
 # north towards east, zenith angle from +z [rad]; sky-plane points s = (wx/wz, wy/wz) [tan].
 #
 # Clouds protocol (implemented in ``pipeline/clouds.py``, used here by duck typing):
-#   clouds.transmittance(s (..., 2), time) -> (...) in [0, 1], direct transmittance along s;
-#   clouds.radiance(s (..., 2), time, *, sun_s (2,), sun_irradiance (3,), sky_irradiance (3,))
+#   clouds.transmittance(s (..., 2), time, footprint=None) -> (...) in [0, 1], direct transmittance along s;
+#   clouds.radiance(s (..., 2), time, *, sun_s (2,), sun_irradiance (3,), sky_irradiance (3,), footprint=None)
 #       -> (..., 3) light scattered towards the observer [kcd/m^2], given the sun's sky-plane
 #       point, its normal irradiance above the clouds after the atmosphere and the moon [klx], and
 #       the clear sky's horizontal irradiance [klx].
@@ -637,15 +637,16 @@ class ProceduralSky:
         L = preetham_radiance(cos_zenith, cos_gamma, turbidity=self.turbidity, sun_zenith=np.pi / 2 - self.sun.elevation)
         return L * self._sky_dimming
 
-    def radiance(self, s) -> np.ndarray:
+    def radiance(self, s, footprint=None) -> np.ndarray:
         """Sky radiance without the sun disc at sky-plane points s (..., 2) [tan]:
-        L_clear T + cloud glow. [kcd/m^2]"""
+        L_clear T + cloud glow. ``footprint``: None, or the sky-plane width each point stands
+        for (scalar or (...)) [tan], over which the cloud pattern is filtered (a camera's
+        pixel near the horizon spans kilometres of cloud deck). [kcd/m^2]"""
         L = self.clear_radiance(s)
         if self.clouds is None:
             return L
-        s = np.asarray(s, dtype=np.float64)
-        L *= np.clip(self.clouds.transmittance(s, self.time), 0.0, 1.0)[..., None]
-        return L + self.clouds.radiance(s, self.time, **self._cloud_light)
+        L *= np.clip(self.clouds.transmittance(s, self.time, footprint), 0.0, 1.0)[..., None]
+        return L + self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light)
 
     @cached_property
     def _cloud_light(self) -> dict:

@@ -332,3 +332,25 @@ def test_shapes_inputs_and_shade():
         layer(cover=1.5)
     with pytest.raises(ValueError):
         layer(wind=(1.0, 2.0, 3.0))
+
+
+def test_footprint_filters_the_pattern_like_a_box_average():
+    """With a footprint the field is the pattern averaged over about that width on the layer:
+    its variance falls as the footprint grows, the mean stays, and a footprint below a texel
+    changes nothing."""
+    layer = CloudLayer(cover=0.5, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0)
+    rng = np.random.default_rng(5)
+    s = rng.uniform(-2, 2, size=(20000, 2))
+    sharp = layer.field(s, 0.0)
+    np.testing.assert_allclose(layer.field(s, 0.0, footprint=1e-4 * layer.texel / layer.altitude), sharp)
+    texel_tan = layer.texel / layer.altitude
+    spreads = [layer.field(s, 0.0, footprint=k * texel_tan).std() for k in (1, 8, 64)]
+    assert spreads[0] > spreads[1] > spreads[2]
+    # against brute force: the mean of the sharp field over the 8 x 8 texel block around a point
+    k = 8
+    point = np.array([[0.3, -0.2]])
+    offsets = (np.arange(64) + 0.5) / 64 - 0.5
+    grid = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2) * k * texel_tan + point
+    brute = layer.field(grid, 0.0).mean()
+    filtered = layer.field(point, 0.0, footprint=k * texel_tan)[0]
+    assert abs(filtered - brute) < 0.25 * sharp.std(), (filtered, brute)

@@ -309,10 +309,10 @@ class Overcast:
         self.glow = glow
         self.calls = []
 
-    def transmittance(self, s, time):
+    def transmittance(self, s, time, footprint=None):
         return np.full(np.shape(s)[:-1], 0.5)
 
-    def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance):
+    def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, footprint=None):
         self.calls.append((np.array(sun_s), np.array(sun_irradiance), np.array(sky_irradiance), time))
         return np.full(np.shape(s)[:-1] + (3,), self.glow)
 
