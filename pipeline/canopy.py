@@ -455,10 +455,36 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
     out = []
     for primitive in (_ellipses(shapes, grid), _capsule_pieces(shapes, grid)):
         _scatter(*primitive, shape=grid.shape, period=period_px, out=out)
-    flat = np.concatenate([f for f, _ in out]) if out else np.zeros(0, np.int64)
-    weight = np.concatenate([w for _, w in out]) if out else np.zeros(0, np.float32)
+    flat = np.concatenate([f for f, _, _ in out]) if out else np.zeros(0, np.int64)
+    weight = np.concatenate([w for _, w, _ in out]) if out else np.zeros(0, np.float32)
     optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
     return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+
+
+def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
+    """Every pixel that every shape covers on ``grid``, as fragments (one per shape and pixel).
+
+    The coverages are those that ``rasterize_transmittance`` multiplies: for each fragment the
+    fraction c in [0, 1) of the pixel's area that the shape covers (clipped just below 1).
+    Returns (pixel (n,) int64, the flat index ``row * cols + col``; coverage (n,) float32 in
+    (0, 1); shape (n,) int64: ellipse i is shape i, capsule j is shape ``len(shapes.center) + j``).
+    Fragments are grouped by shape, not sorted; pixels outside the grid and zero coverages are
+    dropped. period : as for ``rasterize_transmittance`` (every translate keeps its shape index).
+    """
+    rows, cols = grid.shape
+    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
+    out = []
+    for primitive, offset in ((_ellipses(shapes, grid), 0), (_capsule_pieces(shapes, grid), len(shapes.center))):
+        _scatter(*primitive, shape=grid.shape, period=period_px, out=out, offset=offset)
+    if not out:
+        return np.zeros(0, np.int64), np.zeros(0, np.float32), np.zeros(0, np.int64)
+    flat = np.concatenate([f for f, _, _ in out])
+    weight = np.concatenate([w for _, w, _ in out])
+    source = np.concatenate([s for _, _, s in out])
+    row, col = np.divmod(flat, cols + 1)
+    keep = (row < rows) & (col < cols) & (weight > 0)
+    coverage = -np.expm1(-weight[keep])
+    return row[keep] * cols + col[keep], coverage.astype(np.float32), source[keep]
 
 
 def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_height: float, grid: Grid,
@@ -485,7 +511,7 @@ def _pixels(points, grid: Grid):
 
 def _ellipses(shapes: Shapes, grid: Grid):
     """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
-    feature size B, thickness 2B, distance function, no selection."""
+    feature size B, thickness 2B, distance function, no selection, each ellipse's index."""
     a = shapes.axis_a * [1.0, -1.0] / grid.pixel
     b = shapes.axis_b * [1.0, -1.0] / grid.pixel
     p, s = a[:, 0] ** 2 + b[:, 0] ** 2, a[:, 1] ** 2 + b[:, 1] ** 2
@@ -495,7 +521,7 @@ def _ellipses(shapes: Shapes, grid: Grid):
     angle = 0.5 * np.arctan2(2 * q, p - s)
     params = np.column_stack([np.cos(angle), np.sin(angle), major, np.maximum(minor, 1e-4)])
     return (_pixels(shapes.center, grid), np.sqrt(np.column_stack([p, s])), params, minor, 2 * minor,
-            _ellipse_distance, None)
+            _ellipse_distance, None, np.arange(len(minor)))
 
 
 def _ellipse_distance(dx, dy, prm):
@@ -513,7 +539,8 @@ def _ellipse_distance(dx, dy, prm):
 def _capsule_pieces(shapes: Shapes, grid: Grid):
     """Capsules in pixel units, long ones cut into pieces of length <= max(4 r, 16) pixels so
     that their boxes stay tight. A piece keeps the whole capsule's distance but only the pixels
-    whose centre projects onto its stretch of the axis, so the pieces tile the capsule exactly."""
+    whose centre projects onto its stretch of the axis, so the pieces tile the capsule exactly.
+    The last item is the index of each piece's capsule."""
     p0, p1 = _pixels(shapes.start, grid), _pixels(shapes.end, grid)
     radius = shapes.radius / grid.pixel
     axis = p1 - p0
@@ -529,7 +556,7 @@ def _capsule_pieces(shapes: Shapes, grid: Grid):
     t_lo = np.where(i == 0, -np.inf, i / n)
     t_hi = np.where(i == n - 1, np.inf, (i + 1) / n)
     params = np.column_stack([p0[src] - center, axis[src], inverse, r, t_lo, t_hi])
-    return center, half, params, r, 2 * r, _capsule_distance, _capsule_select
+    return center, half, params, r, 2 * r, _capsule_distance, _capsule_select, src
 
 
 def _capsule_distance(dx, dy, prm):
@@ -572,18 +599,23 @@ def _translates(center, half, period, shape):
     return src, center[src] + shift
 
 
-def _scatter(center, half, params, feature, thickness, distance, select, *, shape, period, out):
-    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage)) of every pixel of
-    every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect padding."""
+def _scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
+             offset=None):
+    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage), label) of every
+    pixel of every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect
+    padding. The label is None, or with an ``offset`` the fragment's shape index ``offset + owner``."""
     rows, cols = shape
+    source = None if offset is None else offset + owner
     if period is not None:
         src, center = _translates(center, half, period, shape)
         half, params, feature, thickness = half[src], params[src], feature[src], thickness[src]
+        source = None if source is None else source[src]
     lo = np.clip(np.floor(center - half), 0, [cols, rows]).astype(np.int64)
     hi = np.clip(np.ceil(center + half), 0, [cols, rows]).astype(np.int64)
     keep = np.all(hi > lo, axis=1)
     center, lo, size = center[keep], lo[keep], (hi - lo)[keep]
     params, feature, thickness = params[keep], feature[keep], thickness[keep]
+    source = None if source is None else source[keep]
     if not len(center):
         return
     # k x k sub-samples: k = 1 for shapes at least 2.5 pixels thick (minor semi-axis or radius),
@@ -622,4 +654,5 @@ def _scatter(center, half, params, feature, thickness, distance, select, *, shap
             weight = -np.log1p(-np.clip(cover, 0, _OPAQUE))
             r = np.where(np.arange(h) < size[idx, 1, None], lo[idx, 1, None] + np.arange(h), rows)
             c = np.where(np.arange(w) < size[idx, 0, None], lo[idx, 0, None] + np.arange(w), cols)
-            out.append(((r[:, :, None] * (cols + 1) + c[:, None, :]).ravel(), weight.ravel()))
+            label = None if source is None else np.repeat(source[idx], h * w)
+            out.append(((r[:, :, None] * (cols + 1) + c[:, None, :]).ravel(), weight.ravel(), label))
