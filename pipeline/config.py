@@ -17,6 +17,7 @@ from pathlib import Path
 import yaml
 
 from . import __version__, ephemeris
+from .composite import DISPLAYS
 from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
 
@@ -152,7 +153,8 @@ class SkyConfig:
     """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
     Procedural: turbidity; the sun by angles or by site and time; moon (with angles; implied by
-    site and time); clouds."""
+    site and time); clouds. haze : extinction length of the air the camera looks through,
+    0 for none. [m]"""
 
     model: str
     radiance: tuple[float, float, float]
@@ -164,6 +166,7 @@ class SkyConfig:
     site: SiteConfig | None = None
     moon: MoonConfig | None = None
     clouds: CloudsConfig | None = None
+    haze: float = 3000.0
 
 
 @dataclass(frozen=True)
@@ -176,6 +179,37 @@ class GroundConfig:
     pixel: float
     sun_window: tuple[float, float, float, float] | None = None
     sun_pixel: float | None = None
+    albedo: str | Path = "grass"
+    albedo_size: float = 4.0
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """The pinhole camera: position (x, y, z) [m], None to stand it where it sees the canopy
+    and its shadows (``render.camera_of``); look_at (x, y, z) [m], or else yaw (azimuth of the
+    view, from north towards east) and pitch (negative looking down) [rad], None to look at the
+    canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
+    default (white ground under the clear sky at 1); display : a name in ``composite.DISPLAYS``."""
+
+    position: tuple[float, float, float] | None = None
+    look_at: tuple[float, float, float] | None = None
+    yaw: float | None = None
+    pitch: float | None = None
+    fov: float = 0.8726646259971648
+    resolution: tuple[int, int] = (1280, 720)
+    exposure: float = 0.0
+    display: str = "filmic"
+
+
+@dataclass(frozen=True)
+class ForegroundConfig:
+    """model : 'trees' (the canopy's grove, rendered), 'passes' (imported EXR sequences
+    ``sun``, ``sky``, ``alpha``, one file per cycle frame) or 'none'."""
+
+    model: str
+    sun: tuple[Path, ...] = ()
+    sky: tuple[Path, ...] = ()
+    alpha: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -193,13 +227,17 @@ class Config:
     sky: SkyConfig
     ground: GroundConfig
     animation: AnimationConfig
+    camera: CameraConfig
+    foreground: ForegroundConfig
 
     def digest(self) -> str:
         """Hash of every value and every input file's bytes, with the package version (16 hex)."""
         values = asdict(self)
         values.pop("path")
-        files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask} | (
-            {str(self.sky.hdri)} if self.sky.hdri else set()))
+        files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
+                       | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
+                       | ({str(self.sky.hdri)} if self.sky.hdri else set())
+                       | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set()))
         h = hashlib.sha256()
         h.update(json.dumps(values, sort_keys=True, default=str).encode())
         h.update(__version__.encode())
@@ -396,8 +434,10 @@ def _parse(root: _Section, path: Path) -> Config:
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)
     sky = _parse_sky(root.section("sky"), canopy, ground)
+    camera = _parse_camera(root.section("camera"), ground)
+    foreground = _parse_foreground(root.section("foreground"), canopy)
     root.done()
-    return Config(path.resolve(), canopy, sky, ground, animation)
+    return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground)
 
 
 def _parse_animation(s: _Section) -> AnimationConfig:
@@ -424,8 +464,13 @@ def _parse_ground(s: _Section) -> GroundConfig:
         if sun_pixel > pixel:
             s.fail("sun_pixel", f"must not be above ground.pixel ({sun_pixel:g} > {pixel:g})")
         _check_pixels(s, "sun_pixel", sun_window or window, sun_pixel, MAX_SUN_PIXELS)
+    albedo = "grass"
+    if s.has("albedo") and s.data["albedo"] != "grass":
+        albedo = s.file("albedo")
+    s.raw("albedo", None)
+    albedo_size = s.number("albedo_size", 4.0, above=0.0)
     s.done()
-    return GroundConfig(window, pixel, sun_window, sun_pixel)
+    return GroundConfig(window, pixel, sun_window, sun_pixel, albedo, albedo_size)
 
 
 def _check_pixels(s: _Section, name, window, pixel, most):
@@ -562,6 +607,7 @@ def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyCo
     extra = {}
     if model == "procedural":
         extra = _parse_procedural(s)
+    extra["haze"] = s.number("haze", 3000.0, at_least=0.0)
     s.done()
     return SkyConfig(model, radiance, hdri, rotation, alpha, **extra)
 
@@ -625,3 +671,52 @@ def _parse_site(s: _Section, t: _Section) -> SiteConfig:
     s.done()
     t.done()
     return site
+
+
+MAX_IMAGE_PIXELS = 64_000_000
+FOREGROUNDS = ("trees", "passes", "none")
+
+
+def _parse_camera(s: _Section, ground: GroundConfig) -> CameraConfig:
+    """The camera; what it leaves out is placed by ``render.camera_of``."""
+    position = s.numbers("position", 3) if s.has("position") else None
+    if position is not None and position[2] <= 0:
+        s.fail("position", f"the camera must be above the ground (z = {position[2]:g})")
+    if s.has("look_at") and (s.has("yaw") or s.has("pitch")):
+        s.fail("look_at", "give either look_at or yaw and pitch, not both")
+    look_at = yaw = pitch = None
+    if s.has("look_at"):
+        look_at = s.numbers("look_at", 3)
+        if position is not None and look_at == position:
+            s.fail("look_at", "must differ from camera.position")
+    elif s.has("yaw") or s.has("pitch"):
+        yaw = math.radians(s.number("yaw", 0.0) % 360.0)
+        pitch = math.radians(s.number("pitch", 0.0, at_least=-90.0, below=90.0 + 1e-9))
+    fov = math.radians(s.number("fov", 50.0, above=0.0, below=170.0))
+    resolution = s.numbers("resolution", 2, (1280, 720))
+    if not all(v.is_integer() and v >= 2 for v in resolution):
+        s.fail("resolution", f"must be two whole numbers of at least 2 (got {list(resolution)})")
+    width, height = (int(v) for v in resolution)
+    if width * height > MAX_IMAGE_PIXELS:
+        s.fail("resolution", f"{width} x {height} is {width * height:.3g} pixels; the most is {MAX_IMAGE_PIXELS:.3g}")
+    camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height),
+                          exposure=s.number("exposure", 0.0, at_least=-20.0, below=20.0),
+                          display=s.choice("display", DISPLAYS, "filmic"))
+    s.done()
+    return camera
+
+
+def _parse_foreground(s: _Section, canopy: CanopyConfig) -> ForegroundConfig:
+    model = s.choice("model", FOREGROUNDS, "trees" if canopy.trees else "none")
+    if model == "trees" and canopy.trees is None:
+        s.fail("model", "'trees' renders the canopy's procedural grove; this canopy has mask images")
+    files = {}
+    for name in ("sun", "sky", "alpha"):
+        if model == "passes":
+            files[name] = s.mask_files(name)
+            if len(files[name]) != canopy.cycle:
+                s.fail(name, f"needs one file per cycle frame: {canopy.cycle}, found {len(files[name])}")
+        elif s.has(name):
+            s.fail(name, f"only used with model: passes (model is {model})")
+    s.done()
+    return ForegroundConfig(model, **files)

@@ -1,6 +1,8 @@
 """The orchestrator: reads a config's inputs and runs the stages in order.
 
-For now one product: the ground irradiance raster (Max 1991, Fig. 7) of ``sunshade ground``.
+The cycle phase makes the products of every cycle frame (mask spectra, foreground passes) and
+caches them; the frame phase makes a frame: the ground raster (Max 1991, Fig. 7) under that
+frame's sky, resampled in the camera with the sky, the foreground blended by S over it.
 """
 
 from __future__ import annotations
@@ -14,9 +16,11 @@ from datetime import datetime
 import joblib
 import numpy as np
 
-from . import cache, canopy, ephemeris, io, shadow
+from . import albedo as albedos
+from . import cache, camera, canopy, composite, ephemeris, foreground, io, shadow
 from . import sky as sky_models
-from .config import MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, SkyConfig
+from .composite import REC709_LUMINANCE
+from .config import MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -32,6 +36,7 @@ class GroundResult:
     grid: Grid
     unshadowed: np.ndarray
     exact: bool
+    outer: tuple[np.ndarray, Grid] | None = None
 
 
 def default_workers() -> int:
@@ -325,14 +330,15 @@ def cycle_item(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int
 
 def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
                 workers: int = 1, progress=None) -> int:
-    """Every layer's cycle products for every cycle frame: those already stored are checked
-    here, the missing ones computed in parallel over cycle frames by joblib processes (each
-    with ``workers`` FFT threads). ``progress(done, total)`` is called as items finish.
-    Returns the number of items computed."""
+    """Every cycle product for every cycle frame (each layer's spectra, the foreground passes of
+    built-in trees): those already stored are checked here, the missing ones computed in
+    parallel over cycle frames by joblib processes (each with ``workers`` FFT threads).
+    ``progress(done, total)`` is called as items finish. Returns the number of items computed."""
     tasks = [(layer, frame) for frame in range(config.canopy.cycle)
              for layer in range(len(config.canopy.layers))]
-    missing = [(layer, frame) for layer, frame in tasks
-               if store.get("spectra", cycle_params(config, plan, layer, frame)) is None]
+    if config.foreground.model == "trees":
+        tasks += [(None, frame) for frame in range(config.canopy.cycle)]
+    missing = [(layer, frame) for layer, frame in tasks if store.get(*_product_key(config, plan, layer, frame)) is None]
     done = len(tasks) - len(missing)
     if progress:
         progress(done, len(tasks))
@@ -350,37 +356,64 @@ def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int 
     return computed
 
 
+def _product_key(config, plan, layer, frame):
+    """(kind, params) of a cycle product: a layer's spectra, or the foreground (layer None)."""
+    if layer is None:
+        return "foreground", foreground_params(config, plan, frame)
+    return "spectra", cycle_params(config, plan, layer, frame)
+
+
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:
     store = cache.Cache(root)
-    cycle_item(config, plan, layer, frame, store, workers=workers)
+    if layer is None:
+        foreground_item(config, plan, frame, store)
+    else:
+        cycle_item(config, plan, layer, frame, store, workers=workers)
     return store.misses
 
 
 def render_ground(config: Config, *, frame: int = 0, store: cache.Cache | None = None,
-                  plan: RunPlan | None = None, workers: int | None = None) -> GroundResult:
+                  plan: RunPlan | None = None, workers: int | None = None, sky=None,
+                  outer: bool = False) -> GroundResult:
     """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
     raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
-    product rule. Cycle products come from ``store`` (computed on a miss)."""
+    product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
+    frame's sky model, loaded when not given. ``outer``: also the coarse raster of the whole
+    window with the sun at the coarse cell (the paper's single scale), where the sun window
+    does not cover it: what a camera sees beyond the sun window."""
     workers = workers or default_workers()
     plan = plan or plan_run(config)
     store = store or cache.Cache(cache.cache_dir(None))
-    sky = load_sky(config.sky, scene_at(config, frame))
+    sky = sky or load_sky(config.sky, scene_at(config, frame))
     cycle_frame = frame % config.canopy.cycle
-    grounds, totals, exact = [], [], True
+    outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
+    grounds, outers, totals, exact = [], [], [], True
     for index, layer_plan in enumerate(plan.layers):
         item = cycle_item(config, plan, index, cycle_frame, store, workers=workers)
-        g, total, layer_exact = _ground_of_layer(sky, layer_plan, item, plan, workers)
+        g, total, layer_exact, g_outer = _ground_of_layer(sky, layer_plan, item, plan, workers, outer)
         grounds.append(g)
+        outers.append(g_outer)
         totals.append(total)
         exact &= layer_exact
     combined = shadow.combine_layers(grounds, totals[0])
     grid = plan.sun_window or plan.window
-    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact)
+    around = None
+    if outer:
+        around = (np.moveaxis(shadow.combine_layers(outers, totals[0]), 0, -1), plan.window)
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around)
 
 
-def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers):
-    """(ground raster, unshadowed total, exact) of one layer: the coarse sky light, plus the
-    fine sun kernel on the sun window."""
+def _covers(inner: Grid, outer: Grid) -> bool:
+    """Whether ``inner`` reaches over all of ``outer`` (to a hundredth of a pixel)."""
+    a, b = inner.extent, outer.extent
+    tol = 0.01 * outer.pixel
+    return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
+
+
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False):
+    """(ground raster, unshadowed total, exact, outer raster or None) of one layer: the coarse
+    sky light, plus the fine sun kernel on the sun window; with ``outer`` also the coarse
+    raster with the sun kernel at the coarse cell."""
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
         grid = coarse.sky or shadow.sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
@@ -393,9 +426,257 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers):
                                    workers=workers)
         exact = True
     total = raster.total
+    g_outer = None
     if lp.sun is not None:
+        if outer:
+            g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
         kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
         g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
-    return g, total, exact
+    return g, total, exact, g_outer
+
+
+def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
+    """The sun's light through one layer on the coarse window (channels, rows, cols): its
+    kernel at the coarse sky cell, correlated like the sky. [klx]"""
+    kernel = sky_models.sun_kernel(sky, plan.window.pixel / lp.height)
+    coarse = lp.coarse
+    if isinstance(coarse, shadow.PeriodicPlan):
+        return shadow.ground_periodic(sky_models.SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
+                                      item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+    weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
+    if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
+        dr, dc = np.subtract(shadow.sky_offset(kernel.grid), shadow.sky_offset(coarse.sky))
+        rows, cols = kernel.weighted.shape[1:]
+        r0, c0 = max(dr, 0), max(dc, 0)
+        r1, c1 = min(dr + rows, coarse.sky.shape[0]), min(dc + cols, coarse.sky.shape[1])
+        if r1 > r0 and c1 > c0:
+            weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+    outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
+    raster = sky_models.SkyRaster(coarse.sky or shadow.sky_grid((0, 0), (1, 1), kernel.grid.pixel),
+                                  weighted, outside)
+    return shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+
+
+# ---------------------------------------------------------------------------------------------
+# The finished frame: camera, foreground, compositing (Max 1991, Figs. 10 and 13)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """The clear, uneclipsed light of a run, fixed for all its frames: what the foreground
+    passes are lit by and the exposure is set from.
+
+    sun_direction : (3,) unit vector towards the sun, or None; sun_irradiance : (3,) its normal
+    irradiance [klx]; sky_irradiance : (3,) horizontal irradiance of the sky alone [klx].
+    """
+
+    sun_direction: np.ndarray | None
+    sun_irradiance: np.ndarray
+    sky_irradiance: np.ndarray
+
+    @property
+    def unshadowed(self) -> np.ndarray:
+        """Horizontal irradiance of sun and sky together (3,). [klx]"""
+        if self.sun_direction is None:
+            return self.sky_irradiance
+        return self.sky_irradiance + self.sun_irradiance * self.sun_direction[2]
+
+
+def reference_lighting(config: Config, plan: RunPlan) -> Lighting:
+    """The run's Lighting: the clear sky of the config with its sun at the projection
+    direction (the middle frame's), no clouds and no moon."""
+    s = np.append(plan.projection, 1.0)
+    direction = s / np.linalg.norm(s)
+    sky = config.sky
+    if sky.model == "uniform":
+        return Lighting(None, np.zeros(3), np.pi * np.asarray(sky.radiance, dtype=np.float64))
+    if sky.model == "hdri":
+        hdri = _load_hdri(sky)
+        if hdri.sun is None:
+            return Lighting(None, np.zeros(3), hdri.total_irradiance())
+        return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
+                        hdri.total_irradiance())
+    middle = scene_at(config, config.animation.frames // 2).sun
+    clear = sky_models.ProceduralSky(turbidity=sky.turbidity, sun=middle, moon=None, clouds=None)
+    return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
+
+
+CAMERA_HEIGHT = 1.7
+"""Eye height of a camera placed by default. [m]"""
+
+
+def camera_of(config: Config, plan: RunPlan) -> camera.Camera:
+    """The config's camera, with what it leaves out filled in: by default it stands at eye
+    height on the shadow side of the canopy, 35 degrees round from the sun's line and 2.2
+    canopy heights from its centre, looking at the middle of the crowns, so that the shadows
+    come towards it and the leaves are lit from behind."""
+    c = config.camera
+    centre = np.array(config.canopy.layers[0].center, dtype=np.float64)
+    height = max(layer.height for layer in config.canopy.layers)
+    position = c.position
+    if position is None:
+        sx, sy = plan.projection
+        sun_azimuth = np.arctan2(sx, sy) if sx or sy else np.pi
+        bearing = sun_azimuth + np.pi - np.radians(35.0)
+        distance = 2.2 * height
+        position = (*(centre + distance * np.array([np.sin(bearing), np.cos(bearing)])), CAMERA_HEIGHT)
+    width, rows = c.resolution
+    if c.yaw is not None:
+        return camera.Camera(tuple(position), c.yaw, c.pitch, c.fov, width, rows)
+    target = c.look_at or (*centre, 0.45 * height)
+    return camera.Camera.look_at(position, target, vertical_fov=c.fov, width=width, height=rows)
+
+
+def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
+    """Everything the built-in trees' passes at ``cycle_frame`` depend on: not the light's
+    strength or colour, since they are stored per unit irradiance."""
+    c = config.canopy
+    return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+            "heights": [layer.height for layer in c.layers], "layout": c.layout,
+            "center": c.layers[0].center, "size": c.layers[0].size,
+            "camera": asdict(camera_of(config, plan)),
+            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection}
+
+
+def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
+    """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance:
+    ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
+    a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols). The shading is
+    linear in each channel's light, so a frame scales them by the run's Lighting.
+    Memory-mapped, read-only."""
+
+    def compute():
+        grove, flutter = _grove(config.canopy)
+        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        has_sun = plan.sun_window is not None
+        sun_point = np.asarray(plan.projection)
+        leaf_visibility = wood_visibility = None
+        if has_sun:
+            leaf_visibility, wood_visibility = foreground.sun_visibility(leaves, grove.wood, sun_point=sun_point)
+        direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
+        passes = foreground.tree_passes(
+            leaves, grove.wood, camera_of(config, plan), sun_direction=direction,
+            sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility)
+        return {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+
+    return store.get_or_compute("foreground", foreground_params(config, plan, cycle_frame), compute)
+
+
+def foreground_passes(config: Config, plan: RunPlan, cycle_frame: int, store: cache.Cache,
+                      light: Lighting | None = None):
+    """(F_sun, F_sky, alpha) of the config's foreground at ``cycle_frame`` [kcd/m^2], the
+    built-in trees lit by ``light`` (default: the run's reference Lighting); None without one."""
+    fg = config.foreground
+    if fg.model == "trees":
+        light = light or reference_lighting(config, plan)
+        item = foreground_item(config, plan, cycle_frame, store)
+        # light bounced off the ground reaches the trees' undersides as more diffuse light: half
+        # the ground's radiosity, its sun part following S with the sun pass
+        bounce = 0.5 * albedo_mipmap(config.ground).mean
+        sun_down = light.sun_irradiance * (light.sun_direction[2] if light.sun_direction is not None else 0.0)
+        sky = item["sky"] * (light.sky_irradiance * (1.0 + bounce)).astype(np.float32)
+        sun = item["sun"] * light.sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
+        return sky + sun, sky, item["alpha"]
+    if fg.model == "passes":
+        passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+        try:
+            foreground.check_passes_size(passes, camera_of(config, plan))
+        except ValueError as exc:
+            raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
+        return passes.sun, passes.sky, passes.alpha
+    return None
+
+
+@functools.lru_cache(maxsize=4)
+def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
+    """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image
+    covering ``albedo_size`` metres a side."""
+    if ground.albedo == "grass":
+        image, grid = albedos.grass_albedo(period=ground.albedo_size)
+    else:
+        image = io.read_image(ground.albedo)
+        image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
+        rows, cols = image.shape[:2]
+        grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
+    return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
+
+
+def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap, ...]:
+    """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
+    coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
+    (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
+    horizon)."""
+    rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
+    maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
+    raster, grid = rasters[-1]
+    if config.canopy.layout == "periodic":
+        period = config.canopy.layers[0].size
+        x0, y0, x1, y1 = grid.extent
+        if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
+            return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
+        value = raster.reshape(-1, 3).mean(axis=0)
+    else:
+        value = ground.unshadowed
+    return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """radiance : (rows, cols, 3) float32 scene-linear [kcd/m^2]; sun_fraction : S [1];
+    scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster."""
+
+    radiance: np.ndarray
+    sun_fraction: float
+    scene: Scene
+    exposure: float
+    ground: GroundResult
+
+
+def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = None,
+                 plan: RunPlan | None = None, workers: int | None = None) -> FrameResult:
+    """The finished frame at output ``frame`` (Max 1991, Fig. 10): the ground raster under the
+    frame's sky, resampled in perspective with the sky; the haze; the foreground passes of its
+    cycle frame blended by S and composited over them."""
+    workers = workers or default_workers()
+    plan = plan or plan_run(config)
+    store = store or cache.Cache(cache.cache_dir(None))
+    scene = scene_at(config, frame)
+    sky = load_sky(config.sky, scene)
+    ground = render_ground(config, frame=frame, store=store, plan=plan, workers=workers, sky=sky, outer=True)
+    view = camera_of(config, plan)
+    background, distance = camera.background(
+        view, irradiance=irradiance_maps(config, ground), albedo=albedo_mipmap(config.ground), sky=sky)
+    light = reference_lighting(config, plan)
+    sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
+    sky_scale = _sky_scale(sky, light)
+    atmosphere = None
+    if config.sky.haze > 0:
+        rays = camera.pixel_rays(view)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        transmittance, sky_haze, atmosphere = composite.aerial_perspective(
+            distance, rays, length=config.sky.haze,
+            sun_direction=light.sun_direction if light.sun_direction is not None else np.array([0.0, 0.0, 1.0]),
+            sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
+        background = transmittance[..., None] * background + np.float32(sky_scale) * sky_haze
+    passes = foreground_passes(config, plan, frame % config.canopy.cycle, store, light)
+    if passes is None:
+        empty = np.zeros_like(background)
+        passes = (empty, empty, empty[..., 0])
+    radiance = composite.composite_frame(
+        background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
+        sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
+    exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+    return FrameResult(radiance, sun_fraction, scene, exposure, ground)
+
+
+def _sky_scale(sky, light: Lighting) -> float:
+    """Skylight now over the reference skylight, by luminance: clouds and the moon dim it. [1]"""
+    reference = float(light.sky_irradiance @ REC709_LUMINANCE)
+    now = getattr(sky, "sky_irradiance", None)
+    if now is None or reference <= 0:
+        return 1.0
+    return float(np.asarray(now) @ REC709_LUMINANCE) / reference

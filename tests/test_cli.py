@@ -95,6 +95,7 @@ def test_layers_multiply(inputs):
 
 
 def set_key(config, dotted, value):
+    """``config`` with the key at ``dotted`` set to ``value`` (or deleted)."""
     node = config
     keys = dotted.split(".")
     for key in keys[:-1]:
@@ -130,6 +131,18 @@ BAD_CONFIGS = [
     ("hdri key with uniform", "sky.hdri", "sky.exr", "sky.hdri: only used with model: hdri"),
     ("size of zero", "canopy.size", [0, 4], "canopy.size: both sides must be above 0"),
     ("NaN height", "canopy.height", float("nan"), "canopy.height: must be a finite number"),
+    ("camera underground", "camera", {"position": [0, 0, -1]}, "camera.position: the camera must be above"),
+    ("look_at and pitch", "camera", {"look_at": [0, 5, 0], "pitch": -10}, "camera.look_at: give either"),
+    ("look_at the camera", "camera", {"position": [0, 0, 2], "look_at": [0, 0, 2]}, "camera.look_at: must differ"),
+    ("fov of 180", "camera", {"fov": 180}, "camera.fov: must be below 170"),
+    ("fractional resolution", "camera", {"resolution": [640.5, 360]}, "camera.resolution: must be two whole"),
+    ("misspelt display", "camera", {"display": "filmc"}, "camera.display: unknown value 'filmc'; valid: srgb, filmic"),
+    ("trees foreground with masks", "foreground", {"model": "trees"}, "foreground.model: 'trees' renders"),
+    ("passes files missing", "foreground", {"model": "passes", "sun": "no.exr", "sky": "no.exr",
+                                            "alpha": "no.exr"}, "foreground.sun: no such file"),
+    ("pass key without passes", "foreground", {"sun": "sky.exr"}, "foreground.sun: only used with model: passes"),
+    ("missing albedo image", "ground.albedo", "grass.png", "ground.albedo: no such file"),
+    ("negative haze", "sky.haze", -5, "sky.haze: must be at least 0"),
 ]
 
 
@@ -349,3 +362,52 @@ def test_ground_frame_outside_the_animation_is_refused(inputs, capsys):
     assert main(["ground", str(config), "--frame", "9", "-o", str(out / "g.exr")]) == 2
     assert "--frame 9 is outside 0..3 (animation.frames is 4)" in capsys.readouterr().err
     assert list(out.iterdir()) == []
+
+
+def small_camera(config):
+    config["camera"] = {"position": [0.0, -6.0, 1.7], "look_at": [0.0, 0.0, 1.0], "resolution": [64, 36]}
+    return config
+
+
+def test_frame_writes_a_png_and_a_scene_linear_exr_with_metadata(inputs, capsys):
+    folder, out = inputs
+    config = small_camera(base_config())
+    config["sky"] = {"model": "procedural", "sun": {"elevation": 40.0, "azimuth": 120.0}}
+    path = write_config(folder, config)
+    assert main(["frame", str(path), "--frame", "0", "-o", str(out / "f.png")]) == 0
+    assert main(["frame", str(path), "--frame", "0", "-o", str(out / "f.exr")]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["f.exr", "f.png"]
+    png, exr = io.read_image(out / "f.png"), io.read_image(out / "f.exr")
+    assert png.shape == (36, 64, 3) and exr.shape == (36, 64, 3)
+    assert 0.05 < png.mean() < 0.95
+    names = ["sunshade:config_hash", "sunshade:frame", "sunshade:sun_fraction", "sunshade:sun_azimuth_elevation"]
+    attributes = io.read_attributes(out / "f.exr", names)
+    assert attributes["sunshade:frame"] == 0 and attributes["sunshade:sun_fraction"] == pytest.approx(1.0)
+    assert tuple(attributes["sunshade:sun_azimuth_elevation"]) == pytest.approx((120.0, 40.0))
+    assert len(attributes["sunshade:config_hash"]) == 16
+    assert "S = 1.0000" in capsys.readouterr().out
+
+
+def test_frame_with_imported_passes_of_the_wrong_size_names_the_file(inputs, capsys):
+    folder, out = inputs
+    for name in ("sun", "sky", "alpha"):
+        io.write_exr(folder / f"fg_{name}.exr", np.ones((10, 10, 3), np.float32))
+    config = small_camera(base_config())
+    config["foreground"] = {"model": "passes", "sun": "fg_sun.exr", "sky": "fg_sky.exr", "alpha": "fg_alpha.exr"}
+    assert main(["frame", str(write_config(folder, config)), "-o", str(out / "f.png")]) == 2
+    err = capsys.readouterr().err
+    assert "fg_sun.exr" in err and "10 x 10" in err and "64 x 36" in err
+    assert list(out.iterdir()) == []
+
+
+def test_frame_with_imported_passes_composites_them(inputs):
+    """Alpha 1 and S = 0 under a uniform sky (no sun): the frame is the sky pass."""
+    folder, out = inputs
+    sky_pass = np.random.default_rng(2).random((36, 64, 3)).astype(np.float32)
+    io.write_exr(folder / "fg_sun.exr", 5 * sky_pass)
+    io.write_exr(folder / "fg_sky.exr", sky_pass)
+    io.write_exr(folder / "fg_alpha.exr", np.ones((36, 64, 1), np.float32))
+    config = small_camera(base_config())
+    config["foreground"] = {"model": "passes", "sun": "fg_sun.exr", "sky": "fg_sky.exr", "alpha": "fg_alpha.exr"}
+    assert main(["frame", str(write_config(folder, config)), "-o", str(out / "f.exr")]) == 0
+    np.testing.assert_allclose(io.read_image(out / "f.exr"), sky_pass, rtol=1e-6)

@@ -60,16 +60,20 @@ def run_cycle(config, store):
 
 
 def test_cycle_phase_is_computed_once_and_again_only_for_what_changes(tmp_path):
+    """3 cycle frames: one layer's spectra and the trees' foreground passes each."""
     store = cache.Cache(tmp_path / "cache")
     base = load(tmp_path, tiny_grove())
-    assert run_cycle(base, store) == 3
+    assert run_cycle(base, store) == 6
     assert run_cycle(base, store) == 0
-    # the sky's own settings do not touch the canopy's products
-    assert run_cycle(load(tmp_path, tiny_grove(**{"sky.turbidity": 5.0})), store) == 0
-    for change in ({"canopy.trees.leaves_per_tree": 401}, {"canopy.trees.seed": 4},
-                   {"ground.pixel": 0.125}, {"sky.sun": {"elevation": 50.0, "azimuth": 150.0}},
-                   {"canopy.flutter": {"cycle": 3, "swing": 5.0}}):
-        assert run_cycle(load(tmp_path, tiny_grove(**change)), store) == 3, change
+    # the sky's own settings and the exposure touch none of the canopy's products (the passes
+    # are stored per unit irradiance)
+    for change in ({"sky.turbidity": 5.0}, {"camera": {"exposure": 1.0}}):
+        assert run_cycle(load(tmp_path, tiny_grove(**change)), store) == 0, change
+    for change, expected in (({"canopy.trees.leaves_per_tree": 401}, 6), ({"canopy.trees.seed": 4}, 6),
+                             ({"ground.pixel": 0.125}, 3), ({"camera": {"fov": 40.0}}, 3),
+                             ({"sky.sun": {"elevation": 50.0, "azimuth": 150.0}}, 6),
+                             ({"canopy.flutter": {"cycle": 3, "swing": 5.0}}, 6)):
+        assert run_cycle(load(tmp_path, tiny_grove(**change)), store) == expected, change
 
 
 def test_a_truncated_cycle_item_is_recomputed_not_used(tmp_path):
@@ -117,3 +121,45 @@ def test_scene_moves_the_moon_across_the_frames(tmp_path):
     assert offset(last) == pytest.approx((0.6, 0.0), abs=1e-9)
     assert offset(middle)[0] == pytest.approx(-0.6 + 1.2 * 3 / 5, abs=1e-9)
     assert last.time == pytest.approx(5 / 24)
+
+
+@pytest.mark.parametrize("layout", ["isolated", "periodic"])
+def test_outer_raster_with_a_coarse_sun_matches_the_fine_one(tmp_path, layout):
+    """Beyond a small sun window a camera sees the coarse raster with the sun at the coarse
+    cell: on the sun window its 0.4 m block means agree with the two-scale raster, and outside
+    it the grove's shadow is there."""
+    changes = {"ground.sun_window": [-1.2, -1.2, 1.2, 1.2]}
+    if layout == "periodic":
+        changes.update({"canopy.layout": "periodic", "canopy.size": [3.0, 3.0]})
+    config = load(tmp_path, tiny_grove(**changes))
+    result = render.render_ground(config, frame=0, store=cache.Cache(tmp_path / "c"), outer=True)
+    outer, grid = result.outer
+    assert grid.shape == (60, 60) and result.grid.pixel == 0.04
+    from pipeline.shadow import resample_bilinear
+    on_fine = np.moveaxis(resample_bilinear(np.moveaxis(outer, -1, 0), grid, result.grid), 0, -1)
+    blocks = lambda a: a[:60, :60].reshape(6, 10, 6, 10, 3).mean(axis=(1, 3))  # noqa: E731
+    rel = np.abs(blocks(on_fine) - blocks(result.irradiance)) / blocks(result.irradiance)
+    assert rel.mean() < 0.02 and rel.max() < 0.15, (rel.mean(), rel.max())
+    assert outer.min() < 0.6 * result.unshadowed.min()
+    whole = render.render_ground(load(tmp_path, tiny_grove(**{**changes, "ground.sun_window": [-3, -3, 3, 3]})),
+                                 frame=0, store=cache.Cache(tmp_path / "c"), outer=True)
+    assert whole.outer is None  # the sun window covers the window: nothing to add
+
+
+def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
+    """No foreground, no haze, a white albedo: a camera straight above the sun window whose
+    pixels fall on the raster's pixels shows radiance E / pi of the ground raster, north up."""
+    from pipeline import io
+
+    io.write_exr(tmp_path / "white.exr", np.ones((4, 4, 3), np.float32))
+    height = 2.0
+    fov = float(np.degrees(2 * np.arctan(1.0 / height)))  # 2 m across at 2 m: one 0.04 m texel per pixel
+    config = load(tmp_path, tiny_grove(**{
+        "ground.albedo": "white.exr", "sky.haze": 0.0, "foreground": {"model": "none"},
+        "camera": {"position": [0.0, 0.0, height], "yaw": 0.0, "pitch": -90.0, "fov": fov,
+                   "resolution": [50, 50]}}))
+    result = render.render_frame(config, frame=0, store=cache.Cache(tmp_path / "c"))
+    ground = result.ground.irradiance
+    assert ground.shape == (50, 50, 3)
+    np.testing.assert_allclose(result.radiance, ground / np.pi, rtol=2e-3)
+    assert result.sun_fraction == pytest.approx(1.0)

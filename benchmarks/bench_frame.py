@@ -1,0 +1,139 @@
+"""The frame phase beyond the ground raster at 1280 x 720: resampling ground and sky in the
+camera, haze and compositing, writing; and the foreground passes per cycle frame. Each beside
+a baseline measured in the same run.
+
+    python benchmarks/bench_frame.py [--frames 4] [--threads 2]
+
+Default grove (bench_cycle.CONFIG) with drifting clouds, the camera placed by default, 1280 x
+720. Baselines: one bilinear lookup per pixel of a 2048^2 RGB raster with
+scipy.ndimage.map_coordinates (order 1, no filtering), and writing the same pixels as raw
+.npy bytes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy import ndimage
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench_cycle import CONFIG  # noqa: E402
+from bench_sun import median_seconds  # noqa: E402
+
+from pipeline import cache, camera, canopy, composite, foreground, io, render  # noqa: E402
+from pipeline.cli import frame_attributes  # noqa: E402
+from pipeline.config import load_config  # noqa: E402
+
+
+def bilinear_baseline(view: camera.Camera, repeats=3) -> float:
+    """Best time of one unfiltered bilinear lookup per pixel in a 2048^2 RGB raster. [s]"""
+    raster = np.random.default_rng(0).random((3, 2048, 2048), dtype=np.float32)
+    v, u = np.mgrid[0:view.height, 0:view.width]
+    coords = np.stack([v * 2048.0 / view.height, u * 2048.0 / view.width]).astype(np.float32)
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for channel in raster:
+            ndimage.map_coordinates(channel, coords, order=1)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=4)
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="sunshade-bench-"))
+    try:
+        config_dict = dict(CONFIG)
+        config_dict["sky"] = {**CONFIG["sky"], "clouds": {"cover": 0.4}}
+        config_dict["canopy"] = {**CONFIG["canopy"], "flutter": {"cycle": args.frames}}
+        config_dict["animation"] = {"frames": args.frames}
+        path = work / "grove.yaml"
+        path.write_text(yaml.safe_dump(config_dict))
+        config = load_config(path)
+        plan = render.plan_run(config)
+        store = cache.Cache(work / "cache")
+        render.cycle_phase(config, plan, store, jobs=2, workers=1)
+        view = render.camera_of(config, plan)
+        light = render.reference_lighting(config, plan)
+        print(f"camera {view.width} x {view.height}; ground raster {plan.sun_window.shape} at "
+              f"{plan.sun_window.pixel} m, coarse {plan.window.shape} at {plan.window.pixel} m")
+
+        skies = [render.load_sky(config.sky, render.scene_at(config, f)) for f in range(args.frames)]
+        grounds = [render.render_ground(config, frame=f, store=store, plan=plan, workers=args.threads,
+                                        sky=skies[f], outer=True) for f in range(args.frames)]
+        albedo = render.albedo_mipmap(config.ground)
+        backgrounds = {}
+
+        def resample(i):
+            backgrounds[i] = camera.background(view, irradiance=render.irradiance_maps(config, grounds[i]),
+                                               albedo=albedo, sky=skies[i])
+
+        frames = {}
+
+        def blend(i):
+            background, distance = backgrounds[i]
+            rays = camera.pixel_rays(view)
+            rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+            t, sky_haze, atmosphere = composite.aerial_perspective(
+                distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
+                sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
+            sun, sky, alpha = render.foreground_passes(config, plan, i, store, light)
+            frames[i] = composite.composite_frame(t[..., None] * background + sky_haze, sun_pass=sun,
+                                                  sky_pass=sky, alpha=alpha, sun_fraction=0.7,
+                                                  atmosphere=atmosphere)
+
+        result = render.render_frame(config, frame=0, store=store, plan=plan, workers=args.threads)
+
+        def write(i):
+            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result), half=True)
+            io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
+
+        def write_raw(i):
+            np.save(work / f"raw.{i}.npy", frames[i])
+
+        def ground(i):
+            render.render_ground(config, frame=i, store=store, plan=plan, workers=args.threads, sky=skies[i],
+                                 outer=True)
+
+        def whole(i):
+            render.render_frame(config, frame=i, store=store, plan=plan, workers=args.threads)
+
+        grove, flutter = render._grove(config.canopy)
+
+        def passes(i):
+            leaves = canopy.leaves_at(grove, flutter, i)
+            leaf_v, wood_v = foreground.sun_visibility(leaves, grove.wood, sun_point=np.array(plan.projection))
+            foreground.tree_passes(leaves, grove.wood, view, sun_direction=light.sun_direction,
+                                   sun_irradiance=np.ones(3), sky_irradiance=np.ones(3),
+                                   leaf_sun_visibility=leaf_v, wood_sun_visibility=wood_v)
+
+        n = args.frames
+        t_resample, t_blend, t_write = (median_seconds(f, n) for f in (resample, blend, write))
+        t_raw, t_ground, t_whole, t_passes = (median_seconds(f, n) for f in (write_raw, ground, whole, passes))
+        base = bilinear_baseline(view)
+        print(f"resampling ground and sky: {t_resample * 1e3:.0f} ms; unfiltered bilinear lookup "
+              f"of a 2048^2 RGB raster: {base * 1e3:.0f} ms; ratio {t_resample / base:.1f}")
+        print(f"haze and compositing: {t_blend * 1e3:.0f} ms")
+        print(f"writing half EXR + PNG: {t_write * 1e3:.0f} ms; raw .npy of the same pixels: "
+              f"{t_raw * 1e3:.1f} ms; ratio {t_write / t_raw:.0f}")
+        print(f"ground raster: {t_ground * 1e3:.0f} ms; whole frame (no writing): {t_whole * 1e3:.0f} ms "
+              f"(median of {n} frames, {args.threads} FFT threads)")
+        print(f"foreground passes per cycle frame (sun visibility + passes, "
+              f"{len(grove.leaves.center)} leaves): {t_passes:.2f} s")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
