@@ -153,7 +153,7 @@ class SkyConfig:
     """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
     Procedural: turbidity; the sun by angles or by site and time; moon (with angles; implied by
-    site and time); clouds. haze : extinction length of the air the camera looks through,
+    site and time); clouds; skylight (factor on the clear sky, 0 for the sun alone). haze : extinction length of the air the camera looks through,
     0 for none. [m]"""
 
     model: str
@@ -167,6 +167,7 @@ class SkyConfig:
     moon: MoonConfig | None = None
     clouds: CloudsConfig | None = None
     haze: float = 3000.0
+    skylight: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -580,7 +581,7 @@ def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyCo
     model = s.choice("model", tuple(SKY_MODELS), "procedural")
     owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "turbidity": "procedural",
               "sun": "procedural", "site": "procedural", "time": "procedural", "moon": "procedural",
-              "clouds": "procedural"}
+              "clouds": "procedural", "skylight": "procedural"}
     for key, owner in owners.items():
         if s.has(key) and model != owner:
             s.fail(key, f"only used with model: {owner} (model is {model})")
@@ -649,7 +650,9 @@ def _parse_procedural(s: _Section) -> dict:
             seed=cs.integer("seed", 1, at_least=0),
         )
         cs.done()
-    return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds}
+    skylight = s.number("skylight", 1.0, at_least=0.0, below=100.0)
+    return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds,
+            "skylight": skylight}
 
 
 def _parse_site(s: _Section, t: _Section) -> SiteConfig:

@@ -59,7 +59,7 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
             clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
                                 wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
         return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=scene.sun, moon=scene.moon,
-                                        clouds=clouds, time=scene.time)
+                                        clouds=clouds, time=scene.time, skylight=sky.skylight)
     return _load_hdri(sky)
 
 
@@ -500,7 +500,7 @@ def reference_lighting(config: Config, plan: RunPlan) -> Lighting:
         return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
                         hdri.total_irradiance())
     middle = scene_at(config, config.animation.frames // 2).sun
-    clear = sky_models.ProceduralSky(turbidity=sky.turbidity, sun=middle, moon=None, clouds=None)
+    clear = sky_models.ProceduralSky(turbidity=sky.turbidity, sun=middle, skylight=sky.skylight)
     return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
 
 

@@ -531,6 +531,8 @@ class ProceduralSky:
     moon : MoonDisc or None.
     clouds : an object with the clouds protocol (module comment above), or None.
     time : passed to the clouds. [s]
+    skylight : factor on the clear sky's radiance; 0 leaves the sun alone, as in the paper's
+        Fig. 11. [1]
 
     Radiance in kcd/m^2, irradiance in klx (linear Rec.709 channels). The moon cuts the sun and
     dims the clear sky and the clouds' glow by the same (limb-weighted) factor, since skylight is
@@ -542,6 +544,7 @@ class ProceduralSky:
     moon: MoonDisc | None = None
     clouds: object | None = None
     time: float = 0.0
+    skylight: float = 1.0
 
     def __post_init__(self):
         lo, hi = TURBIDITY_RANGE
@@ -625,8 +628,8 @@ class ProceduralSky:
     # --- the sky ------------------------------------------------------------------------------
     @cached_property
     def _sky_dimming(self) -> np.ndarray:
-        """Eclipse dimming of skylight (3,): the sun's visible fraction. [1]"""
-        return self.moon_visible
+        """Factor on the clear sky (3,): the sun's visible fraction (eclipse), times skylight. [1]"""
+        return self.moon_visible * self.skylight
 
     def clear_radiance(self, s) -> np.ndarray:
         """Clear-sky radiance at sky-plane points s (..., 2) [tan], eclipse-dimmed, no sun disc. [kcd/m^2]"""

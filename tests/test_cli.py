@@ -143,6 +143,7 @@ BAD_CONFIGS = [
     ("pass key without passes", "foreground", {"sun": "sky.exr"}, "foreground.sun: only used with model: passes"),
     ("missing albedo image", "ground.albedo", "grass.png", "ground.albedo: no such file"),
     ("negative haze", "sky.haze", -5, "sky.haze: must be at least 0"),
+    ("skylight with uniform", "sky.skylight", 0.5, "sky.skylight: only used with model: procedural"),
 ]
 
 

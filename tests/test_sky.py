@@ -450,3 +450,16 @@ def test_cut_sun_leaves_skies_without_a_sun_alone():
         sun_kernel(EquirectSky(np.ones((height, width, 3), np.float32)), 1e-3)
     with pytest.raises(ValueError, match="together"):
         EquirectSky(np.ones((height, width, 3), np.float32), sun=SunDisc(0.0, 0.5))
+
+
+def test_skylight_scales_the_blue_sky_and_leaves_the_sun():
+    """skylight 0 is the sun alone (the paper's Fig. 11); 0.5 halves the clear sky."""
+    from dataclasses import replace
+
+    sky = sun_sky(45.0)
+    dark, half = replace(sky, skylight=0.0), replace(sky, skylight=0.5)
+    s = np.array([[0.3, -0.2], [1.5, 0.4]])
+    assert not dark.radiance(s).any() and not dark.sky_irradiance.any()
+    np.testing.assert_allclose(half.radiance(s), 0.5 * sky.radiance(s), rtol=1e-12)
+    np.testing.assert_allclose(dark.sun_irradiance(), sky.sun_irradiance(), rtol=1e-12)
+    assert dark.sun_fraction() == sky.sun_fraction() == 1.0
