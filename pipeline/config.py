@@ -435,7 +435,7 @@ def _parse(root: _Section, path: Path) -> Config:
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)
     sky = _parse_sky(root.section("sky"), canopy, ground)
-    camera = _parse_camera(root.section("camera"), ground)
+    camera = _parse_camera(root.section("camera"))
     foreground = _parse_foreground(root.section("foreground"), canopy)
     root.done()
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground)
@@ -680,7 +680,7 @@ MAX_IMAGE_PIXELS = 64_000_000
 FOREGROUNDS = ("trees", "passes", "none")
 
 
-def _parse_camera(s: _Section, ground: GroundConfig) -> CameraConfig:
+def _parse_camera(s: _Section) -> CameraConfig:
     """The camera; what it leaves out is placed by ``render.camera_of``."""
     position = s.numbers("position", 3) if s.has("position") else None
     if position is not None and position[2] <= 0:
