@@ -29,7 +29,7 @@ from bench_cycle import CONFIG  # noqa: E402
 from bench_sun import median_seconds  # noqa: E402
 
 from pipeline import cache, camera, canopy, composite, foreground, io, render  # noqa: E402
-from pipeline.cli import frame_attributes  # noqa: E402
+from pipeline.run import frame_attributes  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 
@@ -96,7 +96,7 @@ def main() -> None:
         result = render.render_frame(config, frame=0, store=store, plan=plan, workers=args.threads)
 
         def write(i):
-            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result), half=True)
+            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()), half=True)
             io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
 
         def write_raw(i):

@@ -18,6 +18,7 @@ from . import __version__, io
 from .cache import Cache, cache_dir, parse_size
 from .composite import display_ground, display_sky
 from .config import ConfigError, load_config
+from .run import RunError
 
 EXIT_BAD_INPUT = 2
 
@@ -31,7 +32,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (ConfigError, io.ImageError, BadInput) as exc:
+    except (ConfigError, io.ImageError, BadInput, RunError) as exc:
         print(f"sunshade: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except MemoryError:
@@ -51,6 +52,40 @@ def _parser():
     )
     parser.add_argument("--version", action="version", version=f"sunshade {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    render = commands.add_parser(
+        "render",
+        help="render a config's animation: frames, video and run.json, resumably",
+        description="Render the animation of a config into output.folder (default "
+        "renders/NAME): the cycle products (cached), then the frames NAME.0000.exr and .png, "
+        "then the video once every frame is done, and run.json. Run it again to resume: done "
+        "frames (their files complete and made by the same config) are skipped.",
+    )
+    render.add_argument("config", help="YAML config file")
+    render.add_argument("--frames", default=None, help="frames to render, e.g. 0-47,100 "
+                        "(default: all)")
+    render.add_argument("--jobs", type=int, default=None, help="frames rendered at once, each in "
+                        "its own process (default: render.jobs, else one per core)")
+    render.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                        help="run the tasks on this dask.distributed scheduler (the cache and "
+                        "the output folder must be on a file system every worker shares)")
+    render.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
+    render.add_argument("--output", default=None, help="output folder (default: output.folder)")
+    render.add_argument("--force", action="store_true", help="render the frames and the video "
+                        "again even if done")
+    render.add_argument("--preview", action="store_true", help="small and fast, for a first "
+                        "look: a quarter of the resolution, coarser rasters, in FOLDER/preview")
+    render.set_defaults(run=_run_render)
+
+    check = commands.add_parser(
+        "check",
+        help="check a config and every file it names, and do nothing else",
+        description="Read and check a config and every input file it names (masks, HDRI, "
+        "albedo, foreground passes). Exit code 0 if a render would start, 2 with one line "
+        "naming the key or file if not.",
+    )
+    check.add_argument("config", help="YAML config file")
+    check.set_defaults(run=_run_check)
 
     ground = commands.add_parser(
         "ground",
@@ -138,6 +173,80 @@ def _checked_output(path: str, suffix: str) -> Path:
     return out
 
 
+def _run_check(args) -> int:
+    from .render import check_inputs
+
+    config = load_config(args.config)
+    plan = check_inputs(config)
+    width, height = config.camera.resolution
+    print(f"{args.config}: ok: {config.animation.frames} frames at {config.animation.fps:g} fps, "
+          f"{width} x {height} px, a cycle of {config.canopy.cycle}, "
+          f"{len(plan.layers)} canopy layer{'s' if len(plan.layers) > 1 else ''}; "
+          f"config hash {config.digest()}")
+    return 0
+
+
+def _run_render(args) -> int:
+    from dataclasses import replace
+
+    from .config import preview
+    from .run import check_folder, parse_frames, render_run
+
+    if args.jobs is not None and args.jobs < 1:
+        raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
+    config = load_config(args.config)
+    if args.output is not None:
+        config = replace(config, output=replace(config.output, folder=Path(args.output).absolute()))
+    if args.preview:
+        config = preview(config)
+    frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
+    check_folder(config.output.folder)
+    summary = render_run(config, frames=frames, store=Cache(cache_dir(args.cache).absolute()),
+                         jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                         progress=_Progress(sys.stderr))
+    made = f"; video {summary.video}" if summary.video else ""
+    print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
+          f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
+    return 0
+
+
+class _Progress:
+    """A run's progress on a stream: on a terminal one line redrawn in place (stage, a bar,
+    count, time left), else a plain log line every 10 s and at the end of each stage."""
+
+    LABELS = {"cycle": "cycle products", "frames": "frames", "video": "video"}
+
+    def __init__(self, stream):
+        self.stream, self.tty = stream, stream.isatty()
+        self.stage = None
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        now = time.monotonic()
+        if stage != self.stage:
+            self.stage, self.started, self.first, self.logged = stage, now, done, None
+        if not total or (done == self.first and done == total):
+            return
+        rate = (done - self.first) / max(now - self.started, 1e-9)
+        left = f", {_clock((total - done) / rate)} left" if 0 < done < total and rate > 0 else ""
+        label = self.LABELS.get(stage, stage)
+        if self.tty:
+            filled = int(24 * done / total)
+            end = "\n" if done == total else ""
+            self.stream.write(f"\r{label:<15} [{'#' * filled}{'.' * (24 - filled)}] "
+                              f"{done}/{total}{left}\033[K{end}")
+            self.stream.flush()
+        elif done == total or self.logged is None or now - self.logged >= 10.0:
+            self.logged = now
+            self.stream.write(f"sunshade: {label} {done}/{total}{left}\n")
+            self.stream.flush()
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
+        else f"{seconds // 60}:{seconds % 60:02d}"
+
+
 def _run_ground(args) -> int:
     from .render import render_ground
 
@@ -184,6 +293,7 @@ def _run_ground(args) -> int:
 def _run_frame(args) -> int:
     from .composite import display
     from .render import render_frame
+    from .run import frame_attributes
 
     suffix = Path(args.output).suffix.lower()
     output = _checked_output(args.output, suffix if suffix in (".png", ".exr") else ".png")
@@ -199,33 +309,14 @@ def _run_frame(args) -> int:
     if not np.all(np.isfinite(result.radiance)):
         raise BadInput(f"{args.config}: the frame overflowed; lower the sky's radiance")
     if suffix == ".exr":
-        io.write_exr(output, result.radiance, frame_attributes(config, result), half=args.half)
+        io.write_exr(output, result.radiance, frame_attributes(config, result, config.digest()),
+                     half=args.half)
     else:
         io.write_png(output, display(result.radiance, exposure=result.exposure, transform=config.camera.display))
     rows, cols = result.radiance.shape[:2]
     print(f"sunshade: frame {args.frame}, {cols} x {rows} px, S = {result.sun_fraction:.4f}, "
           f"in {elapsed:.2f} s; wrote {output}")
     return 0
-
-
-def frame_attributes(config, result) -> dict:
-    """EXR metadata of a finished frame: what made it and the sun of that moment."""
-    attributes = {
-        "sunshade:config_hash": config.digest(),
-        "sunshade:version": __version__,
-        "sunshade:frame": int(result.scene.frame),
-        "sunshade:sun_fraction": float(result.sun_fraction),
-        "sunshade:exposure": float(result.exposure),
-    }
-    if result.scene.sun is not None:
-        attributes["sunshade:sun_azimuth_elevation"] = (np.degrees(result.scene.sun.azimuth),
-                                                        np.degrees(result.scene.sun.elevation))
-    if result.scene.moon is not None:
-        attributes["sunshade:moon_azimuth_elevation"] = (np.degrees(result.scene.moon.azimuth),
-                                                         np.degrees(result.scene.moon.elevation))
-    if result.scene.when is not None:
-        attributes["sunshade:time_utc"] = result.scene.when.isoformat()
-    return attributes
 
 
 def _check_frame(frame: int, count: int, flag: str, key: str) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -221,6 +221,35 @@ class AnimationConfig:
     fps: float
 
 
+VIDEOS = ("mp4", "gif", "none")
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """Where a run goes: frames ``name.0000.exr`` and ``.png`` and the video ``name.mp4`` in
+    ``folder`` (relative to the current folder; default ``renders/NAME``); video : a name in
+    VIDEOS; half : EXR frames in half floats (else float32)."""
+
+    name: str
+    folder: Path
+    video: str = "mp4"
+    half: bool = True
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """jobs : processes rendering at once (None: one per core); sun_cells : cells across the
+    sun disc's diameter on its fine grid, when ground.sun_pixel does not set it (16 shows
+    crescents)."""
+
+    jobs: int | None = None
+    sun_cells: int = 16
+
+
+_NOT_IN_DIGEST = {"output": ("name", "folder", "video"), "render": ("jobs",)}
+"""Values that change where or how fast frames are made, not their bytes."""
+
+
 @dataclass(frozen=True)
 class Config:
     path: Path
@@ -230,11 +259,17 @@ class Config:
     animation: AnimationConfig
     camera: CameraConfig
     foreground: ForegroundConfig
+    output: OutputConfig
+    render: RenderConfig = RenderConfig()
 
     def digest(self) -> str:
-        """Hash of every value and every input file's bytes, with the package version (16 hex)."""
+        """Hash of every value that shapes a frame's bytes and of every input file's bytes,
+        with the package version (16 hex)."""
         values = asdict(self)
         values.pop("path")
+        for section, names in _NOT_IN_DIGEST.items():
+            for name in names:
+                values[section].pop(name)
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
@@ -245,6 +280,39 @@ class Config:
         for name in files:
             h.update(Path(name).read_bytes())
         return h.hexdigest()[:16]
+
+
+PREVIEW_SCALE = 4
+"""A preview's camera has this many times fewer pixels across, its ground pixels are this many
+times larger."""
+PREVIEW_SUN_CELLS = 6
+
+
+def preview(config: Config) -> Config:
+    """The config made small and fast for a first look: a quarter of the camera's resolution,
+    ground pixels four times larger (less where a periodic tile must stay a whole number of
+    them), the sun disc 6 cells across (imported foreground passes keep the camera's
+    resolution), the run in the ``preview`` folder inside the output
+    folder. Everything else, the canopy and the sky included, is kept."""
+    ground = config.ground
+    factor = PREVIEW_SCALE
+    if config.canopy.layout == "periodic":
+        sides = [side / ground.pixel for layer in config.canopy.layers for side in layer.size]
+        factor = next(f for f in range(PREVIEW_SCALE, 0, -1)
+                      if all(abs(n / f - round(n / f)) < 1e-6 * n for n in sides))
+    pixel = ground.pixel * factor
+    sun_pixel = None
+    if ground.sun_pixel is not None:
+        sun_pixel = min(ground.sun_pixel * 16 / PREVIEW_SUN_CELLS, pixel)
+    width, height = config.camera.resolution
+    if config.foreground.model != "passes":  # imported passes keep their size
+        width, height = max(2, width // PREVIEW_SCALE), max(2, height // PREVIEW_SCALE)
+    return replace(
+        config,
+        ground=replace(ground, pixel=pixel, sun_pixel=sun_pixel),
+        camera=replace(config.camera, resolution=(width, height)),
+        render=replace(config.render, sun_cells=PREVIEW_SUN_CELLS),
+        output=replace(config.output, folder=config.output.folder / "preview"))
 
 
 def load_config(path) -> Config:
@@ -437,8 +505,34 @@ def _parse(root: _Section, path: Path) -> Config:
     sky = _parse_sky(root.section("sky"), canopy, ground)
     camera = _parse_camera(root.section("camera"))
     foreground = _parse_foreground(root.section("foreground"), canopy)
+    output = _parse_output(root.section("output"), path)
+    render = _parse_render(root.section("render"))
     root.done()
-    return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground)
+    return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render)
+
+
+def _parse_output(s: _Section, path: Path) -> OutputConfig:
+    name = s.raw("name", path.stem)
+    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
+        s.fail("name", f"must be a name of letters, digits, - and _ (got {name!r})")
+    folder = s.raw("folder", f"renders/{name}")
+    if not isinstance(folder, str) or not folder:
+        s.fail("folder", f"must be a folder name, not {_kind(folder)}")
+    video = s.choice("video", VIDEOS, "mp4")
+    half = s.raw("half", True)
+    if not isinstance(half, bool):
+        s.fail("half", f"must be true or false, not {_kind(half)}")
+    s.done()
+    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half)
+
+
+def _parse_render(s: _Section) -> RenderConfig:
+    jobs = s.integer("jobs", at_least=1) if s.has("jobs") else None
+    render = RenderConfig(jobs, s.integer("sun_cells", 16, at_least=2))
+    if render.sun_cells > 64:
+        s.fail("sun_cells", f"must be at most 64 (got {render.sun_cells})")
+    s.done()
+    return render
 
 
 def _parse_animation(s: _Section) -> AnimationConfig:

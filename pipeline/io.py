@@ -64,11 +64,13 @@ def read_attributes(path, names) -> dict:
 
 def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False) -> None:
     """Write (rows, cols, channels) scene-linear pixels as an EXR (float32 or half), ZIP-compressed,
-    with ``attributes`` (str, int, float, or a tuple of floats) in its header."""
+    with ``attributes`` (str, int, float, or a tuple of floats) in its header. No time stamp
+    is written, so the same pixels and attributes always give the same bytes."""
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     rows, cols, channels = pixels.shape
     spec = oiio.ImageSpec(cols, rows, channels, "half" if half else "float")
     spec.attribute("compression", "zip")
+    spec.attribute("DateTime", "")  # else OpenEXR's capDate holds the time of writing
     for name, value in (attributes or {}).items():
         if isinstance(value, (tuple, list)):
             spec.attribute(name, oiio.TypeDesc(f"float[{len(value)}]"), tuple(float(v) for v in value))
@@ -77,8 +79,9 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
     _write_atomic(path, spec, pixels)
 
 
-def write_png(path, pixels: np.ndarray) -> None:
-    """Write display-referred pixels in [0, 1] (rows, cols, channels) as an 8-bit PNG.
+def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
+    """Write display-referred pixels in [0, 1] (rows, cols, channels) as an 8-bit PNG, with
+    ``attributes`` (str or int) as text chunks.
 
     A fixed-seed dither of one code value breaks the banding of smooth gradients; the same
     pixels always give the same bytes.
@@ -90,6 +93,8 @@ def write_png(path, pixels: np.ndarray) -> None:
     data = np.ascontiguousarray(np.clip(codes, 0, 255).astype(np.uint8))
     rows, cols, channels = data.shape
     spec = oiio.ImageSpec(cols, rows, channels, "uint8")
+    for name, value in (attributes or {}).items():
+        spec.attribute(name, value)
     _write_atomic(path, spec, data)
 
 

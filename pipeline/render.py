@@ -10,8 +10,10 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import time
 from dataclasses import asdict, dataclass
 from datetime import datetime
+from pathlib import Path
 
 import joblib
 import numpy as np
@@ -76,10 +78,6 @@ def _load_hdri(sky: SkyConfig) -> EquirectSky:
     if image.max() > MAX_RADIANCE:
         raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
     return sky_models.cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
-
-
-SUN_CELLS = 16
-"""Cells across the sun disc's diameter on the fine sky grid, by default (crescents need 16)."""
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
@@ -179,6 +177,26 @@ class RunPlan:
     layers: tuple[LayerPlan, ...]
 
 
+def check_inputs(config: Config) -> RunPlan:
+    """Read every input file of a config and check it (masks, HDRI, albedo image, foreground
+    passes and their size), then plan the run: what a run would stumble on, found before any
+    work starts. Raises io.ImageError naming the file."""
+    for layer in config.canopy.layers:
+        for frame in range(len(layer.mask)):
+            load_mask(layer, frame)
+    if config.sky.model == "hdri":
+        _load_hdri(config.sky)
+    if isinstance(config.ground.albedo, Path):
+        image = albedo_mipmap(config.ground).level(0)
+        if not np.all(np.isfinite(image)) or image.min() < 0:
+            raise io.ImageError(config.ground.albedo, "albedo must be finite and not negative")
+    plan = plan_run(config)
+    if config.foreground.model == "passes":
+        for cycle_frame in range(config.canopy.cycle):
+            _imported_passes(config, plan, cycle_frame)
+    return plan
+
+
 def plan_run(config: Config) -> RunPlan:
     """The grids and correlation plans of a run, from the config alone (an HDRI sky is read
     for its sun; no mask image is read)."""
@@ -219,14 +237,14 @@ def _sun_reach(sun) -> float:
 
 def _sun_window(config: Config, scenes, lowest: float) -> Grid:
     """The fine ground grid of the sun: ``ground.sun_pixel`` or a pixel small enough for the
-    sun disc to span SUN_CELLS cells under the lowest canopy plane, unless the window would then
+    sun disc to span render.sun_cells cells under the lowest canopy plane, unless the window would then
     pass MAX_SUN_PIXELS (the pixel grows) or the pixel would pass ground.pixel."""
     ground = config.ground
     window = ground.sun_window or ground.window
     pixel = ground.sun_pixel
     if pixel is None:
         radius = min(sc.sun.angular_radius for sc in scenes)
-        pixel = lowest * 2 * np.tan(radius) / SUN_CELLS
+        pixel = lowest * 2 * np.tan(radius) / config.render.sun_cells
         area = (window[2] - window[0]) * (window[3] - window[1])
         pixel = min(max(pixel, np.sqrt(area / MAX_SUN_PIXELS)), ground.pixel)
     return Grid.from_window(window, pixel)
@@ -329,15 +347,16 @@ def cycle_item(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int
 
 
 def cycle_phase(config: Config, plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
-                workers: int = 1, progress=None) -> int:
+                workers: int = 1, progress=None, cycle_frames=None) -> int:
     """Every cycle product for every cycle frame (each layer's spectra, the foreground passes of
-    built-in trees): those already stored are checked here, the missing ones computed in
-    parallel over cycle frames by joblib processes (each with ``workers`` FFT threads).
+    built-in trees), or for ``cycle_frames`` only: those already stored are checked here, the
+    missing ones computed in parallel over cycle frames by joblib processes (each with
+    ``workers`` FFT threads; the backend is joblib's current one, Dask included).
     ``progress(done, total)`` is called as items finish. Returns the number of items computed."""
-    tasks = [(layer, frame) for frame in range(config.canopy.cycle)
-             for layer in range(len(config.canopy.layers))]
+    frames = range(config.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
+    tasks = [(layer, frame) for frame in frames for layer in range(len(config.canopy.layers))]
     if config.foreground.model == "trees":
-        tasks += [(None, frame) for frame in range(config.canopy.cycle)]
+        tasks += [(None, frame) for frame in frames]
     missing = [(layer, frame) for layer, frame in tasks if store.get(*_product_key(config, plan, layer, frame)) is None]
     done = len(tasks) - len(missing)
     if progress:
@@ -582,13 +601,21 @@ def foreground_passes(config: Config, plan: RunPlan, cycle_frame: int, store: ca
         sun = item["sun"] * light.sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
         return sky + sun, sky, item["alpha"]
     if fg.model == "passes":
-        passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
-        try:
-            foreground.check_passes_size(passes, camera_of(config, plan))
-        except ValueError as exc:
-            raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
+        passes = _imported_passes(config, plan, cycle_frame)
         return passes.sun, passes.sky, passes.alpha
     return None
+
+
+def _imported_passes(config: Config, plan: RunPlan, cycle_frame: int) -> foreground.ForegroundPasses:
+    """The imported passes of ``cycle_frame``, read and checked against the camera's size.
+    Raises io.ImageError naming the file."""
+    fg = config.foreground
+    passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+    try:
+        foreground.check_passes_size(passes, camera_of(config, plan))
+    except ValueError as exc:
+        raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
+    return passes
 
 
 @functools.lru_cache(maxsize=4)
@@ -637,19 +664,24 @@ class FrameResult:
 
 
 def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = None,
-                 plan: RunPlan | None = None, workers: int | None = None) -> FrameResult:
+                 plan: RunPlan | None = None, workers: int | None = None,
+                 timings: dict | None = None) -> FrameResult:
     """The finished frame at output ``frame`` (Max 1991, Fig. 10): the ground raster under the
     frame's sky, resampled in perspective with the sky; the haze; the foreground passes of its
-    cycle frame blended by S and composited over them."""
+    cycle frame blended by S and composited over them. ``timings``, if given, receives the
+    seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``."""
     workers = workers or default_workers()
     plan = plan or plan_run(config)
     store = store or cache.Cache(cache.cache_dir(None))
+    clock = _Stopwatch(timings)
     scene = scene_at(config, frame)
     sky = load_sky(config.sky, scene)
     ground = render_ground(config, frame=frame, store=store, plan=plan, workers=workers, sky=sky, outer=True)
+    clock.lap("ground")
     view = camera_of(config, plan)
     background, distance = camera.background(
         view, irradiance=irradiance_maps(config, ground), albedo=albedo_mipmap(config.ground), sky=sky)
+    clock.lap("camera")
     light = reference_lighting(config, plan)
     sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
     sky_scale = _sky_scale(sky, light)
@@ -670,7 +702,21 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
         background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
         sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
     exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+    clock.lap("composite")
     return FrameResult(radiance, sun_fraction, scene, exposure, ground)
+
+
+class _Stopwatch:
+    """Adds the seconds since the last lap to ``timings[stage]`` (nothing when timings is None)."""
+
+    def __init__(self, timings: dict | None):
+        self.timings, self.last = timings, time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.timings is not None:
+            self.timings[stage] = self.timings.get(stage, 0.0) + now - self.last
+        self.last = now
 
 
 def _sky_scale(sky, light: Lighting) -> float:

@@ -147,14 +147,25 @@ BAD_CONFIGS = [
 ]
 
 
+def assert_refused(config, out, capsys, message, *, commands=("ground", "check", "render"), extra=()):
+    """Every command refuses the config with exit 2 and one line holding ``message``, before
+    writing anything (no output file, no run folder, no cache)."""
+    for command in commands:
+        argv = {"ground": ["ground", str(config), "-o", str(out / "g.exr"), "--png"],
+                "check": ["check", str(config)],
+                "render": ["render", str(config), "--output", str(out / "run"),
+                           "--cache", str(out / "cache"), *extra]}[command]
+        assert main(argv) == 2, command
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, (command, err)
+        assert list(out.iterdir()) == [], command
+
+
 @pytest.mark.parametrize("name,key,value,message", BAD_CONFIGS, ids=[b[0] for b in BAD_CONFIGS])
 def test_bad_config_exits_2_names_the_key_and_writes_nothing(inputs, capsys, name, key, value, message):
     folder, out = inputs
     config = write_config(folder, set_key(base_config(), key, value))
-    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and message in err, err
-    assert list(out.iterdir()) == []
+    assert_refused(config, out, capsys, message)
 
 
 def test_error_names_the_yaml_line(inputs, capsys):
@@ -196,10 +207,44 @@ def test_bad_input_file_exits_2_and_writes_nothing(inputs, capsys, name, section
             cfg["sky"] = {"alpha": 80.0}
         cfg[section].update(change)
         config = write_config(folder, cfg)
-    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and message in err, err
-    assert list(out.iterdir()) == []
+    assert_refused(config, out, capsys, message)
+
+
+BAD_RUNS = [
+    ("frames out of range", {}, ["--frames", "0-3,120"], "--frames: 120 is outside 0..47"),
+    ("frames backwards", {}, ["--frames", "5-2"], "--frames: the range 5-2 runs backwards"),
+    ("frames not numbers", {}, ["--frames", "a-b"], "--frames: 'a-b' is not a frame"),
+    ("no jobs", {}, ["--jobs", "0"], "--jobs must be at least 1"),
+    ("output folder is a file", {}, ["--output", "{folder}/config.yaml/run"], "is a file, not a folder"),
+    ("misspelt video", {"output": {"video": "mp5"}}, [], "output.video: unknown value 'mp5'; valid: mp4, gif, none"),
+    ("output name with a slash", {"output": {"name": "a/b"}}, [], "output.name: must be a name"),
+    ("half as text", {"output": {"half": "yes"}}, [], "output.half: must be true or false"),
+    ("unknown render key", {"render": {"job": 2}}, [], "render.job: unknown key"),
+    ("no render jobs", {"render": {"jobs": 0}}, [], "render.jobs: must be at least 1"),
+    ("sun cells", {"render": {"sun_cells": 1}}, [], "render.sun_cells: must be at least 2"),
+    ("frames of zero", {"animation": {"frames": 0}}, [], "animation.frames: must be at least 1"),
+]
+
+
+@pytest.mark.parametrize("name,change,args,message", BAD_RUNS, ids=[b[0] for b in BAD_RUNS])
+def test_bad_render_exits_2_and_writes_nothing(inputs, capsys, name, change, args, message):
+    folder, out = inputs
+    config = write_config(folder, {**base_config(), **change})
+    args = [a.format(folder=folder) for a in args]
+    commands = ("render",) if args else ("check", "render")
+    assert_refused(config, out, capsys, message, commands=commands, extra=args)
+
+
+def test_unwritable_output_folder_writes_nothing(inputs, capsys):
+    folder, out = inputs
+    if os.geteuid() == 0:
+        pytest.skip("root writes anywhere")
+    locked = folder / "locked"
+    locked.mkdir(mode=0o500)
+    config = write_config(folder, base_config())
+    assert main(["render", str(config), "--output", str(locked / "run"), "--cache", str(out / "cache")]) == 2
+    assert "cannot write the output folder" in capsys.readouterr().err
+    assert list(out.iterdir()) == [] and list(locked.iterdir()) == []
 
 
 def test_bad_output_paths(inputs, capsys):

@@ -1,0 +1,207 @@
+"""Runs: frames, video and run.json; resume after SIGKILL; jobs; a Dask cluster. Real processes."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import imageio.v2 as imageio
+import pytest
+import yaml
+
+from pipeline import io
+from pipeline.cli import main
+from pipeline.run import RunError, parse_frames
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY = {
+    "canopy": {"height": 4.0, "trees": {"count": 1, "seed": 3, "crown_radius": 1.5,
+                                        "leaves_per_tree": 3000, "leaf_length": 0.08},
+               "flutter": {"cycle": 3}},
+    "sky": {"sun": {"elevation": 60.0, "azimuth": 180.0},
+            "moon": {"offset_start": [0.4, 0.1], "offset_end": [0.2, 0.05]},
+            "clouds": {"cover": 0.4, "scale": 300.0}},
+    "ground": {"window": [-4, -4, 4, 4], "pixel": 0.05, "sun_window": [-1, -1, 1, 1]},
+    "camera": {"resolution": [96, 64]},
+    "render": {"sun_cells": 8},
+    "animation": {"frames": 8, "fps": 12},
+}
+
+
+def write_config(folder: Path, config=TINY, name="tiny.yaml") -> Path:
+    path = folder / name
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+def sunshade(*args, **popen):
+    """A real ``sunshade`` process."""
+    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *map(str, args)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
+
+
+def run_to_end(*args) -> str:
+    process = sunshade(*args)
+    out, err = process.communicate(timeout=240)
+    assert process.returncode == 0, err
+    return out
+
+
+def contents(folder: Path) -> dict:
+    """The bytes of every frame and video file in a run folder (not run.json, not the lock)."""
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())
+            if p.suffix in (".exr", ".png", ".mp4", ".gif")}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted run with one job: the bytes every other run must reproduce."""
+    folder = tmp_path_factory.mktemp("reference")
+    config = write_config(folder)
+    run_to_end("render", config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
+    return config, contents(folder / "run")
+
+
+def test_a_run_writes_every_frame_the_video_and_run_json(reference):
+    config, files = reference
+    names = [f"tiny.{i:04d}.{ext}" for i in range(8) for ext in ("exr", "png")]
+    assert sorted(files) == sorted(names + ["tiny.mp4"])
+    folder = config.parent / "run"
+    record = json.loads((folder / "run.json").read_text())
+    assert record["config_hash"] == io.read_attributes(folder / "tiny.0003.exr", ["sunshade:config_hash"])[
+        "sunshade:config_hash"]
+    assert [f["frame"] for f in record["frames"]] == list(range(8))
+    fractions = [f["sun_fraction"] for f in record["frames"]]
+    assert all(0 < s < 1 for s in fractions) and fractions[0] > fractions[-1]  # the moon covers more
+    assert record["frames"][0]["sun"] == pytest.approx({"azimuth": 180.0, "elevation": 60.0})
+    assert "moon" in record["frames"][0] and record["video"]["frames"] == 8
+    assert {"numpy", "OpenImageIO", "python"} <= set(record["versions"])
+    assert record["config"]["animation"]["frames"] == 8
+    assert record["timings"]["frames"] > 0 and "ground" in record["timings"]["frame_stages"]
+    frames = imageio.mimread(folder / "tiny.mp4")
+    assert len(frames) == 8 and frames[0].shape[:2] == (64, 96)
+
+
+def test_jobs_two_gives_the_same_bytes(reference, tmp_path):
+    config, files = reference
+    run_to_end("render", config, "--jobs", "2", "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+    assert contents(tmp_path / "run") == files
+
+
+def test_a_second_run_has_nothing_to_do(reference, capsys):
+    config, files = reference
+    folder = config.parent / "run"
+    before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.suffix != ".json"}
+    assert main(["render", str(config), "--output", str(folder), "--cache", str(config.parent / "cache")]) == 0
+    assert "0 frames rendered, 8 already done" in capsys.readouterr().out
+    assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.suffix != ".json"} == before
+
+
+def kill_when(process, ready, *, timeout=120.0) -> bool:
+    """SIGKILL the process and its workers as soon as ``ready()``; False if it ended first."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if ready():
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+            return True
+        if process.poll() is not None:
+            return False
+        time.sleep(0.005)
+    raise AssertionError("the run neither reached the kill point nor ended")
+
+
+def cache_items(cache: Path) -> int:
+    return sum(1 for _ in cache.rglob("*.npy")) if cache.exists() else 0
+
+
+def pngs(folder: Path) -> int:
+    return sum(1 for _ in folder.glob("tiny.*.png")) if folder.exists() else 0
+
+
+KILL_POINTS = [
+    ("in the cycle phase", "2", lambda run, cache: cache_items(cache) >= 1),
+    ("after two frames", "2", lambda run, cache: pngs(run) >= 2),
+    ("after five frames", "1", lambda run, cache: pngs(run) >= 5),
+    ("at the video", "2", lambda run, cache: pngs(run) >= 8 or any(run.glob(".tiny.tmp-*.mp4"))),
+]
+
+
+@pytest.mark.parametrize("name,jobs,ready", KILL_POINTS, ids=[k[0] for k in KILL_POINTS])
+def test_killed_and_resumed_run_ends_with_the_same_bytes(reference, tmp_path, name, jobs, ready):
+    config, files = reference
+    run, cache = tmp_path / "run", tmp_path / "cache"
+    process = sunshade("render", config, "--jobs", jobs, "--output", run, "--cache", cache,
+                       start_new_session=True)
+    killed = kill_when(process, lambda: ready(run, cache))
+    assert killed, "the run ended before the kill point"
+    other = "1" if jobs == "2" else "2"
+    run_to_end("render", config, "--jobs", other, "--output", run, "--cache", cache)
+    assert contents(run) == files
+    assert not list(run.glob(".*.tmp-*"))
+
+
+def test_a_changed_config_renders_again_only_what_it_changes(reference, tmp_path, capsys):
+    config, files = reference
+    run, cache = tmp_path / "run", tmp_path / "cache"
+    assert main(["render", str(config), "--frames", "0-2", "--output", str(run), "--cache", str(cache)]) == 0
+    assert not (run / "tiny.mp4").exists()  # the video waits for every frame
+    assert json.loads((run / "run.json").read_text())["video"] is None
+    capsys.readouterr()
+    assert main(["render", str(config), "--output", str(run), "--cache", str(cache)]) == 0
+    assert "5 frames rendered, 3 already done" in capsys.readouterr().out
+    assert contents(run) == files
+    # the video format does not change a frame; the exposure changes every frame
+    gif = write_config(tmp_path, {**TINY, "output": {"video": "gif"}})
+    assert main(["render", str(gif), "--output", str(run), "--cache", str(cache)]) == 0
+    assert "0 frames rendered, 8 already done" in capsys.readouterr().out
+    assert (run / "tiny.gif").is_file()
+    brighter = write_config(tmp_path, {**TINY, "camera": {"resolution": [96, 64], "exposure": 1.0}})
+    assert main(["render", str(brighter), "--output", str(run), "--cache", str(cache)]) == 0
+    assert "8 frames rendered, 0 already done" in capsys.readouterr().out
+    changed = contents(run)
+    assert changed["tiny.0000.png"] != files["tiny.0000.png"]
+
+
+def test_preview_is_small_and_apart(reference, tmp_path):
+    config, files = reference
+    run_to_end("render", config, "--preview", "--frames", "0-1", "--output", tmp_path / "run",
+               "--cache", tmp_path / "cache")
+    image = io.read_image(tmp_path / "run" / "preview" / "tiny.0000.png")
+    assert image.shape[:2] == (16, 24)
+    assert not list((tmp_path / "run").glob("tiny.*"))
+
+
+def test_parse_frames():
+    assert parse_frames("0-3,7, 5", 10) == (0, 1, 2, 3, 5, 7)
+    assert parse_frames("9", 10) == (9,)
+    for bad in ("10", "3-1", "-1", "x", "1-2-3", ""):
+        with pytest.raises(RunError):
+            parse_frames(bad, 10)
+
+
+def test_a_second_render_in_the_same_folder_is_refused(reference, tmp_path):
+    import filelock
+
+    config, _ = reference
+    run = tmp_path / "run"
+    run.mkdir()
+    with filelock.FileLock(run / ".sunshade.lock"):
+        process = sunshade("render", config, "--output", run, "--cache", tmp_path / "cache")
+        out, err = process.communicate(timeout=60)
+    assert process.returncode == 2 and "another sunshade render" in err
+    assert not list(run.glob("tiny.*"))
+
+
+def test_a_dask_cluster_renders_the_same_bytes(reference, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    config, files = reference
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        run_to_end("render", config, "--scheduler", cluster.scheduler_address,
+                   "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+    assert contents(tmp_path / "run") == files
