@@ -28,7 +28,6 @@ from datetime import datetime, timedelta, timezone
 
 import ephem
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 AU = 149_597_870_700.0
 """Astronomical unit (IAU 2012 resolution B2). [m]"""
@@ -274,6 +273,8 @@ def contact_times(
     closest approach in the window is reported. Contacts are geometric: they are returned even
     when the sun is below the horizon; check ``sun_and_moon(...)[0].elevation``.
     """
+    from scipy.optimize import brentq, minimize_scalar  # 0.3 s to import: only when asked
+
     start_utc, end_utc = _utc(start, "start"), _utc(end, "end")
     span = (end_utc - start_utc).total_seconds()
     if not span > 0:
