@@ -457,3 +457,28 @@ def test_frame_with_imported_passes_composites_them(inputs):
     config["foreground"] = {"model": "passes", "sun": "fg_sun.exr", "sky": "fg_sky.exr", "alpha": "fg_alpha.exr"}
     assert main(["frame", str(write_config(folder, config)), "-o", str(out / "f.exr")]) == 0
     np.testing.assert_allclose(io.read_image(out / "f.exr"), sky_pass, rtol=1e-6)
+
+
+class _Stream(__import__("io").StringIO):
+    def __init__(self, tty):
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+
+def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
+    from pipeline.cli import _Progress
+
+    terminal, log = _Stream(True), _Stream(False)
+    for stream in (terminal, log):
+        progress = _Progress(stream)
+        for done in range(0, 5):
+            progress("frames", done, 4)
+    bar = terminal.getvalue()
+    assert bar.count("\r") == 5 and "frames" in bar and "[" + "#" * 24 + "] 4/4" in bar
+    assert "left" in bar and bar.endswith("\n")
+    lines = log.getvalue().splitlines()
+    assert lines[0] == "sunshade: frames 0/4" and lines[-1] == "sunshade: frames 4/4"
+    assert "\r" not in log.getvalue() and len(lines) == 2  # at most one line per 10 s between
