@@ -146,6 +146,19 @@ def _parser():
     sky.add_argument("-o", "--output", required=True, help="output EXR file")
     sky.set_defaults(run=_run_sky)
 
+    figures = commands.add_parser(
+        "figures",
+        help="reproduce the paper's figures as PNGs",
+        description="Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky "
+        "(5), the weighted sky raster (6), the ground raster (7), the finished frame (10), the "
+        "same with a point sun and no sky light (11), the eclipsed ground and frame (12, 13), "
+        "I0(alpha)/pi (16), and S(t) through the 2024 eclipse at Dallas.",
+    )
+    figures.add_argument("--output", default="figures", help="folder (default ./figures)")
+    figures.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
+    figures.add_argument("--preview", action="store_true", help="small and fast")
+    figures.set_defaults(run=_run_figures)
+
     cache = commands.add_parser(
         "cache",
         help="look after the on-disk cache of cycle products",
@@ -379,6 +392,24 @@ def _run_sky(args) -> int:
         io.write_png(png, display_sky(image))
         written.append(png)
     print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _run_figures(args) -> int:
+    from .figures import FIGURES, write_figures
+    from .run import check_folder
+
+    folder = Path(args.output)
+    check_folder(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    progress = _Progress(sys.stderr)
+    started = time.perf_counter()
+    written = write_figures(folder, store=Cache(cache_dir(args.cache)), preview=args.preview,
+                            progress=lambda name, done, total: progress("figures", done, total))
+    captions = dict(FIGURES)
+    for path in written:
+        print(f"{path}: {captions.get(path.name, '')}")
+    print(f"sunshade: {len(written)} figures in {time.perf_counter() - started:.1f} s")
     return 0
 
 
