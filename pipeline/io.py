@@ -93,6 +93,7 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
     data = np.ascontiguousarray(np.clip(codes, 0, 255).astype(np.uint8))
     rows, cols, channels = data.shape
     spec = oiio.ImageSpec(cols, rows, channels, "uint8")
+    spec.attribute("png:compressionLevel", 3)  # a third of the time of zlib's 6, files 5% larger
     for name, value in (attributes or {}).items():
         spec.attribute(name, value)
     _write_atomic(path, spec, data)
