@@ -59,7 +59,7 @@ from filelock import FileLock, Timeout
 
 #: Mixed into every key. Change it whenever the code that computes any cached product changes
 #: its result, so that old items are never read for new code (they age out through ``prune``).
-CODE_VERSION = "sunshade-cycle-1"
+CODE_VERSION = "sunshade-cycle-2"
 
 #: Layout version of an item folder and its ``meta.json``; items of another format are broken.
 FORMAT = 1

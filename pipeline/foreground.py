@@ -69,7 +69,7 @@ LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
 """Default hemispherical reflectance of a green leaf, linear Rec.709 RGB. [dimensionless]"""
 LEAF_TRANSMITTANCE = (0.04, 0.12, 0.02)
 """Default hemispherical transmittance of a green leaf, linear Rec.709 RGB. [dimensionless]"""
-BARK_REFLECTANCE = (0.10, 0.07, 0.05)
+BARK_REFLECTANCE = (0.25, 0.20, 0.15)
 """Default reflectance of bark, linear Rec.709 RGB. [dimensionless]"""
 
 _DEPTH_RATIO = 1.05  # most ratio of the depths of a wood piece's ends in the camera pass
