@@ -63,13 +63,13 @@ def read_attributes(path, names) -> dict:
 
 
 def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False) -> None:
-    """Write (rows, cols, channels) scene-linear pixels as an EXR (float32 or half), ZIP-compressed,
+    """Write (rows, cols, channels) scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless),
     with ``attributes`` (str, int, float, or a tuple of floats) in its header. No time stamp
     is written, so the same pixels and attributes always give the same bytes."""
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     rows, cols, channels = pixels.shape
     spec = oiio.ImageSpec(cols, rows, channels, "half" if half else "float")
-    spec.attribute("compression", "zip")
+    spec.attribute("compression", "piz")
     spec.attribute("DateTime", "")  # else OpenEXR's capDate holds the time of writing
     for name, value in (attributes or {}).items():
         if isinstance(value, (tuple, list)):
