@@ -146,6 +146,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     """
     started = time.perf_counter()
     timings = {}
+    store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
     digest = config.digest()
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
