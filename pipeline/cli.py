@@ -94,8 +94,9 @@ def _parser():
         "ground.window at ground.pixel metres, north-up, as an EXR.",
     )
     ground.add_argument("config", help="YAML config file")
-    ground.add_argument("-o", "--output", required=True, help="output EXR file")
-    ground.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside it")
+    ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
+                        "(tone-mapped) file")
+    ground.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
     ground.add_argument("--frame", type=int, default=0, help="output frame (default 0): the "
                         "sun, moon and clouds of that moment, the canopy at frame mod cycle")
     ground.add_argument("--threads", type=int, default=None, help="FFT threads (default: all cores)")
@@ -142,8 +143,9 @@ def _parser():
     sky.add_argument("config", help="YAML config file")
     sky.add_argument("--frame", type=int, default=0, help="output frame (default 0)")
     sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
-    sky.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside it")
-    sky.add_argument("-o", "--output", required=True, help="output EXR file")
+    sky.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
+    sky.add_argument("-o", "--output", required=True, help="output EXR (radiance) or PNG "
+                     "(tone-mapped) file")
     sky.set_defaults(run=_run_sky)
 
     figures = commands.add_parser(
@@ -165,6 +167,8 @@ def _parser():
         description="The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.",
     )
     cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
+    cache.add_argument("config", nargs="?", default=None, help="list: only this config's items; "
+                       "prune: remove only its items (all, or down to --max-size)")
     cache.add_argument("--cache", default=None, help="cache folder")
     cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
     cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
@@ -172,10 +176,14 @@ def _parser():
     return parser
 
 
-def _checked_output(path: str, suffix: str) -> Path:
+OUTPUT_SUFFIXES = (".png", ".exr")
+"""What ``-o`` may name: a display-referred PNG or a scene-linear EXR."""
+
+
+def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
     out = Path(path)
-    if out.suffix.lower() != suffix:
-        raise BadInput(f"{out}: the output must be a {suffix} file")
+    if out.suffix.lower() not in suffixes:
+        raise BadInput(f"{out}: the output must be a {' or '.join(suffixes)} file")
     if out.is_dir():
         raise BadInput(f"{out}: is a folder, not a file")
     folder = out.parent if str(out.parent) else Path(".")
@@ -187,7 +195,7 @@ def _checked_output(path: str, suffix: str) -> Path:
 
 
 def _run_check(args) -> int:
-    from .render import check_inputs
+    from .render import check_inputs, framing_warnings
 
     config = load_config(args.config)
     plan = check_inputs(config)
@@ -196,7 +204,34 @@ def _run_check(args) -> int:
           f"{width} x {height} px, a cycle of {config.canopy.cycle}, "
           f"{len(plan.layers)} canopy layer{'s' if len(plan.layers) > 1 else ''}; "
           f"config hash {config.digest()}")
+    for line in _framing_lines(plan):
+        print(line)
+    _warn(config, plan, framing_warnings)
     return 0
+
+
+def _framing_lines(plan) -> list[str]:
+    """The resolved windows and camera, each marked (placed) where the plan placed it."""
+
+    def mark(key):
+        return " (placed)" if key in plan.auto else ""
+
+    def box(grid):
+        return "[" + ", ".join(f"{v:.2f}" for v in grid.extent) + "]"
+
+    lines = [f"  ground.window: {box(plan.window)} m at {plan.window.pixel:g} m{mark('ground.window')}"]
+    if plan.sun_window is not None:
+        lines.append(f"  ground.sun_window: {box(plan.sun_window)} m at {plan.sun_window.pixel:.4g} m"
+                     f"{mark('ground.sun_window')}")
+    view = plan.camera
+    lines.append(f"  camera: position [{', '.join(f'{v:.2f}' for v in view.position)}] m, "
+                 f"yaw {np.degrees(view.yaw):.1f}, pitch {np.degrees(view.pitch):.1f} degrees{mark('camera')}")
+    return lines
+
+
+def _warn(config, plan, framing_warnings) -> None:
+    for line in framing_warnings(config, plan):
+        print(f"sunshade: warning: {line}", file=sys.stderr)
 
 
 def _run_render(args) -> int:
@@ -216,7 +251,8 @@ def _run_render(args) -> int:
     check_folder(config.output.folder)
     summary = render_run(config, frames=frames, store=Cache(cache_dir(args.cache).absolute()),
                          jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                         progress=_Progress(sys.stderr))
+                         progress=_Progress(sys.stderr),
+                         warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
     made = f"; video {summary.video}" if summary.video else ""
     print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
@@ -263,8 +299,9 @@ def _clock(seconds: float) -> str:
 def _run_ground(args) -> int:
     from .render import render_ground
 
-    output = _checked_output(args.output, ".exr")
-    png = _checked_output(str(output.with_suffix(".png")), ".png") if args.png else None
+    output = _checked_output(args.output)
+    exr = output if output.suffix.lower() == ".exr" else None
+    png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if args.threads is not None and args.threads < 1:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
     config = load_config(args.config)
@@ -289,8 +326,10 @@ def _run_ground(args) -> int:
         "sunshade:version": __version__,
         "sunshade:frame": int(args.frame),
     }
-    io.write_exr(output, result.irradiance, attributes)
-    written = [output]
+    written = []
+    if exr is not None:
+        io.write_exr(exr, result.irradiance, attributes)
+        written.append(exr)
     if png is not None:
         io.write_png(png, display_ground(result.irradiance, result.unshadowed))
         written.append(png)
@@ -308,8 +347,8 @@ def _run_frame(args) -> int:
     from .render import render_frame
     from .run import frame_attributes
 
-    suffix = Path(args.output).suffix.lower()
-    output = _checked_output(args.output, suffix if suffix in (".png", ".exr") else ".png")
+    output = _checked_output(args.output)
+    suffix = output.suffix.lower()
     if args.threads is not None and args.threads < 1:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
     if args.half and suffix != ".exr":
@@ -340,8 +379,8 @@ def _check_frame(frame: int, count: int, flag: str, key: str) -> None:
 def _run_mask(args) -> int:
     from .render import layer_masks, plan_run
 
-    suffix = Path(args.output).suffix.lower()
-    output = _checked_output(args.output, suffix if suffix in (".png", ".exr") else ".png")
+    output = _checked_output(args.output)
+    suffix = output.suffix.lower()
     config = load_config(args.config)
     _check_frame(args.frame, config.canopy.cycle, "--frame", "the canopy's cycle")
     _check_frame(args.layer, len(config.canopy.layers), "--layer", "the number of canopy layers")
@@ -369,8 +408,9 @@ def _run_mask(args) -> int:
 def _run_sky(args) -> int:
     from .render import load_sky, scene_at
 
-    output = _checked_output(args.output, ".exr")
-    png = _checked_output(str(output.with_suffix(".png")), ".png") if args.png else None
+    output = _checked_output(args.output)
+    exr = output if output.suffix.lower() == ".exr" else None
+    png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if not 8 <= args.width <= 16384 or args.width % 2:
         raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
     config = load_config(args.config)
@@ -386,8 +426,10 @@ def _run_sky(args) -> int:
     if scene.sun is not None:
         attributes["sunshade:sun_azimuth_elevation"] = (np.degrees(scene.sun.azimuth),
                                                         np.degrees(scene.sun.elevation))
-    io.write_exr(output, image, attributes)
-    written = [output]
+    written = []
+    if exr is not None:
+        io.write_exr(exr, image, attributes)
+        written.append(exr)
     if png is not None:
         io.write_png(png, display_sky(image))
         written.append(png)
@@ -414,33 +456,109 @@ def _run_figures(args) -> int:
 
 
 def _run_cache(args) -> int:
-
-    store = Cache(cache_dir(args.cache))
+    root = cache_dir(args.cache)
+    store = Cache(root)
+    if args.config is not None and args.action not in ("list", "prune"):
+        raise BadInput(f"cache {args.action} takes no CONFIG (list and prune do)")
+    limit = None
     if args.action == "prune":
-        if args.max_size is None:
-            raise BadInput("cache prune needs --max-size, e.g. --max-size 2G")
-        try:
-            limit = parse_size(args.max_size)
-        except ValueError as exc:
-            raise BadInput(f"--max-size: {exc}") from None
+        if args.max_size is None and args.config is None:
+            raise BadInput("cache prune needs --max-size, e.g. --max-size 2G (or a CONFIG whose items to remove)")
+        if args.max_size is not None:
+            try:
+                limit = parse_size(args.max_size)
+            except ValueError as exc:
+                raise BadInput(f"--max-size: {exc}") from None
     elif args.max_size is not None:
         raise BadInput("--max-size is only for cache prune")
-    if args.action == "list":
-        items = store.list()
-        for item in items:
-            print(f"{item.kind:<12} {item.key[:16]}  {_size(item.bytes):>9}  "
-                  f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(item.last_used))}")
-        print(f"{len(items)} items, {_size(sum(i.bytes for i in items))} in {store.root}")
+    if not root.is_dir():
+        if args.cache is not None or os.environ.get("SUNSHADE_CACHE"):
+            raise BadInput(f"--cache {root}: no such cache folder" if args.cache is not None
+                           else f"$SUNSHADE_CACHE {root}: no such cache folder")
+        print(f"0 items: no cache folder yet at {root}")
         return 0
+    mine = None
+    if args.config is not None:
+        from .render import config_item_keys, plan_run
+
+        config = load_config(args.config)
+        mine = config_item_keys(config, plan_run(config))
+    if args.action == "list":
+        return _print_lines(_cache_listing(store, args.config, mine))
     if args.action == "verify":
         count = len(store.list())
         broken = store.verify(remove=args.remove)
-        for item, problem in broken:
-            print(f"{item.kind} {item.key[:16]}: {problem}" + (" (removed)" if args.remove else ""))
-        print(f"{len(broken)} broken of {count} items")
+        lines = [f"{item.kind} {item.key[:16]}: {problem}" + (" (removed)" if args.remove else "")
+                 for item, problem in broken]
+        _print_lines([*lines, f"{len(broken)} broken of {count} items"])
         return 1 if broken and not args.remove else 0
-    removed = store.clear() if args.action == "clear" else store.prune(limit)
+    if mine is not None:
+        removed = _prune_items(store, mine, limit)
+    else:
+        removed = store.clear() if args.action == "clear" else store.prune(limit)
     print(f"removed {len(removed)} items, {_size(sum(i.bytes for i in removed))}")
+    return 0
+
+
+def _cache_listing(store: Cache, config_file, mine) -> list[str]:
+    """The cache's items grouped by the config that made them (as recorded by its renders), with
+    their size and cycle frames; items of no recorded config grouped by kind. With a config:
+    its items only."""
+    from .render import recorded_configs
+
+    items = store.list()
+    if mine is not None:
+        own = [item for item in items if item.key in mine]
+        frames = {mine[item.key][1] for item in own}
+        cycle = len({frame for _, frame in mine.values()})
+        return [f"{config_file}: {len(own)} of {len(mine)} items, {_size(sum(i.bytes for i in own))}, "
+                f"cycle frames {len(frames)} of {cycle} in {store.root}"]
+    lines, left = [], {item.key: item for item in items}
+    for entry in recorded_configs(store):
+        own = [item for item in items if item.key in entry["keys"]]
+        if not own:
+            continue
+        for item in own:
+            left.pop(item.key, None)
+        kinds = ", ".join(f"{sum(i.kind == k for i in own)} {k}" for k in sorted({i.kind for i in own}))
+        frames = {item.params.get("frame") for item in own if item.params}
+        used = max(item.last_used for item in own)
+        lines.append(f"{entry['name']:<24} {_size(sum(i.bytes for i in own)):>10}  {len(own)} items "
+                     f"({kinds}), cycle frames {len(frames)} of {entry['cycle']}, last used "
+                     f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(used))}  {entry['config']}")
+    for kind in sorted({item.kind for item in left.values()}):
+        own = [item for item in left.values() if item.kind == kind]
+        lines.append(f"{'(no recorded config)':<24} {_size(sum(i.bytes for i in own)):>10}  "
+                     f"{len(own)} {kind} items")
+    lines.append(f"{len(items)} items, {_size(sum(i.bytes for i in items))} in {store.root}")
+    return lines
+
+
+def _prune_items(store: Cache, mine, limit):
+    """Remove a config's items, least recently used first, until they total at most ``limit``
+    bytes (None: all of them)."""
+    from .cache import _remove
+
+    own = sorted((item for item in store.list() if item.key in mine), key=lambda i: (i.last_used, i.key))
+    total, removed = sum(item.bytes for item in own), []
+    for item in own:
+        if limit is not None and total <= limit:
+            break
+        if _remove(item.path):
+            removed.append(item)
+        total -= item.bytes
+    return removed
+
+
+def _print_lines(lines) -> int:
+    """Print lines to stdout; a reader that stops early (``| head``) ends it quietly."""
+    try:
+        for line in lines:
+            print(line)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
     return 0
 
 

@@ -128,3 +128,25 @@ def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
     whole run, so an eclipse or a cloud darkens the picture as it darkens the day."""
     luminance = float(np.asarray(unshadowed, dtype=np.float64) @ REC709_LUMINANCE)
     return float(2.0**stops * np.pi / luminance) if luminance > 0 else float(2.0**stops)
+
+
+def auto_exposure(readings, *, reference, frame_time: float, time_constant: float,
+                  limits=(-4.0, 10.0), stops: float = 0.0) -> np.ndarray:
+    """Exposure per frame [m^2/kcd] that follows the scene's light like a camera's auto
+    exposure: each frame's meter reading (``readings`` (frames, 3), the open ground's horizontal
+    irradiance [klx]) is followed in log (stops) through a first-order lag, the first frame
+    metered at once: ``m_k = m_(k-1) + (1 - exp(-frame_time / time_constant)) (log2 E_k -
+    m_(k-1))`` (frame_time, time_constant [s]; 0 follows each frame at once). The exposure puts
+    a white Lambertian ground under the metered light at 1, times 2^stops, clamped to
+    ``limits`` (least, most) [stops] over ``exposure_for(reference)`` (the clear sky's):
+    under the least light it goes no brighter than 2^most times that, so totality darkens."""
+    luminance = np.asarray(readings, dtype=np.float64) @ REC709_LUMINANCE.astype(np.float64)
+    base = exposure_for(reference)
+    floor = np.log2(np.pi / base) - limits[1]  # the dimmest light the exposure follows [log2 klx]
+    metered = np.log2(np.maximum(luminance, 2.0**floor * 1e-3))
+    keep = np.exp(-frame_time / time_constant) if time_constant > 0 else 0.0
+    level = np.empty_like(metered)
+    for k, value in enumerate(metered):
+        level[k] = value if k == 0 else keep * level[k - 1] + (1.0 - keep) * value
+    exposure = 2.0**stops * np.pi / 2.0**level
+    return np.clip(exposure, base * 2.0 ** (limits[0] + stops), base * 2.0 ** (limits[1] + stops))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from dataclasses import asdict, dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -172,16 +173,35 @@ class SkyConfig:
 
 @dataclass(frozen=True)
 class GroundConfig:
-    """window : (x_min, y_min, x_max, y_max) [m]; pixel : ground pixel [m]. The sun's fine
-    raster: sun_window (None: the window) and sun_pixel (None: chosen so the sun disc spans
-    16 cells, within MAX_SUN_PIXELS). [m]"""
+    """window : (x_min, y_min, x_max, y_max) [m], None to frame the canopy's shadow over the
+    animation (``render.plan_run``); pixel : ground pixel [m]. The sun's fine raster:
+    sun_window (None: the ground the camera sees of the shadow, or the window when it is given)
+    and sun_pixel (None: chosen so the sun disc spans 16 cells, within MAX_SUN_PIXELS). [m]"""
 
-    window: tuple[float, float, float, float]
+    window: tuple[float, float, float, float] | None
     pixel: float
     sun_window: tuple[float, float, float, float] | None = None
     sun_pixel: float | None = None
     albedo: str | Path = "grass"
     albedo_size: float = 4.0
+
+
+AUTO_TIME_CONSTANT = 0.2
+"""Default time constant of ``camera.exposure: auto``: the exposure closes 63% of the gap to
+the metered light in this much film time. [s]"""
+AUTO_LIMITS = (-4.0, 10.0)
+"""Default limits of ``camera.exposure: auto``: the least and the most exposure, in stops over
+the fixed exposure of the run's clear sky. [stops]"""
+
+
+@dataclass(frozen=True)
+class AutoExposureConfig:
+    """``camera.exposure: auto``: the exposure follows the open ground's light (sun times S
+    plus sky) through a first-order lag of ``time_constant`` [s of film time], clamped to
+    ``limits`` (least, most) [stops] over the fixed exposure of the clear sky."""
+
+    time_constant: float = AUTO_TIME_CONSTANT
+    limits: tuple[float, float] = AUTO_LIMITS
 
 
 @dataclass(frozen=True)
@@ -190,7 +210,8 @@ class CameraConfig:
     and its shadows (``render.camera_of``); look_at (x, y, z) [m], or else yaw (azimuth of the
     view, from north towards east) and pitch (negative looking down) [rad], None to look at the
     canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
-    default (white ground under the clear sky at 1); display : a name in ``composite.DISPLAYS``."""
+    default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
+    light; display : a name in ``composite.DISPLAYS``."""
 
     position: tuple[float, float, float] | None = None
     look_at: tuple[float, float, float] | None = None
@@ -200,6 +221,7 @@ class CameraConfig:
     resolution: tuple[int, int] = (1280, 720)
     exposure: float = 0.0
     display: str = "filmic"
+    auto_exposure: AutoExposureConfig | None = None
 
 
 @dataclass(frozen=True)
@@ -482,8 +504,34 @@ class _Section:
     def done(self):
         unknown = [k for k in self.data if k not in self.taken]
         if unknown:
-            valid = ", ".join(sorted(self.taken))
+            pattern = re.sub(r"\[\d+\]", "[]", self.path)
+            valid = ", ".join(sorted(self.taken | set(_VALID_KEYS.get(pattern, ()))))
             self.fail(str(unknown[0]), f"unknown key (valid here: {valid})")
+
+
+_VALID_KEYS = {
+    "": ("animation", "ground", "canopy", "sky", "camera", "foreground", "output", "render"),
+    "canopy": ("layout", "trees", "flutter", "mask", "size", "center", "height", "layers"),
+    "canopy.layers[]": ("mask", "size", "center", "height"),
+    "canopy.trees": ("count", "seed", "crown_radius", "leaves_per_tree", "leaf_length", "spread"),
+    "canopy.flutter": ("cycle", "swing", "twist"),
+    "sky": ("model", "radiance", "hdri", "rotation", "alpha", "turbidity", "sun", "site", "time",
+            "moon", "clouds", "skylight", "haze"),
+    "sky.sun": ("elevation", "azimuth", "radius"),
+    "sky.moon": ("offset_start", "offset_end", "radius"),
+    "sky.clouds": ("cover", "scale", "altitude", "wind", "thickness", "seed"),
+    "sky.site": ("latitude", "longitude", "elevation"),
+    "sky.time": ("start", "end"),
+    "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"),
+    "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display"),
+    "camera.exposure": ("mode", "stops", "time_constant", "limits"),
+    "foreground": ("model", "sun", "sky", "alpha"),
+    "animation": ("frames", "fps"),
+    "output": ("name", "folder", "video", "half"),
+    "render": ("jobs", "sun_cells"),
+}
+"""Every key each section accepts (a layer's index written []), whichever the parser reads:
+what an unknown-key error lists."""
 
 
 def _is_number(value) -> bool:
@@ -511,8 +559,15 @@ def _parse(root: _Section, path: Path) -> Config:
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render)
 
 
+def default_name(path: Path) -> str:
+    """The output name a config file gives by default: its file name without the suffix, every
+    run of characters other than letters, digits, - and _ (a dot, a space) made one _."""
+    name = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem).strip("_")
+    return name or "sunshade"
+
+
 def _parse_output(s: _Section, path: Path) -> OutputConfig:
-    name = s.raw("name", path.stem)
+    name = s.raw("name", default_name(path))
     if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
         s.fail("name", f"must be a name of letters, digits, - and _ (got {name!r})")
     folder = s.raw("folder", f"renders/{name}")
@@ -550,15 +605,17 @@ def _parse_window(s: _Section, name, default):
 
 
 def _parse_ground(s: _Section) -> GroundConfig:
-    window = _parse_window(s, "window", (-20.0, -20.0, 20.0, 20.0))
+    window = _parse_window(s, "window", None) if s.has("window") else None
     pixel = s.number("pixel", 0.05, above=0.0)
-    _check_pixels(s, "pixel", window, pixel, MAX_GROUND_PIXELS)
+    if window is not None:
+        _check_pixels(s, "pixel", window, pixel, MAX_GROUND_PIXELS)
     sun_window = _parse_window(s, "sun_window", None) if s.has("sun_window") else None
     sun_pixel = s.number("sun_pixel", above=0.0) if s.has("sun_pixel") else None
     if sun_pixel is not None:
         if sun_pixel > pixel:
             s.fail("sun_pixel", f"must not be above ground.pixel ({sun_pixel:g} > {pixel:g})")
-        _check_pixels(s, "sun_pixel", sun_window or window, sun_pixel, MAX_SUN_PIXELS)
+        if sun_window or window:
+            _check_pixels(s, "sun_pixel", sun_window or window, sun_pixel, MAX_SUN_PIXELS)
     albedo = "grass"
     if s.has("albedo") and s.data["albedo"] != "grass":
         albedo = s.file("albedo")
@@ -661,7 +718,7 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
             if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
                 s.fail("size", f"a periodic tile must be a whole number of ground pixels "
                        f"({ratio * ground.pixel:g} / {ground.pixel:g} = {ratio:.4g})")
-    elif images:
+    elif images and ground.window is not None:  # an automatic window is checked by the plan
         window = ground.window
         fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
             (window[3] - window[1]) / ground.pixel + pixels[1])
@@ -796,11 +853,32 @@ def _parse_camera(s: _Section) -> CameraConfig:
     width, height = (int(v) for v in resolution)
     if width * height > MAX_IMAGE_PIXELS:
         s.fail("resolution", f"{width} x {height} is {width * height:.3g} pixels; the most is {MAX_IMAGE_PIXELS:.3g}")
-    camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height),
-                          exposure=s.number("exposure", 0.0, at_least=-20.0, below=20.0),
-                          display=s.choice("display", DISPLAYS, "filmic"))
+    stops, auto = _parse_exposure(s)
+    camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height), exposure=stops,
+                          display=s.choice("display", DISPLAYS, "filmic"), auto_exposure=auto)
     s.done()
     return camera
+
+
+def _parse_exposure(s: _Section):
+    """camera.exposure: stops (fixed), ``auto``, or ``{mode: auto, stops, time_constant,
+    limits}``. Returns (stops, AutoExposureConfig or None)."""
+    value = s.raw("exposure", 0.0)
+    if value == "auto":
+        return 0.0, AutoExposureConfig()
+    if not isinstance(value, dict):
+        if not _is_number(value):
+            s.fail("exposure", f"must be a number of stops, auto, or a mapping with mode: auto, not {_kind(value)}")
+        return s.number("exposure", 0.0, at_least=-20.0, below=20.0), None
+    e = s.section("exposure")
+    e.choice("mode", ("auto",))
+    stops = e.number("stops", 0.0, at_least=-20.0, below=20.0)
+    time_constant = e.number("time_constant", AUTO_TIME_CONSTANT, at_least=0.0, below=1e6)
+    limits = e.numbers("limits", 2, AUTO_LIMITS)
+    if not -30.0 <= limits[0] <= limits[1] <= 30.0:
+        e.fail("limits", f"must be [least, most] stops with -30 <= least <= most <= 30 (got {list(limits)})")
+    e.done()
+    return stops, AutoExposureConfig(time_constant, limits)
 
 
 def _parse_foreground(s: _Section, canopy: CanopyConfig) -> ForegroundConfig:

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import datetime
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from . import albedo as albedos
 from . import cache, camera, canopy, composite, ephemeris, foreground, io, shadow
 from . import sky as sky_models
 from .composite import REC709_LUMINANCE
-from .config import MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig
+from .config import MAX_GROUND_PIXELS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, ConfigError, CanopyLayer, Config, GroundConfig, SkyConfig
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -168,13 +169,21 @@ class RunPlan:
 
     window : the coarse ground Grid (sky light) [m]; sun_window : the fine ground Grid of the
     sun, or None without a sun kernel [m]; projection : the sky-plane point of the sun the
-    leaves are projected along (Max 1991, Fig. 1) [tan]; layers : per canopy plane.
+    leaves are projected along (Max 1991, Fig. 1) [tan]; layers : per canopy plane;
+    camera : the resolved camera; auto : the config keys the plan placed itself (of
+    ``ground.window``, ``ground.sun_window``, ``camera``); shadow : (x_min, y_min, x_max, y_max)
+    of where the canopy's shadow falls over the animation [m], None for a periodic forest;
+    exposures : the exposure of every frame with ``camera.exposure: auto``, else None [m^2/kcd].
     """
 
     window: Grid
     sun_window: Grid | None
     projection: tuple[float, float]
     layers: tuple[LayerPlan, ...]
+    camera: camera.Camera | None = None
+    auto: tuple[str, ...] = ()
+    shadow: tuple[float, float, float, float] | None = None
+    exposures: tuple[float, ...] | None = None
 
 
 def check_inputs(config: Config) -> RunPlan:
@@ -199,8 +208,9 @@ def check_inputs(config: Config) -> RunPlan:
 
 def plan_run(config: Config) -> RunPlan:
     """The grids and correlation plans of a run, from the config alone (an HDRI sky is read
-    for its sun; no mask image is read)."""
-    window = Grid.from_window(config.ground.window, config.ground.pixel)
+    for its sun; no mask image is read). What the config leaves out of ``ground.window``,
+    ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's path over the
+    animation (``frame_scene``)."""
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
     has_sun = scenes[0].sun is not None
     projection = (0.0, 0.0)
@@ -209,7 +219,27 @@ def plan_run(config: Config) -> RunPlan:
         projection = tuple(float(v) for v in sky_plane_from_direction(
             middle.azimuth, np.pi / 2 - middle.elevation))
     heights = [layer.height for layer in config.canopy.layers]
-    sun_window = _sun_window(config, scenes, min(heights)) if has_sun else None
+    framing = frame_scene(config, scenes, projection)
+    window = Grid.from_window(framing.window, config.ground.pixel)
+    sun_window = (_sun_window(config, scenes, min(heights), framing.sun_window or framing.window)
+                  if has_sun else None)
+    layers = _plan_layers(config, scenes, window, sun_window, projection)
+    if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None:
+        # the sun's path over the animation widens the fine mask: keep it within AUTO_SUN_MASK
+        cells = max(np.prod(lp.sun.mask.shape) for lp in layers)
+        if cells > AUTO_SUN_MASK:
+            sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
+            layers = _plan_layers(config, scenes, window, sun_window, projection)
+    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
+                   framing.shadow)
+    if config.camera.auto_exposure is not None:
+        plan = replace(plan, exposures=auto_exposures(config, plan, scenes))
+    return plan
+
+
+def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, projection):
+    """Each canopy plane's LayerPlan: its mask grid, coarse plan and fine sun plan."""
+    has_sun = sun_window is not None
     layers = []
     for layer in config.canopy.layers:
         grid = _canopy_grid(config, layer, window, projection)
@@ -226,7 +256,339 @@ def plan_run(config: Config) -> RunPlan:
             lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
             sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
         layers.append(LayerPlan(layer.height, grid, coarse, sun))
-    return RunPlan(window, sun_window, projection, tuple(layers))
+    return layers
+
+
+# ---------------------------------------------------------------------------------------------
+# Framing: the ground windows and the camera placed from the canopy and the sun's path, so that
+# any place and time frames the canopy's dappled shadow (docs/method.md, "Framing").
+# ---------------------------------------------------------------------------------------------
+
+CAMERA_HEIGHT = 1.7
+"""Eye height of a camera placed by default. [m]"""
+CAMERA_PITCH = 35.0
+"""How far a camera placed by default looks down at the shadow. [deg]"""
+ECLIPSE_PITCH = 50.0
+"""How far it looks down when the moon cuts the sun in some frame: nearer, so that the pinhole
+images are large enough to show their crescents. [deg]"""
+CAMERA_TURN = 35.0
+"""A camera placed by default looks this far round from the sun's azimuth, towards the west
+of it. [deg]"""
+WINDOW_MARGIN = 0.5
+"""An automatic ground.window reaches this many canopy heights beyond the canopy and its shadow:
+the soft shade of the sky light. [1]"""
+AUTO_SUN_PIXELS = 1_500_000
+"""Most pixels of an automatic ground.sun_window at its natural pixel: the far ground the
+camera sees beyond it reads the coarse raster. [1]"""
+AUTO_SUN_MASK = 6_000_000
+"""Most cells of the fine mask behind an automatic sun window (the window moved along the sun's
+path over the animation): past it the fine pixel grows. [1]"""
+AUTO_VIEW_SAMPLES = 48
+"""Rays per side of the image with which the ground the camera sees is found. [1]"""
+
+
+@dataclass(frozen=True)
+class Framing:
+    """The resolved ground windows [m] (x_min, y_min, x_max, y_max; sun_window None: the
+    window), the camera, which of them were placed automatically, and where the shadow falls
+    [m] (None: a periodic forest, shadow everywhere)."""
+
+    window: tuple[float, float, float, float]
+    sun_window: tuple[float, float, float, float] | None
+    camera: camera.Camera
+    auto: tuple[str, ...]
+    shadow: tuple[float, float, float, float] | None
+
+
+def canopy_extent(config: Config, projection) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) [m] of every canopy plane: the grove's leaves projected
+    along the sun (``projection`` [tan]) onto each plane over the flutter cycle, or the mask
+    images' areas."""
+    boxes = []
+    for layer in config.canopy.layers:
+        if config.canopy.trees is None or config.canopy.layout == "periodic":
+            (cx, cy), (w, h) = layer.center, layer.size
+            boxes.append((cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2))
+        else:
+            grove, flutter = _grove(config.canopy)
+            boxes.append(tuple(float(v) for v in canopy.grove_bounds(
+                grove, flutter, sun=np.array(projection), plane_height=layer.height)))
+    return _union(boxes)
+
+
+def crown_centre(config: Config) -> np.ndarray:
+    """(x, y, z) [m]: the mean of the grove's leaf stems, or of the mask planes' centres at
+    their heights. Its shadow, not the canopy's bounding box's, is where the leaves' shade is:
+    a low sun throws the trunks' shadows far longer than the crowns'."""
+    if config.canopy.trees is None or config.canopy.layout == "periodic":
+        return np.mean([(*layer.center, layer.height) for layer in config.canopy.layers], axis=0)
+    grove, _ = _grove(config.canopy)
+    return grove.pivot.mean(axis=0)
+
+
+DAPPLE_TRANSMITTANCE = 0.15
+"""The camera placed by default looks where this share of the sun gets through the leaves: a
+shade of small sun flecks that stand apart. [1]"""
+DAPPLE_CELL = 0.25
+"""Cell of the leaf-shadow density map that finds it (averaged over 1 m). [m]"""
+
+
+def dappled_point(config: Config, s) -> np.ndarray:
+    """(x, y) [m] on the ground where the sun, at sky-plane point ``s`` [tan], gets through the
+    grove's leaves in about DAPPLE_TRANSMITTANCE: each leaf's shadow (its ellipse's area
+    pi |u| |v| times |n . w| / w_z along the sun w) is summed on a map of DAPPLE_CELL cells,
+    averaged over 1 m, and taken as the optical depth of leaves placed at random,
+    T = exp(-area per area); of the points nearest that T, the one nearest the shadow of the
+    leaves' centre. A dense crown under a low sun lets light through only near its rim. Mask
+    images and periodic forests: the shadow of the planes' centre."""
+    centre = crown_centre(config)
+    middle = centre[:2] - centre[2] * np.asarray(s)
+    if config.canopy.trees is None or config.canopy.layout == "periodic":
+        return middle
+    from scipy.ndimage import uniform_filter
+
+    grove, _ = _grove(config.canopy)
+    leaves = grove.leaves
+    w = np.append(s, 1.0) / np.linalg.norm(np.append(s, 1.0))
+    normal = np.cross(leaves.axis_u, leaves.axis_v)
+    area = np.pi * np.abs(normal @ w) / w[2]  # |u x v| |n . w| = |(u x v) . w|
+    shade = leaves.center[:, :2] - leaves.center[:, 2:3] * np.asarray(s)
+    lo = shade.min(axis=0) - 1.0
+    cells = np.ceil((shade.max(axis=0) + 1.0 - lo) / DAPPLE_CELL).astype(int)
+    col, row = ((shade - lo) / DAPPLE_CELL).astype(int).T
+    depth = np.zeros(cells[::-1])
+    np.add.at(depth, (row, col), area / DAPPLE_CELL**2)
+    depth = uniform_filter(depth, size=max(1, int(round(1.0 / DAPPLE_CELL))), mode="constant")
+    transmittance = np.exp(-depth)
+    miss = np.abs(np.log(np.maximum(transmittance, 1e-30) / DAPPLE_TRANSMITTANCE))
+    rows, cols = np.nonzero(miss <= miss.min() + 0.1)
+    points = lo + (np.column_stack([cols, rows]) + 0.5) * DAPPLE_CELL
+    return points[np.argmin(np.linalg.norm(points - middle, axis=1))]
+
+
+def _union(boxes):
+    boxes = np.array(boxes, dtype=np.float64)
+    return (*boxes[:, :2].min(axis=0), *boxes[:, 2:].max(axis=0))
+
+
+def _grow(box, margin):
+    return (box[0] - margin, box[1] - margin, box[2] + margin, box[3] + margin)
+
+
+def _intersect(a, b):
+    box = (max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3]))
+    return box if box[2] > box[0] and box[3] > box[1] else None
+
+
+def shadow_extents(config: Config, scenes, projection) -> list:
+    """Per frame, (x_min, y_min, x_max, y_max) [m] of the ground the canopy's shadow falls on: a
+    plane point c at height h shades c - h s along the sun's sky-plane point s [tan], so the
+    shadow lies h cot(elevation) from the canopy, towards the anti-solar azimuth."""
+    extent = canopy_extent(config, projection)
+    boxes = []
+    for scene in scenes:
+        if scene.sun is None:
+            boxes.append(extent)
+            continue
+        sx, sy = sky_plane_from_direction(scene.sun.azimuth, np.pi / 2 - scene.sun.elevation)
+        boxes.append(_union([(extent[0] - h * sx, extent[1] - h * sy, extent[2] - h * sx, extent[3] - h * sy)
+                             for h in (layer.height for layer in config.canopy.layers)]))
+    return boxes
+
+
+def frame_scene(config: Config, scenes, projection) -> Framing:
+    """The windows and the camera of a run, each from the config where it gives them, else
+    placed (docs/method.md, "Framing"):
+
+    - ``ground.window``: the canopy and its shadow over every frame, grown by WINDOW_MARGIN
+      canopy heights (an isolated canopy); one tile (a periodic forest).
+    - ``camera``: at eye height, looking CAMERA_PITCH (ECLIPSE_PITCH when the moon cuts the
+      sun) down at the middle frame's shadow of the leaves' centre (``crown_centre``), facing CAMERA_TURN round
+      from the sun's azimuth; a given position looks there, a given look_at is seen from there.
+    - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
+      length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
+      the window when a window is given but no sun window.
+    """
+    ground, c = config.ground, config.camera
+    heights = [layer.height for layer in config.canopy.layers]
+    periodic = config.canopy.layout == "periodic"
+    auto = []
+    extent = canopy_extent(config, projection)
+    shadows = shadow_extents(config, scenes, projection)
+    shadow_box = None if periodic else _union(shadows)
+    window = ground.window
+    if window is None:
+        auto.append("ground.window")
+        window = extent if periodic else _grow(_union([extent, shadow_box]), WINDOW_MARGIN * max(heights))
+        if not periodic:
+            _check_auto_pixels(config, "ground.window", window, ground.pixel, MAX_GROUND_PIXELS, "ground.pixel")
+    # the camera's target: where the middle frame's shade is dappled
+    sun = scenes[len(scenes) // 2].sun
+    s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)
+    target = dappled_point(config, s)
+    if ground.sun_window is not None and c.position is None and c.look_at is None:
+        sw = ground.sun_window
+        target = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2])
+    view = _place_camera(config, scenes, target, s, auto)
+    sun_window = ground.sun_window
+    if sun_window is None and sun is not None:
+        if ground.window is not None:
+            sun_window = ground.window
+        else:
+            auto.append("ground.sun_window")
+            sun_window = _seen_sun_window(config, scenes, view, shadow_box, window)
+    return Framing(tuple(float(v) for v in window),
+                   None if sun_window is None else tuple(float(v) for v in sun_window),
+                   view, tuple(auto), shadow_box)
+
+
+def _check_auto_pixels(config, key, window, pixel, most, knob):
+    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
+    if cells > most:
+        raise ConfigError(f"{config.path}: {key}", f"the automatic window {[round(v, 2) for v in window]} would be "
+                          f"{cells:.3g} pixels; the most is {most:.3g}: give {key} or raise {knob}")
+
+
+def _eclipsed(scenes) -> bool:
+    """Whether the moon cuts the sun in some frame."""
+    for scene in scenes:
+        if scene.sun is None or scene.moon is None:
+            continue
+        a = sky_models._unit(scene.sun.azimuth, scene.sun.elevation)
+        b = sky_models._unit(scene.moon.azimuth, scene.moon.elevation)
+        if np.arccos(np.clip(a @ b, -1, 1)) < scene.sun.angular_radius + scene.moon.angular_radius:
+            return True
+    return False
+
+
+def _place_camera(config: Config, scenes, target, s, auto) -> camera.Camera:
+    """The config's camera with what it leaves out placed to look at ``target`` [m]."""
+    c = config.camera
+    width, rows = c.resolution
+    if c.position is not None and (c.yaw is not None or c.look_at is not None):
+        if c.yaw is not None:
+            return camera.Camera(tuple(c.position), c.yaw, c.pitch, c.fov, width, rows)
+        return camera.Camera.look_at(c.position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
+    auto.append("camera")
+    if c.position is not None:
+        return camera.Camera.look_at(c.position, (*target, 0.0), vertical_fov=c.fov, width=width, height=rows)
+    if c.look_at is not None:
+        target = np.array(c.look_at[:2])
+    yaw = c.yaw
+    if yaw is None:
+        sun_azimuth = float(np.arctan2(s[0], s[1])) if np.any(s) else np.pi
+        yaw = (sun_azimuth - np.radians(CAMERA_TURN)) % (2 * np.pi)
+    pitch = c.pitch if c.pitch is not None else -np.radians(ECLIPSE_PITCH if _eclipsed(scenes) else CAMERA_PITCH)
+    back = CAMERA_HEIGHT / np.tan(-pitch) if pitch < -np.radians(1.0) else 2.0 * max(
+        layer.height for layer in config.canopy.layers)
+    position = (*(np.asarray(target) - back * np.array([np.sin(yaw), np.cos(yaw)])), CAMERA_HEIGHT)
+    if c.look_at is not None:
+        return camera.Camera.look_at(position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
+    return camera.Camera(tuple(float(v) for v in position), float(yaw), float(pitch), c.fov, width, rows)
+
+
+def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
+    """Ground points (n, 2) [m] and their distances (n,) [m] of a grid of rays over the image
+    that meet the ground."""
+    u, v = np.meshgrid(np.linspace(0, view.width, samples), np.linspace(0, view.height, samples))
+    rays = camera.image_rays(view, u, v).reshape(-1, 3)
+    down = rays[:, 2] < -1e-9
+    t = -view.position[2] / rays[down, 2]
+    points = np.asarray(view.position[:2]) + t[:, None] * rays[down, :2]
+    return points, t * np.linalg.norm(rays[down], axis=1)
+
+
+def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
+    """The ground the camera sees of the shadow (grown by a pinhole image's length), within the
+    window, as near as AUTO_SUN_PIXELS fine pixels allow. [m]"""
+    heights = [layer.height for layer in config.canopy.layers]
+    radius = min(sc.sun.angular_radius for sc in scenes)
+    lowest = min(sc.sun.elevation for sc in scenes)
+    pixel = config.ground.sun_pixel or min(heights) * 2 * np.tan(radius) / config.render.sun_cells
+    image = 2 * max(heights) * np.tan(radius) / np.sin(lowest)  # a pinhole image's length [m]
+    area = window if shadow_box is None else _intersect(_grow(shadow_box, image), window) or window
+    points, distance = seen_ground(view)
+    inside = ((points[:, 0] >= area[0]) & (points[:, 0] <= area[2])
+              & (points[:, 1] >= area[1]) & (points[:, 1] <= area[3]))
+    if not inside.any():
+        return area if _pixels(area, pixel) <= AUTO_SUN_PIXELS else _grow(
+            (*view.position[:2], *view.position[:2]), 2.0)
+    points, distance = points[inside], distance[inside]
+    order = np.argsort(distance)
+    best = None
+    for k in range(1, len(order) + 1):  # the nearest points first, while they fit
+        near = points[order[:k]]
+        box = _intersect(_grow((*near.min(axis=0), *near.max(axis=0)), 2 * pixel + image / 4), area)
+        if box is None:
+            continue
+        if _pixels(box, pixel) > AUTO_SUN_PIXELS and best is not None:
+            break
+        best = box
+    return best
+
+
+def _pixels(box, pixel) -> float:
+    return (box[2] - box[0]) * (box[3] - box[1]) / pixel**2
+
+
+def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
+    """One-line warnings of a plan whose picture would show no dappled shadow: the camera sees
+    none of the sun window, or the canopy's shadow misses the sun window (the sun too low for
+    the canopy's reach) in some frames."""
+    warnings = []
+    fine = plan.sun_window or plan.window
+    x0, y0, x1, y1 = fine.extent
+    key = "ground.sun_window" if plan.sun_window is not None else "ground.window"
+    points, _ = seen_ground(plan.camera)
+    seen = ((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1))
+    if not seen.any():
+        warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
+                        f"its frames will show no sun flecks (leave camera out to place it)")
+    if config.canopy.layout == "isolated" and plan.sun_window is not None:
+        scenes = [scene_at(config, f) for f in range(config.animation.frames)]
+        boxes = shadow_extents(config, scenes, plan.projection)
+        missed = [f for f, box in enumerate(boxes) if _intersect(box, fine.extent) is None]
+        if missed:
+            elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
+            warnings.append(f"the canopy's shadow falls outside {key} in {len(missed)} of "
+                            f"{len(boxes)} frames ({_ranges(missed)}; the sun at "
+                            f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
+                            f"does not reach the window along the sun there")
+    return warnings
+
+
+def _ranges(frames) -> str:
+    parts, start = [], frames[0]
+    for a, b in zip(frames, frames[1:] + [None]):
+        if b != a + 1:
+            parts.append(f"{start}" if start == a else f"{start}-{a}")
+            start = b
+    return ",".join(parts)
+
+
+def auto_exposures(config: Config, plan: RunPlan, scenes) -> tuple[float, ...]:
+    """The exposure of every frame with ``camera.exposure: auto`` [m^2/kcd]: each frame's
+    meter reading is the open ground's light (``meter``), followed through
+    ``composite.auto_exposure``'s first-order lag and limits."""
+    light = reference_lighting(config, plan)
+    readings = [meter(config, scene, light) for scene in scenes]
+    a = config.camera.auto_exposure
+    return tuple(composite.auto_exposure(readings, reference=light.unshadowed,
+                                         frame_time=1.0 / config.animation.fps,
+                                         time_constant=a.time_constant, limits=a.limits,
+                                         stops=config.camera.exposure))
+
+
+def meter(config: Config, scene: Scene, light: Lighting) -> np.ndarray:
+    """What an incident-light meter on the open ground reads at a frame (3,): the sky's
+    horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
+    [klx]"""
+    sky = load_sky(config.sky, scene)
+    if light.sun_direction is None or not hasattr(sky, "sky_irradiance"):
+        return light.unshadowed
+    sun = sky.total_sun_irradiance() if hasattr(sky, "total_sun_irradiance") else (
+        light.sun_irradiance * light.sun_direction[2])
+    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sun)
 
 
 def _sun_reach(sun) -> float:
@@ -235,12 +597,11 @@ def _sun_reach(sun) -> float:
     return 1.1 * sun.angular_radius / np.cos(min(zenith + sun.angular_radius, np.radians(89.0))) ** 2
 
 
-def _sun_window(config: Config, scenes, lowest: float) -> Grid:
+def _sun_window(config: Config, scenes, lowest: float, window) -> Grid:
     """The fine ground grid of the sun: ``ground.sun_pixel`` or a pixel small enough for the
     sun disc to span render.sun_cells cells under the lowest canopy plane, unless the window would then
     pass MAX_SUN_PIXELS (the pixel grows) or the pixel would pass ground.pixel."""
     ground = config.ground
-    window = ground.sun_window or ground.window
     pixel = ground.sun_pixel
     if pixel is None:
         radius = min(sc.sun.angular_radius for sc in scenes)
@@ -380,6 +741,52 @@ def _product_key(config, plan, layer, frame):
     if layer is None:
         return "foreground", foreground_params(config, plan, frame)
     return "spectra", cycle_params(config, plan, layer, frame)
+
+
+CONFIG_INDEX = ".configs"
+"""Folder in the cache root where each config that rendered records the keys of its cycle
+products (``record_config_items``), so that ``sunshade cache list`` can name them."""
+
+
+def config_item_keys(config: Config, plan: RunPlan) -> dict[str, tuple[str, int]]:
+    """Every cycle product a config's run needs: cache key -> (kind, cycle frame)."""
+    keys = {}
+    for frame in range(config.canopy.cycle):
+        for layer in [*range(len(config.canopy.layers)), *([None] if config.foreground.model == "trees" else [])]:
+            kind, params = _product_key(config, plan, layer, frame)
+            keys[cache.key_of(kind, params)] = (kind, frame)
+    return keys
+
+
+def record_config_items(config: Config, plan: RunPlan, store: cache.Cache) -> None:
+    """Record in the cache which items are this config's (``CONFIG_INDEX``/<hash of its path>
+    .json: its name, path and keys, those of earlier versions of it kept), written atomically."""
+    folder = store.root / CONFIG_INDEX
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{hashlib.sha256(str(config.path).encode()).hexdigest()[:16]}.json"
+    try:
+        keys = set(json.loads(path.read_text()).get("keys", []))
+    except (OSError, ValueError, AttributeError):
+        keys = set()
+    keys |= set(config_item_keys(config, plan))
+    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    temporary.write_text(json.dumps({"name": config.output.name, "config": str(config.path),
+                                     "cycle": config.canopy.cycle, "keys": sorted(keys)}))
+    temporary.replace(path)
+
+
+def recorded_configs(store: cache.Cache) -> list[dict]:
+    """The configs recorded in a cache (``record_config_items``), each {name, config, cycle,
+    keys}."""
+    found = []
+    for path in sorted((store.root / CONFIG_INDEX).glob("*.json")):
+        try:
+            entry = json.loads(path.read_text())
+            found.append({"name": str(entry["name"]), "config": str(entry["config"]),
+                          "cycle": int(entry.get("cycle", 0)), "keys": set(entry["keys"])})
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return found
 
 
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:
@@ -523,30 +930,9 @@ def reference_lighting(config: Config, plan: RunPlan) -> Lighting:
     return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
 
 
-CAMERA_HEIGHT = 1.7
-"""Eye height of a camera placed by default. [m]"""
-
-
 def camera_of(config: Config, plan: RunPlan) -> camera.Camera:
-    """The config's camera, with what it leaves out filled in: by default it stands at eye
-    height on the shadow side of the canopy, 35 degrees round from the sun's line and 2.2
-    canopy heights from its centre, looking at the middle of the crowns, so that the shadows
-    come towards it and the leaves are lit from behind."""
-    c = config.camera
-    centre = np.array(config.canopy.layers[0].center, dtype=np.float64)
-    height = max(layer.height for layer in config.canopy.layers)
-    position = c.position
-    if position is None:
-        sx, sy = plan.projection
-        sun_azimuth = np.arctan2(sx, sy) if sx or sy else np.pi
-        bearing = sun_azimuth + np.pi - np.radians(35.0)
-        distance = 2.2 * height
-        position = (*(centre + distance * np.array([np.sin(bearing), np.cos(bearing)])), CAMERA_HEIGHT)
-    width, rows = c.resolution
-    if c.yaw is not None:
-        return camera.Camera(tuple(position), c.yaw, c.pitch, c.fov, width, rows)
-    target = c.look_at or (*centre, 0.45 * height)
-    return camera.Camera.look_at(position, target, vertical_fov=c.fov, width=width, height=rows)
+    """The run's camera: the config's, with what it leaves out placed by ``frame_scene``."""
+    return plan.camera
 
 
 def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
@@ -701,7 +1087,10 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
     radiance = composite.composite_frame(
         background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
         sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
-    exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+    if plan.exposures is not None:
+        exposure = plan.exposures[frame]
+    else:
+        exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
     clock.lap("composite")
     return FrameResult(radiance, sun_fraction, scene, exposure, ground)
 

@@ -29,9 +29,12 @@ import numpy as np
 from . import __version__, cache, io
 from .composite import display
 from .config import Config
-from .render import RunPlan, check_inputs, cycle_phase, default_workers, render_frame
+from .render import (RunPlan, check_inputs, cycle_phase, default_workers, framing_warnings,
+                     record_config_items, render_frame)
 
 RUN_FILE = "run.json"
+MAX_RUNS = 100
+"""run.json keeps the record of this many latest renders of a config."""
 LOCK_FILE = ".sunshade.lock"
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
@@ -133,7 +136,7 @@ class RunSummary:
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress=None) -> RunSummary:
+               progress=None, warn=None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -142,14 +145,21 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         cores // jobs FFT threads (one on a cluster). scheduler : a dask.distributed scheduler
         address (``tcp://host:8786``) to run the tasks on instead.
     progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
-        ``video``. Raises RunError, config.ConfigError, io.ImageError before any work.
+        ``video``. warn : called with each one-line warning of the plan
+        (``render.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
+        before any work.
     """
     started = time.perf_counter()
     timings = {}
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
+    for line in framing_warnings(config, plan) if warn else ():
+        warn(line)
     digest = config.digest()
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
+    if scheduler:
+        with _backend(scheduler):  # an unreachable scheduler fails before anything is written
+            pass
     folder = _make_folder(config.output.folder)
     jobs = jobs or config.render.jobs or default_workers()
     threads = 1 if scheduler else max(1, default_workers() // jobs)
@@ -170,6 +180,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                             cycle_frames={f % config.canopy.cycle for f in todo},
                             progress=progress and (lambda done, total: progress("cycle", done, total)))
                 timings["cycle"] = time.perf_counter() - mark
+                record_config_items(config, plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
                 for frame, seconds in _frame_phase(config, plan, store, todo, digest, jobs=jobs,
@@ -180,8 +191,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 timings["frames"] = time.perf_counter() - mark
         video = _video(config, digest, records, _read_run_file(folder), progress, timings, force=force)
         timings["total"] = time.perf_counter() - started
-        _write_run_file(config, digest, records, video, timings, jobs=jobs, threads=threads,
-                        scheduler=scheduler)
+        _write_run_file(config, plan, digest, records, video, timings, jobs=jobs, threads=threads,
+                        scheduler=scheduler, rendered=todo)
     finally:
         lock.release()
     return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),
@@ -302,20 +313,50 @@ def _read_run_file(folder: Path) -> dict:
         return {}
 
 
-def _write_run_file(config, digest, records, video, timings, *, jobs, threads, scheduler):
-    """run.json: the resolved config and its hash, versions, the command's settings, timings,
-    and per done frame S and the sun and moon (degrees), written atomically."""
+def resolved_config(config: Config, plan: RunPlan) -> dict:
+    """The config as run: with the ground windows and the camera the plan placed where the
+    config left them out, so that run.json says what was rendered."""
+    values = asdict(config)
+    values["ground"]["window"] = list(plan.window.extent)
+    if plan.sun_window is not None:
+        values["ground"]["sun_window"] = list(plan.sun_window.extent)
+        values["ground"]["sun_pixel"] = plan.sun_window.pixel
+    view = plan.camera
+    values["camera"].update(position=list(view.position), yaw=view.yaw, pitch=view.pitch,
+                            look_at=None if "camera" in plan.auto else values["camera"]["look_at"])
+    values["placed"] = list(plan.auto)
+    return values
+
+
+def _write_run_file(config, plan, digest, records, video, timings, *, jobs, threads, scheduler,
+                    rendered):
+    """run.json: the resolved config (windows and camera as placed) and its hash, versions,
+    the command's settings, timings, per done frame S and the sun and moon (degrees), and
+    ``runs``: one entry (time, frames rendered, settings, timings) per render that did work, the
+    earlier ones kept, so that a re-run that finds every frame done leaves the record of the
+    runs that made them. Written atomically."""
     versions = {"python": platform.python_version(), "sunshade": __version__}
     for name in VERSIONED:
         with contextlib.suppress(metadata.PackageNotFoundError):
             versions[name] = metadata.version(name)
+    previous = _read_run_file(config.output.folder)
+    runs = previous.get("runs", []) if previous.get("config_hash") == digest else []
+    if not runs and previous.get("config_hash") == digest and "timings" in previous:
+        runs = [{"frames": None, "settings": previous.get("settings"), "timings": previous["timings"]}]
+    runs = (runs + [{"finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                     "frames": len(rendered), "video": "video" in timings,
+                     "settings": {"jobs": jobs, "threads": threads, "scheduler": scheduler},
+                     "timings": timings}])[-MAX_RUNS:]
+    worked = [run for run in runs if run["frames"] is None or run["frames"] or run.get("video")]
+    last = worked[-1] if worked else runs[-1]
     document = {
         "config_file": str(config.path),
         "config_hash": digest,
-        "config": asdict(config),
+        "config": resolved_config(config, plan),
         "versions": versions,
-        "settings": {"jobs": jobs, "threads": threads, "scheduler": scheduler},
-        "timings": timings,
+        "settings": last["settings"],
+        "timings": last["timings"],
+        "runs": runs,
         "frames": [record for record in records.values() if record is not None],
         "video": video,
     }

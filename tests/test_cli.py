@@ -252,8 +252,10 @@ def test_bad_output_paths(inputs, capsys):
     config = write_config(folder, base_config())
     assert main(["ground", str(config), "-o", str(folder / "missing" / "g.exr")]) == 2
     assert "no such folder" in capsys.readouterr().err
-    assert main(["ground", str(config), "-o", str(out / "g.png")]) == 2
-    assert "must be a .exr file" in capsys.readouterr().err
+    for command in ("ground", "frame", "sky"):  # one message naming every suffix they take
+        extra = ["--frame", "0"] if command != "ground" else []
+        assert main([command, str(config), *extra, "-o", str(out / "g.jpg")]) == 2
+        assert "must be a .png or .exr file" in capsys.readouterr().err
     assert main(["ground", str(folder / "absent.yaml"), "-o", str(out / "g.exr")]) == 2
     assert "cannot read the config" in capsys.readouterr().err
     if os.geteuid() != 0:  # root writes anywhere
