@@ -326,16 +326,23 @@ def crown_centre(config: Config) -> np.ndarray:
     return grove.pivot.mean(axis=0)
 
 
-DAPPLE_TRANSMITTANCE = 0.15
-"""The camera placed by default looks where this share of the sun gets through the leaves: a
-shade of small sun flecks that stand apart. [1]"""
+DAPPLE_TRANSMITTANCE = 0.3
+"""The camera placed by default looks where this share of the sun gets through the leaves:
+near the shadow's rim, sun flecks on shade (a low sun's flecks are large and faint, so the
+contrast comes from the rim). [1]"""
+ECLIPSE_TRANSMITTANCE = 0.1
+"""The same when the moon cuts the sun in some frame and the sun stands above LOW_SUN: deeper in
+the shade, where the pinhole images stand apart and show their crescents. [1]"""
+LOW_SUN = 30.0
+"""Below this elevation the pinhole images are over twice as long as wide (1 / sin(elevation))
+and overlap in deep shade: an eclipse is framed at the rim too. [deg]"""
 DAPPLE_CELL = 0.25
 """Cell of the leaf-shadow density map that finds it (averaged over 1 m). [m]"""
 
 
-def dappled_point(config: Config, s) -> np.ndarray:
+def dappled_point(config: Config, s, transmittance: float = DAPPLE_TRANSMITTANCE) -> np.ndarray:
     """(x, y) [m] on the ground where the sun, at sky-plane point ``s`` [tan], gets through the
-    grove's leaves in about DAPPLE_TRANSMITTANCE: each leaf's shadow (its ellipse's area
+    grove's leaves in about ``transmittance`` [1]: each leaf's shadow (its ellipse's area
     pi |u| |v| times |n . w| / w_z along the sun w) is summed on a map of DAPPLE_CELL cells,
     averaged over 1 m, and taken as the optical depth of leaves placed at random,
     T = exp(-area per area); of the points nearest that T, the one nearest the shadow of the
@@ -359,8 +366,7 @@ def dappled_point(config: Config, s) -> np.ndarray:
     depth = np.zeros(cells[::-1])
     np.add.at(depth, (row, col), area / DAPPLE_CELL**2)
     depth = uniform_filter(depth, size=max(1, int(round(1.0 / DAPPLE_CELL))), mode="constant")
-    transmittance = np.exp(-depth)
-    miss = np.abs(np.log(np.maximum(transmittance, 1e-30) / DAPPLE_TRANSMITTANCE))
+    miss = np.abs(np.log(np.maximum(np.exp(-depth), 1e-30) / transmittance))
     rows, cols = np.nonzero(miss <= miss.min() + 0.1)
     points = lo + (np.column_stack([cols, rows]) + 0.5) * DAPPLE_CELL
     return points[np.argmin(np.linalg.norm(points - middle, axis=1))]
@@ -425,7 +431,8 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     # the camera's target: where the middle frame's shade is dappled
     sun = scenes[len(scenes) // 2].sun
     s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)
-    target = dappled_point(config, s)
+    deep = sun is not None and _eclipsed(scenes) and sun.elevation >= np.radians(LOW_SUN)
+    target = dappled_point(config, s, ECLIPSE_TRANSMITTANCE if deep else DAPPLE_TRANSMITTANCE)
     if ground.sun_window is not None and c.position is None and c.look_at is None:
         sw = ground.sun_window
         target = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2])

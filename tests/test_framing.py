@@ -1,0 +1,249 @@
+"""Framing: windows and camera placed from the canopy and the sun's path; the warnings; auto
+exposure. Small groves and small frames: each render takes a second or two."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from pipeline import camera, composite, ephemeris, io, render
+from pipeline.cache import Cache
+from pipeline.cli import main
+from pipeline.composite import REC709_LUMINANCE
+from pipeline.config import load_config
+from pipeline.geometry import sky_plane_from_direction
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SITES = {  # latitude, longitude, UTC: the sun at about 65, 29 and 12 degrees
+    "dallas-eclipse": (32.78, -96.80, "2024-04-08T18:25:00Z"),  # S = 0.20, a deep partial phase
+    "oslo-morning": (59.91, 10.75, "2025-06-21T06:30:00Z"),
+    "madrid-eclipse-sunset": (40.42, -3.70, "2026-08-12T18:05:00Z"),  # S = 0.59
+}
+
+
+def site_config(latitude, longitude, when, **camera_keys):
+    """One tree 6 m high under the sun of a place and time; no window, sun window or camera
+    position given: the plan places them."""
+    return {
+        "canopy": {"height": 6.0, "trees": {"count": 1, "seed": 7, "crown_radius": 3.0,
+                                            "leaves_per_tree": 20000, "leaf_length": 0.10},
+                   "flutter": {"cycle": 1}},
+        "sky": {"site": {"latitude": latitude, "longitude": longitude},
+                "time": {"start": when, "end": when}, "alpha": 70.0},
+        "ground": {"pixel": 0.05, "albedo": "grey.png"},
+        "camera": {"resolution": [320, 180], **camera_keys},
+        "foreground": {"model": "none"},
+        "animation": {"frames": 1},
+    }
+
+
+def write(folder: Path, config: dict, name="scene.yaml") -> Path:
+    io.write_png(folder / "grey.png", np.full((4, 4, 3), 0.5, np.float32))  # luminance = light
+    path = folder / name
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+def luminance(result) -> np.ndarray:
+    return result.radiance @ REC709_LUMINANCE
+
+
+@pytest.mark.parametrize("site", SITES)
+def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
+    """With no camera or windows given, the frame shows sun flecks on shade: the 95th/5th
+    percentile ratio of the ground's luminance is at least 2, or, where the sun and sky of that
+    moment cannot give 2 between open sun and open shade (a low sun), at least that."""
+    config = load_config(write(tmp_path, site_config(*SITES[site])))
+    plan = render.plan_run(config)
+    assert set(plan.auto) == {"ground.window", "ground.sun_window", "camera"}
+    result = render.render_frame(config, plan=plan, store=Cache(tmp_path / "cache"))
+    *_, ground_fraction = camera.ground_hits(plan.camera)
+    ground = luminance(result)[ground_fraction >= 1.0]
+    assert ground.size > 0.9 * ground_fraction.size
+    p95, p5 = np.percentile(ground, [95, 5])
+    sky = render.load_sky(config.sky, result.scene)
+    open_ground = sky.sky_irradiance + result.sun_fraction * sky.total_sun_irradiance()
+    possible = float(open_ground @ REC709_LUMINANCE) / float(sky.sky_irradiance @ REC709_LUMINANCE)
+    assert p95 / p5 >= min(2.0, possible), (p95 / p5, possible)
+    assert render.framing_warnings(config, plan) == []
+
+
+def test_the_eclipse_frame_shows_crescents_turned_as_the_moon_cuts_the_sun(tmp_path):
+    """The shape of the pinhole images, measured in the frame: against the same frame under the
+    uncut sun (same camera, same rasters), the pattern moves by the offset of the visible
+    crescent's centroid from the sun's centre, turned round by the pinhole (-h times it on the
+    sky plane), projected by the camera. A round image would not move; a crescent cut on the
+    wrong side would move the other way."""
+    latitude, longitude, when = SITES["dallas-eclipse"]
+    eclipsed = load_config(write(tmp_path, site_config(latitude, longitude, when, fov=20.0,
+                                                       resolution=[480, 270]), "e.yaml"))
+    plan = render.plan_run(eclipsed)
+    view, scene = plan.camera, render.scene_at(eclipsed, 0)
+    sun, moon = scene.sun, scene.moon
+    uncut = site_config(latitude, longitude, when)
+    uncut["sky"] = {"sun": {"elevation": float(np.degrees(sun.elevation)),
+                            "azimuth": float(np.degrees(sun.azimuth)),
+                            "radius": float(np.degrees(sun.angular_radius))}, "alpha": 70.0}
+    uncut["camera"] = {"resolution": [480, 270], "fov": 20.0, "position": list(view.position),
+                       "yaw": float(np.degrees(view.yaw)), "pitch": float(np.degrees(view.pitch))}
+    uncut["ground"].update(window=list(plan.window.extent), sun_window=list(plan.sun_window.extent),
+                           sun_pixel=plan.sun_window.pixel)
+    uncut = load_config(write(tmp_path, uncut, "u.yaml"))
+    store = Cache(tmp_path / "cache")
+    a = luminance(render.render_frame(eclipsed, plan=plan, store=store))
+    b = luminance(render.render_frame(uncut, store=store))
+    rows, cols = a.shape
+    crop = (slice(rows // 4, 3 * rows // 4), slice(cols // 4, 3 * cols // 4))
+    a, b = a[crop] - a[crop].mean(), b[crop] - b[crop].mean()
+    correlation = np.fft.fftshift(np.fft.irfft2(np.fft.rfft2(a) * np.conj(np.fft.rfft2(b)), s=a.shape))
+    r, c = np.unravel_index(np.argmax(correlation), correlation.shape)
+    peak = correlation[r - 2:r + 3, c - 2:c + 3]
+    peak = np.maximum(peak - peak.min(), 0.0)
+    dr, dc = np.mgrid[-2:3, -2:3]
+    measured = np.array([c - correlation.shape[1] // 2 + (peak * dc).sum() / peak.sum(),
+                         r - correlation.shape[0] // 2 + (peak * dr).sum() / peak.sum()])
+    # the visible sun's centroid on the tangent plane (limb darkening u = 0.6), from the ephemeris
+    dx, dy = ephemeris.moon_offset_from_sun(
+        ephemeris.BodyPosition(sun.azimuth, sun.elevation, sun.angular_radius),
+        ephemeris.BodyPosition(moon.azimuth, moon.elevation, moon.angular_radius))
+    grid = np.linspace(-sun.angular_radius, sun.angular_radius, 601)
+    x, y = np.meshgrid(grid, grid)
+    rho2 = (x**2 + y**2) / sun.angular_radius**2
+    weight = np.where(rho2 <= 1, 1 - 0.6 * (1 - np.sqrt(np.clip(1 - rho2, 0, 1))), 0.0)
+    weight *= (x - dx) ** 2 + (y - dy) ** 2 > moon.angular_radius**2
+    cx, cy = (weight * x).sum() / weight.sum(), (weight * y).sum() / weight.sum()
+    a_, h_ = sun.azimuth, sun.elevation
+    centre = np.array([np.cos(h_) * np.sin(a_), np.cos(h_) * np.cos(a_), np.sin(h_)])
+    e_az = np.array([np.cos(a_), -np.sin(a_), 0.0])
+    e_el = np.array([-np.sin(h_) * np.sin(a_), -np.sin(h_) * np.cos(a_), np.cos(h_)])
+    w = centre + cx * e_az + cy * e_el
+    shift = -6.0 * (w[:2] / w[2] - np.array(sky_plane_from_direction(a_, np.pi / 2 - h_)))
+    target = render.seen_ground(view, 3)[0][4]  # the ground at the image's centre
+    u, v, _ = camera.project_points(view, np.array([[*target, 0.0], [*(target + shift), 0.0]]))
+    predicted = np.array([u[1] - u[0], v[1] - v[0]])
+    assert np.linalg.norm(predicted) > 4.0  # pixels: the crescents are resolved
+    cosine = measured @ predicted / (np.linalg.norm(measured) * np.linalg.norm(predicted))
+    assert cosine > np.cos(np.radians(15)), (measured, predicted)
+    assert 0.6 < np.linalg.norm(measured) / np.linalg.norm(predicted) < 1.3, (measured, predicted)
+
+
+def test_check_prints_the_placed_framing_and_warns_of_a_camera_that_looks_away(tmp_path, capsys):
+    latitude, longitude, when = SITES["oslo-morning"]
+    placed = write(tmp_path, site_config(latitude, longitude, when), "placed.yaml")
+    assert main(["check", str(placed)]) == 0
+    out, err = capsys.readouterr()
+    assert "ground.window: [" in out and "ground.sun_window: [" in out
+    assert out.count("(placed)") == 3 and "camera: position [" in out
+    assert "warning" not in err
+    away = site_config(latitude, longitude, when)
+    away["camera"].update(position=[0.0, 0.0, 1.7], yaw=0.0, pitch=10.0)  # north, at the sky
+    away["ground"]["sun_window"] = [-2.0, -2.0, 2.0, 2.0]
+    assert main(["check", str(write(tmp_path, away, "away.yaml"))]) == 0
+    out, err = capsys.readouterr()
+    warnings = [line for line in err.splitlines() if line.startswith("sunshade: warning:")]
+    assert len(warnings) == 1 and "the camera sees none of ground.sun_window" in warnings[0]
+
+
+def test_a_shadow_that_leaves_the_sun_window_is_warned_of(tmp_path, capsys):
+    """The sun setting over the animation: a sun window fixed near the tree loses the shadow
+    in the last frames (it lies h cot(elevation) away)."""
+    config = site_config(40.42, -3.70, "2026-08-12T16:00:00Z")
+    config["sky"]["time"]["end"] = "2026-08-12T18:40:00Z"
+    config["animation"]["frames"] = 5
+    config["ground"].update(window=[-15, -15, 15, 15], sun_window=[-3.0, -3.0, 3.0, 3.0])
+    path = write(tmp_path, config)
+    assert main(["check", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert "the canopy's shadow falls outside ground.sun_window in" in err
+    plan = render.plan_run(load_config(path))
+    # by hand: the shadow of the crown's centre lies h cot(elevation) from it
+    config = load_config(path)
+    last = render.scene_at(config, 4).sun
+    assert 6.0 / np.tan(last.elevation) > 3.0 + 3.0 * 2  # beyond the window and the crown
+    assert plan.auto == ("camera",)
+
+
+def test_an_explicit_framing_is_kept_as_given(tmp_path):
+    latitude, longitude, when = SITES["oslo-morning"]
+    config = site_config(latitude, longitude, when, position=[1.0, -6.0, 1.7], look_at=[0.0, 0.0, 0.5])
+    config["ground"].update(window=[-4, -4, 4, 4], sun_window=[-1, -1, 1, 1])
+    plan = render.plan_run(load_config(write(tmp_path, config)))
+    assert plan.auto == ()
+    assert plan.window.extent == pytest.approx((-4, -4, 4, 4))
+    assert plan.sun_window.extent == pytest.approx((-1, -1, 1, 1), abs=plan.sun_window.pixel)
+    assert plan.camera == camera.Camera.look_at((1.0, -6.0, 1.7), (0.0, 0.0, 0.5), vertical_fov=np.radians(50.0),
+                                                width=320, height=180)
+
+
+# ---------------------------------------------------------------------------------------------
+# auto exposure
+# ---------------------------------------------------------------------------------------------
+
+
+def test_auto_exposure_follows_a_step_with_its_time_constant_and_stops_at_its_limits():
+    """A step of the light from 100 to 100 / 2^5 klx at frame 10 (24 fps, 0.5 s): the metered
+    level closes the gap as 1 - exp(-t / 0.5 s), the analytic first-order response."""
+    light = np.array([100.0] * 10 + [100.0 / 32] * 60)
+    readings = light[:, None] * np.ones(3)
+    reference = np.full(3, 100.0)
+    exposure = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
+                                       time_constant=0.5, limits=(-4.0, 10.0))
+    stops = np.log2(exposure / composite.exposure_for(reference))
+    t = np.arange(1, 61) / 24
+    assert stops[:10] == pytest.approx(0.0, abs=1e-12)
+    # the discrete lag of one frame step: exp(-k dt / tau) exactly
+    assert stops[10:] == pytest.approx(5.0 * (1 - np.exp(-t / 0.5)), abs=1e-9)
+    held = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
+                                   time_constant=0.5, limits=(-1.0, 2.0))
+    assert np.log2(held / composite.exposure_for(reference)).max() == pytest.approx(2.0)
+    # time constant 0 follows each frame at once; stops bias it, and the limits count from the
+    # fixed exposure with the same stops
+    instant = composite.auto_exposure(readings * 4, reference=reference, frame_time=1 / 24,
+                                      time_constant=0.0, limits=(-4.0, 10.0), stops=1.0)
+    assert np.log2(instant / composite.exposure_for(reference)) == pytest.approx(
+        1.0 - 2.0 + np.where(np.arange(70) >= 10, 5.0, 0.0))
+    clamped = composite.auto_exposure(readings * 4, reference=reference, frame_time=1 / 24,
+                                      time_constant=0.0, limits=(-1.0, 2.0), stops=1.0)
+    assert np.log2(clamped / composite.exposure_for(reference, stops=1.0))[:10] == pytest.approx(-1.0)
+    dark = composite.auto_exposure(np.zeros((3, 3)), reference=reference, frame_time=1 / 24,
+                                   time_constant=0.0, limits=(-4.0, 10.0))
+    assert np.all(np.isfinite(dark)) and np.log2(dark / composite.exposure_for(reference)) == pytest.approx(10.0)
+
+
+AUTO_BAND = (0.2, 0.8)
+"""Mean display value of the Dallas frames with auto exposure, up to second contact
+(docs/method.md, "Exposure")."""
+
+
+def test_auto_exposure_keeps_the_dallas_eclipse_readable_to_second_contact(tmp_path):
+    """configs/eclipse-2024-dallas.yaml with no flutter and a small frame: the mean display
+    value stays in AUTO_BAND from first contact to the last frame before second contact, while
+    the fixed exposure of the same scene falls out of it."""
+    config = yaml.safe_load((ROOT / "configs" / "eclipse-2024-dallas.yaml").read_text())
+    config["canopy"]["flutter"]["cycle"] = 1
+    config["camera"]["resolution"] = [160, 90]
+    config["ground"]["albedo"] = str(ROOT / "configs" / "assets" / "sand.png")
+    config["render"] = {"sun_cells": 6}
+    assert config["camera"]["exposure"]["mode"] == "auto"
+    path = write(tmp_path, config, "dallas.yaml")
+    auto = load_config(path)
+    plan = render.plan_run(auto)
+    site = auto.sky.site
+    c2 = ephemeris.contact_times(ephemeris.Site(site.latitude, site.longitude, site.elevation),
+                                 site.start, site.end)["C2"]
+    frames = [f for f in (0, 80, 160, 200, 225, 232, 236, 239) if render.scene_at(auto, f).when < c2]
+    assert frames[-1] >= 236
+    fixed_config = dict(config, camera=dict(config["camera"], exposure=1.5))
+    fixed = load_config(write(tmp_path, fixed_config, "fixed.yaml"))
+    store = Cache(tmp_path / "cache")
+    means, fixed_means = [], []
+    for frame in frames:
+        result = render.render_frame(auto, frame=frame, plan=plan, store=store)
+        means.append(float(composite.display(result.radiance, exposure=result.exposure).mean()))
+        result = render.render_frame(fixed, frame=frame, store=store)
+        fixed_means.append(float(composite.display(result.radiance, exposure=result.exposure).mean()))
+    assert min(means) >= AUTO_BAND[0] and max(means) <= AUTO_BAND[1], dict(zip(frames, means))
+    assert min(fixed_means) < AUTO_BAND[0]  # what the fixed exposure did
