@@ -784,7 +784,7 @@ def record_config_items(config: Config, plan: RunPlan, store: cache.Cache) -> No
 
 def recorded_configs(store: cache.Cache) -> list[dict]:
     """The configs recorded in a cache (``record_config_items``), each {name, config, cycle,
-    keys}."""
+    keys}, by name."""
     found = []
     for path in sorted((store.root / CONFIG_INDEX).glob("*.json")):
         try:
@@ -793,7 +793,7 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
                           "cycle": int(entry.get("cycle", 0)), "keys": set(entry["keys"])})
         except (OSError, ValueError, KeyError, TypeError):
             continue
-    return found
+    return sorted(found, key=lambda entry: (entry["name"], entry["config"]))
 
 
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:

@@ -484,3 +484,87 @@ def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
     lines = log.getvalue().splitlines()
     assert lines[0] == "sunshade: frames 0/4" and lines[-1] == "sunshade: frames 4/4"
     assert "\r" not in log.getvalue() and len(lines) == 2  # at most one line per 10 s between
+
+
+@pytest.mark.parametrize("section,keys", [
+    ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "sun", "site", "time",
+             "moon", "clouds", "skylight", "haze"}),
+    ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
+    ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display"}),
+])
+def test_an_unknown_key_lists_every_valid_key_of_its_section(inputs, capsys, section, keys):
+    """The keys the README's config documents for the section, whichever the parser read."""
+    folder, out = inputs
+    config = base_config()
+    config.setdefault(section, {})["mooon"] = 1
+    assert main(["check", str(write_config(folder, config))]) == 2
+    err = capsys.readouterr().err
+    assert f"{section}.mooon: unknown key (valid here: " in err
+    listed = set(err.split("valid here: ")[1].rstrip(")\n").split(", "))
+    assert listed == keys
+
+
+def test_a_config_named_with_dots_or_spaces_gets_a_valid_output_name(inputs, capsys):
+    folder, out = inputs
+    for name, expected in (("my.scene.yaml", "my_scene"), ("my eclipse.yaml", "my_eclipse")):
+        path = write_config(folder, base_config(), name)
+        assert main(["check", str(path)]) == 0, capsys.readouterr().err
+        from pipeline.config import load_config
+
+        assert load_config(path).output.name == expected
+        assert main(["ground", str(path), "-o", str(out / f"{expected}.exr")]) == 0
+
+
+def test_sky_and_ground_write_a_png_alone(inputs):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    assert main(["ground", str(config), "-o", str(out / "g.png")]) == 0
+    procedural = base_config()
+    procedural["sky"] = {"model": "procedural", "sun": {"elevation": 40.0, "azimuth": 90.0}}
+    assert main(["sky", str(write_config(folder, procedural, "p.yaml")), "--width", "64",
+                 "-o", str(out / "s.png")]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["g.png", "s.png"]
+    assert io.read_image(out / "s.png").shape == (32, 64, 3)
+
+
+def test_cache_list_groups_items_by_config_and_takes_one(tmp_path, capsys):
+    """Two configs rendered into one cache: the listing names each with its items, size and
+    cycle frames; with a config, only its items; prune with a config removes only its."""
+    from test_run import TINY
+
+    cache = tmp_path / "cache"
+    configs = []
+    for name, seed in (("first", 3), ("second", 4)):
+        config = {**TINY, "canopy": {**TINY["canopy"], "trees": {**TINY["canopy"]["trees"], "seed": seed}},
+                  "animation": {"frames": 2, "fps": 12}, "output": {"video": "none"}}
+        configs.append(write_config(tmp_path, config, f"{name}.yaml"))
+        assert main(["render", str(configs[-1]), "--jobs", "1", "--output", str(tmp_path / name),
+                     "--cache", str(cache)]) == 0
+    capsys.readouterr()
+    assert main(["cache", "list", "--cache", str(cache)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines[:2]] == ["first", "second"]
+    assert all("cycle frames 2 of 3" in line and "items (" in line for line in lines[:2])
+    assert lines[-1].startswith("8 items")  # 2 cycle frames x (spectra, foreground) x 2 configs
+    assert main(["cache", "list", str(configs[0]), "--cache", str(cache)]) == 0
+    assert "4 of 6 items" in capsys.readouterr().out
+    assert main(["cache", "prune", str(configs[0]), "--cache", str(cache)]) == 0
+    assert "removed 4 items" in capsys.readouterr().out
+    assert main(["cache", "list", "--cache", str(cache)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[0] == "second" and lines[-1].startswith("4 items")
+
+
+def test_cache_list_into_a_closed_pipe_and_a_missing_cache_folder(tmp_path):
+    from pipeline.cache import Cache
+
+    store = Cache(tmp_path / "c")
+    for seed in range(400):
+        store.get_or_compute("spectrum", {"seed": seed}, lambda: {"a": np.zeros(4, np.float32)})
+    done = subprocess.run(f"{sys.executable} -m pipeline.cli cache list --cache {tmp_path / 'c'} | head -2",
+                          shell=True, capture_output=True, text=True, cwd=ROOT)
+    assert done.stdout.count("\n") == 2 and "Traceback" not in done.stderr, done.stderr
+    done = subprocess.run([sys.executable, "-m", "pipeline.cli", "cache", "list", "--cache",
+                           str(tmp_path / "absent")], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 2 and "no such cache folder" in done.stderr
+    assert not (tmp_path / "absent").exists()

@@ -107,6 +107,15 @@ def test_a_second_run_has_nothing_to_do(reference, capsys):
     assert main(["render", str(config), "--output", str(folder), "--cache", str(config.parent / "cache")]) == 0
     assert "0 frames rendered, 8 already done" in capsys.readouterr().out
     assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.suffix != ".json"} == before
+    # run.json keeps the record of the run that did the work, and lists both
+    record = json.loads((folder / "run.json").read_text())
+    assert [run["frames"] for run in record["runs"]][-2:] == [8, 0]
+    assert record["timings"]["frames"] > 0 and record["timings"] == record["runs"][-2]["timings"]
+    assert set(record["runs"][-1]["timings"]) == {"check", "total"}
+    # the camera the plan placed is written as placed, not as None
+    assert record["config"]["placed"] == ["camera"]
+    assert len(record["config"]["camera"]["position"]) == 3
+    assert record["config"]["ground"]["window"] == pytest.approx([-4, -4, 4, 4])
 
 
 def kill_when(process, ready, *, timeout=120.0) -> bool:
@@ -217,3 +226,13 @@ def test_a_dask_cluster_renders_the_same_bytes(reference, tmp_path):
         run_to_end("render", config, "--scheduler", cluster.scheduler_address,
                    "--output", tmp_path / "run", "--cache", tmp_path / "cache")
     assert_same_files(tmp_path / "run", files)
+
+
+def test_an_unreachable_scheduler_writes_nothing(tmp_path):
+    pytest.importorskip("distributed")
+    config = write_config(tmp_path)
+    process = sunshade("render", config, "--scheduler", "tcp://127.0.0.1:9", "--output",
+                       tmp_path / "run", "--cache", tmp_path / "cache")
+    out, err = process.communicate(timeout=120)
+    assert process.returncode == 2 and "cannot reach the scheduler" in err
+    assert not (tmp_path / "run").exists()
