@@ -195,7 +195,7 @@ def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
 
 
 def _run_check(args) -> int:
-    from .render import check_inputs, framing_warnings
+    from .render import check_inputs, disk_needed, framing_warnings
 
     config = load_config(args.config)
     plan = check_inputs(config)
@@ -206,6 +206,9 @@ def _run_check(args) -> int:
           f"config hash {config.digest()}")
     for line in _framing_lines(plan):
         print(line)
+    frames, cycle = disk_needed(config, plan)
+    print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
+          f"cache {_size(cycle)}")
     _warn(config, plan, framing_warnings)
     return 0
 

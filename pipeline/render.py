@@ -269,8 +269,8 @@ CAMERA_HEIGHT = 1.7
 CAMERA_PITCH = 35.0
 """How far a camera placed by default looks down at the shadow. [deg]"""
 ECLIPSE_PITCH = 50.0
-"""How far it looks down when the moon cuts the sun in some frame: nearer, so that the pinhole
-images are large enough to show their crescents. [deg]"""
+"""How far it looks down when the moon cuts the sun in some frame and the sun stands above
+LOW_SUN: nearer, so that the pinhole images are large enough to show their crescents. [deg]"""
 CAMERA_TURN = 35.0
 """A camera placed by default looks this far round from the sun's azimuth, towards the west
 of it. [deg]"""
@@ -409,7 +409,7 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.window``: the canopy and its shadow over every frame, grown by WINDOW_MARGIN
       canopy heights (an isolated canopy); one tile (a periodic forest).
     - ``camera``: at eye height, looking CAMERA_PITCH (ECLIPSE_PITCH when the moon cuts the
-      sun) down at the middle frame's shadow of the leaves' centre (``crown_centre``), facing CAMERA_TURN round
+      sun above LOW_SUN) down at the middle frame's shadow of the leaves' centre (``crown_centre``), facing CAMERA_TURN round
       from the sun's azimuth; a given position looks there, a given look_at is seen from there.
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
@@ -436,7 +436,7 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     if ground.sun_window is not None and c.position is None and c.look_at is None:
         sw = ground.sun_window
         target = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2])
-    view = _place_camera(config, scenes, target, s, auto)
+    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH)
     sun_window = ground.sun_window
     if sun_window is None and sun is not None:
         if ground.window is not None:
@@ -468,8 +468,9 @@ def _eclipsed(scenes) -> bool:
     return False
 
 
-def _place_camera(config: Config, scenes, target, s, auto) -> camera.Camera:
-    """The config's camera with what it leaves out placed to look at ``target`` [m]."""
+def _place_camera(config: Config, target, s, auto, pitch_down: float) -> camera.Camera:
+    """The config's camera with what it leaves out placed to look at ``target`` [m], by default
+    ``pitch_down`` [deg] below the horizon."""
     c = config.camera
     width, rows = c.resolution
     if c.position is not None and (c.yaw is not None or c.look_at is not None):
@@ -485,7 +486,7 @@ def _place_camera(config: Config, scenes, target, s, auto) -> camera.Camera:
     if yaw is None:
         sun_azimuth = float(np.arctan2(s[0], s[1])) if np.any(s) else np.pi
         yaw = (sun_azimuth - np.radians(CAMERA_TURN)) % (2 * np.pi)
-    pitch = c.pitch if c.pitch is not None else -np.radians(ECLIPSE_PITCH if _eclipsed(scenes) else CAMERA_PITCH)
+    pitch = c.pitch if c.pitch is not None else -np.radians(pitch_down)
     back = CAMERA_HEIGHT / np.tan(-pitch) if pitch < -np.radians(1.0) else 2.0 * max(
         layer.height for layer in config.canopy.layers)
     position = (*(np.asarray(target) - back * np.array([np.sin(yaw), np.cos(yaw)])), CAMERA_HEIGHT)
@@ -539,9 +540,10 @@ def _pixels(box, pixel) -> float:
 
 
 def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
-    """One-line warnings of a plan whose picture would show no dappled shadow: the camera sees
-    none of the sun window, or the canopy's shadow misses the sun window (the sun too low for
-    the canopy's reach) in some frames."""
+    """One-line warnings of a plan whose picture would show no dappled shadow, or a false one:
+    the camera sees none of the sun window; the sun is below the canopy's reach, the sky square
+    (``sky.alpha``), in some frames, so that beyond the sun window nothing shades it; the
+    canopy's shadow falls outside the sun window in some frames."""
     warnings = []
     fine = plan.sun_window or plan.window
     x0, y0, x1, y1 = fine.extent
@@ -551,8 +553,15 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
     if not seen.any():
         warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
                         f"its frames will show no sun flecks (leave camera out to place it)")
+    scenes = [scene_at(config, f) for f in range(config.animation.frames)]
+    reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
+    low = [f for f, scene in enumerate(scenes) if scene.sun is not None and scene.sun.elevation < reach]
+    if low and plan.sun_window is not None:
+        warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
+                        f"degrees reaches down to {np.degrees(reach):g} degrees elevation) in "
+                        f"{len(low)} of {len(scenes)} frames ({_ranges(low)}): beyond {key} its "
+                        f"light is taken as unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
-        scenes = [scene_at(config, f) for f in range(config.animation.frames)]
         boxes = shadow_extents(config, scenes, plan.projection)
         missed = [f for f, box in enumerate(boxes) if _intersect(box, fine.extent) is None]
         if missed:
@@ -748,6 +757,32 @@ def _product_key(config, plan, layer, frame):
     if layer is None:
         return "foreground", foreground_params(config, plan, frame)
     return "spectra", cycle_params(config, plan, layer, frame)
+
+
+FRAME_BYTES_PER_PIXEL = {True: 4.2, False: 7.4}
+"""Disk a finished frame takes per pixel, its EXR (half floats: True; float32: False, PIZ) and
+its PNG together: 3.9 MB for a 1280 x 720 frame of configs/eclipse.yaml in half floats (its 240
+frames took 933 MB, docs/accuracy.md); float32 adds 2 bytes a pixel. About: the compression
+follows the picture. [B]"""
+
+
+def disk_needed(config: Config, plan: RunPlan) -> tuple[float, float]:
+    """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and every
+    cycle product at its exact size: per layer and cycle frame the coarse spectrum (complex64
+    half spectrum of its FFT, or of one tile) and the fine one, per cycle frame the built-in
+    trees' passes (sun, sky: 3 float32, alpha: 1)."""
+    width, height = config.camera.resolution
+    frames = config.animation.frames * width * height * FRAME_BYTES_PER_PIXEL[config.output.half]
+    per_frame = 0
+    for lp in plan.layers:
+        rows, cols = getattr(lp.coarse, "fft_shape", None) or lp.coarse.tile_shape
+        per_frame += rows * (cols // 2 + 1) * 8
+        if lp.sun is not None:
+            rows, cols = lp.sun.fft_shape
+            per_frame += rows * (cols // 2 + 1) * 8
+    if config.foreground.model == "trees":
+        per_frame += 7 * 4 * width * height
+    return float(frames), float(per_frame * config.canopy.cycle)
 
 
 CONFIG_INDEX = ".configs"

@@ -236,3 +236,16 @@ def test_an_unreachable_scheduler_writes_nothing(tmp_path):
     out, err = process.communicate(timeout=120)
     assert process.returncode == 2 and "cannot reach the scheduler" in err
     assert not (tmp_path / "run").exists()
+
+
+def test_check_says_the_disk_a_run_needs(reference, capsys):
+    """The cache part of the estimate is the cycle products' exact array sizes: against the
+    reference run's cache on disk (its .npy headers and meta.json files are the difference)."""
+    config, _ = reference
+    assert main(["check", str(config)]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.strip().startswith("disk:"))
+    from pipeline.cli import _size
+
+    used = sum(p.stat().st_size for p in (config.parent / "cache").rglob("*.npy"))
+    assert f"cache {_size(used)}" in line or abs(float(line.split("cache ")[1].split()[0]) /
+                                                  float(_size(used).split()[0]) - 1) < 0.02, (line, used)
