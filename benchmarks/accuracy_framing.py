@@ -48,6 +48,10 @@ def main():
               f"p95/p5 {p95 / p5:.2f}, open sun / open shade {possible:.2f}; camera "
               f"{tuple(round(v, 2) for v in plan.camera.position)}, pitch {np.degrees(plan.camera.pitch):.0f}")
 
+    measured, predicted = scenes.crescent_shift(folder)
+    print(f"dallas-eclipse crescent shift against the uncut sun: measured {np.round(measured, 2)} px, "
+          f"predicted {np.round(predicted, 2)} px (columns, rows)")
+
     config = yaml.safe_load((ROOT / "configs" / "eclipse-2024-dallas.yaml").read_text())
     config["canopy"]["flutter"]["cycle"] = 1
     config["camera"]["resolution"] = [160, 90]

@@ -85,6 +85,7 @@ ground:
   pixel: 0.025
   sun_window: [-4, -4, 4, 4]
   sun_pixel: 0.01
+camera: {position: [-15.95101705184504, 7.4380814066363135, 1.7], look_at: [0.0, 0.0, 3.6]}
 animation: {frames: 240, fps: 24}
 """
 
@@ -107,6 +108,7 @@ ground:
   pixel: 0.025
   sun_window: [-4, -4, 4, 4]
   sun_pixel: 0.01
+camera: {position: [-15.95101705184504, 7.4380814066363135, 1.7], look_at: [0.0, 0.0, 3.6]}
 animation: {frames: 240, fps: 24}
 """
 

@@ -402,6 +402,22 @@ def shadow_extents(config: Config, scenes, projection) -> list:
     return boxes
 
 
+def leaf_shadow_extents(config: Config, scenes, projection) -> list:
+    """Per frame, (x_min, y_min, x_max, y_max) [m] of the leaves' shadows alone (every 16th
+    leaf's centre, at its own height, along the frame's sun): a low sun's trunk shadow reaches
+    far beyond them. Mask images: ``shadow_extents``."""
+    if config.canopy.trees is None or config.canopy.layout == "periodic":
+        return shadow_extents(config, scenes, projection)
+    grove, _ = _grove(config.canopy)
+    centres = grove.leaves.center[::16]
+    boxes = []
+    for scene in scenes:
+        s = np.array(sky_plane_from_direction(scene.sun.azimuth, np.pi / 2 - scene.sun.elevation))
+        shade = centres[:, :2] - centres[:, 2:3] * s
+        boxes.append((*shade.min(axis=0), *shade.max(axis=0)))
+    return boxes
+
+
 def frame_scene(config: Config, scenes, projection) -> Framing:
     """The windows and the camera of a run, each from the config where it gives them, else
     placed (docs/method.md, "Framing"):
@@ -543,7 +559,7 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
     """One-line warnings of a plan whose picture would show no dappled shadow, or a false one:
     the camera sees none of the sun window; the sun is below the canopy's reach, the sky square
     (``sky.alpha``), in some frames, so that beyond the sun window nothing shades it; the
-    canopy's shadow falls outside the sun window in some frames."""
+    leaves' shadow falls outside the sun window in some frames."""
     warnings = []
     fine = plan.sun_window or plan.window
     x0, y0, x1, y1 = fine.extent
@@ -562,11 +578,11 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
                         f"{len(low)} of {len(scenes)} frames ({_ranges(low)}): beyond {key} its "
                         f"light is taken as unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
-        boxes = shadow_extents(config, scenes, plan.projection)
+        boxes = leaf_shadow_extents(config, scenes, plan.projection)
         missed = [f for f, box in enumerate(boxes) if _intersect(box, fine.extent) is None]
         if missed:
             elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
-            warnings.append(f"the canopy's shadow falls outside {key} in {len(missed)} of "
+            warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "
                             f"{len(boxes)} frames ({_ranges(missed)}; the sun at "
                             f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
                             f"does not reach the window along the sun there")

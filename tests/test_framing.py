@@ -74,12 +74,12 @@ def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
     assert render.framing_warnings(config, plan) == []
 
 
-def test_the_eclipse_frame_shows_crescents_turned_as_the_moon_cuts_the_sun(tmp_path):
-    """The shape of the pinhole images, measured in the frame: against the same frame under the
-    uncut sun (same camera, same rasters), the pattern moves by the offset of the visible
-    crescent's centroid from the sun's centre, turned round by the pinhole (-h times it on the
-    sky plane), projected by the camera. A round image would not move; a crescent cut on the
-    wrong side would move the other way."""
+def crescent_shift(tmp_path):
+    """(measured, predicted) shift [pixel] (along columns, rows) of the Dallas eclipse frame's
+    pattern against the same frame under the uncut sun (same camera, same rasters): measured by
+    cross-correlation, predicted from the offset of the visible crescent's centroid from the
+    sun's centre, turned round by the pinhole (-h times it on the sky plane), projected by the
+    camera."""
     latitude, longitude, when = SITES["dallas-eclipse"]
     eclipsed = load_config(write(tmp_path, site_config(latitude, longitude, when, fov=20.0,
                                                        resolution=[480, 270]), "e.yaml"))
@@ -127,6 +127,13 @@ def test_the_eclipse_frame_shows_crescents_turned_as_the_moon_cuts_the_sun(tmp_p
     target = render.seen_ground(view, 3)[0][4]  # the ground at the image's centre
     u, v, _ = camera.project_points(view, np.array([[*target, 0.0], [*(target + shift), 0.0]]))
     predicted = np.array([u[1] - u[0], v[1] - v[0]])
+    return measured, predicted
+
+
+def test_the_eclipse_frame_shows_crescents_turned_as_the_moon_cuts_the_sun(tmp_path):
+    """The shape of the pinhole images, measured in the frame (``crescent_shift``): a round
+    image would not move; a crescent cut on the wrong side would move the other way."""
+    measured, predicted = crescent_shift(tmp_path)
     assert np.linalg.norm(predicted) > 4.0  # pixels: the crescents are resolved
     cosine = measured @ predicted / (np.linalg.norm(measured) * np.linalg.norm(predicted))
     assert cosine > np.cos(np.radians(15)), (measured, predicted)
@@ -143,7 +150,7 @@ def test_check_prints_the_placed_framing_and_warns_of_a_camera_that_looks_away(t
     assert "warning" not in err
     away = site_config(latitude, longitude, when)
     away["camera"].update(position=[0.0, 0.0, 1.7], yaw=0.0, pitch=10.0)  # north, at the sky
-    away["ground"]["sun_window"] = [-2.0, -2.0, 2.0, 2.0]
+    away["ground"]["sun_window"] = list(render.plan_run(load_config(placed)).sun_window.extent)
     assert main(["check", str(write(tmp_path, away, "away.yaml"))]) == 0
     out, err = capsys.readouterr()
     warnings = [line for line in err.splitlines() if line.startswith("sunshade: warning:")]
@@ -162,7 +169,7 @@ def test_a_shadow_that_leaves_the_sun_window_or_the_sky_square_is_warned_of(tmp_
     path = write(tmp_path, config)
     assert main(["check", str(path)]) == 0
     err = capsys.readouterr().err
-    assert "the canopy's shadow falls outside ground.sun_window in" in err
+    assert "the leaves' shadow falls outside ground.sun_window in" in err
     low = [f for f in range(5) if render.scene_at(load_config(path), f).sun.elevation < np.radians(20.0)]
     assert low and f"the sun is below the sky square (sky.alpha 70 degrees reaches down to 20 degrees " \
         f"elevation) in {len(low)} of 5 frames" in err
