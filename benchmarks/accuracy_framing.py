@@ -34,8 +34,8 @@ spec.loader.exec_module(scenes)
 def main():
     folder = Path(tempfile.mkdtemp(prefix="framing-"))
     store = Cache(folder / "cache")
-    for site, place in scenes.SITES.items():
-        config = load_config(scenes.write(folder, scenes.site_config(*place), f"{site}.yaml"))
+    for site in scenes.SITES:
+        config = load_config(scenes.write(folder, scenes.dapple_scene(site), f"{site}.yaml"))
         plan = render.plan_run(config)
         result = render.render_frame(config, plan=plan, store=store)
         *_, ground_fraction = camera.ground_hits(plan.camera)

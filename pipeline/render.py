@@ -23,7 +23,7 @@ from . import albedo as albedos
 from . import cache, camera, canopy, composite, ephemeris, foreground, io, shadow
 from . import sky as sky_models
 from .composite import REC709_LUMINANCE
-from .config import MAX_GROUND_PIXELS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, ConfigError, CanopyLayer, Config, GroundConfig, SkyConfig
+from .config import MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, ConfigError, CanopyLayer, Config, GroundConfig, SkyConfig
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -444,6 +444,9 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
         window = extent if periodic else _grow(_union([extent, shadow_box]), WINDOW_MARGIN * max(heights))
         if not periodic:
             _check_auto_pixels(config, "ground.window", window, ground.pixel, MAX_GROUND_PIXELS, "ground.pixel")
+            if config.canopy.trees is None:  # an image canopy's transform: window and canopy
+                grown = _grow(window, max(max(layer.size) for layer in config.canopy.layers) / 2)
+                _check_auto_pixels(config, "ground.window", grown, ground.pixel, MAX_FFT_CELLS, "ground.pixel")
     # the camera's target: where the middle frame's shade is dappled
     sun = scenes[len(scenes) // 2].sun
     s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)

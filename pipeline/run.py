@@ -158,8 +158,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     digest = config.digest()
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
     if scheduler:
-        with _backend(scheduler):  # an unreachable scheduler fails before anything is written
-            pass
+        _reach(scheduler)  # an unreachable scheduler fails before anything is written
     folder = _make_folder(config.output.folder)
     jobs = jobs or config.render.jobs or default_workers()
     threads = 1 if scheduler else max(1, default_workers() // jobs)
@@ -274,6 +273,23 @@ def _backend(scheduler: str | None):
         raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler ({exc})") from None
     with client, joblib.parallel_config(backend="dask"):
         yield
+
+
+def _reach(scheduler: str) -> None:
+    """Raise RunError unless the scheduler answers: a TCP connection to a ``tcp://host:port``
+    address (refused at once, or 10 s for a host that does not answer), a client for others."""
+    import socket
+    from urllib.parse import urlsplit
+
+    address = urlsplit(scheduler if "://" in scheduler else f"tcp://{scheduler}")
+    if address.scheme != "tcp" or not address.hostname or not address.port:
+        with _backend(scheduler):
+            return
+    try:
+        socket.create_connection((address.hostname, address.port), timeout=10.0).close()
+    except OSError as exc:
+        raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler "
+                       f"({exc.strerror or exc})") from None
 
 
 def _make_folder(folder: Path) -> Path:
