@@ -307,7 +307,7 @@ def _run_ground(args) -> int:
     png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if args.threads is not None and args.threads < 1:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
-    config = load_config(args.config)
+    config = load_config(args.config, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     digest = config.digest()
     started = time.perf_counter()
@@ -356,7 +356,7 @@ def _run_frame(args) -> int:
         raise BadInput(f"--threads must be at least 1 (got {args.threads})")
     if args.half and suffix != ".exr":
         raise BadInput("--half is for EXR output")
-    config = load_config(args.config)
+    config = load_config(args.config, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
     result = render_frame(config, frame=args.frame, store=Cache(cache_dir(args.cache)), workers=args.threads)
@@ -384,7 +384,7 @@ def _run_mask(args) -> int:
 
     output = _checked_output(args.output)
     suffix = output.suffix.lower()
-    config = load_config(args.config)
+    config = load_config(args.config, named_frames=False)
     _check_frame(args.frame, config.canopy.cycle, "--frame", "the canopy's cycle")
     _check_frame(args.layer, len(config.canopy.layers), "--layer", "the number of canopy layers")
     plan = plan_run(config)
@@ -416,7 +416,7 @@ def _run_sky(args) -> int:
     png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if not 8 <= args.width <= 16384 or args.width % 2:
         raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
-    config = load_config(args.config)
+    config = load_config(args.config, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     scene = scene_at(config, args.frame)
     sky = load_sky(config.sky, scene)

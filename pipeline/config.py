@@ -337,8 +337,10 @@ def preview(config: Config) -> Config:
         output=replace(config.output, folder=config.output.folder / "preview"))
 
 
-def load_config(path) -> Config:
-    """Read and validate a YAML config file; raise ConfigError naming the file and key."""
+def load_config(path, *, named_frames: bool = True) -> Config:
+    """Read and validate a YAML config file; raise ConfigError naming the file and key.
+    ``named_frames=False`` (commands that write no named frames: ``frame``, ``ground``, ``sky``,
+    ``mask``): an ``output.name`` that is no valid name is replaced by the default one."""
     path = Path(path)
     try:
         text = path.read_text()
@@ -354,7 +356,7 @@ def load_config(path) -> Config:
     lines: dict[str, int] = {}
     _key_lines(node, "", lines, path)
     root = _Section(data if data is not None else {}, "", _Context(path, lines))
-    return _parse(root, path)
+    return _parse(root, path, named_frames)
 
 
 @dataclass(frozen=True)
@@ -546,14 +548,14 @@ def _kind(value) -> str:
     )
 
 
-def _parse(root: _Section, path: Path) -> Config:
+def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     animation = _parse_animation(root.section("animation"))
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)
     sky = _parse_sky(root.section("sky"), canopy, ground)
     camera = _parse_camera(root.section("camera"))
     foreground = _parse_foreground(root.section("foreground"), canopy)
-    output = _parse_output(root.section("output"), path)
+    output = _parse_output(root.section("output"), path, named_frames)
     render = _parse_render(root.section("render"))
     root.done()
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render)
@@ -566,9 +568,12 @@ def default_name(path: Path) -> str:
     return name or "sunshade"
 
 
-def _parse_output(s: _Section, path: Path) -> OutputConfig:
+def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputConfig:
     name = s.raw("name", default_name(path))
-    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
+    valid = isinstance(name, str) and name and all(c.isalnum() or c in "-_" for c in name)
+    if not valid and not named_frames:
+        name = default_name(path)
+    elif not valid:
         s.fail("name", f"must be a name of letters, digits, - and _ (got {name!r})")
     folder = s.raw("folder", f"renders/{name}")
     if not isinstance(folder, str) or not folder:

@@ -513,6 +513,15 @@ def test_a_config_named_with_dots_or_spaces_gets_a_valid_output_name(inputs, cap
 
         assert load_config(path).output.name == expected
         assert main(["ground", str(path), "-o", str(out / f"{expected}.exr")]) == 0
+    # a name no frame file can carry: refused by check and render, ignored by the commands that
+    # write no named frames
+    config = base_config()
+    config["output"] = {"name": "my.scene"}
+    path = write_config(folder, config, "named.yaml")
+    assert main(["check", str(path)]) == 2
+    assert "output.name: must be a name" in capsys.readouterr().err
+    assert main(["ground", str(path), "-o", str(out / "named.exr")]) == 0
+    assert main(["mask", str(path), "-o", str(out / "named-mask.png")]) == 0
 
 
 def test_sky_and_ground_write_a_png_alone(inputs):

@@ -164,6 +164,9 @@ def test_check_prints_the_placed_framing_and_warns_of_a_camera_that_looks_away(t
     out, err = capsys.readouterr()
     warnings = [line for line in err.splitlines() if line.startswith("sunshade: warning:")]
     assert len(warnings) == 1 and "the camera sees none of ground.sun_window" in warnings[0]
+    assert main(["render", str(tmp_path / "away.yaml"), "--output", str(tmp_path / "run"),
+                 "--cache", str(tmp_path / "cache"), "--jobs", "1"]) == 0
+    assert capsys.readouterr().err.count("sunshade: warning: the camera sees none of ground.sun_window") == 1
 
 
 def test_a_shadow_that_leaves_the_sun_window_or_the_sky_square_is_warned_of(tmp_path, capsys):
