@@ -173,7 +173,8 @@ class RunPlan:
     camera : the resolved camera; auto : the config keys the plan placed itself (of
     ``ground.window``, ``ground.sun_window``, ``camera``); shadow : (x_min, y_min, x_max, y_max)
     of where the canopy's shadow falls over the animation [m], None for a periodic forest;
-    exposures : the exposure of every frame with ``camera.exposure: auto``, else None [m^2/kcd].
+    exposures : the exposure of every frame with ``camera.exposure: auto`` (``with_exposures``),
+    else None: a frame then meters the frames its exposure remembers [m^2/kcd].
     """
 
     window: Grid
@@ -232,8 +233,6 @@ def plan_run(config: Config) -> RunPlan:
             layers = _plan_layers(config, scenes, window, sun_window, projection)
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    framing.shadow)
-    if config.camera.auto_exposure is not None:
-        plan = replace(plan, exposures=auto_exposures(config, plan, scenes))
     return plan
 
 
@@ -601,17 +600,41 @@ def _ranges(frames) -> str:
     return ",".join(parts)
 
 
-def auto_exposures(config: Config, plan: RunPlan, scenes) -> tuple[float, ...]:
-    """The exposure of every frame with ``camera.exposure: auto`` [m^2/kcd]: each frame's
-    meter reading is the open ground's light (``meter``), followed through
-    ``composite.auto_exposure``'s first-order lag and limits."""
-    light = reference_lighting(config, plan)
-    readings = [meter(config, scene, light) for scene in scenes]
+EXPOSURE_MEMORY = 14.0
+"""Auto exposure forgets the light of frames more than this many time constants back (their
+weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]"""
+
+
+def exposure_frames(config: Config, frame: int) -> range:
+    """The frames whose light the auto exposure of ``frame`` remembers."""
     a = config.camera.auto_exposure
-    return tuple(composite.auto_exposure(readings, reference=light.unshadowed,
-                                         frame_time=1.0 / config.animation.fps,
-                                         time_constant=a.time_constant, limits=a.limits,
-                                         stops=config.camera.exposure))
+    memory = int(np.ceil(EXPOSURE_MEMORY * a.time_constant * config.animation.fps))
+    return range(max(0, frame - memory), frame + 1)
+
+
+def auto_exposures(config: Config, plan: RunPlan, frames=None) -> dict[int, float]:
+    """The exposure of ``frames`` (default: all) with ``camera.exposure: auto`` [m^2/kcd]: each
+    frame's meter reading is the open ground's light (``meter``), followed through
+    ``composite.auto_exposure``'s first-order lag and limits from the first frame it remembers
+    (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered."""
+    light = reference_lighting(config, plan)
+    frames = range(config.animation.frames) if frames is None else frames
+    windows = {frame: exposure_frames(config, frame) for frame in frames}
+    readings = {f: meter(config, scene_at(config, f), light) for f in sorted(set().union(*windows.values()))}
+    a = config.camera.auto_exposure
+    return {frame: float(composite.auto_exposure(
+                [readings[f] for f in window], reference=light.unshadowed,
+                frame_time=1.0 / config.animation.fps, time_constant=a.time_constant,
+                limits=a.limits, stops=config.camera.exposure)[-1])
+            for frame, window in windows.items()}
+
+
+def with_exposures(config: Config, plan: RunPlan) -> RunPlan:
+    """The plan with every frame's auto exposure, metered once for a whole run."""
+    if config.camera.auto_exposure is None:
+        return plan
+    exposures = auto_exposures(config, plan)
+    return replace(plan, exposures=tuple(exposures[f] for f in range(config.animation.frames)))
 
 
 def meter(config: Config, scene: Scene, light: Lighting) -> np.ndarray:
@@ -1150,6 +1173,8 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
         sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
     if plan.exposures is not None:
         exposure = plan.exposures[frame]
+    elif config.camera.auto_exposure is not None:
+        exposure = auto_exposures(config, plan, [frame])[frame]
     else:
         exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
     clock.lap("composite")

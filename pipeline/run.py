@@ -30,7 +30,7 @@ from . import __version__, cache, io
 from .composite import display
 from .config import Config
 from .render import (RunPlan, check_inputs, cycle_phase, default_workers, framing_warnings,
-                     record_config_items, render_frame)
+                     record_config_items, render_frame, with_exposures)
 
 RUN_FILE = "run.json"
 MAX_RUNS = 100
@@ -152,7 +152,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     started = time.perf_counter()
     timings = {}
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
-    plan = check_inputs(config)
+    plan = with_exposures(config, check_inputs(config))
     for line in framing_warnings(config, plan) if warn else ():
         warn(line)
     digest = config.digest()
