@@ -173,8 +173,8 @@ class RunPlan:
     camera : the resolved camera; auto : the config keys the plan placed itself (of
     ``ground.window``, ``ground.sun_window``, ``camera``); shadow : (x_min, y_min, x_max, y_max)
     of where the canopy's shadow falls over the animation [m], None for a periodic forest;
-    exposures : the exposure of every frame with ``camera.exposure: auto`` (``with_exposures``),
-    else None: a frame then meters the frames its exposure remembers [m^2/kcd].
+    exposures : per frame, its exposure with ``camera.exposure: auto`` (``with_exposures``), or
+    None: a frame then meters the frames its exposure remembers [m^2/kcd].
     """
 
     window: Grid
@@ -184,7 +184,7 @@ class RunPlan:
     camera: camera.Camera | None = None
     auto: tuple[str, ...] = ()
     shadow: tuple[float, float, float, float] | None = None
-    exposures: tuple[float, ...] | None = None
+    exposures: tuple[float | None, ...] | None = None
 
 
 def check_inputs(config: Config) -> RunPlan:
@@ -629,12 +629,13 @@ def auto_exposures(config: Config, plan: RunPlan, frames=None) -> dict[int, floa
             for frame, window in windows.items()}
 
 
-def with_exposures(config: Config, plan: RunPlan) -> RunPlan:
-    """The plan with every frame's auto exposure, metered once for a whole run."""
+def with_exposures(config: Config, plan: RunPlan, frames=None) -> RunPlan:
+    """The plan with the auto exposure of ``frames`` (default: all; the others None), metered
+    once for a whole run."""
     if config.camera.auto_exposure is None:
         return plan
-    exposures = auto_exposures(config, plan)
-    return replace(plan, exposures=tuple(exposures[f] for f in range(config.animation.frames)))
+    exposures = auto_exposures(config, plan, frames)
+    return replace(plan, exposures=tuple(exposures.get(f) for f in range(config.animation.frames)))
 
 
 def meter(config: Config, scene: Scene, light: Lighting) -> np.ndarray:
@@ -1171,7 +1172,7 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
     radiance = composite.composite_frame(
         background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
         sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
-    if plan.exposures is not None:
+    if plan.exposures is not None and plan.exposures[frame] is not None:
         exposure = plan.exposures[frame]
     elif config.camera.auto_exposure is not None:
         exposure = auto_exposures(config, plan, [frame])[frame]

@@ -152,7 +152,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     started = time.perf_counter()
     timings = {}
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
-    plan = with_exposures(config, check_inputs(config))
+    plan = check_inputs(config)
     for line in framing_warnings(config, plan) if warn else ():
         warn(line)
     digest = config.digest()
@@ -173,6 +173,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         todo = [f for f in frames if force or records[f] is None]
         timings["check"] = time.perf_counter() - started
         if todo:
+            plan = with_exposures(config, plan, todo)
             with _backend(scheduler):
                 mark = time.perf_counter()
                 cycle_phase(config, plan, store, jobs=jobs, workers=threads,
