@@ -526,7 +526,8 @@ def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
 
 def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
     """The ground the camera sees of the shadow (grown by a pinhole image's length), within the
-    window, as near as AUTO_SUN_PIXELS fine pixels allow. [m]"""
+    window, as near as AUTO_SUN_PIXELS fine pixels allow; if it sees none of the shadow, what
+    it sees of the window. [m]"""
     heights = [layer.height for layer in config.canopy.layers]
     radius = min(sc.sun.angular_radius for sc in scenes)
     lowest = min(sc.sun.elevation for sc in scenes)
@@ -536,9 +537,12 @@ def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
     points, distance = seen_ground(view)
     inside = ((points[:, 0] >= area[0]) & (points[:, 0] <= area[2])
               & (points[:, 1] >= area[1]) & (points[:, 1] <= area[3]))
-    if not inside.any():
-        return area if _pixels(area, pixel) <= AUTO_SUN_PIXELS else _grow(
-            (*view.position[:2], *view.position[:2]), 2.0)
+    if not inside.any():  # the camera misses the shadow: the ground it sees in the window
+        area = window
+        inside = ((points[:, 0] >= area[0]) & (points[:, 0] <= area[2])
+                  & (points[:, 1] >= area[1]) & (points[:, 1] <= area[3]))
+    if not inside.any():  # nor the window (it looks up, or away): 2 m about its foot
+        return _grow((*view.position[:2], *view.position[:2]), 2.0)
     points, distance = points[inside], distance[inside]
     order = np.argsort(distance)
     best = None
