@@ -5,7 +5,8 @@ exposure"), with the scenes of tests/test_framing.py:
   luminance in the frame, beside the most the sun and sky of that moment allow between open sun
   and open shade;
 - the eclipse frame's shift against the uncut sun, measured and predicted (pixels);
-- the mean display value of the Dallas frames with auto and with a fixed exposure.
+- the mean display value of the Dallas frames with its auto exposure and with the fixed 1.5
+  stops it had.
 
     python benchmarks/accuracy_framing.py
 """

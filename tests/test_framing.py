@@ -248,7 +248,7 @@ AUTO_BAND = (0.2, 0.8)
 def test_auto_exposure_keeps_the_dallas_eclipse_readable_to_second_contact(tmp_path):
     """configs/eclipse-2024-dallas.yaml with no flutter and a small frame: the mean display
     value stays in AUTO_BAND from first contact to the last frame before second contact, while
-    the fixed exposure of the same scene falls out of it."""
+    the fixed exposure it had (1.5 stops) falls out of it."""
     config = yaml.safe_load((ROOT / "configs" / "eclipse-2024-dallas.yaml").read_text())
     config["canopy"]["flutter"]["cycle"] = 1
     config["camera"]["resolution"] = [160, 90]
