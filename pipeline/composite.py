@@ -131,7 +131,7 @@ def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
 
 
 def auto_exposure(readings, *, reference, frame_time: float, time_constant: float,
-                  limits=(-4.0, 10.0), stops: float = 0.0) -> np.ndarray:
+                  limits, stops: float = 0.0) -> np.ndarray:
     """Exposure per frame [m^2/kcd] that follows the scene's light like a camera's auto
     exposure: each frame's meter reading (``readings`` (frames, 3), the open ground's horizontal
     irradiance [klx]) is followed in log (stops) through a first-order lag, the first frame
