@@ -292,6 +292,8 @@ class Config:
         for section, names in _NOT_IN_DIGEST.items():
             for name in names:
                 values[section].pop(name)
+        if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
+            values["camera"].pop("auto_exposure")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
