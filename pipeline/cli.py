@@ -348,7 +348,7 @@ def _run_mask(args) -> int:
     plan = plan_run(config)
     layer = plan.layers[args.layer]
     if args.fine and layer.sun is None:
-        raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: procedural)")
+        raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: cie, preetham or hdri)")
     started = time.perf_counter()
     coarse, fine = layer_masks(config, plan, args.layer, args.frame)
     mask, grid = (fine, layer.sun.mask) if args.fine else (coarse, layer.canopy)
@@ -378,7 +378,7 @@ def _run_sky(args) -> int:
     scene = scene_at(config, args.frame)
     sky = load_sky(config.sky, scene)
     if not hasattr(sky, "equirect"):
-        raise BadInput(f"{args.config}: sunshade sky writes procedural skies (sky.model is "
+        raise BadInput(f"{args.config}: sunshade sky writes the cie and preetham skies (sky.model is "
                        f"{config.sky.model}; an hdri sky is its image)")
     image = sky.equirect(args.width)
     attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),
