@@ -499,3 +499,30 @@ def test_skylight_scales_the_blue_sky_and_leaves_the_sun():
     np.testing.assert_allclose(half.radiance(s), 0.5 * sky.radiance(s), rtol=1e-12)
     np.testing.assert_allclose(dark.sun_irradiance(), sky.sun_irradiance(), rtol=1e-12)
     assert dark.sun_fraction() == sky.sun_fraction() == 1.0
+
+
+def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path):
+    """What a user sees: the hemisphere integral of the `sunshade sky` image (texels' exact
+    projected solid angles, the sun disc deposited in it) is the light `sunshade ground` gives
+    ground that no leaf shades, and both are the standard models' daylight."""
+    import yaml
+
+    from pipeline import io
+    from pipeline.cli import main
+
+    rng = np.random.default_rng(0)
+    io.write_png(tmp_path / "mask.png", np.where(rng.random((40, 40)) < 0.4, 0.0, 1.0).astype(np.float32)[..., None])
+    config = {"canopy": {"mask": "mask.png", "size": [4.0, 4.0], "height": 3.0},
+              "sky": {"model": "cie", "turbidity": 4.0, "sun": {"elevation": 40.0, "azimuth": 120.0}, "alpha": 80.0},
+              "ground": {"window": [-24, -24, 24, 24], "pixel": 0.5, "sun_window": [20, 20, 22, 22],
+                         "sun_pixel": 0.05}}
+    path = tmp_path / "open.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert main(["sky", str(path), "--width", "1024", "-o", str(tmp_path / "sky.exr")]) == 0
+    assert main(["ground", str(path), "-o", str(tmp_path / "ground.exr")]) == 0
+    sky_total = EquirectSky(io.read_image(tmp_path / "sky.exr")).total_irradiance()
+    ground = io.read_image(tmp_path / "ground.exr")  # the sun window, 20..22 m: 17 m (3 tan 80) from the leaves
+    assert np.ptp(ground[..., 1]) < 1e-3 * ground[..., 1].mean()  # open ground: no shadow
+    assert ground.reshape(-1, 3).mean(axis=0) == pytest.approx(sky_total, rel=1e-2)
+    direct, diffuse = reference_daylight(40.0, 4.0, 0.0)
+    assert ground.reshape(-1, 3).mean(axis=0) @ LUMA == pytest.approx(direct + diffuse, rel=0.01)
