@@ -17,6 +17,7 @@ from pipeline.cache import (
     ENV_VAR,
     MAX_PARAM_ARRAY_SIZE,
     Cache,
+    CacheWarning,
     cache_dir,
     key_of,
     parse_size,
@@ -224,9 +225,11 @@ def test_missing_meta_is_treated_as_absent(tmp_path):
     cache, compute = Cache(tmp_path), Counter()
     cache.get_or_compute("mask", PARAMS, compute)
     (item_of(cache) / "meta.json").unlink()
-    assert cache.get("mask", PARAMS) is None
     (item, problem), = cache.verify()
     assert "meta.json" in problem
+    with pytest.warns(CacheWarning, match="meta.json is missing"):
+        assert cache.get("mask", PARAMS) is None  # and removed, to be computed again
+    assert cache.list() == []
     cache.get_or_compute("mask", PARAMS, compute)
     assert compute.calls == 2 and cache.verify() == []
 
