@@ -287,7 +287,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         before = json.dumps(index, sort_keys=True)
         checked = check_frames(config, digest, store, index)
         for frame, problem in sorted(checked.damaged.items()):
-            warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; rendering it again",
+            action = "rendering it again" if force or frame in frames else "not done"
+            warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; {action}",
                           FrameWarning, stacklevel=2)
         if json.dumps(index, sort_keys=True) != before:
             _write_index(folder, index)
