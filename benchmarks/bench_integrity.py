@@ -9,8 +9,8 @@ digest of each frame written, and a resume that checks the frames it skips.
    in this process (the baseline: sizes, headers and a stat, what every later read costs) and
    with ``cache.forget_verified()`` before it (every item's CRC-32 computed again: the worst
    case; a run checks each item once per worker process, so once per ``cycle`` frames), the
-   two alternated ``--repeat`` times; beside them the checksums alone of the items a frame
-   reads. Medians over frames and repeats.
+   two alternated ``--repeat`` times, in turn first; beside them the checksums alone of the
+   items a frame reads. Medians over frames and repeats.
 2. Frame digests (issue 19): the BLAKE2b of the EXR and PNG a frame writes, beside the frame.
 3. With ``--run FOLDER`` (a finished ``sunshade render CONFIG --output FOLDER``): the wall time
    of a resume with nothing to do (sizes, inodes and times against index.json), of one after
@@ -65,24 +65,26 @@ def cache_checks(config, frames, repeat) -> None:
     cycle_phase(config, plan, store, jobs=1, workers=workers,
                 cycle_frames={f % config.canopy.cycle for f in frames})
     trusted, checked, sums, size = [], [], [], 0
-    for _ in range(repeat):
+    for turn in range(repeat):
         for frame in frames:
-            reader = cache.Cache(store.root)  # its items were checked in this process before
-            trusted.append(seconds(lambda: render_frame(config, frame=frame, store=reader, plan=plan,
-                                                        workers=workers)))
-            cache.forget_verified()
-            checked.append(seconds(lambda: render_frame(config, frame=frame, store=reader, plan=plan,
-                                                        workers=workers)))
+            reader = cache.Cache(store.root)
+            for forget in ((False, True) if turn % 2 == 0 else (True, False)):  # both orders
+                if forget:
+                    cache.forget_verified()
+                (checked if forget else trusted).append(seconds(
+                    lambda: render_frame(config, frame=frame, store=reader, plan=plan, workers=workers)))
             sums.append(seconds(lambda: [reader.recheck(item, stamp, fresh=True, repair=False)
                                          for item, stamp in reader.served.items()]))
             size = sum(reader.item_path(*item.split("/")).joinpath(file).stat().st_size
                        for item, stamp in reader.served.items() for file in stamp)
     base, worst, crc = (statistics.median(v) for v in (trusted, checked, sums))
+    paired = statistics.median(c - t for c, t in zip(checked, trusted))
     print(f"cache checks, {config.path.name}, frames {','.join(map(str, frames))}, "
           f"{len(trusted)} renders each, {workers} FFT threads:")
     print(f"  frame, items checked before (baseline) : {base * 1e3:8.1f} ms (median)")
     print(f"  frame, every item checked on this read : {worst * 1e3:8.1f} ms (median), "
-          f"{100 * (worst - base) / base:+.1f} % of the baseline")
+          f"{100 * (worst - base) / base:+.1f} % of the baseline; median of the paired "
+          f"differences {paired * 1e3:+.1f} ms, {100 * paired / base:+.1f} %")
     print(f"  the checksums alone, {size / 2**20:.1f} MiB of items : {crc * 1e3:8.1f} ms (median), "
           f"{100 * crc / base:.1f} % of the baseline frame; a run checks each item once per "
           f"worker: {100 * crc / base / config.canopy.cycle:.2f} % per frame over a cycle")

@@ -41,7 +41,6 @@ RUN_FILE = "run.json"
 INDEX_FILE = "index.json"
 INDEX_FORMAT = 1
 LOCK_FILE = ".sunshade.lock"
-_DIGEST_CHUNK = 1 << 20  # [B]
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
 
