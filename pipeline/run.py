@@ -282,6 +282,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
     try:
         _remove_temporaries(folder)
+        if (folder / INDEX_FILE).is_dir():
+            raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
         index = _read_index(folder)
         before = json.dumps(index, sort_keys=True)
         checked = check_frames(config, digest, store, index)
@@ -460,12 +462,17 @@ def _read_index(folder: Path) -> dict:
 
 
 def _write_index(folder: Path, index: dict) -> None:
-    """index.json, written atomically (a temporary name, then renamed)."""
+    """index.json, written atomically (a temporary name, then renamed). Raises RunError naming
+    the file if it cannot be written."""
     path = folder / INDEX_FILE
     temporary = path.with_name(f".{INDEX_FILE}.tmp-{os.getpid()}")
-    temporary.write_text(json.dumps({"format": INDEX_FORMAT, "frames": index},
-                                    separators=(",", ":")) + "\n")
-    temporary.replace(path)
+    try:
+        temporary.write_text(json.dumps({"format": INDEX_FORMAT, "frames": index},
+                                        separators=(",", ":")) + "\n")
+        temporary.replace(path)
+    except OSError as exc:
+        temporary.unlink(missing_ok=True)
+        raise RunError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def _read_run_file(folder: Path) -> dict:

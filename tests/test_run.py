@@ -375,3 +375,11 @@ def test_flipped_bits_in_every_kind_of_cache_item_never_reach_a_frame(finished, 
     assert_same_files(tmp_path / "fresh", files)
     code, out, err = main(["cache", "verify", "--cache", str(cache)]), *capsys.readouterr()
     assert code == 0 and out.strip().startswith("0 broken")
+
+
+def test_an_index_that_is_a_folder_stops_the_run_before_any_work(reference, tmp_path, capsys):
+    config, _ = reference
+    (tmp_path / "run" / "index.json").mkdir(parents=True)
+    code, out, err = render_in_process(config, tmp_path / "run", tmp_path / "cache", capsys)
+    assert code == 2 and err.strip().endswith("index.json: is a folder, not a file")
+    assert len(err.strip().splitlines()) == 1 and not list((tmp_path / "run").glob("tiny.*"))
