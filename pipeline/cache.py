@@ -15,6 +15,8 @@ Layout under the cache root (``cache_dir``)::
     <root>/<kind>/<key[:2]>/.tmp-<key>-...      an item being written (or left by a killed writer)
     <root>/<kind>/<key[:2]>/.del-<key>-...      an item being removed
     <root>/locks/<key>.lock                     one file lock per key
+    <root>/damaged/<key>.json                   the items of this key found damaged and removed:
+                                                when, why, and the inodes of their .npy files
 
 Writes are atomic: the arrays, then ``meta.json``, are written into a temporary folder beside
 the final one, which is then renamed into place (``os.rename`` of a folder is atomic on POSIX),
@@ -83,6 +85,7 @@ MAX_PARAM_ARRAY_SIZE = 1024
 
 META = "meta.json"
 LOCKS = "locks"
+DAMAGED = "damaged"
 _TMP = ".tmp-"
 _DEL = ".del-"
 _KEY_RE = re.compile(r"^[0-9a-f]{64}$")
@@ -209,7 +212,7 @@ def key_of(kind: str, params: Mapping[str, Any]) -> str:
     The same inputs give the same key in any process and on any machine.
     """
     _check_name(kind, "cache kind")
-    if kind == LOCKS:
+    if kind in (LOCKS, DAMAGED):
         raise ValueError(f"invalid cache kind {kind!r}: reserved")
     if not isinstance(params, Mapping):
         raise TypeError(f"params must be a mapping, not {type(params).__name__}")
@@ -318,7 +321,8 @@ class Cache:
         verify : check the checksums of the files and of meta.json, unless this process
             checked these very files before (same size, inode and times); ``fresh`` checks
             them whatever this process saw. Without it, sizes and headers only.
-        stamp : ``{file: [crc32, size, inode, mtime_ns, ctime_ns]}`` of the item's arrays.
+        stamp : ``{file: [crc32, size, inode, mtime_ns, ctime_ns, created]}`` of the item's
+            arrays (``created``: when this copy was written, from meta.json).
         """
         meta_path = path / META
         try:
@@ -348,7 +352,8 @@ class Cache:
                 if st.st_size != spec["file_bytes"]:
                     raise _Broken(f"{spec['file']} has {st.st_size} bytes, expected {spec['file_bytes']}")
                 identity = [st.st_size, st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
-                stamp[spec["file"]] = [spec.get("file_crc32", spec["crc32"]), *identity]
+                stamp[spec["file"]] = [spec.get("file_crc32", spec["crc32"]), *identity,
+                                       meta.get("created")]
                 signature.append((spec["file"], *identity))
             check = verify and (fresh or _VERIFIED.get(str(path)) != tuple(signature))
             arrays = {}
@@ -406,10 +411,41 @@ class Cache:
 
     def _remove_broken(self, path: Path, kind: str, key: str, problem: str) -> None:
         """Remove a broken item (the caller holds its lock) with a one-line CacheWarning."""
+        self._bury(path, key, problem)
         _remove(path)
         self.repaired += 1
         warnings.warn(f"cache item {kind}/{key[:12]} was damaged ({problem}); removed, it is "
                       "computed again", CacheWarning, stacklevel=4)
+
+    def _bury(self, path: Path, key: str, problem: str) -> None:
+        """Record, before removing it, that the item at ``path`` was found damaged: when
+        [s since epoch], why, the inodes of its .npy files and when the copy was written (from
+        meta.json, if readable), so that what was made from this very copy of it can be told
+        apart later (``recheck``). Best effort: a record
+        that cannot be written is left out."""
+        try:
+            inodes = {e.name: e.inode() for e in os.scandir(path) if e.name.endswith(".npy")}
+            try:
+                created = json.loads((path / META).read_bytes()).get("created")
+            except (OSError, ValueError, AttributeError):
+                created = None  # unknown: any copy with these inodes counts
+            records = self._damaged(key) + [{"found": time.time(), "problem": problem,
+                                             "inodes": inodes, "created": created}]
+            folder = self.root / DAMAGED
+            folder.mkdir(parents=True, exist_ok=True)
+            temporary = folder / f"{_TMP}{key}-{os.getpid()}-{secrets.token_hex(4)}"
+            temporary.write_text(json.dumps(records))
+            os.replace(temporary, folder / f"{key}.json")
+        except OSError:
+            pass
+
+    def _damaged(self, key: str) -> list:
+        """The records of ``_bury`` for ``key`` (empty if none or unreadable)."""
+        try:
+            records = json.loads((self.root / DAMAGED / f"{key}.json").read_bytes())
+        except (OSError, ValueError):
+            return []
+        return records if isinstance(records, list) else []
 
     def get(self, kind: str, params: Mapping[str, Any], *, verify: bool = True
             ) -> dict[str, np.ndarray] | None:
@@ -491,21 +527,29 @@ class Cache:
 
         None when its files have the same sizes, inodes and times (nothing is read), when they
         changed but hold the same checksums (the item was computed again), or when the item is
-        absent (pruned: nothing says it was wrong). Otherwise the problem in words: the item is
-        damaged (with ``repair`` it is removed, with a CacheWarning) or holds other bytes.
+        absent (pruned: nothing says it was wrong). Otherwise the problem in words: the very
+        copy read then (the same inodes) was found damaged and removed since, by any process;
+        the item is damaged now (with ``repair`` it is removed, with a CacheWarning); or it
+        holds other bytes.
         ``fresh``: read and check the files whatever their sizes and times. A sound item read
         here is recorded in ``served`` with its current stamp.
         """
         kind, _, key = item.partition("/")
         if not _NAME_RE.fullmatch(kind) or not _KEY_RE.fullmatch(key):
             return f"{item!r} is not a cache item"
+        for record in self._damaged(key):
+            inodes = record.get("inodes", {}) if isinstance(record, dict) else {}
+            created = record.get("created") if isinstance(record, dict) else None
+            if any(inodes.get(file) == values[2] and created in (None, values[5])
+                   for file, values in stamp.items()):
+                return f"cache item {kind}/{key[:12]}, found damaged since ({record.get('problem')})"
         path = self.item_path(kind, key)
         try:
             now = {file: [st.st_size, st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
                    for file in stamp for st in [os.stat(path / file)]}
         except OSError:
             now = None
-        if not fresh and now is not None and all(now[f] == list(stamp[f][1:]) for f in stamp):
+        if not fresh and now is not None and all(now[f] == list(stamp[f][1:5]) for f in stamp):
             return None
         try:
             found = self._open(path, kind, key, verify=True, fresh=fresh)
@@ -618,6 +662,7 @@ class Cache:
             except _Broken as e:
                 problems.append((item, str(e)))
                 if remove:
+                    self._bury(item.path, item.key, str(e))
                     _remove(item.path)
         return problems
 

@@ -452,6 +452,7 @@ def test_recheck_tells_whether_an_item_is_still_what_was_served(tmp_path):
     cache.get_or_compute("mask", PARAMS, compute)
     (name, stamp), = cache.served.items()
     assert name == f"mask/{key_of('mask', PARAMS)}" and list(stamp) == ["spectrum.npy", "mean.npy"]
+    assert stamp["spectrum.npy"][5] == json.loads((item_of(cache) / "meta.json").read_text())["created"]
     assert cache.recheck(name, stamp) is None  # unchanged: nothing read
     os.utime(item_of(cache) / "spectrum.npy")  # touched, same bytes
     fresh = Cache(tmp_path)
@@ -462,9 +463,15 @@ def test_recheck_tells_whether_an_item_is_still_what_was_served(tmp_path):
     with pytest.warns(CacheWarning):
         assert "damaged" in Cache(tmp_path).recheck(name, stamp)
     assert cache.list() == []
-    assert cache.recheck(name, stamp) is None  # absent: nothing says the frame was wrong
-    cache.get_or_compute("mask", PARAMS, Counter(seed=5))  # computed again, other bytes
-    assert "other bytes" in Cache(tmp_path).recheck(name, stamp)
+    assert "found damaged since" in cache.recheck(name, stamp)  # that copy, removed as damaged
+    again = Cache(tmp_path)
+    again.get_or_compute("mask", PARAMS, compute)
+    copy = again.served[name]
+    assert again.recheck(name, copy) is None
+    again.clear()
+    assert again.recheck(name, copy) is None  # absent: a clear or prune says nothing against it
+    Cache(tmp_path).get_or_compute("mask", PARAMS, Counter(seed=5))  # computed again, other bytes
+    assert "other bytes" in Cache(tmp_path).recheck(name, copy)
 
 
 def test_cache_verify_reports_a_damaged_header_in_one_line(tmp_path, capsys):

@@ -409,3 +409,24 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
     for path in frame_files(config, 4):
         assert path.read_bytes() == files[path.name]
+
+
+def test_frames_made_from_an_item_found_damaged_elsewhere_render_again_pruned_do_not(finished, capsys):
+    """An item found damaged and removed by another command (here `cache verify --remove`)
+    leaves a record of that copy: the frames made from it render again; items pruned or
+    cleared say nothing against the frames made from them."""
+    config, files, run, cache = finished
+    assert "0 frames rendered" in render_in_process(config, run, cache, capsys)[1]  # the copies' inodes
+    (item,) = [i for i in items_of_frame(run, 2) if i.startswith("spectra")]
+    flip(npy_of(cache, item, "fine.npy"), -33)
+    assert main(["cache", "verify", "--remove", "--cache", str(cache)]) == 0
+    assert "(removed)" in capsys.readouterr()[0]
+    code, out, err = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "2 frames rendered, 6 already done" in out
+    assert [line.split(":")[2].strip() for line in err.splitlines() if "warning" in line] == [
+        "tiny.0002", "tiny.0005"]
+    assert "found damaged since (fine.npy: checksum mismatch" in err
+    assert_same_files(run, files)
+    assert main(["cache", "clear", "--cache", str(cache)]) == 0
+    code, out, err = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "0 frames rendered, 8 already done" in out
