@@ -227,7 +227,7 @@ def check_frames(config: Config, digest: str, store: cache.Cache, index: dict, *
                     problem = f"made from {items[tag]}"
                 elif item in store.served:
                     entry["items"][item] = store.served[item]
-        except (KeyError, TypeError, AttributeError, ValueError):
+        except (KeyError, IndexError, TypeError, AttributeError, ValueError):
             problem = "its entry in index.json is unreadable"
         if problem:
             damaged[frame] = problem
