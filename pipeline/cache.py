@@ -10,10 +10,13 @@ Layout under the cache root (``cache_dir``)::
 
     <root>/<kind>/<key[:2]>/<key>/<name>.npy    one .npy file per named array (C order)
     <root>/<kind>/<key[:2]>/<key>/meta.json     kind, key, params, created, and per array:
-                                                dtype, shape, data bytes, file bytes, CRC-32
+                                                dtype, shape, data bytes, file bytes, CRC-32 of
+                                                the data and of the whole file; its own CRC-32
     <root>/<kind>/<key[:2]>/.tmp-<key>-...      an item being written (or left by a killed writer)
     <root>/<kind>/<key[:2]>/.del-<key>-...      an item being removed
     <root>/locks/<key>.lock                     one file lock per key
+    <root>/damaged/<key>.json                   the items of this key found damaged and removed:
+                                                when, why, and the inodes of their .npy files
 
 Writes are atomic: the arrays, then ``meta.json``, are written into a temporary folder beside
 the final one, which is then renamed into place (``os.rename`` of a folder is atomic on POSIX),
@@ -21,12 +24,20 @@ so an item folder that exists is complete or was damaged afterwards. Removal is 
 rename to a ``.del-`` name, then delete. A writer holds the key's file lock from its re-check
 to the rename, so concurrent processes sharing a cache compute each item once.
 
-Checks. Every hit compares each file's size with ``meta.json`` and parses the ``.npy``
-headers (a few microseconds per file: truncation and header damage are always caught).
-``verify=True`` and ``Cache.verify`` also recompute the CRC-32 of the data (``zlib.crc32``,
-about 4 ms per 16 MiB on this machine kind; SHA-256 takes 9 ms and BLAKE2b 18 ms, and a
-checksum here guards against accidents, not adversaries). A broken item is removed and
-recomputed, never reported to the caller as an error.
+Checks. Every read checks the item: each file's size against ``meta.json``, the CRC-32 of each
+whole ``.npy`` file, header and data (``zlib.crc32``, about 4 ms per 16 MiB on this machine
+kind; SHA-256 takes 9 ms and BLAKE2b 18 ms, and a checksum here guards against accidents, not
+adversaries), and ``meta.json`` against a CRC-32 of its own content. The checksums of an item
+are computed once per process: later reads compare the files' size, inode, modification and
+change times [ns] with those seen when the bytes were checked, and check the bytes again when
+any of them differs (``forget_verified`` makes the next read check again). A damaged item
+(truncated, flipped bits, a damaged header or ``meta.json``) is removed with a one-line
+``CacheWarning`` and recomputed, never reported to the caller as an error.
+``benchmarks/bench_integrity.py`` measures the cost against the frame phase.
+
+Each ``Cache`` records the items it served (``served``): their checksums and the files' sizes,
+inodes and times, so that a run can tell later whether the item a frame was made from has
+changed since (``Cache.recheck``).
 
 Last use is the modification time of ``meta.json``, touched on every hit; ``Cache.prune``
 removes the least recently used items first. Times are seconds since the Unix epoch. [s]
@@ -42,6 +53,7 @@ import enum
 import hashlib
 import json
 import math
+import mmap
 import os
 import re
 import secrets
@@ -73,12 +85,27 @@ MAX_PARAM_ARRAY_SIZE = 1024
 
 META = "meta.json"
 LOCKS = "locks"
+DAMAGED = "damaged"
 _TMP = ".tmp-"
 _DEL = ".del-"
 _KEY_RE = re.compile(r"^[0-9a-f]{64}$")
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 _ALLOWED_DTYPE_KINDS = "biufc"
 _CRC_CHUNK = 1 << 24  # [B]
+_META_CRC = "meta_crc32"
+
+#: Items whose bytes this process has checked: item folder -> the signature of its files
+#: (name, size, inode, modification and change time [ns]) when they were checked.
+_VERIFIED: dict[str, tuple] = {}
+
+
+class CacheWarning(RuntimeWarning):
+    """A damaged cache item that was removed (it is computed again), or an item not stored."""
+
+
+def forget_verified() -> None:
+    """Forget which items this process has checked: the next read of each checks its bytes."""
+    _VERIFIED.clear()
 
 
 def cache_dir(explicit: str | os.PathLike[str] | None = None) -> Path:
@@ -185,7 +212,7 @@ def key_of(kind: str, params: Mapping[str, Any]) -> str:
     The same inputs give the same key in any process and on any machine.
     """
     _check_name(kind, "cache kind")
-    if kind == LOCKS:
+    if kind in (LOCKS, DAMAGED):
         raise ValueError(f"invalid cache kind {kind!r}: reserved")
     if not isinstance(params, Mapping):
         raise TypeError(f"params must be a mapping, not {type(params).__name__}")
@@ -201,11 +228,32 @@ def key_of(kind: str, params: Mapping[str, Any]) -> str:
 
 def _crc32(array: np.ndarray) -> int:
     """CRC-32 of the bytes of a C-contiguous array (zlib.crc32, chunked)."""
-    flat = array.reshape(-1).view(np.uint8)
+    return _crc32_of(array.reshape(-1).view(np.uint8))
+
+
+def _crc32_of(buffer) -> int:
+    """CRC-32 of a bytes-like object, in chunks of ``_CRC_CHUNK`` bytes (no copies)."""
+    view = memoryview(buffer).cast("B")
     crc = 0
-    for start in range(0, flat.size, _CRC_CHUNK):
-        crc = zlib.crc32(flat[start:start + _CRC_CHUNK], crc)
+    for start in range(0, len(view), _CRC_CHUNK):
+        crc = zlib.crc32(view[start:start + _CRC_CHUNK], crc)
     return crc
+
+
+def _file_crc32(path: Path) -> int:
+    """CRC-32 of a whole file's bytes, read through a memory map."""
+    with open(path, "rb") as f:
+        if os.fstat(f.fileno()).st_size == 0:
+            return 0
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+            return _crc32_of(mapped)
+
+
+def _meta_crc32(meta: Mapping) -> int:
+    """CRC-32 of a meta.json document without its own checksum, in canonical JSON."""
+    body = {k: v for k, v in meta.items() if k != _META_CRC}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return zlib.crc32(text.encode("ascii"))
 
 
 @dataclass(frozen=True)
@@ -242,6 +290,8 @@ class Cache:
 
     ``hits``, ``misses`` and ``repaired`` count, in this process, the items read, computed
     (absent or broken) and of those the broken ones that were removed and recomputed.
+    ``served`` maps ``"kind/key"`` to the stamp of each item this store returned (see
+    ``recheck``).
     """
 
     def __init__(self, root: str | os.PathLike[str]):
@@ -249,6 +299,7 @@ class Cache:
         self.hits = 0
         self.misses = 0
         self.repaired = 0
+        self.served: dict[str, dict] = {}
 
     def __repr__(self) -> str:
         return f"Cache({str(self.root)!r})"
@@ -264,8 +315,15 @@ class Cache:
 
     # -- reading -----------------------------------------------------------------------
 
-    def _open(self, path: Path, kind: str | None, key: str, *, verify: bool):
-        """(meta, arrays) of a complete item, None if absent; raises _Broken otherwise."""
+    def _open(self, path: Path, kind: str | None, key: str, *, verify: bool, fresh: bool = False):
+        """(meta, arrays, stamp) of a complete item, None if absent; raises _Broken otherwise.
+
+        verify : check the checksums of the files and of meta.json, unless this process
+            checked these very files before (same size, inode and times); ``fresh`` checks
+            them whatever this process saw. Without it, sizes and headers only.
+        stamp : ``{file: [crc32, size, inode, mtime_ns, ctime_ns, created]}`` of the item's
+            arrays (``created``: when this copy was written, from meta.json).
+        """
         meta_path = path / META
         try:
             with open(meta_path, "rb") as f:
@@ -277,79 +335,160 @@ class Cache:
         except (OSError, ValueError) as e:
             raise _Broken(f"{META} is unreadable: {e}") from None
         try:
+            if not isinstance(meta, dict):
+                raise _Broken(f"{META} is not a JSON object")
+            if verify and _META_CRC in meta and _meta_crc32(meta) != meta[_META_CRC]:
+                raise _Broken(f"{META}: checksum mismatch (corrupted)")
             if meta.get("format") != FORMAT:
                 raise _Broken(f"format {meta.get('format')!r}, expected {FORMAT}")
             if meta.get("key") != key or (kind is not None and meta.get("kind") != kind):
                 raise _Broken(f"{META} names another item ({meta.get('kind')}/{meta.get('key')})")
             specs = meta["arrays"]
+            stamp, signature = {}, []
             for name, spec in specs.items():
-                size = os.stat(path / spec["file"]).st_size
-                if size != spec["file_bytes"]:
-                    raise _Broken(f"{spec['file']} has {size} bytes, expected {spec['file_bytes']}")
+                if spec["file"] != f"{name}.npy":
+                    raise _Broken(f"{META} names the file {spec['file']!r} for {name!r}")
+                st = os.stat(path / spec["file"])
+                if st.st_size != spec["file_bytes"]:
+                    raise _Broken(f"{spec['file']} has {st.st_size} bytes, expected {spec['file_bytes']}")
+                identity = [st.st_size, st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
+                stamp[spec["file"]] = [spec.get("file_crc32", spec["crc32"]), *identity,
+                                       meta.get("created")]
+                signature.append((spec["file"], *identity))
+            check = verify and (fresh or _VERIFIED.get(str(path)) != tuple(signature))
             arrays = {}
             for name, spec in specs.items():
+                if check and "file_crc32" in spec and _file_crc32(path / spec["file"]) != spec["file_crc32"]:
+                    raise _Broken(f"{spec['file']}: checksum mismatch (corrupted)")
                 a = np.load(path / spec["file"], mmap_mode="r", allow_pickle=False)
                 if a.dtype.str != spec["dtype"] or list(a.shape) != spec["shape"] \
                         or not a.flags.c_contiguous:
                     raise _Broken(f"{spec['file']} holds {a.dtype.str} {list(a.shape)}, "
                                   f"expected {spec['dtype']} {spec['shape']}")
-                if verify and _crc32(a) != spec["crc32"]:
+                if check and "file_crc32" not in spec and _crc32(a) != spec["crc32"]:
                     raise _Broken(f"{spec['file']}: checksum mismatch (corrupted data)")
                 arrays[name] = a
         except _Broken:
+            _VERIFIED.pop(str(path), None)
             raise
         except FileNotFoundError as e:
+            _VERIFIED.pop(str(path), None)
             raise _Broken(f"{Path(e.filename).name} is missing") from None
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-            raise _Broken(f"unreadable: {type(e).__name__}: {e}") from None
-        return meta, arrays
+        except Exception as e:  # whatever a damaged header makes numpy or json raise
+            _VERIFIED.pop(str(path), None)
+            raise _Broken(f"unreadable: {type(e).__name__}: {e}".splitlines()[0]) from None
+        if check:
+            _VERIFIED[str(path)] = tuple(signature)
+        return meta, arrays, stamp
 
-    def _hit(self, path: Path, arrays: dict) -> dict[str, np.ndarray]:
+    def _hit(self, kind: str, key: str, found: tuple) -> dict[str, np.ndarray]:
         self.hits += 1
+        self.served[f"{kind}/{key}"] = found[2]
         try:
-            os.utime(path / META)  # last use, for prune
+            os.utime(self.item_path(kind, key) / META)  # last use, for prune
         except OSError:
             pass  # a read-only or concurrently pruned cache still serves this hit
-        return arrays
+        return found[1]
 
-    def get(self, kind: str, params: Mapping[str, Any], *, verify: bool = False
+    def _discard(self, path: Path, kind: str, key: str, problem: str) -> None:
+        """Remove a broken item, under its lock, with a one-line CacheWarning; if it is sound
+        again by the time the lock is held (another process repaired it), keep it."""
+        lock = self._lock(key)
+        try:
+            (self.root / LOCKS).mkdir(parents=True, exist_ok=True)
+            lock.acquire()
+        except OSError as e:
+            warnings.warn(f"cache item {kind}/{key[:12]} is damaged ({problem}) and cannot be "
+                          f"removed: {e}", CacheWarning, stacklevel=3)
+            return
+        try:
+            try:
+                self._open(path, kind, key, verify=True, fresh=True)
+            except _Broken as e:
+                self._remove_broken(path, kind, key, str(e))
+        finally:
+            lock.release()
+
+    def _remove_broken(self, path: Path, kind: str, key: str, problem: str) -> None:
+        """Remove a broken item (the caller holds its lock) with a one-line CacheWarning."""
+        self._bury(path, key, problem)
+        _remove(path)
+        self.repaired += 1
+        warnings.warn(f"cache item {kind}/{key[:12]} was damaged ({problem}); removed, it is "
+                      "computed again", CacheWarning, stacklevel=4)
+
+    def _bury(self, path: Path, key: str, problem: str) -> None:
+        """Record, before removing it, that the item at ``path`` was found damaged: when
+        [s since epoch], why, the inodes of its .npy files and when the copy was written (from
+        meta.json, if readable), so that what was made from this very copy of it can be told
+        apart later (``recheck``). Best effort: a record
+        that cannot be written is left out."""
+        try:
+            inodes = {e.name: e.inode() for e in os.scandir(path) if e.name.endswith(".npy")}
+            try:
+                created = json.loads((path / META).read_bytes()).get("created")
+            except (OSError, ValueError, AttributeError):
+                created = None  # unknown: any copy with these inodes counts
+            records = self._damaged(key) + [{"found": time.time(), "problem": problem,
+                                             "inodes": inodes, "created": created}]
+            folder = self.root / DAMAGED
+            folder.mkdir(parents=True, exist_ok=True)
+            temporary = folder / f"{_TMP}{key}-{os.getpid()}-{secrets.token_hex(4)}"
+            temporary.write_text(json.dumps(records))
+            os.replace(temporary, folder / f"{key}.json")
+        except OSError:
+            pass
+
+    def _damaged(self, key: str) -> list:
+        """The records of ``_bury`` for ``key`` (empty if none or unreadable)."""
+        try:
+            records = json.loads((self.root / DAMAGED / f"{key}.json").read_bytes())
+        except (OSError, ValueError):
+            return []
+        return records if isinstance(records, list) else []
+
+    def get(self, kind: str, params: Mapping[str, Any], *, verify: bool = True
             ) -> dict[str, np.ndarray] | None:
         """The item's arrays, memory-mapped read-only, or None if it is absent or broken.
 
-        Does not compute, lock or repair anything; ``verify=True`` adds the full checksums.
+        Computes nothing; a broken item is removed (with a CacheWarning), so that the next
+        ``get_or_compute`` computes it. ``verify=False`` checks sizes and headers only.
         """
         key = key_of(kind, params)
         path = self.item_path(kind, key)
         try:
             found = self._open(path, kind, key, verify=verify)
-        except _Broken:
+        except _Broken as e:
+            self._discard(path, kind, key, str(e))
             return None
-        return None if found is None else self._hit(path, found[1])
+        return None if found is None else self._hit(kind, key, found)
 
     def get_or_compute(self, kind: str, params: Mapping[str, Any],
                        compute: Callable[[], Mapping[str, np.ndarray]], *,
-                       verify: bool = False) -> dict[str, np.ndarray]:
+                       verify: bool = True) -> dict[str, np.ndarray]:
         """The item ``(kind, params)``: read back if stored and sound, else computed and stored.
 
         kind, params : as for ``key_of``; ``params`` must name everything ``compute`` depends on.
         compute : called with no arguments on a miss; returns ``{name: array}`` with names as
             for ``kind`` and numeric or bool arrays (stored C-contiguous).
-        verify : also check the CRC-32 of every array on a hit (reads all the data: about
-            4 ms per 16 MiB); sizes and headers are always checked.
+        verify : check the CRC-32 of every file on the first read in this process (about
+            4 ms per 16 MiB), and again whenever the files changed since; ``False`` checks
+            sizes and headers only.
 
         Returns ``{name: numpy.memmap}`` opened read-only (``mmap_mode='r'``), in the order
         ``compute`` returned them. A broken item (truncated, corrupted, without meta) is
-        removed and recomputed. On a miss the key's file lock is held while computing, so
-        concurrent processes compute each key once; the others wait and then read it. If the
-        store cannot be written (disk full, read-only), a warning is issued and the computed
-        arrays are returned as they are. Exceptions of ``compute`` propagate; nothing is stored.
+        removed with a one-line CacheWarning and recomputed. On a miss the key's file lock is
+        held while computing, so concurrent processes compute each key once; the others wait
+        and then read it. If the store cannot be written (disk full, read-only), a warning is
+        issued and the computed arrays are returned as they are. Exceptions of ``compute``
+        propagate; nothing is stored.
         """
         key = key_of(kind, params)
         path = self.item_path(kind, key)
         try:
             found = self._open(path, kind, key, verify=verify)
             if found is not None:
-                return self._hit(path, found[1])
+                return self._hit(kind, key, found)
         except _Broken:
             pass  # repaired below, under the lock, after a re-check
         lock = self._lock(key)
@@ -358,29 +497,72 @@ class Cache:
             lock.acquire()
         except OSError as e:  # a read-only or unreachable cache: still render
             warnings.warn(f"cache item {kind}/{key[:12]} not stored: cannot lock in "
-                          f"{self.root}: {e}", RuntimeWarning, stacklevel=2)
+                          f"{self.root}: {e}", CacheWarning, stacklevel=2)
             self.misses += 1
             return _normalize(compute(), kind)
         try:
             try:
                 found = self._open(path, kind, key, verify=verify)
                 if found is not None:  # another process wrote it while we waited
-                    return self._hit(path, found[1])
-            except _Broken:
-                _remove(path)
-                self.repaired += 1
+                    return self._hit(kind, key, found)
+            except _Broken as e:
+                self._remove_broken(path, kind, key, str(e))
             self.misses += 1
             arrays = _normalize(compute(), kind)
             try:
                 self._write(path, kind, key, params, arrays)
-                found = self._open(path, kind, key, verify=False)
+                found = self._open(path, kind, key, verify=True, fresh=True)
             except (OSError, _Broken) as e:
                 warnings.warn(f"cache item {kind}/{key[:12]} not stored in {self.root}: {e}",
-                              RuntimeWarning, stacklevel=2)
+                              CacheWarning, stacklevel=2)
                 return arrays
+            self.served[f"{kind}/{key}"] = found[2]
             return found[1]
         finally:
             lock.release()
+
+    def recheck(self, item: str, stamp: Mapping[str, list], *, fresh: bool = False,
+                repair: bool = True) -> str | None:
+        """Whether item ``"kind/key"`` is still the one ``stamp`` (from ``served``) describes.
+
+        None when its files have the same sizes, inodes and times (nothing is read), when they
+        changed but hold the same checksums (the item was computed again), or when the item is
+        absent (pruned: nothing says it was wrong). Otherwise the problem in words: the very
+        copy read then (the same inodes) was found damaged and removed since, by any process;
+        the item is damaged now (with ``repair`` it is removed, with a CacheWarning); or it
+        holds other bytes.
+        ``fresh``: read and check the files whatever their sizes and times. A sound item read
+        here is recorded in ``served`` with its current stamp.
+        """
+        kind, _, key = item.partition("/")
+        if not _NAME_RE.fullmatch(kind) or not _KEY_RE.fullmatch(key):
+            return f"{item!r} is not a cache item"
+        for record in self._damaged(key):
+            inodes = record.get("inodes", {}) if isinstance(record, dict) else {}
+            created = record.get("created") if isinstance(record, dict) else None
+            if any(inodes.get(file) == values[2] and created in (None, values[5])
+                   for file, values in stamp.items()):
+                return f"cache item {kind}/{key[:12]}, found damaged since ({record.get('problem')})"
+        path = self.item_path(kind, key)
+        try:
+            now = {file: [st.st_size, st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
+                   for file in stamp for st in [os.stat(path / file)]}
+        except OSError:
+            now = None
+        if not fresh and now is not None and all(now[f] == list(stamp[f][1:5]) for f in stamp):
+            return None
+        try:
+            found = self._open(path, kind, key, verify=True, fresh=fresh)
+        except _Broken as e:
+            if repair:
+                self._discard(path, kind, key, str(e))
+            return f"cache item {kind}/{key[:12]}, damaged since ({e})"
+        if found is None:
+            return None
+        self.served[item] = found[2]
+        if {file: v[0] for file, v in found[2].items()} != {file: v[0] for file, v in stamp.items()}:
+            return f"cache item {kind}/{key[:12]} holds other bytes than when it was read"
+        return None
 
     # -- writing -----------------------------------------------------------------------
 
@@ -398,10 +580,11 @@ class Cache:
                     file_bytes = f.tell()
                 specs[name] = {"file": file, "dtype": a.dtype.str, "shape": list(a.shape),
                                "nbytes": int(a.nbytes), "file_bytes": int(file_bytes),
-                               "crc32": _crc32(a)}
+                               "crc32": _crc32(a), "file_crc32": _file_crc32(tmp / file)}
             meta = {"format": FORMAT, "code_version": CODE_VERSION, "kind": kind, "key": key,
                     "created": time.time(), "checksum": "crc32", "arrays": specs,
                     "params": _canonical(params, "params")}
+            meta[_META_CRC] = _meta_crc32(meta)
             with open(tmp / META, "w", encoding="ascii") as f:
                 json.dump(meta, f, indent=1, allow_nan=False)
             try:
@@ -469,16 +652,17 @@ class Cache:
                 if what == "item"]
 
     def verify(self, *, remove: bool = False) -> list[tuple[CacheItem, str]]:
-        """Check every item fully (sizes, headers, CRC-32 of all data): the broken ones, each
-        with its problem in words. ``remove=True`` also removes them (they would be
-        recomputed when next needed anyway). Reads the whole cache."""
+        """Check every item fully (sizes, headers, CRC-32 of all files and of meta.json): the
+        broken ones, each with its problem in words. ``remove=True`` also removes them (they
+        would be recomputed when next needed anyway). Reads the whole cache."""
         problems = []
         for item in self.list():
             try:
-                self._open(item.path, item.kind, item.key, verify=True)
+                self._open(item.path, item.kind, item.key, verify=True, fresh=True)
             except _Broken as e:
                 problems.append((item, str(e)))
                 if remove:
+                    self._bury(item.path, item.key, str(e))
                     _remove(item.path)
         return problems
 

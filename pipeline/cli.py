@@ -10,6 +10,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,13 @@ class BadInput(Exception):
     """Bad input found by the command itself (an output path, say)."""
 
 
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings (a damaged cache item or frame, say) as one line each."""
+    print(f"sunshade: warning: {message}", file=file or sys.stderr)
+
+
 def main(argv=None) -> int:
+    warnings.showwarning = _warning_line
     parser = _parser()
     args = parser.parse_args(argv)
     try:
@@ -75,6 +82,9 @@ def _parser():
                         "again even if done")
     render.add_argument("--preview", action="store_true", help="small and fast, for a first "
                         "look: a quarter of the resolution, coarser rasters, in FOLDER/preview")
+    render.add_argument("--verify", action="store_true", help="render nothing: report the "
+                        "frames whose files are damaged or not made by this config (exit code "
+                        "1 if any), reading every frame and the cache items they were made from")
     render.set_defaults(run=_run_render)
 
     check = commands.add_parser(
@@ -251,6 +261,8 @@ def _run_render(args) -> int:
     if args.preview:
         config = preview(config)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
+    if args.verify:
+        return _verify_run(config, Cache(cache_dir(args.cache).absolute()))
     check_folder(config.output.folder)
     summary = render_run(config, frames=frames, store=Cache(cache_dir(args.cache).absolute()),
                          jobs=args.jobs, scheduler=args.scheduler, force=args.force,
@@ -260,6 +272,20 @@ def _run_render(args) -> int:
     print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
     return 0
+
+
+def _verify_run(config, store) -> int:
+    from .run import frame_files, verify_run
+
+    checked = verify_run(config, store=store)
+    for what, frames in (("damaged", checked.damaged), ("foreign", checked.foreign)):
+        for frame, problem in sorted(frames.items()):
+            print(f"{frame_files(config, frame)[0].stem}: {what}: {problem}")
+    count = config.animation.frames
+    absent = count - len(checked.done) - len(checked.damaged) - len(checked.foreign)
+    print(f"sunshade: {len(checked.done)} of {count} frames whole, {len(checked.damaged)} "
+          f"damaged, {len(checked.foreign)} foreign, {absent} not rendered; {config.output.folder}")
+    return 1 if checked.damaged or checked.foreign else 0
 
 
 class _Progress:
@@ -390,7 +416,7 @@ def _run_mask(args) -> int:
     plan = plan_run(config)
     layer = plan.layers[args.layer]
     if args.fine and layer.sun is None:
-        raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: procedural)")
+        raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: cie, preetham or hdri)")
     started = time.perf_counter()
     coarse, fine = layer_masks(config, plan, args.layer, args.frame)
     mask, grid = (fine, layer.sun.mask) if args.fine else (coarse, layer.canopy)
@@ -421,7 +447,7 @@ def _run_sky(args) -> int:
     scene = scene_at(config, args.frame)
     sky = load_sky(config.sky, scene)
     if not hasattr(sky, "equirect"):
-        raise BadInput(f"{args.config}: sunshade sky writes procedural skies (sky.model is "
+        raise BadInput(f"{args.config}: sunshade sky writes the cie and preetham skies (sky.model is "
                        f"{config.sky.model}; an hdri sky is its image)")
     image = sky.equirect(args.width)
     attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),

@@ -17,10 +17,12 @@ from pathlib import Path
 
 import yaml
 
-from . import __version__, ephemeris
+from . import __version__, daylight, ephemeris
+from .clearsky import CIE_TYPES, DEFAULT_CIE_TYPE
 from .composite import DISPLAYS
 from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
+from .sky import PROCEDURAL_MODELS
 
 LAYOUTS = ("isolated", "periodic")
 MAX_GROUND_PIXELS = 64_000_000
@@ -153,9 +155,12 @@ class CloudsConfig:
 class SkyConfig:
     """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
-    Procedural: turbidity; the sun by angles or by site and time; moon (with angles; implied by
-    site and time); clouds; skylight (factor on the clear sky, 0 for the sun alone). haze : extinction length of the air the camera looks through,
-    0 for none. [m]"""
+    Procedural (models 'cie' and 'preetham', ``sky.PROCEDURAL_MODELS``): turbidity (the Linke
+    turbidity factor; turbidity_auto: it was looked up in the climatology for the site and the
+    middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
+    time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
+    sky, 0 for the sun alone). haze : extinction length of the air the camera looks through, 0
+    for none. [m]"""
 
     model: str
     radiance: tuple[float, float, float]
@@ -169,6 +174,8 @@ class SkyConfig:
     clouds: CloudsConfig | None = None
     haze: float = 3000.0
     skylight: float = 1.0
+    cie_type: int = DEFAULT_CIE_TYPE
+    turbidity_auto: bool = False
 
 
 @dataclass(frozen=True)
@@ -519,8 +526,8 @@ _VALID_KEYS = {
     "canopy.layers[]": ("mask", "size", "center", "height"),
     "canopy.trees": ("count", "seed", "crown_radius", "leaves_per_tree", "leaf_length", "spread"),
     "canopy.flutter": ("cycle", "swing", "twist"),
-    "sky": ("model", "radiance", "hdri", "rotation", "alpha", "turbidity", "sun", "site", "time",
-            "moon", "clouds", "skylight", "haze"),
+    "sky": ("model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
+            "time", "moon", "clouds", "skylight", "haze"),
     "sky.sun": ("elevation", "azimuth", "radius"),
     "sky.moon": ("offset_start", "offset_end", "radius"),
     "sky.clouds": ("cover", "scale", "altitude", "wind", "thickness", "seed"),
@@ -736,12 +743,14 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
 
 
 def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyConfig:
-    model = s.choice("model", tuple(SKY_MODELS), "procedural")
-    owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "turbidity": "procedural",
-              "sun": "procedural", "site": "procedural", "time": "procedural", "moon": "procedural",
-              "clouds": "procedural", "skylight": "procedural"}
+    if s.raw("model", "cie") == "procedural":  # the former name of the CIE clear sky
+        s.data = {**s.data, "model": "cie"}
+    model = s.choice("model", tuple(SKY_MODELS), "cie")
+    procedural = " or ".join(PROCEDURAL_MODELS)
+    owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "cie_type": "cie",
+              **dict.fromkeys(("turbidity", "sun", "site", "time", "moon", "clouds", "skylight"), procedural)}
     for key, owner in owners.items():
-        if s.has(key) and model != owner:
+        if s.has(key) and model not in owner.split(" or "):
             s.fail(key, f"only used with model: {owner} (model is {model})")
     radiance = (1.0, 1.0, 1.0)
     hdri = None
@@ -764,15 +773,24 @@ def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyCo
                 s.fail("alpha", f"the sky square at {alpha_deg:g} degrees would be {n} x {n} cells "
                        f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
     extra = {}
-    if model == "procedural":
-        extra = _parse_procedural(s)
+    if model in PROCEDURAL_MODELS:
+        extra = _parse_procedural(s, model)
     extra["haze"] = s.number("haze", 3000.0, at_least=0.0)
     s.done()
     return SkyConfig(model, radiance, hdri, rotation, alpha, **extra)
 
 
-def _parse_procedural(s: _Section) -> dict:
-    turbidity = s.number("turbidity", 3.0, at_least=1.7, below=10.0)
+def _parse_procedural(s: _Section, model: str) -> dict:
+    lo, hi = daylight.TURBIDITY_RANGE
+    auto = s.raw("turbidity", 3.0) == "auto"
+    if auto and not (s.has("site") and s.has("time")):
+        s.fail("turbidity", "auto needs sky.site and sky.time (the climatology is of a place and month)")
+    turbidity = None if auto else s.number("turbidity", 3.0, at_least=lo, below=hi + 1e-9)
+    cie_type = DEFAULT_CIE_TYPE
+    if model == "cie":
+        cie_type = s.integer("cie_type", DEFAULT_CIE_TYPE, at_least=min(CIE_TYPES))
+        if cie_type not in CIE_TYPES:
+            s.fail("cie_type", f"must be one of the CIE standard general skies 1..{max(CIE_TYPES)} (got {cie_type})")
     sun = site = moon = None
     if s.has("site") or s.has("time"):
         if s.has("sun"):
@@ -780,6 +798,9 @@ def _parse_procedural(s: _Section) -> dict:
         if s.has("moon"):
             s.fail("moon", "the moon is implied by site and time")
         site = _parse_site(s.section("site"), s.section("time"))
+        if auto:
+            middle = site.start + (site.end - site.start) / 2
+            turbidity = min(max(daylight.linke_turbidity(middle, site.latitude, site.longitude), lo), hi)
     else:
         ss = s.section("sun")
         sun = SunConfig(
@@ -810,7 +831,7 @@ def _parse_procedural(s: _Section) -> dict:
         cs.done()
     skylight = s.number("skylight", 1.0, at_least=0.0, below=100.0)
     return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds,
-            "skylight": skylight}
+            "skylight": skylight, "cie_type": cie_type, "turbidity_auto": auto}
 
 
 def _parse_site(s: _Section, t: _Section) -> SiteConfig:

@@ -75,7 +75,7 @@ canopy:
   flutter: {cycle: 48, swing: 12.0, twist: 20.0}
   layers: [{height: 8.0}, {height: 6.5}]
 sky:
-  model: procedural
+  model: cie
   turbidity: 3.0
   sun: {elevation: 50.0, azimuth: 150.0}
   clouds: {cover: 0.4, scale: 800.0, altitude: 2000.0, wind: [8.0, 2.0], thickness: 1.0}
@@ -98,7 +98,7 @@ canopy:
   flutter: {cycle: 48, swing: 12.0, twist: 20.0}
   layers: [{height: 8.0}, {height: 6.5}]
 sky:
-  model: procedural
+  model: cie
   turbidity: 3.0
   sun: {elevation: 50.0, azimuth: 150.0, radius: 0.005}
   skylight: 0.0
@@ -120,7 +120,7 @@ canopy:
   trees: {count: 3, seed: 7, crown_radius: 4.0, leaves_per_tree: 90000, leaf_length: 0.08}
   flutter: {cycle: 48, swing: 12.0, twist: 20.0}
 sky:
-  model: procedural
+  model: cie
   turbidity: 3.0
   sun: {elevation: 60.0, azimuth: 180.0}
   moon: {offset_start: [0.25, 0.12], offset_end: [0.1, 0.05]}
@@ -140,7 +140,7 @@ animation: {frames: 48, fps: 24}
 DALLAS_2024 = """\
 # The total solar eclipse of 2024 April 8 from Dallas, one output frame a minute.
 sky:
-  model: procedural
+  model: cie
   turbidity: 3.0
   site: {latitude: 32.7767, longitude: -96.7970, elevation: 140.0}
   time: {start: "2024-04-08T17:10:00Z", end: "2024-04-08T20:15:00Z"}

@@ -55,15 +55,21 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
     (negative radiance is taken as 0). Raises io.ImageError."""
     if sky.model == "uniform":
         return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
-    if sky.model == "procedural":
+    if sky.model in sky_models.PROCEDURAL_MODELS:
         clouds = None
         if sky.clouds is not None:
             c = sky.clouds
             clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
                                 wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
-        return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=scene.sun, moon=scene.moon,
-                                        clouds=clouds, time=scene.time, skylight=sky.skylight)
+        return _clear_sky(sky, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time)
     return _load_hdri(sky)
+
+
+def _clear_sky(sky: SkyConfig, sun: sky_models.SunDisc, **state) -> sky_models.ProceduralSky:
+    """The procedural sky of a config with ``sun``; ``state``: moon, clouds, time."""
+    return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
+                                    cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
+                                    **state)
 
 
 @functools.lru_cache(maxsize=4)
@@ -116,7 +122,7 @@ def scene_at(config: Config, frame: int) -> Scene:
     time = frame / config.animation.fps
     if sky.model == "hdri":
         return Scene(frame, time, None, _load_hdri(sky).sun, None)
-    if sky.model != "procedural":
+    if sky.model not in sky_models.PROCEDURAL_MODELS:
         return Scene(frame, time, None, None, None)
     if sky.site is not None:
         site = sky.site
@@ -1015,7 +1021,7 @@ def reference_lighting(config: Config, plan: RunPlan) -> Lighting:
         return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
                         hdri.total_irradiance())
     middle = scene_at(config, config.animation.frames // 2).sun
-    clear = sky_models.ProceduralSky(turbidity=sky.turbidity, sun=middle, skylight=sky.skylight)
+    clear = _clear_sky(sky, middle)
     return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
 
 

@@ -1,10 +1,14 @@
 """A run: a config's animation rendered into a folder of frames, then its video, resumably.
 
 The folder holds ``NAME.0000.exr`` (scene-linear) and ``NAME.0000.png`` (display) per frame,
-``NAME.mp4`` (or ``.gif``) and ``run.json``. Every file is written under a temporary name and
-renamed into place, the PNG after the EXR, both carrying the config's hash. A frame is done when
-both files are there with the hash of the config being run; a re-run skips done frames and the
-cached cycle products, so a run killed at any point and run again ends with the same bytes.
+``NAME.mp4`` (or ``.gif``), ``run.json`` and ``index.json``. Every file is written under a
+temporary name and renamed into place, the PNG after the EXR, both carrying the config's hash.
+When a frame's files are written, ``index.json`` records the config hash, the BLAKE2b digest,
+size, inode and times of each file, and the cache items the frame was made from (their
+checksums and files' identities; ``cache.Cache.served``). A frame is done when its entry has
+the hash of the config being run, both files are as recorded and its cache items have not been
+found damaged since (docs/runs.md, Resume). A re-run skips done frames and the cached cycle
+products, so a run killed at any point and run again ends with the same bytes.
 
 Parallel: joblib over cycle frames and over output frames, each task with ``threads`` FFT
 threads; with a scheduler address the same tasks run on a dask.distributed cluster through
@@ -14,10 +18,12 @@ joblib's Dask backend (the cache and the output folder on a file system all work
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import platform
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
@@ -35,6 +41,8 @@ from .render import (RunPlan, check_inputs, cycle_phase, default_workers, framin
 RUN_FILE = "run.json"
 MAX_RUNS = 100
 """run.json keeps the record of this many latest renders of a config."""
+INDEX_FILE = "index.json"
+INDEX_FORMAT = 1
 LOCK_FILE = ".sunshade.lock"
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
@@ -42,6 +50,10 @@ VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmp
 
 class RunError(Exception):
     """A run that cannot start: a bad frame list, a busy or unwritable folder, no scheduler."""
+
+
+class FrameWarning(UserWarning):
+    """A frame found damaged, or made from a cache item found damaged since: rendered again."""
 
 
 def parse_frames(text: str, count: int) -> tuple[int, ...]:
@@ -124,6 +136,116 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
     return attributes
 
 
+def file_digest(path) -> str:
+    """BLAKE2b (16 bytes, hex) of a file's bytes."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, lambda: hashlib.blake2b(digest_size=16)).hexdigest()
+
+
+def _file_stamp(path: Path) -> dict:
+    """What index.json records of a frame file just written: name, size [B], digest, and its
+    inode and modification and change times [ns] (unchanged, the file is taken as it was)."""
+    digest = file_digest(path)
+    st = os.stat(path)
+    return {"name": path.name, "bytes": st.st_size, "blake2b": digest,
+            "stat": [st.st_ino, st.st_mtime_ns, st.st_ctime_ns]}
+
+
+def _file_problem(path: Path, stamp: dict, *, full: bool) -> tuple[str | None, dict | None]:
+    """(problem in words or None, the stamp with the file's current inode and times when its
+    bytes were read and found as recorded). The digest is computed only when the size,
+    inode or times differ from ``stamp``, or with ``full``."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return "is missing", None
+    except OSError as exc:
+        return f"is unreadable ({exc.strerror or exc})", None
+    if st.st_size != stamp["bytes"]:
+        return f"has {st.st_size} bytes, not the {stamp['bytes']} written (truncated or replaced)", None
+    identity = [st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
+    if not full and identity == stamp["stat"]:
+        return None, None
+    try:
+        digest = file_digest(path)
+    except OSError as exc:
+        return f"is unreadable ({exc.strerror or exc})", None
+    if digest != stamp["blake2b"]:
+        return "holds other bytes than those written (corrupted or replaced)", None
+    return None, (None if identity == stamp["stat"] else {**stamp, "stat": identity})
+
+
+@dataclass(frozen=True)
+class FrameCheck:
+    """The frames of a run folder for one config.
+
+    done : {frame: its index.json entry} -- files as written, by this config, from sound
+        cache items. damaged : {frame: problem} -- files not as written (truncated, corrupted,
+        replaced, missing, unreadable), or made from a cache item found damaged since.
+    foreign : {frame: why} -- files there but not recorded for this config (made by another
+        config, or not in index.json). Other frames have no files yet.
+    """
+
+    done: dict
+    damaged: dict
+    foreign: dict
+
+
+def check_frames(config: Config, digest: str, store: cache.Cache, index: dict, *,
+                 full: bool = False, repair: bool = True) -> FrameCheck:
+    """Check every frame of the animation against ``index`` (the frames of index.json).
+
+    A file whose size, inode and times are as recorded is taken as written (nothing is read);
+    otherwise, or with ``full``, its BLAKE2b digest is compared. Each cache item a done frame
+    was made from is looked at the same way (``cache.Cache.recheck``; fully with ``full``).
+    ``repair``: remove cache items found damaged, so that they are computed again. Entries
+    whose files or items were read and found as recorded get their new stamps in ``index``.
+    """
+    done, damaged, foreign = {}, {}, {}
+    items = {}  # (item, stamp as JSON) -> problem or None, each looked at once
+    for frame in range(config.animation.frames):
+        files = frame_files(config, frame)
+        entry = index.get(str(frame))
+        try:
+            if entry is None or entry["config_hash"] != digest:
+                if any(path.exists() for path in files):
+                    foreign[frame] = ("not recorded in index.json" if entry is None
+                                      else "made by another config")
+                continue
+            problem = None
+            for path, kind in zip(files, ("exr", "png")):
+                problem, fresh = _file_problem(path, entry["files"][kind], full=full)
+                if problem:
+                    problem = f"{path.name} {problem}"
+                    break
+                if fresh:
+                    entry["files"][kind] = fresh
+            for item, stamp in entry["items"].items():
+                if problem:
+                    break
+                tag = (item, json.dumps(stamp, sort_keys=True))
+                if tag not in items:
+                    items[tag] = store.recheck(item, stamp, fresh=full, repair=repair)
+                if items[tag]:
+                    problem = f"made from {items[tag]}"
+                elif item in store.served:
+                    entry["items"][item] = store.served[item]
+        except (KeyError, IndexError, TypeError, AttributeError, ValueError):
+            problem = "its entry in index.json is unreadable"
+        if problem:
+            damaged[frame] = problem
+        else:
+            done[frame] = entry
+    return FrameCheck(done, damaged, foreign)
+
+
+def verify_run(config: Config, *, store: cache.Cache) -> FrameCheck:
+    """Check a run folder without writing anything: every frame file's digest and every
+    cache item the frames were made from, fully."""
+    index = _read_index(config.output.folder)
+    return check_frames(config, config.digest(), store, index, full=True, repair=False)
+
+
 @dataclass(frozen=True)
 class RunSummary:
     """What a run did: frames rendered and skipped, the video (None: not made), timings [s]."""
@@ -169,7 +291,19 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
     try:
         _remove_temporaries(folder)
-        records = {f: frame_record(config, f, digest) for f in range(config.animation.frames)}
+        if (folder / INDEX_FILE).is_dir():
+            raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
+        index = _read_index(folder)
+        before = json.dumps(index, sort_keys=True)
+        checked = check_frames(config, digest, store, index)
+        for frame, problem in sorted(checked.damaged.items()):
+            action = "rendering it again" if force or frame in frames else "not done"
+            warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; {action}",
+                          FrameWarning, stacklevel=2)
+        if json.dumps(index, sort_keys=True) != before:
+            _write_index(folder, index)
+        records = {f: (checked.done[f]["record"] if f in checked.done else None)
+                   for f in range(config.animation.frames)}
         todo = [f for f in frames if force or records[f] is None]
         timings["check"] = time.perf_counter() - started
         if todo:
@@ -183,13 +317,19 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 record_config_items(config, plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
-                for frame, seconds in _frame_phase(config, plan, store, todo, digest, jobs=jobs,
-                                                   threads=threads, progress=progress):
-                    records[frame] = frame_record(config, frame, digest)
+                for frame, seconds, entry, caught in _frame_phase(
+                        config, plan, store, todo, digest, jobs=jobs, threads=threads,
+                        progress=progress):
+                    for category, text in caught:  # raised in a worker: said here, once
+                        warnings.warn(text, category, stacklevel=2)
+                    index[str(frame)] = entry
+                    _write_index(folder, index)
+                    records[frame] = entry["record"]
                     for stage, value in seconds.items():
                         stages[stage] = stages.get(stage, 0.0) + value
                 timings["frames"] = time.perf_counter() - mark
-        video = _video(config, digest, records, _read_run_file(folder), progress, timings, force=force)
+        video = _video(config, digest, records, _read_run_file(folder), progress, timings,
+                       force=force or bool(checked.damaged))
         timings["total"] = time.perf_counter() - started
         _write_run_file(config, plan, digest, records, video, timings, jobs=jobs, threads=threads,
                         scheduler=scheduler, rendered=todo)
@@ -200,8 +340,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
 
 
 def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
-    """Render the ``todo`` frames in parallel; yields (frame, stage seconds) as each is
-    written."""
+    """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
+    frame is written."""
     if progress:
         progress("frames", 0, len(todo))
     tasks = (joblib.delayed(_frame_task)(config, plan, frame, str(store.root), digest, threads)
@@ -214,10 +354,14 @@ def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
 
 
 def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int):
-    """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds)."""
+    """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
+    its index.json entry, the warnings raised meanwhile as (category, text)): a worker's
+    warnings are said by the process that runs the command."""
     timings = {}
-    result = render_frame(config, frame=frame, store=cache.Cache(root), plan=plan,
-                          workers=threads, timings=timings)
+    store = cache.Cache(root)
+    with warnings.catch_warnings(record=True) as caught:
+        result = render_frame(config, frame=frame, store=store, plan=plan,
+                              workers=threads, timings=timings)
     mark = time.perf_counter()
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
@@ -226,7 +370,11 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
     picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display)
     io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
-    return frame, timings
+    mark = time.perf_counter()
+    entry = {"config_hash": digest, "files": {"exr": _file_stamp(exr), "png": _file_stamp(png)},
+             "items": dict(store.served), "record": frame_record(config, frame, digest)}
+    timings["digest"] = time.perf_counter() - mark
+    return frame, timings, entry, [(w.category, str(w.message)) for w in caught]
 
 
 def _video(config: Config, digest: str, records: dict, previous: dict, progress, timings, *,
@@ -321,6 +469,38 @@ def _remove_temporaries(folder: Path) -> None:
     """Remove the half-written files a killed run left (we hold the folder's lock)."""
     for path in folder.glob(".*.tmp-*"):
         path.unlink(missing_ok=True)
+
+
+def _read_index(folder: Path) -> dict:
+    """The frames recorded in the folder's index.json ({frame as text: entry}); empty, with a
+    FrameWarning, if it is unreadable (its frames are then rendered again)."""
+    path = folder / INDEX_FILE
+    try:
+        document = json.loads(path.read_bytes())
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:
+        document = exc
+    if not (isinstance(document, dict) and document.get("format") == INDEX_FORMAT
+            and isinstance(document.get("frames"), dict)):
+        warnings.warn(f"{path} is unreadable or of another format; its frames are not taken "
+                      "as done", FrameWarning, stacklevel=3)
+        return {}
+    return document["frames"]
+
+
+def _write_index(folder: Path, index: dict) -> None:
+    """index.json, written atomically (a temporary name, then renamed). Raises RunError naming
+    the file if it cannot be written."""
+    path = folder / INDEX_FILE
+    temporary = path.with_name(f".{INDEX_FILE}.tmp-{os.getpid()}")
+    try:
+        temporary.write_text(json.dumps({"format": INDEX_FORMAT, "frames": index},
+                                        separators=(",", ":")) + "\n")
+        temporary.replace(path)
+    except OSError as exc:
+        temporary.unlink(missing_ok=True)
+        raise RunError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def _read_run_file(folder: Path) -> dict:

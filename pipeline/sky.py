@@ -20,6 +20,7 @@ from functools import cached_property
 import numpy as np
 from scipy import ndimage
 
+from . import clearsky, daylight
 from .composite import REC709_LUMINANCE
 from .geometry import Grid, projected_solid_angle
 from .shadow import fold, sky_grid, sky_offset
@@ -254,8 +255,9 @@ def _flush(accum, pending: list) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Procedural sky: Preetham, Shirley & Smits (1999) clear sky, an attenuated limb-darkened sun,
-# a dark moon and duck-typed clouds.
+# Procedural sky: a clear sky at the absolute levels of ``daylight`` (Ineichen & Perez 2002 with
+# the Perez et al. 1990 efficacies) shaped by ``clearsky`` (CIE standard general sky or Preetham
+# et al. 1999), an attenuated limb-darkened sun, a dark moon and duck-typed clouds.
 #
 # Units: radiance in kcd/m^2 per linear Rec.709 channel (the channels' Rec.709 luminance is the
 # photometric luminance), so irradiances [radiance x sr] come out in klx. Directions: azimuth from
@@ -270,20 +272,11 @@ def _flush(accum, pending: list) -> None:
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
-LUMINOUS_SOLAR_CONSTANT = 133.8
-"""Extraterrestrial normal illuminance of the sun at 1 au (Darula, Kittler & Gueymard 2005,
-"Reference luminous solar constant and solar luminance for illuminance calculations", Solar
-Energy 79(5), 559-565). [klx]"""
-
 SUN_ANGULAR_RADIUS = float(np.deg2rad(959.63 / 3600.0))
 """Angular radius of the sun at 1 au, 959.63 arcsec (Espenak & Meeus 2006, as in ephemeris). [rad]"""
 
-SUN_LUMINANCE = LUMINOUS_SOLAR_CONSTANT / (np.pi * SUN_ANGULAR_RADIUS**2)
-"""Disc-mean luminance of the sun above the atmosphere, E_v0 / (pi r^2) = 1.97e6 kcd/m^2
-(1.96e9 cd/m^2 in Darula et al. 2005). Independent of the sun's distance. [kcd/m^2]"""
-
 RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
-"""Representative wavelengths of the R, G, B channels for the sun's attenuation. [um]"""
+"""Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation. [um]"""
 
 LIMB_DARKENING = (0.52, 0.59, 0.68)
 """Linear limb-darkening coefficients u of I(mu) / I(1) = 1 - u (1 - mu) for R, G, B. G: the
@@ -292,33 +285,6 @@ linear law with the disc-mean of Allen's quadratic law at 550 nm, I/I(1) = 0.30 
 R and B follow the stronger darkening at shorter wavelengths (Hestroffer & Magnan 1998, A&A 333,
 338); approximate. [1]"""
 
-XYZ_TO_REC709 = np.array(
-    [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]]
-)
-"""CIE XYZ to linear Rec.709 RGB (D65 white), IEC 61966-2-1."""
-
-# Preetham et al. 1999, appendix A.2: Perez coefficients (A..E) = slope * T + intercept, rows Y, x, y.
-_PEREZ_SLOPE = np.array(
-    [[0.1787, -0.3554, -0.0227, 0.1206, -0.0670],
-     [-0.0193, -0.0665, -0.0004, -0.0641, -0.0033],
-     [-0.0167, -0.0950, -0.0079, -0.0441, -0.0109]]
-)
-_PEREZ_INTERCEPT = np.array(
-    [[-1.4630, 0.4275, 5.3251, -2.5771, 0.3703],
-     [-0.2592, 0.0008, 0.2125, -0.8989, 0.0452],
-     [-0.2608, 0.0092, 0.2102, -1.6537, 0.0529]]
-)
-# zenith chromaticity x_z, y_z = [T^2 T 1] M [theta_s^3 theta_s^2 theta_s 1]^T (appendix A.2)
-_ZENITH_X = np.array(
-    [[0.00166, -0.00375, 0.00209, 0.0], [-0.02903, 0.06377, -0.03202, 0.00394], [0.11693, -0.21196, 0.06052, 0.25886]]
-)
-_ZENITH_Y = np.array(
-    [[0.00275, -0.00610, 0.00317, 0.0], [-0.04214, 0.08970, -0.04153, 0.00516], [0.15346, -0.26756, 0.06670, 0.26688]]
-)
-TURBIDITY_RANGE = (1.7, 10.0)
-"""Turbidities accepted: Preetham's fits are meant for about 2..10; below 1.21 the luminance
-coefficient B turns positive and the sky blows up at the horizon. [1]"""
-
 CLEAR_SKY_NODE_SPACING = 0.02
 """Largest spacing of the nodes on which ``ProceduralSky.raster`` evaluates the clear sky. [tan]"""
 
@@ -326,100 +292,23 @@ MAX_KERNEL_CELLS = 4_000_000
 """Largest sun kernel block, in cells: a low sun on a fine grid is refused rather than ground out."""
 
 
-def perez_coefficients(turbidity: float) -> np.ndarray:
-    """Perez distribution coefficients A..E for Y, x and y (Preetham et al. 1999, appendix A.2).
+def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
+    """Colour of the sun's direct light after the atmosphere, scaled to Rec.709 luminance 1: the
+    direct transmittance for R, G, B of Preetham et al. (1999, appendix A.1), Rayleigh
+    tau_R = exp(-0.008735 lambda^-4.08 m) times Angstrom aerosol tau_a = exp(-beta lambda^-1.3 m),
+    beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um], m the Kasten & Young (1989) relative air
+    mass of pvlib. Only the ratios between the channels are kept: the level is ``daylight``'s.
 
-    turbidity : atmospheric turbidity T. [1]
-    Returns (3, 5): rows Y, x, y; columns A, B, C, D, E. [1]
-    """
-    return _PEREZ_SLOPE * float(turbidity) + _PEREZ_INTERCEPT
-
-
-def zenith_luminance(turbidity: float, sun_zenith: float) -> float:
-    """Zenith luminance Y_z = (4.0453 T - 4.9710) tan(chi) - 0.2155 T + 2.4192 with
-    chi = (4/9 - T/120)(pi - 2 theta_s) (Preetham et al. 1999, appendix A.2). [kcd/m^2]
-
-    turbidity : T. [1]   sun_zenith : theta_s, in [0, pi/2]. [rad]
-    """
-    chi = (4.0 / 9.0 - turbidity / 120.0) * (np.pi - 2.0 * sun_zenith)
-    return float((4.0453 * turbidity - 4.9710) * np.tan(chi) - 0.2155 * turbidity + 2.4192)
-
-
-def zenith_chromaticity(turbidity: float, sun_zenith: float) -> tuple[float, float]:
-    """CIE xy chromaticity of the zenith (Preetham et al. 1999, appendix A.2). [1]
-
-    turbidity : T. [1]   sun_zenith : theta_s. [rad]
-    """
-    t = np.array([turbidity**2, turbidity, 1.0])
-    a = np.array([sun_zenith**3, sun_zenith**2, sun_zenith, 1.0])
-    return float(t @ _ZENITH_X @ a), float(t @ _ZENITH_Y @ a)
-
-
-def preetham_radiance(cos_zenith, cos_gamma, *, turbidity: float, sun_zenith: float) -> np.ndarray:
-    """Clear-sky radiance of the Preetham, Shirley & Smits (1999) model, no sun disc.
-
-    For each of Y, x, y: value = zenith value * F(theta, gamma) / F(0, theta_s), with the Perez
-    function F = (1 + A exp(B / cos(theta))) (1 + C exp(D gamma) + E cos^2(gamma)) (eq. 3 of the
-    paper); then xyY -> XYZ -> linear Rec.709.
-
-    cos_zenith : cos(theta) of the viewing directions, in (0, 1]. [1]
-    cos_gamma : cosine of the angle between the directions and the sun. [1]
-    turbidity : T, in TURBIDITY_RANGE. [1]
-    sun_zenith : theta_s, in [0, pi/2). [rad]
-    Returns (..., 3) float64 linear Rec.709 radiance. [kcd/m^2]
-    """
-    cos_zenith = np.asarray(cos_zenith, dtype=np.float64)
-    cos_gamma = np.clip(np.asarray(cos_gamma, dtype=np.float64), -1.0, 1.0)
-    coef = perez_coefficients(turbidity)
-    gamma = np.arccos(cos_gamma)
-    inv_cos = 1.0 / np.maximum(cos_zenith, 1e-6)
-    x_z, y_z = zenith_chromaticity(turbidity, sun_zenith)
-    zenith = (zenith_luminance(turbidity, sun_zenith), x_z, y_z)
-    Y, x, y = (
-        z * _perez(coef[k], inv_cos, gamma, cos_gamma) / _perez(coef[k], 1.0, sun_zenith, np.cos(sun_zenith))
-        for k, z in enumerate(zenith)
-    )
-    return _rgb_from_xyY(x, y, Y)
-
-
-def _perez(c, inv_cos, gamma, cos_gamma):
-    A, B, C, D, E = c
-    return (1.0 + A * np.exp(B * inv_cos)) * (1.0 + C * np.exp(D * gamma) + E * cos_gamma * cos_gamma)
-
-
-def _rgb_from_xyY(x, y, Y):
-    """Linear Rec.709 (..., 3) from CIE xyY."""
-    X = x / y * Y
-    Z = (1.0 - x - y) / y * Y
-    M = XYZ_TO_REC709
-    return np.stack([M[i, 0] * X + M[i, 1] * Y + M[i, 2] * Z for i in range(3)], axis=-1)
-
-
-def relative_airmass(zenith) -> np.ndarray:
-    """Relative optical air mass, Kasten & Young (1989), Applied Optics 28(22), 4735:
-    m = 1 / (cos z + 0.50572 (96.07995 - z_deg)^-1.6364); 1 at the zenith, about 38 at the horizon.
-
-    zenith : zenith angle, in [0, pi/2]. [rad]   Returns m. [1]
-    """
-    z = np.asarray(zenith, dtype=np.float64)
-    return 1.0 / (np.cos(z) + 0.50572 * (96.07995 - np.degrees(z)) ** -1.6364)
-
-
-def sun_transmittance(zenith: float, turbidity: float) -> np.ndarray:
-    """Direct transmittance of the atmosphere for R, G, B (Preetham et al. 1999, appendix A.1).
-
-    Rayleigh tau_R = exp(-0.008735 lambda^-4.08 m) and Angstrom aerosol
-    tau_a = exp(-beta lambda^-1.3 m), beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um], with
-    the Kasten & Young air mass m. Ozone, water vapour and mixed gases are left out (a few per cent
-    in the visible).
-
-    zenith : sun zenith angle. [rad]   turbidity : T. [1]
+    zenith : sun zenith angle, in [0, pi/2). [rad]   turbidity : T. [1]
     Returns (3,) float64. [1]
     """
-    m = relative_airmass(zenith)
+    from pvlib import atmosphere
+
+    m = float(atmosphere.get_relative_airmass(float(np.degrees(zenith)), "kastenyoung1989"))
     lam = RGB_WAVELENGTHS
     beta = 0.04608 * turbidity - 0.04586
-    return np.exp(-m * (0.008735 * lam**-4.08 + beta * lam**-1.3))
+    transmittance = np.exp(-m * (0.008735 * lam**-4.08 + beta * lam**-1.3))
+    return transmittance / (transmittance @ np.asarray(REC709_LUMINANCE, dtype=np.float64))
 
 
 def sun_disc_radiance(angular_distance, *, angular_radius: float, normal_irradiance, limb_darkening):
@@ -524,19 +413,26 @@ def _gauss_legendre(a, b, n):
 
 @dataclass(frozen=True)
 class ProceduralSky:
-    """Clear sky (Preetham et al. 1999) with the sun, an optional moon and optional clouds.
+    """Clear sky in absolute units with the sun, an optional moon and optional clouds.
 
-    turbidity : T, in TURBIDITY_RANGE. [1]
-    sun : SunDisc -- elevation must be above 0: the model has no twilight (ValueError).
+    turbidity : Linke turbidity factor TL, in daylight.TURBIDITY_RANGE: the levels of sun and
+        sky (``daylight.clear_daylight``) and the colours of both. [1]
+    sun : SunDisc -- elevation must be above 0: the model has no twilight (ValueError). Its
+        angular radius gives its distance, so the extraterrestrial irradiance. [rad]
     moon : MoonDisc or None.
     clouds : an object with the clouds protocol (module comment above), or None.
     time : passed to the clouds. [s]
     skylight : factor on the clear sky's radiance; 0 leaves the sun alone, as in the paper's
         Fig. 11. [1]
+    shape : the clear sky's angular distribution, a name in ``clearsky.SHAPES``; cie_type : the
+        CIE standard general sky type with shape 'cie', 1..15.
+    altitude : of the site above sea level. [m]
 
-    Radiance in kcd/m^2, irradiance in klx (linear Rec.709 channels). The moon cuts the sun and
-    dims the clear sky and the clouds' glow by the same (limb-weighted) factor, since skylight is
-    scattered sunlight; below the horizon there is no light (0).
+    Radiance in kcd/m^2, irradiance in klx (linear Rec.709 channels). The clear sky (no moon, no
+    clouds, skylight 1) gives the diffuse horizontal illuminance of ``daylight`` and the sun its
+    direct normal illuminance. The moon cuts the sun and dims the clear sky and the clouds' glow
+    by the same (limb-weighted) factor, since skylight is scattered sunlight; below the horizon
+    there is no light (0).
     """
 
     turbidity: float
@@ -545,13 +441,20 @@ class ProceduralSky:
     clouds: object | None = None
     time: float = 0.0
     skylight: float = 1.0
+    shape: str = "cie"
+    cie_type: int = clearsky.DEFAULT_CIE_TYPE
+    altitude: float = 0.0
 
     def __post_init__(self):
-        lo, hi = TURBIDITY_RANGE
+        lo, hi = daylight.TURBIDITY_RANGE
         if not (lo <= self.turbidity <= hi):
             raise ValueError(f"turbidity must be in [{lo}, {hi}], got {self.turbidity}")
         if not self.sun.elevation > 0.0:
-            raise ValueError(f"sun elevation must be above 0 for the Preetham sky, got {self.sun.elevation} [rad]")
+            raise ValueError(f"sun elevation must be above 0 for the clear sky, got {self.sun.elevation} [rad]")
+        if self.shape not in clearsky.SHAPES:
+            raise ValueError(f"unknown sky shape {self.shape!r} (valid: {', '.join(clearsky.SHAPES)})")
+        if self.cie_type not in clearsky.CIE_TYPES:
+            raise ValueError(f"cie_type must be 1..15, got {self.cie_type}")
 
     # --- the sun ------------------------------------------------------------------------------
     @cached_property
@@ -565,11 +468,17 @@ class ProceduralSky:
         return self.sun_direction[:2] / self.sun_direction[2]
 
     @cached_property
+    def daylight(self) -> daylight.ClearDaylight:
+        """The clear sky's direct and diffuse light at this sun, turbidity, altitude and distance."""
+        return daylight.clear_daylight(np.pi / 2 - self.sun.elevation, self.turbidity, altitude=self.altitude,
+                                       distance_factor=(self.sun.angular_radius / SUN_ANGULAR_RADIUS) ** 2)
+
+    @cached_property
     def sun_normal_irradiance(self) -> np.ndarray:
-        """Clear, uneclipsed normal irradiance of the sun after the atmosphere (3,): the extraterrestrial
-        E_v0 (r / r_1au)^2 as white light times ``sun_transmittance``. [klx]"""
+        """Clear, uneclipsed normal irradiance of the sun after the atmosphere (3,): the direct
+        normal illuminance of ``daylight`` in the colour of ``sun_colour``. [klx]"""
         zenith = np.pi / 2 - self.sun.elevation
-        return SUN_LUMINANCE * np.pi * self.sun.angular_radius**2 * sun_transmittance(zenith, self.turbidity)
+        return self.daylight.direct_normal_illuminance * sun_colour(zenith, self.turbidity)
 
     def total_sun_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the clear, uneclipsed sun (3,): the sun kernel's sum without moon
@@ -631,14 +540,29 @@ class ProceduralSky:
         """Factor on the clear sky (3,): the sun's visible fraction (eclipse), times skylight. [1]"""
         return self.moon_visible * self.skylight
 
-    def clear_radiance(self, s) -> np.ndarray:
-        """Clear-sky radiance at sky-plane points s (..., 2) [tan], eclipse-dimmed, no sun disc. [kcd/m^2]"""
+    def _relative_sky(self, s) -> np.ndarray:
+        """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1. [1]"""
         s = np.asarray(s, dtype=np.float64)
         cos_zenith = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
-        c = self.sun_direction
-        cos_gamma = (s[..., 0] * c[0] + s[..., 1] * c[1] + c[2]) * cos_zenith
-        L = preetham_radiance(cos_zenith, cos_gamma, turbidity=self.turbidity, sun_zenith=np.pi / 2 - self.sun.elevation)
-        return L * self._sky_dimming
+        w = np.stack([s[..., 0] * cos_zenith, s[..., 1] * cos_zenith, cos_zenith], axis=-1)
+        return clearsky.relative_sky(cos_zenith, _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
+                                     turbidity=self.turbidity, shape=self.shape, cie_type=self.cie_type)
+
+    @cached_property
+    def _relative_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
+        return self._outside(None, self._relative_sky)
+
+    @cached_property
+    def zenith_luminance(self) -> float:
+        """Luminance of the clear, uneclipsed sky at the zenith: the one that gives the diffuse
+        horizontal illuminance of ``daylight`` (skylight and the moon not applied). [kcd/m^2]"""
+        luminance = self._relative_irradiance @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
+        return self.daylight.diffuse_horizontal_illuminance / luminance
+
+    def clear_radiance(self, s) -> np.ndarray:
+        """Clear-sky radiance at sky-plane points s (..., 2) [tan], eclipse-dimmed, no sun disc. [kcd/m^2]"""
+        return self._relative_sky(s) * (self.zenith_luminance * self._sky_dimming)
 
     def radiance(self, s, footprint=None) -> np.ndarray:
         """Sky radiance without the sun disc at sky-plane points s (..., 2) [tan]:
@@ -659,7 +583,7 @@ class ProceduralSky:
     @cached_property
     def clear_sky_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the clear sky (3,), no sun disc, eclipse-dimmed. [klx]"""
-        return self._outside(None, self.clear_radiance)
+        return self._relative_irradiance * (self.zenith_luminance * self._sky_dimming)
 
     @cached_property
     def sky_irradiance(self) -> np.ndarray:
@@ -946,5 +870,8 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
     return EquirectSky(image, sky.rotation, sun, energy / direction[2])
 
 
-MODELS = {"procedural": ProceduralSky, "uniform": UniformSky, "hdri": EquirectSky}
-"""The sky models a config may name (sky.model)."""
+PROCEDURAL_MODELS = clearsky.SHAPES
+"""The sky models drawn by ``ProceduralSky``, named by their clear-sky shape."""
+
+MODELS = {**dict.fromkeys(PROCEDURAL_MODELS, ProceduralSky), "uniform": UniformSky, "hdri": EquirectSky}
+"""The sky models a config may name (sky.model); 'procedural' is read as 'cie'."""

@@ -17,6 +17,7 @@ from pipeline.cache import (
     ENV_VAR,
     MAX_PARAM_ARRAY_SIZE,
     Cache,
+    CacheWarning,
     cache_dir,
     key_of,
     parse_size,
@@ -224,9 +225,11 @@ def test_missing_meta_is_treated_as_absent(tmp_path):
     cache, compute = Cache(tmp_path), Counter()
     cache.get_or_compute("mask", PARAMS, compute)
     (item_of(cache) / "meta.json").unlink()
-    assert cache.get("mask", PARAMS) is None
     (item, problem), = cache.verify()
     assert "meta.json" in problem
+    with pytest.warns(CacheWarning, match="meta.json is missing"):
+        assert cache.get("mask", PARAMS) is None  # and removed, to be computed again
+    assert cache.list() == []
     cache.get_or_compute("mask", PARAMS, compute)
     assert compute.calls == 2 and cache.verify() == []
 
@@ -372,3 +375,116 @@ def test_parse_size(text, expected):
 def test_parse_size_rejects_bad_text(text):
     with pytest.raises(ValueError, match="invalid size"):
         parse_size(text)
+
+
+# -- every read is checked (issue 16) ---------------------------------------------------
+
+
+def flip_bit(path: Path, offset: int, *, keep_mtime: bool = False) -> None:
+    """Flip the lowest bit of one byte of a file in place (offset from the end if negative)."""
+    st = path.stat()
+    with open(path, "r+b") as f:
+        f.seek(offset, os.SEEK_SET if offset >= 0 else os.SEEK_END)
+        byte = f.read(1)[0]
+        f.seek(-1, os.SEEK_CUR)
+        f.write(bytes([byte ^ 1]))
+    if keep_mtime:
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_every_read_checks_the_bytes_without_being_asked(tmp_path):
+    cache, compute = Cache(tmp_path), Counter()
+    cache.get_or_compute("mask", PARAMS, compute)
+    npy = item_of(cache) / "spectrum.npy"
+    original = npy.read_bytes()
+    flip_bit(npy, -5, keep_mtime=True)  # the change time still moves: checked again
+    with pytest.warns(CacheWarning, match=r"mask/[0-9a-f]{12} was damaged \(spectrum.npy: checksum"):
+        out = Cache(tmp_path).get_or_compute("mask", PARAMS, compute)
+    assert compute.calls == 2
+    np.testing.assert_array_equal(out["spectrum"], spectrum(0))
+    assert npy.read_bytes() == original  # repaired on disk
+    flip_bit(npy, 200)
+    with pytest.warns(CacheWarning, match="damaged"):
+        assert cache.get("mask", PARAMS) is None  # get removes it too
+    assert cache.list() == []
+
+
+def test_damaged_meta_json_that_still_parses_is_found(tmp_path):
+    cache, compute = Cache(tmp_path), Counter()
+    cache.get_or_compute("mask", PARAMS, compute)
+    meta_path = item_of(cache) / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    meta["arrays"]["spectrum"]["shape"] = [33, 64]  # valid JSON, wrong content
+    meta_path.write_text(json.dumps(meta, indent=1))
+    (item, problem), = cache.verify()
+    assert problem == "meta.json: checksum mismatch (corrupted)"
+    with pytest.warns(CacheWarning, match="meta.json: checksum mismatch"):
+        out = cache.get_or_compute("mask", PARAMS, compute)
+    assert compute.calls == 2 and out["spectrum"].shape == (64, 33) and cache.verify() == []
+
+
+def test_header_damage_in_an_item_of_the_previous_version_is_one_line(tmp_path):
+    """Items written before whole-file checksums (no file_crc32, no meta_crc32): a header
+    that numpy cannot parse (its tokenizer raises TokenError) is a broken item, not a
+    traceback."""
+    cache, compute = Cache(tmp_path), Counter()
+    cache.get_or_compute("mask", PARAMS, compute)
+    meta_path = item_of(cache) / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    del meta["meta_crc32"], meta["arrays"]["spectrum"]["file_crc32"]
+    meta_path.write_text(json.dumps(meta, indent=1))
+    assert Cache(tmp_path).get("mask", PARAMS) is not None  # still read, data CRC-32 checked
+    npy = item_of(cache) / "spectrum.npy"
+    data = bytearray(npy.read_bytes())
+    at = data.index(b"'shape'")
+    data[at:at + 12] = b"'shape': ((("
+    npy.write_bytes(bytes(data))
+    (item, problem), = cache.verify()
+    assert problem.startswith("unreadable: TokenError") and "\n" not in problem
+    with pytest.warns(CacheWarning, match="TokenError"):
+        out = cache.get_or_compute("mask", PARAMS, compute)
+    np.testing.assert_array_equal(out["spectrum"], spectrum(0))
+    assert compute.calls == 2 and cache.verify() == []
+
+
+def test_recheck_tells_whether_an_item_is_still_what_was_served(tmp_path):
+    cache, compute = Cache(tmp_path), Counter()
+    cache.get_or_compute("mask", PARAMS, compute)
+    (name, stamp), = cache.served.items()
+    assert name == f"mask/{key_of('mask', PARAMS)}" and list(stamp) == ["spectrum.npy", "mean.npy"]
+    assert stamp["spectrum.npy"][5] == json.loads((item_of(cache) / "meta.json").read_text())["created"]
+    assert cache.recheck(name, stamp) is None  # unchanged: nothing read
+    os.utime(item_of(cache) / "spectrum.npy")  # touched, same bytes
+    fresh = Cache(tmp_path)
+    assert fresh.recheck(name, stamp) is None and fresh.served[name] != stamp
+    flip_bit(item_of(cache) / "spectrum.npy", -1)
+    assert "damaged" in Cache(tmp_path).recheck(name, stamp, repair=False)
+    assert len(cache.list()) == 1  # repair=False removes nothing
+    with pytest.warns(CacheWarning):
+        assert "damaged" in Cache(tmp_path).recheck(name, stamp)
+    assert cache.list() == []
+    assert "found damaged since" in cache.recheck(name, stamp)  # that copy, removed as damaged
+    again = Cache(tmp_path)
+    again.get_or_compute("mask", PARAMS, compute)
+    copy = again.served[name]
+    assert again.recheck(name, copy) is None
+    again.clear()
+    assert again.recheck(name, copy) is None  # absent: a clear or prune says nothing against it
+    Cache(tmp_path).get_or_compute("mask", PARAMS, Counter(seed=5))  # computed again, other bytes
+    assert "other bytes" in Cache(tmp_path).recheck(name, copy)
+
+
+def test_cache_verify_reports_a_damaged_header_in_one_line(tmp_path, capsys):
+    from pipeline.cli import main
+
+    cache = Cache(tmp_path)
+    cache.get_or_compute("mask", PARAMS, Counter())
+    npy = item_of(cache) / "spectrum.npy"
+    data = bytearray(npy.read_bytes())
+    data[10:20] = b"{'descr': "[::-1]
+    npy.write_bytes(bytes(data))
+    assert main(["cache", "verify", "--cache", str(tmp_path)]) == 1
+    out, err = capsys.readouterr()
+    assert out.splitlines() == [f"mask {key_of('mask', PARAMS)[:16]}: spectrum.npy: checksum "
+                                "mismatch (corrupted)", "1 broken of 1 items"]
+    assert err == ""

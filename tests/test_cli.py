@@ -117,7 +117,7 @@ BAD_CONFIGS = [
     ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
     ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
     ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
-    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: procedural, uniform, hdri"),
+    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: cie, preetham, uniform, hdri"),
     ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
     ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
     ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
@@ -143,7 +143,7 @@ BAD_CONFIGS = [
     ("pass key without passes", "foreground", {"sun": "sky.exr"}, "foreground.sun: only used with model: passes"),
     ("missing albedo image", "ground.albedo", "grass.png", "ground.albedo: no such file"),
     ("negative haze", "sky.haze", -5, "sky.haze: must be at least 0"),
-    ("skylight with uniform", "sky.skylight", 0.5, "sky.skylight: only used with model: procedural"),
+    ("skylight with uniform", "sky.skylight", 0.5, "sky.skylight: only used with model: cie or preetham"),
 ]
 
 
@@ -487,8 +487,8 @@ def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
 
 
 @pytest.mark.parametrize("section,keys", [
-    ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "sun", "site", "time",
-             "moon", "clouds", "skylight", "haze"}),
+    ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
+             "time", "moon", "clouds", "skylight", "haze"}),
     ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
     ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display"}),
 ])

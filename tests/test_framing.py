@@ -63,9 +63,8 @@ def luminance(result) -> np.ndarray:
 @pytest.mark.parametrize("site", SITES)
 def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
     """With no camera or windows given, the frame shows sun flecks on shade: the 95th/5th
-    percentile ratio of the ground's luminance is at least 2, or, where the sun and sky of that
-    moment cannot give 2 between open sun and open shade (a low sun), 90% of the excess over 1
-    they can give."""
+    percentile ratio of the ground's luminance is at least 2 (the sun and sky of each moment
+    allow it: open sun over open shade is 2.2 to 7 there, docs/accuracy.md)."""
     config = load_config(write(tmp_path, dapple_scene(site)))
     plan = render.plan_run(config)
     assert set(plan.auto) == {"ground.window", "ground.sun_window", "camera"}
@@ -74,12 +73,7 @@ def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
     ground = luminance(result)[ground_fraction >= 1.0]
     assert ground.size > 0.9 * ground_fraction.size
     p95, p5 = np.percentile(ground, [95, 5])
-    sky = render.load_sky(config.sky, result.scene)
-    open_ground = sky.sky_irradiance + result.sun_fraction * sky.total_sun_irradiance()
-    possible = float(open_ground @ REC709_LUMINANCE) / float(sky.sky_irradiance @ REC709_LUMINANCE)
-    # a low sun's light cannot give 2 between open sun and open shade (issue 13's sky is still
-    # too bright): there, 90% of what it can give
-    assert p95 / p5 >= (2.0 if possible >= 2.0 else 1.0 + 0.9 * (possible - 1.0)), (p95 / p5, possible)
+    assert p95 / p5 >= 2.0, p95 / p5
     assert render.framing_warnings(config, plan) == []
 
 
@@ -240,7 +234,7 @@ def test_auto_exposure_follows_a_step_with_its_time_constant_and_stops_at_its_li
     assert np.all(np.isfinite(dark)) and np.log2(dark / composite.exposure_for(reference)) == pytest.approx(10.0)
 
 
-AUTO_BAND = (0.2, 0.8)
+AUTO_BAND = (0.15, 0.75)
 """Mean display value of the Dallas frames with auto exposure, up to second contact
 (docs/method.md, "Exposure")."""
 

@@ -138,8 +138,10 @@ def test_outer_raster_with_a_coarse_sun_matches_the_fine_one(tmp_path, layout):
     from pipeline.shadow import resample_bilinear
     on_fine = np.moveaxis(resample_bilinear(np.moveaxis(outer, -1, 0), grid, result.grid), 0, -1)
     blocks = lambda a: a[:60, :60].reshape(6, 10, 6, 10, 3).mean(axis=(1, 3))  # noqa: E731
-    rel = np.abs(blocks(on_fine) - blocks(result.irradiance)) / blocks(result.irradiance)
-    assert rel.mean() < 0.02 and rel.max() < 0.15, (rel.mean(), rel.max())
+    # the coarse sun errs by a share of the sun's light (in deep shade a large share of little
+    # light): measured against the open ground's light
+    rel = np.abs(blocks(on_fine) - blocks(result.irradiance)) / result.unshadowed
+    assert rel.mean() < 0.02 and rel.max() < 0.06, (rel.mean(), rel.max())
     assert outer.min() < 0.6 * result.unshadowed.min()
     whole = render.render_ground(load(tmp_path, tiny_grove(**{**changes, "ground.sun_window": [-3, -3, 3, 3]})),
                                  frame=0, store=cache.Cache(tmp_path / "c"), outer=True)

@@ -2,6 +2,7 @@
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -227,6 +228,217 @@ def test_a_dask_cluster_renders_the_same_bytes(reference, tmp_path):
                    "--output", tmp_path / "run", "--cache", tmp_path / "cache")
     assert_same_files(tmp_path / "run", files)
 
+
+# -- done means whole (issue 19) and damaged cache items (issue 16) ---------------------
+
+
+@pytest.fixture
+def finished(reference, tmp_path):
+    """A copy of the reference run folder and its cache: new inodes and times, same bytes."""
+    config, files = reference
+    shutil.copytree(config.parent / "run", tmp_path / "run")
+    shutil.copytree(config.parent / "cache", tmp_path / "cache")
+    return config, files, tmp_path / "run", tmp_path / "cache"
+
+
+def flip(path: Path, offset: int) -> None:
+    """Flip one bit of a file in place."""
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0x04
+    path.write_bytes(bytes(data))
+
+
+def damage(run: Path, how: str, name: str) -> None:
+    path = run / name
+    if how == "truncate":
+        os.truncate(path, path.stat().st_size // 2)
+    elif how == "corrupt":
+        flip(path, path.stat().st_size // 2)
+    else:  # replace: another frame's file of the same kind under this name
+        other = "tiny.0005" if not name.startswith("tiny.0005") else "tiny.0006"
+        shutil.copyfile(run / f"{other}{path.suffix}", path)
+
+
+def render_in_process(config, run, cache, capsys, *extra) -> tuple[int, str, str]:
+    code = main(["render", str(config), "--output", str(run), "--cache", str(cache), *extra])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+DAMAGE = [("truncate", ("tiny.0000.exr", "tiny.0007.png")),
+          ("corrupt", ("tiny.0004.exr", "tiny.0000.png")),
+          ("replace", ("tiny.0007.exr", "tiny.0004.png"))]
+
+
+@pytest.mark.parametrize("how,names", DAMAGE, ids=[d[0] for d in DAMAGE])
+def test_damaged_frames_are_found_and_rendered_again(finished, capsys, how, names):
+    config, files, run, cache = finished
+    for name in names:
+        damage(run, how, name)
+    stems = sorted(name[:9] for name in names)
+    code, out, err = render_in_process(config, run, cache, capsys, "--verify")
+    assert code == 1 and err == ""
+    assert [line.split(":")[0] for line in out.splitlines()[:-1]] == stems
+    assert all(": damaged: " in line for line in out.splitlines()[:-1])
+    assert "6 of 8 frames whole, 2 damaged, 0 foreign" in out
+    code, out, err = render_in_process(config, run, cache, capsys, "--jobs", "1")
+    assert code == 0 and "2 frames rendered, 6 already done" in out
+    notes = [line for line in err.splitlines() if "warning" in line]
+    assert [line.split(":")[2].strip() for line in notes] == stems  # one line each
+    assert all(line.startswith("sunshade: warning: ") and "rendering it again" in line for line in notes)
+    assert_same_files(run, files)
+    assert render_in_process(config, run, cache, capsys, "--verify")[0] == 0
+
+
+def items_of_frame(run: Path, frame: int) -> dict:
+    return json.loads((run / "index.json").read_text())["frames"][str(frame)]["items"]
+
+
+@pytest.mark.parametrize("kind", ["spectra", "foreground"])
+def test_frames_made_from_a_swapped_cache_item_are_rendered_again(finished, capsys, kind):
+    """A cache item replaced by another's bytes after the run: the frames made from it are not
+    done (the item may have been wrong when they were made); exactly they render again."""
+    config, files, run, cache = finished
+    (victim,) = [i for i in items_of_frame(run, 1) if i.startswith(kind)]
+    (donor,) = [i for i in items_of_frame(run, 2) if i.startswith(kind)]
+    file = "coarse.npy" if kind == "spectra" else "sun.npy"
+    path = lambda item: cache / item.split("/")[0] / item.split("/")[1][:2] / item.split("/")[1] / file
+    original = path(victim).read_bytes()
+    shutil.copyfile(path(donor), path(victim))
+    code, out, _ = render_in_process(config, run, cache, capsys, "--verify")
+    assert code == 1 and [line[:9] for line in out.splitlines()[:-1]] == ["tiny.0001", "tiny.0004", "tiny.0007"]
+    code, out, err = render_in_process(config, run, cache, capsys, "--jobs", "2")
+    assert code == 0 and "3 frames rendered, 5 already done" in out
+    assert f"cache item {victim[:len(kind) + 13]} was damaged" in err
+    assert_same_files(run, files)
+    assert path(victim).read_bytes() == original
+
+
+def test_unchanged_frames_are_not_read_and_copies_are_hashed_once(finished, capsys):
+    """A no-op resume compares sizes, inodes and times with index.json; a copied folder (new
+    inodes) is hashed once, found whole, and its new stamps recorded."""
+    config, files, run, cache = finished
+    index = json.loads((run / "index.json").read_text())
+    code, out, err = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "0 frames rendered, 8 already done" in out and err == ""
+    assert json.loads((run / "index.json").read_text()) != index  # new inodes recorded
+    stamps = (run / "index.json").read_bytes()
+    assert render_in_process(config, run, cache, capsys)[0] == 0
+    assert (run / "index.json").read_bytes() == stamps  # nothing new to record
+    assert_same_files(run, files)
+
+
+def test_foreign_and_unrecorded_frames_are_rendered_again(finished, capsys):
+    config, files, run, cache = finished
+    index = json.loads((run / "index.json").read_text())
+    del index["frames"]["2"]  # as if killed between the rename and the index
+    index["frames"]["5"]["config_hash"] = "0" * 16
+    (run / "index.json").write_text(json.dumps(index))
+    code, out, _ = render_in_process(config, run, cache, capsys, "--verify")
+    assert code == 1 and out.splitlines()[:-1] == [
+        "tiny.0002: foreign: not recorded in index.json",
+        "tiny.0005: foreign: made by another config"]
+    code, out, _ = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "2 frames rendered, 6 already done" in out
+    assert_same_files(run, files)
+    (run / "index.json").write_text("{not json")
+    code, out, err = render_in_process(config, run, cache, capsys, "--frames", "0-1")
+    assert code == 0 and "2 frames rendered, 0 already done" in out and "index.json" in err
+    assert_same_files(run, files)
+
+
+def npy_of(cache: Path, item: str, name: str) -> Path:
+    kind, key = item.split("/")
+    return cache / kind / key[:2] / key / name
+
+
+FAULTS = {
+    "data": [("spectra", 0, "coarse.npy", -9), ("spectra", 1, "fine.npy", -9),
+             ("spectra", 2, "mean.npy", -1), ("foreground", 0, "sun.npy", -9),
+             ("foreground", 1, "sky.npy", -9), ("foreground", 2, "alpha.npy", -9)],
+    "headers": [("spectra", 0, "coarse.npy", 30), ("spectra", 1, "meta.json", 40),
+                ("foreground", 2, "alpha.npy", 60), ("foreground", 0, "meta.json", 60)],
+}
+
+
+@pytest.mark.parametrize("where", list(FAULTS))
+def test_flipped_bits_in_every_kind_of_cache_item_never_reach_a_frame(finished, tmp_path, capsys, where):
+    """Issue 16: bits flipped in mask spectra, fine masks, means and foreground passes, or in
+    their headers: the render says so in one line per item, repairs them and writes the
+    reference's bytes."""
+    config, files, run, cache = finished
+    faults = []
+    for kind, cycle_frame, name, offset in FAULTS[where]:
+        (item,) = [i for i in items_of_frame(run, cycle_frame) if i.startswith(kind)]
+        path = npy_of(cache, item, name)
+        faults.append((item, path, path.read_bytes()))
+        flip(path, offset)
+    fresh = tmp_path / "fresh"  # frames 0-2 read every cycle frame's items
+    code, out, err = render_in_process(config, fresh, cache, capsys, "--jobs", "1", "--frames", "0-2")
+    assert code == 0 and "Traceback" not in err
+    warned = [line for line in err.splitlines() if "cache item" in line]
+    assert len(warned) == len(faults) and all(line.startswith("sunshade: warning: ") for line in warned)
+    for item, path, before in faults:
+        assert any(item[:len(item.split('/')[0]) + 13] in line for line in warned)
+        if path.suffix == ".npy":
+            assert path.read_bytes() == before  # computed again, the same bytes
+    assert_same_files(fresh, {name: files[name] for name in contents(fresh)})
+    assert sorted(contents(fresh)) == [f"tiny.000{i}.{ext}" for i in range(3) for ext in ("exr", "png")]
+    code, out, err = main(["cache", "verify", "--cache", str(cache)]), *capsys.readouterr()
+    assert code == 0 and out.strip().startswith("0 broken")
+
+
+def test_an_index_that_is_a_folder_stops_the_run_before_any_work(reference, tmp_path, capsys):
+    config, _ = reference
+    (tmp_path / "run" / "index.json").mkdir(parents=True)
+    code, out, err = render_in_process(config, tmp_path / "run", tmp_path / "cache", capsys)
+    assert code == 2 and err.strip().endswith("index.json: is a folder, not a file")
+    assert len(err.strip().splitlines()) == 1 and not list((tmp_path / "run").glob("tiny.*"))
+
+
+def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(finished, tmp_path):
+    """What a frame task (run in a worker process by joblib or Dask) returns: the cache
+    warnings it raised, for the command to say, and the items it read, repaired."""
+    from dataclasses import replace
+
+    from pipeline.cache import CacheWarning
+    from pipeline.config import load_config
+    from pipeline.render import plan_run
+    from pipeline.run import _frame_task, frame_files
+
+    config_path, files, run, cache = finished
+    config = load_config(config_path)
+    config = replace(config, output=replace(config.output, folder=tmp_path / "out"))
+    (tmp_path / "out").mkdir()
+    (item,) = [i for i in items_of_frame(run, 4) if i.startswith("foreground")]
+    flip(npy_of(cache, item, "sky.npy"), -17)
+    frame, _, entry, caught = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
+    assert frame == 4 and [category for category, _ in caught] == [CacheWarning]
+    assert f"cache item {item[:23]} was damaged (sky.npy: checksum mismatch" in caught[0][1]
+    assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
+    for path in frame_files(config, 4):
+        assert path.read_bytes() == files[path.name]
+
+
+def test_frames_made_from_an_item_found_damaged_elsewhere_render_again_pruned_do_not(finished, capsys):
+    """An item found damaged and removed by another command (here `cache verify --remove`)
+    leaves a record of that copy: the frames made from it render again; items pruned or
+    cleared say nothing against the frames made from them."""
+    config, files, run, cache = finished
+    assert "0 frames rendered" in render_in_process(config, run, cache, capsys)[1]  # the copies' inodes
+    (item,) = [i for i in items_of_frame(run, 2) if i.startswith("spectra")]
+    flip(npy_of(cache, item, "fine.npy"), -33)
+    assert main(["cache", "verify", "--remove", "--cache", str(cache)]) == 0
+    assert "(removed)" in capsys.readouterr()[0]
+    code, out, err = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "2 frames rendered, 6 already done" in out
+    assert [line.split(":")[2].strip() for line in err.splitlines() if "warning" in line] == [
+        "tiny.0002", "tiny.0005"]
+    assert "found damaged since (fine.npy: checksum mismatch" in err
+    assert_same_files(run, files)
+    assert main(["cache", "clear", "--cache", str(cache)]) == 0
+    code, out, err = render_in_process(config, run, cache, capsys)
+    assert code == 0 and "0 frames rendered, 8 already done" in out
 
 def test_an_unreachable_scheduler_writes_nothing(tmp_path):
     pytest.importorskip("distributed")
