@@ -12,13 +12,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-
-class ImageError(ValueError):
-    """An image that cannot be read or written; ``path`` names the file."""
-
-    def __init__(self, path, message: str):
-        super().__init__(f"{path}: {message}")
-        self.path = Path(path)
+from .errors import ImageError
 
 
 def read_image(path) -> np.ndarray:
