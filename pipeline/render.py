@@ -22,7 +22,8 @@ from . import albedo as albedos
 from . import cache, camera, canopy, composite, ephemeris, foreground, io, shadow
 from . import sky as sky_models
 from .composite import REC709_LUMINANCE
-from .config import MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig
+from .errors import ConfigError, portable
+from .config import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -226,7 +227,29 @@ def plan_run(config: Config) -> RunPlan:
             lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
             sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
         layers.append(LayerPlan(layer.height, grid, coarse, sun))
-    return RunPlan(window, sun_window, projection, tuple(layers))
+    plan = RunPlan(window, sun_window, projection, tuple(layers))
+    _check_sizes(config, plan)
+    return plan
+
+
+def _check_sizes(config: Config, plan: RunPlan) -> None:
+    """Refuse a plan whose rasters would pass the stated limits (config.MAX_SUN_PIXELS and
+    MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
+    def refuse(key, what, cells, most, advice):
+        raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
+                          f"{cells * BYTES_PER_CELL / 1e9:.3g} GB; the most is {most:.3g}: {advice}")
+
+    if plan.sun_window is not None and np.prod(plan.sun_window.shape) > MAX_SUN_PIXELS:
+        refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),
+               MAX_SUN_PIXELS, "shrink ground.sun_window (or ground.window) or raise ground.pixel")
+    for layer in plan.layers:
+        if np.prod(getattr(layer.coarse, "fft_shape", (0, 0))) > MAX_FFT_CELLS:
+            refuse("ground.window", "the sky light's transform", np.prod(layer.coarse.fft_shape),
+                   MAX_FFT_CELLS, "shrink ground.window or the canopy, or raise ground.pixel")
+        if layer.sun is not None and np.prod(layer.sun.fft_shape) > MAX_FFT_CELLS:
+            refuse("ground.sun_window", "the sun's transform (its window and the sun's path)",
+                   np.prod(layer.sun.fft_shape), MAX_FFT_CELLS,
+                   "shrink ground.sun_window or the time span, or raise ground.sun_pixel")
 
 
 def _sun_reach(sun) -> float:
@@ -382,6 +405,7 @@ def _product_key(config, plan, layer, frame):
     return "spectra", cycle_params(config, plan, layer, frame)
 
 
+@portable
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:
     store = cache.Cache(root)
     if layer is None:

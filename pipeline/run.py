@@ -17,6 +17,7 @@ import contextlib
 import json
 import os
 import platform
+import re
 import time
 from dataclasses import asdict, dataclass
 from importlib import metadata
@@ -26,19 +27,16 @@ import filelock
 import joblib
 import numpy as np
 
-from . import __version__, cache, io
+from . import __version__, cache, io, paths
 from .composite import display
 from .config import Config
+from .errors import RunError, portable
 from .render import RunPlan, check_inputs, cycle_phase, default_workers, render_frame
 
 RUN_FILE = "run.json"
 LOCK_FILE = ".sunshade.lock"
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
-
-
-class RunError(Exception):
-    """A run that cannot start: a bad frame list, a busy or unwritable folder, no scheduler."""
 
 
 def parse_frames(text: str, count: int) -> tuple[int, ...]:
@@ -202,6 +200,7 @@ def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
             progress("frames", done, len(todo))
 
 
+@portable
 def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds)."""
     timings = {}
@@ -287,6 +286,25 @@ def check_folder(folder: Path) -> None:
         raise RunError(f"{folder}: {existing} is a file, not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise RunError(f"{folder}: cannot write the output folder ({existing} is not writable)")
+
+
+def check_outputs(config: Config) -> None:
+    """Raise RunError unless the run's files could be written, touching nothing: the folder
+    (``check_folder``), every name within the system's limits (``paths.problem``), and no
+    frame, video, lock or run.json name taken by a folder."""
+    folder = config.output.folder
+    if problem := paths.problem(folder):
+        raise RunError(f"{folder}: {problem}")
+    check_folder(folder)
+    names = {RUN_FILE, LOCK_FILE} | ({video_file(config).name} if video_file(config) else set())
+    for path in (*frame_files(config, config.animation.frames - 1), *(folder / n for n in names)):
+        if problem := paths.problem(path):
+            raise RunError(f"{path}: {problem}")
+    if folder.is_dir():
+        frame = re.compile(rf"{re.escape(config.output.name)}\.\d+\.(exr|png)")
+        for entry in os.scandir(folder):
+            if (entry.name in names or frame.fullmatch(entry.name)) and entry.is_dir():
+                raise RunError(f"{entry.path}: is a folder where the run writes a file; move it")
 
 
 def _remove_temporaries(folder: Path) -> None:
