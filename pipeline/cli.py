@@ -20,13 +20,14 @@ from . import __version__, io, paths
 from .cache import ENV_VAR, Cache, cache_dir, parse_size
 from .composite import display_ground, display_sky
 from .config import load_config
-from .errors import BadInput, SunshadeError, WorkerError
+from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
 
 
 def main(argv=None) -> int:
+    one_line_warnings()
     parser = _parser()
     try:
         args = parser.parse_args(argv)
@@ -109,6 +110,9 @@ def _parser():
     render.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                         help="run the tasks on this dask.distributed scheduler (the cache and "
                         "the output folder must be on a file system every worker shares)")
+    render.add_argument("--cluster-timeout", type=float, default=None, metavar="SECONDS",
+                        help="with --scheduler: end the run (resumably) once the cluster has had "
+                        "no scheduler or no workers this long (default: docs/runs.md)")
     render.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
     render.add_argument("--output", default=None, help="output folder (default: output.folder)")
     render.add_argument("--force", action="store_true", help="render the frames and the video "
@@ -269,10 +273,12 @@ def _run_render(args) -> int:
     from dataclasses import replace
 
     from .config import preview
-    from .run import check_outputs, parse_frames, render_run
+    from .run import check_outputs, missing_folders, parse_frames, remove_if_empty, render_run
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
+    if args.cluster_timeout is not None and not 0 < args.cluster_timeout < 1e6:
+        raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
     store = _store(args.cache)
     config = load_config(args.config)
     if args.output is not None:
@@ -282,9 +288,15 @@ def _run_render(args) -> int:
         config = preview(config)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     check_outputs(config)
-    summary = render_run(config, frames=frames, store=store,
-                         jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                         progress=_Progress(sys.stderr))
+    new = missing_folders(config.output.folder)
+    try:
+        summary = render_run(config, frames=frames, store=store,
+                             jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                             cluster_timeout=args.cluster_timeout,
+                             progress=_Progress(sys.stderr))
+    except BaseException:
+        remove_if_empty(new)
+        raise
     made = f"; video {summary.video}" if summary.video else ""
     print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")

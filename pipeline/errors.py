@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import pickle
 import traceback
+import warnings
 from pathlib import Path
 
 
@@ -64,6 +65,12 @@ class WorkerError(Exception):
         return self.args[0]
 
 
+def one_line_warnings() -> None:
+    """Show warnings in this process as one line each, ``sunshade: warning: ...``, without
+    the source line Python adds."""
+    warnings.formatwarning = lambda message, *_, **__: f"sunshade: warning: {message}\n"
+
+
 def portable(task):
     """``task`` made safe to run in another process: an exception that does not survive
     pickling is raised as a WorkerError (its type, message and traceback as text) instead, so
@@ -71,6 +78,7 @@ def portable(task):
 
     @functools.wraps(task)
     def run(*args, **kwargs):
+        one_line_warnings()
         try:
             return task(*args, **kwargs)
         except Exception as exc:
