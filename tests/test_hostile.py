@@ -9,7 +9,7 @@ import time
 
 import pytest
 import yaml
-from test_cli import ROOT, base_config, write_config, write_inputs
+from test_cli import ROOT, base_config, inputs, write_config  # noqa: F401 (inputs: a fixture)
 
 from pipeline import paths
 from pipeline.cli import main
@@ -17,14 +17,6 @@ from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
 
 MOST_MEMORY = 300e6
 """The most a refused input may take (issue 16). [byte]"""
-
-
-@pytest.fixture
-def inputs(tmp_path):
-    write_inputs(tmp_path)
-    out = tmp_path / "out"
-    out.mkdir()
-    return tmp_path, out
 
 
 def tree(folder):
