@@ -64,12 +64,12 @@ def _fail(line: str, code: int, debug: bool = False) -> int:
 
 def _os_error_line(exc: OSError) -> str:
     """One line for a failed file operation, naming the path where the error has one."""
-    paths = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    names = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
     reason = exc.strerror or str(exc) or type(exc).__name__
     hint = ""
     if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
         hint = "; make room and run the same command again (done work is kept)"
-    return f"{' -> '.join(paths)}: {reason}{hint}" if paths else f"{reason}{hint}"
+    return f"{' -> '.join(names)}: {reason}{hint}" if names else f"{reason}{hint}"
 
 
 class _UsageError(Exception):

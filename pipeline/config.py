@@ -600,11 +600,11 @@ def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConf
         width, height = camera.resolution
         size = animation.frames * width * height * FRAME_BYTES_PER_PIXEL
         root.fail("animation.frames", f"{animation.frames:.3g} frames of {width} x {height} px "
-                  f"would be about {_bytes(size)} of files; the most is {MAX_FRAMES} frames")
+                  f"would be about {size_text(size)} of files; the most is {MAX_FRAMES} frames")
 
 
-def _bytes(count: float) -> str:
-    """A byte count for a message: 3.2 GB. [byte]"""
+def size_text(count: float) -> str:
+    """A byte count for a message: '3.2 GB'. [byte]"""
     for unit in ("B", "kB", "MB", "GB", "TB"):
         if count < 1000 or unit == "TB":
             return f"{count:.3g} {unit}"
@@ -688,7 +688,8 @@ def _parse_ground(s: _Section) -> GroundConfig:
 def _check_pixels(s: _Section, name, window, pixel, most):
     cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
     if cells > most:
-        s.fail(name, f"the window would be {cells:.3g} pixels; the most is {most:.3g}")
+        s.fail(name, f"the window would be {cells:.3g} pixels, about "
+               f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
 
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
@@ -783,8 +784,9 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
         fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
             (window[3] - window[1]) / ground.pixel + pixels[1])
         if fft > MAX_FFT_CELLS:
-            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform; "
-                   f"the most is {MAX_FFT_CELLS:.3g}: raise ground.pixel")
+            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform, about "
+                   f"{size_text(fft * BYTES_PER_CELL)}; the most is {MAX_FFT_CELLS:.3g}: raise "
+                   "ground.pixel")
     return layer
 
 

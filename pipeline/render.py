@@ -23,7 +23,8 @@ from . import cache, camera, canopy, composite, ephemeris, foreground, io, shado
 from . import sky as sky_models
 from .composite import REC709_LUMINANCE
 from .errors import ConfigError, portable
-from .config import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig
+from .config import (BYTES_PER_CELL, MAX_FFT_CELLS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig,
+                     CanopyLayer, Config, GroundConfig, SkyConfig, size_text)
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -237,7 +238,7 @@ def _check_sizes(config: Config, plan: RunPlan) -> None:
     MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
     def refuse(key, what, cells, most, advice):
         raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
-                          f"{cells * BYTES_PER_CELL / 1e9:.3g} GB; the most is {most:.3g}: {advice}")
+                          f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:.3g}: {advice}")
 
     if plan.sun_window is not None and np.prod(plan.sun_window.shape) > MAX_SUN_PIXELS:
         refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),

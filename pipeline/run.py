@@ -135,7 +135,7 @@ class RunSummary:
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress=None, cluster_timeout: float = None) -> RunSummary:
+               progress=None, cluster_timeout: float | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -253,6 +253,8 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
 CLUSTER_TIMEOUT = 30.0
 """How long a run waits for a lost Dask cluster (no scheduler, or no workers) before it ends
 with one line saying how to resume. [s]"""
+
+
 @contextlib.contextmanager
 def _backend(scheduler: str | None, timeout: float = CLUSTER_TIMEOUT):
     """joblib's Dask backend on the cluster at ``scheduler`` for the block; local processes
