@@ -318,6 +318,7 @@ MAX_YAML_VALUES = 100_000
 """Most keys, values and list items a config may hold, its aliases expanded."""
 MAX_YAML_DEPTH = 32
 """Deepest nesting of mappings and lists in a config."""
+_TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
 
 
 def load_config(path) -> Config:
@@ -353,6 +354,12 @@ def load_yaml(path):
                           f"offset {exc.start}); save the config as UTF-8") from None
     loader = yaml.SafeLoader(text)
     try:
+        depth = 0
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):  # flat: no recursion
+            depth += (isinstance(event, yaml.CollectionStartEvent)
+                      - isinstance(event, yaml.CollectionEndEvent))
+            if depth > MAX_YAML_DEPTH:
+                raise ConfigError(f"{path}:{event.start_mark.line + 1}", _TOO_DEEP)
         node = loader.get_single_node()
         if node is not None:
             _expanded_size(node, 0, set(), {}, path)
@@ -363,8 +370,6 @@ def load_yaml(path):
         raise ConfigError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
     except ConfigError:
         raise
-    except RecursionError:
-        raise ConfigError(str(path), f"nested too deep; the most is {MAX_YAML_DEPTH} levels") from None
     except (ValueError, OverflowError, TypeError) as exc:  # a value YAML parsed but cannot build
         raise ConfigError(str(path), f"not valid YAML ({exc})") from None
     finally:
@@ -378,7 +383,7 @@ def _expanded_size(node, depth, holders, sizes, path) -> int:
     inside what it names."""
     where = f"{path}:{node.start_mark.line + 1}"
     if depth > MAX_YAML_DEPTH:
-        raise ConfigError(where, f"nested too deep; the most is {MAX_YAML_DEPTH} levels")
+        raise ConfigError(where, _TOO_DEEP)
     if id(node) in holders:
         raise ConfigError(where, "an alias refers to a mapping or list that holds it")
     if id(node) not in sizes:
