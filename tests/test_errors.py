@@ -1,4 +1,5 @@
 import pickle
+import threading
 
 import pytest
 
@@ -33,10 +34,13 @@ def test_the_one_line_errors_are_the_ones_the_cli_reports():
 
 
 class _TwoArguments(Exception):
-    """An exception that does not unpickle: the trouble ImageError and ConfigError had."""
+    """An exception that does not cross a process boundary: two arguments to its __init__ (the
+    trouble ImageError and ConfigError had), and a lock that pickles in no way (tblib, which
+    Dask installs, makes the first kind picklable)."""
 
     def __init__(self, a, b):
         super().__init__(f"{a} and {b}")
+        self.lock = threading.Lock()
 
 
 def _raises_unpicklable():
