@@ -184,7 +184,7 @@ def test_debug_shows_the_traceback_and_still_ends_with_the_line(inputs, capfd):
     assert "Traceback" in capfd.readouterr().err
 
 
-HEAVY = ["alias bomb", "nested thousands deep", "billion frames", "huge sun window", "time across the night"]
+HEAVY = ["alias bomb", "billion frames", "huge sun window"]  # issue 16: > 1 minute, 2-4.7 GB
 
 
 @pytest.mark.parametrize("name", HEAVY)
