@@ -273,7 +273,9 @@ def _run_render(args) -> int:
     from dataclasses import replace
 
     from .config import preview
-    from .run import check_outputs, missing_folders, parse_frames, remove_if_empty, render_run
+    from .render import default_workers
+    from .run import (MAX_JOBS_PER_CORE, check_outputs, missing_folders, parse_frames,
+                      remove_if_empty, render_run)
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
@@ -287,6 +289,11 @@ def _run_render(args) -> int:
     if args.preview:
         config = preview(config)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
+    jobs, most = args.jobs or config.render.jobs, MAX_JOBS_PER_CORE * default_workers()
+    if jobs and jobs > most and args.scheduler is None:
+        raise BadInput(f"{'--jobs' if args.jobs else f'{args.config}: render.jobs'} {jobs} would "
+                       f"start {jobs} processes on {default_workers()} cores; the most is {most} "
+                       f"({MAX_JOBS_PER_CORE} a core)")
     check_outputs(config)
     new = missing_folders(config.output.folder)
     try:

@@ -37,6 +37,9 @@ from .config import Config
 from .errors import RunError, SunshadeError, portable
 from .render import RunPlan, check_inputs, cycle_phase, default_workers, render_frame
 
+MAX_JOBS_PER_CORE = 4
+"""Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
+frame's rasters."""
 RUN_FILE = "run.json"
 LOCK_FILE = ".sunshade.lock"
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",

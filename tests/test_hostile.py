@@ -114,6 +114,7 @@ FLAGS = [  # render's flags: name, arguments, the words of the message
     ("cache with a NUL", ["--cache", "a\x00b"], "--cache a\\0b: contains a NUL byte"),
     ("output name too long", ["--output", "o" * 300], "--output " + "o" * 300 + ": the name"),
     ("cluster timeout of 0", ["--cluster-timeout", "0"], "--cluster-timeout must be above 0 s"),
+    ("a million jobs", ["--jobs", "1000000"], "--jobs 1000000 would start 1000000 processes on"),
 ]
 
 
