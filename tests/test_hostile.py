@@ -44,6 +44,13 @@ def alias_bomb():
     return "\n".join(lines) + "\n"  # 9^10 = 3.5e9 strings once expanded
 
 
+def merge_bomb():
+    lines = ["a: &a {k1: 1, k2: 2, k3: 3, k4: 4, k5: 5, k6: 6, k7: 7, k8: 8, k9: 9}"]
+    for parent, child in zip("abcdefghi", "bcdefghij"):
+        lines.append(f"{child}: &{child} {{<<: [{', '.join([f'*{parent}'] * 9)}]}}")
+    return "\n".join(lines) + "\n"  # merge keys copy 9^10 pairs once built
+
+
 def with_sky(sky, **sections):
     config = base_config()
     config["sky"] = sky
@@ -62,6 +69,7 @@ CASES = [  # name, the config's bytes, the words of the message
     ("utf-16", YAML_TEXT.encode("utf-16"), "not UTF-8 text (byte 0xff at offset 0)"),
     ("binary", bytes(range(128, 256)) * 8, "not UTF-8 text (byte 0x80"),
     ("alias bomb", alias_bomb().encode(), "its aliases expand to over"),
+    ("merge-key bomb", merge_bomb().encode(), "its aliases expand to over"),
     ("alias inside itself", b"a: &a [1, *a]\n", "an alias refers to a mapping or list that holds it"),
     ("nested thousands deep", b"a: " + b"[" * 5000 + b"]" * 5000 + b"\n", "nested too deep"),
     ("nested past the limit", b"a: " + b"[" * (MAX_YAML_DEPTH + 2) + b"]" * (MAX_YAML_DEPTH + 2) + b"\n",
