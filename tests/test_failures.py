@@ -1,6 +1,8 @@
 """Failures during a run (issues 16 and 19): a full disk in a worker process and a lost Dask
 cluster end the run with one line and exit code 2, and the run resumes to the same bytes."""
 
+import contextlib
+import os
 import re
 import resource
 import signal
@@ -117,3 +119,31 @@ def test_losing_the_scheduler_ends_the_run_with_one_line(tmp_path):
     assert process.returncode == 2, err
     assert error_lines(err) == [err.strip().splitlines()[-1]], err
     assert "lost the cluster" in err and "Traceback" not in err
+
+
+def loky_workers(pid):
+    """The joblib (loky) worker processes among the children of process ``pid`` (Linux /proc)."""
+    found = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as children:
+            for child in children.read().split():
+                with contextlib.suppress(OSError), open(f"/proc/{child}/cmdline") as cmdline:
+                    if "popen_loky" in cmdline.read():
+                        found.append(int(child))
+    return found
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="finds the workers in /proc")
+def test_a_worker_process_killed_ends_the_run_with_one_line(tmp_path):
+    config = write_config(tmp_path, SHORT)
+    process = sunshade("render", config, "--jobs", "2", "--output", tmp_path / "run",
+                       "--cache", tmp_path / "cache")
+    deadline = time.monotonic() + 120
+    while not (workers := loky_workers(process.pid)) and time.monotonic() < deadline:
+        time.sleep(0.01)  # the cycle phase starts its two workers
+    os.kill(workers[0], signal.SIGKILL)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 2, err
+    assert error_lines(err) == ["sunshade: error: a worker process died (killed, or out of memory?); "
+                                "done frames are kept: run the same command again to resume"], err
+    assert "Traceback" not in err
