@@ -389,14 +389,15 @@ def _expanded_size(node, depth, holders, sizes, path) -> int:
     if id(node) not in sizes:
         if isinstance(node, yaml.ScalarNode):
             return 1
-        children = node.value if isinstance(node, yaml.SequenceNode) else [n for kv in node.value for n in kv]
+        children = node.value if isinstance(node, yaml.SequenceNode) else \
+            [n for pair in node.value for n in pair]
         holders.add(id(node))
         total = 1
         for child in children:
             total += _expanded_size(child, depth + 1, holders, sizes, path)
             if total > MAX_YAML_VALUES:
-                raise ConfigError(where, f"its aliases expand to over {MAX_YAML_VALUES} values; "
-                                  f"the most is {MAX_YAML_VALUES}")
+                raise ConfigError(where, f"holds over {MAX_YAML_VALUES} values, its aliases "
+                                  f"expanded; the most is {MAX_YAML_VALUES}")
         holders.discard(id(node))
         sizes[id(node)] = total
     return sizes[id(node)]
@@ -593,8 +594,9 @@ def _parse(root: _Section, path: Path) -> Config:
 
 MAX_FRAMES = 100_000
 """Most output frames of one animation (a run plans and checks every frame before it starts)."""
-FRAME_BYTES_PER_PIXEL = 9
-"""About what a frame's files take per camera pixel: a half-float EXR and an 8-bit PNG. [byte]"""
+FRAME_BYTES_PER_PIXEL = 4
+"""About what a frame's files (half-float EXR and PNG) take per camera pixel: the eclipse
+demo's 240 frames of 1280 x 720 took 0.9 GB. [byte]"""
 SUN_SPAN_SAMPLES = 20_000
 """Most moments at which the sun is checked over a site's time span."""
 
