@@ -283,12 +283,14 @@ def _backend(scheduler: str | None, timeout: float = CLUSTER_TIMEOUT):
             reason = " ".join(str(exc).split()) or type(exc).__name__
             raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler ({reason})") from None
         watchdog = _Watchdog(client, timeout)
-        with client, joblib.parallel_config(backend="dask"), watchdog:
+        with client, joblib.parallel_config(backend="dask", wait_for_workers_timeout=timeout), \
+                watchdog:
             try:
                 yield
             except Exception as exc:
                 lost = watchdog.lost or (client.status != "running" and "the scheduler is gone") \
-                    or (isinstance(exc, concurrent.futures.CancelledError) and "tasks cancelled")
+                    or (isinstance(exc, concurrent.futures.CancelledError) and "tasks cancelled") \
+                    or ("has no worker" in str(exc) and f"no workers for {timeout:g} s")
                 if not lost or isinstance(exc, SunshadeError):
                     raise  # a worker's own error (a full disk, say): reported as with --jobs 1
                 raise RunError(f"--scheduler {scheduler}: lost the cluster ({lost}); done frames "

@@ -152,3 +152,18 @@ def test_a_worker_process_killed_ends_the_run_with_one_line(tmp_path):
     assert error_lines(err) == ["sunshade: error: a worker process died (killed, or out of memory?); "
                                 "done frames are kept: run the same command again to resume"], err
     assert "Traceback" not in err
+
+
+def test_a_cluster_without_workers_ends_the_run_and_writes_nothing(tmp_path, short):
+    distributed = pytest.importorskip("distributed")
+    config, _, _ = short
+    with distributed.LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
+                           "--cluster-timeout", "1", "--output", tmp_path / "new" / "run",
+                           "--cache", tmp_path / "cache")
+        _, err = process.communicate(timeout=120)
+    assert process.returncode == 2, err
+    assert error_lines(err) == [err.strip().splitlines()[-1]], err
+    assert "lost the cluster (no workers for 1 s)" in err and "Traceback" not in err
+    assert not (tmp_path / "new").exists()
