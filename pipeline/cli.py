@@ -7,56 +7,90 @@ Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing writte
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
 import time
-import warnings
+import traceback
 from pathlib import Path
 
 import numpy as np
 
-from . import __version__, io
-from .cache import Cache, cache_dir, parse_size
+from . import __version__, io, paths
+from .cache import ENV_VAR, Cache, cache_dir, parse_size
 from .composite import display_ground, display_sky
-from .config import ConfigError, load_config
-from .run import RunError
+from .config import load_config
+from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
 
 EXIT_BAD_INPUT = 2
-
-
-class BadInput(Exception):
-    """Bad input found by the command itself (an output path, say)."""
-
-
-def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
-    """Warnings (a damaged cache item or frame, say) as one line each."""
-    print(f"sunshade: warning: {message}", file=file or sys.stderr)
+EXIT_FAILURE = 1
 
 
 def main(argv=None) -> int:
-    warnings.showwarning = _warning_line
+    one_line_warnings()
     parser = _parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        return _fail(str(exc), EXIT_BAD_INPUT)
     try:
         return args.run(args)
-    except (ConfigError, io.ImageError, BadInput, RunError) as exc:
-        print(f"sunshade: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    except SunshadeError as exc:
+        return _fail(str(exc), EXIT_BAD_INPUT, args.debug)
     except MemoryError:
-        print("sunshade: error: not enough memory for this config; raise ground.pixel, or lower "
-              "sky.alpha or the canopy size", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _fail("not enough memory for this config; raise ground.pixel, or lower sky.alpha "
+                     "or the canopy size", EXIT_BAD_INPUT, args.debug)
+    except OSError as exc:
+        return _fail(_os_error_line(exc), EXIT_BAD_INPUT, args.debug)
     except KeyboardInterrupt:
         print("sunshade: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug: one line, the traceback only under --debug
+        what = str(exc) if isinstance(exc, WorkerError) else f"{type(exc).__name__}: {exc}"
+        return _fail(f"internal error ({what}); run again with --debug for the traceback, and "
+                     "please report it", EXIT_FAILURE, args.debug)
+
+
+def _fail(line: str, code: int, debug: bool = False) -> int:
+    """Print ``line`` (the traceback before it under --debug); return ``code``."""
+    if debug:
+        traceback.print_exc()
+        details = getattr(sys.exception(), "details", "")
+        if details:
+            print(f"the worker's traceback:\n{details}", file=sys.stderr, end="")
+    print(f"sunshade: error: {' '.join(line.split())}", file=sys.stderr)
+    return code
+
+
+def _os_error_line(exc: OSError) -> str:
+    """One line for a failed file operation, naming the path where the error has one."""
+    names = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    hint = ""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        hint = "; make room and run the same command again (done work is kept)"
+    return f"{' -> '.join(names)}: {reason}{hint}" if names else f"{reason}{hint}"
+
+
+class _UsageError(Exception):
+    """A command line argparse refused: its one-line message."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors that name the flag (and the command to ask for help)."""
+
+    def error(self, message):
+        raise _UsageError(f"{message} (see {self.prog} --help)")
 
 
 def _parser():
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="sunshade",
         description="Sunlight and skylight through leaves (Max 1991, 'Unified sun and sky "
         "illumination for shadows under trees').",
     )
+    parser.add_argument("--debug", action="store_true", help="on an error, print the traceback "
+                        "too (for a bug report)")
     parser.add_argument("--version", action="version", version=f"sunshade {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -76,6 +110,9 @@ def _parser():
     render.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                         help="run the tasks on this dask.distributed scheduler (the cache and "
                         "the output folder must be on a file system every worker shares)")
+    render.add_argument("--cluster-timeout", type=float, default=None, metavar="SECONDS",
+                        help="with --scheduler: end the run (resumably) once the cluster has had "
+                        "no scheduler or no workers this long (default: docs/runs.md)")
     render.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
     render.add_argument("--output", default=None, help="output folder (default: output.folder)")
     render.add_argument("--force", action="store_true", help="render the frames and the video "
@@ -183,6 +220,9 @@ def _parser():
     cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
     cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
     cache.set_defaults(run=_run_cache)
+    for command in commands.choices.values():  # --debug after the command too
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="on an error, print the traceback too (for a bug report)")
     return parser
 
 
@@ -190,8 +230,28 @@ OUTPUT_SUFFIXES = (".png", ".exr")
 """What ``-o`` may name: a display-referred PNG or a scene-linear EXR."""
 
 
+def _flag_path(flag: str, value) -> Path:
+    """The path a flag (or an environment variable) gives, checked by ``paths.problem``;
+    raises BadInput naming the flag."""
+    if problem := paths.problem(value):
+        shown = str(value).replace("\0", "\\0")
+        raise BadInput(f"{flag} {shown}: {problem}")
+    return Path(value)
+
+
+def _store(explicit) -> Cache:
+    """The cache at --cache, else $SUNSHADE_CACHE, else ./cache, its path checked first."""
+    flag, value = ("--cache", explicit) if explicit else (f"${ENV_VAR}", os.environ.get(ENV_VAR))
+    if value:
+        _flag_path(flag, value)
+    root = cache_dir(explicit)
+    if root.exists() and not root.is_dir():
+        raise BadInput(f"{flag} {root}: is a file, not a folder")
+    return Cache(root)
+
+
 def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
-    out = Path(path)
+    out = _flag_path("--output", path)
     if out.suffix.lower() not in suffixes:
         raise BadInput(f"{out}: the output must be a {' or '.join(suffixes)} file")
     if out.is_dir():
@@ -207,8 +267,11 @@ def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
 def _run_check(args) -> int:
     from .render import check_inputs, disk_needed, framing_warnings
 
+    from .run import check_outputs
+
     config = load_config(args.config)
     plan = check_inputs(config)
+    check_outputs(config)
     width, height = config.camera.resolution
     print(f"{args.config}: ok: {config.animation.frames} frames at {config.animation.fps:g} fps, "
           f"{width} x {height} px, a cycle of {config.canopy.cycle}, "
@@ -251,23 +314,40 @@ def _run_render(args) -> int:
     from dataclasses import replace
 
     from .config import preview
-    from .run import check_folder, parse_frames, render_run
+    from .render import default_workers
+    from .run import (MAX_JOBS_PER_CORE, check_outputs, missing_folders, parse_frames,
+                      remove_if_empty, render_run)
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
+    if args.cluster_timeout is not None and not 0 < args.cluster_timeout < 1e6:
+        raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
+    store = _store(args.cache)
     config = load_config(args.config)
     if args.output is not None:
-        config = replace(config, output=replace(config.output, folder=Path(args.output).absolute()))
+        folder = _flag_path("--output", args.output).expanduser().absolute()
+        config = replace(config, output=replace(config.output, folder=folder))
     if args.preview:
         config = preview(config)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     if args.verify:
-        return _verify_run(config, Cache(cache_dir(args.cache).absolute()))
-    check_folder(config.output.folder)
-    summary = render_run(config, frames=frames, store=Cache(cache_dir(args.cache).absolute()),
-                         jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                         progress=_Progress(sys.stderr),
-                         warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
+        return _verify_run(config, store)
+    jobs, most = args.jobs or config.render.jobs, MAX_JOBS_PER_CORE * default_workers()
+    if jobs and jobs > most and args.scheduler is None:
+        raise BadInput(f"{'--jobs' if args.jobs else f'{args.config}: render.jobs'} {jobs} would "
+                       f"start {jobs} processes on {default_workers()} cores; the most is {most} "
+                       f"({MAX_JOBS_PER_CORE} a core)")
+    check_outputs(config)
+    new = missing_folders(config.output.folder)
+    try:
+        summary = render_run(config, frames=frames, store=store,
+                             jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                             cluster_timeout=args.cluster_timeout,
+                             progress=_Progress(sys.stderr),
+                             warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
+    except BaseException:
+        remove_if_empty(new)
+        raise
     made = f"; video {summary.video}" if summary.video else ""
     print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
@@ -337,7 +417,7 @@ def _run_ground(args) -> int:
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     digest = config.digest()
     started = time.perf_counter()
-    store = Cache(cache_dir(args.cache))
+    store = _store(args.cache)
     result = render_ground(config, frame=args.frame, store=store, workers=args.threads)
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.irradiance)):
@@ -385,7 +465,7 @@ def _run_frame(args) -> int:
     config = load_config(args.config, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
-    result = render_frame(config, frame=args.frame, store=Cache(cache_dir(args.cache)), workers=args.threads)
+    result = render_frame(config, frame=args.frame, store=_store(args.cache), workers=args.threads)
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.radiance)):
         raise BadInput(f"{args.config}: the frame overflowed; lower the sky's radiance")
@@ -470,12 +550,12 @@ def _run_figures(args) -> int:
     from .figures import FIGURES, write_figures
     from .run import check_folder
 
-    folder = Path(args.output)
+    folder = _flag_path("--output", args.output)
     check_folder(folder)
     folder.mkdir(parents=True, exist_ok=True)
     progress = _Progress(sys.stderr)
     started = time.perf_counter()
-    written = write_figures(folder, store=Cache(cache_dir(args.cache)), preview=args.preview,
+    written = write_figures(folder, store=_store(args.cache), preview=args.preview,
                             progress=lambda name, done, total: progress("figures", done, total))
     captions = dict(FIGURES)
     for path in written:
@@ -485,8 +565,8 @@ def _run_figures(args) -> int:
 
 
 def _run_cache(args) -> int:
-    root = cache_dir(args.cache)
-    store = Cache(root)
+    store = _store(args.cache)
+    root = store.root
     if args.config is not None and args.action not in ("list", "prune"):
         raise BadInput(f"cache {args.action} takes no CONFIG (list and prune do)")
     limit = None

@@ -17,9 +17,10 @@ from pathlib import Path
 
 import yaml
 
-from . import __version__, daylight, ephemeris
+from . import __version__, daylight, ephemeris, paths
 from .clearsky import CIE_TYPES, DEFAULT_CIE_TYPE
 from .composite import DISPLAYS
+from .errors import ConfigError
 from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
 from .sky import PROCEDURAL_MODELS
@@ -28,6 +29,9 @@ LAYOUTS = ("isolated", "periodic")
 MAX_GROUND_PIXELS = 64_000_000
 MAX_FFT_CELLS = 128_000_000
 MAX_SUN_PIXELS = 16_000_000
+BYTES_PER_CELL = 52
+"""About the memory a render takes per cell of its largest raster (measured: the sun's fine
+raster and its transforms). [byte]"""
 MIN_SUN_ELEVATION = math.radians(2.0)
 """Lowest sun a site and time may give: below it the sun disc's sky-plane image explodes. [rad]"""
 MAX_LEAVES = 1_000_000
@@ -37,13 +41,6 @@ MOON_RADIUS_DEG = 0.2725
 """Angular radius of the moon for explicit-angle eclipses: a little larger than the sun. [deg]"""
 MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
-
-
-class ConfigError(ValueError):
-    """A bad configuration: ``where`` is 'file:line: key.path' or 'file: key.path'."""
-
-    def __init__(self, where: str, message: str):
-        super().__init__(f"{where}: {message}")
 
 
 @dataclass(frozen=True)
@@ -346,26 +343,97 @@ def preview(config: Config) -> Config:
         output=replace(config.output, folder=config.output.folder / "preview"))
 
 
+MAX_CONFIG_BYTES = 1 << 20
+"""Largest config file read. [byte]"""
+MAX_YAML_VALUES = 100_000
+"""Most keys, values and list items a config may hold, its aliases expanded."""
+MAX_YAML_DEPTH = 32
+"""Deepest nesting of mappings and lists in a config."""
+_TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
+
+
 def load_config(path, *, named_frames: bool = True) -> Config:
     """Read and validate a YAML config file; raise ConfigError naming the file and key.
     ``named_frames=False`` (commands that write no named frames: ``frame``, ``ground``, ``sky``,
     ``mask``): an ``output.name`` that is no valid name is replaced by the default one."""
+    node, data = load_yaml(path)
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(str(path), f"cannot read the config ({exc.strerror or exc})") from None
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ConfigError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
     lines: dict[str, int] = {}
     _key_lines(node, "", lines, path)
     root = _Section(data if data is not None else {}, "", _Context(path, lines))
     return _parse(root, path, named_frames)
+
+
+def load_yaml(path):
+    """The one place YAML is read: (node tree, values) of a UTF-8 file of at most
+    MAX_CONFIG_BYTES, at most MAX_YAML_DEPTH deep and MAX_YAML_VALUES values with its aliases
+    expanded. Raises ConfigError naming the file (and line) before anything big is built."""
+    if problem := paths.problem(path):
+        raise ConfigError(str(path).replace("\x00", "\\0"), f"bad config path: {problem}")
+    path = Path(path)
+    try:
+        with open(path, "rb") as file:
+            raw = file.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(str(path), f"cannot read the config ({exc.strerror or exc})") from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(str(path), f"the config is over {MAX_CONFIG_BYTES} bytes; the most is "
+                          f"{MAX_CONFIG_BYTES} (is it a config?)")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{path}:{line}", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
+                          f"offset {exc.start}); save the config as UTF-8") from None
+    loader = yaml.SafeLoader(text)
+    try:
+        depth = 0
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):  # flat: no recursion
+            depth += (isinstance(event, yaml.CollectionStartEvent)
+                      - isinstance(event, yaml.CollectionEndEvent))
+            if depth > MAX_YAML_DEPTH:
+                raise ConfigError(f"{path}:{event.start_mark.line + 1}", _TOO_DEEP)
+        node = loader.get_single_node()
+        if node is not None:
+            _expanded_size(node, 0, set(), {}, path)
+        data = loader.construct_document(node) if node is not None else None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise ConfigError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+    except ConfigError:
+        raise
+    except (ValueError, OverflowError, TypeError) as exc:  # a value YAML parsed but cannot build
+        raise ConfigError(str(path), f"not valid YAML ({exc})") from None
+    finally:
+        loader.dispose()
+    return node, data
+
+
+def _expanded_size(node, depth, holders, sizes, path) -> int:
+    """Values under ``node`` with every alias expanded (``sizes`` by node id, ``holders`` the
+    nodes above it). Raises ConfigError past MAX_YAML_DEPTH or MAX_YAML_VALUES, or for an alias
+    inside what it names."""
+    where = f"{path}:{node.start_mark.line + 1}"
+    if depth > MAX_YAML_DEPTH:
+        raise ConfigError(where, _TOO_DEEP)
+    if id(node) in holders:
+        raise ConfigError(where, "an alias refers to a mapping or list that holds it")
+    if id(node) not in sizes:
+        if isinstance(node, yaml.ScalarNode):
+            return 1
+        children = node.value if isinstance(node, yaml.SequenceNode) else \
+            [n for pair in node.value for n in pair]
+        holders.add(id(node))
+        total = 1
+        for child in children:
+            total += _expanded_size(child, depth + 1, holders, sizes, path)
+            if total > MAX_YAML_VALUES:
+                raise ConfigError(where, f"holds over {MAX_YAML_VALUES} values, its aliases "
+                                  f"expanded; the most is {MAX_YAML_VALUES}")
+        holders.discard(id(node))
+        sizes[id(node)] = total
+    return sizes[id(node)]
 
 
 @dataclass(frozen=True)
@@ -479,6 +547,7 @@ class _Section:
         value = self.raw(name)
         if not isinstance(value, str) or "%" not in value:
             return (self.file(name),)
+        self.check_path(name, value)
         pattern = (self.ctx.path.parent / value).resolve()
         try:
             names = [Path(str(pattern) % i) for i in range(2)]
@@ -502,6 +571,7 @@ class _Section:
         value = self.raw(name)
         if not isinstance(value, str) or not value:
             self.fail(name, f"must be a file name, not {_kind(value)}")
+        self.check_path(name, value)
         path = (self.ctx.path.parent / value).resolve()
         if not path.is_file():
             self.fail(name, f"no such file: {path}")
@@ -511,6 +581,11 @@ class _Section:
         except OSError as exc:
             self.fail(name, f"cannot read {path} ({exc.strerror})")
         return path
+
+    def check_path(self, name, value):
+        """Fail naming the key if ``value`` cannot be a path (see ``paths.problem``)."""
+        if problem := paths.problem(value):
+            self.fail(name, problem)
 
     def done(self):
         unknown = [k for k in self.data if k not in self.taken]
@@ -546,15 +621,18 @@ what an unknown-key error lists."""
 
 
 def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    """An int or float (not a bool); an int too big for a float is not one."""
+    return isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)
+                                        and abs(value) < 10**300)
 
 
 def _kind(value) -> str:
     if value is None:
         return "nothing"
-    return {dict: "a mapping", list: "a list", str: f"the text {value!r}", bool: f"{value}"}.get(
+    text = {dict: "a mapping", list: "a list", str: f"the text {value!r}", bool: f"{value}"}.get(
         type(value), repr(value)
     )
+    return text if len(text) <= 80 else f"{text[:60]}... ({len(text)} characters)"
 
 
 def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
@@ -567,7 +645,52 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     output = _parse_output(root.section("output"), path, named_frames)
     render = _parse_render(root.section("render"))
     root.done()
+    _check_frames(root, animation, camera)
+    if sky.site is not None:
+        _check_sun_over_span(root, sky.site, animation.frames)
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render)
+
+
+MAX_FRAMES = 100_000
+"""Most output frames of one animation (a run plans and checks every frame before it starts)."""
+FRAME_BYTES_PER_PIXEL = 4
+"""About what a frame's files (half-float EXR and PNG) take per camera pixel: the eclipse
+demo's 240 frames of 1280 x 720 took 0.9 GB. [byte]"""
+SUN_SPAN_SAMPLES = 20_000
+"""Most moments at which the sun is checked over a site's time span."""
+
+
+def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConfig) -> None:
+    """Refuse more than MAX_FRAMES frames, with what they would take on disk."""
+    if animation.frames > MAX_FRAMES:
+        width, height = camera.resolution
+        size = animation.frames * width * height * FRAME_BYTES_PER_PIXEL
+        root.fail("animation.frames", f"{animation.frames:.3g} frames of {width} x {height} px "
+                  f"would be about {size_text(size)} of files; the most is {MAX_FRAMES} frames")
+
+
+def size_text(count: float) -> str:
+    """A byte count for a message: '3.2 GB'. [byte]"""
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if count < 1000 or unit == "TB":
+            return f"{count:.3g} {unit}"
+        count /= 1000
+
+
+def _check_sun_over_span(root: _Section, site: SiteConfig, frames: int) -> None:
+    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at every frame: check
+    it at each frame's moment (at most SUN_SPAN_SAMPLES of them, evenly spread, so a night is
+    never missed) and name the first moment it is not."""
+    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
+    count = min(frames, SUN_SPAN_SAMPLES)
+    for i in range(count):
+        when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            root.fail("sky.time", f"the sun is {math.degrees(sun.elevation):.1f} degrees above "
+                      f"the horizon at {when.isoformat()}, between time.start and time.end; the "
+                      f"procedural sky needs it at least {math.degrees(MIN_SUN_ELEVATION):g} "
+                      f"degrees high all through (a span that crosses the night)")
 
 
 def default_name(path: Path) -> str:
@@ -587,6 +710,7 @@ def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputC
     folder = s.raw("folder", f"renders/{name}")
     if not isinstance(folder, str) or not folder:
         s.fail("folder", f"must be a folder name, not {_kind(folder)}")
+    s.check_path("folder", folder)
     video = s.choice("video", VIDEOS, "mp4")
     half = s.raw("half", True)
     if not isinstance(half, bool):
@@ -642,7 +766,8 @@ def _parse_ground(s: _Section) -> GroundConfig:
 def _check_pixels(s: _Section, name, window, pixel, most):
     cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
     if cells > most:
-        s.fail(name, f"the window would be {cells:.3g} pixels; the most is {most:.3g}")
+        s.fail(name, f"the window would be {cells:.3g} pixels, about "
+               f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
 
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
@@ -737,8 +862,9 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
         fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
             (window[3] - window[1]) / ground.pixel + pixels[1])
         if fft > MAX_FFT_CELLS:
-            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform; "
-                   f"the most is {MAX_FFT_CELLS:.3g}: raise ground.pixel")
+            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform, about "
+                   f"{size_text(fft * BYTES_PER_CELL)}; the most is {MAX_FFT_CELLS:.3g}: raise "
+                   "ground.pixel")
     return layer
 
 
@@ -842,6 +968,8 @@ def _parse_site(s: _Section, t: _Section) -> SiteConfig:
         start=t.utc("start"),
         end=t.utc("end"),
     )
+    if not abs(site.latitude) <= math.pi / 2:  # degrees a hair above 90 pass number()
+        s.fail("latitude", f"must lie in [-90, 90] degrees (got {math.degrees(site.latitude)!r})")
     if site.end < site.start:
         t.fail("end", f"must not be before time.start ({site.end.isoformat()} < {site.start.isoformat()})")
     place = ephemeris.Site(site.latitude, site.longitude, site.elevation)

@@ -6,19 +6,15 @@ crash never leaves a half-written file under the real name.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
-
-class ImageError(ValueError):
-    """An image that cannot be read or written; ``path`` names the file."""
-
-    def __init__(self, path, message: str):
-        super().__init__(f"{path}: {message}")
-        self.path = Path(path)
+from .errors import ImageError
 
 
 def read_image(path) -> np.ndarray:
@@ -33,15 +29,16 @@ def read_image(path) -> np.ndarray:
         raise ImageError(path, "no such file")
     as_stored = oiio.ImageSpec()
     as_stored.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), as_stored)
-    if inp is None:
-        raise ImageError(path, f"cannot read image ({oiio.geterror().strip() or 'unknown format'})")
-    try:
-        spec = inp.spec()
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        error = inp.geterror()
-    finally:
-        inp.close()
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(str(path), as_stored)
+        if inp is None:
+            raise ImageError(path, f"cannot read image ({oiio.geterror().strip() or 'unknown format'})")
+        try:
+            spec = inp.spec()
+            pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+            error = inp.geterror()
+        finally:
+            inp.close()
     if pixels is None or error:
         raise ImageError(path, f"cannot read image ({error.strip() or 'truncated or corrupt'})")
     pixels = np.asarray(pixels, dtype=np.float32)
@@ -52,7 +49,8 @@ def read_image(path) -> np.ndarray:
 
 def read_attributes(path, names) -> dict:
     """The named metadata attributes of an image file (missing ones are None)."""
-    inp = oiio.ImageInput.open(str(path))
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise ImageError(path, f"cannot read image ({oiio.geterror().strip()})")
     try:
@@ -60,6 +58,22 @@ def read_attributes(path, names) -> dict:
         return {name: spec.getattribute(name) for name in names}
     finally:
         inp.close()
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence file descriptor 2 for the block: libpng prints its own error lines there, and
+    the error reaches the user once, as an ImageError naming the file."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 2)
+        os.close(null)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False) -> None:

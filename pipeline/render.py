@@ -23,7 +23,9 @@ from . import albedo as albedos
 from . import cache, camera, canopy, composite, ephemeris, foreground, io, shadow
 from . import sky as sky_models
 from .composite import REC709_LUMINANCE
-from .config import MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_RADIANCE, MAX_SUN_PIXELS, CanopyConfig, ConfigError, CanopyLayer, Config, GroundConfig, SkyConfig
+from .errors import ConfigError, portable
+from .config import (BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_RADIANCE, MAX_SUN_PIXELS,
+                     CanopyConfig, CanopyLayer, Config, GroundConfig, SkyConfig, size_text)
 from .clouds import CloudLayer
 from .geometry import Grid, sky_plane_from_direction
 from .sky import EquirectSky, UniformSky
@@ -239,6 +241,7 @@ def plan_run(config: Config) -> RunPlan:
             layers = _plan_layers(config, scenes, window, sun_window, projection)
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    framing.shadow)
+    _check_sizes(config, plan)
     return plan
 
 
@@ -660,6 +663,26 @@ def meter(config: Config, scene: Scene, light: Lighting) -> np.ndarray:
     return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sun)
 
 
+def _check_sizes(config: Config, plan: RunPlan) -> None:
+    """Refuse a plan whose rasters would pass the stated limits (config.MAX_SUN_PIXELS and
+    MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
+    def refuse(key, what, cells, most, advice):
+        raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
+                          f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:.3g}: {advice}")
+
+    if plan.sun_window is not None and np.prod(plan.sun_window.shape) > MAX_SUN_PIXELS:
+        refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),
+               MAX_SUN_PIXELS, "shrink ground.sun_window (or ground.window) or raise ground.pixel")
+    for layer in plan.layers:
+        if np.prod(getattr(layer.coarse, "fft_shape", (0, 0))) > MAX_FFT_CELLS:
+            refuse("ground.window", "the sky light's transform", np.prod(layer.coarse.fft_shape),
+                   MAX_FFT_CELLS, "shrink ground.window or the canopy, or raise ground.pixel")
+        if layer.sun is not None and np.prod(layer.sun.fft_shape) > MAX_FFT_CELLS:
+            refuse("ground.sun_window", "the sun's transform (its window and the sun's path)",
+                   np.prod(layer.sun.fft_shape), MAX_FFT_CELLS,
+                   "shrink ground.sun_window or the time span, or raise ground.sun_pixel")
+
+
 def _sun_reach(sun) -> float:
     """How far the sun disc reaches from its centre on the sky plane, with 10% to spare. [tan]"""
     zenith = np.pi / 2 - sun.elevation
@@ -884,6 +907,7 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
     return sorted(found, key=lambda entry: (entry["name"], entry["config"]))
 
 
+@portable
 def _cycle_task(config, plan, layer, frame, root, workers) -> int:
     store = cache.Cache(root)
     if layer is None:

@@ -17,13 +17,18 @@ joblib's Dask backend (the cache and the output folder on a file system all work
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import platform
+import re
+import threading
 import time
 import warnings
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
@@ -32,12 +37,16 @@ import filelock
 import joblib
 import numpy as np
 
-from . import __version__, cache, io
+from . import __version__, cache, io, paths
 from .composite import display
 from .config import Config
+from .errors import RunError, SunshadeError, portable
 from .render import (RunPlan, check_inputs, cycle_phase, default_workers, framing_warnings,
                      record_config_items, render_frame, with_exposures)
 
+MAX_JOBS_PER_CORE = 4
+"""Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
+frame's rasters."""
 RUN_FILE = "run.json"
 MAX_RUNS = 100
 """run.json keeps the record of this many latest renders of a config."""
@@ -46,10 +55,6 @@ INDEX_FORMAT = 1
 LOCK_FILE = ".sunshade.lock"
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
-
-
-class RunError(Exception):
-    """A run that cannot start: a bad frame list, a busy or unwritable folder, no scheduler."""
 
 
 class FrameWarning(UserWarning):
@@ -258,14 +263,15 @@ class RunSummary:
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress=None, warn=None) -> RunSummary:
+               progress=None, warn=None, cluster_timeout: float | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
 
     jobs : processes at once (default ``render.jobs``, else one per core); each gets
         cores // jobs FFT threads (one on a cluster). scheduler : a dask.distributed scheduler
-        address (``tcp://host:8786``) to run the tasks on instead.
+        address (``tcp://host:8786``) to run the tasks on instead. cluster_timeout : how long
+        a lost cluster is waited for (default CLUSTER_TIMEOUT). [s]
     progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
         ``video``. warn : called with each one-line warning of the plan
         (``render.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
@@ -308,7 +314,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         timings["check"] = time.perf_counter() - started
         if todo:
             plan = with_exposures(config, plan, todo)
-            with _backend(scheduler):
+            with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
                 mark = time.perf_counter()
                 cycle_phase(config, plan, store, jobs=jobs, workers=threads,
                             cycle_frames={f % config.canopy.cycle for f in todo},
@@ -353,6 +359,7 @@ def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
             progress("frames", done, len(todo))
 
 
+@portable
 def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text)): a worker's
@@ -405,23 +412,87 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
     return {"file": path.name, "config_hash": digest, "frames": count, "bytes": path.stat().st_size}
 
 
+CLUSTER_TIMEOUT = 30.0
+"""How long a run waits for a lost Dask cluster (no scheduler, or no workers) before it ends
+with one line saying how to resume. [s]"""
+
+
 @contextlib.contextmanager
-def _backend(scheduler: str | None):
+def _backend(scheduler: str | None, timeout: float = CLUSTER_TIMEOUT):
     """joblib's Dask backend on the cluster at ``scheduler`` for the block; local processes
-    without one."""
+    without one. A worker process that dies, or a cluster lost for ``timeout`` seconds [s]
+    (``_Watchdog``), ends the block with a RunError saying how to resume."""
     if scheduler is None:
-        yield
+        try:
+            yield
+        except BrokenProcessPool as exc:
+            raise RunError("a worker process died (killed, or out of memory?); done frames are "
+                           "kept: run the same command again to resume") from exc
         return
     try:
         from distributed import Client
     except ImportError:
         raise RunError("--scheduler needs Dask: pip install 'sunshade[distributed]'") from None
+    muted = logging.root.manager.disable  # Dask logs its reconnection errors: more lines
+    logging.disable(logging.ERROR)
     try:
-        client = Client(scheduler, timeout="10s")
-    except (OSError, TimeoutError) as exc:
-        raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler ({exc})") from None
-    with client, joblib.parallel_config(backend="dask"):
-        yield
+        try:
+            client = Client(scheduler, timeout=f"{timeout}s")
+        except Exception as exc:  # not an address, refused, timed out: said in many types
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler ({reason})") from None
+        watchdog = _Watchdog(client, timeout)
+        with client, joblib.parallel_config(backend="dask", wait_for_workers_timeout=timeout), \
+                watchdog:
+            try:
+                yield
+            except Exception as exc:
+                lost = watchdog.lost or (client.status != "running" and "the scheduler is gone") \
+                    or (isinstance(exc, concurrent.futures.CancelledError) and "tasks cancelled") \
+                    or ("has no worker" in str(exc) and f"no workers for {timeout:g} s")
+                if not lost or isinstance(exc, SunshadeError):
+                    raise  # a worker's own error (a full disk, say): reported as with --jobs 1
+                raise RunError(f"--scheduler {scheduler}: lost the cluster ({lost}); done frames "
+                               "are kept: start the scheduler and workers and run the same "
+                               "command again to resume") from None
+    finally:
+        logging.disable(muted)
+
+
+class _Watchdog:
+    """A thread that watches a Dask client for the block: after ``timeout`` seconds [s] with no
+    workers or no scheduler, it records why in ``lost`` and closes the client, which cancels
+    the tasks the run waits on."""
+
+    def __init__(self, client, timeout: float):
+        self.client, self.timeout, self.lost = client, timeout, None
+        self.stop = threading.Event()
+
+    def __enter__(self):
+        self.thread = threading.Thread(target=self._watch, name="sunshade-watchdog", daemon=True)
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.thread.join()
+
+    def _watch(self):
+        since = time.monotonic()
+        while not self.stop.wait(0.5):
+            try:
+                alive = self.client.status == "running" and bool(
+                    self.client.scheduler_info(n_workers=1)["workers"])
+            except Exception:
+                alive = False
+            if alive:
+                since = time.monotonic()
+            elif time.monotonic() - since > self.timeout:
+                self.lost = (f"no workers for {self.timeout:g} s" if self.client.status == "running"
+                             else f"no scheduler for {self.timeout:g} s")
+                with contextlib.suppress(Exception):
+                    self.client.close(timeout=2)
+                return
 
 
 def _reach(scheduler: str) -> None:
@@ -463,6 +534,43 @@ def check_folder(folder: Path) -> None:
         raise RunError(f"{folder}: {existing} is a file, not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise RunError(f"{folder}: cannot write the output folder ({existing} is not writable)")
+
+
+def missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and those of its parents that do not exist yet, innermost first."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def remove_if_empty(folders: list[Path]) -> None:
+    """Remove the ``folders`` (innermost first) that a failed run made and left empty but for
+    its lock file, so that a failing run leaves nothing new behind."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            (folder / LOCK_FILE).unlink(missing_ok=True)
+            folder.rmdir()
+
+
+def check_outputs(config: Config) -> None:
+    """Raise RunError unless the run's files could be written, touching nothing: the folder
+    (``check_folder``), every name within the system's limits (``paths.problem``), and no
+    frame, video, lock or run.json name taken by a folder."""
+    folder = config.output.folder
+    if problem := paths.problem(folder):
+        raise RunError(f"{folder}: {problem}")
+    check_folder(folder)
+    names = {RUN_FILE, LOCK_FILE} | ({video_file(config).name} if video_file(config) else set())
+    for path in (*frame_files(config, config.animation.frames - 1), *(folder / n for n in names)):
+        if problem := paths.problem(path):
+            raise RunError(f"{path}: {problem}")
+    if folder.is_dir():
+        frame = re.compile(rf"{re.escape(config.output.name)}\.\d+\.(exr|png)")
+        for entry in os.scandir(folder):
+            if (entry.name in names or frame.fullmatch(entry.name)) and entry.is_dir():
+                raise RunError(f"{entry.path}: is a folder where the run writes a file; move it")
 
 
 def _remove_temporaries(folder: Path) -> None:

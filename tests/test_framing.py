@@ -1,7 +1,6 @@
 """Framing: windows and camera placed from the canopy and the sun's path; the warnings; auto
 exposure. Small groves and small frames: each render takes a second or two."""
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +170,8 @@ def test_a_shadow_that_leaves_the_sun_window_or_the_sky_square_is_warned_of(tmp_
     config["sky"]["time"]["end"] = "2026-08-12T18:40:00Z"
     config["sky"]["alpha"] = 70.0
     config["animation"]["frames"] = 5
-    config["ground"].update(window=[-15, -15, 15, 15], sun_window=[-3.0, -3.0, 3.0, 3.0])
+    config["ground"].update(window=[-15, -15, 15, 15], sun_window=[-3.0, -3.0, 3.0, 3.0],
+                          sun_pixel=0.05)  # the sun's path over 2.7 h: a coarse fine mask
     path = write(tmp_path, config)
     assert main(["check", str(path)]) == 0
     err = capsys.readouterr().err

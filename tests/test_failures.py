@@ -1,0 +1,169 @@
+"""Failures during a run (issues 16 and 19): a full disk in a worker process and a lost Dask
+cluster end the run with one line and exit code 2, and the run resumes to the same bytes."""
+
+import contextlib
+import os
+import re
+import resource
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from test_run import TINY, assert_same_files, contents, run_to_end, sunshade, write_config
+
+SHORT = {**TINY, "animation": {"frames": 3, "fps": 12}}
+"""test_run's tiny config, three frames long: the failures come early, the resumes are short."""
+FILE_LIMIT = 20_000
+"""The largest file a 'full disk' run may write: cache items and frames fail, config reads not. [byte]"""
+
+
+def full_disk():
+    """In the child before exec: files stop growing at FILE_LIMIT (EFBIG, not a signal), as a
+    full disk stops them; the worker processes inherit it."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_LIMIT, FILE_LIMIT))
+
+
+def error_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("sunshade: error:")]
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    """A clean run of SHORT: (config, its filled cache, the bytes every other run must give)."""
+    folder = tmp_path_factory.mktemp("short")
+    config = write_config(folder, SHORT)
+    run_to_end("render", config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
+    return config, folder / "cache", contents(folder / "run")
+
+
+def test_a_full_disk_in_a_worker_is_the_one_line_of_one_process(tmp_path, short):
+    config, cache, reference = short
+    found = {}
+    for jobs in ("1", "2"):  # the cycle products are cached: the frames' writes fail
+        folder = tmp_path / f"run{jobs}"
+        process = sunshade("render", config, "--jobs", jobs, "--output", folder,
+                           "--cache", cache, preexec_fn=full_disk)
+        _, err = process.communicate(timeout=240)
+        assert process.returncode == 2, err
+        assert "Traceback" not in err and "BrokenProcessPool" not in err, err
+        lines = error_lines(err)
+        assert len(lines) == 1 and err.strip().splitlines()[-1] == lines[0], err
+        assert f"{folder}/tiny.0" in lines[0] and "cannot write" in lines[0], lines
+        found[jobs] = re.sub(r"\d+", "N", lines[0].replace(str(folder), "RUN"))
+    assert found["1"] == found["2"]  # the same line, whatever the process it came from
+    run_to_end("render", config, "--jobs", "1", "--output", tmp_path / "run2", "--cache", cache)
+    assert_same_files(tmp_path / "run2", reference)  # space back: it resumes
+
+
+def dask_worker(address):
+    """A real Dask worker process of two threads (with one, joblib would run the tasks here),
+    and no nanny to bring it back when it is killed."""
+    return subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                             "--no-nanny", "--nthreads", "2", "--no-dashboard"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def test_losing_every_worker_ends_the_run_in_the_stated_time_and_it_resumes(tmp_path, short):
+    distributed = pytest.importorskip("distributed")
+    config, _, reference = short
+    with distributed.LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        worker = dask_worker(cluster.scheduler_address)
+        try:
+            client.wait_for_workers(1, timeout=60)
+            process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
+                               "--cluster-timeout", "2", "--output", tmp_path / "run",
+                               "--cache", tmp_path / "cache")
+            seen = []
+            for line in process.stderr:  # the cycle products are being made on the worker
+                seen.append(line)
+                if "cycle products 0/" in line:
+                    break
+            worker.kill()
+            _, err = process.communicate(timeout=120)
+        finally:
+            worker.kill()
+            worker.wait()
+        err = "".join(seen) + err
+        assert process.returncode == 2, err
+        assert error_lines(err) == [err.strip().splitlines()[-1]], err
+        assert "lost the cluster (no workers for 2 s)" in err and "run the same command again" in err
+        assert "Traceback" not in err
+        assert not (tmp_path / "run").exists() or contents(tmp_path / "run") != reference
+        worker = dask_worker(cluster.scheduler_address)
+        try:
+            client.wait_for_workers(1, timeout=60)
+            run_to_end("render", config, "--scheduler", cluster.scheduler_address,
+                       "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+        finally:
+            worker.kill()
+            worker.wait()
+    assert_same_files(tmp_path / "run", reference)
+
+
+def test_losing_the_scheduler_ends_the_run_with_one_line(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    config = write_config(tmp_path)
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True,
+                                       host="127.0.0.1", dashboard_address=None)
+    process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
+                       "--cluster-timeout", "2", "--output", tmp_path / "run",
+                       "--cache", tmp_path / "cache")
+    seen = []
+    for line in process.stderr:
+        seen.append(line)
+        if "cycle products 0/" in line:
+            break
+    cluster.close()
+    _, err = process.communicate(timeout=120)
+    err = "".join(seen) + err
+    assert process.returncode == 2, err
+    assert error_lines(err) == [err.strip().splitlines()[-1]], err
+    assert "lost the cluster" in err and "Traceback" not in err
+
+
+def loky_workers(pid):
+    """The joblib (loky) worker processes among the children of process ``pid`` (Linux /proc)."""
+    found = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as children:
+            for child in children.read().split():
+                with contextlib.suppress(OSError), open(f"/proc/{child}/cmdline") as cmdline:
+                    if "popen_loky" in cmdline.read():
+                        found.append(int(child))
+    return found
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="finds the workers in /proc")
+def test_a_worker_process_killed_ends_the_run_with_one_line(tmp_path):
+    config = write_config(tmp_path, SHORT)
+    process = sunshade("render", config, "--jobs", "2", "--output", tmp_path / "run",
+                       "--cache", tmp_path / "cache")
+    deadline = time.monotonic() + 120
+    while not (workers := loky_workers(process.pid)) and time.monotonic() < deadline:
+        time.sleep(0.01)  # the cycle phase starts its two workers
+    os.kill(workers[0], signal.SIGKILL)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 2, err
+    assert error_lines(err) == ["sunshade: error: a worker process died (killed, or out of memory?); "
+                                "done frames are kept: run the same command again to resume"], err
+    assert "Traceback" not in err
+
+
+def test_a_cluster_without_workers_ends_the_run_and_writes_nothing(tmp_path, short):
+    distributed = pytest.importorskip("distributed")
+    config, _, _ = short
+    with distributed.LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
+                           "--cluster-timeout", "1", "--output", tmp_path / "new" / "run",
+                           "--cache", tmp_path / "cache")
+        _, err = process.communicate(timeout=120)
+    assert process.returncode == 2, err
+    assert error_lines(err) == [err.strip().splitlines()[-1]], err
+    assert "lost the cluster (no workers for 1 s)" in err and "Traceback" not in err
+    assert not (tmp_path / "new").exists()

@@ -1,0 +1,240 @@
+"""Hostile inputs (issue 16): each class through ``check`` and ``render`` exits 2 with one line
+naming the key, flag or file, and writes nothing; the ones that once hung or took gigabytes run
+as real processes, their memory measured."""
+
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+from test_cli import ROOT, base_config, inputs, write_config  # noqa: F401 (inputs: a fixture)
+
+from pipeline import paths
+from pipeline.cli import main
+from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
+
+MOST_MEMORY = 300e6
+"""The most a refused input may take (issue 16). [byte]"""
+
+
+def tree(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def assert_refused(config, out, capfd, message, *, extra=(), commands=("check", "render")):
+    """Exit 2 and one line holding ``message`` on stderr (libpng's own lines included: fd 2
+    is captured), and nothing new under ``out``."""
+    before = tree(out)
+    for command in commands:
+        argv = {"check": ["check", str(config)],
+                "render": ["render", str(config), "--output", str(out / "run"),
+                           "--cache", str(out / "cache"), *extra]}[command]
+        assert main(argv) == 2, command
+        err = capfd.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, (command, err)
+        assert tree(out) == before, command
+
+
+def alias_bomb():
+    lines = ['a: &a ["x", "x", "x", "x", "x", "x", "x", "x", "x"]']
+    for parent, child in zip("abcdefghi", "bcdefghij"):
+        lines.append(f"{child}: &{child} [{', '.join([f'*{parent}'] * 9)}]")
+    return "\n".join(lines) + "\n"  # 9^10 = 3.5e9 strings once expanded
+
+
+def merge_bomb():
+    lines = ["a: &a {k1: 1, k2: 2, k3: 3, k4: 4, k5: 5, k6: 6, k7: 7, k8: 8, k9: 9}"]
+    for parent, child in zip("abcdefghi", "bcdefghij"):
+        lines.append(f"{child}: &{child} {{<<: [{', '.join([f'*{parent}'] * 9)}]}}")
+    return "\n".join(lines) + "\n"  # merge keys copy 9^10 pairs once built
+
+
+def with_sky(sky, **sections):
+    config = base_config()
+    config["sky"] = sky
+    config.update(sections)
+    return yaml.safe_dump(config)
+
+
+def site(latitude, start, end):
+    return {"model": "procedural", "site": {"latitude": latitude, "longitude": 2.35},
+            "time": {"start": start, "end": end}}
+
+
+YAML_TEXT = yaml.safe_dump(base_config())
+CASES = [  # name, the config's bytes, the words of the message
+    ("latin-1 comment", ("# café\n" + YAML_TEXT).encode("latin-1"), "config.yaml:1: not UTF-8 text (byte 0xe9"),
+    ("utf-16", YAML_TEXT.encode("utf-16"), "not UTF-8 text (byte 0xff at offset 0)"),
+    ("binary", bytes(range(128, 256)) * 8, "not UTF-8 text (byte 0x80"),
+    ("alias bomb", alias_bomb().encode(), "values, its aliases expanded; the most is 100000"),
+    ("merge-key bomb", merge_bomb().encode(), "values, its aliases expanded; the most is 100000"),
+    ("alias inside itself", b"a: &a [1, *a]\n", "an alias refers to a mapping or list that holds it"),
+    ("nested thousands deep", b"a: " + b"[" * 5000 + b"]" * 5000 + b"\n", "nested too deep"),
+    ("nested past the limit", b"a: " + b"[" * (MAX_YAML_DEPTH + 2) + b"]" * (MAX_YAML_DEPTH + 2) + b"\n",
+     f"the most is {MAX_YAML_DEPTH} levels"),
+    ("over a megabyte", b"# padding\n" * (MAX_CONFIG_BYTES // 10 + 1), "the config is over"),
+    ("impossible date", b"animation: {frames: 2024-13-45}\n", "not valid YAML (month must be in 1..12)"),
+    ("integer past a float", f"animation: {{frames: {'9' * 400}}}\n".encode(),
+     "animation.frames: must be a whole number"),
+    ("NUL in a mask path", YAML_TEXT.replace("mask: mask.png", 'mask: "mask\\0.png"').encode(),
+     "canopy.mask: contains a NUL byte"),
+    ("mask name too long", YAML_TEXT.replace("mask: mask.png", f"mask: {'m' * 300}.png").encode(),
+     f"canopy.mask: the name 'mmmmmmmmmmmmmmmmmmmmmmmm'... is 304 bytes long; the most is {paths.NAME_MAX}"),
+    ("output folder of no user", yaml.safe_dump({**base_config(), "output": {"folder": "~no-such-user-x/r"}}).encode(),
+     "output.folder: cannot resolve '~no-such-user-x'"),
+    ("billion frames", yaml.safe_dump({**base_config(), "animation": {"frames": 10**9}}).encode(),
+     f"animation.frames: 1e+09 frames of 1280 x 720 px would be about 3.69e+03 TB of files; the most is {MAX_FRAMES}"),
+    ("huge sun window", with_sky({"model": "procedural"}, ground={"window": [-4, -4, 4, 4], "pixel": 0.1,
+                                                                   "sun_window": [-1e4, -1e4, 1e4, 1e4]}).encode(),
+     "ground.sun_window: the sun's fine raster would be 4e+10 cells, about 2.08 TB; the most is 1.6e+07"),
+    ("huge window with a sun", with_sky({"model": "procedural"}, ground={"window": [-150, -150, 150, 150],
+                                                                          "pixel": 0.05}).encode(),
+     "ground.sun_window: the sun's fine raster would be 3.6e+07 cells"),
+    ("time across the night", with_sky(site(48.85, "2024-06-01T10:00:00Z", "2024-06-02T10:00:00Z")).encode(),
+     "sky.time: the sun is -"),
+    ("latitude a hair above 90", with_sky(site(90.0000000001, "2024-06-21T10:00:00Z", "2024-06-21T11:00:00Z")).encode(),
+     "sky.site.latitude: must lie in [-90, 90] degrees"),
+]
+
+
+@pytest.mark.parametrize("name,text,message", CASES, ids=[c[0] for c in CASES])
+def test_hostile_config_exits_2_in_one_line_and_writes_nothing(inputs, capfd, name, text, message):
+    folder, out = inputs
+    config = folder / "config.yaml"
+    config.write_bytes(text)
+    assert_refused(config, out, capfd, message)
+
+
+def test_truncated_png_is_one_line_without_libpng_s_own(inputs, capfd):
+    folder, out = inputs
+    whole = (folder / "mask.png").read_bytes()
+    (folder / "mask.png").write_bytes(whole[:len(whole) // 2])
+    assert_refused(write_config(folder, base_config()), out, capfd, "mask.png: cannot read image")
+
+
+FLAGS = [  # render's flags: name, arguments, the words of the message
+    ("jobs not a number", ["--jobs", "abc"], "argument --jobs: invalid int value: 'abc' (see sunshade render --help)"),
+    ("unknown flag", ["--jbos", "2"], "unrecognized arguments: --jbos 2"),
+    ("scheduler not an address", ["--scheduler", "no-port-here"], "--scheduler no-port-here: cannot reach the scheduler"),
+    ("cache of no user", ["--cache", "~no-such-user-x/cache"], "--cache ~no-such-user-x/cache: cannot resolve"),
+    ("cache with a NUL", ["--cache", "a\x00b"], "--cache a\\0b: contains a NUL byte"),
+    ("output name too long", ["--output", "o" * 300], "--output " + "o" * 300 + ": the name"),
+    ("cluster timeout of 0", ["--cluster-timeout", "0"], "--cluster-timeout must be above 0 s"),
+    ("a million jobs", ["--jobs", "1000000"], "--jobs 1000000 would start 1000000 processes on"),
+]
+
+
+@pytest.mark.parametrize("name,args,message", FLAGS, ids=[f[0] for f in FLAGS])
+def test_bad_flags_exit_2_in_one_line_naming_the_flag(inputs, capfd, name, args, message):
+    folder, out = inputs
+    assert_refused(write_config(folder, base_config()), out, capfd, message, extra=args,
+                   commands=("render",))
+
+
+def test_cache_folder_from_the_environment_is_checked(inputs, capfd, monkeypatch):
+    folder, out = inputs
+    monkeypatch.setenv("SUNSHADE_CACHE", "~no-such-user-x/cache")
+    config = write_config(folder, base_config())
+    assert main(["ground", str(config), "-o", str(out / "g.exr")]) == 2
+    assert capfd.readouterr().err.strip() == (
+        "sunshade: error: $SUNSHADE_CACHE ~no-such-user-x/cache: cannot resolve "
+        "'~no-such-user-x' (no such user or home folder)")
+    assert tree(out) == []
+
+
+@pytest.mark.parametrize("taken", ["config.0000.exr", "config.0047.png", "run.json", "config.mp4"])
+def test_an_output_name_taken_by_a_folder_is_refused(inputs, capfd, taken):
+    folder, out = inputs
+    (out / "run" / taken).mkdir(parents=True)
+    config = write_config(folder, {**base_config(), "output": {"folder": str(out / "run")}})
+    assert_refused(config, out, capfd, f"{out / 'run' / taken}: is a folder where the run writes a file")
+
+
+def test_output_name_too_long_for_a_frame_file(inputs, capfd):
+    folder, out = inputs
+    config = write_config(folder, {**base_config(), "output": {"name": "n" * 250, "folder": str(out / "run")}})
+    assert_refused(config, out, capfd, "the name 'nnnnnnnnnnnnnnnnnnnnnnnn'... is 259 bytes long")
+
+
+def test_an_unreachable_scheduler_leaves_no_folder(inputs, capfd):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    argv = ["render", str(config), "--output", str(out / "new" / "run"), "--cache", str(out / "cache"),
+            "--scheduler", "tcp://127.0.0.1:9", "--cluster-timeout", "0.5"]
+    assert main(argv) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--scheduler tcp://127.0.0.1:9: cannot reach" in err
+    assert tree(out) == []
+
+
+def test_any_remaining_os_error_is_one_line_naming_the_path(inputs, capfd):
+    folder, out = inputs
+    (out / "cache").write_text("a file where the cache folder goes")
+    config = write_config(folder, base_config())
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--cache", str(out / "cache")]) == 2
+    assert capfd.readouterr().err.strip() == f"sunshade: error: --cache {out / 'cache'}: is a file, not a folder"
+    # /proc looks writable to root, but no folder can be made in it: a raw OSError
+    assert main(["figures", "--preview", "--output", "/proc/sunshade-test/figures"]) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "/proc/sunshade-test" in err, err
+    assert "Traceback" not in err
+
+
+def test_debug_shows_the_traceback_and_still_ends_with_the_line(inputs, capfd):
+    folder, out = inputs
+    config = write_config(folder, {**base_config(), "animation": {"frames": 0}})
+    assert main(["--debug", "check", str(config)]) == 2
+    err = capfd.readouterr().err
+    assert "Traceback (most recent call last)" in err
+    assert err.strip().splitlines()[-1].startswith("sunshade: error: ")
+    assert main(["check", str(config), "--debug"]) == 2
+    assert "Traceback" in capfd.readouterr().err
+
+
+HEAVY = ["alias bomb", "billion frames", "huge sun window"]  # issue 16: > 1 minute, 2-4.7 GB
+
+
+@pytest.mark.parametrize("name", HEAVY)
+def test_what_once_hung_or_took_gigabytes_ends_small(inputs, name):
+    folder, out = inputs
+    _, text, message = next(c for c in CASES if c[0] == name)
+    config = folder / "config.yaml"
+    config.write_bytes(text)
+    for command in (["check", config], ["render", config, "--output", out / "run", "--cache", out / "cache"]):
+        code, err, seconds, peak = run_peak(command, folder)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
+        assert peak < MOST_MEMORY, f"{name}: {peak / 1e6:.0f} MB"
+        assert tree(out) == []
+
+
+PEAK = """
+import os, subprocess, sys
+process = subprocess.Popen(sys.argv[1:])
+_, status, usage = os.wait4(process.pid, 0)
+print(os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024)
+"""
+"""Runs a command and prints its exit code and peak resident memory [byte]: from a small
+process, since Linux counts a child's peak from that of the process it was forked from."""
+
+
+def run_peak(args, cwd):
+    """A real ``sunshade`` process: (exit code, stderr, seconds, its peak resident memory [byte])."""
+    started = time.monotonic()
+    done = subprocess.run([sys.executable, "-c", PEAK, sys.executable, "-m", "pipeline.cli",
+                           *map(str, args)], cwd=ROOT, capture_output=True, text=True,
+                          timeout=120)  # a guard against a hang, not a time limit
+    code, peak = (int(v) for v in done.stdout.split())
+    return code, done.stderr, time.monotonic() - started, peak
+
+
+@pytest.mark.parametrize("name,words", [("con\x00fig.yaml", "con\\0fig.yaml: bad config path: contains a NUL byte"),
+                                        ("c" * 300 + ".yaml", "bad config path: the name"),
+                                        ("~no-such-user-x/c.yaml", "bad config path: cannot resolve")])
+def test_a_bad_config_path_is_one_line(inputs, capfd, name, words):
+    folder, out = inputs
+    for argv in (["check", name], ["render", name, "--output", str(out / "run")]):
+        assert main(argv) == 2
+        err = capfd.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and words in err, err
+    assert tree(out) == []
