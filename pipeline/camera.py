@@ -817,6 +817,37 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     return out
 
 
+def horizon_sky(camera: Camera, sky) -> np.ndarray:
+    """The sky's radiance (width, 3) float32 just above the horizon in each image column: the
+    radiance of an endless column of haze seen level (the sky model holds its haze), which
+    the ground tends to with distance (Koschmieder 1924, ``render.render_frame``).
+
+    Each column is sampled in its direction at the horizon, raised to wz / |w| = MIN_UPWARD,
+    with the footprint of ``sky_view`` there (the cloud pattern filtered to its mean so far
+    out). sky : as ``sky_view``. [radiance]
+    """
+    from .sky import EquirectSky, ProceduralSky, UniformSky
+
+    right, up, forward = camera.basis
+    u = np.arange(camera.width, dtype=np.float64) + 0.5
+    # the level ray of column u is forward + x right + y up with wz = 0: y = -tan(pitch), and its
+    # horizontal part (sin yaw, cos yaw) / cos(pitch) + x right
+    ahead = np.array([np.sin(camera.yaw), np.cos(camera.yaw), 0.0]) / max(np.cos(camera.pitch), 1e-6)
+    x = (u - 0.5 * camera.width) / camera.focal
+    w = ahead[None, :] + x[:, None] * np.array([right[0], right[1], 0.0])[None, :]
+    w[:, :2] /= np.hypot(w[:, 0], w[:, 1])[:, None]
+    w[:, 2] = MIN_UPWARD / np.sqrt(1.0 - MIN_UPWARD**2)
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    if isinstance(sky, UniformSky):
+        return np.broadcast_to(np.asarray(sky.radiance, dtype=np.float32), (camera.width, 3)).copy()
+    if isinstance(sky, EquirectSky):
+        return equirect_lookup(sky.image, w, rotation=sky.rotation)
+    s = w[:, :2] / w[:, 2:3]
+    if isinstance(sky, ProceduralSky):
+        return np.asarray(sky.radiance(s, footprint=1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
+    return np.asarray(sky.radiance(s), dtype=np.float32)
+
+
 def equirect_lookup(image, w, *, rotation: float = 0.0) -> np.ndarray:
     """Bilinear samples (..., 3) float32 of an equirectangular image (height, width, 3) in the
     directions of unit vectors w (..., 3), in DESIGN.md's convention (top row at the zenith,

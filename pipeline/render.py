@@ -687,13 +687,15 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
     sky_scale = _sky_scale(sky, light)
     atmosphere = None
     if config.sky.haze > 0:
+        # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
+        # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
+        # holds its own haze), so the far ground meets the sky at the horizon without a line
         rays = camera.pixel_rays(view)
         rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-        transmittance, sky_haze, atmosphere = composite.aerial_perspective(
-            distance, rays, length=config.sky.haze,
-            sun_direction=light.sun_direction if light.sun_direction is not None else np.array([0.0, 0.0, 1.0]),
-            sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-        background = transmittance[..., None] * background + np.float32(sky_scale) * sky_haze
+        transmittance = composite.aerial_perspective(
+            distance, rays, length=config.sky.haze, sun_direction=np.array([0.0, 0.0, 1.0]),
+            sun_irradiance=np.zeros(3), sky_irradiance=np.zeros(3))[0][..., None]
+        background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
     passes = foreground_passes(config, plan, frame % config.canopy.cycle, store, light)
     if passes is None:
         empty = np.zeros_like(background)
