@@ -735,7 +735,8 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     irradiance : MipMap of the ground irradiance E (channels 3, or 1 for grey), or a sequence
         of them, finest first: each but the last holds NaN beyond its raster ("constant" with
         value NaN), and a footprint that reaches NaN is read from the next. [radiance x sr]
-    albedo : MipMap of the ground's albedo (channels 3 or 1). [1]
+    albedo : MipMap of the ground's albedo (channels 3 or 1), or a laying of one with a
+        ``sample(footprints, lod_bias=)`` method (``albedo.StochasticTiling``). [1]
     Returns
         radiance : (height, width, 3) float32 -- albedo E / pi over the pixel's ground part, with
             albedo and E each averaged over its ground footprint (``ground_hits``,
@@ -758,7 +759,7 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
                                               size=max(1, _BLOCK // camera.width))
         fp = Footprints(*ellipses)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
-        rho = _filtered(albedo, fp, LOD_BIAS)
+        rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
         distance[rows] = distance_rows.reshape(len(rows), camera.width)
     return radiance, fraction.copy(), distance

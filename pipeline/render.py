@@ -632,6 +632,14 @@ def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
     return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
 
 
+@functools.lru_cache(maxsize=4)
+def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
+    """The ground's albedo as the camera reads it: the tile of ``albedo_mipmap`` laid by
+    stochastic tiling (Heitz & Neyret 2018, ``albedo.StochasticTiling``), so that its period
+    does not show in rows to the horizon."""
+    return albedos.stochastic_tiling(albedo_mipmap(ground))
+
+
 def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap, ...]:
     """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
     coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
@@ -680,7 +688,7 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
     clock.lap("ground")
     view = camera_of(config, plan)
     background, distance = camera.background(
-        view, irradiance=irradiance_maps(config, ground), albedo=albedo_mipmap(config.ground), sky=sky)
+        view, irradiance=irradiance_maps(config, ground), albedo=ground_albedo(config.ground), sky=sky)
     clock.lap("camera")
     light = reference_lighting(config, plan)
     sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
