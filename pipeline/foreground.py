@@ -83,11 +83,16 @@ class ForegroundPasses:
     sun : (rows, cols, 3) float32 -- lit by the clear sun and the sky. [radiance]
     sky : (rows, cols, 3) float32 -- lit by the sky alone. [radiance]
     alpha : (rows, cols) float32 -- coverage in [0, 1]. [dimensionless]
+    haze : (rows, cols) float32 or None -- the share of the pixel that the haze in front of the
+        trees veils, sum over fragments of weight (1 - T): a frame adds it times the sky at the
+        horizon (Koschmieder, as the ground); the sun and sky passes hold T times the trees'
+        light. None: no haze. [dimensionless]
     """
 
     sun: np.ndarray
     sky: np.ndarray
     alpha: np.ndarray
+    haze: np.ndarray | None = None
 
     def __post_init__(self):
         if np.ndim(self.alpha) != 2:
@@ -292,7 +297,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                 leaf_sky_exposure=0.7, wood_sky_exposure=0.6,
                 leaf_reflectance=LEAF_REFLECTANCE, leaf_transmittance=LEAF_TRANSMITTANCE,
                 bark_reflectance=BARK_REFLECTANCE, near: float = 0.1,
-                ground_height: float | None = 0.0) -> ForegroundPasses:
+                ground_height: float | None = 0.0, haze: float = 0.0) -> ForegroundPasses:
     """The foreground passes of leaves and wood seen by ``camera`` (see the module docstring).
 
     leaves, wood : the grove at one cycle frame (``canopy.leaves_at``, ``grove.wood``). [m]
@@ -309,6 +314,9 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     near : shapes nearer the pinhole than this are clipped (wood) or dropped (leaves). [m]
     ground_height : the ground plane z, which hides what lies below it (the trunks' round feet),
         judged at pixel centres; None keeps everything. The camera must be above it. [m]
+    haze : extinction length of the air between the camera and the trees, or 0 for none: each
+        fragment keeps T = exp(-distance / haze) of its light, and the ``haze`` pass gets the
+        rest of its weight. [m]
     Returns ForegroundPasses in radiance units, irradiance / sr [klx / sr = kcd/m^2].
     """
     wood = _no_wood() if wood is None else wood
@@ -421,6 +429,16 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         flat, coverage, frag_depth, frag_sun, frag_sky = (
             x[above] for x in (flat, coverage, frag_depth, frag_sun, frag_sky))
     weight = _front_to_back(flat, frag_depth, coverage)
+    haze_image = None
+    if haze > 0:
+        ray = np.sqrt(1.0 + ((pu - 0.5 * cols) / focal) ** 2 + ((0.5 * rows - pv) / focal) ** 2)
+        if ground_height is not None:
+            ray = ray[above]
+        transmittance = np.exp(-frag_depth * ray / haze)  # frag_depth is along forward
+        frag_sun = frag_sun * transmittance[:, None]
+        frag_sky = frag_sky * transmittance[:, None]
+        haze_image = np.bincount(flat, weights=weight * (1.0 - transmittance),
+                                 minlength=rows * cols).reshape(rows, cols).astype(np.float32)
     optical = np.bincount(flat, weights=-np.log1p(-coverage.astype(np.float64)), minlength=rows * cols)
     alpha = -np.expm1(-optical).reshape(rows, cols)
     sun_image = np.stack([np.bincount(flat, weights=weight * frag_sun[:, c], minlength=rows * cols)
@@ -428,7 +446,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     sky_image = np.stack([np.bincount(flat, weights=weight * frag_sky[:, c], minlength=rows * cols)
                           for c in range(3)], axis=-1).reshape(rows, cols, 3)
     return ForegroundPasses(sun_image.astype(np.float32), sky_image.astype(np.float32),
-                            alpha.astype(np.float32))
+                            alpha.astype(np.float32), haze_image)
 
 
 def _rgb(value, name) -> np.ndarray:
@@ -507,3 +525,95 @@ def _wood_side(p0, p1, origin, right, up, forward, focal):
     perp = np.column_stack([-image_axis[:, 1], image_axis[:, 0]])
     flip = np.where(np.sum(image_side * perp, axis=1) < 0, -1.0, 1.0)
     return toward, sideways * flip[:, None]
+
+
+# ---------------------------------------------------------------------------------------------
+# A periodic forest in the camera: the tile's trees copied over every tile in view
+# ---------------------------------------------------------------------------------------------
+
+FULL_DETAIL_DISTANCE = 10.0
+"""Within this distance of the camera every leaf of a periodic forest's copies is drawn;
+beyond it a leaf is kept with probability (FULL_DETAIL_DISTANCE / d)^2 and, kept, grown by
+d / FULL_DETAIL_DISTANCE in both axes, so its expected area, and the crown's coverage, is
+unchanged (stochastic simplification, Cook, Halstead, Planck & Ryu, "Stochastic Simplification
+of Aggregate Detail", ACM TOG 26(3), 2007): a far crown costs as many leaves as it has pixels,
+not as it has leaves. [m]"""
+
+HAZE_REACH = 3.0
+"""Copies of a periodic forest are drawn out to this many haze extinction lengths, where the
+haze lets 1.8 % of their light through, and to no more than MAX_FOREST_REACH. [1]"""
+
+MAX_FOREST_REACH = 600.0
+"""Farthest copies drawn of a periodic forest, whatever the haze. [m]"""
+
+
+def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
+                    seed: int = 0):
+    """The shapes of one tile of a periodic forest (every shape wrapped into the tile, as
+    ``canopy.grow_grove`` makes them) copied over every tile the camera sees: those whose
+    bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
+    MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as FULL_DETAIL_DISTANCE
+    says.
+
+    leaves, wood : the tile's shapes. [m]
+    period : the tile's side; center : (x, y) of the tile's centre. [m]
+    haze : extinction length of the air (0: none, MAX_FOREST_REACH). [m]
+    seed : seed of the leaves' choice (default_rng([seed, 3])).
+    Returns (Leaves, Wood, leaf_index (N',) int64, wood_index (M',) int64): the copies, and the
+    shape of the tile that each is a copy of (for its per-shape values: sun visibility).
+    """
+    period = float(period)
+    reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
+    position = np.asarray(camera.position, dtype=np.float64)
+    everything = np.concatenate([leaves.center, wood.start, wood.end])
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))  # half-width of the tile's shapes
+    radius = np.sqrt(2.0) * margin + float(np.max(wood.radius, initial=0.0))
+    right, up, forward = camera.basis
+    half_diagonal = np.arctan(0.5 * np.hypot(camera.width, camera.height) / camera.focal)
+    count = int(np.ceil((reach + radius) / period))
+    i, j = np.meshgrid(np.arange(-count, count + 1), np.arange(-count, count + 1), indexing="ij")
+    shift = np.column_stack([i.ravel(), j.ravel()]) * period
+    centres = np.asarray(center, dtype=np.float64) + shift
+    middle = np.column_stack([centres, np.full(len(centres), 0.5 * (low[2] + high[2]))])
+    bound = np.hypot(radius, 0.5 * (high[2] - low[2]))
+    to = middle - position
+    distance = np.linalg.norm(to, axis=1)
+    # the cone of the view (the image's half-diagonal about ``forward``), widened by each copy's bounds
+    angle = np.arccos(np.clip(to @ forward / np.maximum(distance, 1e-12), -1.0, 1.0))
+    inside = distance <= bound
+    widen = np.arcsin(np.clip(bound / np.maximum(distance, 1e-12), 0.0, 1.0))
+    seen = inside | ((distance - bound <= reach) & (angle - widen <= half_diagonal))
+    shift = shift[seen]
+    rng = np.random.default_rng([seed, 3])
+    draw = rng.random(len(leaves.center))
+    tile_draw = rng.random(len(shift))
+    by_draw = np.argsort(draw)
+    sorted_draw = draw[by_draw]
+    nearest = np.maximum(distance[seen] - bound, 1e-9)
+    centers, axes_u, axes_v, leaf_index = [], [], [], []
+    for offset, turn, near in zip(shift, tile_draw, nearest):
+        # the leaves a copy could keep: (draw + turn) mod 1 below the share at its nearest point
+        most = min(1.0, (FULL_DETAIL_DISTANCE / near) ** 2)
+        if most >= 1.0:
+            candidates = by_draw
+        else:
+            lo, hi = 1.0 - turn, 1.0 - turn + most
+            candidates = np.concatenate([by_draw[np.searchsorted(sorted_draw, lo):np.searchsorted(sorted_draw, hi)],
+                                         by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
+        c = leaves.center[candidates] + np.array([offset[0], offset[1], 0.0])
+        d = np.linalg.norm(c - position, axis=1)
+        keep_share = np.minimum(1.0, (FULL_DETAIL_DISTANCE / np.maximum(d, 1e-9)) ** 2)
+        chosen = np.mod(draw[candidates] + turn, 1.0) < keep_share
+        kept = candidates[chosen]
+        c, keep_share = c[chosen], keep_share[chosen]
+        grow = 1.0 / np.sqrt(keep_share)[:, None]
+        centers.append(c)
+        axes_u.append(leaves.axis_u[kept] * grow)
+        axes_v.append(leaves.axis_v[kept] * grow)
+        leaf_index.append(kept)
+    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]), len(wood.radius), axis=0)
+    wood_index = np.tile(np.arange(len(wood.radius)), len(shift))
+    copies = Wood(wood.start[wood_index] + moved, wood.end[wood_index] + moved, np.asarray(wood.radius)[wood_index])
+    return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
+            np.concatenate(leaf_index), wood_index)

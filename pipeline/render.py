@@ -557,7 +557,11 @@ def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
             "heights": [layer.height for layer in c.layers], "layout": c.layout,
             "center": c.layers[0].center, "size": c.layers[0].size,
             "camera": asdict(camera_of(config, plan)),
-            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection}
+            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
+            "haze": config.sky.haze,
+            "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
+                "detail": foreground.FULL_DETAIL_DISTANCE, "reach": foreground.HAZE_REACH,
+                "most": foreground.MAX_FOREST_REACH}}
 
 
 def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
@@ -569,18 +573,29 @@ def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cach
 
     def compute():
         grove, flutter = _grove(config.canopy)
-        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        leaves, wood = canopy.leaves_at(grove, flutter, cycle_frame), grove.wood
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
         if has_sun:
-            leaf_visibility, wood_visibility = foreground.sun_visibility(leaves, grove.wood, sun_point=sun_point)
+            leaf_visibility, wood_visibility = foreground.sun_visibility(leaves, wood, sun_point=sun_point)
+        view = camera_of(config, plan)
+        if config.canopy.layout == "periodic":  # the tile's trees on every tile in view
+            layer = config.canopy.layers[0]
+            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+                leaves, wood, view, period=layer.size[0], center=layer.center, haze=config.sky.haze,
+                seed=config.canopy.trees.seed)
+            if has_sun:
+                leaf_visibility, wood_visibility = leaf_visibility[leaf_index], wood_visibility[wood_index]
         direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
         passes = foreground.tree_passes(
-            leaves, grove.wood, camera_of(config, plan), sun_direction=direction,
+            leaves, wood, view, sun_direction=direction,
             sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
-            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility)
-        return {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=config.sky.haze)
+        item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+        if passes.haze is not None:
+            item["haze"] = passes.haze
+        return item
 
     return store.get_or_compute("foreground", foreground_params(config, plan, cycle_frame), compute)
 
@@ -705,6 +720,11 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
             sun_irradiance=np.zeros(3), sky_irradiance=np.zeros(3))[0][..., None]
         background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
     passes = foreground_passes(config, plan, frame % config.canopy.cycle, store, light)
+    if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
+        veiled = foreground_item(config, plan, frame % config.canopy.cycle, store).get("haze")
+        if veiled is not None:  # the haze in front of the trees, as in front of the ground
+            veil = veiled[..., None] * (camera.horizon_sky(view, sky)[None] / np.float32(sky_scale))
+            passes = (passes[0] + veil, passes[1] + veil, passes[2])
     if passes is None:
         empty = np.zeros_like(background)
         passes = (empty, empty, empty[..., 0])

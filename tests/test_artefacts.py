@@ -52,3 +52,34 @@ def test_the_horizon_has_no_line_brighter_than_the_sky_and_ground_beside_it(tmp_
     above, below = band[:4].max(axis=0), band[5:].max(axis=0)
     assert np.all(band[4] <= np.maximum(above, below) * 1.01 + 1e-6)
     assert np.all(band.max(axis=0) <= np.maximum(above, below) * 1.01 + 1e-6)
+
+
+def test_a_periodic_forest_stands_on_every_tile_in_view():
+    """One tree in a 10 m tile, the camera looking along a row of tiles: the trunk of every
+    copy out to 60 m covers the image where the copy's trunk projects (independently, by
+    camera.project_points), and the gaps between the copies' trunks stay open."""
+    from pipeline import camera as cameras, canopy, foreground
+
+    tile = 10.0
+    grove = canopy.grow_grove(canopy.GroveParams(count=1, seed=4, crown_radius=2.0, leaves_per_tree=200,
+                                                 height=6.0, layout="periodic", tile=tile))
+    leaves = canopy.leaves_at(grove, canopy.FlutterParams(cycle=2), 0)
+    foot = grove.bases[0, :2]
+    view = cameras.Camera((foot[0] + 0.6, foot[1] - 3.0, 1.5), 0.0, 0.0, np.radians(40.0), 200, 120)
+    copies, wood, leaf_index, wood_index = foreground.periodic_copies(
+        leaves, grove.wood, view, period=tile, center=(0.0, 0.0), haze=400.0)
+    assert len(wood.radius) > 10 * len(grove.wood.radius)
+    passes = foreground.tree_passes(copies, wood, view, sun_direction=[0.0, 0.6, 0.8], sun_irradiance=1.0,
+                                    sky_irradiance=1.0, leaf_sun_visibility=1.0, wood_sun_visibility=1.0,
+                                    haze=400.0)
+    for k in range(1, 7):  # the trunk of the copy k tiles north, at 1 m above the ground
+        u, v, depth = cameras.project_points(view, np.array([foot[0], foot[1] + k * tile, 1.0]))
+        assert depth > 0
+        assert passes.alpha[int(v), int(u)] > 0.5, k
+    # beside the trunks at their foot, halfway to the next column of trees, the ground shows
+    u, v, _ = cameras.project_points(view, np.array([foot[0] + 0.5 * tile, foot[1] + 3 * tile, 0.3]))
+    assert passes.alpha[int(v), int(u)] < 0.1
+    # the haze veils the far copies more than the near ones
+    near = cameras.project_points(view, np.array([foot[0], foot[1] + tile, 1.0]))
+    far = cameras.project_points(view, np.array([foot[0], foot[1] + 6 * tile, 1.0]))
+    assert passes.haze[int(far[1]), int(far[0])] > passes.haze[int(near[1]), int(near[0])] > 0
