@@ -661,6 +661,8 @@ def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap
     (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
     horizon)."""
     rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
+    if ground.outer:
+        rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
     maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
     raster, grid = rasters[-1]
     if config.canopy.layout == "periodic":
@@ -672,6 +674,40 @@ def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap
     else:
         value = ground.unshadowed
     return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+
+
+BLEND_BAND_PIXELS = 8
+"""Least width of the band, in coarse ground pixels, inside the sun window's edge over which the
+fine sun-resolved ground gives way to the coarse ground (``blend_band``). [pixel]"""
+
+BLEND_BAND_SHARE = (1 / 8, 1 / 4)
+"""The band's width as shares of the sun window's shorter side: at least the first (so that at
+full scale the change of texture is spread over a good part of the view), at most the second
+(so that a small preview window keeps its middle half sun-resolved). [1]"""
+
+
+def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_grid: Grid) -> np.ndarray:
+    """The fine ground raster (rows, cols, 3) [klx] with a band inside its edges where it gives
+    way to the coarse raster (resampled bilinearly onto the fine grid), so that the camera,
+    which reads the fine raster inside the sun window and the coarse one beyond it, shows no
+    seam at the window's edge (issue: a rectangle where sharp sun flecks meet blurred ones).
+
+    Width: ``b = clip(max(BLEND_BAND_PIXELS coarse pixels, BLEND_BAND_SHARE[0] s), ...,
+    BLEND_BAND_SHARE[1] s)``, s the window's shorter side [m]. Weight of the fine raster at a
+    pixel centre at distance d from the nearest edge: ``w = smoothstep(d / b) = t^2 (3 - 2 t)``,
+    t = clip(d / b, 0, 1): 0 at the edge (where the coarse raster takes over), 1 from the
+    band's inner side on, with zero slope at both ends. Both rasters hold the same light
+    (the fine sun kernel and the coarse one have the same sum), so the blend keeps the mean.
+    """
+    rows, cols = fine_grid.shape
+    shorter = min(rows, cols) * fine_grid.pixel
+    width = max(BLEND_BAND_PIXELS * coarse_grid.pixel, BLEND_BAND_SHARE[0] * shorter)
+    width = min(width, BLEND_BAND_SHARE[1] * shorter)
+    across = lambda n: (np.minimum(np.arange(n), n - 1 - np.arange(n)) + 0.5) * fine_grid.pixel  # noqa: E731
+    t = np.clip(np.minimum(across(rows)[:, None], across(cols)[None, :]) / width, 0.0, 1.0)
+    weight = (t * t * (3.0 - 2.0 * t)).astype(np.float32)[..., None]
+    under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)
+    return (weight * fine + (1.0 - weight) * under).astype(np.float32)
 
 
 @dataclass(frozen=True)

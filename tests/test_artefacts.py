@@ -83,3 +83,36 @@ def test_a_periodic_forest_stands_on_every_tile_in_view():
     near = cameras.project_points(view, np.array([foot[0], foot[1] + tile, 1.0]))
     far = cameras.project_points(view, np.array([foot[0], foot[1] + 6 * tile, 1.0]))
     assert passes.haze[int(far[1]), int(far[0])] > passes.haze[int(near[1]), int(near[0])] > 0
+
+
+@pytest.mark.parametrize("mask_value", [0.5, None])
+def test_no_seam_at_the_sun_windows_edge(tmp_path, mask_value):
+    """A uniform canopy (an even grey mask, or even white noise) in a periodic layout, the
+    camera straight down over the sun window's west edge, white ground, no haze: along each
+    row, the largest step between neighbouring pixels within 4 pixels of the edge is no larger
+    than the largest step inside either side (the fine sun-resolved ground and the coarse one)."""
+    from pipeline import io
+
+    rng = np.random.default_rng(7)
+    mask = np.full((60, 60, 1), mask_value, np.float32) if mask_value else rng.random((60, 60, 1)).astype(np.float32)
+    io.write_exr(tmp_path / "mask.exr", mask)
+    io.write_exr(tmp_path / "white.exr", np.ones((4, 4, 3), np.float32))
+    config = _config(tmp_path, {
+        "canopy": {"mask": "mask.exr", "size": [6.0, 6.0], "height": 4.0, "layout": "periodic"},
+        "sky": {"model": "procedural", "sun": {"elevation": 60.0, "azimuth": 180.0}, "alpha": 70.0,
+                "haze": 0.0},
+        "ground": {"window": [-3, -3, 3, 3], "pixel": 0.1, "sun_window": [-1.0, -1.5, 2.0, 1.5],
+                   "sun_pixel": 0.02, "albedo": "white.exr"},
+        "camera": {"position": [-1.0, 0.0, 3.0], "yaw": 0.0, "pitch": -90.0, "fov": 40.0,
+                   "resolution": [80, 40]},  # x from -3.2 to 1.2 m: the west edge, not the east
+        "foreground": {"model": "none"},
+        "animation": {"frames": 1},
+    })
+    frame = render.render_frame(config, store=cache.Cache(tmp_path / "c"), workers=1)
+    lum = (frame.radiance @ REC709_LUMINANCE.astype(np.float32)).astype(np.float64)
+    edge = config.camera.resolution[0] // 2  # x = -1 m is the middle column's left side
+    steps = np.abs(np.diff(lum, axis=1))  # steps[:, j] is between columns j and j + 1
+    at_edge = steps[:, edge - 5 : edge + 4].max(axis=1)
+    coarse_side = steps[:, 2 : edge - 8].max(axis=1)
+    fine_side = steps[:, edge + 8 : -2].max(axis=1)
+    assert np.all(at_edge <= np.maximum(coarse_side, fine_side) + 1e-4 * lum.mean())
