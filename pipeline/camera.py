@@ -811,8 +811,9 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     else:
         wz = np.maximum(w[..., 2], MIN_UPWARD)
         s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
-        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius
-            out[rows] = sky.radiance(s, footprint=1.0 / (camera.focal * wz * wz))
+        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius and across
+            out[rows] = sky.radiance(s, footprint=np.stack(np.broadcast_arrays(
+                1.0 / (camera.focal * wz * wz), 1.0 / (camera.focal * wz)), axis=-1))
         else:
             out[rows] = sky.radiance(s)
     return out
