@@ -559,6 +559,9 @@ def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
             "camera": asdict(camera_of(config, plan)),
             "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
             "haze": config.sky.haze,
+            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+                     "probe": foreground.STEM_PROBE},
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
                 "detail": foreground.FULL_DETAIL_DISTANCE, "reach": foreground.HAZE_REACH,
                 "most": foreground.MAX_FOREST_REACH}}
@@ -573,12 +576,12 @@ def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cach
 
     def compute():
         grove, flutter = _grove(config.canopy)
-        leaves, wood = canopy.leaves_at(grove, flutter, cycle_frame), grove.wood
+        leaves, wood = canopy.leaves_at(grove, flutter, cycle_frame), foreground.taper_wood(grove.wood)[0]
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
         if has_sun:
-            leaf_visibility, wood_visibility = foreground.sun_visibility(leaves, wood, sun_point=sun_point)
+            leaf_visibility, wood_visibility = foreground.stem_visibility(leaves, wood, sun_point=sun_point)
         view = camera_of(config, plan)
         if config.canopy.layout == "periodic":  # the tile's trees on every tile in view
             layer = config.canopy.layers[0]
