@@ -116,3 +116,35 @@ def test_no_seam_at_the_sun_windows_edge(tmp_path, mask_value):
     coarse_side = steps[:, 2 : edge - 8].max(axis=1)
     fine_side = steps[:, edge + 8 : -2].max(axis=1)
     assert np.all(at_edge <= np.maximum(coarse_side, fine_side) + 1e-4 * lum.mean())
+
+
+def test_forest_yaml_has_its_trees_on_the_tiles_around_the_camera(tmp_path):
+    """configs/forest.yaml with few leaves and a small image: the trunk of every tree of every
+    tile whose foot lies in view within 25 m covers the image where it projects, at 1 m above
+    the ground; before, only the trees of the first tile stood."""
+    from pathlib import Path
+
+    from pipeline import camera as cameras
+
+    root = Path(__file__).resolve().parents[1]
+    data = yaml.safe_load((root / "configs" / "forest.yaml").read_text())
+    data["canopy"]["trees"]["leaves_per_tree"] = 300
+    data["camera"]["resolution"] = [320, 180]
+    data["ground"]["albedo"] = str(root / "configs" / "assets" / "lawn.png")
+    config = _config(tmp_path, data)
+    plan = render.plan_run(config)
+    item = render.foreground_item(config, plan, 0, cache.Cache(tmp_path / "c"))
+    grove, _ = render._grove(config.canopy)
+    view = render.camera_of(config, plan)
+    tile = config.canopy.layers[0].size[0]
+    checked = 0
+    for i in range(-3, 4):
+        for j in range(-3, 4):
+            for foot in grove.bases[:, :2] + [i * tile, j * tile]:
+                point = np.array([foot[0], foot[1], 1.0])
+                u, v, depth = cameras.project_points(view, point)
+                far = np.linalg.norm(point - np.asarray(view.position))
+                if depth > 1.0 and far < 25.0 and 2 <= u < 318 and 2 <= v < 178:
+                    checked += 1
+                    assert item["alpha"][int(v), int(u)] > 0.5, (i, j, foot)
+    assert checked >= 8
