@@ -641,13 +641,14 @@ def _wood_side(p0, p1, origin, right, up, forward, focal):
 # A periodic forest in the camera: the tile's trees copied over every tile in view
 # ---------------------------------------------------------------------------------------------
 
-FULL_DETAIL_DISTANCE = 10.0
-"""Within this distance of the camera every leaf of a periodic forest's copies is drawn;
-beyond it a leaf is kept with probability (FULL_DETAIL_DISTANCE / d)^2 and, kept, grown by
-d / FULL_DETAIL_DISTANCE in both axes, so its expected area, and the crown's coverage, is
-unchanged (stochastic simplification, Cook, Halstead, Planck & Ryu, "Stochastic Simplification
-of Aggregate Detail", ACM TOG 26(3), 2007): a far crown costs as many leaves as it has pixels,
-not as it has leaves. [m]"""
+LEAF_PIXELS = 6.0
+"""A periodic forest's copied leaves are drawn at least this long in the image: within the
+distance D = focal x (median leaf length) / LEAF_PIXELS of the camera every leaf is drawn
+(10 m for configs/forest.yaml at 1280 x 720, 2.5 m in its preview); beyond it a leaf is kept
+with probability (D / d)^2 and, kept, grown by d / D in both axes, so its expected area, and the
+crown's coverage, is unchanged (stochastic simplification, Cook, Halstead, Planck & Ryu,
+"Stochastic Simplification of Aggregate Detail", ACM TOG 26(3), 2007): a far crown costs as
+many leaves as it has pixels, not as it has leaves. [pixel]"""
 
 HAZE_REACH = 3.0
 """Copies of a periodic forest are drawn out to this many haze extinction lengths, where the
@@ -657,20 +658,28 @@ MAX_FOREST_REACH = 600.0
 """Farthest copies drawn of a periodic forest, whatever the haze. [m]"""
 
 
+STEM_DETAIL_PIXELS = 2.0
+"""Copies of a periodic forest whose stems are all under this radius in the image are drawn
+with the straight capsules (``coarse_wood``) instead of the tapered pieces: a joint's step in
+width is then under half a pixel, and 40 pieces a trunk would cost more than the leaves. [pixel]"""
+
+
 def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
-                    seed: int = 0):
+                    seed: int = 0, coarse_wood: Wood | None = None):
     """The shapes of one tile of a periodic forest (every shape wrapped into the tile, as
     ``canopy.grow_grove`` makes them) copied over every tile the camera sees: those whose
     bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
-    MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as FULL_DETAIL_DISTANCE
-    says.
+    MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
 
     leaves, wood : the tile's shapes. [m]
     period : the tile's side; center : (x, y) of the tile's centre. [m]
     haze : extinction length of the air (0: none, MAX_FOREST_REACH). [m]
     seed : seed of the leaves' choice (default_rng([seed, 3])).
+    coarse_wood : the stems as fewer, straight capsules, drawn instead of ``wood`` in the copies
+        that STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere). [m]
     Returns (Leaves, Wood, leaf_index (N',) int64, wood_index (M',) int64): the copies, and the
-    shape of the tile that each is a copy of (for its per-shape values: sun visibility).
+    shape of the tile that each is a copy of (for its per-shape values: sun visibility), stems
+    of ``coarse_wood`` numbered after those of ``wood``.
     """
     period = float(period)
     reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
@@ -698,13 +707,15 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
     rng = np.random.default_rng([seed, 3])
     draw = rng.random(len(leaves.center))
     tile_draw = rng.random(len(shift))
+    length = 2.0 * np.median(np.linalg.norm(leaves.axis_u, axis=1)) if len(draw) else 0.0
+    full_detail = camera.focal * length / LEAF_PIXELS  # [m]
     by_draw = np.argsort(draw)
     sorted_draw = draw[by_draw]
     nearest = np.maximum(distance[seen] - bound, 1e-9)
     centers, axes_u, axes_v, leaf_index = [], [], [], []
     for offset, turn, near in zip(shift, tile_draw, nearest):
         # the leaves a copy could keep: (draw + turn) mod 1 below the share at its nearest point
-        most = min(1.0, (FULL_DETAIL_DISTANCE / near) ** 2)
+        most = min(1.0, (full_detail / near) ** 2)
         if most >= 1.0:
             candidates = by_draw
         else:
@@ -713,7 +724,7 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
                                          by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
         c = leaves.center[candidates] + np.array([offset[0], offset[1], 0.0])
         d = np.linalg.norm(c - position, axis=1)
-        keep_share = np.minimum(1.0, (FULL_DETAIL_DISTANCE / np.maximum(d, 1e-9)) ** 2)
+        keep_share = np.minimum(1.0, (full_detail / np.maximum(d, 1e-9)) ** 2)
         chosen = np.mod(draw[candidates] + turn, 1.0) < keep_share
         kept = candidates[chosen]
         c, keep_share = c[chosen], keep_share[chosen]
@@ -722,8 +733,13 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
         axes_u.append(leaves.axis_u[kept] * grow)
         axes_v.append(leaves.axis_v[kept] * grow)
         leaf_index.append(kept)
-    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]), len(wood.radius), axis=0)
-    wood_index = np.tile(np.arange(len(wood.radius)), len(shift))
-    copies = Wood(wood.start[wood_index] + moved, wood.end[wood_index] + moved, np.asarray(wood.radius)[wood_index])
+    sources = [wood] if coarse_wood is None else [wood, coarse_wood]
+    every = Wood(*(np.concatenate([getattr(w, f) for w in sources]) for f in ("start", "end", "radius")))
+    fine = np.arange(len(wood.radius))
+    coarse = fine if coarse_wood is None else len(wood.radius) + np.arange(len(coarse_wood.radius))
+    thin = camera.focal * float(np.max(wood.radius, initial=0.0)) / nearest < STEM_DETAIL_PIXELS
+    wood_index = np.concatenate([coarse if far else fine for far in thin] or [np.zeros(0, np.int64)])
+    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]), [len(coarse) if far else len(fine) for far in thin], axis=0)
+    copies = Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index])
     return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
             np.concatenate(leaf_index), wood_index)

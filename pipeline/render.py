@@ -563,8 +563,8 @@ def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
                      "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
-                "detail": foreground.FULL_DETAIL_DISTANCE, "reach": foreground.HAZE_REACH,
-                "most": foreground.MAX_FOREST_REACH}}
+                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
+                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
 
 
 def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
@@ -576,7 +576,8 @@ def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cach
 
     def compute():
         grove, flutter = _grove(config.canopy)
-        leaves, wood = canopy.leaves_at(grove, flutter, cycle_frame), foreground.taper_wood(grove.wood)[0]
+        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = foreground.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
@@ -587,9 +588,12 @@ def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cach
             layer = config.canopy.layers[0]
             leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
                 leaves, wood, view, period=layer.size[0], center=layer.center, haze=config.sky.haze,
-                seed=config.canopy.trees.seed)
-            if has_sun:
-                leaf_visibility, wood_visibility = leaf_visibility[leaf_index], wood_visibility[wood_index]
+                seed=config.canopy.trees.seed, coarse_wood=grove.wood)
+            if has_sun:  # a straight capsule gets the mean visibility of its pieces
+                pieces = np.bincount(owner, minlength=len(grove.wood.radius))
+                capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
+                leaf_visibility = leaf_visibility[leaf_index]
+                wood_visibility = np.concatenate([wood_visibility, capsule])[wood_index]
         direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
         passes = foreground.tree_passes(
             leaves, wood, view, sun_direction=direction,
