@@ -451,10 +451,11 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                             alpha.astype(np.float32), haze_image)
 
 
-BARK_FURROWS = 14
-"""Furrows round a trunk or branch in ``bark_pattern``. [1]"""
+BARK_FURROWS = (14, 23)
+"""Furrows round a trunk or branch in ``bark_pattern``: two families, so that the ridges are
+uneven, not a corduroy. [1]"""
 
-BARK_CONTRAST = 0.35
+BARK_CONTRAST = 0.25
 """Bark reflectance runs from (1 - BARK_CONTRAST) to (1 + BARK_CONTRAST) times its mean
 between the furrows' floors and ridges. [1]"""
 
@@ -474,8 +475,9 @@ def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
     across = np.cross(axis, reference)
     angle = np.arctan2(np.sum(normal * across, axis=1), np.sum(normal * reference, axis=1))
     wander = 0.6 * np.sin(2 * np.pi * height / 0.9) + 0.3 * np.sin(2 * np.pi * height / 0.37 + 1.3)
-    ridge = np.cos(BARK_FURROWS * angle + wander)
-    period_px = 2 * np.pi * np.asarray(radius_px) / BARK_FURROWS
+    coarse, fine = BARK_FURROWS
+    ridge = 0.6 * np.cos(coarse * angle + wander) + 0.4 * np.cos(fine * angle + 2.1 - 1.7 * wander)
+    period_px = 2 * np.pi * np.asarray(radius_px) / fine
     fade = np.clip((period_px - 4.0) / 4.0, 0.0, 1.0)
     return 1.0 + BARK_CONTRAST * fade * ridge
 
