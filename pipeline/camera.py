@@ -807,7 +807,7 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     if isinstance(sky, UniformSky):
         out[rows] = np.asarray(sky.radiance, dtype=np.float32)
     elif isinstance(sky, EquirectSky):
-        out[rows] = equirect_lookup(sky.image, w, rotation=sky.rotation)
+        out[rows] = equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
     else:
         wz = np.maximum(w[..., 2], MIN_UPWARD)
         s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
@@ -843,26 +843,29 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
     if isinstance(sky, UniformSky):
         return np.broadcast_to(np.asarray(sky.radiance, dtype=np.float32), (camera.width, 3)).copy()
     if isinstance(sky, EquirectSky):
-        return equirect_lookup(sky.image, w, rotation=sky.rotation)
+        return equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
     s = w[:, :2] / w[:, 2:3]
     if isinstance(sky, ProceduralSky):
         return np.asarray(sky.radiance(s, footprint=1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
     return np.asarray(sky.radiance(s), dtype=np.float32)
 
 
-def equirect_lookup(image, w, *, rotation: float = 0.0) -> np.ndarray:
+def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
     """Bilinear samples (..., 3) float32 of an equirectangular image (height, width, 3) in the
     directions of unit vectors w (..., 3), in DESIGN.md's convention (top row at the zenith,
     centre column north, east at three quarters of the width, texel centres at
     ((col + 0.5) / width, (row + 0.5) / height)); ``rotation`` [rad] turns the image about the
-    zenith towards the east. Columns wrap round; rows are held at the poles."""
+    zenith towards the east. Columns wrap round; rows are held at the poles. ``sky_only``: rows
+    are held to the upper half too, so that a direction just above the horizon never blends in
+    the image's ground below it (the ground plane stands for that: blended, it drew a dark band
+    over the horizon)."""
     image = np.asarray(image)
     height, width = image.shape[:2]
     w = np.asarray(w, dtype=np.float64)
     azimuth = np.arctan2(w[..., 0], w[..., 1]) - rotation
     zenith = np.arccos(np.clip(w[..., 2], -1.0, 1.0))
     col = (azimuth / (2.0 * np.pi) + 0.5) * width - 0.5
-    row = np.clip(zenith / np.pi * height - 0.5, 0.0, height - 1.0)
+    row = np.clip(zenith / np.pi * height - 0.5, 0.0, (np.ceil(0.5 * height) - 1.0 if sky_only else height - 1.0))
     c0, r0 = np.floor(col), np.floor(row)
     fc = (col - c0).astype(np.float32)[..., None]
     fr = (row - r0).astype(np.float32)[..., None]
