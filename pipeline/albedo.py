@@ -8,6 +8,8 @@ channel. [1]
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.fft as sfft
 
@@ -58,3 +60,193 @@ def grass_albedo(*, size_px: int = 1024, period: float = 4.0, seed: int = 0):
     image = grass + soil[..., None] * (dirt - grass)
     image = np.clip(image, 0.01, 0.99).astype(np.float32)
     return image, Grid((0.0, float(period)), float(period) / size_px, (size_px, size_px))
+
+
+# ---------------------------------------------------------------------------------------------
+# Stochastic tiling: the albedo tile laid without visible repetition
+#
+# Heitz & Neyret, "High-Performance By-Example Noise using a Histogram-Preserving Blending
+# Operator", Proc. ACM Comput. Graph. Interact. Tech. 1(2), 2018 (HPG): the plane is cut into
+# equilateral triangles; each lattice vertex reads the tile at its own random offset, and a
+# point blends the reads of its triangle's three vertices (barycentric weights w_i) by the
+# variance-preserving operator G = sum_i w_i G_i / sqrt(sum_i w_i^2) (section 3). Done on the
+# albedo itself that operator shifts colours (soil blended into grass turns pink), so, as in the
+# paper (section 4), the tile's colours are first decorrelated (PCA) and each component mapped
+# to a standard Gaussian through its histogram (G = Phi^-1(rank)); the blend is done on those
+# and mapped back through the inverse transformation, which gives every point the tile's own
+# histogram. Filtering (the paper's section 4.3, prefiltering the inverse lookup): the tile's
+# Gaussian form is mip-mapped and read with each pixel's footprint as the plain tile is; the
+# inverse lookup of mip level k is the regression of the tile's level k on the Gaussian form's
+# level k, E[albedo_k | G_k], so a far pixel, whose reads are all means, gets the tile's mean.
+# The tile's period no longer shows: two points a period apart lie in different triangles whose
+# vertices read unrelated parts of the tile.
+# ---------------------------------------------------------------------------------------------
+
+TILING_CELLS_PER_PERIOD = 2.0 * np.sqrt(3.0)
+"""Triangle sides per tile period, as in Heitz & Neyret's code (uv x 2 sqrt(3)): each vertex's
+read shows about a third of the tile. [1]"""
+
+BLEND_SHARPNESS = 4.0
+"""Exponent on the barycentric weights, renormalised (Mikkelsen, "Practical Real-Time
+Hex-Tiling", JCGT 11(2), 2022): most of a triangle takes one vertex's read, and only narrow
+bands blend three, where the blend would mix soil into grass. [1]"""
+
+LOOKUP_BINS = 256
+"""Bins of the inverse lookups over the Gaussian range [-4, 4]. [1]"""
+
+
+@dataclass(frozen=True, eq=False)
+class StochasticTiling:
+    """A periodic albedo MipMap laid on the ground by Heitz & Neyret's stochastic tiling
+    (built by ``stochastic_tiling``).
+
+    texture : camera.MipMap with outside "periodic" -- the tile. [1]
+    gaussian : camera.MipMap of the tile's Gaussian form (same levels). [1]
+    center : (channels,) the tile's mean; basis (channels, channels): its principal axes
+        (columns). [1]
+    lookups : (levels, channels, LOOKUP_BINS) -- per level and component, the component's mean
+        value at the bins' centres of the Gaussian form. [1]
+    cell : side of the lattice's triangles. [m]
+    seed : seed of the vertices' offsets (a hash of the vertex and the seed: the same on every
+        worker and in every frame).
+    """
+
+    texture: object
+    gaussian: object
+    center: np.ndarray
+    basis: np.ndarray
+    lookups: np.ndarray
+    cell: float
+    seed: int = 0
+
+    @property
+    def mean(self) -> np.ndarray:
+        """The tile's mean (channels,), which the tiling keeps. [1]"""
+        return self.texture.mean
+
+    @property
+    def channels(self) -> int:
+        return self.texture.channels
+
+    def level(self, k: int) -> np.ndarray:
+        """Level ``k`` of the tile (``MipMap.level``)."""
+        return self.texture.level(k)
+
+    def weights(self, x, y):
+        """The triangles' vertices and barycentric weights at ground points x, y (n,) [m]:
+        vertex ids (3, n, 2) int64 on the skewed lattice and weights (3, n) float64 summing to 1."""
+        # skew the plane so that the triangles become half squares (the paper's TriangleGrid)
+        a = np.asarray(x, dtype=np.float64) / self.cell
+        b = np.asarray(y, dtype=np.float64) / self.cell
+        sa, sb = a - b / np.sqrt(3.0), 2.0 * b / np.sqrt(3.0)
+        ia, ib = np.floor(sa), np.floor(sb)
+        fa, fb = sa - ia, sb - ib
+        ia, ib = ia.astype(np.int64), ib.astype(np.int64)
+        lower = fa + fb < 1.0
+        one = np.ones_like(ia)
+        corners_low = np.stack([np.stack([ia, ib], -1), np.stack([ia, ib + one], -1), np.stack([ia + one, ib], -1)])
+        corners_high = np.stack([np.stack([ia + one, ib + one], -1), np.stack([ia + one, ib], -1),
+                                 np.stack([ia, ib + one], -1)])
+        vertices = np.where(lower[None, :, None], corners_low, corners_high)
+        weights = np.where(lower[None], np.stack([1.0 - fa - fb, fb, fa]), np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
+        return vertices, weights
+
+    def offsets(self, vertices) -> np.ndarray:
+        """Each lattice vertex's offset (..., 2) into the tile, uniform in [0, period). [m]"""
+        v = np.asarray(vertices, dtype=np.int64).astype(np.uint64)
+        key = v[..., 0] * np.uint64(0x9E3779B97F4A7C15) ^ v[..., 1] * np.uint64(0xC2B2AE3D27D4EB4F)
+        key ^= np.uint64(self.seed) * np.uint64(0x165667B19E3779F9)
+        px, py = self.texture.period
+        return np.stack([_unit_hash(key) * px, _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * py], -1)
+
+    def sample(self, fp, *, lod_bias: float) -> np.ndarray:
+        """The tiled albedo averaged over ground footprints ``fp`` (camera.Footprints):
+        (channels, n) float32. [1]"""
+        from . import camera
+
+        vertices, w = self.weights(fp.x, fp.y)
+        w = w**BLEND_SHARPNESS
+        w /= w.sum(axis=0)
+        offset = self.offsets(vertices)
+        g = np.zeros((self.channels, len(fp)), dtype=np.float64)
+        for i in range(3):
+            moved = camera.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
+                                      fp.ex, fp.ey)
+            g += w[i] * camera._filtered(self.gaussian, moved, lod_bias)
+        g /= np.sqrt(np.sum(w * w, axis=0))
+        _, level, blend = camera._filter_choice(self.gaussian, lod_bias, fp.major, fp.minor)
+        level = level.astype(np.intp)
+        upper = np.minimum(level + 1, self.gaussian.count - 1)
+        position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
+        low = np.minimum(np.floor(position).astype(np.intp), LOOKUP_BINS - 2)
+        frac = position - low
+        components = np.empty_like(g)
+        for c in range(self.channels):
+            def lookup(k):
+                table = self.lookups[:, c]
+                return table[k, low[c]] * (1.0 - frac[c]) + table[k, low[c] + 1] * frac[c]
+            components[c] = lookup(level) * (1.0 - blend) + lookup(upper) * blend
+        out = self.center[:, None] + _times(components.T, self.basis.T).T
+        return np.clip(out, 0.0, None).astype(np.float32)
+
+
+def _unit_hash(key: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser (Steele, Lea & Flood 2014) of uint64 keys, as floats in [0, 1)."""
+    z = key + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)).astype(np.float64) / float(2**53)
+
+
+def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
+    """The Heitz & Neyret tiling of a periodic albedo MipMap (``camera.mipmap``, outside
+    "periodic"), its triangles period / TILING_CELLS_PER_PERIOD a side (the longer period)."""
+    from . import camera
+    from scipy.special import ndtri
+
+    if texture.outside != "periodic":
+        raise ValueError("stochastic tiling needs a periodic texture")
+    tile = np.asarray(texture.level(0), dtype=np.float64)
+    rows, cols, channels = tile.shape
+    flat = tile.reshape(-1, channels)
+    center = flat.mean(axis=0)
+    _, basis = np.linalg.eigh(np.cov(flat - center, rowvar=False).reshape(channels, channels))
+    components = _times(flat - center, basis)
+    gaussian = np.empty((len(flat), channels), dtype=np.float32)
+    quantiles = ndtri((np.arange(len(flat)) + 0.5) / len(flat)).astype(np.float32)
+    for c in range(channels):  # Phi^-1 of the rank: a standard Gaussian histogram (ties kept apart)
+        gaussian[np.argsort(components[:, c].astype(np.float32)), c] = quantiles
+    px, py = texture.period
+    grid = Grid((0.0, py), px / cols, (rows, cols))
+    gauss_map = camera.mipmap(gaussian.reshape(rows, cols, channels), grid,
+                              outside="periodic", period=(px, py))
+    centres = -4.0 + 8.0 * (np.arange(LOOKUP_BINS) + 0.5) / LOOKUP_BINS
+    lookups = np.empty((gauss_map.count, channels, LOOKUP_BINS))
+    for k in range(gauss_map.count):
+        g_k = gauss_map.level(k).reshape(-1, channels).astype(np.float64)
+        y_k = _times(texture.level(k).reshape(-1, channels).astype(np.float64) - center, basis)
+        for c in range(channels):
+            lookups[k, c] = _regression(g_k[:, c], y_k[:, c], centres)
+    return StochasticTiling(texture, gauss_map, center, basis, lookups,
+                            max(px, py) / TILING_CELLS_PER_PERIOD, seed)
+
+
+def _times(rows, matrix) -> np.ndarray:
+    """rows (n, c) @ matrix (c, c), summed column by column (a small matrix product that BLAS,
+    for an inner size of 3, does many times slower)."""
+    out = np.zeros((rows.shape[0], matrix.shape[1]))
+    for i in range(matrix.shape[0]):
+        out += rows[:, i : i + 1] * matrix[i]
+    return out
+
+
+def _regression(g, y, centres) -> np.ndarray:
+    """E[y | g] at ``centres``: y's mean in each bin of g, joined linearly across empty bins and
+    held beyond the outermost full ones. [units of y]"""
+    width = centres[1] - centres[0]
+    index = np.clip(np.floor((g - centres[0] + 0.5 * width) / width).astype(np.intp), 0, len(centres) - 1)
+    count = np.bincount(index, minlength=len(centres))
+    total = np.bincount(index, weights=y, minlength=len(centres))
+    full = count > 0
+    return np.interp(centres, centres[full], total[full] / count[full])

@@ -735,7 +735,8 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     irradiance : MipMap of the ground irradiance E (channels 3, or 1 for grey), or a sequence
         of them, finest first: each but the last holds NaN beyond its raster ("constant" with
         value NaN), and a footprint that reaches NaN is read from the next. [radiance x sr]
-    albedo : MipMap of the ground's albedo (channels 3 or 1). [1]
+    albedo : MipMap of the ground's albedo (channels 3 or 1), or a laying of one with a
+        ``sample(footprints, lod_bias=)`` method (``albedo.StochasticTiling``). [1]
     Returns
         radiance : (height, width, 3) float32 -- albedo E / pi over the pixel's ground part, with
             albedo and E each averaged over its ground footprint (``ground_hits``,
@@ -758,7 +759,7 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
                                               size=max(1, _BLOCK // camera.width))
         fp = Footprints(*ellipses)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
-        rho = _filtered(albedo, fp, LOD_BIAS)
+        rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
         distance[rows] = distance_rows.reshape(len(rows), camera.width)
     return radiance, fraction.copy(), distance
@@ -806,30 +807,65 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     if isinstance(sky, UniformSky):
         out[rows] = np.asarray(sky.radiance, dtype=np.float32)
     elif isinstance(sky, EquirectSky):
-        out[rows] = equirect_lookup(sky.image, w, rotation=sky.rotation)
+        out[rows] = equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
     else:
         wz = np.maximum(w[..., 2], MIN_UPWARD)
         s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
-        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius
-            out[rows] = sky.radiance(s, footprint=1.0 / (camera.focal * wz * wz))
+        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius and across
+            out[rows] = sky.radiance(s, footprint=np.stack(np.broadcast_arrays(
+                1.0 / (camera.focal * wz * wz), 1.0 / (camera.focal * wz)), axis=-1))
         else:
             out[rows] = sky.radiance(s)
     return out
 
 
-def equirect_lookup(image, w, *, rotation: float = 0.0) -> np.ndarray:
+def horizon_sky(camera: Camera, sky) -> np.ndarray:
+    """The sky's radiance (width, 3) float32 just above the horizon in each image column: the
+    radiance of an endless column of haze seen level (the sky model holds its haze), which
+    the ground tends to with distance (Koschmieder 1924, ``render.render_frame``).
+
+    Each column is sampled in its direction at the horizon, raised to wz / |w| = MIN_UPWARD,
+    with the footprint of ``sky_view`` there (the cloud pattern filtered to its mean so far
+    out). sky : as ``sky_view``. [radiance]
+    """
+    from .sky import EquirectSky, ProceduralSky, UniformSky
+
+    right, up, forward = camera.basis
+    u = np.arange(camera.width, dtype=np.float64) + 0.5
+    # the level ray of column u is forward + x right + y up with wz = 0: y = -tan(pitch), and its
+    # horizontal part (sin yaw, cos yaw) / cos(pitch) + x right
+    ahead = np.array([np.sin(camera.yaw), np.cos(camera.yaw), 0.0]) / max(np.cos(camera.pitch), 1e-6)
+    x = (u - 0.5 * camera.width) / camera.focal
+    w = ahead[None, :] + x[:, None] * np.array([right[0], right[1], 0.0])[None, :]
+    w[:, :2] /= np.hypot(w[:, 0], w[:, 1])[:, None]
+    w[:, 2] = MIN_UPWARD / np.sqrt(1.0 - MIN_UPWARD**2)
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    if isinstance(sky, UniformSky):
+        return np.broadcast_to(np.asarray(sky.radiance, dtype=np.float32), (camera.width, 3)).copy()
+    if isinstance(sky, EquirectSky):
+        return equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
+    s = w[:, :2] / w[:, 2:3]
+    if isinstance(sky, ProceduralSky):
+        return np.asarray(sky.radiance(s, footprint=1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
+    return np.asarray(sky.radiance(s), dtype=np.float32)
+
+
+def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
     """Bilinear samples (..., 3) float32 of an equirectangular image (height, width, 3) in the
     directions of unit vectors w (..., 3), in DESIGN.md's convention (top row at the zenith,
     centre column north, east at three quarters of the width, texel centres at
     ((col + 0.5) / width, (row + 0.5) / height)); ``rotation`` [rad] turns the image about the
-    zenith towards the east. Columns wrap round; rows are held at the poles."""
+    zenith towards the east. Columns wrap round; rows are held at the poles. ``sky_only``: rows
+    are held to the upper half too, so that a direction just above the horizon never blends in
+    the image's ground below it (the ground plane stands for that: blended, it drew a dark band
+    over the horizon)."""
     image = np.asarray(image)
     height, width = image.shape[:2]
     w = np.asarray(w, dtype=np.float64)
     azimuth = np.arctan2(w[..., 0], w[..., 1]) - rotation
     zenith = np.arccos(np.clip(w[..., 2], -1.0, 1.0))
     col = (azimuth / (2.0 * np.pi) + 0.5) * width - 0.5
-    row = np.clip(zenith / np.pi * height - 0.5, 0.0, height - 1.0)
+    row = np.clip(zenith / np.pi * height - 0.5, 0.0, (np.ceil(0.5 * height) - 1.0 if sky_only else height - 1.0))
     c0, r0 = np.floor(col), np.floor(row)
     fc = (col - c0).astype(np.float32)[..., None]
     fr = (row - r0).astype(np.float32)[..., None]

@@ -297,6 +297,52 @@ def _noise_levels(seed: int, texels: int, period: float, spectral_slope: float) 
     return tuple(levels)
 
 
+MAX_TAPS = 16
+"""Most trilinear taps along a footprint's longer axis (``CloudLayer.field``)."""
+
+_HERMITE_NODES = 8  # Gauss-Hermite nodes of a footprint's mean coverage
+
+
+@lru_cache(maxsize=8)
+def _level_variances(seed: int, texels: int, period: float, spectral_slope: float) -> np.ndarray:
+    """Variance of each mip level of the noise (level 0: 1): (levels,) float64, entry k that of
+    the lattice's means over boxes of 2^k texels. [dimensionless]"""
+    return np.array([level.var() for level in _noise_levels(seed, texels, period, spectral_slope)])
+
+
+def _lost_variance(key, along, across) -> np.ndarray:
+    """The variance of the noise within a footprint of widths ``along`` x ``across`` (m,)
+    [texel] about its mean: 1 - var(box mean) for a box of the footprint's area, from the mip
+    levels' variances (log-linear between them); below 2 texels, the lost variance of a
+    2-texel box times (width / 2)^2 (a smooth field varies linearly within a small box).
+    [dimensionless]"""
+    variances = _level_variances(*key)
+    lost = 1.0 - variances
+    width = np.sqrt(np.maximum(along * across, 1e-300))  # the box of the same area [texel]
+    level = np.log2(np.maximum(width, 1e-300))
+    big = np.interp(level, np.arange(len(lost)), lost)
+    small = lost[1] * (width / 2.0) ** 2 if len(lost) > 1 else np.zeros_like(width)
+    return np.clip(np.where(width >= 2.0, big, np.minimum(small, big)), 0.0, 1.0)
+
+
+@lru_cache(maxsize=8)
+def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.ndarray:
+    """Cubic B-spline coefficients of the noise lattice (periodic), read-only float64."""
+    coefficients = ndimage.spline_filter(_noise(seed, texels, period, spectral_slope)[0], order=3,
+                                         mode="grid-wrap")
+    coefficients.setflags(write=False)
+    return coefficients
+
+
+def _read(key, level: int, coords) -> np.ndarray:
+    """The noise level ``level`` at lattice coordinates ``coords`` (2, m) [texel of that level],
+    wrapped: cubic B-spline interpolation at level 0 (where a camera magnifies the lattice),
+    bilinear at the box-filtered coarser levels (read only where it minifies them)."""
+    if level == 0:
+        return ndimage.map_coordinates(_spline(*key), coords, order=3, mode="grid-wrap", prefilter=False)
+    return ndimage.map_coordinates(_noise_levels(*key)[level], coords, order=1, mode="grid-wrap")
+
+
 @lru_cache(maxsize=64)
 def _knots(seed, texels, period, spectral_slope, cover, softness):
     """Field values and coverages of the rank-space smoothstep (see the module docstring)."""
@@ -386,12 +432,23 @@ class CloudLayer:
 
     def field(self, s, time, footprint=None) -> np.ndarray:
         """The noise (zero mean, unit variance on the lattice) where directions ``s`` (..., 2)
-        [tan] meet the layer at ``time`` [s], bilinearly interpolated. [dimensionless]
+        [tan] meet the layer at ``time`` [s]. [dimensionless]
 
-        footprint : None, or the width (scalar or (...)) each sample stands for on the sky
-            plane [tan]: the noise is then box-filtered over about that width on the layer
-            (trilinear mip-mapping of the lattice), so that a far cloud deck seen in a camera
-            near the horizon does not alias."""
+        The lattice is read by cubic B-spline interpolation (Unser, Aldroubi & Eden, "Fast
+        B-spline transforms for continuous image representation and interpolation", IEEE PAMI
+        13(3), 1991: the lattice's spline coefficients, cached), so the field and its gradient
+        are continuous and a cloud's edge (a level line of the field) stays a smooth curve
+        however much a camera magnifies it; bilinear reading left a kink at every texel, the
+        blocky, camouflage-like edges.
+
+        footprint : None, or the width each sample stands for on the sky plane [tan]: a
+            scalar or (...) (a round footprint), or (..., 2) (the same shape as ``s``): its
+            width along the radius s / |s| and across it. The noise is then filtered over it
+            on the layer, as GPUs filter textures anisotropically: the mip level is chosen
+            from the narrower width and up to MAX_TAPS trilinear taps are spread along the
+            wider one (a camera's pixel near the horizon is 1 / cos(theta) times longer along
+            the radius than across it on the sky plane: filtered round, the far cloud deck was
+            smeared sideways into stepped bands)."""
         s = np.asarray(s, dtype=np.float64)
         n = self.texels
         per_texel = self.altitude / self.texel
@@ -405,32 +462,82 @@ class CloudLayer:
         coords[0] -= shift_row
         np.multiply(s[:, 0], per_texel, out=coords[1])
         coords[1] -= shift_col
-        levels = _noise_levels(*self._noise_key())
+        key = self._noise_key()
+        levels = _noise_levels(*key)
         if footprint is None:
-            return ndimage.map_coordinates(levels[0], coords, order=1, mode="grid-wrap").reshape(shape)
-        width = np.broadcast_to(np.asarray(footprint, dtype=np.float64), shape).reshape(-1) * per_texel
-        level = np.clip(np.log2(np.maximum(width, 1e-300)), 0.0, len(levels) - 1.0)
+            return _read(key, 0, coords).reshape(shape)
+        along, across = self._widths(shape, footprint)
+        major, minor = np.maximum(along, across), np.minimum(along, across)
+        taps = np.clip(np.ceil(major / np.maximum(minor, 1.0) - 1e-9), 1, MAX_TAPS).astype(np.intp)
+        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(levels) - 1.0)
+        # the major axis on the lattice (row grows with -y): the radius, or across it
+        radius = np.hypot(s[:, 0], s[:, 1])
+        ex = np.where(radius > 0, s[:, 0] / np.maximum(radius, 1e-300), 1.0)
+        ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
+        ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
+        # grouped by the finer level read and, within a group, by tap count (most first), so
+        # that the samples of each tap are a contiguous run
+        k0 = np.minimum(np.floor(level).astype(np.intp), len(levels) - 1)
+        blend = level - k0
+        order = np.lexsort((-taps, k0))
+        coords, taps, k0, blend, major, ex, ey = (a[..., order] for a in (coords, taps, k0, blend, major, ex, ey))
         out = np.zeros(len(level))
-        for k in range(int(np.ceil(level.max())) + 1):
-            weight = np.clip(1.0 - np.abs(level - k), 0.0, 1.0)
-            used = weight > 0
-            if not used.any():
-                continue
-            at = (coords[:, used] + 0.5) / 2.0**k - 0.5  # texel centres of level k
-            out[used] += weight[used] * ndimage.map_coordinates(levels[k], at, order=1, mode="grid-wrap")
+        starts = np.flatnonzero(np.diff(k0, prepend=-1))
+        for a, b in zip(starts, np.append(starts[1:], len(k0))):
+            k = int(k0[a])
+            for t in range(int(taps[a])):
+                m = a + int(np.count_nonzero(taps[a:b] > t))  # taps[a:b] is non-increasing
+                step = ((t + 0.5) / taps[a:m] - 0.5) * major[a:m]  # [texel] from the centre
+                at = coords[:, a:m] + np.stack([-ey[a:m] * step, ex[a:m] * step])
+                value = _read(key, k, (at + 0.5) / 2.0**k - 0.5)  # texel centres of level k
+                upper = blend[a:m] > 0
+                if k + 1 < len(levels) and upper.any():
+                    finer = value[upper]
+                    coarser = _read(key, k + 1, (at[:, upper] + 0.5) / 2.0 ** (k + 1) - 0.5)
+                    value[upper] = finer + blend[a:m][upper] * (coarser - finer)
+                out[a:m] += value / taps[a:m]
+        result = np.empty_like(out)
+        result[order] = out
+        out = result
         return out.reshape(shape)
+
+    def _widths(self, shape, footprint):
+        """A footprint (``field``) as its widths along the radius and across it, each
+        (prod(shape),) [texel of the lattice]."""
+        per_texel = self.altitude / self.texel
+        width = np.asarray(footprint, dtype=np.float64)
+        if width.ndim == len(shape) + 1 and width.shape[-1] == 2:
+            along = np.broadcast_to(width[..., 0], shape).reshape(-1) * per_texel
+            across = np.broadcast_to(width[..., 1], shape).reshape(-1) * per_texel
+        else:
+            along = across = np.broadcast_to(width, shape).reshape(-1) * per_texel
+        return along, across
 
     def coverage(self, s, time, footprint=None) -> np.ndarray:
         """Cloud coverage c in [0, 1] at directions ``s`` (..., 2) [tan] at ``time`` [s]:
         1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane.
-        ``footprint`` as in ``field``. [dimensionless]"""
+        ``footprint`` as in ``field``: the coverage is then the footprint's mean coverage, not
+        the coverage of its mean field (which cuts a hard edge through the pixel, the stair
+        steps of an aliased edge): the field within the footprint is taken as Gaussian about
+        its filtered value with the variance that the filter took out (``_lost_variance``),
+        and c averaged over it by Gauss-Hermite quadrature, as Heitz & Neyret (2018, section
+        4.3) prefilter a lookup applied to a filtered Gaussian texture. [dimensionless]"""
         s = np.asarray(s, dtype=np.float64)
         if self.cover <= 0.0:
             return np.zeros(s.shape[:-1])
         if self.cover >= 1.0:
             return np.ones(s.shape[:-1])
         values, levels = _knots(*self._noise_key(), self.cover, self.softness)
-        return np.interp(self.field(s, time, footprint), values, levels)
+        field = self.field(s, time, footprint)
+        if footprint is None:
+            return np.interp(field, values, levels)
+        along, across = self._widths(s.shape[:-1], footprint)
+        spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
+        nodes, weights = np.polynomial.hermite_e.hermegauss(_HERMITE_NODES)
+        out = np.zeros(field.shape)
+        for z, w in zip(nodes, weights / weights.sum()):
+            out += w * np.interp(field + z * spread, values, levels)
+        return out
 
     def optical_depth(self, s, time, footprint=None) -> np.ndarray:
         """Vertical optical depth tau = thickness x coverage where ``s`` (..., 2) [tan] meets the

@@ -83,11 +83,16 @@ class ForegroundPasses:
     sun : (rows, cols, 3) float32 -- lit by the clear sun and the sky. [radiance]
     sky : (rows, cols, 3) float32 -- lit by the sky alone. [radiance]
     alpha : (rows, cols) float32 -- coverage in [0, 1]. [dimensionless]
+    haze : (rows, cols) float32 or None -- the share of the pixel that the haze in front of the
+        trees veils, sum over fragments of weight (1 - T): a frame adds it times the sky at the
+        horizon (Koschmieder, as the ground); the sun and sky passes hold T times the trees'
+        light. None: no haze. [dimensionless]
     """
 
     sun: np.ndarray
     sky: np.ndarray
     alpha: np.ndarray
+    haze: np.ndarray | None = None
 
     def __post_init__(self):
         if np.ndim(self.alpha) != 2:
@@ -292,7 +297,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                 leaf_sky_exposure=0.7, wood_sky_exposure=0.6,
                 leaf_reflectance=LEAF_REFLECTANCE, leaf_transmittance=LEAF_TRANSMITTANCE,
                 bark_reflectance=BARK_REFLECTANCE, near: float = 0.1,
-                ground_height: float | None = 0.0) -> ForegroundPasses:
+                ground_height: float | None = 0.0, haze: float = 0.0) -> ForegroundPasses:
     """The foreground passes of leaves and wood seen by ``camera`` (see the module docstring).
 
     leaves, wood : the grove at one cycle frame (``canopy.leaves_at``, ``grove.wood``). [m]
@@ -309,6 +314,9 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     near : shapes nearer the pinhole than this are clipped (wood) or dropped (leaves). [m]
     ground_height : the ground plane z, which hides what lies below it (the trunks' round feet),
         judged at pixel centres; None keeps everything. The camera must be above it. [m]
+    haze : extinction length of the air between the camera and the trees, or 0 for none: each
+        fragment keeps T = exp(-distance / haze) of its light, and the ``haze`` pass gets the
+        rest of its weight. [m]
     Returns ForegroundPasses in radiance units, irradiance / sr [klx / sr = kcd/m^2].
     """
     wood = _no_wood() if wood is None else wood
@@ -410,8 +418,10 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         toward, sideways = side
         n_w = facing_part[:, None] * toward[j] + lateral[:, None] * sideways[j]
         k = owner[j]
-        sky_w = (wood_exposure[k] * 0.5 * (1 + n_w[:, 2]))[:, None] * bark * e_sky / np.pi
-        sun_w = (wood_vis[k] * np.maximum(n_w @ s, 0.0))[:, None] * bark * e_sun / np.pi
+        axis_z = p0[j, 2] + t * (p1[j, 2] - p0[j, 2])  # height of the fragment's axis point [m]
+        furrows = bark_pattern(n_w, p1[j] - p0[j], axis_z, radius_px[j])[:, None] * bark
+        sky_w = (wood_exposure[k] * 0.5 * (1 + n_w[:, 2]))[:, None] * furrows * e_sky / np.pi
+        sun_w = (wood_vis[k] * np.maximum(n_w @ s, 0.0))[:, None] * furrows * e_sun / np.pi
         frag_sky[~is_leaf] = sky_w
         frag_sun[~is_leaf] = sky_w + sun_w
 
@@ -421,6 +431,16 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         flat, coverage, frag_depth, frag_sun, frag_sky = (
             x[above] for x in (flat, coverage, frag_depth, frag_sun, frag_sky))
     weight = _front_to_back(flat, frag_depth, coverage)
+    haze_image = None
+    if haze > 0:
+        ray = np.sqrt(1.0 + ((pu - 0.5 * cols) / focal) ** 2 + ((0.5 * rows - pv) / focal) ** 2)
+        if ground_height is not None:
+            ray = ray[above]
+        transmittance = np.exp(-frag_depth * ray / haze)  # frag_depth is along forward
+        frag_sun = frag_sun * transmittance[:, None]
+        frag_sky = frag_sky * transmittance[:, None]
+        haze_image = np.bincount(flat, weights=weight * (1.0 - transmittance),
+                                 minlength=rows * cols).reshape(rows, cols).astype(np.float32)
     optical = np.bincount(flat, weights=-np.log1p(-coverage.astype(np.float64)), minlength=rows * cols)
     alpha = -np.expm1(-optical).reshape(rows, cols)
     sun_image = np.stack([np.bincount(flat, weights=weight * frag_sun[:, c], minlength=rows * cols)
@@ -428,7 +448,117 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     sky_image = np.stack([np.bincount(flat, weights=weight * frag_sky[:, c], minlength=rows * cols)
                           for c in range(3)], axis=-1).reshape(rows, cols, 3)
     return ForegroundPasses(sun_image.astype(np.float32), sky_image.astype(np.float32),
-                            alpha.astype(np.float32))
+                            alpha.astype(np.float32), haze_image)
+
+
+BARK_FURROWS = (14, 23)
+"""Furrows round a trunk or branch in ``bark_pattern``: two families, so that the ridges are
+uneven, not a corduroy. [1]"""
+
+BARK_CONTRAST = 0.25
+"""Bark reflectance runs from (1 - BARK_CONTRAST) to (1 + BARK_CONTRAST) times its mean
+between the furrows' floors and ridges. [1]"""
+
+
+def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
+    """Factor (n,) on the bark's reflectance at wood fragments: vertical furrows round the
+    stem that wander a little with height, mean 1 (so the stem's mean reflectance stays
+    BARK_REFLECTANCE), faded out where a furrow would be under 4 pixels wide (no moire on a far
+    or thin stem). [1]
+
+    normal : (n, 3) the stem's outward unit normal at the fragment; axis : (n, 3) the stem's
+    direction; height : (n,) the height of the fragment's axis point [m]; radius_px : (n,) the
+    stem's radius in the image [pixel].
+    """
+    axis = _unit(np.asarray(axis, dtype=np.float64))
+    reference = _unit(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
+    across = np.cross(axis, reference)
+    angle = np.arctan2(np.sum(normal * across, axis=1), np.sum(normal * reference, axis=1))
+    wander = 0.6 * np.sin(2 * np.pi * height / 0.9) + 0.3 * np.sin(2 * np.pi * height / 0.37 + 1.3)
+    coarse, fine = BARK_FURROWS
+    ridge = 0.6 * np.cos(coarse * angle + wander) + 0.4 * np.cos(fine * angle + 2.1 - 1.7 * wander)
+    period_px = 2 * np.pi * np.asarray(radius_px) / fine
+    fade = np.clip((period_px - 4.0) / 4.0, 0.0, 1.0)
+    return 1.0 + BARK_CONTRAST * fade * ridge
+
+
+TIP_TAPER = 0.7
+"""A stem that nothing continues (a branch's tip, a trunk's top) narrows to this share of its
+radius at its end (``taper_wood``). [1]"""
+
+TAPER_PIECE = 0.25
+"""Length of the pieces a stem is cut into by ``taper_wood``. [m]"""
+
+
+def taper_wood(wood: Wood) -> tuple[Wood, np.ndarray]:
+    """The stems as smooth, tapering tubes, drawn as pieces about TAPER_PIECE [m] long.
+
+    Capsules are chained where one starts at the other's end (a trunk's segments, a branch's
+    two halves); each chain's axis becomes the Catmull-Rom spline through its joints (Catmull
+    & Rom, "A class of local interpolating splines", 1974; uniform, with mirrored end points),
+    so the axis, and with it the normal that shades the stem, turns gradually instead of at a
+    joint at the same height on every trunk; the radius runs linearly from each capsule's own
+    at its start to the next one's (or to TIP_TAPER of its own at a chain's end), so the width
+    changes by millimetres from piece to piece instead of by centimetres at a joint. Each piece
+    also gets its own sun visibility (``stem_visibility``), so the light on a trunk fades where
+    the crown's shade begins.
+
+    Returns (Wood of the pieces, owner (k,) int64: the capsule each piece comes from). [m]
+    """
+    start, end = np.asarray(wood.start, dtype=np.float64), np.asarray(wood.end, dtype=np.float64)
+    radius = np.asarray(wood.radius, dtype=np.float64)
+    starts = {tuple(np.round(p, 9)): i for i, p in enumerate(start)}
+    follower = [starts.get(tuple(np.round(p, 9)), -1) for p in end]
+    follower = [f if f != i else -1 for i, f in enumerate(follower)]
+    has_predecessor = np.zeros(len(radius), bool)
+    for f in follower:
+        if f >= 0:
+            has_predecessor[f] = True
+    pieces_start, pieces_end, pieces_radius, owner = [], [], [], []
+    seen = np.zeros(len(radius), bool)
+    heads = [i for i in range(len(radius)) if not has_predecessor[i]] + list(range(len(radius)))
+    for head in heads:  # chains from their heads; then any capsule left (a closed loop)
+        chain, i = [], head
+        while i >= 0 and not seen[i]:
+            seen[i] = True
+            chain.append(i)
+            i = follower[i]
+        if not chain:
+            continue
+        knots = np.vstack([start[chain[0]], end[chain]])
+        radii = np.append(radius[chain], TIP_TAPER * radius[chain[-1]])
+        padded = np.vstack([2 * knots[0] - knots[1], knots, 2 * knots[-1] - knots[-2]])
+        for k, capsule in enumerate(chain):
+            p0, p1, p2, p3 = padded[k : k + 4]
+            count = max(1, int(np.ceil(np.linalg.norm(p2 - p1) / TAPER_PIECE)))
+            u = np.linspace(0.0, 1.0, count + 1)[:, None]
+            curve = 0.5 * ((2 * p1) + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u**2
+                           + (3 * p1 - p0 - 3 * p2 + p3) * u**3)
+            middle = 0.5 * (u[:-1, 0] + u[1:, 0])
+            pieces_start.append(curve[:-1])
+            pieces_end.append(curve[1:])
+            pieces_radius.append(radii[k] + middle * (radii[k + 1] - radii[k]))
+            owner.append(np.full(count, capsule))
+    if not owner:
+        return Wood(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)), np.zeros(0, np.int64)
+    return (Wood(np.concatenate(pieces_start), np.concatenate(pieces_end), np.concatenate(pieces_radius)),
+            np.concatenate(owner).astype(np.int64))
+
+
+STEM_PROBE = 1e-3
+"""Radius of the stems' axis lines, as a share of their radius, in ``stem_visibility``. [1]"""
+
+
+def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | None = None):
+    """``sun_visibility`` of the leaves and of the pieces ``stems`` of the wood (``taper_wood``),
+    in one pass in which each piece is probed along its axis by a line STEM_PROBE of its radius
+    thick: so the pieces of a stem, whose round ends overlap, do not shade one another (a
+    stem's own shading is its normal's, max(n . s, 0)), and a stem is shaded by the leaves
+    where the crown's shade begins along it. The stems cast no shadow in this pass: on the
+    leaves, a few dozen branches against thousands of leaves, that is left out.
+    Returns (leaf (N,), stem piece (K,)) in [0, 1]. [1]"""
+    probes = Wood(stems.start, stems.end, STEM_PROBE * np.asarray(stems.radius))
+    return sun_visibility(leaves, probes, sun_point=sun_point, pixel=pixel)
 
 
 def _rgb(value, name) -> np.ndarray:
@@ -507,3 +637,111 @@ def _wood_side(p0, p1, origin, right, up, forward, focal):
     perp = np.column_stack([-image_axis[:, 1], image_axis[:, 0]])
     flip = np.where(np.sum(image_side * perp, axis=1) < 0, -1.0, 1.0)
     return toward, sideways * flip[:, None]
+
+
+# ---------------------------------------------------------------------------------------------
+# A periodic forest in the camera: the tile's trees copied over every tile in view
+# ---------------------------------------------------------------------------------------------
+
+LEAF_PIXELS = 6.0
+"""A periodic forest's copied leaves are drawn at least this long in the image: within the
+distance D = focal x (median leaf length) / LEAF_PIXELS of the camera every leaf is drawn
+(10 m for configs/forest.yaml at 1280 x 720, 2.5 m in its preview); beyond it a leaf is kept
+with probability (D / d)^2 and, kept, grown by d / D in both axes, so its expected area, and the
+crown's coverage, is unchanged (stochastic simplification, Cook, Halstead, Planck & Ryu,
+"Stochastic Simplification of Aggregate Detail", ACM TOG 26(3), 2007): a far crown costs as
+many leaves as it has pixels, not as it has leaves. [pixel]"""
+
+HAZE_REACH = 3.0
+"""Copies of a periodic forest are drawn out to this many haze extinction lengths, where the
+haze lets 1.8 % of their light through, and to no more than MAX_FOREST_REACH. [1]"""
+
+MAX_FOREST_REACH = 600.0
+"""Farthest copies drawn of a periodic forest, whatever the haze. [m]"""
+
+
+STEM_DETAIL_PIXELS = 2.0
+"""Copies of a periodic forest whose stems are all under this radius in the image are drawn
+with the straight capsules (``coarse_wood``) instead of the tapered pieces: a joint's step in
+width is then under half a pixel, and 40 pieces a trunk would cost more than the leaves. [pixel]"""
+
+
+def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
+                    seed: int = 0, coarse_wood: Wood | None = None):
+    """The shapes of one tile of a periodic forest (every shape wrapped into the tile, as
+    ``canopy.grow_grove`` makes them) copied over every tile the camera sees: those whose
+    bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
+    MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
+
+    leaves, wood : the tile's shapes. [m]
+    period : the tile's side; center : (x, y) of the tile's centre. [m]
+    haze : extinction length of the air (0: none, MAX_FOREST_REACH). [m]
+    seed : seed of the leaves' choice (default_rng([seed, 3])).
+    coarse_wood : the stems as fewer, straight capsules, drawn instead of ``wood`` in the copies
+        that STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere). [m]
+    Returns (Leaves, Wood, leaf_index (N',) int64, wood_index (M',) int64): the copies, and the
+    shape of the tile that each is a copy of (for its per-shape values: sun visibility), stems
+    of ``coarse_wood`` numbered after those of ``wood``.
+    """
+    period = float(period)
+    reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
+    position = np.asarray(camera.position, dtype=np.float64)
+    everything = np.concatenate([leaves.center, wood.start, wood.end])
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))  # half-width of the tile's shapes
+    radius = np.sqrt(2.0) * margin + float(np.max(wood.radius, initial=0.0))
+    right, up, forward = camera.basis
+    half_diagonal = np.arctan(0.5 * np.hypot(camera.width, camera.height) / camera.focal)
+    count = int(np.ceil((reach + radius) / period))
+    i, j = np.meshgrid(np.arange(-count, count + 1), np.arange(-count, count + 1), indexing="ij")
+    shift = np.column_stack([i.ravel(), j.ravel()]) * period
+    centres = np.asarray(center, dtype=np.float64) + shift
+    middle = np.column_stack([centres, np.full(len(centres), 0.5 * (low[2] + high[2]))])
+    bound = np.hypot(radius, 0.5 * (high[2] - low[2]))
+    to = middle - position
+    distance = np.linalg.norm(to, axis=1)
+    # the cone of the view (the image's half-diagonal about ``forward``), widened by each copy's bounds
+    angle = np.arccos(np.clip(to @ forward / np.maximum(distance, 1e-12), -1.0, 1.0))
+    inside = distance <= bound
+    widen = np.arcsin(np.clip(bound / np.maximum(distance, 1e-12), 0.0, 1.0))
+    seen = inside | ((distance - bound <= reach) & (angle - widen <= half_diagonal))
+    shift = shift[seen]
+    rng = np.random.default_rng([seed, 3])
+    draw = rng.random(len(leaves.center))
+    tile_draw = rng.random(len(shift))
+    length = 2.0 * np.median(np.linalg.norm(leaves.axis_u, axis=1)) if len(draw) else 0.0
+    full_detail = camera.focal * length / LEAF_PIXELS  # [m]
+    by_draw = np.argsort(draw)
+    sorted_draw = draw[by_draw]
+    nearest = np.maximum(distance[seen] - bound, 1e-9)
+    centers, axes_u, axes_v, leaf_index = [], [], [], []
+    for offset, turn, near in zip(shift, tile_draw, nearest):
+        # the leaves a copy could keep: (draw + turn) mod 1 below the share at its nearest point
+        most = min(1.0, (full_detail / near) ** 2)
+        if most >= 1.0:
+            candidates = by_draw
+        else:
+            lo, hi = 1.0 - turn, 1.0 - turn + most
+            candidates = np.concatenate([by_draw[np.searchsorted(sorted_draw, lo):np.searchsorted(sorted_draw, hi)],
+                                         by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
+        c = leaves.center[candidates] + np.array([offset[0], offset[1], 0.0])
+        d = np.linalg.norm(c - position, axis=1)
+        keep_share = np.minimum(1.0, (full_detail / np.maximum(d, 1e-9)) ** 2)
+        chosen = np.mod(draw[candidates] + turn, 1.0) < keep_share
+        kept = candidates[chosen]
+        c, keep_share = c[chosen], keep_share[chosen]
+        grow = 1.0 / np.sqrt(keep_share)[:, None]
+        centers.append(c)
+        axes_u.append(leaves.axis_u[kept] * grow)
+        axes_v.append(leaves.axis_v[kept] * grow)
+        leaf_index.append(kept)
+    sources = [wood] if coarse_wood is None else [wood, coarse_wood]
+    every = Wood(*(np.concatenate([getattr(w, f) for w in sources]) for f in ("start", "end", "radius")))
+    fine = np.arange(len(wood.radius))
+    coarse = fine if coarse_wood is None else len(wood.radius) + np.arange(len(coarse_wood.radius))
+    thin = camera.focal * float(np.max(wood.radius, initial=0.0)) / nearest < STEM_DETAIL_PIXELS
+    wood_index = np.concatenate([coarse if far else fine for far in thin] or [np.zeros(0, np.int64)])
+    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]), [len(coarse) if far else len(fine) for far in thin], axis=0)
+    copies = Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index])
+    return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
+            np.concatenate(leaf_index), wood_index)

@@ -1062,7 +1062,14 @@ def foreground_params(config: Config, plan: RunPlan, cycle_frame: int) -> dict:
             "heights": [layer.height for layer in c.layers], "layout": c.layout,
             "center": c.layers[0].center, "size": c.layers[0].size,
             "camera": asdict(camera_of(config, plan)),
-            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection}
+            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
+            "haze": config.sky.haze,
+            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+                     "probe": foreground.STEM_PROBE},
+            "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
+                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
+                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
 
 
 def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
@@ -1075,17 +1082,32 @@ def foreground_item(config: Config, plan: RunPlan, cycle_frame: int, store: cach
     def compute():
         grove, flutter = _grove(config.canopy)
         leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = foreground.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
         if has_sun:
-            leaf_visibility, wood_visibility = foreground.sun_visibility(leaves, grove.wood, sun_point=sun_point)
+            leaf_visibility, wood_visibility = foreground.stem_visibility(leaves, wood, sun_point=sun_point)
+        view = camera_of(config, plan)
+        if config.canopy.layout == "periodic":  # the tile's trees on every tile in view
+            layer = config.canopy.layers[0]
+            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+                leaves, wood, view, period=layer.size[0], center=layer.center, haze=config.sky.haze,
+                seed=config.canopy.trees.seed, coarse_wood=grove.wood)
+            if has_sun:  # a straight capsule gets the mean visibility of its pieces
+                pieces = np.bincount(owner, minlength=len(grove.wood.radius))
+                capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
+                leaf_visibility = leaf_visibility[leaf_index]
+                wood_visibility = np.concatenate([wood_visibility, capsule])[wood_index]
         direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
         passes = foreground.tree_passes(
-            leaves, grove.wood, camera_of(config, plan), sun_direction=direction,
+            leaves, wood, view, sun_direction=direction,
             sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
-            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility)
-        return {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=config.sky.haze)
+        item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+        if passes.haze is not None:
+            item["haze"] = passes.haze
+        return item
 
     return store.get_or_compute("foreground", foreground_params(config, plan, cycle_frame), compute)
 
@@ -1137,12 +1159,22 @@ def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
     return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
 
 
+@functools.lru_cache(maxsize=4)
+def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
+    """The ground's albedo as the camera reads it: the tile of ``albedo_mipmap`` laid by
+    stochastic tiling (Heitz & Neyret 2018, ``albedo.StochasticTiling``), so that its period
+    does not show in rows to the horizon."""
+    return albedos.stochastic_tiling(albedo_mipmap(ground))
+
+
 def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap, ...]:
     """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
     coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
     (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
     horizon)."""
     rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
+    if ground.outer:
+        rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
     maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
     raster, grid = rasters[-1]
     if config.canopy.layout == "periodic":
@@ -1154,6 +1186,40 @@ def irradiance_maps(config: Config, ground: GroundResult) -> tuple[camera.MipMap
     else:
         value = ground.unshadowed
     return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+
+
+BLEND_BAND_PIXELS = 8
+"""Least width of the band, in coarse ground pixels, inside the sun window's edge over which the
+fine sun-resolved ground gives way to the coarse ground (``blend_band``). [pixel]"""
+
+BLEND_BAND_SHARE = (1 / 8, 1 / 4)
+"""The band's width as shares of the sun window's shorter side: at least the first (so that at
+full scale the change of texture is spread over a good part of the view), at most the second
+(so that a small preview window keeps its middle half sun-resolved). [1]"""
+
+
+def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_grid: Grid) -> np.ndarray:
+    """The fine ground raster (rows, cols, 3) [klx] with a band inside its edges where it gives
+    way to the coarse raster (resampled bilinearly onto the fine grid), so that the camera,
+    which reads the fine raster inside the sun window and the coarse one beyond it, shows no
+    seam at the window's edge (issue: a rectangle where sharp sun flecks meet blurred ones).
+
+    Width: ``b = clip(max(BLEND_BAND_PIXELS coarse pixels, BLEND_BAND_SHARE[0] s), ...,
+    BLEND_BAND_SHARE[1] s)``, s the window's shorter side [m]. Weight of the fine raster at a
+    pixel centre at distance d from the nearest edge: ``w = smoothstep(d / b) = t^2 (3 - 2 t)``,
+    t = clip(d / b, 0, 1): 0 at the edge (where the coarse raster takes over), 1 from the
+    band's inner side on, with zero slope at both ends. Both rasters hold the same light
+    (the fine sun kernel and the coarse one have the same sum), so the blend keeps the mean.
+    """
+    rows, cols = fine_grid.shape
+    shorter = min(rows, cols) * fine_grid.pixel
+    width = max(BLEND_BAND_PIXELS * coarse_grid.pixel, BLEND_BAND_SHARE[0] * shorter)
+    width = min(width, BLEND_BAND_SHARE[1] * shorter)
+    across = lambda n: (np.minimum(np.arange(n), n - 1 - np.arange(n)) + 0.5) * fine_grid.pixel  # noqa: E731
+    t = np.clip(np.minimum(across(rows)[:, None], across(cols)[None, :]) / width, 0.0, 1.0)
+    weight = (t * t * (3.0 - 2.0 * t)).astype(np.float32)[..., None]
+    under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)
+    return (weight * fine + (1.0 - weight) * under).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -1185,21 +1251,28 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
     clock.lap("ground")
     view = camera_of(config, plan)
     background, distance = camera.background(
-        view, irradiance=irradiance_maps(config, ground), albedo=albedo_mipmap(config.ground), sky=sky)
+        view, irradiance=irradiance_maps(config, ground), albedo=ground_albedo(config.ground), sky=sky)
     clock.lap("camera")
     light = reference_lighting(config, plan)
     sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
     sky_scale = _sky_scale(sky, light)
     atmosphere = None
     if config.sky.haze > 0:
+        # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
+        # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
+        # holds its own haze), so the far ground meets the sky at the horizon without a line
         rays = camera.pixel_rays(view)
         rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-        transmittance, sky_haze, atmosphere = composite.aerial_perspective(
-            distance, rays, length=config.sky.haze,
-            sun_direction=light.sun_direction if light.sun_direction is not None else np.array([0.0, 0.0, 1.0]),
-            sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-        background = transmittance[..., None] * background + np.float32(sky_scale) * sky_haze
+        transmittance = composite.aerial_perspective(
+            distance, rays, length=config.sky.haze, sun_direction=np.array([0.0, 0.0, 1.0]),
+            sun_irradiance=np.zeros(3), sky_irradiance=np.zeros(3))[0][..., None]
+        background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
     passes = foreground_passes(config, plan, frame % config.canopy.cycle, store, light)
+    if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
+        veiled = foreground_item(config, plan, frame % config.canopy.cycle, store).get("haze")
+        if veiled is not None:  # the haze in front of the trees, as in front of the ground
+            veil = veiled[..., None] * (camera.horizon_sky(view, sky)[None] / np.float32(sky_scale))
+            passes = (passes[0] + veil, passes[1] + veil, passes[2])
     if passes is None:
         empty = np.zeros_like(background)
         passes = (empty, empty, empty[..., 0])

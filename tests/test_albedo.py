@@ -36,3 +36,56 @@ def test_grass_albedo_is_deterministic_by_seed():
     assert np.abs(a - c).mean() > 0.005
     with pytest.raises(ValueError):
         grass_albedo(size_px=64, period=0.0)
+
+
+# ---- stochastic tiling (Heitz & Neyret 2018) ----------------------------------------------
+
+from pipeline import camera  # noqa: E402
+from pipeline.albedo import stochastic_tiling  # noqa: E402
+
+
+def _tiled(size_px=256, period=4.0):
+    image, grid = grass_albedo(size_px=size_px, period=period, seed=2)
+    mip = camera.mipmap(image, grid, outside="periodic", period=(period, period))
+    return mip, stochastic_tiling(mip, seed=5)
+
+
+def _points(x, y, width):
+    n = x.size
+    return camera.Footprints(x.ravel(), y.ravel(), np.full(n, width), np.full(n, width), np.ones(n), np.zeros(n))
+
+
+def test_stochastic_tiling_breaks_the_tile_period():
+    """The correlation of the laid albedo with itself one tile period away (along x, along y
+    and along the diagonal) is under 0.15, where the plain tile's is 1 by construction."""
+    period = 4.0
+    mip, tiling = _tiled(period=period)
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-200.0, 200.0, (2, 40000))
+    luminance = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    here = luminance @ tiling.sample(_points(x, y, 0.016), lod_bias=camera.LOD_BIAS)
+    plain = luminance @ camera.sample_footprints(mip, _points(x, y, 0.016)).T
+    for dx, dy in ((period, 0.0), (0.0, period), (period, period)):
+        there = luminance @ tiling.sample(_points(x + dx, y + dy, 0.016), lod_bias=camera.LOD_BIAS)
+        plain_there = luminance @ camera.sample_footprints(mip, _points(x + dx, y + dy, 0.016)).T
+        assert np.corrcoef(plain, plain_there)[0, 1] > 0.999
+        assert abs(np.corrcoef(here, there)[0, 1]) < 0.15
+
+
+def test_stochastic_tiling_keeps_the_tiles_histogram_and_mean_at_every_scale():
+    """Point reads have the plain tile's mean, spread and percentiles per channel; wide footprints
+    (a far pixel) tend to the tile's mean, as the plain tile's do."""
+    mip, tiling = _tiled()
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-100.0, 100.0, (2, 60000))
+    tile = camera.sample_footprints(mip, _points(x, y, 0.01))  # the same bilinear reads, untiled
+    laid = tiling.sample(_points(x, y, 0.01), lod_bias=camera.LOD_BIAS).T
+    np.testing.assert_allclose(laid.mean(axis=0), tile.mean(axis=0), rtol=0.02)
+    np.testing.assert_allclose(laid.std(axis=0), tile.std(axis=0), rtol=0.08)
+    for q in (5, 50, 95):
+        np.testing.assert_allclose(np.percentile(laid, q, axis=0), np.percentile(tile, q, axis=0), rtol=0.06)
+    for width in (0.5, 8.0):
+        plain = camera.sample_footprints(mip, _points(x[:5000], y[:5000], width))
+        laid = tiling.sample(_points(x[:5000], y[:5000], width), lod_bias=camera.LOD_BIAS).T
+        np.testing.assert_allclose(laid.mean(axis=0), plain.mean(axis=0), rtol=0.02)
+        np.testing.assert_allclose(laid.std(axis=0), plain.std(axis=0), rtol=0.25, atol=1e-4)

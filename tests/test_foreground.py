@@ -289,3 +289,75 @@ def test_default_grove_renders(capsys):
     # upright: the trunks reach the bottom half of the image, the crowns fill the top half
     rows_with_trees = np.flatnonzero(passes.alpha.max(axis=1) > 0.5)
     assert rows_with_trees.max() > 250 and passes.alpha[:180].sum() > 2 * passes.alpha[180:].sum()
+
+
+# ---- smooth tapered stems (issue 18) ---------------------------------------------------------
+
+from pipeline.foreground import TIP_TAPER, taper_wood  # noqa: E402
+
+
+def _bent_trunk():
+    """Three capsules end to end, bent at the two joints, radii stepping down 0.2, 0.16, 0.12 m."""
+    knots = np.array([[0.0, 6.0, 0.0], [0.15, 6.0, 2.5], [-0.1, 6.1, 5.0], [0.05, 6.0, 7.5]])
+    return Wood(knots[:-1], knots[1:], np.array([0.2, 0.16, 0.12])), knots
+
+
+def test_tapered_stems_pass_through_the_joints_and_narrow_without_steps():
+    wood, knots = _bent_trunk()
+    pieces, owner = taper_wood(wood)
+    assert np.all(np.diff(owner) >= 0) and set(owner) == {0, 1, 2}
+    np.testing.assert_allclose(pieces.start[0], knots[0])
+    np.testing.assert_allclose(pieces.end[-1], knots[-1])
+    np.testing.assert_allclose(pieces.start[1:], pieces.end[:-1])  # one unbroken axis
+    for k in (1, 2):  # the axis goes through each joint
+        assert np.min(np.linalg.norm(pieces.end - knots[k], axis=1)) < 1e-12
+    # the width falls steadily, by millimetres a piece, to TIP_TAPER of the last radius
+    steps = np.diff(pieces.radius)
+    assert np.all(steps < 0) and np.abs(steps).max() < 0.005
+    assert pieces.radius[-1] == pytest.approx(TIP_TAPER * 0.12, rel=0.05)
+    # the axis turns from piece to piece by under a third of the capsules' bend at a joint
+    def turns(start, end):
+        axis = (end - start) / np.linalg.norm(end - start, axis=1)[:, None]
+        return np.degrees(np.arccos(np.clip(np.sum(axis[1:] * axis[:-1], axis=1), -1, 1)))
+
+    assert turns(pieces.start, pieces.end).max() < turns(wood.start, wood.end).max() / 3
+
+
+def test_a_bent_trunk_has_no_band_of_light_at_its_joints():
+    """The brightest sunlit line of a stem piece of axis a has radiance in proportion to
+    sqrt(1 - (a . s)^2) (its best-lit normal, at right angles to a): along the tapered trunk it
+    changes from piece to piece by under a third of the jump at a joint of the straight
+    capsules, where the band of light began at the same height on every trunk."""
+    wood, _ = _bent_trunk()
+    sun = np.array([1.0, -0.4, 0.5]) / np.linalg.norm([1.0, -0.4, 0.5])
+
+    def brightest(start, end):
+        axis = (end - start) / np.linalg.norm(end - start, axis=1)[:, None]
+        return np.sqrt(1.0 - (axis @ sun) ** 2)
+
+    pieces, _ = taper_wood(wood)
+    smooth = np.abs(np.diff(brightest(pieces.start, pieces.end))).max()
+    kinked = np.abs(np.diff(brightest(wood.start, wood.end))).max()
+    assert kinked > 0.02 and smooth < kinked / 3
+
+
+def test_stem_pieces_are_shaded_by_leaves_not_by_each_other():
+    """A vertical trunk under one broad leaf at 6 m, the sun 30 degrees from the zenith: the
+    pieces in the leaf's shadow get visibility about 0, the others about 1 (in the old
+    capsule-wide visibility each segment got one value, and the round ends of consecutive
+    pieces would shade each other)."""
+    from pipeline.foreground import stem_visibility
+
+    wood = Wood(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 3.0]]), np.array([[0.0, 0.0, 3.0], [0.0, 0.0, 6.0]]),
+                np.array([0.2, 0.15]))
+    pieces, _ = taper_wood(wood)
+    leaf = Leaves(np.array([[0.0, 0.0, 6.5]]), np.array([[0.6, 0.0, 0.0]]), np.array([[0.0, 0.6, 0.0]]))
+    sun = np.array([np.tan(np.radians(30.0)), 0.0])  # towards +x, 30 degrees from the zenith
+    _, visibility = stem_visibility(leaf, pieces, sun_point=sun, pixel=0.02)
+    middle = 0.5 * (pieces.start[:, 2] + pieces.end[:, 2])
+    # the leaf's shadow along the trunk: where the ray towards the sun meets z = 6.5 within 0.6 m
+    shaded = (6.5 - middle) * np.tan(np.radians(30.0)) < 0.55
+    lit = (6.5 - middle) * np.tan(np.radians(30.0)) > 0.65
+    assert shaded.any() and lit.any()
+    assert np.all(visibility[shaded] < 0.05)
+    assert np.all(visibility[lit] > 0.98)
