@@ -846,7 +846,7 @@ def disk_needed(config: Config, plan: RunPlan) -> tuple[float, float]:
     """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and every
     cycle product at its exact size: per layer and cycle frame the coarse spectrum (complex64
     half spectrum of its FFT, or of one tile) and the fine one, per cycle frame the built-in
-    trees' passes (sun, sky: 3 float32, alpha: 1)."""
+    trees' passes (sun, sky: 3 float32, alpha and haze: 1)."""
     width, height = config.camera.resolution
     frames = config.animation.frames * width * height * FRAME_BYTES_PER_PIXEL[config.output.half]
     per_frame = 0
@@ -857,7 +857,7 @@ def disk_needed(config: Config, plan: RunPlan) -> tuple[float, float]:
             rows, cols = lp.sun.fft_shape
             per_frame += rows * (cols // 2 + 1) * 8
     if config.foreground.model == "trees":
-        per_frame += 7 * 4 * width * height
+        per_frame += 8 * 4 * width * height  # float32 sun and sky (3 each), alpha, haze depth
     return float(frames), float(per_frame * config.canopy.cycle)
 
 
