@@ -3,7 +3,7 @@
     python benchmarks/bench_shadow.py            # n = 512, 1024, 2048, 4096
     python benchmarks/bench_shadow.py --quick    # n = 512, 1024
 
-For each n and both layouts (DESIGN.md section 4) it times, in the same run and interleaved
+For each n and both layouts (docs/method.md, "The correlation") it times, in the same run and interleaved
 so that a noisy shared machine hits both alike:
 
 - ground: one call of ``shadow.ground_periodic`` / ``shadow.ground_isolated`` on a 3-channel

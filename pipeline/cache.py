@@ -1,10 +1,10 @@
 """The on-disk store of cycle products: named numpy arrays keyed by a hash of their inputs.
 
-DESIGN.md section 6. A product of the cycle phase (mask spectra per level, fine masks,
+docs/runs.md, "The cache's checks"; docs/method.md, "Cycle products and the cache". A product of the cycle phase (mask spectra per level, fine masks,
 foreground passes) is an *item*: a ``dict[str, numpy.ndarray]`` computed from a small set of
 parameters. Its key is the SHA-256 of a canonical JSON of its kind, its parameters and
-``CODE_VERSION``; keys are made from parameters, never from big arrays (DESIGN.md section 8:
-hashing a 16 MiB argument costs 20 ms per call).
+``CODE_VERSION``; keys are made from parameters, never from big arrays (hashing a 16 MiB
+argument costs 20 ms per call).
 
 Layout under the cache root (``cache_dir``)::
 

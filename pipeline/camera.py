@@ -101,7 +101,7 @@ def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.n
 
 # ---------------------------------------------------------------------------------------------
 # The perspective view of the ground and the sky: the background B of the frame composite
-# (DESIGN.md section 4, frame = F_sky + S (F_sun - F_sky) + (1 - A) B).
+# (docs/method.md, "The camera, the foreground and the finished frame": frame = F_sky + S (F_sun - F_sky) + (1 - A) B).
 #
 # Ground rasters are minified far from the camera (a 1 cm texel may be metres of a far pixel), so
 # they are read through a mip map with anisotropic footprints, as GPU anisotropic filtering does:
@@ -788,7 +788,7 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     """The sky's radiance (height, width, 3) float32 in the camera's image, without the sun disc.
 
     sky : UniformSky (its constant radiance), EquirectSky (bilinear in its image, ``rotation``
-        included, DESIGN.md section 3) or any model with ``radiance(s)`` at sky-plane points
+        included, docs/method.md "Conventions") or any model with ``radiance(s)`` at sky-plane points
         s = (wx / wz, wy / wz) [tan] (ProceduralSky), with wz / |w| held at MIN_UPWARD or more.
     Each pixel cut by the horizon is sampled at the centre of its sky part; pixels wholly below
     the horizon are 0. [radiance]
@@ -852,7 +852,7 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
 
 def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
     """Bilinear samples (..., 3) float32 of an equirectangular image (height, width, 3) in the
-    directions of unit vectors w (..., 3), in DESIGN.md's convention (top row at the zenith,
+    directions of unit vectors w (..., 3), in the convention of docs/method.md (top row at the zenith,
     centre column north, east at three quarters of the width, texel centres at
     ((col + 0.5) / width, (row + 0.5) / height)); ``rotation`` [rad] turns the image about the
     zenith towards the east. Columns wrap round; rows are held at the poles. ``sky_only``: rows

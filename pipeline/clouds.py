@@ -2,8 +2,8 @@
 
 A ``CloudLayer`` is a horizontal, geometrically thin sheet of cloud at ``altitude`` [m] whose
 vertical optical depth ``tau(x)`` varies over the horizontal plane and drifts with the wind.
-Seen from the observer, a sky-plane direction ``s = (wx / wz, wy / wz)`` (DESIGN.md section 4,
-Max 1991 Fig. 2) meets the layer at the horizontal point ``altitude * s``; the layer then
+Seen from the observer, a sky-plane direction ``s = (wx / wz, wy / wz)`` (docs/method.md, "The sky plane
+and the sky raster"; Max 1991 Fig. 2) meets the layer at the horizontal point ``altitude * s``; the layer then
 
 - dims whatever lies behind it (clear sky, sun disc) by ``exp(-tau / cos(theta))``, and
 - adds the sunlight and skylight it scatters towards the observer (``radiance``).

@@ -1,7 +1,7 @@
 """Topocentric sun and moon: positions, angular radii, eclipse obscuration and contact times.
 
 Positions come from PyEphem (``ephem``, libastro; offline, no data download). Conventions
-(DESIGN.md section 3): radians everywhere, azimuth from north towards east, elevation from the
+(docs/method.md, "Conventions"): radians everywhere, azimuth from north towards east, elevation from the
 horizon. Elevations are *geometric* topocentric ones: the observer's pressure is set to 0 so
 that ephem applies no atmospheric refraction, and the sun and moon keep their true shapes and
 relative positions (refraction would lift both by about the same amount and squash the discs

@@ -6,7 +6,7 @@ the files in ``configs/`` (the package may be installed without them). ``preview
 pixels, the leaves (fewer and larger, the same leaf area), the sun window and the camera so that
 the whole set takes seconds.
 
-Images follow the rasters' convention (DESIGN.md section 3): north up, east to the right. The two
+Images follow the rasters' convention (docs/method.md, "Conventions"): north up, east to the right. The two
 plots are drawn with matplotlib's object API (``Figure`` and ``FigureCanvasAgg``): no pyplot, no
 backend switch, no global state.
 """
@@ -323,7 +323,7 @@ def sun_fraction_curve(config: Config) -> tuple[list[datetime], np.ndarray, np.n
 
 
 def sun_fraction_plot(config: Config, *, title: str, width: int = 960, height: int = 640) -> np.ndarray:
-    """The plot of S(t) through an eclipse (DESIGN.md section 4: the direct sun over that of the
+    """The plot of S(t) through an eclipse (docs/method.md, "The procedural sky": the direct sun over that of the
     clear, uneclipsed sun) for a site-and-time ``config``, UTC time across, the contacts C1 to C4
     marked. Returns display values (height, width, 3) in [0, 1]."""
     import matplotlib.dates as mdates

@@ -1,6 +1,6 @@
 """Units, the sky-plane mapping, the raster ``Grid`` and the unshadowed irradiance ``I0``.
 
-Conventions (DESIGN.md section 3): world axes x east, y north, z up; azimuth from north
+Conventions (docs/method.md, "Conventions"): world axes x east, y north, z up; azimuth from north
 towards east; zenith angle ``theta`` from +z. Every planar raster is indexed ``[row, col]``
 with ``col`` growing with +x and ``row`` growing with -y (north-up), pixel centres at
 ``origin + (col + 0.5, -(row + 0.5)) * pixel`` where ``origin`` is the north-west corner.

@@ -754,7 +754,7 @@ def layer_masks(config: Config, plan: RunPlan, layer_index: int, cycle_frame: in
 
 
 def cycle_params(config: Config, plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
-    """Everything a layer's cycle products at ``cycle_frame`` depend on (DESIGN.md section 6)."""
+    """Everything a layer's cycle products at ``cycle_frame`` depend on (docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache")."""
     c = config.canopy
     lp = plan.layers[layer_index]
     if c.trees is None:

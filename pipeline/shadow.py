@@ -16,7 +16,7 @@ A sun low in the east has ``dc > 0``, so the shadow of canopy pixel ``c`` falls 
 ``k = c - i``: west of it. ``tests/test_shadow.py`` proves this against a Monte Carlo estimator
 that works in world coordinates.
 
-Two layouts, both exact for the discrete sum (DESIGN.md section 4):
+Two layouts, both exact for the discrete sum (docs/method.md, "The correlation"):
 
 - isolated: ``m = 1 - o`` with the occlusion ``o`` zero away from the canopy, so
   ``g = total - (e correlated with o)``; only the offsets that can reach the canopy from
@@ -201,8 +201,8 @@ def ground_periodic(
 
 @dataclass(frozen=True)
 class SunPlan:
-    """Index bookkeeping of the fine sun correlation over one ground window (DESIGN.md
-    section 4, two scales): the sun disc as a small kernel of fine sky cells ``q = p / h``,
+    """Index bookkeeping of the fine sun correlation over one ground window (docs/method.md,
+    "Two scales for the sun"): the sun disc as a small kernel of fine sky cells ``q = p / h``,
     correlated with a fine transmittance mask of the canopy plane.
 
     window_shape : (rows, cols) of the fine ground window, the lattice origin.

@@ -5,7 +5,7 @@ projected solid angle, so that the unshadowed irradiance of the ground is the pl
 raster plus ``outside``, the irradiance of all the sky the raster does not cover. No hidden
 normalising factor: radiance in, irradiance [radiance x sr] out.
 
-Equirectangular skies (DESIGN.md section 3): the top row touches the zenith, the centre column
+Equirectangular skies (docs/method.md, "Conventions"): the top row touches the zenith, the centre column
 looks north, east is at three quarters of the width, texel centres at
 ``((col + 0.5) / width, (row + 0.5) / height)``. ``rotation`` turns the sky about the zenith
 towards the east: a feature at image azimuth ``phi`` is seen at azimuth ``phi + rotation``.
@@ -518,7 +518,7 @@ class ProceduralSky:
 
     def sun_fraction(self) -> float:
         """S: direct sun power reaching the ground after moon and clouds over that of the clear,
-        uneclipsed sun (DESIGN.md section 4), weighted by Rec.709 luminance. [1]"""
+        uneclipsed sun (docs/method.md, "The procedural sky"), weighted by Rec.709 luminance. [1]"""
         e = self.sun_normal_irradiance * REC709_LUMINANCE
         return float(self.sun_cloud_transmittance * (e @ self.moon_visible) / e.sum())
 
@@ -719,7 +719,7 @@ def _lerp_nodes(n: int, k: int):
 
 
 def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
-    """The sun disc for the two-scale method (DESIGN.md section 4) on a fine sky-plane grid of cell q.
+    """The sun disc for the two-scale method (docs/method.md, "Two scales for the sun") on a fine sky-plane grid of cell q.
 
     Limb-darkened, cut by the moon, dimmed by the clouds' transmittance towards the sun's centre,
     rasterized directly on the sky plane (a low sun is an ellipse stretched radially by about
@@ -796,7 +796,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
 def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: int = 3,
             max_radius: float = float(np.radians(3.0)), min_elevation: float = float(np.radians(2.0)),
             angular_radius: float = SUN_ANGULAR_RADIUS, limb_darkening: tuple = LIMB_DARKENING) -> EquirectSky:
-    """The HDRI's sun cut out into the fine kernel of the two-scale method (DESIGN.md section 4).
+    """The HDRI's sun cut out into the fine kernel of the two-scale method (docs/method.md, "Two scales for the sun").
 
     Detection, on the Rec.709 luminance Y of the texels above the horizon: the peak texel must
     stand out, Y_max >= ``contrast`` x the median Y; the core is the texels brighter than

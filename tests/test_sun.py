@@ -1,4 +1,4 @@
-"""The two-scale sun (DESIGN.md section 4; issue 3), validated end to end in world coordinates.
+"""The two-scale sun (docs/method.md, "Two scales for the sun"), validated end to end in world coordinates.
 
 Every test renders through ``render.render_ground`` from a YAML config and a mask image, and
 compares with references in ``tests/reference.py`` that trace light in metres and radians (no
