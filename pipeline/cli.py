@@ -473,7 +473,8 @@ def _run_frame(args) -> int:
         io.write_exr(output, result.radiance, frame_attributes(config, result, config.digest()),
                      half=args.half)
     else:
-        io.write_png(output, display(result.radiance, exposure=result.exposure, transform=config.camera.display))
+        io.write_png(output, display(result.radiance, exposure=result.exposure, transform=config.camera.display,
+                                     balance=result.balance))
     rows, cols = result.radiance.shape[:2]
     print(f"sunshade: frame {args.frame}, {cols} x {rows} px, S = {result.sun_fraction:.4f}, "
           f"in {elapsed:.2f} s; wrote {output}")

@@ -43,6 +43,24 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
 DISPLAYS = ("srgb", "filmic")
 """Display transforms from exposed scene-linear values to sRGB code values."""
 
+WHITE_BALANCES = ("daylight", "shade", "none")
+"""What a picture shows as white, as a camera's white balance: ``daylight`` the open ground's
+light (sun and sky), ``shade`` the sky's light alone (the shade under trees comes out neutral and
+the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
+
+
+def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray:
+    """Per-channel gains (3,) of a von Kries white balance: the chosen light (``WHITE_BALANCES``)
+    comes out grey, its luminance kept. sun_irradiance, sky_irradiance : (3,) horizontal
+    irradiance of the run's clear sun and sky. [1]"""
+    if setting not in WHITE_BALANCES:
+        raise ValueError(f"unknown white balance {setting!r}; valid: {', '.join(WHITE_BALANCES)}")
+    light = {"daylight": np.asarray(sun_irradiance, dtype=np.float64) + np.asarray(sky_irradiance, dtype=np.float64),
+             "shade": np.asarray(sky_irradiance, dtype=np.float64), "none": np.ones(3)}[setting]
+    if not np.all(light > 0):
+        return np.ones(3)
+    return float(light @ REC709_LUMINANCE) / light
+
 
 def composite_frame(background: np.ndarray, *, sun_pass: np.ndarray, sky_pass: np.ndarray,
                     alpha: np.ndarray, sun_fraction: float, sky_scale: float = 1.0,
@@ -111,12 +129,15 @@ def aces_filmic(x: np.ndarray) -> np.ndarray:
     return np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
 
 
-def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic") -> np.ndarray:
+def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
+            balance=None) -> np.ndarray:
     """sRGB display values in [0, 1] of scene-linear ``radiance`` [kcd/m^2] times ``exposure``
-    [m^2/kcd]: ``srgb`` clips at 1, ``filmic`` rolls off with ``aces_filmic`` first."""
+    [m^2/kcd] and the white balance's gains ``balance`` (3,) (None: 1): ``srgb`` clips at 1,
+    ``filmic`` rolls off with ``aces_filmic`` first."""
     if transform not in DISPLAYS:
         raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
-    exposed = np.asarray(radiance, dtype=np.float32) * np.float32(exposure)
+    gain = np.float32(exposure) if balance is None else (np.asarray(balance) * exposure).astype(np.float32)
+    exposed = np.asarray(radiance, dtype=np.float32) * gain
     if transform == "filmic":
         exposed = aces_filmic(exposed)
     return srgb_encode(exposed)

@@ -19,7 +19,7 @@ import yaml
 
 from . import __version__, daylight, ephemeris, paths
 from .clearsky import CIE_TYPES, DEFAULT_CIE_TYPE
-from .composite import DISPLAYS
+from .composite import DISPLAYS, WHITE_BALANCES
 from .errors import ConfigError
 from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
@@ -215,7 +215,8 @@ class CameraConfig:
     view, from north towards east) and pitch (negative looking down) [rad], None to look at the
     canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
     default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
-    light; display : a name in ``composite.DISPLAYS``."""
+    light; display : a name in ``composite.DISPLAYS``; white_balance : a name in
+    ``composite.WHITE_BALANCES``."""
 
     position: tuple[float, float, float] | None = None
     look_at: tuple[float, float, float] | None = None
@@ -226,6 +227,7 @@ class CameraConfig:
     exposure: float = 0.0
     display: str = "filmic"
     auto_exposure: AutoExposureConfig | None = None
+    white_balance: str = "daylight"
 
 
 @dataclass(frozen=True)
@@ -609,7 +611,8 @@ _VALID_KEYS = {
     "sky.site": ("latitude", "longitude", "elevation"),
     "sky.time": ("start", "end"),
     "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"),
-    "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display"),
+    "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
+               "white_balance"),
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
     "foreground": ("model", "sun", "sky", "alpha"),
     "animation": ("frames", "fps"),
@@ -1011,7 +1014,8 @@ def _parse_camera(s: _Section) -> CameraConfig:
         s.fail("resolution", f"{width} x {height} is {width * height:.3g} pixels; the most is {MAX_IMAGE_PIXELS:.3g}")
     stops, auto = _parse_exposure(s)
     camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height), exposure=stops,
-                          display=s.choice("display", DISPLAYS, "filmic"), auto_exposure=auto)
+                          display=s.choice("display", DISPLAYS, "filmic"), auto_exposure=auto,
+                          white_balance=s.choice("white_balance", WHITE_BALANCES, "daylight"))
     s.done()
     return camera
 

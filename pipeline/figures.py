@@ -437,7 +437,7 @@ def _fig_ground(scenes: _Scenes) -> np.ndarray:
 def _fig_frame(scenes: _Scenes) -> np.ndarray:
     """Fig. 10: the grove's finished frame 0."""
     result = scenes.grove_frame
-    return composite.display(result.radiance, exposure=result.exposure,
+    return composite.display(result.radiance, exposure=result.exposure, balance=result.balance,
                              transform=scenes.config("grove").camera.display)
 
 
@@ -445,7 +445,8 @@ def _fig_point_sun(scenes: _Scenes) -> np.ndarray:
     """Fig. 11: the grove's frame 0 under a point sun, no sky light."""
     config = scenes.config("point-sun")
     result = render.render_frame(config, frame=0, store=scenes.store)
-    return composite.display(result.radiance, exposure=result.exposure, transform=config.camera.display)
+    return composite.display(result.radiance, exposure=result.exposure, balance=result.balance,
+                             transform=config.camera.display)
 
 
 def _fig_eclipse_ground(scenes: _Scenes) -> np.ndarray:
@@ -457,7 +458,7 @@ def _fig_eclipse_ground(scenes: _Scenes) -> np.ndarray:
 def _fig_eclipse_frame(scenes: _Scenes) -> np.ndarray:
     """Fig. 13: the eclipse's last frame."""
     result = scenes.eclipse_frame
-    return composite.display(result.radiance, exposure=result.exposure,
+    return composite.display(result.radiance, exposure=result.exposure, balance=result.balance,
                              transform=scenes.config("crescents").camera.display)
 
 

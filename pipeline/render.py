@@ -1225,13 +1225,15 @@ def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_gri
 @dataclass(frozen=True)
 class FrameResult:
     """radiance : (rows, cols, 3) float32 scene-linear [kcd/m^2]; sun_fraction : S [1];
-    scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster."""
+    scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster;
+    balance : the white balance's gains for display (3,) [1]."""
 
     radiance: np.ndarray
     sun_fraction: float
     scene: Scene
     exposure: float
     ground: GroundResult
+    balance: np.ndarray | None = None
 
 
 def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = None,
@@ -1285,8 +1287,11 @@ def render_frame(config: Config, *, frame: int = 0, store: cache.Cache | None = 
         exposure = auto_exposures(config, plan, [frame])[frame]
     else:
         exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+    balance = composite.white_balance(
+        config.camera.white_balance, sky_irradiance=light.sky_irradiance,
+        sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
     clock.lap("composite")
-    return FrameResult(radiance, sun_fraction, scene, exposure, ground)
+    return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
 
 
 class _Stopwatch:

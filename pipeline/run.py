@@ -374,7 +374,8 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
     exr, png = frame_files(config, frame)
     io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half)
-    picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display)
+    picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display,
+                      balance=result.balance)
     io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()

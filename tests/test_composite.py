@@ -88,3 +88,41 @@ def test_display_transforms():
         1.055 * 0.18 ** (1 / 2.4) - 0.055, rel=1e-5)
     with pytest.raises(ValueError, match="filmic"):
         composite.display(ramp, exposure=1.0, transform="log")
+
+
+def test_white_balance_makes_the_chosen_light_grey_and_keeps_its_luminance():
+    from pipeline.composite import REC709_LUMINANCE, white_balance
+
+    sun, sky = np.array([70.0, 71.0, 62.0]), np.array([9.0, 13.0, 22.0])  # a warm sun, a blue sky [klx]
+    luma = np.asarray(REC709_LUMINANCE, dtype=np.float64)
+    for setting, light in (("daylight", sun + sky), ("shade", sky)):
+        gains = white_balance(setting, sun_irradiance=sun, sky_irradiance=sky)
+        balanced = gains * light
+        assert np.ptp(balanced) == pytest.approx(0.0, abs=1e-9)  # grey
+        assert balanced @ luma == pytest.approx(light @ luma)  # as bright
+    assert np.all(white_balance("none", sun_irradiance=sun, sky_irradiance=sky) == 1.0)
+    shade = white_balance("shade", sun_irradiance=sun, sky_irradiance=sky)
+    assert shade[0] > 1.0 > shade[2]  # the sun flecks come out warm
+    with pytest.raises(ValueError, match="valid: daylight, shade, none"):
+        white_balance("tungsten", sun_irradiance=sun, sky_irradiance=sky)
+
+
+def test_display_applies_the_white_balance_before_the_tone_curve():
+    from pipeline.composite import display
+
+    radiance = np.full((2, 2, 3), 0.2, dtype=np.float32)
+    plain = display(radiance, exposure=1.0, transform="srgb")
+    warm = display(radiance, exposure=1.0, transform="srgb", balance=np.array([1.5, 1.0, 0.5]))
+    assert np.allclose(display(radiance * np.float32([1.5, 1.0, 0.5]), exposure=1.0, transform="srgb"), warm)
+    assert warm[0, 0, 0] > plain[0, 0, 0] > warm[0, 0, 2]
+
+
+def test_an_unknown_white_balance_is_refused_naming_the_key(tmp_path, capsys):
+    from test_cli import assert_refused, base_config, write_config, write_inputs
+
+    write_inputs(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    config = {**base_config(), "camera": {"white_balance": "tungsten"}}
+    assert_refused(write_config(tmp_path, config), out, capsys,
+                   "camera.white_balance: unknown value 'tungsten'; valid: daylight, shade, none")
