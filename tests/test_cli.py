@@ -490,7 +490,8 @@ def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
     ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
              "time", "moon", "clouds", "skylight", "haze"}),
     ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
-    ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display"}),
+    ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
+                "white_balance"}),
 ])
 def test_an_unknown_key_lists_every_valid_key_of_its_section(inputs, capsys, section, keys):
     """The keys the README's config documents for the section, whichever the parser read."""
