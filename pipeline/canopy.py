@@ -449,16 +449,23 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
 
     period : (Px, Py) [m] or None; if given the shapes repeat with these periods and every
         translate that touches the grid is drawn (one tile or any window of a periodic forest).
+
+    The loops over shapes and their pixels are compiled (``pipeline/_raster.py``, numba): the
+    same arithmetic as ``coverage_fragments``, 10 to 20 times faster (docs/accuracy.md).
     """
-    rows, cols = grid.shape
+    from . import _raster
+
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
-    out = []
-    for primitive in (_ellipses(shapes, grid), _capsule_pieces(shapes, grid)):
-        _scatter(*primitive, shape=grid.shape, period=period_px, out=out)
-    flat = np.concatenate([f for f, _, _ in out]) if out else np.zeros(0, np.int64)
-    weight = np.concatenate([w for _, w, _ in out]) if out else np.zeros(0, np.float32)
-    optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
-    return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+    optical = np.zeros(grid.shape, np.float64)
+    for primitive, kernel in ((_ellipses(shapes, grid), _raster.ellipses),
+                              (_capsule_pieces(shapes, grid), _raster.capsules)):
+        box = _boxes(*primitive[:5], shape=grid.shape, period=period_px)
+        if box is not None:
+            center, lo, size, params, sub, thin, thickness, _ = box
+            o = np.argsort(lo[:, 1] * (grid.shape[1] + 1) + lo[:, 0], kind="stable")  # row by row: cache
+            kernel((center[o] - lo[o]).astype(np.float32), lo[o], size[o], sub[o], thin[o],
+                   thickness[o].astype(np.float32), params[o].astype(np.float32), optical)
+    return np.exp(-optical).astype(np.float32)
 
 
 def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
@@ -599,31 +606,44 @@ def _translates(center, half, period, shape):
     return src, center[src] + shift
 
 
-def _scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
-             offset=None):
-    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage), label) of every
-    pixel of every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect
-    padding. The label is None, or with an ``offset`` the fragment's shape index ``offset + owner``."""
+def _boxes(center, half, params, feature, thickness, *, shape, period):
+    """The boxes a rasteriser visits: every shape (and with ``period`` every translate) whose
+    box [pixel] touches the raster ``shape`` (rows, cols), its box clipped to the raster.
+    Returns (center, lo, size, params, sub, thin, thickness, index of the shape) or None: ``sub``
+    sub-samples per axis, ``thin`` whether the strip has its second edge."""
     rows, cols = shape
-    source = None if offset is None else offset + owner
+    src = np.arange(len(center))
     if period is not None:
         src, center = _translates(center, half, period, shape)
-        half, params, feature, thickness = half[src], params[src], feature[src], thickness[src]
-        source = None if source is None else source[src]
+        half = half[src]
     lo = np.clip(np.floor(center - half), 0, [cols, rows]).astype(np.int64)
     hi = np.clip(np.ceil(center + half), 0, [cols, rows]).astype(np.int64)
     keep = np.all(hi > lo, axis=1)
+    src = src[keep]
     center, lo, size = center[keep], lo[keep], (hi - lo)[keep]
-    params, feature, thickness = params[keep], feature[keep], thickness[keep]
-    source = None if source is None else source[keep]
+    params, feature, thickness = params[src], feature[src], thickness[src]
     if not len(center):
-        return
+        return None
     # k x k sub-samples: k = 1 for shapes at least 2.5 pixels thick (minor semi-axis or radius),
     # 2 down to 0.8 pixel, 4 below; thin shapes get the second edge of their strip
     sub = np.where(feature >= 2.5, 1, np.where(feature >= 0.8, 2, 4))
     area = size.prod(axis=1)  # and fewer for huge boxes, to bound the memory of one block
     sub = np.where(area * sub**2 > 16 * _CHUNK, np.where(area * 4 > 16 * _CHUNK, 1, 2), sub)
     thin = thickness * sub < 1.5
+    return center, lo, size, params, sub, thin, thickness, src
+
+
+def _scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
+             offset=None):
+    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage), label) of every
+    pixel of every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect
+    padding. The label is None, or with an ``offset`` the fragment's shape index ``offset + owner``."""
+    rows, cols = shape
+    box = _boxes(center, half, params, feature, thickness, shape=shape, period=period)
+    if box is None:
+        return
+    center, lo, size, params, sub, thin, thickness, src = box
+    source = None if offset is None else (offset + owner)[src]
     block = _BUCKETS[np.minimum(np.searchsorted(_BUCKETS, size), len(_BUCKETS) - 1)]
     block = np.maximum(block, size)
     key = ((block[:, 1] * (1 << 20) + block[:, 0]) * 8 + sub) * 2 + thin
