@@ -3,7 +3,7 @@
 The method is the one documented in ``canopy.py`` (and docs/method.md): the coverage of a pixel
 is the mean over k x k sub-samples of the exact area fraction of the sub-sample's square that
 lies inside the shape's local strip. These loops compute it shape by shape straight into the
-optical-depth raster, with the same float32 arithmetic as the array version they replace, so
+transmittance-depth raster, with the same float32 arithmetic as the array version they replace, so
 that no per-pixel fragment arrays are built. Imported lazily: numba costs 0.3 s to import.
 """
 
@@ -15,19 +15,16 @@ import numpy as np
 from numba import njit
 
 _OPAQUE = np.float32(1.0 - 2.0**-20)
-_OPAQUE_DEPTH = -math.log1p(-float(_OPAQUE))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _square_cdf(t, a, b):
+def _square_cdf(t, a, b, inv_a, inv_2ab):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free)."""
+    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free, with the
+    reciprocals 1 / a and 1 / (2 a b + 1e-12) given)."""
     s = abs(t)
-    edge = np.float32(0.5) * (a + b) - s
-    edge = max(edge, np.float32(0.0))
-    quad = edge * edge / (np.float32(2.0) * a * b + np.float32(1e-12))
-    lin = np.float32(0.5) - s / a
-    tail = lin if s <= np.float32(0.5) * (a - b) else quad
+    edge = max(np.float32(0.5) * (a + b) - s, np.float32(0.0))
+    tail = np.float32(0.5) - s * inv_a if s <= np.float32(0.5) * (a - b) else edge * edge * inv_2ab
     return tail if t < 0 else np.float32(1.0) - tail
 
 
@@ -38,10 +35,12 @@ def _cover(d, nx, ny, kf, thick):
     nx, ny = abs(nx), abs(ny)
     a = max(max(nx, ny), np.float32(0.7071))
     b = min(nx, ny)
+    inv_a = np.float32(1.0) / a
+    inv_2ab = np.float32(1.0) / (np.float32(2.0) * a * b + np.float32(1e-12))
     t = d * -kf
-    cover = _square_cdf(t, a, b)
+    cover = _square_cdf(t, a, b, inv_a, inv_2ab)
     if thick >= 0:
-        cover -= _square_cdf(t - thick, a, b)
+        cover -= _square_cdf(t - thick, a, b, inv_a, inv_2ab)
     return cover
 
 
@@ -73,42 +72,59 @@ def _pixel_cover(buf, w, k, r, c):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _deposit(optical, row, col, cover):
-    """Add -log(1 - cover) to optical[row, col], cover clipped just below 1 (a covered pixel's
-    constant is kept aside: log1p is the dearest step)."""
-    if cover >= _OPAQUE:
-        optical[row, col] += _OPAQUE_DEPTH
-    elif cover > 0:
-        optical[row, col] -= math.log1p(-cover)
+def _deposit(transmittance, row, col, cover):
+    """Multiply transmittance[row, col] by 1 - cover, cover clipped just below 1."""
+    if cover > 0:
+        transmittance[row, col] *= 1.0 - float(min(cover, _OPAQUE))
 
 
-def _scratch(size, sub):
-    most = 1
-    for i in range(size.shape[0]):
-        most = max(most, size[i, 0] * size[i, 1] * sub[i] * sub[i])
-    return np.empty(most, np.float32), np.empty(most, np.float32), np.empty(most, np.float32)
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
+    """The box of a shape centred at (cx, cy) with half-size (hx, hy) [pixel], clipped to the
+    raster, as canopy._boxes chooses it: (col, row, width, height, k sub-samples per axis,
+    thin, thickness in sub-samples or -1 when not thin); width 0 when it misses the raster."""
+    x0 = min(max(math.floor(cx - hx), 0.0), float(cols))
+    y0 = min(max(math.floor(cy - hy), 0.0), float(rows))
+    x1 = min(max(math.ceil(cx + hx), 0.0), float(cols))
+    y1 = min(max(math.ceil(cy + hy), 0.0), float(rows))
+    w, h = int(x1) - int(x0), int(y1) - int(y0)
+    if w <= 0 or h <= 0:
+        return int(x0), int(y0), 0, 0, 1, np.float32(-1.0)
+    k = 1 if feature >= 2.5 else (2 if feature >= 0.8 else 4)
+    if w * h * k * k > most:  # fewer sub-samples for huge boxes, as before
+        k = 1 if w * h * 4 > most else 2
+    thick = np.float32(thickness * k) if thickness * k < 1.5 else np.float32(-1.0)
+    return int(x0), int(y0), w, h, k, thick
 
 
-_scratch = njit(cache=True, nogil=True)(_scratch)
+@njit(cache=True, nogil=True)
+def _grown(buffer, size):
+    return buffer if buffer.shape[0] >= size else np.empty(2 * size, np.float32)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(rel, lo, size, sub, thin, thickness, prm, optical):
-    """Add -log(1 - c) of every ellipse's coverage c to ``optical`` (rows, cols) float64.
+def ellipses(center, half, index, prm, feature, thickness, most, transmittance):
+    """Multiply ``transmittance`` (rows, cols) float64 by 1 - c for every ellipse's coverage c.
 
-    rel (n, 2) float32: centre minus the box corner [pixel]; lo (n, 2), size (n, 2) int64: box
-    corner and size (u, v) within the raster; sub (n,) sub-samples per axis; thin (n,) bool;
-    thickness (n,) float32 [pixel]; prm (n, 4) float32: major unit vector, semi-axes A, B."""
-    dxs, dys, buf = _scratch(size, sub)
-    for i in range(rel.shape[0]):
-        k = sub[i]
+    center, half (m, 2) float64: the boxes' centres and half-sizes (u, v) [pixel], in the order
+    drawn (translates of a periodic canopy included); index (m,): the ellipse of each, into
+    prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B) and thickness
+    (n,) (2 B) [pixel]; most: the most sub-samples of one box before k is lowered."""
+    rows, cols = transmittance.shape
+    dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
+    for ii in range(center.shape[0]):
+        i = index[ii]
+        x0, y0, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
+                                      feature[i], thickness[i], rows, cols, most)
+        if w == 0:
+            continue
+        n = w * h * k * k
+        dxs, dys, buf = _grown(dxs, n), _grown(dys, n), _grown(buf, n)
         kf = np.float32(k)
-        w, h = size[i, 0], size[i, 1]
         ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
-        thick = thickness[i] * kf if thin[i] else np.float32(-1.0)
         ab, bb, aa = major * minor, minor * minor, major * major
         eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
-        m = _samples(rel[i, 0], rel[i, 1], w, h, k, dxs, dys)
+        m = _samples(np.float32(center[ii, 0] - x0), np.float32(center[ii, 1] - y0), w, h, k, dxs, dys)
         for j in range(m):
             dx, dy = dxs[j], dys[j]
             p = dx * ex + dy * ey
@@ -118,35 +134,41 @@ def ellipses(rel, lo, size, sub, thin, thickness, prm, optical):
             mp = minor * p
             mq = major * q
             gauge = np.sqrt(mp * mp + mq * mq)
-            grad = np.sqrt(bp * bp + aq * aq) + eps2
-            d = (gauge - ab) * (gauge + eps) / grad
-            buf[j] = _cover(d, (bp * ex - aq * ey) / grad, (bp * ey + aq * ex) / grad, kf, thick)
+            inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
+            d = (gauge - ab) * (gauge + eps) * inv
+            buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
         for r in range(h):
             for c in range(w):
-                _deposit(optical, lo[i, 1] + r, lo[i, 0] + c, _pixel_cover(buf, w, k, r, c))
+                _deposit(transmittance, y0 + r, x0 + c, _pixel_cover(buf, w, k, r, c))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def capsules(rel, lo, size, sub, thin, thickness, prm, optical):
+def capsules(center, half, index, prm, feature, thickness, most, transmittance):
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
-    dxs, dys, buf = _scratch(size, sub)
-    for i in range(rel.shape[0]):
-        k = sub[i]
+    rows, cols = transmittance.shape
+    dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
+    for ii in range(center.shape[0]):
+        i = index[ii]
+        bx, by, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
+                                      feature[i], thickness[i], rows, cols, most)
+        if w == 0:
+            continue
+        n = w * h * k * k
+        dxs, dys, buf = _grown(dxs, n), _grown(dys, n), _grown(buf, n)
         kf = np.float32(k)
-        w, h = size[i, 0], size[i, 1]
-        rx, ry = rel[i, 0], rel[i, 1]
+        rx, ry = np.float32(center[ii, 0] - bx), np.float32(center[ii, 1] - by)
         x0, y0, ex, ey, inverse, radius, t_lo, t_hi = (prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3],
                                                       prm[i, 4], prm[i, 5], prm[i, 6], prm[i, 7])
-        thick = thickness[i] * kf if thin[i] else np.float32(-1.0)
         m = _samples(rx, ry, w, h, k, dxs, dys)
         for j in range(m):
             px, py = dxs[j] - x0, dys[j] - y0
             t = min(max((px * ex + py * ey) * inverse, np.float32(0.0)), np.float32(1.0))
             qx, qy = px - t * ex, py - t * ey
             length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
-            buf[j] = _cover(length - radius, qx / length, qy / length, kf, thick)
+            inv = np.float32(1.0) / length
+            buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
         for r in range(h):
             # the piece's stretch of the axis, judged at pixel centres in float64 as before
             cy = float(r) + 0.5 - float(ry) - float(y0)
@@ -154,4 +176,4 @@ def capsules(rel, lo, size, sub, thin, thickness, prm, optical):
                 cx = float(c) + 0.5 - float(rx) - float(x0)
                 t = (cx * float(ex) + cy * float(ey)) * float(inverse)
                 if t >= float(t_lo) and t < float(t_hi):
-                    _deposit(optical, lo[i, 1] + r, lo[i, 0] + c, _pixel_cover(buf, w, k, r, c))
+                    _deposit(transmittance, by + r, bx + c, _pixel_cover(buf, w, k, r, c))
