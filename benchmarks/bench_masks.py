@@ -1,13 +1,14 @@
 """One cycle frame's leaf masks and their spectra: the compiled rasteriser against the array
 rasteriser it replaced (kept in tests/test_canopy.py as the reference), in the same process.
 
-    python benchmarks/bench_masks.py [CONFIG ...] [--frames 5]
+    python benchmarks/bench_masks.py [CONFIG ...] [--frames 5] [--preview]
 
 CONFIG defaults to configs/eclipse.yaml (160,000 leaves). For each config with trees, every
 layer's coarse and fine masks and their spectra (what ``render.cycle_item`` computes on a miss)
 for cycle frames 0, 1, ... with either rasteriser, one process, one FFT thread. Prints the
 median wall and CPU seconds per cycle frame of each, their ratio, and the largest difference
 between the two masks. The first call, which loads the compiled loops, is timed apart.
+``--preview`` measures the config as ``sunshade render --preview`` makes it.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from pipeline import canopy, render, shadow  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
+from pipeline.config import load_config, preview  # noqa: E402
 from test_canopy import reference_rasterize  # noqa: E402
 
 
@@ -62,9 +63,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("configs", nargs="*", default=[str(ROOT / "configs" / "eclipse.yaml")])
     parser.add_argument("--frames", type=int, default=5)
+    parser.add_argument("--preview", action="store_true")
     args = parser.parse_args()
     for path in args.configs:
         config = load_config(path)
+        config = preview(config) if args.preview else config
         if config.canopy.trees is None:
             print(f"{Path(path).name}: no trees, nothing to rasterise")
             continue

@@ -11,8 +11,29 @@ from __future__ import annotations
 
 import math
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
+
+Out = namedtuple("Out", "emit transmittance pixel cover shape")
+"""Where the coverages go: emit False multiplies ``transmittance`` (rows, cols) float64 by
+1 - c; emit True appends fragments (flat pixel int64, coverage float32, shape int64) to the
+arrays ``pixel``, ``cover``, ``shape`` (``transmittance`` then only gives the raster's shape)."""
+
+
+@njit(cache=True, nogil=True)
+def box_pixels(center, half, rows, cols):
+    """How many pixels the boxes of ``center``, ``half`` [pixel] (m, 2) hold within the raster."""
+    total = 0
+    for i in range(center.shape[0]):
+        w = min(max(math.ceil(center[i, 0] + half[i, 0]), 0.0), float(cols)) - \
+            min(max(math.floor(center[i, 0] - half[i, 0]), 0.0), float(cols))
+        h = min(max(math.ceil(center[i, 1] + half[i, 1]), 0.0), float(rows)) - \
+            min(max(math.floor(center[i, 1] - half[i, 1]), 0.0), float(rows))
+        if w > 0 and h > 0:
+            total += int(w) * int(h)
+    return total
 
 _OPAQUE = np.float32(1.0 - 2.0**-20)
 
@@ -72,10 +93,18 @@ def _pixel_cover(buf, w, k, r, c):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _deposit(transmittance, row, col, cover):
-    """Multiply transmittance[row, col] by 1 - cover, cover clipped just below 1."""
+def _deposit(out, row, col, cover, shape, count):
+    """One pixel's coverage, clipped just below 1: out.transmittance[row, col] multiplied by
+    1 - cover, or with out.emit a fragment appended at ``count``. Returns the new count."""
     if cover > 0:
-        transmittance[row, col] *= 1.0 - float(min(cover, _OPAQUE))
+        cover = min(cover, _OPAQUE)
+        if out.emit:
+            out.pixel[count] = row * out.transmittance.shape[1] + col
+            out.cover[count] = cover
+            out.shape[count] = shape
+            return count + 1
+        out.transmittance[row, col] *= 1.0 - float(cover)
+    return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -103,14 +132,16 @@ def _grown(buffer, size):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(center, half, index, prm, feature, thickness, most, transmittance):
-    """Multiply ``transmittance`` (rows, cols) float64 by 1 - c for every ellipse's coverage c.
+def ellipses(center, half, index, prm, feature, thickness, most, out, owner, count):
+    """Every ellipse's coverage c of every pixel of its box, into ``out`` (see ``Out``): the
+    transmittance multiplied by 1 - c, or fragments appended from ``count`` (returns the count).
 
     center, half (m, 2) float64: the boxes' centres and half-sizes (u, v) [pixel], in the order
     drawn (translates of a periodic canopy included); index (m,): the ellipse of each, into
-    prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B) and thickness
-    (n,) (2 B) [pixel]; most: the most sub-samples of one box before k is lowered."""
-    rows, cols = transmittance.shape
+    prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,)
+    (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most: the most
+    sub-samples of one box before k is lowered."""
+    rows, cols = out.transmittance.shape
     dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
     for ii in range(center.shape[0]):
         i = index[ii]
@@ -139,15 +170,16 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance):
             buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
         for r in range(h):
             for c in range(w):
-                _deposit(transmittance, y0 + r, x0 + c, _pixel_cover(buf, w, k, r, c))
+                count = _deposit(out, y0 + r, x0 + c, _pixel_cover(buf, w, k, r, c), owner[i], count)
+    return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def capsules(center, half, index, prm, feature, thickness, most, transmittance):
+def capsules(center, half, index, prm, feature, thickness, most, out, owner, count):
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
-    rows, cols = transmittance.shape
+    rows, cols = out.transmittance.shape
     dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
     for ii in range(center.shape[0]):
         i = index[ii]
@@ -176,4 +208,5 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance):
                 cx = float(c) + 0.5 - float(rx) - float(x0)
                 t = (cx * float(ex) + cy * float(ey)) * float(inverse)
                 if t >= float(t_lo) and t < float(t_hi):
-                    _deposit(transmittance, by + r, bx + c, _pixel_cover(buf, w, k, r, c))
+                    count = _deposit(out, by + r, bx + c, _pixel_cover(buf, w, k, r, c), owner[i], count)
+    return count

@@ -69,6 +69,7 @@ from pipeline.canopy import (  # noqa: E402
     Leaves,
     Shapes,
     Wood,
+    coverage_fragments,
     grove_bounds,
     grove_mask,
     grow_grove,
@@ -294,18 +295,14 @@ def test_layers_split_the_grove_by_nearest_plane():
 
 
 # --- the array rasteriser that the compiled one replaced, kept as its reference ------------------
-# (pipeline/canopy.py before the loops moved to pipeline/_raster.py, verbatim but for the names
-# it imports; the shapes' preparation, _ellipses and _capsule_pieces, is shared)
+# (pipeline/canopy.py before the loops moved to pipeline/_raster.py, verbatim but for names; the
+# shapes' preparation, _ellipses, _capsule_pieces and _translates, is shared)
 
-from pipeline.canopy import (  # noqa: E402
-    _BUCKETS,
-    _CHUNK,
-    _OPAQUE,
-    _capsule_pieces,
-    _ellipses,
-    _square_cdf,
-    _translates,
-)
+from pipeline.canopy import _capsule_pieces, _ellipses, _translates  # noqa: E402
+
+_CHUNK = 1 << 17  # samples evaluated at once [count]
+_OPAQUE = np.float32(1.0 - 2.0**-20)  # coverage clipped below 1 before -log(1 - c)
+_BUCKETS = np.unique(np.ceil(np.outer(2.0 ** np.arange(20), [1.0, 1.25, 1.5, 1.75]))).astype(np.int64)
 
 
 def reference_rasterize(shapes, grid, *, period=None):
@@ -313,12 +310,53 @@ def reference_rasterize(shapes, grid, *, period=None):
     rows, cols = grid.shape
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
     out = []
-    for primitive in (_ellipses(shapes, grid), _capsule_pieces(shapes, grid)):
+    (*ellipses, owner), (*capsules, source) = _ellipses(shapes, grid), _capsule_pieces(shapes, grid)
+    for primitive in ((*ellipses, _ellipse_distance, None, owner),
+                      (*capsules, _capsule_distance, _capsule_select, source)):
         _reference_scatter(*primitive, shape=grid.shape, period=period_px, out=out)
     flat = np.concatenate([f for f, _, _ in out]) if out else np.zeros(0, np.int64)
     weight = np.concatenate([w for _, w, _ in out]) if out else np.zeros(0, np.float32)
     optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
     return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+
+
+def _ellipse_distance(dx, dy, prm):
+    """Approximate signed distance (g - 1) / |grad g| to an ellipse boundary, g the ellipse's
+    gauge (exact for circles, finite for needles), and the outward unit normal. [pixel]"""
+    ex, ey, major, minor = prm
+    p, q = dx * ex + dy * ey, dy * ex - dx * ey
+    bp, aq = minor * minor * p, major * major * q
+    gauge = np.sqrt(np.square(minor * p) + np.square(major * q))  # A B g
+    grad = np.sqrt(bp * bp + aq * aq) + 1e-3 * minor * minor
+    distance = (gauge - major * minor) * (gauge + 1e-3 * minor) / grad
+    return distance, (bp * ex - aq * ey) / grad, (bp * ey + aq * ex) / grad
+
+
+def _capsule_distance(dx, dy, prm):
+    """Exact signed distance to a capsule and the outward unit normal. [pixel]"""
+    x0, y0, ex, ey, inverse, radius = prm[:6]
+    rx, ry = dx - x0, dy - y0
+    t = np.clip((rx * ex + ry * ey) * inverse, 0, 1)
+    qx, qy = rx - t * ex, ry - t * ey
+    length = np.sqrt(qx * qx + qy * qy) + 1e-6
+    return length - radius, qx / length, qy / length
+
+
+def _capsule_select(dx, dy, prm):
+    """1 where a pixel centre projects onto the piece's stretch [t_lo, t_hi) of the axis."""
+    x0, y0, ex, ey, inverse, _, t_lo, t_hi = prm
+    t = ((dx - x0) * ex + (dy - y0) * ey) * inverse
+    return (t >= t_lo) & (t < t_hi)
+
+
+def _square_cdf(t, a, b):
+    """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
+    b = min(|nx|, |ny|): the CDF of a trapezoid. [dimensionless]"""
+    s = np.abs(t)
+    tail = np.where(s <= 0.5 * (a - b), 0.5 - s / a,
+                    np.square(np.maximum(0.5 * (a + b) - s, 0)) / (2 * a * b + 1e-12))
+    return np.where(t < 0, tail, 1 - tail)
+
 
 
 def _reference_scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
@@ -429,3 +467,45 @@ def test_compiled_rasteriser_matches_the_array_one_on_a_grove():
         grid = Grid.from_window(grove_bounds(grove, flutter, sun=sun, plane_height=grove.params.height), pixel)
         new, old = rasterize_transmittance(shapes, grid), reference_rasterize(shapes, grid)
         assert np.abs(new - old).max() <= 1e-3
+
+
+def reference_fragments(shapes, grid, *, period=None):
+    """coverage_fragments by the former array rasteriser: (pixel, coverage, shape)."""
+    rows, cols = grid.shape
+    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
+    out = []
+    (*ellipses, owner), (*capsules, source) = _ellipses(shapes, grid), _capsule_pieces(shapes, grid)
+    for primitive, offset in (((*ellipses, _ellipse_distance, None, owner), 0),
+                              ((*capsules, _capsule_distance, _capsule_select, source), len(shapes.center))):
+        _reference_scatter(*primitive, shape=grid.shape, period=period_px, out=out, offset=offset)
+    flat = np.concatenate([f for f, _, _ in out])
+    weight = np.concatenate([w for _, w, _ in out])
+    label = np.concatenate([s for _, _, s in out])
+    row, col = np.divmod(flat, cols + 1)
+    keep = (row < rows) & (col < cols) & (weight > 0)
+    return row[keep] * cols + col[keep], (-np.expm1(-weight[keep])).astype(np.float32), label[keep]
+
+
+@pytest.mark.parametrize("period", [None, (2.3, 1.7)])
+def test_coverage_fragments_match_the_array_rasteriser(period):
+    rng = np.random.default_rng(12)
+    leaves = random_leaves(rng, 1500, low=-0.5, high=4.5, pixel=0.04)
+    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
+    shapes = Shapes(leaves.center, leaves.axis_a, leaves.axis_b, wood.start, wood.end, wood.radius)
+    grid = Grid((-0.13, 4.21), 0.037, (120, 110))
+    pixel, coverage, shape = coverage_fragments(shapes, grid, period=period)
+    assert pixel.dtype == np.int64 and coverage.dtype == np.float32 and shape.dtype == np.int64
+    assert np.all((coverage > 0) & (coverage < 1)) and np.all((pixel >= 0) & (pixel < 120 * 110))
+    ref_pixel, ref_coverage, ref_shape = reference_fragments(shapes, grid, period=period)
+    cells = grid.shape[0] * grid.shape[1]
+    key, ref_key = shape * cells + pixel, ref_shape * cells + ref_pixel
+    if period is None:  # one fragment per shape and pixel
+        assert len(np.unique(key)) == len(key)
+    union = np.union1d(key, ref_key)
+    new = np.bincount(np.searchsorted(union, key), weights=coverage, minlength=len(union))
+    old = np.bincount(np.searchsorted(union, ref_key), weights=ref_coverage, minlength=len(union))
+    assert np.abs(new - old).max() <= 1e-3
+    # the fragments multiply to the transmittance
+    product = np.ones(cells)
+    np.multiply.at(product, pixel, 1.0 - coverage.astype(np.float64))
+    assert np.allclose(product.reshape(grid.shape), rasterize_transmittance(shapes, grid, period=period), atol=1e-6)
