@@ -211,7 +211,8 @@ def _run_render(args) -> int:
     if args.output is not None:
         config = replace(config, output=replace(config.output, folder=Path(args.output).absolute()))
     if args.preview:
-        config = preview(config)
+        full, config = config, preview(config)
+        print(_preview_line(full, config), flush=True)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     check_folder(config.output.folder)
     summary = render_run(config, frames=frames, store=Cache(cache_dir(args.cache).absolute()),
@@ -221,6 +222,16 @@ def _run_render(args) -> int:
     print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
     return 0
+
+
+def _preview_line(full, quick) -> str:
+    """One line: what a preview changed from the full render."""
+    changes = [f"{quick.camera.resolution[0]} x {quick.camera.resolution[1]} px",
+               f"ground pixels {quick.ground.pixel:g} m (full: {full.ground.pixel:g})",
+               f"the sun disc {quick.render.sun_cells} cells across (full: {full.render.sun_cells})"]
+    if quick.canopy.cycle != full.canopy.cycle:
+        changes.append(f"a flutter cycle of {quick.canopy.cycle} frames, faster (full: {full.canopy.cycle})")
+    return f"sunshade: preview: {', '.join(changes)}; every leaf and the sky as in the full render"
 
 
 class _Progress:
