@@ -11,15 +11,8 @@ from __future__ import annotations
 
 import math
 
-from collections import namedtuple
-
 import numpy as np
 from numba import njit
-
-Out = namedtuple("Out", "emit transmittance pixel cover shape")
-"""Where the coverages go: emit False multiplies ``transmittance`` (rows, cols) float64 by
-1 - c; emit True appends fragments (flat pixel int64, coverage float32, shape int64) to the
-arrays ``pixel``, ``cover``, ``shape`` (``transmittance`` then only gives the raster's shape)."""
 
 
 @njit(cache=True, nogil=True)
@@ -93,17 +86,26 @@ def _pixel_cover(buf, w, k, r, c):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _deposit(out, row, col, cover, shape, count):
-    """One pixel's coverage, clipped just below 1: out.transmittance[row, col] multiplied by
-    1 - cover, or with out.emit a fragment appended at ``count``. Returns the new count."""
-    if cover > 0:
-        cover = min(cover, _OPAQUE)
-        if out.emit:
-            out.pixel[count] = row * out.transmittance.shape[1] + col
-            out.cover[count] = cover
-            out.shape[count] = shape
-            return count + 1
-        out.transmittance[row, col] *= 1.0 - float(cover)
+def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
+    """The coverages of a w x h box at (x0, y0), from its sub-samples ``buf``, clipped just
+    below 1: transmittance[row, col] multiplied by 1 - cover, or, where ``fragments`` (pixel,
+    coverage, shape) has room, fragments appended at ``count``. Returns the new count."""
+    pixel, coverage, source = fragments
+    if pixel.shape[0]:
+        for r in range(h):
+            for c in range(w):
+                cover = _pixel_cover(buf, w, k, r, c)
+                if cover > 0:
+                    pixel[count] = (y0 + r) * transmittance.shape[1] + x0 + c
+                    coverage[count] = min(cover, _OPAQUE)
+                    source[count] = shape
+                    count += 1
+    else:
+        for r in range(h):
+            for c in range(w):
+                cover = _pixel_cover(buf, w, k, r, c)
+                if cover > 0:
+                    transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE))
     return count
 
 
@@ -132,16 +134,18 @@ def _grown(buffer, size):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(center, half, index, prm, feature, thickness, most, out, owner, count):
-    """Every ellipse's coverage c of every pixel of its box, into ``out`` (see ``Out``): the
-    transmittance multiplied by 1 - c, or fragments appended from ``count`` (returns the count).
+def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
+    """Every ellipse's coverage c of every pixel of its box: ``transmittance`` (rows, cols)
+    float64 multiplied by 1 - c, or, if the arrays ``fragments`` (flat pixel int64, coverage
+    float32, shape int64) are not empty, fragments appended from ``count`` (returns the count;
+    ``transmittance`` then only gives the raster's shape).
 
     center, half (m, 2) float64: the boxes' centres and half-sizes (u, v) [pixel], in the order
     drawn (translates of a periodic canopy included); index (m,): the ellipse of each, into
     prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,)
     (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most: the most
     sub-samples of one box before k is lowered."""
-    rows, cols = out.transmittance.shape
+    rows, cols = transmittance.shape
     dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
     for ii in range(center.shape[0]):
         i = index[ii]
@@ -168,18 +172,16 @@ def ellipses(center, half, index, prm, feature, thickness, most, out, owner, cou
             inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
             d = (gauge - ab) * (gauge + eps) * inv
             buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
-        for r in range(h):
-            for c in range(w):
-                count = _deposit(out, y0 + r, x0 + c, _pixel_cover(buf, w, k, r, c), owner[i], count)
+        count = _deposit(buf, w, h, k, x0, y0, transmittance, fragments, owner[i], count)
     return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def capsules(center, half, index, prm, feature, thickness, most, out, owner, count):
+def capsules(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
-    rows, cols = out.transmittance.shape
+    rows, cols = transmittance.shape
     dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
     for ii in range(center.shape[0]):
         i = index[ii]
@@ -202,11 +204,15 @@ def capsules(center, half, index, prm, feature, thickness, most, out, owner, cou
             inv = np.float32(1.0) / length
             buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
         for r in range(h):
-            # the piece's stretch of the axis, judged at pixel centres in float64 as before
+            # only the pixels of the piece's stretch of the axis, judged at their centres in
+            # float64 as before: the others' sub-samples are cleared
             cy = float(r) + 0.5 - float(ry) - float(y0)
             for c in range(w):
                 cx = float(c) + 0.5 - float(rx) - float(x0)
                 t = (cx * float(ex) + cy * float(ey)) * float(inverse)
-                if t >= float(t_lo) and t < float(t_hi):
-                    count = _deposit(out, by + r, bx + c, _pixel_cover(buf, w, k, r, c), owner[i], count)
+                if not (t >= float(t_lo) and t < float(t_hi)):
+                    for sy in range(k):
+                        for sx in range(k):
+                            buf[(r * k + sy) * w * k + c * k + sx] = 0.0
+        count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
     return count

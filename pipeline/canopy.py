@@ -482,18 +482,14 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
             half = half[index]
         parts.append((kernel, center, half, index, params.astype(np.float32), feature, thickness,
                       primitive[-1] + offset))
-    if emit:
-        size = sum(_raster.box_pixels(part[1], part[2], rows, cols) for part in parts)
-        out = _raster.Out(True, np.empty((rows, cols)), np.empty(size, np.int64), np.empty(size, np.float32),
-                          np.empty(size, np.int64))
-    else:
-        out = _raster.Out(False, np.ones((rows, cols)), np.empty(0, np.int64), np.empty(0, np.float32),
-                          np.empty(0, np.int64))
+    size = sum(_raster.box_pixels(part[1], part[2], rows, cols) for part in parts) if emit else 0
+    fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
+    transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
     for kernel, *arrays, owner in parts:
-        count = kernel(*arrays, 16 * _CHUNK, out, owner, count)
+        count = kernel(*arrays, 16 * _CHUNK, transmittance, fragments, owner, count)
     if emit:
-        return out.pixel[:count], out.cover[:count], out.shape[:count]
-    return out.transmittance.astype(np.float32)
+        return tuple(f[:count] for f in fragments)
+    return transmittance.astype(np.float32)
 
 
 def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
