@@ -293,7 +293,7 @@ PREVIEW_SCALE = 4
 """A preview's camera has this many times fewer pixels across, its ground pixels are this many
 times larger."""
 PREVIEW_SUN_CELLS = 6
-PREVIEW_CYCLE = 12
+PREVIEW_CYCLE = 8
 """A preview's procedural leaves flutter through at most this many cycle frames (faster than in
 the full render): the cycle phase, a mask and its spectra per cycle frame, shrinks with it."""
 
@@ -302,7 +302,7 @@ def preview(config: Config) -> Config:
     """The config made small and fast for a first look: a quarter of the camera's resolution,
     ground pixels four times larger (less where a periodic tile must stay a whole number of
     them), the sun disc 6 cells across (imported foreground passes keep the camera's
-    resolution), a flutter cycle of at most 12 frames for procedural trees (not with imported
+    resolution), a flutter cycle of at most 8 frames for procedural trees (not with imported
     passes, one per cycle frame), the run in the ``preview`` folder inside the output folder.
     Everything else, every leaf and the sky included, is kept, so the crescents and flecks
     of the full render show (docs/accuracy.md, "Speed: preview and cycle phase")."""
