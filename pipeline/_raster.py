@@ -216,3 +216,38 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
                             buf[(r * k + sy) * w * k + c * k + sx] = 0.0
         count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
     return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _turn(v, k, c, s, out):
+    """Rodrigues: ``v`` (3,) turned about the unit axis ``k`` (3,) by the angle of cosine c and
+    sine s, into ``out`` (3,)."""
+    dot = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
+    x = v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * dot
+    y = v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * dot
+    z = v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * dot
+    out[0], out[1], out[2] = x, y, z
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase, omega, swing, twist):
+    """canopy.leaves_at in one pass over the leaves: (center, axis_u, axis_v) (n, 3) [m]."""
+    n = center.shape[0]
+    c_out, u_out, v_out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    length, turned, rel = np.empty(3), np.empty(3), np.empty(3)
+    for i in range(n):
+        norm = math.sqrt(axis_u[i, 0] ** 2 + axis_u[i, 1] ** 2 + axis_u[i, 2] ** 2)
+        for d in range(3):
+            length[d] = axis_u[i, d] / norm
+        angle = twist * math.sin(omega + twist_phase[i])
+        _turn(axis_v[i], length, math.cos(angle), math.sin(angle), turned)
+        angle = swing * math.sin(omega + swing_phase[i])
+        c, s = math.cos(angle), math.sin(angle)
+        for d in range(3):
+            rel[d] = center[i, d] - pivot[i, d]
+        _turn(rel, swing_axis[i], c, s, c_out[i])
+        for d in range(3):
+            c_out[i, d] += pivot[i, d]
+        _turn(axis_u[i], swing_axis[i], c, s, u_out[i])
+        _turn(turned, swing_axis[i], c, s, v_out[i])
+    return c_out, u_out, v_out
