@@ -251,3 +251,28 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
         _turn(axis_u[i], swing_axis[i], c, s, u_out[i])
         _turn(turned, swing_axis[i], c, s, v_out[i])
     return c_out, u_out, v_out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
+    """canopy._ellipses in one pass: ellipses of centre ``center`` and conjugate semi-axes
+    ``axis_a``, ``axis_b`` (n, 2) [m] in the pixel units of a grid of ``origin`` and ``pixel``
+    [m]: (centre (n, 2), box half-size (n, 2), (major unit vector, A, max(B, 1e-4)) (n, 4), B
+    (n,), 2 B (n,)) [pixel]."""
+    n = center.shape[0]
+    c_px, half, prm = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 4))
+    minor_out, thick = np.empty(n), np.empty(n)
+    for i in range(n):
+        a0, a1 = axis_a[i, 0] / pixel, -axis_a[i, 1] / pixel
+        b0, b1 = axis_b[i, 0] / pixel, -axis_b[i, 1] / pixel
+        p, s = a0 * a0 + b0 * b0, a1 * a1 + b1 * b1
+        q = a0 * a1 + b0 * b1
+        major = math.sqrt(0.5 * (p + s) + math.hypot(0.5 * (p - s), q))
+        minor = abs(a0 * b1 - a1 * b0) / max(major, 1e-30)
+        angle = 0.5 * math.atan2(2 * q, p - s)
+        c_px[i, 0] = (center[i, 0] - origin_x) / pixel
+        c_px[i, 1] = (origin_y - center[i, 1]) / pixel
+        half[i, 0], half[i, 1] = math.sqrt(p), math.sqrt(s)
+        prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3] = math.cos(angle), math.sin(angle), major, max(minor, 1e-4)
+        minor_out[i], thick[i] = minor, 2 * minor
+    return c_px, half, prm, minor_out, thick

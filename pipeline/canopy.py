@@ -516,17 +516,12 @@ def _pixels(points, grid: Grid):
 
 def _ellipses(shapes: Shapes, grid: Grid):
     """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
-    feature size B, thickness 2B, each ellipse's index."""
-    a = shapes.axis_a * [1.0, -1.0] / grid.pixel
-    b = shapes.axis_b * [1.0, -1.0] / grid.pixel
-    p, s = a[:, 0] ** 2 + b[:, 0] ** 2, a[:, 1] ** 2 + b[:, 1] ** 2
-    q = a[:, 0] * a[:, 1] + b[:, 0] * b[:, 1]
-    major = np.sqrt(0.5 * (p + s) + np.hypot(0.5 * (p - s), q))
-    minor = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / np.maximum(major, 1e-30)
-    angle = 0.5 * np.arctan2(2 * q, p - s)
-    params = np.column_stack([np.cos(angle), np.sin(angle), major, np.maximum(minor, 1e-4)])
-    return (_pixels(shapes.center, grid), np.sqrt(np.column_stack([p, s])), params, minor, 2 * minor,
-            np.arange(len(minor)))
+    feature size B, thickness 2B, each ellipse's index. (Compiled: _raster.ellipse_params.)"""
+    from . import _raster
+
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (shapes.center, shapes.axis_a, shapes.axis_b)]
+    return (*_raster.ellipse_params(*arrays, float(grid.origin[0]), float(grid.origin[1]), float(grid.pixel)),
+            np.arange(len(shapes.center)))
 
 
 def _capsule_pieces(shapes: Shapes, grid: Grid):
