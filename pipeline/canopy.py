@@ -349,21 +349,15 @@ def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
     """The leaves at ``frame`` (any int): each twists about its length axis by
     twist sin(2 pi frame / cycle + twist_phase) [rad], then swings about its horizontal axis
     through its stem by swing sin(2 pi frame / cycle + swing_phase) [rad]. Exactly periodic:
-    the frame is reduced modulo ``cycle`` first."""
+    the frame is reduced modulo ``cycle`` first. (Compiled: pipeline/_raster.py, ``flutter``.)"""
+    from . import _raster
+
     omega = 2 * np.pi * np.mod(frame, flutter.cycle) / flutter.cycle
     leaves = grove.leaves
-    length_axis = _unit(leaves.axis_u)
-    axis_v = _rotate(leaves.axis_v, length_axis, flutter.twist * np.sin(omega + grove.twist_phase))
-    swing = flutter.swing * np.sin(omega + grove.swing_phase)
-    center = grove.pivot + _rotate(leaves.center - grove.pivot, grove.swing_axis, swing)
-    return Leaves(center, _rotate(leaves.axis_u, grove.swing_axis, swing),
-                  _rotate(axis_v, grove.swing_axis, swing))
-
-
-def _rotate(v, axis, angle):
-    """Rodrigues: vectors v (n, 3) turned by ``angle`` (n,) [rad] about unit ``axis`` (n, 3)."""
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=1, keepdims=True) * (1 - c)
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (
+        leaves.center, leaves.axis_u, leaves.axis_v, grove.pivot, grove.swing_axis, grove.swing_phase,
+        grove.twist_phase)]
+    return Leaves(*_raster.flutter(*arrays, float(omega), float(flutter.swing), float(flutter.twist)))
 
 
 def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: float) -> Shapes:
@@ -433,9 +427,7 @@ def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun, pla
 # ||nx| - |ny||), so straight edges at any angle are exact and only curvature is sampled.
 # ---------------------------------------------------------------------------------------------
 
-_CHUNK = 1 << 17  # samples evaluated at once [count]
-_OPAQUE = np.float32(1.0 - 2.0**-20)  # coverage clipped below 1 before -log(1 - c)
-_BUCKETS = np.unique(np.ceil(np.outer(2.0 ** np.arange(20), [1.0, 1.25, 1.5, 1.75]))).astype(np.int64)
+_CHUNK = 1 << 17  # a box of more than 16 _CHUNK samples gets fewer per pixel [count]
 
 
 def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.ndarray:
@@ -443,22 +435,48 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
 
     Each shape covers a fraction c_i of a pixel's area (box filter; see the comment above for the
     method). Shapes combine as independent occluders: the pixel's transmittance is the product of
-    (1 - c_i), accumulated as the sum of -log(1 - c_i) with c_i clipped just below 1, so a fully
-    covered pixel is 0 (to 1e-6) and two disjoint shapes each covering half a pixel give 0.25,
-    not 0 (a pixel-scale statistical choice: overlaps of shapes are not resolved below a pixel).
+    (1 - c_i) in float64 with c_i clipped just below 1, so a fully covered pixel is 0 (to 1e-6)
+    and two disjoint shapes each covering half a pixel give 0.25, not 0 (a pixel-scale
+    statistical choice: overlaps of shapes are not resolved below a pixel).
 
     period : (Px, Py) [m] or None; if given the shapes repeat with these periods and every
         translate that touches the grid is drawn (one tile or any window of a periodic forest).
+
+    The loops over shapes and their pixels are compiled (``pipeline/_raster.py``, numba), with
+    the coverages of ``coverage_fragments`` to float32 rounding (docs/accuracy.md).
     """
+    return _compiled(shapes, grid, period, emit=False)
+
+
+def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
+    """The compiled rasteriser (pipeline/_raster.py): the transmittance, or with ``emit`` the
+    fragments of ``coverage_fragments``."""
+    from . import _raster
+
     rows, cols = grid.shape
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
-    out = []
-    for primitive in (_ellipses(shapes, grid), _capsule_pieces(shapes, grid)):
-        _scatter(*primitive, shape=grid.shape, period=period_px, out=out)
-    flat = np.concatenate([f for f, _, _ in out]) if out else np.zeros(0, np.int64)
-    weight = np.concatenate([w for _, w, _ in out]) if out else np.zeros(0, np.float32)
-    optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
-    return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+    count = 0
+    parts = []
+    for primitive, kernel, offset in ((_ellipses(shapes, grid), _raster.ellipses, 0),
+                                      (_capsule_pieces(shapes, grid), _raster.capsules, len(shapes.center))):
+        center, half, params, feature, thickness = primitive[:5]
+        if period_px is None:
+            # row by row, for the cache (a radix sort of 16-bit rows)
+            index = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
+            center, half = center[index], half[index]
+        else:
+            index, center = _translates(center, half, period_px, grid.shape)
+            half = half[index]
+        parts.append((kernel, center, half, index, params.astype(np.float32), feature, thickness,
+                      primitive[-1] + offset))
+    size = sum(_raster.box_pixels(part[1], part[2], rows, cols) for part in parts) if emit else 0
+    fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
+    transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
+    for kernel, *arrays, owner in parts:
+        count = kernel(*arrays, 16 * _CHUNK, transmittance, fragments, owner, count)
+    if emit:
+        return tuple(f[:count] for f in fragments)
+    return transmittance.astype(np.float32)
 
 
 def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
@@ -471,20 +489,7 @@ def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
     Fragments are grouped by shape, not sorted; pixels outside the grid and zero coverages are
     dropped. period : as for ``rasterize_transmittance`` (every translate keeps its shape index).
     """
-    rows, cols = grid.shape
-    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
-    out = []
-    for primitive, offset in ((_ellipses(shapes, grid), 0), (_capsule_pieces(shapes, grid), len(shapes.center))):
-        _scatter(*primitive, shape=grid.shape, period=period_px, out=out, offset=offset)
-    if not out:
-        return np.zeros(0, np.int64), np.zeros(0, np.float32), np.zeros(0, np.int64)
-    flat = np.concatenate([f for f, _, _ in out])
-    weight = np.concatenate([w for _, w, _ in out])
-    source = np.concatenate([s for _, _, s in out])
-    row, col = np.divmod(flat, cols + 1)
-    keep = (row < rows) & (col < cols) & (weight > 0)
-    coverage = -np.expm1(-weight[keep])
-    return row[keep] * cols + col[keep], coverage.astype(np.float32), source[keep]
+    return _compiled(shapes, grid, period, emit=True)
 
 
 def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_height: float, grid: Grid,
@@ -511,29 +516,12 @@ def _pixels(points, grid: Grid):
 
 def _ellipses(shapes: Shapes, grid: Grid):
     """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
-    feature size B, thickness 2B, distance function, no selection, each ellipse's index."""
-    a = shapes.axis_a * [1.0, -1.0] / grid.pixel
-    b = shapes.axis_b * [1.0, -1.0] / grid.pixel
-    p, s = a[:, 0] ** 2 + b[:, 0] ** 2, a[:, 1] ** 2 + b[:, 1] ** 2
-    q = a[:, 0] * a[:, 1] + b[:, 0] * b[:, 1]
-    major = np.sqrt(0.5 * (p + s) + np.hypot(0.5 * (p - s), q))
-    minor = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / np.maximum(major, 1e-30)
-    angle = 0.5 * np.arctan2(2 * q, p - s)
-    params = np.column_stack([np.cos(angle), np.sin(angle), major, np.maximum(minor, 1e-4)])
-    return (_pixels(shapes.center, grid), np.sqrt(np.column_stack([p, s])), params, minor, 2 * minor,
-            _ellipse_distance, None, np.arange(len(minor)))
+    feature size B, thickness 2B, each ellipse's index. (Compiled: _raster.ellipse_params.)"""
+    from . import _raster
 
-
-def _ellipse_distance(dx, dy, prm):
-    """Approximate signed distance (g - 1) / |grad g| to an ellipse boundary, g the ellipse's
-    gauge (exact for circles, finite for needles), and the outward unit normal. [pixel]"""
-    ex, ey, major, minor = prm
-    p, q = dx * ex + dy * ey, dy * ex - dx * ey
-    bp, aq = minor * minor * p, major * major * q
-    gauge = np.sqrt(np.square(minor * p) + np.square(major * q))  # A B g
-    grad = np.sqrt(bp * bp + aq * aq) + 1e-3 * minor * minor
-    distance = (gauge - major * minor) * (gauge + 1e-3 * minor) / grad
-    return distance, (bp * ex - aq * ey) / grad, (bp * ey + aq * ex) / grad
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (shapes.center, shapes.axis_a, shapes.axis_b)]
+    return (*_raster.ellipse_params(*arrays, float(grid.origin[0]), float(grid.origin[1]), float(grid.pixel)),
+            np.arange(len(shapes.center)))
 
 
 def _capsule_pieces(shapes: Shapes, grid: Grid):
@@ -556,33 +544,7 @@ def _capsule_pieces(shapes: Shapes, grid: Grid):
     t_lo = np.where(i == 0, -np.inf, i / n)
     t_hi = np.where(i == n - 1, np.inf, (i + 1) / n)
     params = np.column_stack([p0[src] - center, axis[src], inverse, r, t_lo, t_hi])
-    return center, half, params, r, 2 * r, _capsule_distance, _capsule_select, src
-
-
-def _capsule_distance(dx, dy, prm):
-    """Exact signed distance to a capsule and the outward unit normal. [pixel]"""
-    x0, y0, ex, ey, inverse, radius = prm[:6]
-    rx, ry = dx - x0, dy - y0
-    t = np.clip((rx * ex + ry * ey) * inverse, 0, 1)
-    qx, qy = rx - t * ex, ry - t * ey
-    length = np.sqrt(qx * qx + qy * qy) + 1e-6
-    return length - radius, qx / length, qy / length
-
-
-def _capsule_select(dx, dy, prm):
-    """1 where a pixel centre projects onto the piece's stretch [t_lo, t_hi) of the axis."""
-    x0, y0, ex, ey, inverse, _, t_lo, t_hi = prm
-    t = ((dx - x0) * ex + (dy - y0) * ey) * inverse
-    return (t >= t_lo) & (t < t_hi)
-
-
-def _square_cdf(t, a, b):
-    """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid. [dimensionless]"""
-    s = np.abs(t)
-    tail = np.where(s <= 0.5 * (a - b), 0.5 - s / a,
-                    np.square(np.maximum(0.5 * (a + b) - s, 0)) / (2 * a * b + 1e-12))
-    return np.where(t < 0, tail, 1 - tail)
+    return center, half, params, r, 2 * r, src
 
 
 def _translates(center, half, period, shape):
@@ -597,62 +559,3 @@ def _translates(center, half, period, shape):
     nu = np.maximum(count[src, 0], 1)
     shift = np.column_stack([first[src, 0] + m % nu, first[src, 1] + m // nu]) * period
     return src, center[src] + shift
-
-
-def _scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
-             offset=None):
-    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage), label) of every
-    pixel of every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect
-    padding. The label is None, or with an ``offset`` the fragment's shape index ``offset + owner``."""
-    rows, cols = shape
-    source = None if offset is None else offset + owner
-    if period is not None:
-        src, center = _translates(center, half, period, shape)
-        half, params, feature, thickness = half[src], params[src], feature[src], thickness[src]
-        source = None if source is None else source[src]
-    lo = np.clip(np.floor(center - half), 0, [cols, rows]).astype(np.int64)
-    hi = np.clip(np.ceil(center + half), 0, [cols, rows]).astype(np.int64)
-    keep = np.all(hi > lo, axis=1)
-    center, lo, size = center[keep], lo[keep], (hi - lo)[keep]
-    params, feature, thickness = params[keep], feature[keep], thickness[keep]
-    source = None if source is None else source[keep]
-    if not len(center):
-        return
-    # k x k sub-samples: k = 1 for shapes at least 2.5 pixels thick (minor semi-axis or radius),
-    # 2 down to 0.8 pixel, 4 below; thin shapes get the second edge of their strip
-    sub = np.where(feature >= 2.5, 1, np.where(feature >= 0.8, 2, 4))
-    area = size.prod(axis=1)  # and fewer for huge boxes, to bound the memory of one block
-    sub = np.where(area * sub**2 > 16 * _CHUNK, np.where(area * 4 > 16 * _CHUNK, 1, 2), sub)
-    thin = thickness * sub < 1.5
-    block = _BUCKETS[np.minimum(np.searchsorted(_BUCKETS, size), len(_BUCKETS) - 1)]
-    block = np.maximum(block, size)
-    key = ((block[:, 1] * (1 << 20) + block[:, 0]) * 8 + sub) * 2 + thin
-    order = np.argsort(key, kind="stable")
-    starts = np.flatnonzero(np.diff(key[order], prepend=-1))
-    for group in np.split(order, starts[1:]):
-        w, h = block[group[0]]
-        k = int(sub[group[0]])
-        step = max(1, _CHUNK // (int(w) * int(h) * k * k))
-        for j in range(0, len(group), step):
-            idx = group[j:j + step]
-            rel = (center[idx] - lo[idx]).astype(np.float32)
-            prm = [c[:, None, None] for c in params[idx].astype(np.float32).T]
-            xs = ((np.arange(w * k, dtype=np.float32) + 0.5) / k)[None, None, :] - rel[:, 0, None, None]
-            ys = ((np.arange(h * k, dtype=np.float32) + 0.5) / k)[None, :, None] - rel[:, 1, None, None]
-            d, nx, ny = distance(xs, ys, prm)
-            nx, ny = np.abs(nx), np.abs(ny)
-            a, b = np.maximum(np.maximum(nx, ny), np.float32(0.7071), dtype=np.float32), np.minimum(nx, ny)
-            t = d * np.float32(-k)
-            cover = _square_cdf(t, a, b)
-            if thin[group[0]]:
-                cover -= _square_cdf(t - (thickness[idx] * k).astype(np.float32)[:, None, None], a, b)
-            if k > 1:
-                cover = cover.reshape(len(idx), h, k, w, k).mean(axis=(2, 4))
-            if select is not None:  # judged at pixel centres
-                cover = cover * select(np.arange(w) + 0.5 - rel[:, 0, None, None],
-                                       (np.arange(h) + 0.5)[:, None] - rel[:, 1, None, None], prm)
-            weight = -np.log1p(-np.clip(cover, 0, _OPAQUE))
-            r = np.where(np.arange(h) < size[idx, 1, None], lo[idx, 1, None] + np.arange(h), rows)
-            c = np.where(np.arange(w) < size[idx, 0, None], lo[idx, 0, None] + np.arange(w), cols)
-            label = None if source is None else np.repeat(source[idx], h * w)
-            out.append(((r[:, :, None] * (cols + 1) + c[:, None, :]).ravel(), weight.ravel(), label))

@@ -328,7 +328,8 @@ def _run_render(args) -> int:
         folder = _flag_path("--output", args.output).expanduser().absolute()
         config = replace(config, output=replace(config.output, folder=folder))
     if args.preview:
-        config = preview(config)
+        full, config = config, preview(config)
+        print(_preview_line(full, config), flush=True)
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     if args.verify:
         return _verify_run(config, store)
@@ -366,6 +367,16 @@ def _verify_run(config, store) -> int:
     print(f"sunshade: {len(checked.done)} of {count} frames whole, {len(checked.damaged)} "
           f"damaged, {len(checked.foreign)} foreign, {absent} not rendered; {config.output.folder}")
     return 1 if checked.damaged or checked.foreign else 0
+
+
+def _preview_line(full, quick) -> str:
+    """One line: what a preview changed from the full render."""
+    changes = [f"{quick.camera.resolution[0]} x {quick.camera.resolution[1]} px",
+               f"ground pixels {quick.ground.pixel:g} m (full: {full.ground.pixel:g})",
+               f"the sun disc {quick.render.sun_cells} cells across (full: {full.render.sun_cells})"]
+    if quick.canopy.cycle != full.canopy.cycle:
+        changes.append(f"a flutter cycle of {quick.canopy.cycle} frames, faster (full: {full.canopy.cycle})")
+    return f"sunshade: preview: {', '.join(changes)}; every leaf and the sky as in the full render"
 
 
 class _Progress:

@@ -316,14 +316,19 @@ PREVIEW_SCALE = 4
 """A preview's camera has this many times fewer pixels across, its ground pixels are this many
 times larger."""
 PREVIEW_SUN_CELLS = 6
+PREVIEW_CYCLE = 8
+"""A preview's procedural leaves flutter through at most this many cycle frames (faster than in
+the full render): the cycle phase, a mask and its spectra per cycle frame, shrinks with it."""
 
 
 def preview(config: Config) -> Config:
     """The config made small and fast for a first look: a quarter of the camera's resolution,
     ground pixels four times larger (less where a periodic tile must stay a whole number of
     them), the sun disc 6 cells across (imported foreground passes keep the camera's
-    resolution), the run in the ``preview`` folder inside the output
-    folder. Everything else, the canopy and the sky included, is kept."""
+    resolution), a flutter cycle of at most 8 frames for procedural trees (not with imported
+    passes, one per cycle frame), the run in the ``preview`` folder inside the output folder.
+    Everything else, every leaf and the sky included, is kept, so the crescents and flecks
+    of the full render show (docs/accuracy.md, "Speed: preview and cycle phase")."""
     ground = config.ground
     factor = PREVIEW_SCALE
     if config.canopy.layout == "periodic":
@@ -337,8 +342,12 @@ def preview(config: Config) -> Config:
     width, height = config.camera.resolution
     if config.foreground.model != "passes":  # imported passes keep their size
         width, height = max(2, width // PREVIEW_SCALE), max(2, height // PREVIEW_SCALE)
+    canopy = config.canopy
+    if canopy.trees is not None and config.foreground.model != "passes":
+        canopy = replace(canopy, flutter=replace(canopy.flutter, cycle=min(canopy.flutter.cycle, PREVIEW_CYCLE)))
     return replace(
         config,
+        canopy=canopy,
         ground=replace(ground, pixel=pixel, sun_pixel=sun_pixel),
         camera=replace(config.camera, resolution=(width, height)),
         render=replace(config.render, sun_cells=PREVIEW_SUN_CELLS),

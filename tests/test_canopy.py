@@ -69,6 +69,7 @@ from pipeline.canopy import (  # noqa: E402
     Leaves,
     Shapes,
     Wood,
+    coverage_fragments,
     grove_bounds,
     grove_mask,
     grow_grove,
@@ -291,3 +292,220 @@ def test_layers_split_the_grove_by_nearest_plane():
     product = np.prod([grove_mask(grove, flutter, 3, sun=sun, plane_height=8.0, grid=grid,
                                   select=(leaf_layer == i, wood_layer == i)) for i in range(3)], axis=0)
     assert np.allclose(product, whole, atol=1e-5)
+
+
+# --- the array rasteriser that the compiled one replaced, kept as its reference ------------------
+# (pipeline/canopy.py before the loops moved to pipeline/_raster.py, verbatim but for names; the
+# shapes' preparation, _ellipses, _capsule_pieces and _translates, is shared)
+
+from pipeline.canopy import _capsule_pieces, _ellipses, _translates  # noqa: E402
+
+_CHUNK = 1 << 17  # samples evaluated at once [count]
+_OPAQUE = np.float32(1.0 - 2.0**-20)  # coverage clipped below 1 before -log(1 - c)
+_BUCKETS = np.unique(np.ceil(np.outer(2.0 ** np.arange(20), [1.0, 1.25, 1.5, 1.75]))).astype(np.int64)
+
+
+def reference_rasterize(shapes, grid, *, period=None):
+    """Transmittance of ``shapes`` on ``grid`` by the former array rasteriser."""
+    rows, cols = grid.shape
+    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
+    out = []
+    (*ellipses, owner), (*capsules, source) = _ellipses(shapes, grid), _capsule_pieces(shapes, grid)
+    for primitive in ((*ellipses, _ellipse_distance, None, owner),
+                      (*capsules, _capsule_distance, _capsule_select, source)):
+        _reference_scatter(*primitive, shape=grid.shape, period=period_px, out=out)
+    flat = np.concatenate([f for f, _, _ in out]) if out else np.zeros(0, np.int64)
+    weight = np.concatenate([w for _, w, _ in out]) if out else np.zeros(0, np.float32)
+    optical = np.bincount(flat, weights=weight, minlength=(rows + 1) * (cols + 1))
+    return np.exp(-optical).reshape(rows + 1, cols + 1)[:rows, :cols].astype(np.float32)
+
+
+def _ellipse_distance(dx, dy, prm):
+    """Approximate signed distance (g - 1) / |grad g| to an ellipse boundary, g the ellipse's
+    gauge (exact for circles, finite for needles), and the outward unit normal. [pixel]"""
+    ex, ey, major, minor = prm
+    p, q = dx * ex + dy * ey, dy * ex - dx * ey
+    bp, aq = minor * minor * p, major * major * q
+    gauge = np.sqrt(np.square(minor * p) + np.square(major * q))  # A B g
+    grad = np.sqrt(bp * bp + aq * aq) + 1e-3 * minor * minor
+    distance = (gauge - major * minor) * (gauge + 1e-3 * minor) / grad
+    return distance, (bp * ex - aq * ey) / grad, (bp * ey + aq * ex) / grad
+
+
+def _capsule_distance(dx, dy, prm):
+    """Exact signed distance to a capsule and the outward unit normal. [pixel]"""
+    x0, y0, ex, ey, inverse, radius = prm[:6]
+    rx, ry = dx - x0, dy - y0
+    t = np.clip((rx * ex + ry * ey) * inverse, 0, 1)
+    qx, qy = rx - t * ex, ry - t * ey
+    length = np.sqrt(qx * qx + qy * qy) + 1e-6
+    return length - radius, qx / length, qy / length
+
+
+def _capsule_select(dx, dy, prm):
+    """1 where a pixel centre projects onto the piece's stretch [t_lo, t_hi) of the axis."""
+    x0, y0, ex, ey, inverse, _, t_lo, t_hi = prm
+    t = ((dx - x0) * ex + (dy - y0) * ey) * inverse
+    return (t >= t_lo) & (t < t_hi)
+
+
+def _square_cdf(t, a, b):
+    """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
+    b = min(|nx|, |ny|): the CDF of a trapezoid. [dimensionless]"""
+    s = np.abs(t)
+    tail = np.where(s <= 0.5 * (a - b), 0.5 - s / a,
+                    np.square(np.maximum(0.5 * (a + b) - s, 0)) / (2 * a * b + 1e-12))
+    return np.where(t < 0, tail, 1 - tail)
+
+
+
+def _reference_scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,
+             offset=None):
+    """Append (flat index in a (rows + 1, cols + 1) raster, -log(1 - coverage), label) of every
+    pixel of every shape's clipped box to ``out``; row ``rows`` and column ``cols`` collect
+    padding. The label is None, or with an ``offset`` the fragment's shape index ``offset + owner``."""
+    rows, cols = shape
+    source = None if offset is None else offset + owner
+    if period is not None:
+        src, center = _translates(center, half, period, shape)
+        half, params, feature, thickness = half[src], params[src], feature[src], thickness[src]
+        source = None if source is None else source[src]
+    lo = np.clip(np.floor(center - half), 0, [cols, rows]).astype(np.int64)
+    hi = np.clip(np.ceil(center + half), 0, [cols, rows]).astype(np.int64)
+    keep = np.all(hi > lo, axis=1)
+    center, lo, size = center[keep], lo[keep], (hi - lo)[keep]
+    params, feature, thickness = params[keep], feature[keep], thickness[keep]
+    source = None if source is None else source[keep]
+    if not len(center):
+        return
+    # k x k sub-samples: k = 1 for shapes at least 2.5 pixels thick (minor semi-axis or radius),
+    # 2 down to 0.8 pixel, 4 below; thin shapes get the second edge of their strip
+    sub = np.where(feature >= 2.5, 1, np.where(feature >= 0.8, 2, 4))
+    area = size.prod(axis=1)  # and fewer for huge boxes, to bound the memory of one block
+    sub = np.where(area * sub**2 > 16 * _CHUNK, np.where(area * 4 > 16 * _CHUNK, 1, 2), sub)
+    thin = thickness * sub < 1.5
+    block = _BUCKETS[np.minimum(np.searchsorted(_BUCKETS, size), len(_BUCKETS) - 1)]
+    block = np.maximum(block, size)
+    key = ((block[:, 1] * (1 << 20) + block[:, 0]) * 8 + sub) * 2 + thin
+    order = np.argsort(key, kind="stable")
+    starts = np.flatnonzero(np.diff(key[order], prepend=-1))
+    for group in np.split(order, starts[1:]):
+        w, h = block[group[0]]
+        k = int(sub[group[0]])
+        step = max(1, _CHUNK // (int(w) * int(h) * k * k))
+        for j in range(0, len(group), step):
+            idx = group[j:j + step]
+            rel = (center[idx] - lo[idx]).astype(np.float32)
+            prm = [c[:, None, None] for c in params[idx].astype(np.float32).T]
+            xs = ((np.arange(w * k, dtype=np.float32) + 0.5) / k)[None, None, :] - rel[:, 0, None, None]
+            ys = ((np.arange(h * k, dtype=np.float32) + 0.5) / k)[None, :, None] - rel[:, 1, None, None]
+            d, nx, ny = distance(xs, ys, prm)
+            nx, ny = np.abs(nx), np.abs(ny)
+            a, b = np.maximum(np.maximum(nx, ny), np.float32(0.7071), dtype=np.float32), np.minimum(nx, ny)
+            t = d * np.float32(-k)
+            cover = _square_cdf(t, a, b)
+            if thin[group[0]]:
+                cover -= _square_cdf(t - (thickness[idx] * k).astype(np.float32)[:, None, None], a, b)
+            if k > 1:
+                cover = cover.reshape(len(idx), h, k, w, k).mean(axis=(2, 4))
+            if select is not None:  # judged at pixel centres
+                cover = cover * select(np.arange(w) + 0.5 - rel[:, 0, None, None],
+                                       (np.arange(h) + 0.5)[:, None] - rel[:, 1, None, None], prm)
+            weight = -np.log1p(-np.clip(cover, 0, _OPAQUE))
+            r = np.where(np.arange(h) < size[idx, 1, None], lo[idx, 1, None] + np.arange(h), rows)
+            c = np.where(np.arange(w) < size[idx, 0, None], lo[idx, 0, None] + np.arange(w), cols)
+            label = None if source is None else np.repeat(source[idx], h * w)
+            out.append(((r[:, :, None] * (cols + 1) + c[:, None, :]).ravel(), weight.ravel(), label))
+
+
+def random_leaves(rng, n, *, low, high, pixel):
+    """Leaf-like ellipses of every size the renders meet: semi-axes from a tenth of a pixel to
+    eight pixels, aspects 0.02 to 1, skewed conjugate axes [m]."""
+    length = pixel * np.exp(rng.uniform(np.log(0.1), np.log(8.0), n))
+    angle = rng.uniform(0, np.pi, n)
+    u = np.column_stack([np.cos(angle), np.sin(angle)])
+    v = np.column_stack([-np.sin(angle), np.cos(angle)]) + rng.uniform(-0.5, 0.5, (n, 1)) * u
+    aspect = rng.uniform(0.02, 1.0, n)
+    return Shapes(rng.uniform(low, high, (n, 2)), length[:, None] * u, (length * aspect)[:, None] * v,
+                  *NO_WOOD)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_rasteriser_matches_the_array_one_shape_by_shape(seed):
+    # each shape alone: its coverage 1 - t of every pixel within 1e-3 of the pixel's area
+    rng = np.random.default_rng(seed)
+    grid = Grid((0.0, 3.0), 0.1, (30, 30))
+    shapes = [random_leaves(rng, 60, low=-0.2, high=3.2, pixel=0.1),
+              random_shapes(rng, 24, 8, low=-0.3, high=3.3, scale=0.6)]
+    for group in shapes:
+        for i in range(len(group.center)):
+            one = group.subset(leaves=[i], wood=[])
+            assert np.abs(rasterize_transmittance(one, grid) - reference_rasterize(one, grid)).max() <= 1e-3
+        for j in range(len(group.radius)):
+            one = group.subset(leaves=[], wood=[j])
+            assert np.abs(rasterize_transmittance(one, grid) - reference_rasterize(one, grid)).max() <= 1e-3
+
+
+@pytest.mark.parametrize("period", [None, (2.3, 1.7)])
+def test_compiled_rasteriser_matches_the_array_one_on_many_leaves(period):
+    rng = np.random.default_rng(9)
+    shapes = random_leaves(rng, 4000, low=-0.5, high=4.5, pixel=0.04)
+    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
+    shapes = Shapes(shapes.center, shapes.axis_a, shapes.axis_b, wood.start, wood.end, wood.radius)
+    for grid in (Grid((0.0, 4.0), 0.04, (100, 100)), Grid((-1.13, 5.21), 0.031, (170, 190))):
+        new, old = rasterize_transmittance(shapes, grid, period=period), reference_rasterize(shapes, grid, period=period)
+        assert new.dtype == np.float32 and new.shape == grid.shape
+        assert np.abs(new - old).max() <= 1e-3
+        assert np.abs(new - old).mean() <= 1e-6  # the same arithmetic: rounding apart
+
+
+def test_compiled_rasteriser_matches_the_array_one_on_a_grove():
+    grove = grow_grove(GroveParams(count=2, leaves_per_tree=3000, crown_radius=2.0, seed=4))
+    flutter, sun = FlutterParams(), (0.3, -0.2)
+    shapes = project(leaves_at(grove, flutter, 5), grove.wood, sun=sun, plane_height=grove.params.height)
+    for pixel in (0.05, 0.012):  # a coarse mask (thin leaves, 4 x 4 sub-samples) and a fine one
+        grid = Grid.from_window(grove_bounds(grove, flutter, sun=sun, plane_height=grove.params.height), pixel)
+        new, old = rasterize_transmittance(shapes, grid), reference_rasterize(shapes, grid)
+        assert np.abs(new - old).max() <= 1e-3
+
+
+def reference_fragments(shapes, grid, *, period=None):
+    """coverage_fragments by the former array rasteriser: (pixel, coverage, shape)."""
+    rows, cols = grid.shape
+    period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
+    out = []
+    (*ellipses, owner), (*capsules, source) = _ellipses(shapes, grid), _capsule_pieces(shapes, grid)
+    for primitive, offset in (((*ellipses, _ellipse_distance, None, owner), 0),
+                              ((*capsules, _capsule_distance, _capsule_select, source), len(shapes.center))):
+        _reference_scatter(*primitive, shape=grid.shape, period=period_px, out=out, offset=offset)
+    flat = np.concatenate([f for f, _, _ in out])
+    weight = np.concatenate([w for _, w, _ in out])
+    label = np.concatenate([s for _, _, s in out])
+    row, col = np.divmod(flat, cols + 1)
+    keep = (row < rows) & (col < cols) & (weight > 0)
+    return row[keep] * cols + col[keep], (-np.expm1(-weight[keep])).astype(np.float32), label[keep]
+
+
+@pytest.mark.parametrize("period", [None, (2.3, 1.7)])
+def test_coverage_fragments_match_the_array_rasteriser(period):
+    rng = np.random.default_rng(12)
+    leaves = random_leaves(rng, 1500, low=-0.5, high=4.5, pixel=0.04)
+    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
+    shapes = Shapes(leaves.center, leaves.axis_a, leaves.axis_b, wood.start, wood.end, wood.radius)
+    grid = Grid((-0.13, 4.21), 0.037, (120, 110))
+    pixel, coverage, shape = coverage_fragments(shapes, grid, period=period)
+    assert pixel.dtype == np.int64 and coverage.dtype == np.float32 and shape.dtype == np.int64
+    assert np.all((coverage > 0) & (coverage < 1)) and np.all((pixel >= 0) & (pixel < 120 * 110))
+    ref_pixel, ref_coverage, ref_shape = reference_fragments(shapes, grid, period=period)
+    cells = grid.shape[0] * grid.shape[1]
+    key, ref_key = shape * cells + pixel, ref_shape * cells + ref_pixel
+    if period is None:  # one fragment per shape and pixel
+        assert len(np.unique(key)) == len(key)
+    union = np.union1d(key, ref_key)
+    new = np.bincount(np.searchsorted(union, key), weights=coverage, minlength=len(union))
+    old = np.bincount(np.searchsorted(union, ref_key), weights=ref_coverage, minlength=len(union))
+    assert np.abs(new - old).max() <= 1e-3
+    # the fragments multiply to the transmittance
+    product = np.ones(cells)
+    np.multiply.at(product, pixel, 1.0 - coverage.astype(np.float64))
+    assert np.allclose(product.reshape(grid.shape), rasterize_transmittance(shapes, grid, period=period), atol=1e-6)

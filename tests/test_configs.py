@@ -7,6 +7,7 @@ import pytest
 
 from pipeline import io
 from pipeline.cli import main
+from pipeline.config import PREVIEW_CYCLE, load_config, preview
 
 CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
 
@@ -27,9 +28,24 @@ def test_config_checks_and_renders_two_preview_frames(config, cache, tmp_path, c
     assert ": ok: " in capsys.readouterr().out
     assert main(["render", str(config), "--preview", "--frames", "0-1", "--output", str(tmp_path),
                  "--cache", str(cache)]) == 0
-    assert "2 frames rendered" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "2 frames rendered" in out
+    assert len([line for line in out.splitlines() if line.startswith("sunshade: preview: ")]) == 1
     for frame in (0, 1):
         picture = io.read_image(tmp_path / "preview" / f"{config.stem}.{frame:04d}.png")
         assert picture.shape[1] <= 400 and picture.std() > 0.01  # small, and not a flat colour
         radiance = io.read_image(tmp_path / "preview" / f"{config.stem}.{frame:04d}.exr")
         assert np.all(np.isfinite(radiance)) and radiance.max() > 0
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=[path.stem for path in CONFIGS])
+def test_a_preview_keeps_every_leaf_and_the_sky(config):
+    full = load_config(config)
+    quick = preview(full)
+    assert quick.canopy.trees == full.canopy.trees and quick.sky == full.sky
+    assert quick.canopy.layers == full.canopy.layers and quick.animation == full.animation
+    if full.canopy.trees is not None and full.foreground.model != "passes":
+        assert quick.canopy.cycle == min(full.canopy.cycle, PREVIEW_CYCLE)
+    else:
+        assert quick.canopy.cycle == full.canopy.cycle
+    assert quick.camera.resolution[0] <= full.camera.resolution[0] // 4
