@@ -53,7 +53,6 @@ import enum
 import hashlib
 import json
 import math
-import mmap
 import os
 import re
 import secrets
@@ -241,12 +240,13 @@ def _crc32_of(buffer) -> int:
 
 
 def _file_crc32(path: Path) -> int:
-    """CRC-32 of a whole file's bytes, read through a memory map."""
+    """CRC-32 of a whole file's bytes, read in chunks (not through a memory map: an exception
+    raised while a map's buffer is exported made its close raise BufferError instead)."""
+    crc = 0
     with open(path, "rb") as f:
-        if os.fstat(f.fileno()).st_size == 0:
-            return 0
-        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
-            return _crc32_of(mapped)
+        while chunk := f.read(_CRC_CHUNK):
+            crc = zlib.crc32(chunk, crc)
+    return crc
 
 
 def _meta_crc32(meta: Mapping) -> int:
