@@ -350,7 +350,8 @@ def _run_render(args) -> int:
         remove_if_empty(new)
         raise
     made = f"; video {summary.video}" if summary.video else ""
-    print(f"sunshade: {len(summary.rendered)} frames rendered, {len(summary.skipped)} already done, "
+    count = len(summary.rendered)
+    print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
     return 0
 
