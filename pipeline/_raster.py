@@ -133,6 +133,18 @@ def _grown(buffer, size):
     return buffer if buffer.shape[0] >= size else np.empty(2 * size, np.float32)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _next_box(ii, center, half, index, feature, thickness, most, transmittance, samples):
+    """The ii-th box to draw, as ``_box`` gives it: (shape index i, col, row, width, height, k,
+    thick, the sample buffers ``samples`` (x, y, coverage) grown to hold its sub-samples)."""
+    i = index[ii]
+    rows, cols = transmittance.shape
+    x0, y0, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
+                                  feature[i], thickness[i], rows, cols, most)
+    n = w * h * k * k
+    return i, x0, y0, w, h, k, thick, (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
     """Every ellipse's coverage c of every pixel of its box: ``transmittance`` (rows, cols)
@@ -145,16 +157,13 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
     prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,)
     (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most: the most
     sub-samples of one box before k is lowered."""
-    rows, cols = transmittance.shape
-    dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
+    samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
     for ii in range(center.shape[0]):
-        i = index[ii]
-        x0, y0, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
-                                      feature[i], thickness[i], rows, cols, most)
+        i, x0, y0, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
+                                                       transmittance, samples)
         if w == 0:
             continue
-        n = w * h * k * k
-        dxs, dys, buf = _grown(dxs, n), _grown(dys, n), _grown(buf, n)
+        dxs, dys, buf = samples
         kf = np.float32(k)
         ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
         ab, bb, aa = major * minor, minor * minor, major * major
@@ -181,18 +190,15 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
-    rows, cols = transmittance.shape
-    dxs, dys, buf = np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32)
+    samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
     for ii in range(center.shape[0]):
-        i = index[ii]
-        bx, by, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
-                                      feature[i], thickness[i], rows, cols, most)
+        i, bx, by, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
+                                                       transmittance, samples)
+        rx, ry = np.float32(center[ii, 0] - bx), np.float32(center[ii, 1] - by)
         if w == 0:
             continue
-        n = w * h * k * k
-        dxs, dys, buf = _grown(dxs, n), _grown(dys, n), _grown(buf, n)
+        dxs, dys, buf = samples
         kf = np.float32(k)
-        rx, ry = np.float32(center[ii, 0] - bx), np.float32(center[ii, 1] - by)
         x0, y0, ex, ey, inverse, radius, t_lo, t_hi = (prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3],
                                                       prm[i, 4], prm[i, 5], prm[i, 6], prm[i, 7])
         m = _samples(rx, ry, w, h, k, dxs, dys)
