@@ -109,16 +109,16 @@ def cie_types() -> None:
 
 
 def configs() -> None:
-    from pipeline import render
-    from pipeline.config import load_config
+    from pipeline.lighting import reference_lighting
+    from pipeline.plan import load, plan_run
 
     print("| config | sun elevation | direct horizontal klx | diffuse klx | (sun + sky) / sky |")
     print("|---|---|---|---|---|")
     for path in sorted((ROOT / "configs").glob("*.yaml")):
-        config = load_config(path)
+        config = load(path)
         if config.sky.model not in ("cie", "preetham"):
             continue
-        light = render.reference_lighting(config, render.plan_run(config))
+        light = reference_lighting(plan_run(config))
         direct = light.sun_irradiance * light.sun_direction[2] @ LUMA
         diffuse = light.sky_irradiance @ LUMA
         elevation = np.degrees(np.arcsin(light.sun_direction[2]))

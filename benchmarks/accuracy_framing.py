@@ -22,10 +22,12 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import camera, composite, render  # noqa: E402
+from pipeline import camera, composite  # noqa: E402
 from pipeline.cache import Cache  # noqa: E402
 from pipeline.composite import REC709_LUMINANCE  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
+from pipeline.frame import render_frame  # noqa: E402
+from pipeline.inputs import load_sky  # noqa: E402
+from pipeline.plan import load, plan_run  # noqa: E402
 
 spec = importlib.util.spec_from_file_location("test_framing", ROOT / "tests" / "test_framing.py")
 scenes = importlib.util.module_from_spec(spec)
@@ -36,13 +38,13 @@ def main():
     folder = Path(tempfile.mkdtemp(prefix="framing-"))
     store = Cache(folder / "cache")
     for site in scenes.SITES:
-        config = load_config(scenes.write(folder, scenes.dapple_scene(site), f"{site}.yaml"))
-        plan = render.plan_run(config)
-        result = render.render_frame(config, plan=plan, store=store)
+        config = load(scenes.write(folder, scenes.dapple_scene(site), f"{site}.yaml"))
+        plan = plan_run(config)
+        result = render_frame(plan, store=store)
         *_, ground_fraction = camera.ground_hits(plan.camera)
         ground = (result.radiance @ REC709_LUMINANCE)[ground_fraction >= 1.0]
         p95, p5 = np.percentile(ground, [95, 5])
-        sky = render.load_sky(config.sky, result.scene)
+        sky = load_sky(config.sky, result.scene)
         open_ground = sky.sky_irradiance + result.sun_fraction * sky.total_sun_irradiance()
         possible = float(open_ground @ REC709_LUMINANCE) / float(sky.sky_irradiance @ REC709_LUMINANCE)
         print(f"{site}: sun {np.degrees(result.scene.sun.elevation):.1f} deg, S {result.sun_fraction:.3f}, "
@@ -58,13 +60,13 @@ def main():
     config["camera"]["resolution"] = [160, 90]
     config["ground"]["albedo"] = str(ROOT / "configs" / "assets" / "sand.png")
     config["render"] = {"sun_cells": 6}
-    auto = load_config(scenes.write(folder, config, "dallas.yaml"))
-    fixed = load_config(scenes.write(folder, dict(config, camera=dict(config["camera"], exposure=1.5)),
+    auto = load(scenes.write(folder, config, "dallas.yaml"))
+    fixed = load(scenes.write(folder, dict(config, camera=dict(config["camera"], exposure=1.5)),
                                      "fixed.yaml"))
-    plan = render.plan_run(auto)
+    plan = plan_run(auto)
     for frame in (0, 80, 160, 200, 225, 232, 236, 237, 238):
-        a = render.render_frame(auto, frame=frame, plan=plan, store=store)
-        b = render.render_frame(fixed, frame=frame, store=store)
+        a = render_frame(plan, frame, store=store)
+        b = render_frame(plan_run(fixed), frame, store=store)
         print(f"dallas frame {frame} ({a.scene.when:%H:%M:%S} UTC, S {a.sun_fraction:.4f}): mean display "
               f"auto {composite.display(a.radiance, exposure=a.exposure).mean():.3f}, fixed 1.5 stops "
               f"{composite.display(b.radiance, exposure=b.exposure).mean():.3f}")

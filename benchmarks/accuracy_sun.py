@@ -7,7 +7,7 @@ The scene: a seeded canopy of random elliptic leaves (6 cm to 12 cm, about 11% o
 its gaps are pinholes for the sun) in an 18 m x 18 m mask image (a 6 m tile of 5 mm texels,
 repeated 3 x 3) at h = 8 m; the procedural sky, turbidity 3, the sun at 60 degrees elevation,
 azimuth 200, the moon 0.2 degrees right of it and 0.1 up (S = 0.48). It is rendered through
-``render.render_ground`` from a YAML config (the sun resolved on a 1 m fine window, 16 cells
+``ground.render_ground`` from a YAML config (the sun resolved on a 1 m fine window, 16 cells
 across the disc, 4.65 mm pixels; the sky on 20 mm pixels).
 
 The reference (tests/reference.py; no code from pipeline.shadow, no rasters) traces rays from
@@ -38,10 +38,12 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import cache, ephemeris, io, render  # noqa: E402
+from pipeline import cache, ephemeris, io  # noqa: E402
 from pipeline.composite import REC709_LUMINANCE  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc  # noqa: E402
+from pipeline.ground import render_ground  # noqa: E402
+from pipeline.inputs import load_sky  # noqa: E402
+from pipeline.plan import load, plan_run, scene_at  # noqa: E402
 from reference import (  # noqa: E402
     angle_between,
     image_transmittance,
@@ -99,7 +101,7 @@ def scene(folder):
         "animation": {"frames": 1},
     }
     (folder / "leaves.yaml").write_text(yaml.safe_dump(config))
-    return load_config(folder / "leaves.yaml"), mask
+    return load(folder / "leaves.yaml"), mask
 
 
 def pixel_strata(points, rays, pixel, rng):
@@ -118,7 +120,7 @@ def pixel_strata(points, rays, pixel, rng):
 
 def path_traced(config, mask, points, pixel, *, sun_n, sky_rays, rng):
     """Two independent estimates (2, points, 3) of the irradiance over each pixel. [klx]"""
-    sky = render.load_sky(config.sky, render.scene_at(config, 0))
+    sky = load_sky(config.sky, scene_at(config, 0))
     sun = config.sky.sun
     centre, right, up = tangent_frame(sun.azimuth, sun.elevation)
     moon = offset_direction(sun.azimuth, sun.elevation, *np.radians(MOON))
@@ -218,7 +220,7 @@ def main():
         store = cache.Cache(folder / "cache")
         config, mask = scene(folder)
         t = time.perf_counter()
-        result = render.render_ground(config, store=store)
+        result = render_ground(plan_run(config), store=store)
         render_s = time.perf_counter() - t
         grid = result.grid
         rng = np.random.default_rng(2024)

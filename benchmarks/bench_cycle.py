@@ -23,8 +23,9 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import cache, render  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
+from pipeline import cache  # noqa: E402
+from pipeline.cycle import cycle_params, cycle_phase, layer_masks  # noqa: E402
+from pipeline.plan import load, plan_run  # noqa: E402
 
 CONFIG = {
     "canopy": {"height": 8.0, "layout": "isolated",
@@ -63,8 +64,7 @@ def main() -> None:
         CONFIG["canopy"]["flutter"]["cycle"] = args.cycle
         path = work / "grove.yaml"
         path.write_text(yaml.safe_dump(CONFIG))
-        config = load_config(path)
-        plan = render.plan_run(config)
+        plan = plan_run(load(path))
         layer = plan.layers[0]
         store = cache.Cache(work / "cache")
         print(f"coarse window {plan.window.shape}, canopy mask {layer.canopy.shape} -> FFT "
@@ -72,26 +72,26 @@ def main() -> None:
               f"{layer.sun.mask.shape} -> FFT {layer.sun.fft_shape}")
         fft = bare_fft_seconds(layer.coarse.fft_shape) + bare_fft_seconds(layer.sun.fft_shape)
         t = time.perf_counter()
-        coarse, fine = render.layer_masks(config, plan, 0, 0)
+        coarse, fine = layer_masks(plan, 0, 0)
         masks = time.perf_counter() - t
         print(f"one cycle frame, one process: masks {masks:.2f} s; bare rfft2 of both {fft * 1e3:.0f} ms")
 
         t = time.perf_counter()
-        computed = render.cycle_phase(config, plan, store, jobs=args.jobs, workers=1)
+        computed = cycle_phase(plan, store, jobs=args.jobs, workers=1)
         cold = time.perf_counter() - t
         t = time.perf_counter()
-        again = render.cycle_phase(config, plan, store, jobs=args.jobs, workers=1)
+        again = cycle_phase(plan, store, jobs=args.jobs, workers=1)
         warm = time.perf_counter() - t
         print(f"cycle phase, {args.cycle} frames, --jobs {args.jobs}: cold {cold:.1f} s "
               f"({computed} items; target 60 s), warm {warm:.2f} s ({again} computed; target 2 s); "
               f"cold / (cycle x bare FFT) = {cold / (args.cycle * fft):.1f}")
 
-        params = render.cycle_params(config, plan, 0, 1)
+        params = cycle_params(plan, 0, 1)
         t = time.perf_counter()
         item = store.get("spectra", params)
         total = sum(float(np.abs(a).sum()) for a in item.values())
-        load = time.perf_counter() - t
-        print(f"load one cycle frame's spectra and read them through: {load * 1e3:.1f} ms "
+        read = time.perf_counter() - t
+        print(f"load one cycle frame's spectra and read them through: {read * 1e3:.1f} ms "
               f"({sum(a.nbytes for a in item.values()) / 2**20:.1f} MiB; checksum {total:.3g})")
         size = folder_bytes(work / "cache")
         print(f"cache on disk: {size / 2**20:.0f} MiB for {args.cycle} cycle frames "

@@ -5,7 +5,7 @@ digest of each frame written, and a resume that checks the frames it skips.
     python benchmarks/bench_integrity.py CONFIG --run FOLDER --cache DIR [--repeat 5]
 
 1. Cache checks (issue 16). In one process, with the cycle products of the frames in a fresh
-   cache: each frame rendered (``render.render_frame``) with its cache items already checked
+   cache: each frame rendered (``frame.render_frame``) with its cache items already checked
    in this process (the baseline: sizes, headers and a stat, what every later read costs) and
    with ``cache.forget_verified()`` before it (every item's CRC-32 computed again: the worst
    case; a run checks each item once per worker process, so once per ``cycle`` frames), the
@@ -37,9 +37,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline import cache  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
-from pipeline.render import cycle_phase, default_workers, plan_run, render_frame  # noqa: E402
 from pipeline.run import _frame_task, file_digest, parse_frames  # noqa: E402
+from pipeline.cycle import cycle_phase  # noqa: E402
+from pipeline.frame import render_frame  # noqa: E402
+from pipeline.plan import default_workers, load, plan_run  # noqa: E402
 
 
 def seconds(call) -> float:
@@ -62,7 +63,7 @@ def cache_checks(config, frames, repeat) -> None:
     plan = plan_run(config)
     store = cache.Cache(cache.cache_dir(None))
     workers = default_workers()
-    cycle_phase(config, plan, store, jobs=1, workers=workers,
+    cycle_phase(plan, store, jobs=1, workers=workers,
                 cycle_frames={f % config.canopy.cycle for f in frames})
     trusted, checked, sums, size = [], [], [], 0
     for turn in range(repeat):
@@ -72,7 +73,7 @@ def cache_checks(config, frames, repeat) -> None:
                 if forget:
                     cache.forget_verified()
                 (checked if forget else trusted).append(seconds(
-                    lambda: render_frame(config, frame=frame, store=reader, plan=plan, workers=workers)))
+                    lambda: render_frame(plan, frame, store=reader, workers=workers)))
             sums.append(seconds(lambda: [reader.recheck(item, stamp, fresh=True, repair=False)
                                          for item, stamp in reader.served.items()]))
             size = sum(reader.item_path(*item.split("/")).joinpath(file).stat().st_size
@@ -101,7 +102,7 @@ def frame_digests(config, frames, repeat) -> None:
     for _ in range(repeat):
         for frame in frames:
             start = time.perf_counter()
-            _, timings, entry, _ = _frame_task(config, plan, frame, root, config.digest(), default_workers())
+            _, timings, entry, _ = _frame_task(plan, frame, root, config.digest(), default_workers())
             totals.append(time.perf_counter() - start)
             paths = [folder / entry["files"][k]["name"] for k in ("exr", "png")]
             digests.append(seconds(lambda: [file_digest(p) for p in paths]))
@@ -139,7 +140,7 @@ def main() -> None:
     parser.add_argument("--run", default=None, help="a finished run folder of CONFIG: time resumes")
     parser.add_argument("--cache", default=None, help="with --run: the run's cache folder")
     args = parser.parse_args()
-    config = load_config(args.config)
+    config = load(args.config)
     if args.run:
         resumes(Path(args.config).absolute(), Path(args.run).absolute(),
                 cache.cache_dir(args.cache), args.repeat)

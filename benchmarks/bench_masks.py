@@ -4,7 +4,7 @@ rasteriser it replaced (kept in tests/test_canopy.py as the reference), in the s
     python benchmarks/bench_masks.py [CONFIG ...] [--frames 5] [--preview]
 
 CONFIG defaults to configs/eclipse.yaml (160,000 leaves). For each config with trees, every
-layer's coarse and fine masks and their spectra (what ``render.cycle_item`` computes on a miss)
+layer's coarse and fine masks and their spectra (what ``cycle.cycle_item`` computes on a miss)
 for cycle frames 0, 1, ... with either rasteriser, one process, one FFT thread. Prints the
 median wall and CPU seconds per cycle frame of each, their ratio, and the largest difference
 between the two masks. The first call, which loads the compiled loops, is timed apart.
@@ -26,8 +26,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import canopy, render, shadow  # noqa: E402
-from pipeline.config import load_config, preview  # noqa: E402
+from pipeline import canopy, shadow  # noqa: E402
+from pipeline.config import preview  # noqa: E402
+from pipeline.cycle import layer_masks  # noqa: E402
+from pipeline.inputs import grove_of  # noqa: E402
+from pipeline.plan import load, plan_run  # noqa: E402
 from test_canopy import reference_rasterize  # noqa: E402
 
 
@@ -35,7 +38,7 @@ def cycle_frame(config, plan, frame):
     """Every layer's masks and spectra at ``frame``; returns the masks."""
     masks = []
     for index, lp in enumerate(plan.layers):
-        coarse, fine = render.layer_masks(config, plan, index, frame)
+        coarse, fine = layer_masks(plan, index, frame)
         if isinstance(lp.coarse, shadow.IsolatedPlan):
             shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=1)
         else:
@@ -69,13 +72,13 @@ def main() -> None:
     parser.add_argument("--opencv", action="store_true")
     args = parser.parse_args()
     for path in args.configs:
-        config = load_config(path)
+        config = load(path)
         config = preview(config) if args.preview else config
         if config.canopy.trees is None:
             print(f"{Path(path).name}: no trees, nothing to rasterise")
             continue
-        plan = render.plan_run(config)
-        render._grove(config.canopy)  # grown once per process in a run too
+        plan = plan_run(config)
+        grove_of(config.canopy)  # grown once per process in a run too
         t = time.perf_counter()
         cycle_frame(config, plan, config.canopy.cycle - 1)
         first = time.perf_counter() - t
@@ -113,7 +116,7 @@ def compare_opencv(config, plan) -> None:
     from pipeline.geometry import Grid
     from test_canopy import random_leaves
 
-    grove, flutter = render._grove(config.canopy)
+    grove, flutter = grove_of(config.canopy)
     lp = plan.layers[0]
     shapes = canopy.project(canopy.leaves_at(grove, flutter, 0), sun=np.array(plan.projection),
                             plane_height=config.canopy.layers[0].height)

@@ -28,12 +28,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.config import load_config  # noqa: E402
+from pipeline.plan import load  # noqa: E402
 
 
 def preview_run(config: Path, code: Path, work: Path) -> tuple[float, float, float]:
     """(seconds to the first frame's PNG, seconds to the end, CPU seconds) of one preview."""
-    name = load_config(config).output.name
+    name = load(config).output.name
     out = work / "out"
     env = {**os.environ, "PYTHONPATH": str(code)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -33,9 +33,8 @@ import scipy.fft
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.config import load_config  # noqa: E402
-from pipeline.render import default_workers, plan_run  # noqa: E402
 from pipeline.run import parse_frames  # noqa: E402
+from pipeline.plan import default_workers, load, plan_run  # noqa: E402
 
 
 def sunshade(*args) -> float:
@@ -75,7 +74,7 @@ def main() -> None:
     parser.add_argument("config", nargs="?", default=str(ROOT / "configs" / "eclipse.yaml"))
     parser.add_argument("--frames", default="0-23")
     args = parser.parse_args()
-    config = load_config(args.config)
+    config = load(args.config)
     count = len(parse_frames(args.frames, config.animation.frames))
     work = Path(tempfile.mkdtemp(prefix="sunshade-bench-render-"))
     try:

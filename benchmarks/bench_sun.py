@@ -26,9 +26,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_cycle import CONFIG  # noqa: E402
 
-from pipeline import cache, render, shadow  # noqa: E402
+from pipeline import cache, shadow  # noqa: E402
 from pipeline import sky as sky_models  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
+from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
+from pipeline.ground import render_ground  # noqa: E402
+from pipeline.inputs import load_sky  # noqa: E402
+from pipeline.plan import load, plan_run, scene_at  # noqa: E402
 
 
 def round_trip_seconds(shape, workers, repeats=3) -> float:
@@ -66,19 +69,19 @@ def main() -> None:
         config_dict["animation"] = {"frames": args.frames}
         path = work / "grove.yaml"
         path.write_text(yaml.safe_dump(config_dict))
-        config = load_config(path)
-        plan = render.plan_run(config)
+        config = load(path)
+        plan = plan_run(config)
         layer = plan.layers[0]
         store = cache.Cache(work / "cache")
-        render.cycle_phase(config, plan, store, jobs=2, workers=1)
+        cycle_phase(plan, store, jobs=2, workers=1)
         print(f"coarse window {plan.window.shape} (FFT {layer.coarse.fft_shape}); fine window "
               f"{plan.sun_window.shape} (fine mask {layer.sun.mask.shape}, FFT {layer.sun.fft_shape})")
 
         bare_fine = round_trip_seconds(layer.sun.fft_shape, args.threads)
         bare_coarse = round_trip_seconds(layer.coarse.fft_shape, args.threads)
         q = plan.sun_window.pixel / layer.height
-        items = [render.cycle_item(config, plan, 0, f, store) for f in range(args.frames)]
-        skies = [render.load_sky(config.sky, render.scene_at(config, f)) for f in range(args.frames)]
+        items = [cycle_item(plan, 0, f, store) for f in range(args.frames)]
+        skies = [load_sky(config.sky, scene_at(config, f)) for f in range(args.frames)]
         kernels = [sky_models.sun_kernel(s, q) for s in skies]
 
         def fine(i):
@@ -88,7 +91,7 @@ def main() -> None:
             sky_models.sun_kernel(skies[i], q)
 
         def whole(i):
-            render.render_ground(config, frame=i, store=store, plan=plan, workers=args.threads)
+            render_ground(plan, i, store=store, workers=args.threads)
 
         t_fine = median_seconds(fine, args.frames)
         t_kernel = median_seconds(kernel, args.frames)

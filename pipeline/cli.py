@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import inspect
 import os
 import sys
 import time
@@ -19,7 +20,6 @@ import numpy as np
 from . import __version__, io, paths
 from .cache import ENV_VAR, Cache, cache_dir, parse_size
 from .composite import display_ground, display_sky
-from .config import load_config
 from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
 
 EXIT_BAD_INPUT = 2
@@ -89,20 +89,29 @@ def _parser():
         description="Sunlight and skylight through leaves (Max 1991, 'Unified sun and sky "
         "illumination for shadows under trees').",
     )
-    parser.add_argument("--debug", action="store_true", help="on an error, print the traceback "
-                        "too (for a bug report)")
+    parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     parser.add_argument("--version", action="version", version=f"sunshade {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    # the options several commands share, each written once
+    config = _shared("config", help="YAML config file")
+    store = _shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
+    threads = _shared("--threads", type=int, default=None, help="FFT threads (default: all cores)")
+    png = _shared("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
+    moment = _shared("--frame", type=int, default=0, help="output frame (default 0): the sun, moon "
+                     "and clouds of that moment, the canopy at frame mod cycle")
+    picture = _shared("-o", "--output", required=True, help="output PNG or EXR file")
+    debug = _shared("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
 
-    render = commands.add_parser(
-        "render",
-        help="render a config's animation: frames, video and run.json, resumably",
-        description="Render the animation of a config into output.folder (default "
-        "renders/NAME): the cycle products (cached), then the frames NAME.0000.exr and .png, "
-        "then the video once every frame is done, and run.json. Run it again to resume: done "
-        "frames (their files complete and made by the same config) are skipped.",
-    )
-    render.add_argument("config", help="YAML config file")
+    def command(run, parents):
+        """The subcommand run by ``run`` (``_run_NAME``), its help the first paragraph of the
+        function's docstring, its description the rest."""
+        help, _, description = inspect.cleandoc(run.__doc__).partition("\n\n")
+        sub = commands.add_parser(run.__name__.removeprefix("_run_"), parents=[*parents, debug],
+                                  help=help, description=description)
+        sub.set_defaults(run=run)
+        return sub
+
+    render = command(_run_render, [config, store])
     render.add_argument("--frames", default=None, help="frames to render, e.g. 0-47,100 "
                         "(default: all)")
     render.add_argument("--jobs", type=int, default=None, help="frames rendered at once, each in "
@@ -113,7 +122,6 @@ def _parser():
     render.add_argument("--cluster-timeout", type=float, default=None, metavar="SECONDS",
                         help="with --scheduler: end the run (resumably) once the cluster has had "
                         "no scheduler or no workers this long (default: docs/runs.md)")
-    render.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
     render.add_argument("--output", default=None, help="output folder (default: output.folder)")
     render.add_argument("--force", action="store_true", help="render the frames and the video "
                         "again even if done")
@@ -122,108 +130,47 @@ def _parser():
     render.add_argument("--verify", action="store_true", help="render nothing: report the "
                         "frames whose files are damaged or not made by this config (exit code "
                         "1 if any), reading every frame and the cache items they were made from")
-    render.set_defaults(run=_run_render)
 
-    check = commands.add_parser(
-        "check",
-        help="check a config and every file it names, and do nothing else",
-        description="Read and check a config and every input file it names (masks, HDRI, "
-        "albedo, foreground passes). Exit code 0 if a render would start, 2 with one line "
-        "naming the key or file if not.",
-    )
-    check.add_argument("config", help="YAML config file")
-    check.set_defaults(run=_run_check)
+    command(_run_check, [config])
 
-    ground = commands.add_parser(
-        "ground",
-        help="write the ground irradiance under a canopy mask and a sky",
-        description="Write the ground irradiance (RGB float32, linear, radiance x sr) over "
-        "ground.window at ground.pixel metres, north-up, as an EXR.",
-    )
-    ground.add_argument("config", help="YAML config file")
+    ground = command(_run_ground, [config, moment, png, threads, store])
     ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
                         "(tone-mapped) file")
-    ground.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
-    ground.add_argument("--frame", type=int, default=0, help="output frame (default 0): the "
-                        "sun, moon and clouds of that moment, the canopy at frame mod cycle")
-    ground.add_argument("--threads", type=int, default=None, help="FFT threads (default: all cores)")
-    ground.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
-    ground.set_defaults(run=_run_ground)
 
-    frame = commands.add_parser(
-        "frame",
-        help="render one finished frame: ground and sky in the camera, trees in front",
-        description="Render one finished frame (Max 1991, Fig. 10): the ground raster and the "
-        "sky resampled in the camera, the haze, the foreground passes blended by the sun "
-        "fraction S. A .png is exposed and display-transformed (camera.exposure, "
-        "camera.display); an .exr stays scene-linear radiance with its metadata.",
-    )
-    frame.add_argument("config", help="YAML config file")
-    frame.add_argument("--frame", type=int, default=0, help="output frame (default 0)")
-    frame.add_argument("-o", "--output", required=True, help="output PNG or EXR file")
+    frame = command(_run_frame, [config, moment, picture, threads, store])
     frame.add_argument("--half", action="store_true", help="EXR: half floats instead of float32")
-    frame.add_argument("--threads", type=int, default=None, help="FFT threads (default: all cores)")
-    frame.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
-    frame.set_defaults(run=_run_frame)
 
-    mask = commands.add_parser(
-        "mask",
-        help="write the canopy mask of a cycle frame (Max 1991, Fig. 4)",
-        description="Write the transmittance mask (1 = open sky) of one canopy layer at one "
-        "cycle frame, the leaves projected along the sun onto the canopy plane, north-up: the "
-        "coarse mask of the whole canopy, or with --fine the fine mask under the sun window.",
-    )
-    mask.add_argument("config", help="YAML config file")
+    mask = command(_run_mask, [config, picture])
     mask.add_argument("--frame", type=int, default=0, help="cycle frame (default 0)")
     mask.add_argument("--layer", type=int, default=0, help="canopy layer (default 0)")
     mask.add_argument("--fine", action="store_true", help="the fine mask of the sun window")
-    mask.add_argument("-o", "--output", required=True, help="output PNG or EXR file")
-    mask.set_defaults(run=_run_mask)
 
-    sky = commands.add_parser(
-        "sky",
-        help="write the sky of a frame as an equirectangular EXR",
-        description="Write the sky (sun, moon, clouds) of a frame as linear RGB radiance, "
-        "equirectangular: top row at the zenith, centre column north, east at three quarters "
-        "of the width; the lower half is below the horizon.",
-    )
-    sky.add_argument("config", help="YAML config file")
-    sky.add_argument("--frame", type=int, default=0, help="output frame (default 0)")
+    sky = command(_run_sky, [config, moment, png])
     sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
-    sky.add_argument("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
     sky.add_argument("-o", "--output", required=True, help="output EXR (radiance) or PNG "
                      "(tone-mapped) file")
-    sky.set_defaults(run=_run_sky)
 
-    figures = commands.add_parser(
-        "figures",
-        help="reproduce the paper's figures as PNGs",
-        description="Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky "
-        "(5), the weighted sky raster (6), the ground raster (7), the finished frame (10), the "
-        "same with a point sun and no sky light (11), the eclipsed ground and frame (12, 13), "
-        "I0(alpha)/pi (16), and S(t) through the 2024 eclipse at Dallas.",
-    )
+    figures = command(_run_figures, [store])
     figures.add_argument("--output", default="figures", help="folder (default ./figures)")
-    figures.add_argument("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
     figures.add_argument("--preview", action="store_true", help="small and fast")
-    figures.set_defaults(run=_run_figures)
 
-    cache = commands.add_parser(
-        "cache",
-        help="look after the on-disk cache of cycle products",
-        description="The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.",
-    )
+    cache = command(_run_cache, [store])
     cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
     cache.add_argument("config", nargs="?", default=None, help="list: only this config's items; "
                        "prune: remove only its items (all, or down to --max-size)")
-    cache.add_argument("--cache", default=None, help="cache folder")
     cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
     cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
-    cache.set_defaults(run=_run_cache)
-    for command in commands.choices.values():  # --debug after the command too
-        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                             help="on an error, print the traceback too (for a bug report)")
     return parser
+
+
+DEBUG_HELP = "on an error, print the traceback too (for a bug report)"
+
+
+def _shared(*flags, **options) -> argparse.ArgumentParser:
+    """A parent parser (for ``parents=``) holding one argument shared by several commands."""
+    parent = argparse.ArgumentParser(add_help=False)
+    parent.add_argument(*flags, **options)
+    return parent
 
 
 OUTPUT_SUFFIXES = (".png", ".exr")
@@ -264,12 +211,32 @@ def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
     return out
 
 
-def _run_check(args) -> int:
-    from .render import check_inputs, disk_needed, framing_warnings
+def _load(args, *, named_frames: bool = True):
+    """The config of ``args.config`` read, validated and resolved: every command's one loader
+    (``named_frames``: see config.load_config)."""
+    from .config import load_config
+    from .plan import resolve
 
+    return resolve(load_config(args.config, named_frames=named_frames))
+
+
+def _check_threads(args) -> None:
+    if args.threads is not None and args.threads < 1:
+        raise BadInput(f"--threads must be at least 1 (got {args.threads})")
+
+
+def _run_check(args) -> int:
+    """check a config and every file it names, and do nothing else
+
+    Read and check a config and every input file it names (masks, HDRI, albedo, foreground
+    passes). Exit code 0 if a render would start, 2 with one line naming the key or file if
+    not.
+    """
+    from .cycle import disk_needed
+    from .plan import check_inputs
     from .run import check_outputs
 
-    config = load_config(args.config)
+    config = _load(args)
     plan = check_inputs(config)
     check_outputs(config)
     width, height = config.camera.resolution
@@ -279,10 +246,10 @@ def _run_check(args) -> int:
           f"config hash {config.digest()}")
     for line in _framing_lines(plan):
         print(line)
-    frames, cycle = disk_needed(config, plan)
+    frames, cycle = disk_needed(plan)
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
           f"cache {_size(cycle)}")
-    _warn(config, plan, framing_warnings)
+    _warn(plan)
     return 0
 
 
@@ -305,16 +272,25 @@ def _framing_lines(plan) -> list[str]:
     return lines
 
 
-def _warn(config, plan, framing_warnings) -> None:
-    for line in framing_warnings(config, plan):
+def _warn(plan) -> None:
+    from .framing import framing_warnings
+
+    for line in framing_warnings(plan):
         print(f"sunshade: warning: {line}", file=sys.stderr)
 
 
 def _run_render(args) -> int:
+    """render a config's animation: frames, video and run.json, resumably
+
+    Render the animation of a config into output.folder (default renders/NAME): the cycle
+    products (cached), then the frames NAME.0000.exr and .png, then the video once every
+    frame is done, and run.json. Run it again to resume: done frames (their files complete
+    and made by the same config) are skipped.
+    """
     from dataclasses import replace
 
     from .config import preview
-    from .render import default_workers
+    from .plan import default_workers
     from .run import (MAX_JOBS_PER_CORE, check_outputs, missing_folders, parse_frames,
                       remove_if_empty, render_run)
 
@@ -323,7 +299,7 @@ def _run_render(args) -> int:
     if args.cluster_timeout is not None and not 0 < args.cluster_timeout < 1e6:
         raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
     store = _store(args.cache)
-    config = load_config(args.config)
+    config = _load(args)
     if args.output is not None:
         folder = _flag_path("--output", args.output).expanduser().absolute()
         config = replace(config, output=replace(config.output, folder=folder))
@@ -418,19 +394,24 @@ def _clock(seconds: float) -> str:
 
 
 def _run_ground(args) -> int:
-    from .render import render_ground
+    """write the ground irradiance under a canopy mask and a sky
+
+    Write the ground irradiance (RGB float32, linear, radiance x sr) over ground.window at
+    ground.pixel metres, north-up, as an EXR.
+    """
+    from .ground import render_ground
+    from .plan import plan_run
 
     output = _checked_output(args.output)
     exr = output if output.suffix.lower() == ".exr" else None
     png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
-    if args.threads is not None and args.threads < 1:
-        raise BadInput(f"--threads must be at least 1 (got {args.threads})")
-    config = load_config(args.config, named_frames=False)
+    _check_threads(args)
+    config = _load(args, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     digest = config.digest()
     started = time.perf_counter()
     store = _store(args.cache)
-    result = render_ground(config, frame=args.frame, store=store, workers=args.threads)
+    result = render_ground(plan_run(config), args.frame, store=store, workers=args.threads)
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.irradiance)):
         raise BadInput(f"{args.config}: the ground irradiance overflowed; lower the sky's radiance")
@@ -464,20 +445,27 @@ def _run_ground(args) -> int:
 
 
 def _run_frame(args) -> int:
+    """render one finished frame: ground and sky in the camera, trees in front
+
+    Render one finished frame (Max 1991, Fig. 10): the ground raster and the sky resampled
+    in the camera, the haze, the foreground passes blended by the sun fraction S. A .png is
+    exposed and display-transformed (camera.exposure, camera.display); an .exr stays scene-
+    linear radiance with its metadata.
+    """
     from .composite import display
-    from .render import render_frame
+    from .frame import render_frame
+    from .plan import plan_run
     from .run import frame_attributes
 
     output = _checked_output(args.output)
     suffix = output.suffix.lower()
-    if args.threads is not None and args.threads < 1:
-        raise BadInput(f"--threads must be at least 1 (got {args.threads})")
+    _check_threads(args)
     if args.half and suffix != ".exr":
         raise BadInput("--half is for EXR output")
-    config = load_config(args.config, named_frames=False)
+    config = _load(args, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
-    result = render_frame(config, frame=args.frame, store=_store(args.cache), workers=args.threads)
+    result = render_frame(plan_run(config), args.frame, store=_store(args.cache), workers=args.threads)
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.radiance)):
         raise BadInput(f"{args.config}: the frame overflowed; lower the sky's radiance")
@@ -499,11 +487,18 @@ def _check_frame(frame: int, count: int, flag: str, key: str) -> None:
 
 
 def _run_mask(args) -> int:
-    from .render import layer_masks, plan_run
+    """write the canopy mask of a cycle frame (Max 1991, Fig. 4)
+
+    Write the transmittance mask (1 = open sky) of one canopy layer at one cycle frame, the
+    leaves projected along the sun onto the canopy plane, north-up: the coarse mask of the
+    whole canopy, or with --fine the fine mask under the sun window.
+    """
+    from .cycle import layer_masks
+    from .plan import plan_run
 
     output = _checked_output(args.output)
     suffix = output.suffix.lower()
-    config = load_config(args.config, named_frames=False)
+    config = _load(args, named_frames=False)
     _check_frame(args.frame, config.canopy.cycle, "--frame", "the canopy's cycle")
     _check_frame(args.layer, len(config.canopy.layers), "--layer", "the number of canopy layers")
     plan = plan_run(config)
@@ -511,7 +506,7 @@ def _run_mask(args) -> int:
     if args.fine and layer.sun is None:
         raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: cie, preetham or hdri)")
     started = time.perf_counter()
-    coarse, fine = layer_masks(config, plan, args.layer, args.frame)
+    coarse, fine = layer_masks(plan, args.layer, args.frame)
     mask, grid = (fine, layer.sun.mask) if args.fine else (coarse, layer.canopy)
     elapsed = time.perf_counter() - started
     if suffix == ".exr":
@@ -528,14 +523,21 @@ def _run_mask(args) -> int:
 
 
 def _run_sky(args) -> int:
-    from .render import load_sky, scene_at
+    """write the sky of a frame as an equirectangular EXR
+
+    Write the sky (sun, moon, clouds) of a frame as linear RGB radiance, equirectangular:
+    top row at the zenith, centre column north, east at three quarters of the width; the
+    lower half is below the horizon.
+    """
+    from .inputs import load_sky
+    from .plan import scene_at
 
     output = _checked_output(args.output)
     exr = output if output.suffix.lower() == ".exr" else None
     png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if not 8 <= args.width <= 16384 or args.width % 2:
         raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
-    config = load_config(args.config, named_frames=False)
+    config = _load(args, named_frames=False)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     scene = scene_at(config, args.frame)
     sky = load_sky(config.sky, scene)
@@ -560,6 +562,13 @@ def _run_sky(args) -> int:
 
 
 def _run_figures(args) -> int:
+    """reproduce the paper's figures as PNGs
+
+    Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky (5), the
+    weighted sky raster (6), the ground raster (7), the finished frame (10), the same with a
+    point sun and no sky light (11), the eclipsed ground and frame (12, 13), I0(alpha)/pi
+    (16), and S(t) through the 2024 eclipse at Dallas.
+    """
     from .figures import FIGURES, write_figures
     from .run import check_folder
 
@@ -578,6 +587,10 @@ def _run_figures(args) -> int:
 
 
 def _run_cache(args) -> int:
+    """look after the on-disk cache of cycle products
+
+    The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.
+    """
     store = _store(args.cache)
     root = store.root
     if args.config is not None and args.action not in ("list", "prune"):
@@ -601,10 +614,10 @@ def _run_cache(args) -> int:
         return 0
     mine = None
     if args.config is not None:
-        from .render import config_item_keys, plan_run
+        from .cycle import config_item_keys
+        from .plan import plan_run
 
-        config = load_config(args.config)
-        mine = config_item_keys(config, plan_run(config))
+        mine = config_item_keys(plan_run(_load(args)))
     if args.action == "list":
         return _print_lines(_cache_listing(store, args.config, mine))
     if args.action == "verify":
@@ -626,7 +639,7 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
     """The cache's items grouped by the config that made them (as recorded by its renders), with
     their size and cycle frames; items of no recorded config grouped by kind. With a config:
     its items only."""
-    from .render import recorded_configs
+    from .cycle import recorded_configs
 
     items = store.list()
     if mine is not None:

@@ -11,29 +11,21 @@ import hashlib
 import json
 import math
 import re
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
 import yaml
 
-from . import __version__, daylight, ephemeris, paths
+from . import __version__, paths
 from .clearsky import CIE_TYPES, DEFAULT_CIE_TYPE
 from .composite import DISPLAYS, WHITE_BALANCES
+from .daylight import TURBIDITY_RANGE
 from .errors import ConfigError
-from .shadow import MAX_SKY_CELLS, sky_half_cells
 from .sky import MODELS as SKY_MODELS
 from .sky import PROCEDURAL_MODELS
 
 LAYOUTS = ("isolated", "periodic")
-MAX_GROUND_PIXELS = 64_000_000
-MAX_FFT_CELLS = 128_000_000
-MAX_SUN_PIXELS = 16_000_000
-BYTES_PER_CELL = 52
-"""About the memory a render takes per cell of its largest raster (measured: the sun's fine
-raster and its transforms). [byte]"""
-MIN_SUN_ELEVATION = math.radians(2.0)
-"""Lowest sun a site and time may give: below it the sun disc's sky-plane image explodes. [rad]"""
 MAX_LEAVES = 1_000_000
 SUN_RADIUS_DEG = 0.2666
 """Mean angular radius of the sun (959.63 arcsec at 1 au). [deg]"""
@@ -153,8 +145,8 @@ class SkyConfig:
     """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
     Procedural (models 'cie' and 'preetham', ``sky.PROCEDURAL_MODELS``): turbidity (the Linke
-    turbidity factor; turbidity_auto: it was looked up in the climatology for the site and the
-    middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
+    turbidity factor; with turbidity_auto None until ``plan.resolve`` looks it up in the
+    climatology for the site and the middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
     time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
     sky, 0 for the sun alone). haze : extinction length of the air the camera looks through, 0
     for none. [m]"""
@@ -178,7 +170,7 @@ class SkyConfig:
 @dataclass(frozen=True)
 class GroundConfig:
     """window : (x_min, y_min, x_max, y_max) [m], None to frame the canopy's shadow over the
-    animation (``render.plan_run``); pixel : ground pixel [m]. The sun's fine raster:
+    animation (``plan.plan_run``); pixel : ground pixel [m]. The sun's fine raster:
     sun_window (None: the ground the camera sees of the shadow, or the window when it is given)
     and sun_pixel (None: chosen so the sun disc spans 16 cells, within MAX_SUN_PIXELS). [m]"""
 
@@ -211,7 +203,7 @@ class AutoExposureConfig:
 @dataclass(frozen=True)
 class CameraConfig:
     """The pinhole camera: position (x, y, z) [m], None to stand it where it sees the canopy
-    and its shadows (``render.camera_of``); look_at (x, y, z) [m], or else yaw (azimuth of the
+    and its shadows (``framing.frame_scene``); look_at (x, y, z) [m], or else yaw (azimuth of the
     view, from north towards east) and pitch (negative looking down) [rad], None to look at the
     canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
     default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
@@ -222,7 +214,7 @@ class CameraConfig:
     look_at: tuple[float, float, float] | None = None
     yaw: float | None = None
     pitch: float | None = None
-    fov: float = 0.8726646259971648
+    fov: float = math.radians(50.0)
     resolution: tuple[int, int] = (1280, 720)
     exposure: float = 0.0
     display: str = "filmic"
@@ -289,12 +281,19 @@ class Config:
     foreground: ForegroundConfig
     output: OutputConfig
     render: RenderConfig = RenderConfig()
+    lines: dict = field(default_factory=dict, compare=False, repr=False)
+    """The YAML line of each key path, for messages."""
+
+    def where(self, key: str) -> str:
+        """'file:line: key' (or 'file: key') for a message about ``key``."""
+        return _Context(self.path, self.lines).where(key)
 
     def digest(self) -> str:
         """Hash of every value that shapes a frame's bytes and of every input file's bytes,
         with the package version (16 hex)."""
         values = asdict(self)
         values.pop("path")
+        values.pop("lines")
         for section, names in _NOT_IN_DIGEST.items():
             for name in names:
                 values[section].pop(name)
@@ -373,6 +372,14 @@ def load_config(path, *, named_frames: bool = True) -> Config:
     _key_lines(node, "", lines, path)
     root = _Section(data if data is not None else {}, "", _Context(path, lines))
     return _parse(root, path, named_frames)
+
+
+def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames: bool = True) -> Config:
+    """Validate a config given as a mapping (what a YAML file would hold), its file paths
+    relative to ``base_dir``, as if read from ``base_dir/NAME.yaml``; raise ConfigError naming
+    the key."""
+    path = Path(base_dir) / f"{name}.yaml"
+    return _parse(_Section(mapping, "", _Context(path, {})), path, named_frames)
 
 
 def load_yaml(path):
@@ -651,32 +658,31 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     animation = _parse_animation(root.section("animation"))
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)
-    sky = _parse_sky(root.section("sky"), canopy, ground)
+    sky = _parse_sky(root.section("sky"))
     camera = _parse_camera(root.section("camera"))
     foreground = _parse_foreground(root.section("foreground"), canopy)
     output = _parse_output(root.section("output"), path, named_frames)
     render = _parse_render(root.section("render"))
     root.done()
-    _check_frames(root, animation, camera)
-    if sky.site is not None:
-        _check_sun_over_span(root, sky.site, animation.frames)
-    return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render)
+    _check_frames(root, animation, camera, output)
+    return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,
+                  root.ctx.lines)
 
 
 MAX_FRAMES = 100_000
 """Most output frames of one animation (a run plans and checks every frame before it starts)."""
-FRAME_BYTES_PER_PIXEL = 4
-"""About what a frame's files (half-float EXR and PNG) take per camera pixel: the eclipse
-demo's 240 frames of 1280 x 720 took 0.9 GB. [byte]"""
-SUN_SPAN_SAMPLES = 20_000
-"""Most moments at which the sun is checked over a site's time span."""
+FRAME_BYTES_PER_PIXEL = {True: 4.2, False: 7.4}
+"""Disk a finished frame takes per pixel, its EXR (half floats: True; float32: False, PIZ) and
+its PNG together: 3.9 MB for a 1280 x 720 frame of configs/eclipse.yaml in half floats (its 240
+frames took 933 MB, docs/accuracy.md); float32 adds 2 bytes a pixel. About: the compression
+follows the picture. [B]"""
 
 
-def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConfig) -> None:
+def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConfig, output: OutputConfig) -> None:
     """Refuse more than MAX_FRAMES frames, with what they would take on disk."""
     if animation.frames > MAX_FRAMES:
         width, height = camera.resolution
-        size = animation.frames * width * height * FRAME_BYTES_PER_PIXEL
+        size = animation.frames * width * height * FRAME_BYTES_PER_PIXEL[output.half]
         root.fail("animation.frames", f"{animation.frames:.3g} frames of {width} x {height} px "
                   f"would be about {size_text(size)} of files; the most is {MAX_FRAMES} frames")
 
@@ -687,22 +693,6 @@ def size_text(count: float) -> str:
         if count < 1000 or unit == "TB":
             return f"{count:.3g} {unit}"
         count /= 1000
-
-
-def _check_sun_over_span(root: _Section, site: SiteConfig, frames: int) -> None:
-    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at every frame: check
-    it at each frame's moment (at most SUN_SPAN_SAMPLES of them, evenly spread, so a night is
-    never missed) and name the first moment it is not."""
-    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
-    count = min(frames, SUN_SPAN_SAMPLES)
-    for i in range(count):
-        when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
-        sun, _ = ephemeris.sun_and_moon(place, when)
-        if sun.elevation < MIN_SUN_ELEVATION:
-            root.fail("sky.time", f"the sun is {math.degrees(sun.elevation):.1f} degrees above "
-                      f"the horizon at {when.isoformat()}, between time.start and time.end; the "
-                      f"procedural sky needs it at least {math.degrees(MIN_SUN_ELEVATION):g} "
-                      f"degrees high all through (a span that crosses the night)")
 
 
 def default_name(path: Path) -> str:
@@ -723,8 +713,8 @@ def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputC
     if not isinstance(folder, str) or not folder:
         s.fail("folder", f"must be a folder name, not {_kind(folder)}")
     s.check_path("folder", folder)
-    video = s.choice("video", VIDEOS, "mp4")
-    half = s.raw("half", True)
+    video = s.choice("video", VIDEOS, OutputConfig.video)
+    half = s.raw("half", OutputConfig.half)
     if not isinstance(half, bool):
         s.fail("half", f"must be true or false, not {_kind(half)}")
     s.done()
@@ -733,7 +723,7 @@ def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputC
 
 def _parse_render(s: _Section) -> RenderConfig:
     jobs = s.integer("jobs", at_least=1) if s.has("jobs") else None
-    render = RenderConfig(jobs, s.integer("sun_cells", 16, at_least=2))
+    render = RenderConfig(jobs, s.integer("sun_cells", RenderConfig.sun_cells, at_least=2))
     if render.sun_cells > 64:
         s.fail("sun_cells", f"must be at most 64 (got {render.sun_cells})")
     s.done()
@@ -757,29 +747,18 @@ def _parse_window(s: _Section, name, default):
 def _parse_ground(s: _Section) -> GroundConfig:
     window = _parse_window(s, "window", None) if s.has("window") else None
     pixel = s.number("pixel", 0.05, above=0.0)
-    if window is not None:
-        _check_pixels(s, "pixel", window, pixel, MAX_GROUND_PIXELS)
     sun_window = _parse_window(s, "sun_window", None) if s.has("sun_window") else None
     sun_pixel = s.number("sun_pixel", above=0.0) if s.has("sun_pixel") else None
     if sun_pixel is not None:
         if sun_pixel > pixel:
             s.fail("sun_pixel", f"must not be above ground.pixel ({sun_pixel:g} > {pixel:g})")
-        if sun_window or window:
-            _check_pixels(s, "sun_pixel", sun_window or window, sun_pixel, MAX_SUN_PIXELS)
-    albedo = "grass"
-    if s.has("albedo") and s.data["albedo"] != "grass":
+    albedo = GroundConfig.albedo
+    if s.has("albedo") and s.data["albedo"] != GroundConfig.albedo:
         albedo = s.file("albedo")
     s.raw("albedo", None)
-    albedo_size = s.number("albedo_size", 4.0, above=0.0)
+    albedo_size = s.number("albedo_size", GroundConfig.albedo_size, above=0.0)
     s.done()
     return GroundConfig(window, pixel, sun_window, sun_pixel, albedo, albedo_size)
-
-
-def _check_pixels(s: _Section, name, window, pixel, most):
-    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
-    if cells > most:
-        s.fail(name, f"the window would be {cells:.3g} pixels, about "
-               f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
 
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:
@@ -861,26 +840,15 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
         "height": s.number("height", base.get("height", 8.0), above=0.0),
     }
     pixels = [side / ground.pixel for side in size]
-    if pixels[0] * pixels[1] > MAX_GROUND_PIXELS:
-        s.fail("size", f"the canopy would be {pixels[0] * pixels[1]:.3g} pixels at ground.pixel "
-               f"{ground.pixel:g} m; the most is {MAX_GROUND_PIXELS:.3g}")
     if layout == "periodic":
         for ratio in pixels:
             if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
                 s.fail("size", f"a periodic tile must be a whole number of ground pixels "
                        f"({ratio * ground.pixel:g} / {ground.pixel:g} = {ratio:.4g})")
-    elif images and ground.window is not None:  # an automatic window is checked by the plan
-        window = ground.window
-        fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
-            (window[3] - window[1]) / ground.pixel + pixels[1])
-        if fft > MAX_FFT_CELLS:
-            s.fail("size", f"canopy and window together need a {fft:.3g}-cell transform, about "
-                   f"{size_text(fft * BYTES_PER_CELL)}; the most is {MAX_FFT_CELLS:.3g}: raise "
-                   "ground.pixel")
     return layer
 
 
-def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyConfig:
+def _parse_sky(s: _Section) -> SkyConfig:
     if s.raw("model", "cie") == "procedural":  # the former name of the CIE clear sky
         s.data = {**s.data, "model": "cie"}
     model = s.choice("model", tuple(SKY_MODELS), "cie")
@@ -904,29 +872,23 @@ def _parse_sky(s: _Section, canopy: CanopyConfig, ground: GroundConfig) -> SkyCo
     rotation = math.radians(s.number("rotation", 0.0) % 360.0)
     alpha_deg = s.number("alpha", 80.0, above=0.0, below=90.0)
     alpha = math.radians(alpha_deg)
-    if canopy.layout == "periodic":
-        for layer in canopy.layers:
-            n = 2 * sky_half_cells(layer.height, ground.pixel, alpha) + 1
-            if n * n > MAX_SKY_CELLS:
-                s.fail("alpha", f"the sky square at {alpha_deg:g} degrees would be {n} x {n} cells "
-                       f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
     extra = {}
     if model in PROCEDURAL_MODELS:
         extra = _parse_procedural(s, model)
-    extra["haze"] = s.number("haze", 3000.0, at_least=0.0)
+    extra["haze"] = s.number("haze", SkyConfig.haze, at_least=0.0)
     s.done()
     return SkyConfig(model, radiance, hdri, rotation, alpha, **extra)
 
 
 def _parse_procedural(s: _Section, model: str) -> dict:
-    lo, hi = daylight.TURBIDITY_RANGE
+    lo, hi = TURBIDITY_RANGE
     auto = s.raw("turbidity", 3.0) == "auto"
     if auto and not (s.has("site") and s.has("time")):
         s.fail("turbidity", "auto needs sky.site and sky.time (the climatology is of a place and month)")
-    turbidity = None if auto else s.number("turbidity", 3.0, at_least=lo, below=hi + 1e-9)
-    cie_type = DEFAULT_CIE_TYPE
+    turbidity = None if auto else s.number("turbidity", SkyConfig.turbidity, at_least=lo, below=hi + 1e-9)
+    cie_type = SkyConfig.cie_type
     if model == "cie":
-        cie_type = s.integer("cie_type", DEFAULT_CIE_TYPE, at_least=min(CIE_TYPES))
+        cie_type = s.integer("cie_type", SkyConfig.cie_type, at_least=min(CIE_TYPES))
         if cie_type not in CIE_TYPES:
             s.fail("cie_type", f"must be one of the CIE standard general skies 1..{max(CIE_TYPES)} (got {cie_type})")
     sun = site = moon = None
@@ -936,9 +898,6 @@ def _parse_procedural(s: _Section, model: str) -> dict:
         if s.has("moon"):
             s.fail("moon", "the moon is implied by site and time")
         site = _parse_site(s.section("site"), s.section("time"))
-        if auto:
-            middle = site.start + (site.end - site.start) / 2
-            turbidity = min(max(daylight.linke_turbidity(middle, site.latitude, site.longitude), lo), hi)
     else:
         ss = s.section("sun")
         sun = SunConfig(
@@ -967,7 +926,7 @@ def _parse_procedural(s: _Section, model: str) -> dict:
             seed=cs.integer("seed", 1, at_least=0),
         )
         cs.done()
-    skylight = s.number("skylight", 1.0, at_least=0.0, below=100.0)
+    skylight = s.number("skylight", SkyConfig.skylight, at_least=0.0, below=100.0)
     return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds,
             "skylight": skylight, "cie_type": cie_type, "turbidity_auto": auto}
 
@@ -984,12 +943,6 @@ def _parse_site(s: _Section, t: _Section) -> SiteConfig:
         s.fail("latitude", f"must lie in [-90, 90] degrees (got {math.degrees(site.latitude)!r})")
     if site.end < site.start:
         t.fail("end", f"must not be before time.start ({site.end.isoformat()} < {site.start.isoformat()})")
-    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
-    for key, when in (("start", site.start), ("end", site.end)):
-        sun, _ = ephemeris.sun_and_moon(place, when)
-        if sun.elevation < MIN_SUN_ELEVATION:
-            t.fail(key, f"the sun is {math.degrees(sun.elevation):.1f} degrees above the horizon "
-                   f"then; the least is {math.degrees(MIN_SUN_ELEVATION):g}")
     s.done()
     t.done()
     return site
@@ -1000,7 +953,7 @@ FOREGROUNDS = ("trees", "passes", "none")
 
 
 def _parse_camera(s: _Section) -> CameraConfig:
-    """The camera; what it leaves out is placed by ``render.camera_of``."""
+    """The camera; what it leaves out is placed by ``framing.frame_scene``."""
     position = s.numbers("position", 3) if s.has("position") else None
     if position is not None and position[2] <= 0:
         s.fail("position", f"the camera must be above the ground (z = {position[2]:g})")
@@ -1014,8 +967,8 @@ def _parse_camera(s: _Section) -> CameraConfig:
     elif s.has("yaw") or s.has("pitch"):
         yaw = math.radians(s.number("yaw", 0.0) % 360.0)
         pitch = math.radians(s.number("pitch", 0.0, at_least=-90.0, below=90.0 + 1e-9))
-    fov = math.radians(s.number("fov", 50.0, above=0.0, below=170.0))
-    resolution = s.numbers("resolution", 2, (1280, 720))
+    fov = math.radians(s.number("fov", above=0.0, below=170.0)) if s.has("fov") else CameraConfig.fov
+    resolution = s.numbers("resolution", 2, CameraConfig.resolution)
     if not all(v.is_integer() and v >= 2 for v in resolution):
         s.fail("resolution", f"must be two whole numbers of at least 2 (got {list(resolution)})")
     width, height = (int(v) for v in resolution)
@@ -1023,8 +976,8 @@ def _parse_camera(s: _Section) -> CameraConfig:
         s.fail("resolution", f"{width} x {height} is {width * height:.3g} pixels; the most is {MAX_IMAGE_PIXELS:.3g}")
     stops, auto = _parse_exposure(s)
     camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height), exposure=stops,
-                          display=s.choice("display", DISPLAYS, "filmic"), auto_exposure=auto,
-                          white_balance=s.choice("white_balance", WHITE_BALANCES, "daylight"))
+                          display=s.choice("display", DISPLAYS, CameraConfig.display), auto_exposure=auto,
+                          white_balance=s.choice("white_balance", WHITE_BALANCES, CameraConfig.white_balance))
     s.done()
     return camera
 
@@ -1032,16 +985,16 @@ def _parse_camera(s: _Section) -> CameraConfig:
 def _parse_exposure(s: _Section):
     """camera.exposure: stops (fixed), ``auto``, or ``{mode: auto, stops, time_constant,
     limits}``. Returns (stops, AutoExposureConfig or None)."""
-    value = s.raw("exposure", 0.0)
+    value = s.raw("exposure", CameraConfig.exposure)
     if value == "auto":
-        return 0.0, AutoExposureConfig()
+        return CameraConfig.exposure, AutoExposureConfig()
     if not isinstance(value, dict):
         if not _is_number(value):
             s.fail("exposure", f"must be a number of stops, auto, or a mapping with mode: auto, not {_kind(value)}")
-        return s.number("exposure", 0.0, at_least=-20.0, below=20.0), None
+        return s.number("exposure", CameraConfig.exposure, at_least=-20.0, below=20.0), None
     e = s.section("exposure")
     e.choice("mode", ("auto",))
-    stops = e.number("stops", 0.0, at_least=-20.0, below=20.0)
+    stops = e.number("stops", CameraConfig.exposure, at_least=-20.0, below=20.0)
     time_constant = e.number("time_constant", AUTO_TIME_CONSTANT, at_least=0.0, below=1e6)
     limits = e.numbers("limits", 2, AUTO_LIMITS)
     if not -30.0 <= limits[0] <= limits[1] <= 30.0:

@@ -14,7 +14,6 @@ backend switch, no global state.
 from __future__ import annotations
 
 import copy
-import tempfile
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from functools import cached_property
@@ -23,9 +22,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import cache, composite, ephemeris, io, render
+from . import cache, composite, ephemeris, io
 from . import sky as sky_models
-from .config import Config, load_config
+from .config import Config, parse_config
+from .cycle import layer_masks
+from .frame import FrameResult, render_frame
+from .inputs import load_sky
+from .plan import RunPlan, plan_run, resolve, scene_at
 from .geometry import Grid, I0, projected_solid_angle
 
 FIGURES = (
@@ -89,42 +92,12 @@ camera: {position: [-15.95101705184504, 7.4380814066363135, 1.7], look_at: [0.0,
 animation: {frames: 240, fps: 24}
 """
 
-POINT_SUN = """\
-# configs/grove-point-sun.yaml: the grove lit by a point sun alone (the paper's Fig. 11).
-canopy:
-  height: 8.0
-  layout: isolated
-  trees: {count: 3, seed: 7, crown_radius: 4.0, leaves_per_tree: 12000, leaf_length: 0.08}
-  flutter: {cycle: 48, swing: 12.0, twist: 20.0}
-  layers: [{height: 8.0}, {height: 6.5}]
-sky:
-  model: cie
-  turbidity: 3.0
-  sun: {elevation: 50.0, azimuth: 150.0, radius: 0.005}
-  skylight: 0.0
-  alpha: 80.0
-ground:
-  window: [-14, -7, 8, 15]    # grove.yaml has [-10, -10, 10, 10], which cuts the shadow off
-  pixel: 0.025
-  sun_window: [-4, -4, 4, 4]
-  sun_pixel: 0.01
-camera: {position: [-15.95101705184504, 7.4380814066363135, 1.7], look_at: [0.0, 0.0, 3.6]}
-animation: {frames: 240, fps: 24}
-"""
-
 CRESCENTS = """\
 # configs/crescents.yaml: crescent suns under a dense grove during a partial eclipse.
-canopy:
-  height: 8.0
-  layout: isolated
-  trees: {count: 3, seed: 7, crown_radius: 4.0, leaves_per_tree: 90000, leaf_length: 0.08}
-  flutter: {cycle: 48, swing: 12.0, twist: 20.0}
-sky:
-  model: cie
-  turbidity: 3.0
-  sun: {elevation: 60.0, azimuth: 180.0}
-  moon: {offset_start: [0.25, 0.12], offset_end: [0.1, 0.05]}
-  alpha: 80.0
+canopy: {height: 8.0, layout: isolated, flutter: {cycle: 48, swing: 12.0, twist: 20.0},
+         trees: {count: 3, seed: 7, crown_radius: 4.0, leaves_per_tree: 90000, leaf_length: 0.08}}
+sky: {model: cie, turbidity: 3.0, sun: {elevation: 60.0, azimuth: 180.0}, alpha: 80.0,
+      moon: {offset_start: [0.25, 0.12], offset_end: [0.1, 0.05]}}
 ground:
   window: [-8, -8, 8, 8]
   pixel: 0.02
@@ -147,8 +120,13 @@ sky:
 animation: {frames: 186, fps: 24}
 """
 
-SCENES = {"grove": GROVE, "point-sun": POINT_SUN, "crescents": CRESCENTS, "dallas-2024": DALLAS_2024}
-"""YAML text of each scene the figures use, by name."""
+POINT_SUN = {"sky": {"sun": {"elevation": 50.0, "azimuth": 150.0, "radius": 0.005}, "skylight": 0.0,
+                     "clouds": None}}
+"""configs/grove-point-sun.yaml: the grove lit by a point sun alone (the paper's Fig. 11), as
+its changes to the grove (None: a key removed)."""
+
+SCENES = {"grove": GROVE, "point-sun": (GROVE, POINT_SUN), "crescents": CRESCENTS, "dallas-2024": DALLAS_2024}
+"""Each scene the figures use, by name: its YAML text, or (text, changes to it)."""
 
 _PREVIEW_GROVE = {
     "canopy": {"trees": {"leaves_per_tree": 3000, "leaf_length": 0.16}},
@@ -173,22 +151,22 @@ a 320 x 180 camera, one S(t) sample every 5 minutes."""
 
 def scene_config(name: str, *, preview: bool = False) -> Config:
     """The Config of the scene ``name`` (a key of SCENES), from its YAML text; ``preview``
-    merges in PREVIEW[name]. The text goes through ``config.load_config`` in a temporary folder,
-    so it is validated exactly as a config file is."""
-    data = yaml.safe_load(SCENES[name])
+    merges in PREVIEW[name]. Validated and resolved as a config file is."""
+    text, changes = SCENES[name] if isinstance(SCENES[name], tuple) else (SCENES[name], {})
+    data = _merged(yaml.safe_load(text), changes)
     if preview:
         data = _merged(data, PREVIEW.get(name, {}))
-    with tempfile.TemporaryDirectory(prefix="sunshade-figure-") as folder:
-        path = Path(folder) / f"{name}.yaml"
-        path.write_text(yaml.safe_dump(data, sort_keys=False))
-        return load_config(path)
+    return resolve(parse_config(data, Path("."), name=name))
 
 
 def _merged(base: dict, changes: dict) -> dict:
-    """``base`` with ``changes`` merged in, mapping by mapping (neither is mutated)."""
+    """``base`` with ``changes`` merged in, mapping by mapping, a key whose change is None
+    removed (neither is mutated)."""
     out = copy.deepcopy(base)
     for key, value in changes.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
+        if value is None:
+            out.pop(key, None)
+        elif isinstance(value, dict) and isinstance(out.get(key), dict):
             out[key] = _merged(out[key], value)
         else:
             out[key] = copy.deepcopy(value)
@@ -314,8 +292,8 @@ def sun_fraction_curve(config: Config) -> tuple[list[datetime], np.ndarray, np.n
     included), the area is 1 - ``ephemeris.obscured_fraction`` (a uniform disc). [1]"""
     times, fraction, area = [], [], []
     for frame in range(config.animation.frames):
-        scene = render.scene_at(config, frame)
-        fraction.append(render.load_sky(config.sky, scene).sun_fraction())
+        scene = scene_at(config, frame)
+        fraction.append(load_sky(config.sky, scene).sun_fraction())
         d = ephemeris.separation(scene.sun, scene.moon)
         area.append(1.0 - ephemeris.obscured_fraction(d, scene.sun.angular_radius, scene.moon.angular_radius))
         times.append(scene.when)
@@ -387,27 +365,26 @@ class _Scenes:
         return self._configs[name]
 
     @cached_property
-    def grove_plan(self) -> render.RunPlan:
-        return render.plan_run(self.config("grove"))
+    def grove_plan(self) -> RunPlan:
+        return plan_run(self.config("grove"))
 
     @cached_property
     def grove_sky(self):
-        config = self.config("grove")
-        return render.load_sky(config.sky, render.scene_at(config, 0))
+        return load_sky(self.config("grove").sky, self.grove_plan.scenes[0])
 
     @cached_property
-    def grove_frame(self) -> render.FrameResult:
-        return render.render_frame(self.config("grove"), frame=0, store=self.store, plan=self.grove_plan)
+    def grove_frame(self) -> FrameResult:
+        return render_frame(self.grove_plan, 0, store=self.store)
 
     @cached_property
-    def eclipse_frame(self) -> render.FrameResult:
+    def eclipse_frame(self) -> FrameResult:
         config = self.config("crescents")
-        return render.render_frame(config, frame=config.animation.frames - 1, store=self.store)
+        return render_frame(plan_run(config), config.animation.frames - 1, store=self.store)
 
 
 def _fig_mask(scenes: _Scenes) -> np.ndarray:
     """Fig. 4: the grove's upper layer's coarse mask at cycle frame 0, grey."""
-    coarse, _ = render.layer_masks(scenes.config("grove"), scenes.grove_plan, 0, 0)
+    coarse, _ = layer_masks(scenes.grove_plan, 0, 0)
     return coarse[..., None]
 
 
@@ -444,7 +421,7 @@ def _fig_frame(scenes: _Scenes) -> np.ndarray:
 def _fig_point_sun(scenes: _Scenes) -> np.ndarray:
     """Fig. 11: the grove's frame 0 under a point sun, no sky light."""
     config = scenes.config("point-sun")
-    result = render.render_frame(config, frame=0, store=scenes.store)
+    result = render_frame(plan_run(config), 0, store=scenes.store)
     return composite.display(result.radiance, exposure=result.exposure, balance=result.balance,
                              transform=config.camera.display)
 

@@ -41,8 +41,11 @@ from . import __version__, cache, io, paths
 from .composite import display
 from .config import Config
 from .errors import RunError, SunshadeError, portable
-from .render import (RunPlan, check_inputs, cycle_phase, default_workers, framing_warnings,
-                     record_config_items, render_frame, with_exposures)
+from .cycle import cycle_phase, record_config_items
+from .frame import render_frame
+from .framing import framing_warnings
+from .lighting import with_exposures
+from .plan import RunPlan, check_inputs, default_workers
 
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
@@ -274,14 +277,14 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         a lost cluster is waited for (default CLUSTER_TIMEOUT). [s]
     progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
         ``video``. warn : called with each one-line warning of the plan
-        (``render.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
+        (``framing.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
         before any work.
     """
     started = time.perf_counter()
     timings = {}
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
-    for line in framing_warnings(config, plan) if warn else ():
+    for line in framing_warnings(plan) if warn else ():
         warn(line)
     digest = config.digest()
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
@@ -313,18 +316,18 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         todo = [f for f in frames if force or records[f] is None]
         timings["check"] = time.perf_counter() - started
         if todo:
-            plan = with_exposures(config, plan, todo)
+            plan = with_exposures(plan, todo)
             with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
                 mark = time.perf_counter()
-                cycle_phase(config, plan, store, jobs=jobs, workers=threads,
+                cycle_phase(plan, store, jobs=jobs, workers=threads,
                             cycle_frames={f % config.canopy.cycle for f in todo},
                             progress=progress and (lambda done, total: progress("cycle", done, total)))
                 timings["cycle"] = time.perf_counter() - mark
-                record_config_items(config, plan, store)
+                record_config_items(plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
                 for frame, seconds, entry, caught in _frame_phase(
-                        config, plan, store, todo, digest, jobs=jobs, threads=threads,
+                        plan, store, todo, digest, jobs=jobs, threads=threads,
                         progress=progress):
                     for category, text in caught:  # raised in a worker: said here, once
                         warnings.warn(text, category, stacklevel=2)
@@ -345,12 +348,12 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                       video_file(config) if video else None, timings)
 
 
-def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
+def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress):
     """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
     frame is written."""
     if progress:
         progress("frames", 0, len(todo))
-    tasks = (joblib.delayed(_frame_task)(config, plan, frame, str(store.root), digest, threads)
+    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads)
              for frame in todo)
     results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
@@ -360,15 +363,14 @@ def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress):
 
 
 @portable
-def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int):
+def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text)): a worker's
     warnings are said by the process that runs the command."""
-    timings = {}
+    config, timings = plan.config, {}
     store = cache.Cache(root)
     with warnings.catch_warnings(record=True) as caught:
-        result = render_frame(config, frame=frame, store=store, plan=plan,
-                              workers=threads, timings=timings)
+        result = render_frame(plan, frame, store=store, workers=threads, timings=timings)
     mark = time.perf_counter()
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
@@ -623,6 +625,7 @@ def resolved_config(config: Config, plan: RunPlan) -> dict:
     """The config as run: with the ground windows and the camera the plan placed where the
     config left them out, so that run.json says what was rendered."""
     values = asdict(config)
+    values.pop("lines")
     values["ground"]["window"] = list(plan.window.extent)
     if plan.sun_window is not None:
         values["ground"]["sun_window"] = list(plan.sun_window.extent)

@@ -6,15 +6,18 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline import cache, render
+from pipeline import cache
 from pipeline.composite import REC709_LUMINANCE
-from pipeline.config import load_config
+from pipeline.cycle import foreground_item
+from pipeline.frame import render_frame
+from pipeline.inputs import grove_of
+from pipeline.plan import plan_run
+
+from scenes import config_of
 
 
-def _config(tmp_path, config, name="scene.yaml"):
-    path = tmp_path / name
-    path.write_text(yaml.safe_dump(config))
-    return load_config(path)
+def _config(tmp_path, config):
+    return config_of(config, tmp_path)
 
 
 def _lawn(**changes):
@@ -57,7 +60,7 @@ def test_the_horizon_has_no_line_brighter_or_darker_than_the_sky_and_ground_besi
         io.write_exr(tmp_path / "sky.exr", image)
         changes = {"sky": {"model": "hdri", "hdri": "sky.exr", "haze": 400.0}}
     config = _config(tmp_path, _lawn(**changes))
-    frame = render.render_frame(config, store=cache.Cache(tmp_path / "c"), workers=1)
+    frame = render_frame(plan_run(config), store=cache.Cache(tmp_path / "c"), workers=1)
     lum = frame.radiance @ REC709_LUMINANCE.astype(np.float32)
     horizon = config.camera.resolution[1] // 2  # a level camera: the horizon is the middle row's top
     middle = lum[horizon - 1 : horizon + 2]  # the last sky row and the first two ground rows
@@ -122,7 +125,7 @@ def test_no_seam_at_the_sun_windows_edge(tmp_path, mask_value):
         "foreground": {"model": "none"},
         "animation": {"frames": 1},
     })
-    frame = render.render_frame(config, store=cache.Cache(tmp_path / "c"), workers=1)
+    frame = render_frame(plan_run(config), store=cache.Cache(tmp_path / "c"), workers=1)
     lum = (frame.radiance @ REC709_LUMINANCE.astype(np.float32)).astype(np.float64)
     edge = config.camera.resolution[0] // 2  # x = -1 m is the middle column's left side
     steps = np.abs(np.diff(lum, axis=1))  # steps[:, j] is between columns j and j + 1
@@ -146,10 +149,10 @@ def test_forest_yaml_has_its_trees_on_the_tiles_around_the_camera(tmp_path):
     data["camera"]["resolution"] = [320, 180]
     data["ground"]["albedo"] = str(root / "configs" / "assets" / "lawn.png")
     config = _config(tmp_path, data)
-    plan = render.plan_run(config)
-    item = render.foreground_item(config, plan, 0, cache.Cache(tmp_path / "c"))
-    grove, _ = render._grove(config.canopy)
-    view = render.camera_of(config, plan)
+    plan = plan_run(config)
+    item = foreground_item(plan, 0, cache.Cache(tmp_path / "c"))
+    grove, _ = grove_of(config.canopy)
+    view = plan.camera
     tile = config.canopy.layers[0].size[0]
     checked = 0
     for i in range(-3, 4):

@@ -5,43 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from pipeline import io
 from pipeline.cli import main
 
+from scenes import assert_refused, base_config, set_key, write_config
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def write_inputs(folder: Path):
-    """A small leafy mask PNG and a uniform sky EXR in ``folder``."""
-    rng = np.random.default_rng(0)
-    mask = np.where(rng.random((40, 40)) < 0.4, 0.0, 1.0).astype(np.float32)[..., None]
-    io.write_png(folder / "mask.png", mask)
-    io.write_exr(folder / "sky.exr", np.ones((32, 64, 3), np.float32))
-
-
-def base_config():
-    return {
-        "canopy": {"mask": "mask.png", "size": [4.0, 4.0], "center": [0.0, 0.0], "height": 3.0,
-                   "layout": "isolated"},
-        "sky": {"model": "uniform", "radiance": 1.0, "alpha": 80.0},
-        "ground": {"window": [-4, -4, 4, 4], "pixel": 0.1},
-    }
-
-
-def write_config(folder: Path, config, name="config.yaml") -> Path:
-    path = folder / name
-    path.write_text(yaml.safe_dump(config) if not isinstance(config, str) else config)
-    return path
-
-
-@pytest.fixture
-def inputs(tmp_path):
-    write_inputs(tmp_path)
-    out = tmp_path / "out"
-    out.mkdir()
-    return tmp_path, out
 
 
 def test_ground_writes_exr_with_metadata_and_png(inputs, capsys):
@@ -94,81 +64,19 @@ def test_layers_multiply(inputs):
     assert io.read_image(out / "l.exr").mean() < io.read_image(out / "s.exr").mean()
 
 
-def set_key(config, dotted, value):
-    """``config`` with the key at ``dotted`` set to ``value`` (or deleted)."""
-    node = config
-    keys = dotted.split(".")
-    for key in keys[:-1]:
-        node = node[key]
-    if value is DELETE:
-        del node[keys[-1]]
-    else:
-        node[keys[-1]] = value
-    return config
-
-
-DELETE = object()
-
-BAD_CONFIGS = [
-    ("unknown top-level key", "colour", 3, "colour: unknown key"),
-    ("unknown canopy key", "canopy.hieght", 3.0, "canopy.hieght: unknown key"),
-    ("negative height", "canopy.height", -1.0, "canopy.height: must be above 0"),
-    ("zero height", "canopy.height", 0, "canopy.height: must be above 0"),
-    ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
-    ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
-    ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
-    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: cie, preetham, uniform, hdri"),
-    ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
-    ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
-    ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
-    ("negative pixel", "ground.pixel", -0.1, "ground.pixel: must be above 0"),
-    ("huge window", "ground.pixel", 1e-5, "ground.pixel: the window would be"),
-    ("bad layout", "canopy.layout", "tiled", "canopy.layout: unknown value"),
-    ("negative radiance", "sky.radiance", [1, -1, 1], "sky.radiance: must lie in [0, 1e+30]"),
-    ("overflowing radiance", "sky.radiance", 1e38, "sky.radiance: must lie in [0, 1e+30]"),
-    ("rotation with uniform", "sky.rotation", 10.0, "sky.rotation: only used with model: hdri"),
-    ("huge canopy", "canopy.size", [2000, 2000], "canopy.size: the canopy would be"),
-    ("hdri key with uniform", "sky.hdri", "sky.exr", "sky.hdri: only used with model: hdri"),
-    ("size of zero", "canopy.size", [0, 4], "canopy.size: both sides must be above 0"),
-    ("NaN height", "canopy.height", float("nan"), "canopy.height: must be a finite number"),
-    ("camera underground", "camera", {"position": [0, 0, -1]}, "camera.position: the camera must be above"),
-    ("look_at and pitch", "camera", {"look_at": [0, 5, 0], "pitch": -10}, "camera.look_at: give either"),
-    ("look_at the camera", "camera", {"position": [0, 0, 2], "look_at": [0, 0, 2]}, "camera.look_at: must differ"),
-    ("fov of 180", "camera", {"fov": 180}, "camera.fov: must be below 170"),
-    ("fractional resolution", "camera", {"resolution": [640.5, 360]}, "camera.resolution: must be two whole"),
-    ("misspelt display", "camera", {"display": "filmc"}, "camera.display: unknown value 'filmc'; valid: srgb, filmic"),
-    ("trees foreground with masks", "foreground", {"model": "trees"}, "foreground.model: 'trees' renders"),
-    ("passes files missing", "foreground", {"model": "passes", "sun": "no.exr", "sky": "no.exr",
-                                            "alpha": "no.exr"}, "foreground.sun: no such file"),
-    ("pass key without passes", "foreground", {"sun": "sky.exr"}, "foreground.sun: only used with model: passes"),
-    ("missing albedo image", "ground.albedo", "grass.png", "ground.albedo: no such file"),
-    ("negative haze", "sky.haze", -5, "sky.haze: must be at least 0"),
-    ("skylight with uniform", "sky.skylight", 0.5, "sky.skylight: only used with model: cie or preetham"),
-]
-
-
-def assert_refused(config, out, capsys, message, *, commands=("ground", "check", "render"), extra=()):
-    """Every command refuses the config with exit 2 and one line holding ``message``, before
-    writing anything (no output file, no run folder, no cache)."""
-    for command in commands:
-        argv = {"ground": ["ground", str(config), "-o", str(out / "g.exr"), "--png"],
-                "check": ["check", str(config)],
-                "render": ["render", str(config), "--output", str(out / "run"),
-                           "--cache", str(out / "cache"), *extra]}[command]
-        assert main(argv) == 2, command
-        err = capsys.readouterr().err.strip()
-        assert len(err.splitlines()) == 1 and message in err, (command, err)
-        assert list(out.iterdir()) == [], command
-
-
-@pytest.mark.parametrize("name,key,value,message", BAD_CONFIGS, ids=[b[0] for b in BAD_CONFIGS])
-def test_bad_config_exits_2_names_the_key_and_writes_nothing(inputs, capsys, name, key, value, message):
+@pytest.mark.parametrize("key,value,message", [
+    ("colour", 3, "colour: unknown key"),  # the parser
+    ("ground.pixel", 1e-5, "ground.pixel: the window would be"),  # the plan's limits
+    ("canopy.mask", "nope.png", "canopy.mask: no such file"),  # a file
+])
+def test_a_bad_config_exits_2_names_the_key_and_writes_nothing(inputs, capsys, key, value, message):
+    """Every command refuses it in one line before writing anything (the parser's and the
+    plan's checks themselves: tests/test_config.py)."""
     folder, out = inputs
-    config = write_config(folder, set_key(base_config(), key, value))
-    assert_refused(config, out, capsys, message)
+    assert_refused(write_config(folder, set_key(base_config(), key, value)), out, capsys, message)
 
 
-def test_error_names_the_yaml_line(inputs, capsys):
+def test_a_config_error_names_the_yaml_line_through_the_command(inputs, capsys):
     folder, out = inputs
     text = "ground:\n  window: [-4, -4, 4, 4]\n  pixel: 0.1\ncanopy:\n  mask: mask.png\n  height: -2\n"
     config = write_config(folder, text)
@@ -265,13 +173,6 @@ def test_bad_output_paths(inputs, capsys):
     assert list(out.iterdir()) == []
 
 
-def test_shipped_example_config_is_valid():
-    from pipeline.config import load_config
-
-    config = load_config(ROOT / "configs" / "ground.yaml")
-    assert config.sky.model == "hdri" and config.canopy.layers[0].mask[0].is_file()
-
-
 def test_console_script_runs_as_a_real_process(inputs):
     folder, out = inputs
     config = write_config(folder, base_config())
@@ -305,19 +206,6 @@ def test_cache_command_lists_verifies_and_prunes(tmp_path, capsys):
     assert "--max-size" in capsys.readouterr().err
     assert main(["cache", "clear", "--cache", str(tmp_path / "c")]) == 0
     assert store.list() == []
-
-
-def test_layer_errors_name_the_layer_key(inputs, capsys):
-    folder, out = inputs
-    cfg = base_config()
-    cfg["canopy"]["layers"] = [{"height": 3.0}, {"size": [0, 4]}]
-    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 2
-    assert "canopy.layers[1].size: both sides must be above 0" in capsys.readouterr().err
-    cfg = base_config()
-    cfg["canopy"].update(layout="periodic", size=[1e-7, 1e-7])
-    assert main(["ground", str(write_config(folder, cfg)), "-o", str(out / "g.exr")]) == 2
-    assert "whole number of ground pixels" in capsys.readouterr().err
-    assert list(out.iterdir()) == []
 
 
 def test_output_that_is_a_folder_writes_nothing(inputs, capsys):
@@ -486,33 +374,11 @@ def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
     assert "\r" not in log.getvalue() and len(lines) == 2  # at most one line per 10 s between
 
 
-@pytest.mark.parametrize("section,keys", [
-    ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
-             "time", "moon", "clouds", "skylight", "haze"}),
-    ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
-    ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
-                "white_balance"}),
-])
-def test_an_unknown_key_lists_every_valid_key_of_its_section(inputs, capsys, section, keys):
-    """The keys the README's config documents for the section, whichever the parser read."""
-    folder, out = inputs
-    config = base_config()
-    config.setdefault(section, {})["mooon"] = 1
-    assert main(["check", str(write_config(folder, config))]) == 2
-    err = capsys.readouterr().err
-    assert f"{section}.mooon: unknown key (valid here: " in err
-    listed = set(err.split("valid here: ")[1].rstrip(")\n").split(", "))
-    assert listed == keys
-
-
 def test_a_config_named_with_dots_or_spaces_gets_a_valid_output_name(inputs, capsys):
     folder, out = inputs
     for name, expected in (("my.scene.yaml", "my_scene"), ("my eclipse.yaml", "my_eclipse")):
         path = write_config(folder, base_config(), name)
         assert main(["check", str(path)]) == 0, capsys.readouterr().err
-        from pipeline.config import load_config
-
-        assert load_config(path).output.name == expected
         assert main(["ground", str(path), "-o", str(out / f"{expected}.exr")]) == 0
     # a name no frame file can carry: refused by check and render, ignored by the commands that
     # write no named frames

@@ -115,14 +115,3 @@ def test_display_applies_the_white_balance_before_the_tone_curve():
     warm = display(radiance, exposure=1.0, transform="srgb", balance=np.array([1.5, 1.0, 0.5]))
     assert np.allclose(display(radiance * np.float32([1.5, 1.0, 0.5]), exposure=1.0, transform="srgb"), warm)
     assert warm[0, 0, 0] > plain[0, 0, 0] > warm[0, 0, 2]
-
-
-def test_an_unknown_white_balance_is_refused_naming_the_key(tmp_path, capsys):
-    from test_cli import assert_refused, base_config, write_config, write_inputs
-
-    write_inputs(tmp_path)
-    out = tmp_path / "out"
-    out.mkdir()
-    config = {**base_config(), "camera": {"white_balance": "tungsten"}}
-    assert_refused(write_config(tmp_path, config), out, capsys,
-                   "camera.white_balance: unknown value 'tungsten'; valid: daylight, shade, none")

@@ -11,6 +11,9 @@ from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
 
 from pipeline.daylight import clear_daylight, linke_turbidity, perez_efficacy
+from pipeline.plan import load
+
+from scenes import base_config, write_config, write_inputs
 
 
 def dew_point_for(water):
@@ -85,40 +88,13 @@ def test_linke_turbidity_is_the_climatology(site, when):
     assert 1.5 < got < 7.0
 
 
-BAD_SKIES = [
-    ("unknown cie_type", {"model": "cie", "cie_type": 16}, "sky.cie_type: must be one of the CIE standard general skies 1..15"),
-    ("cie_type zero", {"model": "cie", "cie_type": 0}, "sky.cie_type: must be at least 1"),
-    ("cie_type with preetham", {"model": "preetham", "cie_type": 12}, "sky.cie_type: only used with model: cie"),
-    ("auto without site", {"model": "cie", "turbidity": "auto"}, "sky.turbidity: auto needs sky.site and sky.time"),
-    ("turbidity too low", {"model": "cie", "turbidity": 1.0}, "sky.turbidity: must be at least 1.5"),
-    ("turbidity too high", {"model": "cie", "turbidity": 12.0}, "sky.turbidity: must be below 10"),
-    ("turbidity as text", {"model": "cie", "turbidity": "hazy"}, "sky.turbidity: must be a number"),
-]
-
-
-@pytest.mark.parametrize("name,sky,message", BAD_SKIES, ids=[b[0] for b in BAD_SKIES])
-def test_bad_sky_exits_2_names_the_key_and_writes_nothing(tmp_path, capsys, name, sky, message):
-    from test_cli import assert_refused, base_config, write_config, write_inputs
-
-    write_inputs(tmp_path)
-    out = tmp_path / "out"
-    out.mkdir()
-    config = base_config()
-    config["sky"] = {**sky, "alpha": 80.0}
-    assert_refused(write_config(tmp_path, config), out, capsys, message)
-
-
 def test_turbidity_auto_reads_the_climatology_of_the_site_and_month(tmp_path):
-    from test_cli import base_config, write_config, write_inputs
-
-    from pipeline.config import load_config
-
     write_inputs(tmp_path)
     config = base_config()
     config["sky"] = {"model": "cie", "turbidity": "auto", "alpha": 80.0,
                      "site": {"latitude": 32.78, "longitude": -96.80, "elevation": 140.0},
                      "time": {"start": "2024-04-08T18:20:00Z", "end": "2024-04-08T18:40:00Z"}}
-    sky = load_config(write_config(tmp_path, config)).sky
+    sky = load(write_config(tmp_path, config)).sky
     middle = datetime(2024, 4, 8, 18, 30, tzinfo=timezone.utc)
     assert sky.turbidity_auto
     assert sky.turbidity == pytest.approx(

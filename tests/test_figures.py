@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline import composite, figures, io, render
+from pipeline import composite, figures, io
+from pipeline.plan import plan_run
 from pipeline.cli import main
 from pipeline.geometry import I0
 
@@ -144,7 +145,7 @@ def test_scenes_load_from_their_own_text(name, preview, tmp_path, monkeypatch):
     config = figures.scene_config(name, preview=preview)
     assert config.animation.frames >= 1
     if name != "dallas-2024":
-        render.plan_run(config)  # the grids fit together
+        plan_run(config)  # the grids fit together
 
 
 def test_preview_merges_without_touching_the_scene_text():

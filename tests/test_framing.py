@@ -7,12 +7,15 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline import camera, composite, ephemeris, io, render
+from pipeline import camera, composite, ephemeris, io
 from pipeline.cache import Cache
 from pipeline.cli import main
 from pipeline.composite import REC709_LUMINANCE
-from pipeline.config import load_config
+from pipeline.frame import render_frame
+from pipeline.framing import framing_warnings, seen_ground
 from pipeline.geometry import sky_plane_from_direction
+from pipeline.lighting import auto_exposures, meter, reference_lighting, with_exposures
+from pipeline.plan import load, plan_run, scene_at
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,16 +67,16 @@ def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
     """With no camera or windows given, the frame shows sun flecks on shade: the 95th/5th
     percentile ratio of the ground's luminance is at least 2 (the sun and sky of each moment
     allow it: open sun over open shade is 2.2 to 7 there, docs/accuracy.md)."""
-    config = load_config(write(tmp_path, dapple_scene(site)))
-    plan = render.plan_run(config)
+    config = load(write(tmp_path, dapple_scene(site)))
+    plan = plan_run(config)
     assert set(plan.auto) == {"ground.window", "ground.sun_window", "camera"}
-    result = render.render_frame(config, plan=plan, store=Cache(tmp_path / "cache"))
+    result = render_frame(plan, store=Cache(tmp_path / "cache"))
     *_, ground_fraction = camera.ground_hits(plan.camera)
     ground = luminance(result)[ground_fraction >= 1.0]
     assert ground.size > 0.9 * ground_fraction.size
     p95, p5 = np.percentile(ground, [95, 5])
     assert p95 / p5 >= 2.0, p95 / p5
-    assert render.framing_warnings(config, plan) == []
+    assert framing_warnings(plan) == []
 
 
 def crescent_shift(tmp_path):
@@ -83,10 +86,10 @@ def crescent_shift(tmp_path):
     sun's centre, turned round by the pinhole (-h times it on the sky plane), projected by the
     camera."""
     latitude, longitude, when = SITES["dallas-eclipse"]
-    eclipsed = load_config(write(tmp_path, site_config(latitude, longitude, when, fov=20.0,
+    eclipsed = load(write(tmp_path, site_config(latitude, longitude, when, fov=20.0,
                                                        resolution=[480, 270]), "e.yaml"))
-    plan = render.plan_run(eclipsed)
-    view, scene = plan.camera, render.scene_at(eclipsed, 0)
+    plan = plan_run(eclipsed)
+    view, scene = plan.camera, scene_at(eclipsed, 0)
     sun, moon = scene.sun, scene.moon
     uncut = site_config(latitude, longitude, when)
     uncut["sky"] = {"sun": {"elevation": float(np.degrees(sun.elevation)),
@@ -96,10 +99,10 @@ def crescent_shift(tmp_path):
                        "yaw": float(np.degrees(view.yaw)), "pitch": float(np.degrees(view.pitch))}
     uncut["ground"].update(window=list(plan.window.extent), sun_window=list(plan.sun_window.extent),
                            sun_pixel=plan.sun_window.pixel)
-    uncut = load_config(write(tmp_path, uncut, "u.yaml"))
+    uncut = load(write(tmp_path, uncut, "u.yaml"))
     store = Cache(tmp_path / "cache")
-    a = luminance(render.render_frame(eclipsed, plan=plan, store=store))
-    b = luminance(render.render_frame(uncut, store=store))
+    a = luminance(render_frame(plan, store=store))
+    b = luminance(render_frame(plan_run(uncut), store=store))
     rows, cols = a.shape
     crop = (slice(rows // 4, 3 * rows // 4), slice(cols // 4, 3 * cols // 4))
     a, b = a[crop] - a[crop].mean(), b[crop] - b[crop].mean()
@@ -126,7 +129,7 @@ def crescent_shift(tmp_path):
     e_el = np.array([-np.sin(h_) * np.sin(a_), -np.sin(h_) * np.cos(a_), np.cos(h_)])
     w = centre + cx * e_az + cy * e_el
     shift = -6.0 * (w[:2] / w[2] - np.array(sky_plane_from_direction(a_, np.pi / 2 - h_)))
-    target = render.seen_ground(view, 3)[0][4]  # the ground at the image's centre
+    target = seen_ground(view, 3)[0][4]  # the ground at the image's centre
     u, v, _ = camera.project_points(view, np.array([[*target, 0.0], [*(target + shift), 0.0]]))
     predicted = np.array([u[1] - u[0], v[1] - v[0]])
     return measured, predicted
@@ -152,7 +155,7 @@ def test_check_prints_the_placed_framing_and_warns_of_a_camera_that_looks_away(t
     assert "warning" not in err
     away = site_config(latitude, longitude, when)
     away["camera"].update(position=[0.0, 0.0, 1.7], yaw=0.0, pitch=10.0)  # north, at the sky
-    away["ground"]["sun_window"] = list(render.plan_run(load_config(placed)).sun_window.extent)
+    away["ground"]["sun_window"] = list(plan_run(load(placed)).sun_window.extent)
     assert main(["check", str(write(tmp_path, away, "away.yaml"))]) == 0
     out, err = capsys.readouterr()
     warnings = [line for line in err.splitlines() if line.startswith("sunshade: warning:")]
@@ -176,13 +179,13 @@ def test_a_shadow_that_leaves_the_sun_window_or_the_sky_square_is_warned_of(tmp_
     assert main(["check", str(path)]) == 0
     err = capsys.readouterr().err
     assert "the leaves' shadow falls outside ground.sun_window in" in err
-    low = [f for f in range(5) if render.scene_at(load_config(path), f).sun.elevation < np.radians(20.0)]
+    low = [f for f in range(5) if scene_at(load(path), f).sun.elevation < np.radians(20.0)]
     assert low and f"the sun is below the sky square (sky.alpha 70 degrees reaches down to 20 degrees " \
         f"elevation) in {len(low)} of 5 frames" in err
-    plan = render.plan_run(load_config(path))
+    plan = plan_run(load(path))
     # by hand: the shadow of the crown's centre lies h cot(elevation) from it
-    config = load_config(path)
-    last = render.scene_at(config, 4).sun
+    config = load(path)
+    last = scene_at(config, 4).sun
     assert 6.0 / np.tan(last.elevation) > 3.0 + 3.0 * 2  # beyond the window and the crown
     assert plan.auto == ("camera",)
 
@@ -191,7 +194,7 @@ def test_an_explicit_framing_is_kept_as_given(tmp_path):
     latitude, longitude, when = SITES["oslo-morning"]
     config = site_config(latitude, longitude, when, position=[1.0, -6.0, 1.7], look_at=[0.0, 0.0, 0.5])
     config["ground"].update(window=[-4, -4, 4, 4], sun_window=[-1, -1, 1, 1])
-    plan = render.plan_run(load_config(write(tmp_path, config)))
+    plan = plan_run(load(write(tmp_path, config)))
     assert plan.auto == ()
     assert plan.window.extent == pytest.approx((-4, -4, 4, 4))
     assert plan.sun_window.extent == pytest.approx((-1, -1, 1, 1), abs=plan.sun_window.pixel)
@@ -250,22 +253,22 @@ def test_auto_exposure_keeps_the_dallas_eclipse_readable_to_second_contact(tmp_p
     config["render"] = {"sun_cells": 6}
     assert config["camera"]["exposure"]["mode"] == "auto"
     path = write(tmp_path, config, "dallas.yaml")
-    auto = load_config(path)
-    plan = render.plan_run(auto)
+    auto = load(path)
+    plan = plan_run(auto)
     site = auto.sky.site
     c2 = ephemeris.contact_times(ephemeris.Site(site.latitude, site.longitude, site.elevation),
                                  site.start, site.end)["C2"]
-    frames = [f for f in (0, 160, 225, 236, 237, 239) if render.scene_at(auto, f).when < c2]
+    frames = [f for f in (0, 160, 225, 236, 237, 239) if scene_at(auto, f).when < c2]
     assert frames[-1] >= 236
     fixed_config = dict(config, camera=dict(config["camera"], exposure=1.5))
-    fixed = load_config(write(tmp_path, fixed_config, "fixed.yaml"))
+    fixed = load(write(tmp_path, fixed_config, "fixed.yaml"))
     store = Cache(tmp_path / "cache")
     means, fixed_means = [], []
     for frame in frames:
-        result = render.render_frame(auto, frame=frame, plan=plan, store=store)
+        result = render_frame(plan, frame, store=store)
         means.append(float(composite.display(result.radiance, exposure=result.exposure).mean()))
     for frame in (frames[0], frames[-1]):
-        result = render.render_frame(fixed, frame=frame, store=store)
+        result = render_frame(plan_run(fixed), frame, store=store)
         fixed_means.append(float(composite.display(result.radiance, exposure=result.exposure).mean()))
     assert min(means) >= AUTO_BAND[0] and max(means) <= AUTO_BAND[1], dict(zip(frames, means))
     assert min(fixed_means) < AUTO_BAND[0]  # what the fixed exposure did
@@ -289,15 +292,15 @@ def test_a_frames_auto_exposure_is_the_same_rendered_alone_or_in_a_run(tmp_path)
     config["sky"]["time"]["end"] = "2024-04-08T18:39:00Z"
     config["animation"] = {"frames": 24, "fps": 24}
     config["camera"]["exposure"] = {"mode": "auto", "time_constant": 0.05}
-    config = load_config(write(tmp_path, config))
-    plan = render.plan_run(config)
-    whole = render.with_exposures(config, plan).exposures
+    config = load(write(tmp_path, config))
+    plan = plan_run(config)
+    whole = with_exposures(plan).exposures
     assert whole[-1] > 4 * whole[0]  # the eclipse deepens: the exposure opens
     for frame in (0, 23):
-        assert render.auto_exposures(config, plan, [frame])[frame] == pytest.approx(whole[frame], rel=1e-6)
-    light = render.reference_lighting(config, plan)
+        assert auto_exposures(plan, [frame])[frame] == pytest.approx(whole[frame], rel=1e-6)
+    light = reference_lighting(plan)
     series = composite.auto_exposure(
-        [render.meter(config, render.scene_at(config, f), light) for f in range(24)],
+        [meter(plan, plan.scenes[f], light) for f in range(24)],
         reference=light.unshadowed, frame_time=1 / 24, time_constant=0.05, limits=(-4.0, 10.0))
     assert whole == pytest.approx(series, rel=1e-6)  # the untruncated lag
 

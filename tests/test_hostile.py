@@ -8,11 +8,12 @@ import time
 
 import pytest
 import yaml
-from test_cli import ROOT, base_config, inputs, write_config  # noqa: F401 (inputs: a fixture)
 
 from pipeline import paths
 from pipeline.cli import main
 from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
+
+from scenes import ROOT, base_config, write_config
 
 MOST_MEMORY = 300e6
 """The most a refused input may take (issue 16). [byte]"""
@@ -84,7 +85,7 @@ CASES = [  # name, the config's bytes, the words of the message
     ("output folder of no user", yaml.safe_dump({**base_config(), "output": {"folder": "~no-such-user-x/r"}}).encode(),
      "output.folder: cannot resolve '~no-such-user-x'"),
     ("billion frames", yaml.safe_dump({**base_config(), "animation": {"frames": 10**9}}).encode(),
-     f"animation.frames: 1e+09 frames of 1280 x 720 px would be about 3.69e+03 TB of files; the most is {MAX_FRAMES}"),
+     f"animation.frames: 1e+09 frames of 1280 x 720 px would be about 3.87e+03 TB of files; the most is {MAX_FRAMES}"),
     ("huge sun window", with_sky({"model": "procedural"}, ground={"window": [-4, -4, 4, 4], "pixel": 0.1,
                                                                    "sun_window": [-1e4, -1e4, 1e4, 1e4]}).encode(),
      "ground.sun_window: the sun's fine raster would be 4e+10 cells, about 2.08 TB; the most is 1.6e+07"),

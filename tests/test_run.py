@@ -402,17 +402,16 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     from dataclasses import replace
 
     from pipeline.cache import CacheWarning
-    from pipeline.config import load_config
-    from pipeline.render import plan_run
+    from pipeline.plan import load, plan_run
     from pipeline.run import _frame_task, frame_files
 
     config_path, files, run, cache = finished
-    config = load_config(config_path)
+    config = load(config_path)
     config = replace(config, output=replace(config.output, folder=tmp_path / "out"))
     (tmp_path / "out").mkdir()
     (item,) = [i for i in items_of_frame(run, 4) if i.startswith("foreground")]
     flip(npy_of(cache, item, "sky.npy"), -17)
-    frame, _, entry, caught = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
+    frame, _, entry, caught = _frame_task(plan_run(config), 4, str(cache), config.digest(), 1)
     assert frame == 4 and [category for category, _ in caught] == [CacheWarning]
     assert f"cache item {item[:23]} was damaged (sky.npy: checksum mismatch" in caught[0][1]
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]

@@ -1,6 +1,6 @@
 """The two-scale sun (docs/method.md, "Two scales for the sun"), validated end to end in world coordinates.
 
-Every test renders through ``render.render_ground`` from a YAML config and a mask image, and
+Every test renders through ``ground.render_ground`` from a YAML config and a mask image, and
 compares with references in ``tests/reference.py`` that trace light in metres and radians (no
 rasters, kernels or FFTs): the pinhole image of the sun (an ellipse, The Physics Teacher 61, 716
 (2023)), the crescents of an eclipse, the sun fraction over frames, and energy.
@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline import cache, ephemeris, io, render
-from pipeline.config import load_config
+from pipeline import cache, ephemeris, io
+from pipeline.ground import render_ground
+from pipeline.inputs import load_sky
+from pipeline.plan import load, plan_run, scene_at
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc
 
 from reference import (
@@ -86,7 +88,7 @@ def pinhole_config(folder, mask, *, elevation, azimuth, moon=None, frames=1, hal
     }
     path = folder / f"{name}-{mask.split('.')[0]}.yaml"
     path.write_text(yaml.safe_dump(config))
-    return load_config(path)
+    return load(path)
 
 
 def spot(folder, store, **case):
@@ -94,11 +96,11 @@ def spot(folder, store, **case):
     hole config. [klx]"""
     lit = pinhole_config(folder, "hole.png", **case)
     dark = pinhole_config(folder, "solid.png", **case)
-    plans = render.plan_run(lit), render.plan_run(dark)
+    plans = plan_run(lit), plan_run(dark)
     frames = []
     for frame in range(lit.animation.frames):
-        a = render.render_ground(lit, frame=frame, store=store, plan=plans[0])
-        b = render.render_ground(dark, frame=frame, store=store, plan=plans[1])
+        a = render_ground(plans[0], frame, store=store)
+        b = render_ground(plans[1], frame, store=store)
         assert a.grid == b.grid
         frames.append(a.irradiance.astype(np.float64) - b.irradiance.astype(np.float64))
     return np.stack(frames), a.grid, lit
@@ -259,7 +261,7 @@ def test_sun_fraction_follows_the_moon_frame_by_frame(tmp_path, store):
         visible = angle_between(directions, moon) > config.sky.moon.radius
         expected = weight[visible].sum(axis=0) / weight.sum(axis=0)
         np.testing.assert_allclose(measured[frame], expected, atol=2e-3)
-        sky = render.load_sky(config.sky, render.scene_at(config, frame))
+        sky = load_sky(config.sky, scene_at(config, frame))
         luminance = measured[frame] @ (sky.sun_normal_irradiance * [0.2126, 0.7152, 0.0722])
         luminance /= sky.sun_normal_irradiance @ [0.2126, 0.7152, 0.0722]
         assert luminance == pytest.approx(sky.sun_fraction(), abs=2e-3)
@@ -275,12 +277,12 @@ def test_open_canopy_gives_the_unshadowed_irradiance_everywhere(tmp_path, store)
     io.write_png(tmp_path / "open.png", np.ones((40, 40, 1), np.float32))
     config = pinhole_config(tmp_path, "open.png", elevation=40.0, azimuth=75.0, half=0.2,
                             moon=((0.1, -0.1), (0.1, -0.1)))
-    result = render.render_ground(config, store=store)
+    result = render_ground(plan_run(config), store=store)
     assert result.grid.pixel < 0.005  # the fine sun window, not the coarse one
     relative = result.irradiance / result.unshadowed.astype(np.float32) - 1.0
     assert np.abs(relative).max() < 1e-4
     # and that is the open sky's quadrature plus the moon-cut disc integrated in directions
-    sky = render.load_sky(config.sky, render.scene_at(config, 0))
+    sky = load_sky(config.sky, scene_at(config, 0))
     expected = sky.sky_irradiance + eclipsed_sun_irradiance(config, sky)
     np.testing.assert_allclose(result.unshadowed, expected, rtol=5e-4)
 
@@ -306,7 +308,7 @@ def test_sun_irradiance_under_an_eclipse_is_the_horizontal_integral(tmp_path):
     io.write_png(tmp_path / "open.png", np.ones((40, 40, 1), np.float32))
     config = pinhole_config(tmp_path, "open.png", elevation=40.0, azimuth=75.0,
                             moon=((0.0, 0.15), (0.0, 0.15)))
-    sky = render.load_sky(config.sky, render.scene_at(config, 0))
+    sky = load_sky(config.sky, scene_at(config, 0))
     np.testing.assert_allclose(sky.sun_irradiance(), eclipsed_sun_irradiance(config, sky), rtol=5e-4)
 
 
@@ -329,14 +331,14 @@ def test_opaque_canopy_stops_the_sun_and_its_edge_casts_the_penumbra(tmp_path, s
         "ground": {"window": [edge - 0.4, y0 - 0.1, edge + 0.4, y0 + 0.1], "pixel": 0.05},
         "animation": {"frames": 1},
     }))
-    config = load_config(config_path)
-    result = render.render_ground(config, store=store)
+    config = load(config_path)
+    result = render_ground(plan_run(config), store=store)
     grid = result.grid
     row = grid.shape[0] // 2
     cols = np.arange(0, grid.shape[1], 4)
     x, y = grid.ground_from_raster(np.full(len(cols), row), cols)
     points = np.stack([x, y], axis=1)
-    sky = render.load_sky(config.sky, render.scene_at(config, 0))
+    sky = load_sky(config.sky, scene_at(config, 0))
     square = image_transmittance(np.zeros((80, 80)), center=(0, 0), size=(4, 4))
 
     def sky_radiance(az, zen):

@@ -1,0 +1,266 @@
+"""The cycle stage: the products of each cycle frame (every canopy layer's mask spectra, the
+built-in trees' foreground passes), their cache keys, and the cycle phase that computes the
+missing ones in parallel (Max 1991, section 4; docs/method.md, "Cycle products and the
+cache"). Every function takes the RunPlan."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+from dataclasses import asdict
+
+import joblib
+import numpy as np
+
+from . import cache, canopy, foreground, shadow
+from .config import FRAME_BYTES_PER_PIXEL
+from .errors import portable
+from .inputs import grove_of, load_mask
+from .plan import RunPlan
+
+
+def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
+    """Transmittance masks (coarse, fine or None) of one canopy plane at one cycle frame."""
+    config = plan.config
+    layer, lp = config.canopy.layers[layer_index], plan.layers[layer_index]
+    periodic = config.canopy.layout == "periodic"
+    grids = [lp.canopy] + ([lp.sun.mask] if lp.sun else [])
+    if config.canopy.trees is None:
+        image = load_mask(layer, cycle_frame)
+        masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
+                                              grid=g, periodic=periodic) for g in grids]
+    else:
+        grove, flutter = grove_of(config.canopy)
+        heights = tuple(l.height for l in config.canopy.layers)
+        leaf_layer, wood_layer = canopy.layer_index(grove, heights)
+        shapes = canopy.project(
+            canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
+            sun=np.array(plan.projection), plane_height=layer.height,
+        ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
+        period = layer.size if periodic else None
+        masks = [canopy.rasterize_transmittance(shapes, g, period=period) for g in grids]
+    return masks[0], (masks[1] if lp.sun else None)
+
+
+def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
+    """Everything a layer's cycle products at ``cycle_frame`` depend on (docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache")."""
+    config = plan.config
+    c = config.canopy
+    lp = plan.layers[layer_index]
+    if c.trees is None:
+        source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
+    else:
+        source = {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+                  "heights": [l.height for l in c.layers]}
+    layer = c.layers[layer_index]
+    return {
+        "source": source, "layout": c.layout, "layer": layer_index, "height": layer.height,
+        "center": layer.center, "size": layer.size, "frame": cycle_frame,
+        "projection": plan.projection, "canopy": asdict(lp.canopy),
+        "fft": getattr(lp.coarse, "fft_shape", None),
+        "sun": None if lp.sun is None else {"mask": asdict(lp.sun.mask), "fft": lp.sun.fft_shape},
+    }
+
+
+@functools.lru_cache(maxsize=64)
+def _file_digest(path) -> str:
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
+               *, workers: int = 1) -> dict:
+    """A layer's cached cycle products at ``cycle_frame``, computed on a miss: ``coarse`` (the
+    occlusion or tile spectrum), ``mean`` (mean transmittance of a tile), ``fine`` (the fine
+    mask spectrum, when there is a sun kernel). Memory-mapped, read-only."""
+    lp = plan.layers[layer_index]
+
+    def compute():
+        coarse, fine = layer_masks(plan, layer_index, cycle_frame)
+        if isinstance(lp.coarse, shadow.IsolatedPlan):
+            spectrum = shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=workers)
+        else:
+            spectrum = shadow.transmittance_spectrum(coarse, workers=workers)
+        item = {"coarse": spectrum.astype(np.complex64),
+                "mean": np.array([coarse.mean(dtype=np.float64)])}
+        if fine is not None:
+            item["fine"] = shadow.fine_mask_spectrum(fine, lp.sun, workers=workers).astype(np.complex64)
+        return item
+
+    return store.get_or_compute("spectra", cycle_params(plan, layer_index, cycle_frame), compute)
+
+
+def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
+                workers: int = 1, progress=None, cycle_frames=None) -> int:
+    """Every cycle product for every cycle frame (each layer's spectra, the foreground passes of
+    built-in trees), or for ``cycle_frames`` only: those already stored are checked here, the
+    missing ones computed in parallel over cycle frames by joblib processes (each with
+    ``workers`` FFT threads; the backend is joblib's current one, Dask included).
+    ``progress(done, total)`` is called as items finish. Returns the number of items computed."""
+    config = plan.config
+    frames = range(config.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
+    tasks = [(layer, frame) for frame in frames for layer in range(len(config.canopy.layers))]
+    if config.foreground.model == "trees":
+        tasks += [(None, frame) for frame in frames]
+    missing = [(layer, frame) for layer, frame in tasks if store.get(*_product_key(plan, layer, frame)) is None]
+    done = len(tasks) - len(missing)
+    if progress:
+        progress(done, len(tasks))
+    if not missing:
+        return 0
+    computed = 0
+    results = joblib.Parallel(n_jobs=min(jobs, len(missing)), return_as="generator")(
+        joblib.delayed(_cycle_task)(plan, layer, frame, str(store.root), workers)
+        for layer, frame in missing)
+    for misses in results:
+        computed += misses
+        done += 1
+        if progress:
+            progress(done, len(tasks))
+    return computed
+
+
+def _product_key(plan, layer, frame):
+    """(kind, params) of a cycle product: a layer's spectra, or the foreground (layer None)."""
+    if layer is None:
+        return "foreground", foreground_params(plan, frame)
+    return "spectra", cycle_params(plan, layer, frame)
+
+
+def disk_needed(plan: RunPlan) -> tuple[float, float]:
+    """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and every
+    cycle product at its exact size: per layer and cycle frame the coarse spectrum (complex64
+    half spectrum of its FFT, or of one tile) and the fine one, per cycle frame the built-in
+    trees' passes (sun, sky: 3 float32, alpha and haze: 1)."""
+    config = plan.config
+    width, height = config.camera.resolution
+    frames = config.animation.frames * width * height * FRAME_BYTES_PER_PIXEL[config.output.half]
+    per_frame = 0
+    for lp in plan.layers:
+        rows, cols = getattr(lp.coarse, "fft_shape", None) or lp.coarse.tile_shape
+        per_frame += rows * (cols // 2 + 1) * 8
+        if lp.sun is not None:
+            rows, cols = lp.sun.fft_shape
+            per_frame += rows * (cols // 2 + 1) * 8
+    if config.foreground.model == "trees":
+        per_frame += 8 * 4 * width * height  # float32 sun and sky (3 each), alpha, haze depth
+    return float(frames), float(per_frame * config.canopy.cycle)
+
+
+CONFIG_INDEX = ".configs"
+"""Folder in the cache root where each config that rendered records the keys of its cycle
+products (``record_config_items``), so that ``sunshade cache list`` can name them."""
+
+
+def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
+    """Every cycle product a config's run needs: cache key -> (kind, cycle frame)."""
+    config = plan.config
+    keys = {}
+    for frame in range(config.canopy.cycle):
+        for layer in [*range(len(config.canopy.layers)), *([None] if config.foreground.model == "trees" else [])]:
+            kind, params = _product_key(plan, layer, frame)
+            keys[cache.key_of(kind, params)] = (kind, frame)
+    return keys
+
+
+def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
+    """Record in the cache which items are this config's (``CONFIG_INDEX``/<hash of its path>
+    .json: its name, path and keys, those of earlier versions of it kept), written atomically."""
+    config = plan.config
+    folder = store.root / CONFIG_INDEX
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{hashlib.sha256(str(config.path).encode()).hexdigest()[:16]}.json"
+    try:
+        keys = set(json.loads(path.read_text()).get("keys", []))
+    except (OSError, ValueError, AttributeError):
+        keys = set()
+    keys |= set(config_item_keys(plan))
+    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    temporary.write_text(json.dumps({"name": config.output.name, "config": str(config.path),
+                                     "cycle": config.canopy.cycle, "keys": sorted(keys)}))
+    temporary.replace(path)
+
+
+def recorded_configs(store: cache.Cache) -> list[dict]:
+    """The configs recorded in a cache (``record_config_items``), each {name, config, cycle,
+    keys}, by name."""
+    found = []
+    for path in sorted((store.root / CONFIG_INDEX).glob("*.json")):
+        try:
+            entry = json.loads(path.read_text())
+            found.append({"name": str(entry["name"]), "config": str(entry["config"]),
+                          "cycle": int(entry.get("cycle", 0)), "keys": set(entry["keys"])})
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return sorted(found, key=lambda entry: (entry["name"], entry["config"]))
+
+
+@portable
+def _cycle_task(plan, layer, frame, root, workers) -> int:
+    store = cache.Cache(root)
+    if layer is None:
+        foreground_item(plan, frame, store)
+    else:
+        cycle_item(plan, layer, frame, store, workers=workers)
+    return store.misses
+
+
+def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
+    """Everything the built-in trees' passes at ``cycle_frame`` depend on: not the light's
+    strength or colour, since they are stored per unit irradiance."""
+    config = plan.config
+    c = config.canopy
+    return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+            "heights": [layer.height for layer in c.layers], "layout": c.layout,
+            "center": c.layers[0].center, "size": c.layers[0].size,
+            "camera": asdict(plan.camera),
+            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
+            "haze": config.sky.haze,
+            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+                     "probe": foreground.STEM_PROBE},
+            "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
+                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
+                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
+
+
+def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
+    """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance:
+    ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
+    a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols). The shading is
+    linear in each channel's light, so a frame scales them by the run's Lighting.
+    Memory-mapped, read-only."""
+    config = plan.config
+
+    def compute():
+        grove, flutter = grove_of(config.canopy)
+        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = foreground.taper_wood(grove.wood)
+        has_sun = plan.sun_window is not None
+        sun_point = np.asarray(plan.projection)
+        leaf_visibility = wood_visibility = None
+        if has_sun:
+            leaf_visibility, wood_visibility = foreground.stem_visibility(leaves, wood, sun_point=sun_point)
+        view = plan.camera
+        if config.canopy.layout == "periodic":  # the tile's trees on every tile in view
+            layer = config.canopy.layers[0]
+            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+                leaves, wood, view, period=layer.size[0], center=layer.center, haze=config.sky.haze,
+                seed=config.canopy.trees.seed, coarse_wood=grove.wood)
+            if has_sun:  # a straight capsule gets the mean visibility of its pieces
+                pieces = np.bincount(owner, minlength=len(grove.wood.radius))
+                capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
+                leaf_visibility = leaf_visibility[leaf_index]
+                wood_visibility = np.concatenate([wood_visibility, capsule])[wood_index]
+        direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
+        passes = foreground.tree_passes(
+            leaves, wood, view, sun_direction=direction,
+            sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=config.sky.haze)
+        item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+        if passes.haze is not None:
+            item["haze"] = passes.haze
+        return item
+
+    return store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute)

@@ -1,0 +1,155 @@
+"""The frame stage: the finished picture of one output frame (Max 1991, Figs. 10 and 13): the
+ground raster and the sky resampled in the camera, the haze, the foreground passes blended by
+the sun fraction S and composited over them (docs/method.md). Takes the RunPlan and the
+cache."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import cache, camera, composite
+from .composite import REC709_LUMINANCE
+from .cycle import foreground_item
+from .ground import GroundResult, blend_band, render_ground
+from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
+from .lighting import Lighting, auto_exposures, reference_lighting
+from .plan import RunPlan, Scene, default_workers
+
+
+def foreground_passes(plan: RunPlan, cycle_frame: int, store: cache.Cache,
+                      light: Lighting | None = None):
+    """(F_sun, F_sky, alpha) of the config's foreground at ``cycle_frame`` [kcd/m^2], the
+    built-in trees lit by ``light`` (default: the run's reference Lighting); None without one."""
+    config = plan.config
+    fg = config.foreground
+    if fg.model == "trees":
+        light = light or reference_lighting(plan)
+        item = foreground_item(plan, cycle_frame, store)
+        # light bounced off the ground reaches the trees' undersides as more diffuse light: half
+        # the ground's radiosity, its sun part following S with the sun pass
+        bounce = 0.5 * albedo_mipmap(config.ground).mean
+        sun_down = light.sun_irradiance * (light.sun_direction[2] if light.sun_direction is not None else 0.0)
+        sky = item["sky"] * (light.sky_irradiance * (1.0 + bounce)).astype(np.float32)
+        sun = item["sun"] * light.sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
+        return sky + sun, sky, item["alpha"]
+    if fg.model == "passes":
+        passes = imported_passes(fg, plan.camera, cycle_frame)
+        return passes.sun, passes.sky, passes.alpha
+    return None
+
+
+def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap, ...]:
+    """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
+    coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
+    (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
+    horizon)."""
+    rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
+    if ground.outer:
+        rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
+    maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
+    raster, grid = rasters[-1]
+    if plan.config.canopy.layout == "periodic":
+        period = plan.config.canopy.layers[0].size
+        x0, y0, x1, y1 = grid.extent
+        if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
+            return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
+        value = raster.reshape(-1, 3).mean(axis=0)
+    else:
+        value = ground.unshadowed
+    return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """radiance : (rows, cols, 3) float32 scene-linear [kcd/m^2]; sun_fraction : S [1];
+    scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster;
+    balance : the white balance's gains for display (3,) [1]."""
+
+    radiance: np.ndarray
+    sun_fraction: float
+    scene: Scene
+    exposure: float
+    ground: GroundResult
+    balance: np.ndarray | None = None
+
+
+def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
+                 workers: int | None = None, timings: dict | None = None) -> FrameResult:
+    """The finished frame at output ``frame`` (Max 1991, Fig. 10): the ground raster under the
+    frame's sky, resampled in perspective with the sky; the haze; the foreground passes of its
+    cycle frame blended by S and composited over them. ``timings``, if given, receives the
+    seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``."""
+    config = plan.config
+    workers = workers or default_workers()
+    store = store or cache.Cache(cache.cache_dir(None))
+    clock = _Stopwatch(timings)
+    scene = plan.scenes[frame]
+    sky = load_sky(config.sky, scene)
+    ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True)
+    clock.lap("ground")
+    view = plan.camera
+    background, distance = camera.background(
+        view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
+    clock.lap("camera")
+    light = reference_lighting(plan)
+    sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
+    sky_scale = _sky_scale(sky, light)
+    atmosphere = None
+    if config.sky.haze > 0:
+        # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
+        # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
+        # holds its own haze), so the far ground meets the sky at the horizon without a line
+        rays = camera.pixel_rays(view)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        transmittance = composite.aerial_perspective(
+            distance, rays, length=config.sky.haze, sun_direction=np.array([0.0, 0.0, 1.0]),
+            sun_irradiance=np.zeros(3), sky_irradiance=np.zeros(3))[0][..., None]
+        background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
+    passes = foreground_passes(plan, frame % config.canopy.cycle, store, light)
+    if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
+        veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
+        if veiled is not None:  # the haze in front of the trees, as in front of the ground
+            veil = veiled[..., None] * (camera.horizon_sky(view, sky)[None] / np.float32(sky_scale))
+            passes = (passes[0] + veil, passes[1] + veil, passes[2])
+    if passes is None:
+        empty = np.zeros_like(background)
+        passes = (empty, empty, empty[..., 0])
+    radiance = composite.composite_frame(
+        background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
+        sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
+    if plan.exposures is not None and plan.exposures[frame] is not None:
+        exposure = plan.exposures[frame]
+    elif config.camera.auto_exposure is not None:
+        exposure = auto_exposures(plan, [frame])[frame]
+    else:
+        exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+    balance = composite.white_balance(
+        config.camera.white_balance, sky_irradiance=light.sky_irradiance,
+        sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
+    clock.lap("composite")
+    return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
+
+
+class _Stopwatch:
+    """Adds the seconds since the last lap to ``timings[stage]`` (nothing when timings is None)."""
+
+    def __init__(self, timings: dict | None):
+        self.timings, self.last = timings, time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.timings is not None:
+            self.timings[stage] = self.timings.get(stage, 0.0) + now - self.last
+        self.last = now
+
+
+def _sky_scale(sky, light: Lighting) -> float:
+    """Skylight now over the reference skylight, by luminance: clouds and the moon dim it. [1]"""
+    reference = float(light.sky_irradiance @ REC709_LUMINANCE)
+    now = getattr(sky, "sky_irradiance", None)
+    if now is None or reference <= 0:
+        return 1.0
+    return float(np.asarray(now) @ REC709_LUMINANCE) / reference

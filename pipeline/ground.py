@@ -1,0 +1,154 @@
+"""The ground stage: the irradiance on the ground under one frame's sky, the correlation of the
+sky raster with each canopy layer's cached spectrum at the coarse scale and of the sun kernel
+with the fine mask spectrum on the sun window (Max 1991, Fig. 7 and section 3; docs/method.md,
+"Two scales"). Takes the RunPlan, the frame's sky and the cache."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import cache, shadow
+from . import sky as sky_models
+from .cycle import cycle_item
+from .geometry import Grid
+from .inputs import load_sky
+from .plan import LayerPlan, RunPlan, default_workers
+
+
+@dataclass(frozen=True)
+class GroundResult:
+    """irradiance : (rows, cols, 3) float32 [radiance x sr]; grid : its ground Grid [m];
+    unshadowed : (3,) irradiance of the open sky; exact : whether every ray that meets the
+    canopy lies inside the sky square (else light from beyond it was taken as unshadowed)."""
+
+    irradiance: np.ndarray
+    grid: Grid
+    unshadowed: np.ndarray
+    exact: bool
+    outer: tuple[np.ndarray, Grid] | None = None
+
+
+def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
+                  workers: int | None = None, sky=None, outer: bool = False) -> GroundResult:
+    """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
+    raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
+    product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
+    frame's sky model, loaded when not given. ``outer``: also the coarse raster of the whole
+    window with the sun at the coarse cell (the paper's single scale), where the sun window
+    does not cover it: what a camera sees beyond the sun window."""
+    workers = workers or default_workers()
+    store = store or cache.Cache(cache.cache_dir(None))
+    sky = sky or load_sky(plan.config.sky, plan.scenes[frame])
+    cycle_frame = frame % plan.config.canopy.cycle
+    outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
+    grounds, outers, totals, exact = [], [], [], True
+    for index, layer_plan in enumerate(plan.layers):
+        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
+        g, total, layer_exact, g_outer = _ground_of_layer(sky, layer_plan, item, plan, workers, outer)
+        grounds.append(g)
+        outers.append(g_outer)
+        totals.append(total)
+        exact &= layer_exact
+    combined = shadow.combine_layers(grounds, totals[0])
+    grid = plan.sun_window or plan.window
+    around = None
+    if outer:
+        around = (np.moveaxis(shadow.combine_layers(outers, totals[0]), 0, -1), plan.window)
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around)
+
+
+def _covers(inner: Grid, outer: Grid) -> bool:
+    """Whether ``inner`` reaches over all of ``outer`` (to a hundredth of a pixel)."""
+    a, b = inner.extent, outer.extent
+    tol = 0.01 * outer.pixel
+    return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
+
+
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False):
+    """(ground raster, unshadowed total, exact, outer raster or None) of one layer: the coarse
+    sky light, plus the fine sun kernel on the sun window; with ``outer`` also the coarse
+    raster with the sun kernel at the coarse cell."""
+    coarse = lp.coarse
+    if isinstance(coarse, shadow.IsolatedPlan):
+        grid = coarse.sky or shadow.sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
+        raster = sky.raster(grid)  # a 1 x 1 stand-in when no ray reaches the canopy
+        g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+        exact = coarse.exact
+    else:
+        raster = sky.raster(coarse.sky, fold_period=coarse.tile_shape)
+        g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]),
+                                   workers=workers)
+        exact = True
+    total = raster.total
+    g_outer = None
+    if lp.sun is not None:
+        if outer:
+            g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
+        kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
+        g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
+        g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
+        total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+    return g, total, exact, g_outer
+
+
+def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
+    """The sun's light through one layer on the coarse window (channels, rows, cols): its
+    kernel at the coarse sky cell, correlated like the sky. [klx]"""
+    kernel = sky_models.sun_kernel(sky, plan.window.pixel / lp.height)
+    coarse = lp.coarse
+    if isinstance(coarse, shadow.PeriodicPlan):
+        return shadow.ground_periodic(sky_models.SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
+                                      item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+    weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
+    if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
+        dr, dc = np.subtract(shadow.sky_offset(kernel.grid), shadow.sky_offset(coarse.sky))
+        rows, cols = kernel.weighted.shape[1:]
+        r0, c0 = max(dr, 0), max(dc, 0)
+        r1, c1 = min(dr + rows, coarse.sky.shape[0]), min(dc + cols, coarse.sky.shape[1])
+        if r1 > r0 and c1 > c0:
+            weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+    outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
+    raster = sky_models.SkyRaster(coarse.sky or shadow.sky_grid((0, 0), (1, 1), kernel.grid.pixel),
+                                  weighted, outside)
+    return shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+
+
+# ---------------------------------------------------------------------------------------------
+# The finished frame: camera, foreground, compositing (Max 1991, Figs. 10 and 13)
+# ---------------------------------------------------------------------------------------------
+
+
+BLEND_BAND_PIXELS = 8
+"""Least width of the band, in coarse ground pixels, inside the sun window's edge over which the
+fine sun-resolved ground gives way to the coarse ground (``blend_band``). [pixel]"""
+
+BLEND_BAND_SHARE = (1 / 8, 1 / 4)
+"""The band's width as shares of the sun window's shorter side: at least the first (so that at
+full scale the change of texture is spread over a good part of the view), at most the second
+(so that a small preview window keeps its middle half sun-resolved). [1]"""
+
+
+def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_grid: Grid) -> np.ndarray:
+    """The fine ground raster (rows, cols, 3) [klx] with a band inside its edges where it gives
+    way to the coarse raster (resampled bilinearly onto the fine grid), so that the camera,
+    which reads the fine raster inside the sun window and the coarse one beyond it, shows no
+    seam at the window's edge (issue: a rectangle where sharp sun flecks meet blurred ones).
+
+    Width: ``b = clip(max(BLEND_BAND_PIXELS coarse pixels, BLEND_BAND_SHARE[0] s), ...,
+    BLEND_BAND_SHARE[1] s)``, s the window's shorter side [m]. Weight of the fine raster at a
+    pixel centre at distance d from the nearest edge: ``w = smoothstep(d / b) = t^2 (3 - 2 t)``,
+    t = clip(d / b, 0, 1): 0 at the edge (where the coarse raster takes over), 1 from the
+    band's inner side on, with zero slope at both ends. Both rasters hold the same light
+    (the fine sun kernel and the coarse one have the same sum), so the blend keeps the mean.
+    """
+    rows, cols = fine_grid.shape
+    shorter = min(rows, cols) * fine_grid.pixel
+    width = max(BLEND_BAND_PIXELS * coarse_grid.pixel, BLEND_BAND_SHARE[0] * shorter)
+    width = min(width, BLEND_BAND_SHARE[1] * shorter)
+    across = lambda n: (np.minimum(np.arange(n), n - 1 - np.arange(n)) + 0.5) * fine_grid.pixel  # noqa: E731
+    t = np.clip(np.minimum(across(rows)[:, None], across(cols)[None, :]) / width, 0.0, 1.0)
+    weight = (t * t * (3.0 - 2.0 * t)).astype(np.float32)[..., None]
+    under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)
+    return (weight * fine + (1.0 - weight) * under).astype(np.float32)

@@ -1,0 +1,117 @@
+"""The config's inputs as the stages use them: sky models, mask images, the grove of built-in
+trees, the ground's albedo and imported foreground passes, each read and checked once per
+process (docs/design.md, "Stages")."""
+
+from __future__ import annotations
+
+import functools
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import albedo as albedos
+from . import camera, canopy, foreground, io
+from . import sky as sky_models
+from .clouds import CloudLayer
+from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
+from .geometry import Grid
+from .sky import EquirectSky, UniformSky
+
+if TYPE_CHECKING:
+    from .plan import Scene
+
+
+def load_sky(sky: SkyConfig, scene: Scene | None = None):
+    """The sky model of a config at a scene (procedural skies), its image read and checked
+    (negative radiance is taken as 0). Raises io.ImageError."""
+    if sky.model == "uniform":
+        return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
+    if sky.model in sky_models.PROCEDURAL_MODELS:
+        clouds = None
+        if sky.clouds is not None:
+            c = sky.clouds
+            clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
+                                wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
+        return clear_sky(sky, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time)
+    return load_hdri(sky)
+
+
+def clear_sky(sky: SkyConfig, sun: sky_models.SunDisc, **state) -> sky_models.ProceduralSky:
+    """The procedural sky of a config with ``sun``; ``state``: moon, clouds, time."""
+    return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
+                                    cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
+                                    **state)
+
+
+@functools.lru_cache(maxsize=4)
+def load_hdri(sky: SkyConfig) -> EquirectSky:
+    """An HDRI sky read, checked and its sun cut out once per process (the plan needs its sun,
+    every frame its image)."""
+    image = io.read_image(sky.hdri)
+    if image.shape[2] < 3:
+        image = np.repeat(image[..., :1], 3, axis=2)
+    image = image[..., :3]
+    if not np.all(np.isfinite(image)):
+        raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
+    if image.max() > MAX_RADIANCE:
+        raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
+    return sky_models.cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
+
+
+def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
+    """Transmittance (rows, cols) of a layer's mask image at ``frame`` of its sequence.
+    Raises io.ImageError."""
+    path = layer.mask[frame % len(layer.mask)]
+    image = io.read_image(path)
+    try:
+        return canopy.transmittance_from_image(image)
+    except ValueError as exc:
+        raise io.ImageError(path, str(exc)) from None
+
+
+@functools.lru_cache(maxsize=4)
+def grove_of(canopy_config: CanopyConfig):
+    """The grove of a canopy config and its flutter, grown once per process."""
+    trees, layer0 = canopy_config.trees, canopy_config.layers[0]
+    params = canopy.GroveParams(
+        count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
+        leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
+        height=max(layer.height for layer in canopy_config.layers),
+        layout=canopy_config.layout,
+        tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
+        center=layer0.center, spread=trees.spread)
+    f = canopy_config.flutter
+    return canopy.grow_grove(params), canopy.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+
+
+@functools.lru_cache(maxsize=4)
+def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
+    """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image
+    covering ``albedo_size`` metres a side."""
+    if ground.albedo == "grass":
+        image, grid = albedos.grass_albedo(period=ground.albedo_size)
+    else:
+        image = io.read_image(ground.albedo)
+        image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
+        rows, cols = image.shape[:2]
+        grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
+    return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
+
+
+@functools.lru_cache(maxsize=4)
+def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
+    """The ground's albedo as the camera reads it: the tile of ``albedo_mipmap`` laid by
+    stochastic tiling (Heitz & Neyret 2018, ``albedo.StochasticTiling``), so that its period
+    does not show in rows to the horizon."""
+    return albedos.stochastic_tiling(albedo_mipmap(ground))
+
+
+def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground.ForegroundPasses:
+    """The imported passes of ``cycle_frame``, read and checked against the size of the camera
+    ``view``. Raises io.ImageError naming the file."""
+    passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+    try:
+        foreground.check_passes_size(passes, view)
+    except ValueError as exc:
+        raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
+    return passes

@@ -1,0 +1,106 @@
+"""The run's light: the clear, uneclipsed sun and sky that light the foreground passes and set
+the exposure, the incident-light meter and the auto exposure (docs/method.md). Part of the plan
+stage: each function takes the RunPlan."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import composite
+from .inputs import clear_sky, load_hdri, load_sky
+from .plan import RunPlan, Scene
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """The clear, uneclipsed light of a run, fixed for all its frames: what the foreground
+    passes are lit by and the exposure is set from.
+
+    sun_direction : (3,) unit vector towards the sun, or None; sun_irradiance : (3,) its normal
+    irradiance [klx]; sky_irradiance : (3,) horizontal irradiance of the sky alone [klx].
+    """
+
+    sun_direction: np.ndarray | None
+    sun_irradiance: np.ndarray
+    sky_irradiance: np.ndarray
+
+    @property
+    def unshadowed(self) -> np.ndarray:
+        """Horizontal irradiance of sun and sky together (3,). [klx]"""
+        if self.sun_direction is None:
+            return self.sky_irradiance
+        return self.sky_irradiance + self.sun_irradiance * self.sun_direction[2]
+
+
+def reference_lighting(plan: RunPlan) -> Lighting:
+    """The run's Lighting: the clear sky of the config with its sun at the projection
+    direction (the middle frame's), no clouds and no moon."""
+    config = plan.config
+    s = np.append(plan.projection, 1.0)
+    direction = s / np.linalg.norm(s)
+    sky = config.sky
+    if sky.model == "uniform":
+        return Lighting(None, np.zeros(3), np.pi * np.asarray(sky.radiance, dtype=np.float64))
+    if sky.model == "hdri":
+        hdri = load_hdri(sky)
+        if hdri.sun is None:
+            return Lighting(None, np.zeros(3), hdri.total_irradiance())
+        return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
+                        hdri.total_irradiance())
+    middle = plan.scenes[config.animation.frames // 2].sun
+    clear = clear_sky(sky, middle)
+    return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
+
+
+EXPOSURE_MEMORY = 14.0
+"""Auto exposure forgets the light of frames more than this many time constants back (their
+weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]"""
+
+
+def exposure_frames(plan: RunPlan, frame: int) -> range:
+    """The frames whose light the auto exposure of ``frame`` remembers."""
+    config = plan.config
+    a = config.camera.auto_exposure
+    memory = int(np.ceil(EXPOSURE_MEMORY * a.time_constant * config.animation.fps))
+    return range(max(0, frame - memory), frame + 1)
+
+
+def auto_exposures(plan: RunPlan, frames=None) -> dict[int, float]:
+    """The exposure of ``frames`` (default: all) with ``camera.exposure: auto`` [m^2/kcd]: each
+    frame's meter reading is the open ground's light (``meter``), followed through
+    ``composite.auto_exposure``'s first-order lag and limits from the first frame it remembers
+    (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered."""
+    config = plan.config
+    light = reference_lighting(plan)
+    frames = range(config.animation.frames) if frames is None else frames
+    windows = {frame: exposure_frames(plan, frame) for frame in frames}
+    readings = {f: meter(plan, plan.scenes[f], light) for f in sorted(set().union(*windows.values()))}
+    a = config.camera.auto_exposure
+    return {frame: float(composite.auto_exposure(
+                [readings[f] for f in window], reference=light.unshadowed,
+                frame_time=1.0 / config.animation.fps, time_constant=a.time_constant,
+                limits=a.limits, stops=config.camera.exposure)[-1])
+            for frame, window in windows.items()}
+
+
+def with_exposures(plan: RunPlan, frames=None) -> RunPlan:
+    """The plan with the auto exposure of ``frames`` (default: all; the others None), metered
+    once for a whole run."""
+    if plan.config.camera.auto_exposure is None:
+        return plan
+    exposures = auto_exposures(plan, frames)
+    return replace(plan, exposures=tuple(exposures.get(f) for f in range(plan.config.animation.frames)))
+
+
+def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
+    """What an incident-light meter on the open ground reads at a frame (3,): the sky's
+    horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
+    [klx]"""
+    sky = load_sky(plan.config.sky, scene)
+    if light.sun_direction is None or not hasattr(sky, "sky_irradiance"):
+        return light.unshadowed
+    sun = sky.total_sun_irradiance() if hasattr(sky, "total_sun_irradiance") else (
+        light.sun_irradiance * light.sun_direction[2])
+    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sun)

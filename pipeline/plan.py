@@ -1,0 +1,379 @@
+"""The plan stage: a config made into a RunPlan, every per-run value the later stages need.
+
+Only this stage (with ``framing``, ``lighting`` and ``inputs``) reads the config: the cycle,
+ground and frame stages take the plan, a frame's scene and the cache (docs/design.md,
+"Stages"). The compute limits live here, checked before anything is made.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, replace
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from . import canopy, daylight, ephemeris, io, shadow
+from . import sky as sky_models
+from .camera import Camera
+from .config import CanopyLayer, Config, load_config, size_text
+from .errors import ConfigError
+from .framing import AUTO_SUN_MASK, frame_scene
+from .geometry import Grid, sky_plane_from_direction
+from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
+
+MAX_GROUND_PIXELS = 64_000_000
+"""Most pixels of the coarse ground raster, and of a canopy plane's mask. [1]"""
+MAX_FFT_CELLS = 128_000_000
+"""Most cells of any transform. [1]"""
+MAX_SUN_PIXELS = 16_000_000
+"""Most pixels of the sun's fine ground raster. [1]"""
+BYTES_PER_CELL = 52
+"""Memory a raster cell takes while a frame is made, for the messages. [B]"""
+MIN_SUN_ELEVATION = math.radians(2.0)
+"""The procedural sky needs the sun at least this high. [rad]"""
+SUN_SPAN_SAMPLES = 20_000
+"""Most moments at which the sun is checked over a site's time span."""
+
+
+def default_workers() -> int:
+    """FFT threads: the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+def load(path) -> Config:
+    """A config file read, validated and resolved (``resolve``): what every command runs.
+    Raises ConfigError naming the file and key."""
+    return resolve(load_config(path))
+
+
+def resolve(config: Config) -> Config:
+    """The config checked against the compute limits and the sun's path, with ``turbidity:
+    auto`` looked up (the Linke climatology at the site and the middle of the time span,
+    within daylight.TURBIDITY_RANGE). Raises ConfigError naming the key."""
+    _check_limits(config)
+    sky = config.sky
+    if sky.site is not None:
+        _check_sun(config)
+        if sky.turbidity is None:
+            lo, hi = daylight.TURBIDITY_RANGE
+            middle = sky.site.start + (sky.site.end - sky.site.start) / 2
+            turbidity = min(max(daylight.linke_turbidity(middle, sky.site.latitude, sky.site.longitude), lo), hi)
+            config = replace(config, sky=replace(sky, turbidity=turbidity))
+    return config
+
+
+def _check_limits(config: Config) -> None:
+    """Refuse given windows, canopy planes and sky squares whose rasters would pass the limits."""
+    ground, layout = config.ground, config.canopy.layout
+    if ground.window is not None:
+        _check_pixels(config, "ground.pixel", ground.window, ground.pixel, MAX_GROUND_PIXELS)
+    if ground.sun_pixel is not None and (ground.sun_window or ground.window):
+        _check_pixels(config, "ground.sun_pixel", ground.sun_window or ground.window, ground.sun_pixel,
+                      MAX_SUN_PIXELS)
+    images = config.canopy.trees is None
+    for index, layer in enumerate(config.canopy.layers):
+        key = "canopy.size" if len(config.canopy.layers) == 1 else f"canopy.layers[{index}].size"
+        pixels = [side / ground.pixel for side in layer.size]
+        if pixels[0] * pixels[1] > MAX_GROUND_PIXELS:
+            raise ConfigError(config.where(key), f"the canopy would be {pixels[0] * pixels[1]:.3g} pixels "
+                              f"at ground.pixel {ground.pixel:g} m; the most is {MAX_GROUND_PIXELS:.3g}")
+        if layout == "isolated" and images and ground.window is not None:  # an automatic window: the plan
+            window = ground.window
+            fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
+                (window[3] - window[1]) / ground.pixel + pixels[1])
+            if fft > MAX_FFT_CELLS:
+                raise ConfigError(config.where(key), f"canopy and window together need a {fft:.3g}-cell "
+                                  f"transform, about {size_text(fft * BYTES_PER_CELL)}; the most is "
+                                  f"{MAX_FFT_CELLS:.3g}: raise ground.pixel")
+    if layout == "periodic":
+        for layer in config.canopy.layers:
+            n = 2 * shadow.sky_half_cells(layer.height, ground.pixel, config.sky.alpha) + 1
+            if n * n > shadow.MAX_SKY_CELLS:
+                raise ConfigError(config.where("sky.alpha"), f"the sky square at "
+                                  f"{math.degrees(config.sky.alpha):g} degrees would be {n} x {n} cells "
+                                  f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
+
+
+def _check_pixels(config: Config, key, window, pixel, most):
+    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
+    if cells > most:
+        raise ConfigError(config.where(key), f"the window would be {cells:.3g} pixels, about "
+                          f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
+
+
+def _check_sun(config: Config) -> None:
+    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at time.start and
+    time.end and at every frame's moment between (at most SUN_SPAN_SAMPLES of them, evenly
+    spread, so a night is never missed): name the first moment it is not."""
+    site = config.sky.site
+    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
+    least = math.degrees(MIN_SUN_ELEVATION)
+    for key, when in (("start", site.start), ("end", site.end)):
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {math.degrees(sun.elevation):.1f} "
+                              f"degrees above the horizon then; the least is {least:g}")
+    count = min(config.animation.frames, SUN_SPAN_SAMPLES)
+    for i in range(count):
+        when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            raise ConfigError(config.where("sky.time"), f"the sun is {math.degrees(sun.elevation):.1f} "
+                              f"degrees above the horizon at {when.isoformat()}, between time.start and "
+                              f"time.end; the procedural sky needs it at least {least:g} degrees high all "
+                              f"through (a span that crosses the night)")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The sky's state at one output frame.
+
+    frame : output frame index; time : film time frame / fps [s]; when : UTC time (site and
+    time configs) or None; sun, moon : their discs (procedural skies) or None.
+    """
+
+    frame: int
+    time: float
+    when: datetime | None
+    sun: sky_models.SunDisc | None
+    moon: sky_models.MoonDisc | None
+
+
+def scene_at(config: Config, frame: int) -> Scene:
+    """Where the sun and moon are at output ``frame``: from the ephemeris for a site and time
+    span (spread evenly over the frames), or from the explicit angles, the moon sliding from
+    ``offset_start`` to ``offset_end``."""
+    sky, frames = config.sky, config.animation.frames
+    fraction = frame / (frames - 1) if frames > 1 else 0.0
+    time = frame / config.animation.fps
+    if sky.model == "hdri":
+        return Scene(frame, time, None, load_hdri(sky).sun, None)
+    if sky.model not in sky_models.PROCEDURAL_MODELS:
+        return Scene(frame, time, None, None, None)
+    if sky.site is not None:
+        site = sky.site
+        when = site.start + (site.end - site.start) * fraction
+        sun, moon = ephemeris.sun_and_moon(
+            ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
+        return Scene(frame, time, when,
+                     sky_models.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                     sky_models.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+    s = sky.sun
+    sun = sky_models.SunDisc(s.azimuth, s.elevation, s.radius)
+    moon = None
+    if sky.moon is not None:
+        m = sky.moon
+        dx, dy = (a + (b - a) * fraction for a, b in zip(m.offset_start, m.offset_end))
+        azimuth, elevation = offset_direction(s.azimuth, s.elevation, dx, dy)
+        moon = sky_models.MoonDisc(azimuth, elevation, m.radius)
+    return Scene(frame, time, None, sun, moon)
+
+
+def offset_direction(azimuth, elevation, dx, dy):
+    """The direction at gnomonic offset (dx to the right, dy up) [rad] from (azimuth,
+    elevation) [rad]: the inverse of ``ephemeris.moon_offset_from_sun``."""
+    a, h = azimuth, elevation
+    s = np.array([np.cos(h) * np.sin(a), np.cos(h) * np.cos(a), np.sin(h)])
+    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
+    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    w = s + dx * e_az + dy * e_el
+    w /= np.linalg.norm(w)
+    return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))
+
+
+@dataclass(frozen=True)
+class LayerPlan:
+    """One canopy plane's correlation plans, fixed for a whole run.
+
+    height [m]; canopy : its coarse mask Grid on the window's lattice [m]; coarse : the
+    IsolatedPlan or PeriodicPlan; sun : the SunPlan of the fine sun window, or None.
+    """
+
+    height: float
+    canopy: Grid
+    coarse: shadow.IsolatedPlan | shadow.PeriodicPlan
+    sun: shadow.SunPlan | None
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """Everything about the rasters that does not change from frame to frame.
+
+    window : the coarse ground Grid (sky light) [m]; sun_window : the fine ground Grid of the
+    sun, or None without a sun kernel [m]; projection : the sky-plane point of the sun the
+    leaves are projected along (Max 1991, Fig. 1) [tan]; layers : per canopy plane;
+    camera : the resolved camera; auto : the config keys the plan placed itself (of
+    ``ground.window``, ``ground.sun_window``, ``camera``); shadow : (x_min, y_min, x_max, y_max)
+    of where the canopy's shadow falls over the animation [m], None for a periodic forest;
+    exposures : per frame, its exposure with ``camera.exposure: auto`` (``with_exposures``), or
+    None: a frame then meters the frames its exposure remembers [m^2/kcd]; config : the
+    resolved config (``resolve``), the source of every input and parameter; scenes : the sky's
+    state at every output frame.
+    """
+
+    window: Grid
+    sun_window: Grid | None
+    projection: tuple[float, float]
+    layers: tuple[LayerPlan, ...]
+    camera: Camera | None = None
+    auto: tuple[str, ...] = ()
+    shadow: tuple[float, float, float, float] | None = None
+    exposures: tuple[float | None, ...] | None = None
+    config: Config | None = None
+    scenes: tuple[Scene, ...] = ()
+
+
+def check_inputs(config: Config) -> RunPlan:
+    """Read every input file of a config and check it (masks, HDRI, albedo image, foreground
+    passes and their size), then plan the run: what a run would stumble on, found before any
+    work starts. Raises io.ImageError naming the file."""
+    for layer in config.canopy.layers:
+        for frame in range(len(layer.mask)):
+            load_mask(layer, frame)
+    if config.sky.model == "hdri":
+        load_hdri(config.sky)
+    if isinstance(config.ground.albedo, Path):
+        image = albedo_mipmap(config.ground).level(0)
+        if not np.all(np.isfinite(image)) or image.min() < 0:
+            raise io.ImageError(config.ground.albedo, "albedo must be finite and not negative")
+    plan = plan_run(config)
+    if config.foreground.model == "passes":
+        for cycle_frame in range(config.canopy.cycle):
+            imported_passes(config.foreground, plan.camera, cycle_frame)
+    return plan
+
+
+def plan_run(config: Config) -> RunPlan:
+    """The grids and correlation plans of a run, from the config alone (an HDRI sky is read
+    for its sun; no mask image is read). What the config leaves out of ``ground.window``,
+    ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's path over the
+    animation (``frame_scene``). ``config`` must be resolved (``resolve``)."""
+    if config.sky.model in sky_models.PROCEDURAL_MODELS and config.sky.turbidity is None:
+        raise ValueError("plan_run needs a resolved config (plan.resolve): turbidity: auto is not looked up")
+    scenes = [scene_at(config, f) for f in range(config.animation.frames)]
+    has_sun = scenes[0].sun is not None
+    projection = (0.0, 0.0)
+    if has_sun:
+        middle = scenes[len(scenes) // 2].sun
+        projection = tuple(float(v) for v in sky_plane_from_direction(
+            middle.azimuth, np.pi / 2 - middle.elevation))
+    heights = [layer.height for layer in config.canopy.layers]
+    framing = frame_scene(config, scenes, projection)
+    _check_auto_window(config, framing)
+    window = Grid.from_window(framing.window, config.ground.pixel)
+    sun_window = (_sun_window(config, scenes, min(heights), framing.sun_window or framing.window)
+                  if has_sun else None)
+    layers = _plan_layers(config, scenes, window, sun_window, projection)
+    if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None:
+        # the sun's path over the animation widens the fine mask: keep it within AUTO_SUN_MASK
+        cells = max(np.prod(lp.sun.mask.shape) for lp in layers)
+        if cells > AUTO_SUN_MASK:
+            sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
+            layers = _plan_layers(config, scenes, window, sun_window, projection)
+    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
+                   framing.shadow, config=config, scenes=tuple(scenes))
+    _check_sizes(config, plan)
+    return plan
+
+
+def _check_auto_window(config: Config, framing) -> None:
+    """Refuse an isolated canopy's automatic ground.window whose raster, or (mask images) whose
+    transform with the canopy, would pass the limits. Raises ConfigError."""
+    if "ground.window" not in framing.auto or config.canopy.layout == "periodic":
+        return
+    window, pixel = framing.window, config.ground.pixel
+    checks = [(window, MAX_GROUND_PIXELS)]
+    if config.canopy.trees is None:  # an image canopy's transform: window and canopy
+        half = max(max(layer.size) for layer in config.canopy.layers) / 2
+        checks.append(((window[0] - half, window[1] - half, window[2] + half, window[3] + half), MAX_FFT_CELLS))
+    for box, most in checks:
+        cells = ((box[2] - box[0]) / pixel) * ((box[3] - box[1]) / pixel)
+        if cells > most:
+            raise ConfigError(f"{config.path}: ground.window", f"the automatic window "
+                              f"{[round(v, 2) for v in box]} would be {cells:.3g} pixels; the most is "
+                              f"{most:.3g}: give ground.window or raise ground.pixel")
+
+
+def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, projection):
+    """Each canopy plane's LayerPlan: its mask grid, coarse plan and fine sun plan."""
+    has_sun = sun_window is not None
+    layers = []
+    for layer in config.canopy.layers:
+        grid = _canopy_grid(config, layer, window, projection)
+        if config.canopy.layout == "isolated":
+            coarse = shadow.plan_isolated(window, grid, height=layer.height, alpha=config.sky.alpha)
+        else:
+            coarse = shadow.plan_periodic(window, grid, height=layer.height, alpha=config.sky.alpha)
+        sun = None
+        if has_sun:
+            q = sun_window.pixel / layer.height
+            centres = [sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation)
+                       for sc in scenes]
+            reach = max(_sun_reach(sc.sun) for sc in scenes)
+            lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
+            sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
+        layers.append(LayerPlan(layer.height, grid, coarse, sun))
+    return layers
+
+
+# ---------------------------------------------------------------------------------------------
+# Framing: the ground windows and the camera placed from the canopy and the sun's path, so that
+# any place and time frames the canopy's dappled shadow (docs/method.md, "Framing").
+
+def _check_sizes(config: Config, plan: RunPlan) -> None:
+    """Refuse a plan whose rasters would pass the stated limits (config.MAX_SUN_PIXELS and
+    MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
+    def refuse(key, what, cells, most, advice):
+        raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
+                          f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:.3g}: {advice}")
+
+    if plan.sun_window is not None and np.prod(plan.sun_window.shape) > MAX_SUN_PIXELS:
+        refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),
+               MAX_SUN_PIXELS, "shrink ground.sun_window (or ground.window) or raise ground.pixel")
+    for layer in plan.layers:
+        if np.prod(getattr(layer.coarse, "fft_shape", (0, 0))) > MAX_FFT_CELLS:
+            refuse("ground.window", "the sky light's transform", np.prod(layer.coarse.fft_shape),
+                   MAX_FFT_CELLS, "shrink ground.window or the canopy, or raise ground.pixel")
+        if layer.sun is not None and np.prod(layer.sun.fft_shape) > MAX_FFT_CELLS:
+            refuse("ground.sun_window", "the sun's transform (its window and the sun's path)",
+                   np.prod(layer.sun.fft_shape), MAX_FFT_CELLS,
+                   "shrink ground.sun_window or the time span, or raise ground.sun_pixel")
+
+
+def _sun_reach(sun) -> float:
+    """How far the sun disc reaches from its centre on the sky plane, with 10% to spare. [tan]"""
+    zenith = np.pi / 2 - sun.elevation
+    return 1.1 * sun.angular_radius / np.cos(min(zenith + sun.angular_radius, np.radians(89.0))) ** 2
+
+
+def _sun_window(config: Config, scenes, lowest: float, window) -> Grid:
+    """The fine ground grid of the sun: ``ground.sun_pixel`` or a pixel small enough for the
+    sun disc to span render.sun_cells cells under the lowest canopy plane, unless the window would then
+    pass MAX_SUN_PIXELS (the pixel grows) or the pixel would pass ground.pixel."""
+    ground = config.ground
+    pixel = ground.sun_pixel
+    if pixel is None:
+        radius = min(sc.sun.angular_radius for sc in scenes)
+        pixel = lowest * 2 * np.tan(radius) / config.render.sun_cells
+        area = (window[2] - window[0]) * (window[3] - window[1])
+        pixel = min(max(pixel, np.sqrt(area / MAX_SUN_PIXELS)), ground.pixel)
+    return Grid.from_window(window, pixel)
+
+
+def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -> Grid:
+    """The coarse mask grid of a layer on the window's lattice: the image's area, or the
+    grove's bounds over the whole flutter cycle, or one periodic tile."""
+    periodic = config.canopy.layout == "periodic"
+    if config.canopy.trees is None or periodic:
+        return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
+    grove, flutter = grove_of(config.canopy)
+    bounds = canopy.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
+    size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
+    center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
+    return canopy.lattice_grid(center, size, window, periodic=False)

@@ -1,0 +1,156 @@
+"""The config parser and its validation: every bad value refused with one line naming the key
+(and the YAML line where there is one), the plan's limits and sun checks (``plan.resolve``),
+the names a config may give."""
+
+from pathlib import Path
+
+import pytest
+
+from pipeline import clearsky, composite, sky
+from pipeline.config import PROCEDURAL_MODELS, SKY_MODELS, load_config, parse_config
+from pipeline.errors import ConfigError
+from pipeline.plan import resolve
+
+from scenes import base_config, set_key, write_config, write_inputs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def refusal(data, folder) -> str:
+    """The one line a config mapping is refused with, by the parser or the plan."""
+    with pytest.raises(ConfigError) as caught:
+        resolve(parse_config(data, folder))
+    text = str(caught.value)
+    assert "\n" not in text
+    return text
+
+
+BAD_CONFIGS = [
+    ("unknown top-level key", "colour", 3, "colour: unknown key"),
+    ("unknown canopy key", "canopy.hieght", 3.0, "canopy.hieght: unknown key"),
+    ("negative height", "canopy.height", -1.0, "canopy.height: must be above 0"),
+    ("zero height", "canopy.height", 0, "canopy.height: must be above 0"),
+    ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
+    ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
+    ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
+    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: cie, preetham, uniform, hdri"),
+    ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
+    ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
+    ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
+    ("negative pixel", "ground.pixel", -0.1, "ground.pixel: must be above 0"),
+    ("huge window", "ground.pixel", 1e-5, "ground.pixel: the window would be"),
+    ("bad layout", "canopy.layout", "tiled", "canopy.layout: unknown value"),
+    ("negative radiance", "sky.radiance", [1, -1, 1], "sky.radiance: must lie in [0, 1e+30]"),
+    ("overflowing radiance", "sky.radiance", 1e38, "sky.radiance: must lie in [0, 1e+30]"),
+    ("rotation with uniform", "sky.rotation", 10.0, "sky.rotation: only used with model: hdri"),
+    ("huge canopy", "canopy.size", [2000, 2000], "canopy.size: the canopy would be"),
+    ("hdri key with uniform", "sky.hdri", "sky.exr", "sky.hdri: only used with model: hdri"),
+    ("size of zero", "canopy.size", [0, 4], "canopy.size: both sides must be above 0"),
+    ("NaN height", "canopy.height", float("nan"), "canopy.height: must be a finite number"),
+    ("camera underground", "camera", {"position": [0, 0, -1]}, "camera.position: the camera must be above"),
+    ("look_at and pitch", "camera", {"look_at": [0, 5, 0], "pitch": -10}, "camera.look_at: give either"),
+    ("look_at the camera", "camera", {"position": [0, 0, 2], "look_at": [0, 0, 2]}, "camera.look_at: must differ"),
+    ("fov of 180", "camera", {"fov": 180}, "camera.fov: must be below 170"),
+    ("fractional resolution", "camera", {"resolution": [640.5, 360]}, "camera.resolution: must be two whole"),
+    ("misspelt display", "camera", {"display": "filmc"}, "camera.display: unknown value 'filmc'; valid: srgb, filmic"),
+    ("unknown white balance", "camera", {"white_balance": "tungsten"},
+     "camera.white_balance: unknown value 'tungsten'; valid: daylight, shade, none"),
+    ("trees foreground with masks", "foreground", {"model": "trees"}, "foreground.model: 'trees' renders"),
+    ("passes files missing", "foreground", {"model": "passes", "sun": "no.exr", "sky": "no.exr",
+                                            "alpha": "no.exr"}, "foreground.sun: no such file"),
+    ("pass key without passes", "foreground", {"sun": "sky.exr"}, "foreground.sun: only used with model: passes"),
+    ("missing albedo image", "ground.albedo", "grass.png", "ground.albedo: no such file"),
+    ("negative haze", "sky.haze", -5, "sky.haze: must be at least 0"),
+    ("skylight with uniform", "sky.skylight", 0.5, "sky.skylight: only used with model: cie or preetham"),
+]
+
+
+@pytest.mark.parametrize("name,key,value,message", BAD_CONFIGS, ids=[b[0] for b in BAD_CONFIGS])
+def test_a_bad_value_is_refused_naming_the_key(tmp_path, name, key, value, message):
+    write_inputs(tmp_path)
+    assert message in refusal(set_key(base_config(), key, value), tmp_path)
+
+
+BAD_SKIES = [
+    ("unknown cie_type", {"model": "cie", "cie_type": 16}, "sky.cie_type: must be one of the CIE standard general skies 1..15"),
+    ("cie_type zero", {"model": "cie", "cie_type": 0}, "sky.cie_type: must be at least 1"),
+    ("cie_type with preetham", {"model": "preetham", "cie_type": 12}, "sky.cie_type: only used with model: cie"),
+    ("auto without site", {"model": "cie", "turbidity": "auto"}, "sky.turbidity: auto needs sky.site and sky.time"),
+    ("turbidity too low", {"model": "cie", "turbidity": 1.0}, "sky.turbidity: must be at least 1.5"),
+    ("turbidity too high", {"model": "cie", "turbidity": 12.0}, "sky.turbidity: must be below 10"),
+    ("turbidity as text", {"model": "cie", "turbidity": "hazy"}, "sky.turbidity: must be a number"),
+]
+
+
+@pytest.mark.parametrize("name,sky_keys,message", BAD_SKIES, ids=[b[0] for b in BAD_SKIES])
+def test_a_bad_sky_is_refused_naming_the_key(tmp_path, name, sky_keys, message):
+    write_inputs(tmp_path)
+    config = {**base_config(), "sky": {**sky_keys, "alpha": 80.0}}
+    assert message in refusal(config, tmp_path)
+
+
+def test_an_error_names_the_yaml_line(tmp_path):
+    write_inputs(tmp_path)
+    text = "ground:\n  window: [-4, -4, 4, 4]\n  pixel: 0.1\ncanopy:\n  mask: mask.png\n  height: -2\n"
+    path = write_config(tmp_path, text)
+    with pytest.raises(ConfigError, match=f"{path}:6: canopy.height"):
+        load_config(path)
+    # and so do the plan's checks, from the lines the parser recorded
+    text = "ground:\n  window: [-4, -4, 4, 4]\n  pixel: 0.00001\ncanopy:\n  mask: mask.png\n"
+    with pytest.raises(ConfigError, match=f"{path}:3: ground.pixel: the window would be"):
+        resolve(load_config(write_config(tmp_path, text)))
+
+
+def test_layer_errors_name_the_layer_key(tmp_path):
+    write_inputs(tmp_path)
+    config = base_config()
+    config["canopy"]["layers"] = [{"height": 3.0}, {"size": [0, 4]}]
+    assert "canopy.layers[1].size: both sides must be above 0" in refusal(config, tmp_path)
+    config = base_config()
+    config["canopy"].update(layout="periodic", size=[1e-7, 1e-7])
+    assert "whole number of ground pixels" in refusal(config, tmp_path)
+
+
+@pytest.mark.parametrize("section,keys", [
+    ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
+             "time", "moon", "clouds", "skylight", "haze"}),
+    ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
+    ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
+                "white_balance"}),
+])
+def test_an_unknown_key_lists_every_valid_key_of_its_section(tmp_path, section, keys):
+    """The keys the README's config documents for the section, whichever the parser read."""
+    write_inputs(tmp_path)
+    config = base_config()
+    config.setdefault(section, {})["mooon"] = 1
+    text = refusal(config, tmp_path)
+    assert f"{section}.mooon: unknown key (valid here: " in text
+    assert set(text.split("valid here: ")[1].rstrip(")").split(", ")) == keys
+
+
+def test_a_config_named_with_dots_or_spaces_gets_a_valid_output_name(tmp_path):
+    write_inputs(tmp_path)
+    for name, expected in (("my.scene.yaml", "my_scene"), ("my eclipse.yaml", "my_eclipse")):
+        assert load_config(write_config(tmp_path, base_config(), name)).output.name == expected
+    named = {**base_config(), "output": {"name": "my.scene"}}
+    assert "output.name: must be a name" in refusal(named, tmp_path)
+    assert parse_config(named, tmp_path, named_frames=False).output.name == "config"
+
+
+def test_a_mapping_and_its_yaml_file_give_the_same_config(tmp_path):
+    write_inputs(tmp_path)
+    from_file = load_config(write_config(tmp_path, base_config()))
+    assert parse_config(base_config(), tmp_path) == from_file
+    assert parse_config(base_config(), tmp_path).digest() == from_file.digest()
+
+
+def test_shipped_example_config_is_valid():
+    config = load_config(ROOT / "configs" / "ground.yaml")
+    assert config.sky.model == "hdri" and config.canopy.layers[0].mask[0].is_file()
+
+
+def test_the_names_a_config_gives_are_those_the_models_know():
+    """The config's vocabulary has one home; the modules that act on the names know each."""
+    assert set(SKY_MODELS) == set(sky.MODELS)
+    assert set(PROCEDURAL_MODELS) == set(clearsky.SHAPES)
+    assert set(composite.DISPLAYS) >= {"srgb", "filmic"}

@@ -1,0 +1,88 @@
+"""The layout docs/design.md describes ("Stages", "What each stage may import"), checked on the
+source: which module imports which, no import cycle, no module far over 500 lines without a
+reason written at its top."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
+
+PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "clouds", "ephemeris",
+           "canopy", "_raster", "shadow", "albedo", "camera", "foreground", "composite"}
+"""Modules of the method's mathematics: they know no config and no stage."""
+
+BASE = {"errors", "paths", "io", "cache", "__init__"}
+"""Modules every layer may use."""
+
+MAY_IMPORT = {
+    "config": {"constants"},
+    "inputs": {"config"} | PHYSICS,
+    "framing": {"config", "inputs", "plan"} | PHYSICS,
+    "plan": {"config", "framing", "inputs"} | PHYSICS,
+    "lighting": {"config", "plan", "inputs"} | PHYSICS,
+    "cycle": {"config", "plan", "inputs"} | PHYSICS,
+    "ground": {"config", "plan", "cycle", "inputs"} | PHYSICS,
+    "frame": {"config", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
+}
+"""The stages and what each may import besides BASE (docs/design.md)."""
+
+
+def imports(name: str, *, top_level_only: bool = False) -> set[str]:
+    """The package's modules that ``pipeline/NAME.py`` imports (at module level only, or
+    anywhere; ``if TYPE_CHECKING:`` blocks are annotations, not imports)."""
+    tree = ast.parse((PACKAGE / f"{name}.py").read_text())
+    found = set()
+
+    def visit(node, top):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                continue
+            if isinstance(child, ast.ImportFrom) and child.level == 1 and (top or not top_level_only):
+                found.update([child.module] if child.module else [a.name for a in child.names])
+            inner = isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+            visit(child, top and not inner)
+
+    visit(tree, True)
+    return {module.split(".")[0] for module in found}
+
+
+MODULES = sorted(path.stem for path in PACKAGE.glob("*.py"))
+
+
+@pytest.mark.parametrize("name", sorted(PHYSICS & set(MODULES)))
+def test_the_physics_knows_no_config_and_no_stage(name):
+    assert imports(name) <= PHYSICS | BASE, imports(name) - PHYSICS - BASE
+
+
+@pytest.mark.parametrize("name", sorted(MAY_IMPORT))
+def test_each_stage_imports_only_what_the_design_allows(name):
+    assert imports(name) <= MAY_IMPORT[name] | BASE, imports(name) - MAY_IMPORT[name] - BASE
+
+
+def test_there_is_no_import_cycle():
+    graph = {name: imports(name, top_level_only=True) & set(MODULES) for name in MODULES}
+    done, path = set(), []
+
+    def visit(name):
+        if name in path:
+            raise AssertionError(" -> ".join(path[path.index(name):] + [name]))
+        if name in done:
+            return
+        path.append(name)
+        for other in sorted(graph[name]):
+            visit(other)
+        path.pop()
+        done.add(name)
+
+    for name in MODULES:
+        visit(name)
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_a_long_module_says_why_at_its_top(name):
+    """Over about 500 lines (550), the module docstring gives the reason ('Why one module')."""
+    text = (PACKAGE / f"{name}.py").read_text()
+    if text.count("\n") > 550:
+        assert "Why one module" in (ast.get_docstring(ast.parse(text)) or ""), name
