@@ -62,7 +62,7 @@ import numpy as np
 
 from .camera import Camera
 from .canopy import Leaves, Shapes, Wood, coverage_fragments
-from .geometry import Grid
+from .geometry import Grid, normalized
 from .io import ImageError, read_image
 
 LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
@@ -361,7 +361,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     u, v = _image_point(rel, depth, right, up, focal, cols, rows)
     du = _image_vector(axis_u, rel, depth, right, up, forward, focal)
     dv = _image_vector(axis_v, rel, depth, right, up, forward, focal)
-    normal = _unit(np.cross(axis_u, axis_v))
+    normal = normalized(np.cross(axis_u, axis_v))
     facing = np.where(np.sum(rel * normal, axis=1) > 0, -1.0, 1.0)  # the face towards the viewer
     normal_seen = normal * facing[:, None]
     cos_sun = normal_seen @ s
@@ -411,7 +411,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         t = _along(offset, a1 - a0)
         axis_z = 1.0 / ((1 - t) / z0[j] + t / z1[j])  # 1 / depth is affine on the image
         side = _wood_side(p0, p1, origin, right, up, forward, focal)
-        perp = _unit(np.column_stack([-(v1 - v0), u1 - u0]) + np.array([1e-12, 0.0]))[j]
+        perp = normalized(np.column_stack([-(v1 - v0), u1 - u0]) + np.array([1e-12, 0.0]))[j]
         lateral = np.clip(np.sum((offset - t[:, None] * (a1 - a0)) * perp, axis=1) / radius_px[j], -1, 1)
         facing_part = np.sqrt(1 - lateral**2)
         frag_depth[~is_leaf] = axis_z - radius[j] * facing_part
@@ -470,8 +470,8 @@ def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
     direction; height : (n,) the height of the fragment's axis point [m]; radius_px : (n,) the
     stem's radius in the image [pixel].
     """
-    axis = _unit(np.asarray(axis, dtype=np.float64))
-    reference = _unit(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
+    axis = normalized(np.asarray(axis, dtype=np.float64))
+    reference = normalized(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
     across = np.cross(axis, reference)
     angle = np.arctan2(np.sum(normal * across, axis=1), np.sum(normal * reference, axis=1))
     wander = 0.6 * np.sin(2 * np.pi * height / 0.9) + 0.3 * np.sin(2 * np.pi * height / 0.37 + 1.3)
@@ -581,10 +581,6 @@ def _per_shape(value, n, name) -> np.ndarray:
     return value
 
 
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
-
-
 def _image_point(rel, depth, right, up, focal, cols, rows):
     """Image point (u, v) [pixel] of camera-relative points rel (n, 3) at depths (n,) [m]."""
     return 0.5 * cols + focal * (rel @ right) / depth, 0.5 * rows - focal * (rel @ up) / depth
@@ -625,11 +621,11 @@ def _wood_pieces(wood: Wood, origin, forward, near):
 def _wood_side(p0, p1, origin, right, up, forward, focal):
     """Per wood piece: the unit normal of its cylinder facing the camera, and the unit normal at
     right angles to it whose image points the way of the image normal (-(v1 - v0), u1 - u0)."""
-    axis = _unit(p1 - p0)
+    axis = normalized(p1 - p0)
     middle = 0.5 * (p0 + p1)
     view = origin - middle
-    toward = _unit(view - np.sum(view * axis, axis=1, keepdims=True) * axis)
-    sideways = _unit(np.cross(axis, toward))
+    toward = normalized(view - np.sum(view * axis, axis=1, keepdims=True) * axis)
+    sideways = normalized(np.cross(axis, toward))
     rel = middle - origin
     depth = rel @ forward
     image_axis = _image_vector(p1 - p0, rel, depth, right, up, forward, focal)

@@ -5,6 +5,7 @@ import pytest
 from scipy import integrate
 
 from pipeline import composite
+from pipeline.colour import REC709_LUMINANCE
 
 
 @pytest.fixture
@@ -73,7 +74,7 @@ def test_exposure_puts_white_ground_under_the_open_sky_at_one():
     unshadowed = np.array([110.0, 100.0, 90.0])
     exposure = composite.exposure_for(unshadowed)
     white = unshadowed / np.pi  # radiance of a white Lambertian ground [kcd/m^2]
-    assert float(white @ composite.REC709_LUMINANCE) * exposure == pytest.approx(1.0)
+    assert float(white @ REC709_LUMINANCE) * exposure == pytest.approx(1.0)
     assert composite.exposure_for(unshadowed, stops=1) == pytest.approx(2 * exposure)
 
 
@@ -91,7 +92,7 @@ def test_display_transforms():
 
 
 def test_white_balance_makes_the_chosen_light_grey_and_keeps_its_luminance():
-    from pipeline.composite import REC709_LUMINANCE, white_balance
+    from pipeline.composite import white_balance
 
     sun, sky = np.array([70.0, 71.0, 62.0]), np.array([9.0, 13.0, 22.0])  # a warm sun, a blue sky [klx]
     luma = np.asarray(REC709_LUMINANCE, dtype=np.float64)

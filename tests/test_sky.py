@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from pipeline.geometry import I0, sky_plane_from_direction
-from pipeline.shadow import sky_grid
+from pipeline.geometry import sky_grid
 from pipeline.sky import EquirectSky, UniformSky
 
 from reference import equirect_patch
@@ -95,9 +95,9 @@ def test_raster_off_the_sky_counts_as_outside():
 from scipy.integrate import quad
 
 from pipeline.ephemeris import obscured_fraction
-from pipeline.shadow import sky_offset
+from pipeline.colour import REC709_LUMINANCE
+from pipeline.geometry import sky_offset
 from pipeline.sky import (
-    REC709_LUMINANCE,
     MoonDisc,
     ProceduralSky,
     SunDisc,
