@@ -54,6 +54,12 @@ def test_henyey_greenstein_is_normalised_and_forward():
         total, _ = integrate.quad(lambda mu: 2 * np.pi * composite.henyey_greenstein(mu, g), -1, 1)
         assert total == pytest.approx(1.0, rel=1e-6)
     assert composite.henyey_greenstein(1.0, 0.6) > 10 * composite.henyey_greenstein(-1.0, 0.6)
+    mu = np.linspace(-1.0, 1.0, 9)
+    exact = (1 - 0.6**2) / (4 * np.pi * (1 + 0.6**2 - 2 * 0.6 * mu) ** 1.5)
+    np.testing.assert_allclose(composite.henyey_greenstein(mu, 0.6), exact, rtol=1e-14)
+    single = composite.henyey_greenstein(mu.astype(np.float32), 0.6)  # float32 in, float32 out (clouds)
+    assert single.dtype == np.float32
+    np.testing.assert_allclose(single, exact, rtol=1e-6)
 
 
 def test_aerial_perspective_follows_beer_lambert_and_spares_the_sky():

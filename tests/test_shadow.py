@@ -66,18 +66,6 @@ def test_periodic_fft_equals_direct_sum(channels):
         assert np.abs(g - reference).max() <= 1e-5 * reference.max()
 
 
-def test_fold_accumulates_modulo_the_period():
-    rng = np.random.default_rng(5)
-    e = rng.random((2, 11, 7))
-    start, period = (-5, -3), (4, 3)
-    folded = fold(e, start, period)
-    expected = np.zeros((2,) + period)
-    for r in range(11):
-        for c in range(7):
-            expected[:, (start[0] + r) % 4, (start[1] + c) % 3] += e[:, r, c]
-    assert np.allclose(folded, expected)
-
-
 def test_open_sky_of_radiance_one_gives_pi():
     window = Grid.from_window((-5, -5, 5, 5), 0.1)
     sky = UniformSky(np.ones(3))
