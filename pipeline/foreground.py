@@ -60,7 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, project_points
 from .canopy import Leaves, Shapes, Wood, coverage_fragments
 from .geometry import Grid, normalized
 from .io import ImageError, read_image
@@ -358,7 +358,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     kept = np.flatnonzero(depth - reach > near)
     rel, depth, reach = rel[kept], depth[kept], reach[kept]
     axis_u, axis_v = leaves.axis_u[kept], leaves.axis_v[kept]
-    u, v = _image_point(rel, depth, right, up, focal, cols, rows)
+    u, v, _ = project_points(camera, leaves.center[kept])  # depth > near > 0: as rel, depth here
     du = _image_vector(axis_u, rel, depth, right, up, forward, focal)
     dv = _image_vector(axis_v, rel, depth, right, up, forward, focal)
     normal = normalized(np.cross(axis_u, axis_v))
@@ -376,8 +376,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     p0, p1, radius, owner = piece
     rel0, rel1 = p0 - origin, p1 - origin
     z0, z1 = rel0 @ forward, rel1 @ forward
-    u0, v0 = _image_point(rel0, z0, right, up, focal, cols, rows)
-    u1, v1 = _image_point(rel1, z1, right, up, focal, cols, rows)
+    (u0, v0, _), (u1, v1, _) = project_points(camera, p0), project_points(camera, p1)
     radius_px = focal * radius / np.sqrt(z0 * z1)
 
     image = Grid((0.0, 0.0), 1.0, (rows, cols))  # plane point (u, -v) is image point (u, v)
@@ -579,11 +578,6 @@ def _per_shape(value, n, name) -> np.ndarray:
     if not np.all(np.isfinite(value)) or np.any(value < 0) or np.any(value > 1 + 1e-6):
         raise ValueError(f"{name} must lie in [0, 1]")
     return value
-
-
-def _image_point(rel, depth, right, up, focal, cols, rows):
-    """Image point (u, v) [pixel] of camera-relative points rel (n, 3) at depths (n,) [m]."""
-    return 0.5 * cols + focal * (rel @ right) / depth, 0.5 * rows - focal * (rel @ up) / depth
 
 
 def _image_vector(vector, rel, depth, right, up, forward, focal):
