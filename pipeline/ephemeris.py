@@ -16,9 +16,9 @@ fraction, so ``obscured_fraction`` is exactly 1 between the C2 and C3 that ``con
 returns. The lunar limb profile (valleys, mountains; a few seconds at C2 and C3) is ignored.
 
 Times are UTC, taken as UT1 (|UT1 - UTC| < 0.9 s). ephem's own Delta T = TT - UT model is used;
-in ephem 4.2.1 it is an extrapolation after about 2017 (72.4 s for 2024 April 8 against the
-observed 69.2 s), which makes 2024 contacts about 3 s early. Accuracy of contact times against
-published local circumstances: a few seconds (tests/test_ephemeris.py).
+in ephem 4.2.1 it is an extrapolation after about 2017, so recent contacts come early. The
+contact times against published local circumstances are measured in docs/accuracy.md
+(tests/test_ephemeris.py holds them).
 """
 
 from __future__ import annotations

@@ -32,10 +32,10 @@ elliptical leaves that make the shadow masks, and its trunks and branches as cap
 
   ((1 +- n_z) / 2 is the share of the sky that each face sees; the far face's light shines
   through.) ``k`` (``leaf_sky_exposure``) is the fraction of the open sky that the crown lets
-  reach a leaf: a constant 0.7 by default (the mean of ``sky_exposure`` over the leaves of the
-  default grove is 0.71, over its wood 0.68; wood defaults to 0.6), or one value per leaf from
+  reach a leaf: a constant 0.7 by default (wood: 0.6; near the means of ``sky_exposure`` over
+  the default grove, measured in docs/accuracy.md), or one value per leaf from
   ``sky_exposure``, which averages the sun visibility over sky directions (12 visibility
-  passes, 3 s for the default grove; the crown gets darker inside). The sun, of normal
+  passes; the crown gets darker inside). The sun, of normal
   irradiance E_sun along the unit vector s:
 
       L_sun = V |n . s| E_sun / pi  x  rho if the sun lights the face we see, else tau
@@ -160,10 +160,9 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
     pixel : raster pixel across the sun's beam; default a quarter of the median leaf length
         (half the median semi-axis |U|). [m]
     Returns (leaf visibility (N,), wood visibility (M,)) float64 in [0, 1]; a shape that covers
-    no pixel (a leaf edge-on to the sun) gets 1. Against exact rays through 24 leaves
-    (tests/test_foreground.py) the error per leaf is 0.002 mean, 0.012 most at a pixel of 1/30
-    leaf length, 0.03 mean, 0.18 most at the default quarter (partial pixels are treated as
-    independent occluders); the cost grows about as 1 / pixel^2 once pixels are below leaf size.
+    no pixel (a leaf edge-on to the sun) gets 1. Partial pixels are treated as independent
+    occluders; the error per leaf against exact rays (tests/test_foreground.py) is measured in
+    docs/accuracy.md. The cost grows about as 1 / pixel^2 once pixels are below leaf size.
     """
     s = np.array([sun_point[0], sun_point[1], 1.0], dtype=np.float64)
     return _visibility(leaves, _no_wood() if wood is None else wood, s / np.linalg.norm(s), pixel)

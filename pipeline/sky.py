@@ -1,5 +1,8 @@
 """Sky models and their weighted sky-plane rasters ``e`` (Max 1991, eq. 1 and Fig. 6).
 
+``Sky`` declares what the renderer and the camera ask of a sky; ``UniformSky``, ``EquirectSky``
+(an HDRI) and ``ProceduralSky`` (clear sky, sun, moon, clouds) implement all of it.
+
 A sky raster cell holds the integral of ``L(s) cos^4(theta) dA`` over the cell: radiance times
 projected solid angle, so that the unshadowed irradiance of the ground is the plain sum of the
 raster plus ``outside``, the irradiance of all the sky the raster does not cover. No hidden
@@ -588,7 +591,7 @@ class ProceduralSky:
     def sun_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the sun after moon and clouds (3,): the sum of its kernel
         with 16 cells across the disc, which weights each part of a moon-cut disc by its own
-        cos(theta) (to about 2e-4). [klx]"""
+        cos(theta) (its error is measured in docs/accuracy.md). [klx]"""
         return sun_kernel(self, self.sun.angular_radius / 8).weighted.sum(axis=(1, 2), dtype=np.float64)
 
     def _sun_samples(self, w, footprint):
@@ -696,13 +699,13 @@ class ProceduralSky:
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
         exact projected solid angles (Max 1991, eq. 2); ``outside`` by quadrature of the rest of the
-        hemisphere (``_outside``, about 1e-4). With ``fold_period`` (rows, cols), folded as in
+        hemisphere (``_outside``). With ``fold_period`` (rows, cols), folded as in
         ``EquirectSky.raster``. Units: [klx].
 
         The smooth clear sky is evaluated on every k-th cell centre, nodes at most
-        ``CLEAR_SKY_NODE_SPACING`` apart, and interpolated bilinearly (relative error about 3e-4,
-        up to about 1% in the few cells at the sun where the Perez circumsolar term has a cusp);
-        clouds are evaluated at every cell centre.
+        ``CLEAR_SKY_NODE_SPACING`` apart, and interpolated bilinearly (least accurate in the few
+        cells at the sun where the Perez circumsolar term has a cusp; measured in
+        docs/accuracy.md); clouds are evaluated at every cell centre.
         """
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
@@ -793,14 +796,14 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     sub-samples per cell (n >= 8, more when the disc spans few cells), the sun and moon limbs
     anti-aliased by a linear ramp one sub-sample wide measured along the gradient of the angular
     distance (|grad_s rho| = cos(theta) |u_xy|, u the unit tangent away from the disc centre),
-    which keeps the disc's energy to about 1e-4 (3e-4 at worst, from the limb-darkening law's
-    square root at the limb) with no renormalisation.
+    which keeps the disc's energy with no renormalisation (measured in docs/accuracy.md; the
+    worst case comes from the limb-darkening law's square root at the limb).
 
     sky : ProceduralSky, or EquirectSky with a sun (``cut_sun``; no moon, no cloud dimming) --
         the whole sun disc must be above the horizon.
     q : sky-plane cell. [tan]
-    Returns a SkyRaster (outside = 0) on ``shadow.sky_grid(start, shape, q)``: the block covers
-    the disc with a margin of one cell; ``shadow.sky_offset(kernel.grid)`` is its offset ``start``.
+    Returns a SkyRaster (outside = 0) on ``geometry.sky_grid(start, shape, q)``: the block covers
+    the disc with a margin of one cell; ``geometry.sky_offset(kernel.grid)`` is its offset ``start``.
     Units: the sky's irradiance ([klx] for ProceduralSky); its sum is ``sky.sun_irradiance()``.
     """
     sun = sky.sun
@@ -870,7 +873,7 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
     ``ring`` texels around the region. The sun carries the region's radiance above the
     background away, and the region's texels are set to the background: total_irradiance() +
     sun_irradiance() of the result is the input's total_irradiance() (to rounding), and the sun
-    kernel's sum is sun_irradiance() (to about 2e-4). Direction: the unit-vector mean of the
+    kernel's sum is sun_irradiance() (measured in docs/accuracy.md). Direction: the unit-vector mean of the
     texel centres weighted by the excess luminance times solid angle, ``rotation`` included. The
     disc takes ``angular_radius`` and ``limb_darkening``, not the image's (a photographed sun is
     blurred); its normal irradiance is the excess horizontal irradiance over cos(zenith).
