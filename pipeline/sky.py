@@ -30,6 +30,7 @@ from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
 from .geometry import Grid, direction_vector, fold, projected_solid_angle, sky_grid, sky_offset, tangent_axes
 
+
 @dataclass(frozen=True)
 class SkyRaster:
     """The weighted sky on a sky-plane grid.
@@ -61,7 +62,8 @@ class Sky(Protocol):
         folded modulo ``fold_period`` (rows, cols) if given.
     sun_fraction() -> float -- S, the sun's power reaching the ground over the clear,
         uneclipsed sun's; 0.0 without a sun.
-    total_sun_irradiance() -> the clear, uneclipsed sun's; zeros without a sun.
+    total_sun_irradiance() -> the sun's before the moon and clouds dim it (an HDRI's: as
+        photographed); zeros without a sun.
     view_radiance(w, s, footprint=None) -> (..., 3) -- the sky's radiance without the sun disc
         along unit vectors w (..., 3) with sky-plane points s (..., 2) [tan] (the camera holds
         wz at MIN_UPWARD or more), each standing for a sky-plane width ``footprint`` [tan]
