@@ -787,14 +787,12 @@ def _row_footprints(camera: Camera, rows, part):
 def sky_view(camera: Camera, sky) -> np.ndarray:
     """The sky's radiance (height, width, 3) float32 in the camera's image, without the sun disc.
 
-    sky : UniformSky (its constant radiance), EquirectSky (bilinear in its image, ``rotation``
-        included, docs/method.md "Conventions") or any model with ``radiance(s)`` at sky-plane points
-        s = (wx / wz, wy / wz) [tan] (ProceduralSky), with wz / |w| held at MIN_UPWARD or more.
+    sky : a ``sky.Sky``, asked for its ``view_radiance`` along each pixel's unit vector w, at
+        sky-plane points s = (wx / wz, wy / wz) [tan] with wz / |w| held at MIN_UPWARD or more,
+        with a pixel's width on the sky plane along the radius and across as the footprint.
     Each pixel cut by the horizon is sampled at the centre of its sky part; pixels wholly below
     the horizon are 0. [radiance]
     """
-    from .sky import EquirectSky, ProceduralSky, UniformSky
-
     fraction = ground_fraction_rows(camera)
     out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     rows = np.flatnonzero(fraction < 1)
@@ -804,18 +802,10 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     u = np.arange(camera.width, dtype=np.float64)[None, :] + 0.5
     w = image_rays(camera, u, v)
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
-    if isinstance(sky, UniformSky):
-        out[rows] = np.asarray(sky.radiance, dtype=np.float32)
-    elif isinstance(sky, EquirectSky):
-        out[rows] = equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
-    else:
-        wz = np.maximum(w[..., 2], MIN_UPWARD)
-        s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
-        if isinstance(sky, ProceduralSky):  # a pixel's width on the sky plane, along the radius and across
-            out[rows] = sky.radiance(s, footprint=np.stack(np.broadcast_arrays(
-                1.0 / (camera.focal * wz * wz), 1.0 / (camera.focal * wz)), axis=-1))
-        else:
-            out[rows] = sky.radiance(s)
+    wz = np.maximum(w[..., 2], MIN_UPWARD)
+    s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
+    footprint = np.stack(np.broadcast_arrays(1.0 / (camera.focal * wz * wz), 1.0 / (camera.focal * wz)), axis=-1)
+    out[rows] = sky.view_radiance(w, s, footprint)
     return out
 
 
@@ -828,8 +818,6 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
     with the footprint of ``sky_view`` there (the cloud pattern filtered to its mean so far
     out). sky : as ``sky_view``. [radiance]
     """
-    from .sky import EquirectSky, ProceduralSky, UniformSky
-
     right, up, forward = camera.basis
     u = np.arange(camera.width, dtype=np.float64) + 0.5
     # the level ray of column u is forward + x right + y up with wz = 0: y = -tan(pitch), and its
@@ -840,14 +828,8 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
     w[:, :2] /= np.hypot(w[:, 0], w[:, 1])[:, None]
     w[:, 2] = MIN_UPWARD / np.sqrt(1.0 - MIN_UPWARD**2)
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
-    if isinstance(sky, UniformSky):
-        return np.broadcast_to(np.asarray(sky.radiance, dtype=np.float32), (camera.width, 3)).copy()
-    if isinstance(sky, EquirectSky):
-        return equirect_lookup(sky.image, w, rotation=sky.rotation, sky_only=True)
     s = w[:, :2] / w[:, 2:3]
-    if isinstance(sky, ProceduralSky):
-        return np.asarray(sky.radiance(s, footprint=1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
-    return np.asarray(sky.radiance(s), dtype=np.float32)
+    return np.asarray(sky.view_radiance(w, s, 1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
 
 
 def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:

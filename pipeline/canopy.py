@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sparse
 
-from .composite import REC709_LUMINANCE
-from .geometry import Grid
+from .colour import REC709_LUMINANCE
+from .geometry import Grid, normalized
 
 
 def transmittance_from_image(image: np.ndarray) -> np.ndarray:
@@ -317,24 +317,20 @@ def _grow_tree(rng, base, p: GroveParams) -> dict:
     # leaf clusters in a shell of the crown ellipsoid, leaves scattered around each
     n = p.leaves_per_tree
     n_cluster = max(1, n // p.leaves_per_cluster)
-    direction = _unit(rng.normal(size=(n_cluster, 3)))
+    direction = normalized(rng.normal(size=(n_cluster, 3)))
     cluster = crown + direction * rng.uniform(0.35, 1.0, (n_cluster, 1)) ** (1 / 3) * [*half, half_z]
     spread = 0.06 * R * (p.leaves_per_cluster > 1)
     center = cluster[rng.permutation(n) % n_cluster] + rng.normal(0, spread, (n, 3)) * [1, 1, 0.5]
     length = p.leaf_length * rng.uniform(0.7, 1.3, n)
-    u = _unit(rng.normal(size=(n, 3)))
-    v = _unit(np.cross(u, rng.normal(size=(n, 3))))
+    u = normalized(rng.normal(size=(n, 3)))
+    v = normalized(np.cross(u, rng.normal(size=(n, 3))))
     axis_u = 0.5 * length[:, None] * u
     axis_v = 0.5 * (length * rng.uniform(0.4, 0.7, n))[:, None] * v
-    swing_axis = _unit(np.column_stack([-u[:, 1], u[:, 0], np.zeros(n)]) + [1e-12, 0, 0])  # across the leaf
+    swing_axis = normalized(np.column_stack([-u[:, 1], u[:, 0], np.zeros(n)]) + [1e-12, 0, 0])  # across the leaf
     return dict(center=center, axis_u=axis_u, axis_v=axis_v, pivot=center - axis_u,
                 swing_axis=swing_axis, swing_phase=rng.uniform(0, 2 * np.pi, n),
                 twist_phase=rng.uniform(0, 2 * np.pi, n), start=np.concatenate(start),
                 end=np.concatenate(end), radius=np.concatenate(radius))
-
-
-def _unit(v):
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def _wrap(points, p: GroveParams):

@@ -11,10 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-XYZ_TO_REC709 = np.array(
-    [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]]
-)
-"""CIE XYZ to linear Rec.709 RGB (D65 white), IEC 61966-2-1."""
+from .colour import XYZ_TO_REC709
 
 _GRADATION = {1: (4.0, -0.70), 2: (1.1, -0.8), 3: (0.0, -1.0), 4: (-1.0, -0.55), 5: (-1.0, -0.32),
               6: (-1.0, -0.15)}

@@ -74,9 +74,10 @@ from functools import lru_cache
 import numpy as np
 from scipy import ndimage, special
 
+from .composite import henyey_greenstein
+
 __all__ = [
     "CloudLayer",
-    "henyey_greenstein",
     "single_scattering_transmission",
     "single_scattering_flux_transmittance",
     "delta_eddington_transmittance",
@@ -99,27 +100,6 @@ def _phi(x):
         x = x.astype(np.float64)
     x = np.maximum(x, np.finfo(x.dtype).tiny)  # expm1 is exact there: phi = 1
     return -np.expm1(-x) / x
-
-
-def henyey_greenstein(cos_scattering_angle, asymmetry):
-    """Henyey-Greenstein phase function, normalised to 1 over the sphere.
-
-    p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos(Theta))^(3/2))  (Henyey & Greenstein 1941,
-    "Diffuse radiation in the galaxy", ApJ 93, 70-83; used for clouds by Blinn 1982).
-
-    cos_scattering_angle : cosine of the angle between the incident propagation direction and
-        the scattered one; 1 is straight on (forward). [dimensionless]
-    asymmetry : g, the mean cosine of the scattering angle, in (-1, 1). [dimensionless]
-    Returns p. [1/sr]
-    """
-    c = np.asarray(cos_scattering_angle)
-    if c.dtype != np.float32:
-        c = c.astype(np.float64)
-    g = float(asymmetry)
-    d = c * c.dtype.type(-2.0 * g)
-    d += c.dtype.type(1.0 + g * g)
-    d *= np.sqrt(d)
-    return c.dtype.type((1.0 - g * g) / (4.0 * np.pi)) / d
 
 
 def single_scattering_transmission(optical_depth, view_cosine, sun_cosine, phase, *, albedo):

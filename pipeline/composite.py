@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-"""Luminance weights of linear Rec.709 RGB."""
+from .colour import REC709_LUMINANCE
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
@@ -87,11 +86,25 @@ def composite_frame(background: np.ndarray, *, sun_pass: np.ndarray, sky_pass: n
     return frame
 
 
-def henyey_greenstein(cos_angle, g: float) -> np.ndarray:
-    """Henyey-Greenstein phase function at the cosine of the scattering angle, normalised over
-    the sphere. [1/sr]"""
-    cos_angle = np.asarray(cos_angle, dtype=np.float64)
-    return (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * cos_angle) ** 1.5)
+def henyey_greenstein(cos_scattering_angle, asymmetry):
+    """Henyey-Greenstein phase function, normalised to 1 over the sphere.
+
+    p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos(Theta))^(3/2))  (Henyey & Greenstein 1941,
+    "Diffuse radiation in the galaxy", ApJ 93, 70-83; used for clouds by Blinn 1982).
+
+    cos_scattering_angle : cosine of the angle between the incident propagation direction and
+        the scattered one; 1 is straight on (forward). [dimensionless]
+    asymmetry : g, the mean cosine of the scattering angle, in (-1, 1). [dimensionless]
+    Returns p. [1/sr]
+    """
+    c = np.asarray(cos_scattering_angle)
+    if c.dtype != np.float32:
+        c = c.astype(np.float64)
+    g = float(asymmetry)
+    d = c * c.dtype.type(-2.0 * g)
+    d += c.dtype.type(1.0 + g * g)
+    d *= np.sqrt(d)
+    return c.dtype.type((1.0 - g * g) / (4.0 * np.pi)) / d
 
 
 def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float, sun_direction,

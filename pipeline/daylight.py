@@ -5,8 +5,8 @@ luminous efficacy model of Perez et al. (1990), and the Linke turbidity climatol
 The sky's angular shape is ``clearsky``'s; ``sky.ProceduralSky`` scales that shape to these
 levels (docs/method.md, "Daylight in absolute units").
 
-pvlib is imported inside the functions: it takes about 2 s to import, which a command that
-draws no sky (``--help``, a resume with nothing to do) should not pay.
+pvlib is imported inside the functions: its import is slow (measured in docs/accuracy.md), and a
+command that draws no sky (``--help``, a resume with nothing to do) should not pay it.
 """
 
 from __future__ import annotations

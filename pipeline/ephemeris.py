@@ -16,9 +16,9 @@ fraction, so ``obscured_fraction`` is exactly 1 between the C2 and C3 that ``con
 returns. The lunar limb profile (valleys, mountains; a few seconds at C2 and C3) is ignored.
 
 Times are UTC, taken as UT1 (|UT1 - UTC| < 0.9 s). ephem's own Delta T = TT - UT model is used;
-in ephem 4.2.1 it is an extrapolation after about 2017 (72.4 s for 2024 April 8 against the
-observed 69.2 s), which makes 2024 contacts about 3 s early. Accuracy of contact times against
-published local circumstances: a few seconds (tests/test_ephemeris.py).
+in ephem 4.2.1 it is an extrapolation after about 2017, so recent contacts come early. The
+contact times against published local circumstances are measured in docs/accuracy.md
+(tests/test_ephemeris.py holds them).
 """
 
 from __future__ import annotations
@@ -29,11 +29,15 @@ from datetime import datetime, timedelta, timezone
 import ephem
 import numpy as np
 
+from .constants import SUN_ANGULAR_RADIUS
+from .geometry import direction_vector, tangent_axes
+
 AU = 149_597_870_700.0
 """Astronomical unit (IAU 2012 resolution B2). [m]"""
 
-SUN_RADIUS = AU * np.sin(np.deg2rad(959.63 / 3600.0))
-"""Solar radius giving 959.63 arcsec at 1 au, the eclipse-prediction value (Espenak & Meeus 2006). [m]"""
+SUN_RADIUS = AU * np.sin(SUN_ANGULAR_RADIUS)
+"""Solar radius giving ``constants.SUN_RADIUS_ARCSEC`` (959.63 arcsec) at 1 au, the
+eclipse-prediction value (Espenak & Meeus 2006). [m]"""
 
 EARTH_EQUATORIAL_RADIUS = 6_378_137.0
 """WGS84 / IERS equatorial radius of the Earth. [m]"""
@@ -154,14 +158,6 @@ def sun_and_moon(site: Site, when: datetime) -> tuple[BodyPosition, BodyPosition
     return _Sky(site).at(_ephem_date(_utc(when)))
 
 
-def _unit_vector(azimuth, elevation) -> np.ndarray:
-    """Unit vector(s) (..., 3) in world axes x east, y north, z up of a direction. [1]"""
-    azimuth = np.asarray(azimuth, dtype=np.float64)
-    elevation = np.asarray(elevation, dtype=np.float64)
-    ce = np.cos(elevation)
-    return np.stack([ce * np.sin(azimuth), ce * np.cos(azimuth), np.sin(elevation)], axis=-1)
-
-
 def separation(sun: BodyPosition, moon: BodyPosition) -> float:
     """Great-circle angle between the centres of two bodies. [rad]
 
@@ -169,8 +165,8 @@ def separation(sun: BodyPosition, moon: BodyPosition) -> float:
     (arccos of the dot product loses half the digits near 0, i.e. near mid-eclipse).
     Works on arrays of azimuths and elevations too; exactly symmetric in its arguments.
     """
-    u = _unit_vector(sun.azimuth, sun.elevation)
-    v = _unit_vector(moon.azimuth, moon.elevation)
+    u = direction_vector(sun.azimuth, sun.elevation)
+    v = direction_vector(moon.azimuth, moon.elevation)
     cross = np.cross(u, v)  # swapping u and v negates it exactly: the result is symmetric
     out = np.arctan2(np.sqrt(np.sum(cross * cross, axis=-1)), np.sum(u * v, axis=-1))
     return float(out) if out.ndim == 0 else out
@@ -236,11 +232,8 @@ def moon_offset_from_sun(sun: BodyPosition, moon: BodyPosition) -> tuple[float, 
     circle of radius R at (dx, dy) on a tangent-plane grid centred on the sun. The frame is
     tied to the sun's azimuth, so it is undefined with the sun exactly at the zenith.
     """
-    a, h = sun.azimuth, sun.elevation
-    s = _unit_vector(a, h)
-    m = _unit_vector(moon.azimuth, moon.elevation)
-    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
-    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    s, e_az, e_el = tangent_axes(sun.azimuth, sun.elevation)
+    m = direction_vector(moon.azimuth, moon.elevation)
     depth = float(m @ s)
     if depth <= 0.0:
         raise ValueError("the moon is 90 degrees or more from the sun; no gnomonic offset")

@@ -32,10 +32,10 @@ elliptical leaves that make the shadow masks, and its trunks and branches as cap
 
   ((1 +- n_z) / 2 is the share of the sky that each face sees; the far face's light shines
   through.) ``k`` (``leaf_sky_exposure``) is the fraction of the open sky that the crown lets
-  reach a leaf: a constant 0.7 by default (the mean of ``sky_exposure`` over the leaves of the
-  default grove is 0.71, over its wood 0.68; wood defaults to 0.6), or one value per leaf from
+  reach a leaf: a constant 0.7 by default (wood: 0.6; near the means of ``sky_exposure`` over
+  the default grove, measured in docs/accuracy.md), or one value per leaf from
   ``sky_exposure``, which averages the sun visibility over sky directions (12 visibility
-  passes, 3 s for the default grove; the crown gets darker inside). The sun, of normal
+  passes; the crown gets darker inside). The sun, of normal
   irradiance E_sun along the unit vector s:
 
       L_sun = V |n . s| E_sun / pi  x  rho if the sun lights the face we see, else tau
@@ -60,9 +60,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, project_points
 from .canopy import Leaves, Shapes, Wood, coverage_fragments
-from .geometry import Grid
+from .geometry import Grid, normalized
 from .io import ImageError, read_image
 
 LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
@@ -160,10 +160,9 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
     pixel : raster pixel across the sun's beam; default a quarter of the median leaf length
         (half the median semi-axis |U|). [m]
     Returns (leaf visibility (N,), wood visibility (M,)) float64 in [0, 1]; a shape that covers
-    no pixel (a leaf edge-on to the sun) gets 1. Against exact rays through 24 leaves
-    (tests/test_foreground.py) the error per leaf is 0.002 mean, 0.012 most at a pixel of 1/30
-    leaf length, 0.03 mean, 0.18 most at the default quarter (partial pixels are treated as
-    independent occluders); the cost grows about as 1 / pixel^2 once pixels are below leaf size.
+    no pixel (a leaf edge-on to the sun) gets 1. Partial pixels are treated as independent
+    occluders; the error per leaf against exact rays (tests/test_foreground.py) is measured in
+    docs/accuracy.md. The cost grows about as 1 / pixel^2 once pixels are below leaf size.
     """
     s = np.array([sun_point[0], sun_point[1], 1.0], dtype=np.float64)
     return _visibility(leaves, _no_wood() if wood is None else wood, s / np.linalg.norm(s), pixel)
@@ -358,10 +357,10 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     kept = np.flatnonzero(depth - reach > near)
     rel, depth, reach = rel[kept], depth[kept], reach[kept]
     axis_u, axis_v = leaves.axis_u[kept], leaves.axis_v[kept]
-    u, v = _image_point(rel, depth, right, up, focal, cols, rows)
+    u, v, _ = project_points(camera, leaves.center[kept])  # depth > near > 0: as rel, depth here
     du = _image_vector(axis_u, rel, depth, right, up, forward, focal)
     dv = _image_vector(axis_v, rel, depth, right, up, forward, focal)
-    normal = _unit(np.cross(axis_u, axis_v))
+    normal = normalized(np.cross(axis_u, axis_v))
     facing = np.where(np.sum(rel * normal, axis=1) > 0, -1.0, 1.0)  # the face towards the viewer
     normal_seen = normal * facing[:, None]
     cos_sun = normal_seen @ s
@@ -376,8 +375,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     p0, p1, radius, owner = piece
     rel0, rel1 = p0 - origin, p1 - origin
     z0, z1 = rel0 @ forward, rel1 @ forward
-    u0, v0 = _image_point(rel0, z0, right, up, focal, cols, rows)
-    u1, v1 = _image_point(rel1, z1, right, up, focal, cols, rows)
+    (u0, v0, _), (u1, v1, _) = project_points(camera, p0), project_points(camera, p1)
     radius_px = focal * radius / np.sqrt(z0 * z1)
 
     image = Grid((0.0, 0.0), 1.0, (rows, cols))  # plane point (u, -v) is image point (u, v)
@@ -411,7 +409,7 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         t = _along(offset, a1 - a0)
         axis_z = 1.0 / ((1 - t) / z0[j] + t / z1[j])  # 1 / depth is affine on the image
         side = _wood_side(p0, p1, origin, right, up, forward, focal)
-        perp = _unit(np.column_stack([-(v1 - v0), u1 - u0]) + np.array([1e-12, 0.0]))[j]
+        perp = normalized(np.column_stack([-(v1 - v0), u1 - u0]) + np.array([1e-12, 0.0]))[j]
         lateral = np.clip(np.sum((offset - t[:, None] * (a1 - a0)) * perp, axis=1) / radius_px[j], -1, 1)
         facing_part = np.sqrt(1 - lateral**2)
         frag_depth[~is_leaf] = axis_z - radius[j] * facing_part
@@ -470,8 +468,8 @@ def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
     direction; height : (n,) the height of the fragment's axis point [m]; radius_px : (n,) the
     stem's radius in the image [pixel].
     """
-    axis = _unit(np.asarray(axis, dtype=np.float64))
-    reference = _unit(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
+    axis = normalized(np.asarray(axis, dtype=np.float64))
+    reference = normalized(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
     across = np.cross(axis, reference)
     angle = np.arctan2(np.sum(normal * across, axis=1), np.sum(normal * reference, axis=1))
     wander = 0.6 * np.sin(2 * np.pi * height / 0.9) + 0.3 * np.sin(2 * np.pi * height / 0.37 + 1.3)
@@ -581,15 +579,6 @@ def _per_shape(value, n, name) -> np.ndarray:
     return value
 
 
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
-
-
-def _image_point(rel, depth, right, up, focal, cols, rows):
-    """Image point (u, v) [pixel] of camera-relative points rel (n, 3) at depths (n,) [m]."""
-    return 0.5 * cols + focal * (rel @ right) / depth, 0.5 * rows - focal * (rel @ up) / depth
-
-
 def _image_vector(vector, rel, depth, right, up, forward, focal):
     """(du, dv) [pixel] of small world vectors (n, 3) [m] at camera-relative points rel (n, 3):
     the Jacobian of the perspective projection."""
@@ -625,11 +614,11 @@ def _wood_pieces(wood: Wood, origin, forward, near):
 def _wood_side(p0, p1, origin, right, up, forward, focal):
     """Per wood piece: the unit normal of its cylinder facing the camera, and the unit normal at
     right angles to it whose image points the way of the image normal (-(v1 - v0), u1 - u0)."""
-    axis = _unit(p1 - p0)
+    axis = normalized(p1 - p0)
     middle = 0.5 * (p0 + p1)
     view = origin - middle
-    toward = _unit(view - np.sum(view * axis, axis=1, keepdims=True) * axis)
-    sideways = _unit(np.cross(axis, toward))
+    toward = normalized(view - np.sum(view * axis, axis=1, keepdims=True) * axis)
+    sideways = normalized(np.cross(axis, toward))
     rel = middle - origin
     depth = rel @ forward
     image_axis = _image_vector(p1 - p0, rel, depth, right, up, forward, focal)

@@ -1,4 +1,6 @@
-"""Units, the sky-plane mapping, the raster ``Grid`` and the unshadowed irradiance ``I0``.
+"""Where things are: directions, the sky-plane mapping, the raster ``Grid``, sky-plane grids of
+whole-cell offsets, and the unshadowed irradiance ``I0``. Pure numpy; no physics imports, so
+every other module can use it.
 
 Conventions (docs/method.md, "Conventions"): world axes x east, y north, z up; azimuth from north
 towards east; zenith angle ``theta`` from +z. Every planar raster is indexed ``[row, col]``
@@ -72,6 +74,71 @@ def lattice_offset(grid: Grid, lattice: Grid) -> tuple[int, int]:
     if abs(col - round(col)) > 1e-6 or abs(row - round(row)) > 1e-6:
         raise ValueError("grids are not aligned to the same pixel lattice")
     return int(round(row)), int(round(col))
+
+
+def sky_grid(start: tuple[int, int], shape: tuple[int, int], q: float) -> Grid:
+    """Sky-plane grid [tan] whose cell [0, 0] is the offset ``start`` = (dr, dc); cell q [tan]."""
+    return Grid(((start[1] - 0.5) * q, (0.5 - start[0]) * q), q, shape)
+
+
+def sky_offset(grid: Grid) -> tuple[int, int]:
+    """Sky offset (dr, dc) of cell [0, 0] of a sky-plane grid made by ``sky_grid``."""
+    q = grid.pixel
+    return int(round(0.5 - grid.origin[1] / q)), int(round(grid.origin[0] / q + 0.5))
+
+
+def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) -> np.ndarray:
+    """Fold a sky raster modulo the tile period: ``e_f[i mod N] += e[i]``.
+
+    weighted : (channels, rows, cols) with cell [0, 0] at offset ``start``.
+    Returns (channels, period rows, period cols), cell [0, 0] at offset 0.
+    """
+    weighted = np.asarray(weighted)
+    if tuple(start) == (0, 0) and weighted.shape[-2:] == tuple(period):
+        return weighted  # already folded
+    out = np.zeros(weighted.shape[:-2] + tuple(period), dtype=weighted.dtype)
+    for src_r, dst_r in wrapped_spans(start[0], weighted.shape[-2], period[0]):
+        for src_c, dst_c in wrapped_spans(start[1], weighted.shape[-1], period[1]):
+            out[..., dst_r, dst_c] += weighted[..., src_r, src_c]
+    return out
+
+
+def wrapped_spans(start: int, length: int, period: int):
+    """Runs of ``u -> (start + u) mod period`` for u in [0, length), as pairs of slices
+    (u-slice, wrapped slice): the pieces a wrapped copy or fold moves in one go."""
+    spans, u = [], 0
+    while u < length:
+        d = (start + u) % period
+        run = min(period - d, length - u)
+        spans.append((slice(u, u + run), slice(d, d + run)))
+        u += run
+    return spans
+
+
+def direction_vector(azimuth, elevation) -> np.ndarray:
+    """Unit vector(s) (..., 3) in world axes x east, y north, z up of the direction(s) at
+    ``azimuth`` (from north towards east) and ``elevation`` (above the horizon) [rad]. [1]"""
+    azimuth = np.asarray(azimuth, dtype=np.float64)
+    elevation = np.asarray(elevation, dtype=np.float64)
+    ce = np.cos(elevation)
+    return np.stack([ce * np.sin(azimuth), ce * np.cos(azimuth), np.sin(elevation)], axis=-1)
+
+
+def tangent_axes(azimuth: float, elevation: float):
+    """The frame of the sky at a direction (azimuth a, elevation h) [rad]: (s, e_az, e_el), each
+    (3,) float64 in world axes, with s = ``direction_vector(a, h)``, e_az = (cos a, -sin a, 0)
+    the direction of increasing azimuth and e_el = (-sin h sin a, -sin h cos a, cos h) that of
+    increasing elevation. A point at gnomonic offset (dx to the right, dy up) is along
+    s + dx e_az + dy e_el. Undefined at the zenith. [1]"""
+    a, h = azimuth, elevation
+    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
+    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    return direction_vector(a, h), e_az, e_el
+
+
+def normalized(v) -> np.ndarray:
+    """Vectors v (..., n) scaled to unit length along the last axis (a zero vector stays 0). [1]"""
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
 
 
 def sky_plane_from_direction(azimuth, zenith):

@@ -36,7 +36,7 @@ import numpy as np
 import scipy.fft as sfft
 import scipy.sparse as sparse
 
-from .geometry import Grid, lattice_offset
+from .geometry import Grid, fold, lattice_offset, sky_grid, sky_offset, wrapped_spans
 
 if TYPE_CHECKING:
     from .sky import SkyRaster
@@ -52,11 +52,6 @@ def sky_half_cells(height: float, pixel: float, alpha: float) -> int:
     alpha : half-angle of the sky square. [rad]
     """
     return int(round(np.tan(alpha) * height / pixel))
-
-
-def sky_grid(start: tuple[int, int], shape: tuple[int, int], q: float) -> Grid:
-    """Sky-plane grid [tan] whose cell [0, 0] is the offset ``start`` = (dr, dc); cell q [tan]."""
-    return Grid(((start[1] - 0.5) * q, (0.5 - start[0]) * q), q, shape)
 
 
 @dataclass(frozen=True)
@@ -162,22 +157,6 @@ def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1):
     """rfft2 of a periodic tile's transmittance ``m`` (rows, cols) (complex64)."""
     m = np.asarray(transmittance, dtype=np.float32)
     return sfft.rfft2(m, axes=(-2, -1), workers=workers)
-
-
-def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) -> np.ndarray:
-    """Fold a sky raster modulo the tile period: ``e_f[i mod N] += e[i]``.
-
-    weighted : (channels, rows, cols) with cell [0, 0] at offset ``start``.
-    Returns (channels, period rows, period cols), cell [0, 0] at offset 0.
-    """
-    weighted = np.asarray(weighted)
-    if tuple(start) == (0, 0) and weighted.shape[-2:] == tuple(period):
-        return weighted  # already folded
-    out = np.zeros(weighted.shape[:-2] + tuple(period), dtype=weighted.dtype)
-    for src_r, dst_r in _spans(start[0], weighted.shape[-2], period[0]):
-        for src_c, dst_c in _spans(start[1], weighted.shape[-1], period[1]):
-            out[..., dst_r, dst_c] += weighted[..., src_r, src_c]
-    return out
 
 
 def ground_periodic(
@@ -316,12 +295,6 @@ def combine_layers(grounds, unshadowed):
     return out
 
 
-def sky_offset(grid: Grid) -> tuple[int, int]:
-    """Sky offset (dr, dc) of cell [0, 0] of a sky-plane grid made by ``sky_grid``."""
-    q = grid.pixel
-    return int(round(0.5 - grid.origin[1] / q)), int(round(grid.origin[0] / q + 0.5))
-
-
 def _correlate(sky, spectrum, fft_shape, workers):
     """Circular correlation of sky (channels, rows, cols) with a mask given by its spectrum."""
     sky_spectrum = sfft.rfft2(sky, s=fft_shape, axes=(-2, -1), workers=workers)
@@ -337,19 +310,7 @@ def _take_wrapped(raster, start, shape):
     if tuple(shape) == size and start[0] % size[0] == 0 and start[1] % size[1] == 0:
         return raster
     out = np.empty(raster.shape[:-2] + tuple(shape), dtype=raster.dtype)
-    for dst_r, src_r in _spans(start[0], shape[0], size[0]):
-        for dst_c, src_c in _spans(start[1], shape[1], size[1]):
+    for dst_r, src_r in wrapped_spans(start[0], shape[0], size[0]):
+        for dst_c, src_c in wrapped_spans(start[1], shape[1], size[1]):
             out[..., dst_r, dst_c] = raster[..., src_r, src_c]
     return out
-
-
-def _spans(start: int, length: int, period: int):
-    """Runs of ``u -> (start + u) mod period`` for u in [0, length), as pairs of slices
-    (u-slice, wrapped slice): the pieces a wrapped copy or fold moves in one go."""
-    spans, u = [], 0
-    while u < length:
-        d = (start + u) % period
-        run = min(period - d, length - u)
-        spans.append((slice(u, u + run), slice(d, d + run)))
-        u += run
-    return spans

@@ -1,5 +1,8 @@
 """Sky models and their weighted sky-plane rasters ``e`` (Max 1991, eq. 1 and Fig. 6).
 
+``Sky`` declares what the renderer and the camera ask of a sky; ``UniformSky``, ``EquirectSky``
+(an HDRI) and ``ProceduralSky`` (clear sky, sun, moon, clouds) implement all of it.
+
 A sky raster cell holds the integral of ``L(s) cos^4(theta) dA`` over the cell: radiance times
 projected solid angle, so that the unshadowed irradiance of the ground is the plain sum of the
 raster plus ``outside``, the irradiance of all the sky the raster does not cover. No hidden
@@ -16,14 +19,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from scipy import ndimage
 
 from . import clearsky, daylight
-from .composite import REC709_LUMINANCE
-from .geometry import Grid, projected_solid_angle
-from .shadow import fold, sky_grid, sky_offset
+from .camera import equirect_lookup
+from .colour import REC709_LUMINANCE
+from .constants import SUN_ANGULAR_RADIUS
+from .geometry import Grid, direction_vector, fold, projected_solid_angle, sky_grid, sky_offset, tangent_axes
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,39 @@ class SkyRaster:
         return self.weighted.sum(axis=(1, 2), dtype=np.float64) + self.outside
 
 
+@runtime_checkable
+class Sky(Protocol):
+    """What the renderer and the camera ask of a sky model; ``UniformSky``, ``EquirectSky`` and
+    ``ProceduralSky`` implement all of it. Irradiances are (3,) float64, horizontal, in the
+    sky's units ([radiance x sr]; klx for ProceduralSky).
+
+    sun : SunDisc or None -- the disc drawn by ``sun_kernel`` on the fine grid, None without one.
+    sky_irradiance : the sky's irradiance without the sun disc (clouds and the moon included).
+    raster(grid, *, fold_period=None) -> SkyRaster -- the weighted sky on a sky-plane grid,
+        folded modulo ``fold_period`` (rows, cols) if given.
+    sun_fraction() -> float -- S, the sun's power reaching the ground over the clear,
+        uneclipsed sun's; 0.0 without a sun.
+    total_sun_irradiance() -> the sun's before the moon and clouds dim it (an HDRI's: as
+        photographed); zeros without a sun.
+    view_radiance(w, s, footprint=None) -> (..., 3) -- the sky's radiance without the sun disc
+        along unit vectors w (..., 3) with sky-plane points s (..., 2) [tan] (the camera holds
+        wz at MIN_UPWARD or more), each standing for a sky-plane width ``footprint`` [tan]
+        (None, scalar, (...) or (..., 2): along the radius and across) over which a cloud
+        pattern is filtered. A model uses what it needs of w, s and footprint.
+    """
+
+    sun: SunDisc | None
+    sky_irradiance: np.ndarray
+
+    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster: ...
+
+    def sun_fraction(self) -> float: ...
+
+    def total_sun_irradiance(self) -> np.ndarray: ...
+
+    def view_radiance(self, w, s, footprint=None) -> np.ndarray: ...
+
+
 @dataclass(frozen=True)
 class UniformSky:
     """A sky of the same radiance in every direction.
@@ -53,6 +91,29 @@ class UniformSky:
     """
 
     radiance: np.ndarray
+
+    @property
+    def sun(self) -> None:
+        """No sun disc."""
+        return None
+
+    @property
+    def sky_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance (3,), pi L. [radiance x sr]"""
+        return np.pi * np.asarray(self.radiance, dtype=np.float64)
+
+    def sun_fraction(self) -> float:
+        """S = 0: no sun. [1]"""
+        return 0.0
+
+    def total_sun_irradiance(self) -> np.ndarray:
+        """Zeros (3,): no sun. [radiance x sr]"""
+        return np.zeros(3)
+
+    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+        """The radiance (..., 3) float32, the same along every unit vector w (..., 3). [radiance]"""
+        radiance = np.asarray(self.radiance, dtype=np.float32)
+        return np.broadcast_to(radiance, np.shape(w)[:-1] + radiance.shape).copy()
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """Exact cell integrals of the uniform sky on ``grid``; with ``fold_period`` (rows, cols)
@@ -93,7 +154,7 @@ class EquirectSky:
     @cached_property
     def sun_direction(self) -> np.ndarray:
         """Unit vector towards the cut sun's centre (with a sun only). [1]"""
-        return _unit(self.sun.azimuth, self.sun.elevation)
+        return direction_vector(self.sun.azimuth, self.sun.elevation)
 
     def sun_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the cut sun (3,), E_n cos(zenith): the sun kernel's sum; 0
@@ -103,8 +164,23 @@ class EquirectSky:
         return np.asarray(self.sun_normal_irradiance, dtype=np.float64) * self.sun_direction[2]
 
     def sun_fraction(self) -> float:
-        """S = 1: a photographed sun is what it is (clouds and moon are already in the image). [1]"""
-        return 1.0
+        """S = 1 with a sun: a photographed sun is what it is (clouds and moon are already in the
+        image); 0 without one. [1]"""
+        return 0.0 if self.sun is None else 1.0
+
+    def total_sun_irradiance(self) -> np.ndarray:
+        """The cut sun's horizontal irradiance (3,), ``sun_irradiance()``: as photographed. [radiance x sr]"""
+        return self.sun_irradiance()
+
+    @cached_property
+    def sky_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance (3,) of the image, without the cut sun: ``total_irradiance()``. [radiance x sr]"""
+        return self.total_irradiance()
+
+    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+        """Bilinear samples (..., 3) float32 of the image along unit vectors w (..., 3), ``rotation``
+        included, rows held to the upper half (``camera.equirect_lookup``). [radiance]"""
+        return equirect_lookup(self.image, w, rotation=self.rotation, sky_only=True)
 
     def _sun_samples(self, w, footprint):
         """Radiance (..., 3) of the cut sun at unit vectors w (..., 3) (see ``_disc_samples``). [radiance]"""
@@ -272,9 +348,6 @@ def _flush(accum, pending: list) -> None:
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
-SUN_ANGULAR_RADIUS = float(np.deg2rad(959.63 / 3600.0))
-"""Angular radius of the sun at 1 au, 959.63 arcsec (Espenak & Meeus 2006, as in ephemeris). [rad]"""
-
 RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
 """Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation. [um]"""
 
@@ -372,11 +445,6 @@ def _check_disc(disc, name):
         raise ValueError(f"{name} angular_radius must be in (0, 0.1) [rad], got {disc.angular_radius}")
 
 
-def _unit(azimuth, elevation) -> np.ndarray:
-    """Unit vector (x east, y north, z up) of a direction. [1]"""
-    return np.array([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth), np.sin(elevation)])
-
-
 def _angle(w, c):
     """Angle [rad] between unit vectors w (..., 3) and c (3,), stable for small angles."""
     return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(w - c, axis=-1), 0.0, 1.0))
@@ -398,7 +466,7 @@ def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon
                               limb_darkening=sun.limb_darkening)
     cover = np.clip(0.5 - (rho - r) / footprint(direction, rho), 0.0, 1.0)
     if moon is not None:
-        centre = _unit(moon.azimuth, moon.elevation)
+        centre = direction_vector(moon.azimuth, moon.elevation)
         rho_m = _angle(w, centre)
         cover *= np.clip(0.5 + (rho_m - moon.angular_radius) / footprint(centre, rho_m), 0.0, 1.0)
     return value * cover[..., None]
@@ -460,7 +528,7 @@ class ProceduralSky:
     @cached_property
     def sun_direction(self) -> np.ndarray:
         """Unit vector towards the sun's centre. [1]"""
-        return _unit(self.sun.azimuth, self.sun.elevation)
+        return direction_vector(self.sun.azimuth, self.sun.elevation)
 
     @cached_property
     def sun_point(self) -> np.ndarray:
@@ -497,7 +565,7 @@ class ProceduralSky:
         if self.moon is None:
             return np.ones(3)
         r, big_r = self.sun.angular_radius, self.moon.angular_radius
-        d = float(_angle(_unit(self.moon.azimuth, self.moon.elevation), self.sun_direction))
+        d = float(_angle(direction_vector(self.moon.azimuth, self.moon.elevation), self.sun_direction))
         if d >= r + big_r:
             return np.ones(3)
         cuts = np.unique(np.clip([0.0, abs(d - big_r), d + big_r, r], 0.0, r))
@@ -525,7 +593,7 @@ class ProceduralSky:
     def sun_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the sun after moon and clouds (3,): the sum of its kernel
         with 16 cells across the disc, which weights each part of a moon-cut disc by its own
-        cos(theta) (to about 2e-4). [klx]"""
+        cos(theta) (its error is measured in docs/accuracy.md). [klx]"""
         return sun_kernel(self, self.sun.angular_radius / 8).weighted.sum(axis=(1, 2), dtype=np.float64)
 
     def _sun_samples(self, w, footprint):
@@ -574,6 +642,11 @@ class ProceduralSky:
             return L
         L *= np.clip(self.clouds.transmittance(s, self.time, footprint), 0.0, 1.0)[..., None]
         return L + self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light)
+
+    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+        """``radiance(s, footprint)`` (..., 3) at the sky-plane points s (..., 2) of the unit
+        vectors w. [kcd/m^2]"""
+        return self.radiance(s, footprint=footprint)
 
     @cached_property
     def _cloud_light(self) -> dict:
@@ -628,13 +701,13 @@ class ProceduralSky:
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
         exact projected solid angles (Max 1991, eq. 2); ``outside`` by quadrature of the rest of the
-        hemisphere (``_outside``, about 1e-4). With ``fold_period`` (rows, cols), folded as in
+        hemisphere (``_outside``). With ``fold_period`` (rows, cols), folded as in
         ``EquirectSky.raster``. Units: [klx].
 
         The smooth clear sky is evaluated on every k-th cell centre, nodes at most
-        ``CLEAR_SKY_NODE_SPACING`` apart, and interpolated bilinearly (relative error about 3e-4,
-        up to about 1% in the few cells at the sun where the Perez circumsolar term has a cusp);
-        clouds are evaluated at every cell centre.
+        ``CLEAR_SKY_NODE_SPACING`` apart, and interpolated bilinearly (least accurate in the few
+        cells at the sun where the Perez circumsolar term has a cusp; measured in
+        docs/accuracy.md); clouds are evaluated at every cell centre.
         """
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
@@ -685,9 +758,7 @@ class ProceduralSky:
         n = int(np.ceil((r + 2 * spacing) / spacing))
         g = (np.arange(-n, n + 1)) * spacing
         gx, gy = np.meshgrid(g, g)
-        a, h = self.sun.azimuth, self.sun.elevation
-        e1 = np.array([np.cos(a), -np.sin(a), 0.0])
-        e2 = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+        _, e1, e2 = tangent_axes(self.sun.azimuth, self.sun.elevation)
         p = self.sun_direction + gx[..., None] * e1 + gy[..., None] * e2
         norm = np.linalg.norm(p, axis=-1)
         w = p / norm[..., None]
@@ -727,14 +798,14 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     sub-samples per cell (n >= 8, more when the disc spans few cells), the sun and moon limbs
     anti-aliased by a linear ramp one sub-sample wide measured along the gradient of the angular
     distance (|grad_s rho| = cos(theta) |u_xy|, u the unit tangent away from the disc centre),
-    which keeps the disc's energy to about 1e-4 (3e-4 at worst, from the limb-darkening law's
-    square root at the limb) with no renormalisation.
+    which keeps the disc's energy with no renormalisation (measured in docs/accuracy.md; the
+    worst case comes from the limb-darkening law's square root at the limb).
 
     sky : ProceduralSky, or EquirectSky with a sun (``cut_sun``; no moon, no cloud dimming) --
         the whole sun disc must be above the horizon.
     q : sky-plane cell. [tan]
-    Returns a SkyRaster (outside = 0) on ``shadow.sky_grid(start, shape, q)``: the block covers
-    the disc with a margin of one cell; ``shadow.sky_offset(kernel.grid)`` is its offset ``start``.
+    Returns a SkyRaster (outside = 0) on ``geometry.sky_grid(start, shape, q)``: the block covers
+    the disc with a margin of one cell; ``geometry.sky_offset(kernel.grid)`` is its offset ``start``.
     Units: the sky's irradiance ([klx] for ProceduralSky); its sum is ``sky.sun_irradiance()``.
     """
     sun = sky.sun
@@ -746,9 +817,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     if sun.elevation - r <= 1e-3:
         raise ValueError("the sun disc must lie wholly above the horizon for its sky-plane kernel")
     # the disc's bounding box on the sky plane, from points on its limb
-    a, h = sun.azimuth, sun.elevation
-    e1 = np.array([np.cos(a), -np.sin(a), 0.0])
-    e2 = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    _, e1, e2 = tangent_axes(sun.azimuth, sun.elevation)
     psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
     limb = np.cos(r) * sky.sun_direction + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
     limb = limb[:, :2] / limb[:, 2:]
@@ -806,7 +875,7 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
     ``ring`` texels around the region. The sun carries the region's radiance above the
     background away, and the region's texels are set to the background: total_irradiance() +
     sun_irradiance() of the result is the input's total_irradiance() (to rounding), and the sun
-    kernel's sum is sun_irradiance() (to about 2e-4). Direction: the unit-vector mean of the
+    kernel's sum is sun_irradiance() (measured in docs/accuracy.md). Direction: the unit-vector mean of the
     texel centres weighted by the excess luminance times solid angle, ``rotation`` included. The
     disc takes ``angular_radius`` and ``limb_darkening``, not the image's (a photographed sun is
     blurred); its normal irradiance is the excess horizontal irradiance over cos(zenith).

@@ -5,6 +5,7 @@ import pytest
 from scipy import integrate
 
 from pipeline import composite
+from pipeline.colour import REC709_LUMINANCE
 
 
 @pytest.fixture
@@ -53,6 +54,12 @@ def test_henyey_greenstein_is_normalised_and_forward():
         total, _ = integrate.quad(lambda mu: 2 * np.pi * composite.henyey_greenstein(mu, g), -1, 1)
         assert total == pytest.approx(1.0, rel=1e-6)
     assert composite.henyey_greenstein(1.0, 0.6) > 10 * composite.henyey_greenstein(-1.0, 0.6)
+    mu = np.linspace(-1.0, 1.0, 9)
+    exact = (1 - 0.6**2) / (4 * np.pi * (1 + 0.6**2 - 2 * 0.6 * mu) ** 1.5)
+    np.testing.assert_allclose(composite.henyey_greenstein(mu, 0.6), exact, rtol=1e-14)
+    single = composite.henyey_greenstein(mu.astype(np.float32), 0.6)  # float32 in, float32 out (clouds)
+    assert single.dtype == np.float32
+    np.testing.assert_allclose(single, exact, rtol=1e-6)
 
 
 def test_aerial_perspective_follows_beer_lambert_and_spares_the_sky():
@@ -73,7 +80,7 @@ def test_exposure_puts_white_ground_under_the_open_sky_at_one():
     unshadowed = np.array([110.0, 100.0, 90.0])
     exposure = composite.exposure_for(unshadowed)
     white = unshadowed / np.pi  # radiance of a white Lambertian ground [kcd/m^2]
-    assert float(white @ composite.REC709_LUMINANCE) * exposure == pytest.approx(1.0)
+    assert float(white @ REC709_LUMINANCE) * exposure == pytest.approx(1.0)
     assert composite.exposure_for(unshadowed, stops=1) == pytest.approx(2 * exposure)
 
 
@@ -91,7 +98,7 @@ def test_display_transforms():
 
 
 def test_white_balance_makes_the_chosen_light_grey_and_keeps_its_luminance():
-    from pipeline.composite import REC709_LUMINANCE, white_balance
+    from pipeline.composite import white_balance
 
     sun, sky = np.array([70.0, 71.0, 62.0]), np.array([9.0, 13.0, 22.0])  # a warm sun, a blue sky [klx]
     luma = np.asarray(REC709_LUMINANCE, dtype=np.float64)

@@ -7,9 +7,15 @@ from pipeline.geometry import (
     Grid,
     cos4_antiderivative,
     direction_from_sky_plane,
+    direction_vector,
+    fold,
     lattice_offset,
+    normalized,
     projected_solid_angle,
+    sky_grid,
+    sky_offset,
     sky_plane_from_direction,
+    tangent_axes,
 )
 
 
@@ -80,3 +86,45 @@ def test_projected_solid_angle_of_square_grid_sums_to_I0():
     assert w.sum() == pytest.approx(I0(np.arctan((half + 0.5) * q)), rel=1e-12)
     assert w[half, half] == pytest.approx(q * q, rel=1e-3)  # cos^4 ~ 1 at the zenith
     assert np.all(w > 0)
+
+
+def test_fold_accumulates_modulo_the_period():
+    rng = np.random.default_rng(5)
+    e = rng.random((2, 11, 7))
+    start, period = (-5, -3), (4, 3)
+    folded = fold(e, start, period)
+    expected = np.zeros((2,) + period)
+    for r in range(11):
+        for c in range(7):
+            expected[:, (start[0] + r) % 4, (start[1] + c) % 3] += e[:, r, c]
+    assert np.allclose(folded, expected)
+
+
+def test_sky_grid_and_sky_offset_are_inverse():
+    for start, q in [((-3, 5), 0.01), ((0, 0), 0.25), ((17, -40), 1e-4)]:
+        grid = sky_grid(start, (4, 6), q)
+        assert sky_offset(grid) == start
+        # cell [0, 0]'s centre is the sky offset s = (dc q, -dr q)
+        x, y = grid.ground_from_raster(0, 0)
+        assert (x, y) == pytest.approx((start[1] * q, -start[0] * q), abs=1e-12)
+
+
+def test_direction_vector_and_tangent_axes():
+    azimuth, elevation = np.radians([30.0, 200.0]), np.radians([10.0, 70.0])
+    w = direction_vector(azimuth, elevation)
+    assert w.shape == (2, 3) and np.allclose(np.linalg.norm(w, axis=-1), 1.0)
+    assert np.allclose(direction_vector(0.0, 0.0), [0.0, 1.0, 0.0])  # north
+    assert np.allclose(direction_vector(np.pi / 2, 0.0), [1.0, 0.0, 0.0])  # east
+    for a, h in zip(azimuth, elevation):
+        s, e_az, e_el = tangent_axes(a, h)
+        assert np.array_equal(s, direction_vector(a, h))
+        assert np.allclose([s @ e_az, s @ e_el, e_az @ e_el], 0.0, atol=1e-15)
+        step = 1e-6  # e_az, e_el are the directions of increasing azimuth and elevation
+        assert np.allclose((direction_vector(a + step, h) - s) / step, np.cos(h) * e_az, atol=1e-5)
+        assert np.allclose((direction_vector(a, h + step) - s) / step, e_el, atol=1e-5)
+
+
+def test_normalized_scales_to_unit_length_and_leaves_zero_alone():
+    v = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [1e-100, 0.0, 0.0]])
+    u = normalized(v)
+    assert np.allclose(u, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])

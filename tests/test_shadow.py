@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline import canopy, shadow
-from pipeline.geometry import Grid
+from pipeline.geometry import Grid, fold, sky_grid, sky_offset
 from pipeline.sky import EquirectSky, SkyRaster, UniformSky
 
 from reference import (
@@ -23,7 +23,7 @@ def random_case(rng, channels):
     canopy_grid = Grid((start[1] * p, -start[0] * p), p, shape)
     alpha = np.arctan(rng.uniform(0.5, 6) * p / h)
     half = shadow.sky_half_cells(h, p, alpha)
-    full = shadow.sky_grid((-half, -half), (2 * half + 1, 2 * half + 1), p / h)
+    full = sky_grid((-half, -half), (2 * half + 1, 2 * half + 1), p / h)
     e = rng.random((channels, 2 * half + 1, 2 * half + 1)).astype(np.float32)
     mask = rng.random(shape).astype(np.float32)
     return window, canopy_grid, start, h, alpha, half, full, e, mask
@@ -37,7 +37,7 @@ def test_isolated_fft_equals_direct_sum(channels):
         plan = shadow.plan_isolated(window, canopy_grid, height=h, alpha=alpha)
         outside = rng.random(channels)
         if plan.sky is None:
-            sub_grid, sub = shadow.sky_grid((0, 0), (1, 1), full.pixel), np.zeros((channels, 1, 1), np.float32)
+            sub_grid, sub = sky_grid((0, 0), (1, 1), full.pixel), np.zeros((channels, 1, 1), np.float32)
         else:
             sub_grid = plan.sky
             r0 = round(0.5 - sub_grid.origin[1] / sub_grid.pixel) + half
@@ -64,18 +64,6 @@ def test_periodic_fft_equals_direct_sum(channels):
         reference = direct_sum(e, (-half, -half), mask, start, window.shape, None)
         reference += outside[:, None, None] * mask.mean()
         assert np.abs(g - reference).max() <= 1e-5 * reference.max()
-
-
-def test_fold_accumulates_modulo_the_period():
-    rng = np.random.default_rng(5)
-    e = rng.random((2, 11, 7))
-    start, period = (-5, -3), (4, 3)
-    folded = shadow.fold(e, start, period)
-    expected = np.zeros((2,) + period)
-    for r in range(11):
-        for c in range(7):
-            expected[:, (start[0] + r) % 4, (start[1] + c) % 3] += e[:, r, c]
-    assert np.allclose(folded, expected)
 
 
 def test_open_sky_of_radiance_one_gives_pi():
@@ -215,7 +203,7 @@ def test_sky_rasterized_folded_equals_the_folded_raster(model):
     full = sky.raster(plan.sky)
     folded = sky.raster(plan.sky, fold_period=plan.tile_shape)
     assert folded.weighted.shape == (3,) + plan.tile_shape
-    expected = shadow.fold(full.weighted, shadow.sky_offset(plan.sky), plan.tile_shape)
+    expected = fold(full.weighted, sky_offset(plan.sky), plan.tile_shape)
     assert np.allclose(folded.weighted, expected, rtol=1e-5, atol=1e-7 * expected.max())
     assert folded.total == pytest.approx(full.total, rel=1e-6)
     spectrum = shadow.transmittance_spectrum(tile)
@@ -240,7 +228,7 @@ def test_sun_kernel_correlation_equals_direct_sum():
         start = (int(rng.integers(lo[0], hi[0] - 2)), int(rng.integers(lo[1], hi[1] - 2)))
         shape = (int(rng.integers(1, hi[0] - start[0] + 2)), int(rng.integers(1, hi[1] - start[1] + 2)))
         e = rng.random((3,) + shape).astype(np.float32)
-        kernel = SkyRaster(shadow.sky_grid(start, shape, p / h), e, np.zeros(3))
+        kernel = SkyRaster(sky_grid(start, shape, p / h), e, np.zeros(3))
         g = shadow.ground_sun(kernel, spectrum, plan)
         # the mask grid's pixel [0, 0] sits at lattice offset lo from the window's
         expected = direct_sum(e, start, mask, lo, window.shape, outside_value=np.nan)
@@ -251,7 +239,7 @@ def test_sun_kernel_outside_the_plan_is_refused():
     window = Grid((0.0, 0.0), 0.1, (4, 4))
     plan = shadow.plan_sun(window, offset_lo=(-2, -2), offset_hi=(2, 2))
     spectrum = shadow.fine_mask_spectrum(np.ones(plan.mask.shape, np.float32), plan)
-    kernel = SkyRaster(shadow.sky_grid((1, 1), (3, 3), 0.05), np.ones((3, 3, 3), np.float32), np.zeros(3))
+    kernel = SkyRaster(sky_grid((1, 1), (3, 3), 0.05), np.ones((3, 3, 3), np.float32), np.zeros(3))
     with pytest.raises(ValueError, match="outside the planned offsets"):
         shadow.ground_sun(kernel, spectrum, plan)
 

@@ -3,8 +3,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.geometry import I0, sky_plane_from_direction
-from pipeline.shadow import sky_grid
+from pipeline.geometry import I0, sky_grid, sky_plane_from_direction
 from pipeline.sky import EquirectSky, UniformSky
 
 from reference import equirect_patch
@@ -95,9 +94,9 @@ def test_raster_off_the_sky_counts_as_outside():
 from scipy.integrate import quad
 
 from pipeline.ephemeris import obscured_fraction
-from pipeline.shadow import sky_offset
+from pipeline.colour import REC709_LUMINANCE
+from pipeline.geometry import sky_offset
 from pipeline.sky import (
-    REC709_LUMINANCE,
     MoonDisc,
     ProceduralSky,
     SunDisc,
@@ -407,7 +406,8 @@ def test_procedural_sky_refuses_bad_input():
 
 # --- an HDRI's sun cut out into the fine kernel (cut_sun) --------------------------------------
 
-from pipeline.sky import SUN_ANGULAR_RADIUS, cut_sun
+from pipeline.constants import SUN_ANGULAR_RADIUS
+from pipeline.sky import cut_sun
 
 from reference import unit_vector
 
@@ -526,3 +526,57 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
     assert ground.reshape(-1, 3).mean(axis=0) == pytest.approx(sky_total, rel=1e-2)
     direct, diffuse = reference_daylight(40.0, 4.0, 0.0)
     assert ground.reshape(-1, 3).mean(axis=0) @ LUMA == pytest.approx(direct + diffuse, rel=0.01)
+
+
+# --- the one sky interface (sky.Sky) ----------------------------------------------------------
+
+from pipeline.sky import Sky
+
+
+def protocol_skies():
+    """One sky of each model: uniform, an HDRI without and with a cut sun, procedural with clouds."""
+    procedural = sun_sky(40.0, clouds=Overcast(glow=2.0))
+    hdri = EquirectSky(procedural.equirect(256))
+    return {"uniform": UniformSky(np.array([1.0, 2.0, 0.5])), "hdri": hdri, "hdri-sun": cut_sun(hdri),
+            "procedural": procedural}
+
+
+@pytest.mark.parametrize("name", ["uniform", "hdri", "hdri-sun", "procedural"])
+def test_every_sky_model_implements_the_sky_protocol(name):
+    sky = protocol_skies()[name]
+    assert isinstance(sky, Sky)
+    grid = sky_grid((-2, -2), (5, 5), 0.1)
+    raster = sky.raster(grid)
+    assert raster.weighted.shape == (3, 5, 5) and raster.total.shape == (3,)
+    folded = sky.raster(grid, fold_period=(2, 3))
+    assert folded.weighted.shape == (3, 2, 3)
+    assert folded.total == pytest.approx(raster.total, rel=1e-5)
+    has_sun = sky.sun is not None
+    assert has_sun == (name in ("hdri-sun", "procedural"))
+    fraction = sky.sun_fraction()
+    assert isinstance(fraction, float) and (0.0 < fraction <= 1.0 if has_sun else fraction == 0.0)
+    sun = np.asarray(sky.total_sun_irradiance())
+    assert sun.shape == (3,) and (np.all(sun > 0) if has_sun else np.all(sun == 0))
+    irradiance = np.asarray(sky.sky_irradiance)
+    assert irradiance.shape == (3,) and np.all(irradiance > 0)
+    w = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, -0.6, 0.8]])
+    s = w[:, :2] / w[:, 2:]
+    for footprint in (None, 0.01, np.full((3, 2), 0.01)):
+        radiance = np.asarray(sky.view_radiance(w, s, footprint))
+        assert radiance.shape == (3, 3) and np.all(np.isfinite(radiance)) and np.all(radiance > 0)
+
+
+def test_sky_protocol_values_keep_each_models_meaning():
+    skies = protocol_skies()
+    uniform = skies["uniform"]
+    assert np.array_equal(uniform.sky_irradiance, np.pi * np.array([1.0, 2.0, 0.5]))
+    w = np.array([[0.0, 0.0, 1.0], [0.8, 0.0, 0.6]])
+    assert np.array_equal(uniform.view_radiance(w, w[:, :2] / w[:, 2:]), np.float32([[1.0, 2.0, 0.5]] * 2))
+    for name in ("hdri", "hdri-sun"):
+        hdri = skies[name]
+        assert np.array_equal(hdri.sky_irradiance, hdri.total_irradiance())
+        assert np.array_equal(hdri.total_sun_irradiance(), hdri.sun_irradiance())
+    assert skies["hdri-sun"].sun_fraction() == 1.0
+    procedural = skies["procedural"]
+    s = w[:, :2] / w[:, 2:]
+    assert np.array_equal(procedural.view_radiance(w, s, 0.02), procedural.radiance(s, footprint=0.02))
