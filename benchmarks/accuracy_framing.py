@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline import camera, composite  # noqa: E402
 from pipeline.cache import Cache  # noqa: E402
-from pipeline.composite import REC709_LUMINANCE  # noqa: E402
+from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import load, plan_run  # noqa: E402

@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from pipeline import cache, ephemeris, io  # noqa: E402
-from pipeline.composite import REC709_LUMINANCE  # noqa: E402
+from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402

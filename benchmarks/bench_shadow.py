@@ -41,7 +41,7 @@ import scipy.fft as sfft
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import shadow  # noqa: E402
+from pipeline import geometry, shadow  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
 from pipeline.sky import UniformSky  # noqa: E402
 
@@ -112,8 +112,8 @@ def periodic_case(n: int, workers: int):
     mean = float(m.mean(dtype=np.float64))
     _check_dtypes(spectrum, raster)
     unfolded = sky.raster(plan.sky).weighted  # what folding an unfolded sky would add per frame
-    start = shadow.sky_offset(plan.sky)
-    FOLD_MS[n] = 1e3 * float(np.median([_seconds(lambda: shadow.fold(unfolded, start, plan.tile_shape))
+    start = geometry.sky_offset(plan.sky)
+    FOLD_MS[n] = 1e3 * float(np.median([_seconds(lambda: geometry.fold(unfolded, start, plan.tile_shape))
                                          for _ in range(3)]))
 
     def run():

@@ -1,49 +1,10 @@
-"""The on-disk store of cycle products: named numpy arrays keyed by a hash of their inputs.
+"""The on-disk store of cycle products: named numpy arrays keyed by a hash of their inputs, written
+atomically, checksummed, shared safely by concurrent processes (docs/runs.md, "The cache on
+disk" and "The cache's checks").
 
-docs/runs.md, "The cache's checks"; docs/method.md, "Cycle products and the cache". A product of the cycle phase (mask spectra per level, fine masks,
-foreground passes) is an *item*: a ``dict[str, numpy.ndarray]`` computed from a small set of
-parameters. Its key is the SHA-256 of a canonical JSON of its kind, its parameters and
-``CODE_VERSION``; keys are made from parameters, never from big arrays (hashing a 16 MiB
-argument costs 20 ms per call).
-
-Layout under the cache root (``cache_dir``)::
-
-    <root>/<kind>/<key[:2]>/<key>/<name>.npy    one .npy file per named array (C order)
-    <root>/<kind>/<key[:2]>/<key>/meta.json     kind, key, params, created, and per array:
-                                                dtype, shape, data bytes, file bytes, CRC-32 of
-                                                the data and of the whole file; its own CRC-32
-    <root>/<kind>/<key[:2]>/.tmp-<key>-...      an item being written (or left by a killed writer)
-    <root>/<kind>/<key[:2]>/.del-<key>-...      an item being removed
-    <root>/locks/<key>.lock                     one file lock per key
-    <root>/damaged/<key>.json                   the items of this key found damaged and removed:
-                                                when, why, and the inodes of their .npy files
-
-Writes are atomic: the arrays, then ``meta.json``, are written into a temporary folder beside
-the final one, which is then renamed into place (``os.rename`` of a folder is atomic on POSIX),
-so an item folder that exists is complete or was damaged afterwards. Removal is the reverse:
-rename to a ``.del-`` name, then delete. A writer holds the key's file lock from its re-check
-to the rename, so concurrent processes sharing a cache compute each item once.
-
-Checks. Every read checks the item: each file's size against ``meta.json``, the CRC-32 of each
-whole ``.npy`` file, header and data (``zlib.crc32``, about 4 ms per 16 MiB on this machine
-kind; SHA-256 takes 9 ms and BLAKE2b 18 ms, and a checksum here guards against accidents, not
-adversaries), and ``meta.json`` against a CRC-32 of its own content. The checksums of an item
-are computed once per process: later reads compare the files' size, inode, modification and
-change times [ns] with those seen when the bytes were checked, and check the bytes again when
-any of them differs (``forget_verified`` makes the next read check again). A damaged item
-(truncated, flipped bits, a damaged header or ``meta.json``) is removed with a one-line
-``CacheWarning`` and recomputed, never reported to the caller as an error.
-``benchmarks/bench_integrity.py`` measures the cost against the frame phase.
-
-Each ``Cache`` records the items it served (``served``): their checksums and the files' sizes,
-inodes and times, so that a run can tell later whether the item a frame was made from has
-changed since (``Cache.recheck``).
-
-Last use is the modification time of ``meta.json``, touched on every hit; ``Cache.prune``
-removes the least recently used items first. Times are seconds since the Unix epoch. [s]
-
-Assumes a POSIX file system with working ``flock`` (local disks; NFSv4 emulates it with
-POSIX locks).
+Why one module: the layout on disk, the checks and the locking are one contract; split, its
+invariants (an item folder that exists is complete or was damaged afterwards) would be spread
+over several files.
 """
 
 from __future__ import annotations

@@ -8,6 +8,9 @@ Masks can also be drawn: ``grow_grove`` grows a seeded procedural grove (trunks 
 capsules, elliptical leaves), ``leaves_at`` makes its leaves flutter periodically, ``project``
 casts them along the sun onto the canopy plane and ``rasterize_transmittance`` draws the
 anti-aliased transmittance (``grove_mask`` does all three).
+
+Why one module: the grove, its flutter, the projection along the sun and the anti-aliased
+rasteriser are the one way a mask is made (``_raster.py`` holds the compiled kernels).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .colour import XYZ_TO_REC709
+from .vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS
 
 _GRADATION = {1: (4.0, -0.70), 2: (1.1, -0.8), 3: (0.0, -1.0), 4: (-1.0, -0.55), 5: (-1.0, -0.32),
               6: (-1.0, -0.15)}
@@ -23,13 +24,6 @@ CIE_TYPES = {t: (*_GRADATION[g], *_INDICATRIX[i]) for t, (g, i) in _TYPE_GROUPS.
 """The 15 CIE standard general skies (ISO 15469:2004, Tables 1 and 2): type -> (a, b, c, d, e),
 gradation groups I-VI and indicatrix groups 1-6. Types 1-5 are overcast, 6-10 partly cloudy,
 11-15 clear (12: clear, low illuminance turbidity; 13: clear, polluted atmosphere)."""
-
-DEFAULT_CIE_TYPE = 12
-"""The clear sky drawn when a config names no type: CIE type 12, the standard clear sky of low
-illuminance turbidity (docs/accuracy.md, "The clear sky", says how it was chosen)."""
-
-SHAPES = ("cie", "preetham")
-"""The clear-sky shapes a procedural sky may take (sky.model)."""
 
 # Preetham et al. 1999, appendix A.2: Perez coefficients (A..E) = slope * T + intercept, rows Y, x, y.
 _PEREZ_SLOPE = np.array(
@@ -138,5 +132,5 @@ def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shap
     if shape == "cie":
         Y = cie_relative_luminance(cos_zenith, gamma, sun_zenith=sun_zenith, cie_type=cie_type)
     elif shape != "preetham":
-        raise ValueError(f"unknown sky shape {shape!r} (valid: {', '.join(SHAPES)})")
+        raise ValueError(f"unknown sky shape {shape!r} (valid: {', '.join(PROCEDURAL_MODELS)})")
     return rgb_from_xyY(x, y, Y)

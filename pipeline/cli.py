@@ -2,6 +2,9 @@
 
 Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing written),
 1 an unexpected failure.
+
+Why one module: each command's arguments, checks of its flags and printing, and nothing
+else (the work is in the stages); one place shows the whole command line.
 """
 
 from __future__ import annotations

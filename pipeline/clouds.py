@@ -1,69 +1,9 @@
-"""Drifting layers of fractal cloud: their transmittance and the light they scatter.
+"""Drifting layers of fractal cloud: their transmittance and the light they scatter
+(docs/method.md, "The cloud layer": the pattern, the single- and multiple-scattering model and
+its energy bounds).
 
-A ``CloudLayer`` is a horizontal, geometrically thin sheet of cloud at ``altitude`` [m] whose
-vertical optical depth ``tau(x)`` varies over the horizontal plane and drifts with the wind.
-Seen from the observer, a sky-plane direction ``s = (wx / wz, wy / wz)`` (docs/method.md, "The sky plane
-and the sky raster"; Max 1991 Fig. 2) meets the layer at the horizontal point ``altitude * s``; the layer then
-
-- dims whatever lies behind it (clear sky, sun disc) by ``exp(-tau / cos(theta))``, and
-- adds the sunlight and skylight it scatters towards the observer (``radiance``).
-
-The sky model composes the two: ``L(s) = T(s) L_clear(s) + L_cloud(s)``, and dims the sun disc by
-``T(sun_s)``, as clouds drifting over the sun do in Max's film "Sun and Shade".
-
-Pattern
--------
-White noise from ``numpy.random.default_rng(seed)`` on a periodic ``texels x texels`` lattice is
-filtered once with a von Karman power-law spectrum (spectral synthesis; Saupe 1988, "Algorithms
-for random fractals", in Peitgen & Saupe, *The Science of Fractal Images*, ch. 2.4.4)
-
-    P(k) ~ (k^2 + k0^2)^(-(beta + 1) / 2),     k0 = 1 / (2 scale),
-
-so that a straight transect has the 1-D spectrum ``k^-beta`` (``beta = 5/3``, the slope
-measured in marine stratocumulus: Cahalan & Snider 1989, "Marine stratocumulus structure",
-Remote Sens. Environ. 28, 95-107) for wavelengths shorter than ``2 scale``, and no more power at
-longer ones: clouds and gaps are about ``scale`` across, with about six octaves of detail down to
-the lattice spacing ``period * scale / texels``. The texture is cached per
-``(seed, texels, period, spectral_slope)`` and sampled bilinearly with wrap-around, so that the
-field is continuous in ``x`` and its drift is continuous and unbounded in time.
-
-Cover: the field is turned into a coverage ``c`` in [0, 1] by a smoothstep over the ranks
-``[u0 - h, u0 + h]`` of the lattice values, with ``u0 = 1 - cover`` (the field's ``1 - cover``
-quantile is where ``c = 1/2``) and half-width ``h = softness * min(cover, 1 - cover)``. Over the
-plane, ``c >= 1/2`` on a fraction ``cover`` and the mean of ``c`` is ``cover`` too; edges are soft
-and the soft band narrows with small clouds or small holes. ``tau = thickness * c``: thinnest at
-the edges, ``thickness`` in the cores. ``cover = 0`` gives ``tau = 0``, ``cover = 1`` a uniform
-overcast of ``thickness``.
-
-Light
------
-Each sky-plane point is treated as a plane-parallel slab of its own optical depth (independent
-column approximation). With ``mu = cos(theta_view)``, ``mu0 = cos(theta_sun)``, single-scattering
-albedo ``w``, Henyey-Greenstein phase ``p`` [1/sr] at the scattering angle between sun and view,
-sun normal irradiance ``F`` and clear-sky horizontal irradiance ``E``:
-
-    L = w F p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)          (single)
-      + [F mu0 m_sun(tau, mu0) + E m_sky(tau)] / pi                                 (multiple)
-
-with ``phi(x) = (1 - exp(-x)) / x``. The first line is Blinn's (1982) transmitted single
-scattering, ``w F p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``, written so that it is
-stable at ``mu = mu0`` and for any ``tau``. The second line sends the rest of the diffusely
-transmitted flux out of the cloud base uniformly (Lambertian):
-
-- ``m_sun = max(0, T_dE(tau, mu0) - exp(-tau/mu0) - S1(tau, mu0))``: the conservative
-  delta-Eddington total transmittance (Joseph, Wiscombe & Weinman 1976) less the direct beam and
-  less the singly scattered flux ``S1`` that the first line already carries (its hemispheric
-  integral at ``w = 1``, by Gauss-Legendre quadrature, tabulated per call over ``tau``);
-- ``m_sky = max(0, T_2s(tau) - 2 E3(tau))``: the two-stream transmittance of diffuse light
-  (hemispheric-mean closure, Meador & Weaver 1980) less its unscattered part ``2 E3(tau)``, which
-  the sky model already shows as ``T(s) L_clear(s)``;
-- both scaled, for ``w < 1``, by the two-stream ratio of diffusely transmitted flux with and
-  without absorption.
-
-Energy: below the layer, direct + single + multiple is at most ``max(T_dE, exp(-tau/mu0) + S1)``
-of the sun's ``F mu0`` plus at most ``T_2s`` of the sky's ``E``: never more than comes in.
-Neglected: light reflected by the ground onto the cloud base, skylight above the cloud differing
-from ``E``, horizontal transport between columns (cloud sides), the limb darkening of the base.
+Why one module: the noise texture, the cover, the transmittance and the scattered light are one
+physical model of a layer, each part tuned against the others.
 """
 
 from __future__ import annotations

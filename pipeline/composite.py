@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .colour import REC709_LUMINANCE
+from .vocabulary import DISPLAYS, WHITE_BALANCES
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
@@ -39,13 +40,6 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
     return srgb_encode(exposed / (1.0 + exposed))
 
 
-DISPLAYS = ("srgb", "filmic")
-"""Display transforms from exposed scene-linear values to sRGB code values."""
-
-WHITE_BALANCES = ("daylight", "shade", "none")
-"""What a picture shows as white, as a camera's white balance: ``daylight`` the open ground's
-light (sun and sky), ``shade`` the sky's light alone (the shade under trees comes out neutral and
-the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
 
 
 def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray:

@@ -3,6 +3,9 @@
 Angles are degrees in the YAML and radians in the values; lengths are metres. Every error names
 the key path (and the YAML line where there is one) and is raised before any work starts.
 File paths are relative to the folder of the config file.
+
+Why one module: the whole schema, every section's values, defaults and checks, with the
+one safe YAML reader they are read through; it imports no physics (docs/design.md).
 """
 
 from __future__ import annotations
@@ -18,16 +21,13 @@ from pathlib import Path
 import yaml
 
 from . import __version__, paths
-from .clearsky import CIE_TYPES, DEFAULT_CIE_TYPE
-from .composite import DISPLAYS, WHITE_BALANCES
-from .daylight import TURBIDITY_RANGE
+from .constants import SUN_RADIUS_DEG
 from .errors import ConfigError
-from .sky import MODELS as SKY_MODELS
-from .sky import PROCEDURAL_MODELS
+from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, PROCEDURAL_MODELS, SKY_MODELS,
+                         TURBIDITY_RANGE, WHITE_BALANCES)
 
 LAYOUTS = ("isolated", "periodic")
 MAX_LEAVES = 1_000_000
-SUN_RADIUS_DEG = 0.2666
 """Mean angular radius of the sun (959.63 arcsec at 1 au). [deg]"""
 MOON_RADIUS_DEG = 0.2725
 """Angular radius of the moon for explicit-angle eclipses: a little larger than the sun. [deg]"""
@@ -142,9 +142,9 @@ class CloudsConfig:
 
 @dataclass(frozen=True)
 class SkyConfig:
-    """model : a name in ``sky.MODELS``; radiance : linear RGB of a uniform sky;
+    """model : a name in ``vocabulary.SKY_MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
-    Procedural (models 'cie' and 'preetham', ``sky.PROCEDURAL_MODELS``): turbidity (the Linke
+    Procedural (models 'cie' and 'preetham', ``vocabulary.PROCEDURAL_MODELS``): turbidity (the Linke
     turbidity factor; with turbidity_auto None until ``plan.resolve`` looks it up in the
     climatology for the site and the middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
     time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
@@ -207,8 +207,8 @@ class CameraConfig:
     view, from north towards east) and pitch (negative looking down) [rad], None to look at the
     canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
     default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
-    light; display : a name in ``composite.DISPLAYS``; white_balance : a name in
-    ``composite.WHITE_BALANCES``."""
+    light; display : a name in ``vocabulary.DISPLAYS``; white_balance : a name in
+    ``vocabulary.WHITE_BALANCES``."""
 
     position: tuple[float, float, float] | None = None
     look_at: tuple[float, float, float] | None = None
@@ -851,7 +851,7 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
 def _parse_sky(s: _Section) -> SkyConfig:
     if s.raw("model", "cie") == "procedural":  # the former name of the CIE clear sky
         s.data = {**s.data, "model": "cie"}
-    model = s.choice("model", tuple(SKY_MODELS), "cie")
+    model = s.choice("model", SKY_MODELS, "cie")
     procedural = " or ".join(PROCEDURAL_MODELS)
     owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "cie_type": "cie",
               **dict.fromkeys(("turbidity", "sun", "site", "time", "moon", "clouds", "skylight"), procedural)}
@@ -888,9 +888,10 @@ def _parse_procedural(s: _Section, model: str) -> dict:
     turbidity = None if auto else s.number("turbidity", SkyConfig.turbidity, at_least=lo, below=hi + 1e-9)
     cie_type = SkyConfig.cie_type
     if model == "cie":
-        cie_type = s.integer("cie_type", SkyConfig.cie_type, at_least=min(CIE_TYPES))
-        if cie_type not in CIE_TYPES:
-            s.fail("cie_type", f"must be one of the CIE standard general skies 1..{max(CIE_TYPES)} (got {cie_type})")
+        first, last = CIE_TYPE_RANGE
+        cie_type = s.integer("cie_type", SkyConfig.cie_type, at_least=first)
+        if cie_type > last:
+            s.fail("cie_type", f"must be one of the CIE standard general skies {first}..{last} (got {cie_type})")
     sun = site = moon = None
     if s.has("site") or s.has("time"):
         if s.has("sun"):

@@ -25,10 +25,6 @@ PRECIPITABLE_WATER = 2.0
 Radiance's gendaylit; mid-latitude air holds about 1 cm in winter, 3 cm in summer). A change of
 1 cm moves the clear-sky efficacies by under 2%. [cm]"""
 
-TURBIDITY_RANGE = (1.5, 10.0)
-"""Linke turbidity factors accepted: the climatology's values lie within (about 1.8 to 7), and
-the sky's colour model (Preetham et al. 1999) needs more than 1.2. [1]"""
-
 # Perez et al. 1990, Table 4: per sky-clearness bin (Table 1 bounds), coefficients a, b, c, d of
 # the global (eq. 6), direct (eq. 8) and diffuse (eq. 7) luminous efficacy. [lm/W]
 CLEARNESS_BINS = (1.0, 1.065, 1.230, 1.500, 1.950, 2.800, 4.500, 6.200)
@@ -119,7 +115,7 @@ def clear_daylight(sun_zenith: float, linke_turbidity: float, *, altitude: float
     as ``pvlib.clearsky.ineichen``), in illuminance through ``perez_efficacy``.
 
     sun_zenith : geometric zenith angle of the sun's centre, below pi/2. [rad]
-    linke_turbidity : Linke turbidity factor TL (air mass 2), in TURBIDITY_RANGE. [1]
+    linke_turbidity : Linke turbidity factor TL (air mass 2), in vocabulary.TURBIDITY_RANGE. [1]
     altitude : of the site above sea level: thinner air, less scattering. [m]
     distance_factor : (1 au / sun's distance)^2, on the extraterrestrial irradiance. [1]
     precipitable_water : W of the efficacy model. [cm]

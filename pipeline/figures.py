@@ -24,6 +24,7 @@ import yaml
 
 from . import cache, composite, ephemeris, io
 from . import sky as sky_models
+from .colour import REC709_LUMINANCE
 from .config import Config, parse_config
 from .cycle import layer_masks
 from .frame import FrameResult, render_frame
@@ -225,7 +226,7 @@ def log_display(values: np.ndarray, *, top: float | None = None, decades: float 
     as the display value as it is (a log scale has no use for the sRGB curve); each pixel keeps
     its hue (its brightest channel is that brightness). [1]"""
     values = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
-    luminance = values @ composite.REC709_LUMINANCE.astype(np.float64)
+    luminance = values @ REC709_LUMINANCE.astype(np.float64)
     top = luminance.max() if top is None else float(top)
     lit = luminance[luminance > 0]
     if not top > 0 or lit.size == 0:
@@ -244,7 +245,7 @@ def sky_display(radiance: np.ndarray) -> np.ndarray:
     at 0.4, then ``x / (1 + x)`` to keep the sun and its glow from clipping flat
     (``composite.display_sky`` for a whole image, not an equirectangular upper half). [1]"""
     radiance = np.asarray(radiance, dtype=np.float32)
-    median = float(np.median(radiance @ composite.REC709_LUMINANCE))
+    median = float(np.median(radiance @ REC709_LUMINANCE))
     exposed = radiance * np.float32(0.4 / median if median > 0 else 1.0)
     return composite.srgb_encode(exposed / (1.0 + exposed))
 
@@ -399,7 +400,7 @@ def _fig_sky_raster(scenes: _Scenes) -> np.ndarray:
     """Fig. 6: the weighted raster of the grove's upper layer, log scale from the brightest sky
     cell (the sun, far brighter, is white) down to the dimmest."""
     e_sky, e_sun = weighted_sky_raster(scenes.grove_sky, scenes.grove_plan.layers[0].coarse.sky)
-    brightest = float((e_sky @ composite.REC709_LUMINANCE).max())
+    brightest = float((e_sky @ REC709_LUMINANCE).max())
     return log_display(e_sky + e_sun, top=brightest)
 
 

@@ -1,57 +1,10 @@
-"""Foreground passes: the trees themselves, seen by the camera (Max 1991, Figs. 8-9).
+"""Foreground passes: the trees themselves, seen by the camera (Max 1991, Figs. 8-9), lit by sun
+and sky (``sun``) and by the sky alone (``sky``), with their coverage ``alpha``; built in
+(``tree_passes``, the procedural grove) or read from files (``read_passes``). Geometry,
+coverage, compositing, shading and sun visibility: docs/method.md, "The foreground passes".
 
-Per cycle frame the trees are rendered twice, lit by sun and sky (``sun``) and by the sky alone
-(``sky``), with their coverage ``alpha``. All three are linear and premultiplied, so an output
-frame is composited later as (Max 1991, section "Implementation and results")
-
-    frame = F_sky + S (F_sun - F_sky) + (1 - A) B
-
-with ``S`` the sun fraction (clouds, eclipse) and ``B`` the background (ground and sky).
-
-Built-in passes (``tree_passes``) draw the procedural grove of ``canopy``: the same fluttering
-elliptical leaves that make the shadow masks, and its trunks and branches as capsules.
-
-- Geometry. A perspective projection is locally affine: a leaf (centre C, semi-axes U, V)
-  becomes the ellipse of centre proj(C) and conjugate semi-axes J U, J V, J the Jacobian of the
-  projection at C (exact for a leaf facing the camera on its axis, and within a fraction of a
-  pixel for any leaf smaller than a few percent of its distance). A capsule keeps its axis and
-  gets radius focal r / depth; one whose depth varies along it is cut into pieces whose depths
-  differ by at most 5 %. Shapes crossing the ``near`` plane are clipped (wood) or dropped (leaves).
-- Coverage. ``canopy.coverage_fragments`` gives one anti-aliased fragment (pixel, coverage c)
-  per shape and pixel, the same box-filter coverages as the masks. Each fragment gets the depth of
-  its shape's surface at the pixel centre (the leaf's plane; the cylinder's front at that point).
-- Compositing. Fragments are sorted by (pixel, depth); a fragment's weight is c times the
-  product of (1 - c) of the nearer fragments at its pixel (a segmented cumulative sum of
-  log(1 - c)). Colour is the weighted sum of radiances and ``alpha = 1 - prod(1 - c)``, the
-  product rule of the masks: shapes within a pixel are independent occluders.
-- Shading, in radiance units of the irradiances given [klx -> kcd/m^2]:
-  a leaf (reflectance rho, transmittance tau, both Lambertian) seen on the face whose unit normal
-  towards the viewer is n, under a uniform sky of horizontal irradiance E_sky:
-
-      L_sky = k E_sky / pi (rho (1 + n_z) / 2 + tau (1 - n_z) / 2)
-
-  ((1 +- n_z) / 2 is the share of the sky that each face sees; the far face's light shines
-  through.) ``k`` (``leaf_sky_exposure``) is the fraction of the open sky that the crown lets
-  reach a leaf: a constant 0.7 by default (wood: 0.6; near the means of ``sky_exposure`` over
-  the default grove, measured in docs/accuracy.md), or one value per leaf from
-  ``sky_exposure``, which averages the sun visibility over sky directions (12 visibility
-  passes; the crown gets darker inside). The sun, of normal
-  irradiance E_sun along the unit vector s:
-
-      L_sun = V |n . s| E_sun / pi  x  rho if the sun lights the face we see, else tau
-
-  with V the leaf's sun visibility (``leaf_sun_visibility``): seen against the sun, a leaf
-  glows green by translucency. Wood is Lambertian bark with the normal of the cylinder at each
-  pixel (across the cylinder's visible half), lit by the sky as a leaf's front face and by the
-  sun as max(n . s, 0) E_sun, times the visibility of its capsule. F_sky holds the sky terms,
-  F_sun the sky and sun terms.
-- Sun visibility (``sun_visibility``): every shape projected orthographically along the sun
-  onto a plane across it, rasterized at ``pixel`` into fragments, sorted per pixel by distance
-  towards the sun; a leaf's visibility is the coverage-weighted mean over its fragments of the
-  transmittance of the fragments nearer the sun (the same product rule).
-
-Imported passes (``read_passes``), e.g. rendered in Blender: three EXR files, premultiplied
-scene-linear, in the same radiance units as the rest of the run.
+Why one module: the leaves' and the wood's projection, coverage, depth order and shading share
+their fragments and are one renderer; split, each part would import the others' internals.
 """
 
 from __future__ import annotations

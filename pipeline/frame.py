@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cache, camera, composite
-from .composite import REC709_LUMINANCE
+from .colour import REC709_LUMINANCE
 from .cycle import foreground_item
 from .ground import GroundResult, blend_band, render_ground
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
@@ -95,7 +95,7 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
     clock.lap("camera")
     light = reference_lighting(plan)
-    sun_fraction = float(sky.sun_fraction()) if light.sun_direction is not None else 0.0
+    sun_fraction = float(sky.sun_fraction())
     sky_scale = _sky_scale(sky, light)
     atmosphere = None
     if config.sky.haze > 0:
@@ -149,7 +149,6 @@ class _Stopwatch:
 def _sky_scale(sky, light: Lighting) -> float:
     """Skylight now over the reference skylight, by luminance: clouds and the moon dim it. [1]"""
     reference = float(light.sky_irradiance @ REC709_LUMINANCE)
-    now = getattr(sky, "sky_irradiance", None)
-    if now is None or reference <= 0:
+    if reference <= 0:
         return 1.0
-    return float(np.asarray(now) @ REC709_LUMINANCE) / reference
+    return float(np.asarray(sky.sky_irradiance) @ REC709_LUMINANCE) / reference

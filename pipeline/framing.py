@@ -10,9 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import camera, canopy
-from . import sky as sky_models
 from .config import Config
-from .geometry import sky_plane_from_direction
+from .geometry import direction_vector, sky_plane_from_direction
 from .inputs import grove_of
 
 if TYPE_CHECKING:
@@ -222,8 +221,8 @@ def _eclipsed(scenes) -> bool:
     for scene in scenes:
         if scene.sun is None or scene.moon is None:
             continue
-        a = sky_models._unit(scene.sun.azimuth, scene.sun.elevation)
-        b = sky_models._unit(scene.moon.azimuth, scene.moon.elevation)
+        a = direction_vector(scene.sun.azimuth, scene.sun.elevation)
+        b = direction_vector(scene.moon.azimuth, scene.moon.elevation)
         if np.arccos(np.clip(a @ b, -1, 1)) < scene.sun.angular_radius + scene.moon.angular_radius:
             return True
     return False

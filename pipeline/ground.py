@@ -12,7 +12,7 @@ import numpy as np
 from . import cache, shadow
 from . import sky as sky_models
 from .cycle import cycle_item
-from .geometry import Grid
+from .geometry import Grid, sky_grid, sky_offset
 from .inputs import load_sky
 from .plan import LayerPlan, RunPlan, default_workers
 
@@ -72,7 +72,7 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
     raster with the sun kernel at the coarse cell."""
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
-        grid = coarse.sky or shadow.sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
+        grid = coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
         raster = sky.raster(grid)  # a 1 x 1 stand-in when no ray reaches the canopy
         g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
         exact = coarse.exact
@@ -103,14 +103,14 @@ def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
                                       item["coarse"], coarse, float(item["mean"][0]), workers=workers)
     weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
     if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
-        dr, dc = np.subtract(shadow.sky_offset(kernel.grid), shadow.sky_offset(coarse.sky))
+        dr, dc = np.subtract(sky_offset(kernel.grid), sky_offset(coarse.sky))
         rows, cols = kernel.weighted.shape[1:]
         r0, c0 = max(dr, 0), max(dc, 0)
         r1, c1 = min(dr + rows, coarse.sky.shape[0]), min(dc + cols, coarse.sky.shape[1])
         if r1 > r0 and c1 > c0:
             weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
     outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
-    raster = sky_models.SkyRaster(coarse.sky or shadow.sky_grid((0, 0), (1, 1), kernel.grid.pixel),
+    raster = sky_models.SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel),
                                   weighted, outside)
     return shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
 

@@ -16,6 +16,7 @@ from .clouds import CloudLayer
 from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
 from .geometry import Grid
 from .sky import EquirectSky, UniformSky
+from .vocabulary import PROCEDURAL_MODELS
 
 if TYPE_CHECKING:
     from .plan import Scene
@@ -26,7 +27,7 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
     (negative radiance is taken as 0). Raises io.ImageError."""
     if sky.model == "uniform":
         return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
-    if sky.model in sky_models.PROCEDURAL_MODELS:
+    if sky.model in PROCEDURAL_MODELS:
         clouds = None
         if sky.clouds is not None:
             c = sky.clouds

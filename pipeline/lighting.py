@@ -99,8 +99,6 @@ def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
     horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
     [klx]"""
     sky = load_sky(plan.config.sky, scene)
-    if light.sun_direction is None or not hasattr(sky, "sky_irradiance"):
+    if light.sun_direction is None:
         return light.unshadowed
-    sun = sky.total_sun_irradiance() if hasattr(sky, "total_sun_irradiance") else (
-        light.sun_irradiance * light.sun_direction[2])
-    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sun)
+    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.total_sun_irradiance())

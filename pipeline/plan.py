@@ -21,8 +21,9 @@ from .camera import Camera
 from .config import CanopyLayer, Config, load_config, size_text
 from .errors import ConfigError
 from .framing import AUTO_SUN_MASK, frame_scene
-from .geometry import Grid, sky_plane_from_direction
+from .geometry import Grid, sky_plane_from_direction, tangent_axes
 from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
+from .vocabulary import PROCEDURAL_MODELS, TURBIDITY_RANGE
 
 MAX_GROUND_PIXELS = 64_000_000
 """Most pixels of the coarse ground raster, and of a canopy plane's mask. [1]"""
@@ -55,13 +56,13 @@ def load(path) -> Config:
 def resolve(config: Config) -> Config:
     """The config checked against the compute limits and the sun's path, with ``turbidity:
     auto`` looked up (the Linke climatology at the site and the middle of the time span,
-    within daylight.TURBIDITY_RANGE). Raises ConfigError naming the key."""
+    within TURBIDITY_RANGE). Raises ConfigError naming the key."""
     _check_limits(config)
     sky = config.sky
     if sky.site is not None:
         _check_sun(config)
         if sky.turbidity is None:
-            lo, hi = daylight.TURBIDITY_RANGE
+            lo, hi = TURBIDITY_RANGE
             middle = sky.site.start + (sky.site.end - sky.site.start) / 2
             turbidity = min(max(daylight.linke_turbidity(middle, sky.site.latitude, sky.site.longitude), lo), hi)
             config = replace(config, sky=replace(sky, turbidity=turbidity))
@@ -154,7 +155,7 @@ def scene_at(config: Config, frame: int) -> Scene:
     time = frame / config.animation.fps
     if sky.model == "hdri":
         return Scene(frame, time, None, load_hdri(sky).sun, None)
-    if sky.model not in sky_models.PROCEDURAL_MODELS:
+    if sky.model not in PROCEDURAL_MODELS:
         return Scene(frame, time, None, None, None)
     if sky.site is not None:
         site = sky.site
@@ -178,10 +179,7 @@ def scene_at(config: Config, frame: int) -> Scene:
 def offset_direction(azimuth, elevation, dx, dy):
     """The direction at gnomonic offset (dx to the right, dy up) [rad] from (azimuth,
     elevation) [rad]: the inverse of ``ephemeris.moon_offset_from_sun``."""
-    a, h = azimuth, elevation
-    s = np.array([np.cos(h) * np.sin(a), np.cos(h) * np.cos(a), np.sin(h)])
-    e_az = np.array([np.cos(a), -np.sin(a), 0.0])
-    e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
+    s, e_az, e_el = tangent_axes(azimuth, elevation)
     w = s + dx * e_az + dy * e_el
     w /= np.linalg.norm(w)
     return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))
@@ -254,7 +252,7 @@ def plan_run(config: Config) -> RunPlan:
     for its sun; no mask image is read). What the config leaves out of ``ground.window``,
     ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's path over the
     animation (``frame_scene``). ``config`` must be resolved (``resolve``)."""
-    if config.sky.model in sky_models.PROCEDURAL_MODELS and config.sky.turbidity is None:
+    if config.sky.model in PROCEDURAL_MODELS and config.sky.turbidity is None:
         raise ValueError("plan_run needs a resolved config (plan.resolve): turbidity: auto is not looked up")
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
     has_sun = scenes[0].sun is not None

@@ -13,6 +13,10 @@ looks north, east is at three quarters of the width, texel centres at
 ``((col + 0.5) / width, (row + 0.5) / height)``. ``rotation`` turns the sky about the zenith
 towards the east: a feature at image azimuth ``phi`` is seen at azimuth ``phi + rotation``.
 ``cut_sun`` moves an HDRI's sun out of the image into a disc for the fine kernel (``sun_kernel``).
+
+Why one module: the three sky models share the sky-plane raster, the sun disc and its
+kernel, the moon and the ``Sky`` interface they implement; split, each would import the
+others' helpers.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from . import clearsky, daylight
 from .camera import equirect_lookup
 from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
+from .vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS, TURBIDITY_RANGE
 from .geometry import Grid, direction_vector, fold, projected_solid_angle, sky_grid, sky_offset, tangent_axes
 
 
@@ -483,7 +488,7 @@ def _gauss_legendre(a, b, n):
 class ProceduralSky:
     """Clear sky in absolute units with the sun, an optional moon and optional clouds.
 
-    turbidity : Linke turbidity factor TL, in daylight.TURBIDITY_RANGE: the levels of sun and
+    turbidity : Linke turbidity factor TL, in vocabulary.TURBIDITY_RANGE: the levels of sun and
         sky (``daylight.clear_daylight``) and the colours of both. [1]
     sun : SunDisc -- elevation must be above 0: the model has no twilight (ValueError). Its
         angular radius gives its distance, so the extraterrestrial irradiance. [rad]
@@ -492,7 +497,7 @@ class ProceduralSky:
     time : passed to the clouds. [s]
     skylight : factor on the clear sky's radiance; 0 leaves the sun alone, as in the paper's
         Fig. 11. [1]
-    shape : the clear sky's angular distribution, a name in ``clearsky.SHAPES``; cie_type : the
+    shape : the clear sky's angular distribution, a name in ``vocabulary.PROCEDURAL_MODELS``; cie_type : the
         CIE standard general sky type with shape 'cie', 1..15.
     altitude : of the site above sea level. [m]
 
@@ -510,17 +515,17 @@ class ProceduralSky:
     time: float = 0.0
     skylight: float = 1.0
     shape: str = "cie"
-    cie_type: int = clearsky.DEFAULT_CIE_TYPE
+    cie_type: int = DEFAULT_CIE_TYPE
     altitude: float = 0.0
 
     def __post_init__(self):
-        lo, hi = daylight.TURBIDITY_RANGE
+        lo, hi = TURBIDITY_RANGE
         if not (lo <= self.turbidity <= hi):
             raise ValueError(f"turbidity must be in [{lo}, {hi}], got {self.turbidity}")
         if not self.sun.elevation > 0.0:
             raise ValueError(f"sun elevation must be above 0 for the clear sky, got {self.sun.elevation} [rad]")
-        if self.shape not in clearsky.SHAPES:
-            raise ValueError(f"unknown sky shape {self.shape!r} (valid: {', '.join(clearsky.SHAPES)})")
+        if self.shape not in PROCEDURAL_MODELS:
+            raise ValueError(f"unknown sky shape {self.shape!r} (valid: {', '.join(PROCEDURAL_MODELS)})")
         if self.cie_type not in clearsky.CIE_TYPES:
             raise ValueError(f"cie_type must be 1..15, got {self.cie_type}")
 
@@ -938,9 +943,3 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
                   angular_radius, tuple(limb_darkening))
     return EquirectSky(image, sky.rotation, sun, energy / direction[2])
 
-
-PROCEDURAL_MODELS = clearsky.SHAPES
-"""The sky models drawn by ``ProceduralSky``, named by their clear-sky shape."""
-
-MODELS = {**dict.fromkeys(PROCEDURAL_MODELS, ProceduralSky), "uniform": UniformSky, "hdri": EquirectSky}
-"""The sky models a config may name (sky.model); 'procedural' is read as 'cie'."""

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from pipeline import cache
-from pipeline.composite import REC709_LUMINANCE
+from pipeline.colour import REC709_LUMINANCE
 from pipeline.cycle import foreground_item
 from pipeline.frame import render_frame
 from pipeline.inputs import grove_of

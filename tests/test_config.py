@@ -6,10 +6,12 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import clearsky, composite, sky
-from pipeline.config import PROCEDURAL_MODELS, SKY_MODELS, load_config, parse_config
+from pipeline import clearsky, sky
+from pipeline.config import load_config, parse_config
 from pipeline.errors import ConfigError
-from pipeline.plan import resolve
+from pipeline.inputs import load_sky
+from pipeline.plan import plan_run, resolve
+from pipeline.vocabulary import CIE_TYPE_RANGE, SKY_MODELS
 
 from scenes import base_config, set_key, write_config, write_inputs
 
@@ -149,8 +151,12 @@ def test_shipped_example_config_is_valid():
     assert config.sky.model == "hdri" and config.canopy.layers[0].mask[0].is_file()
 
 
-def test_the_names_a_config_gives_are_those_the_models_know():
-    """The config's vocabulary has one home; the modules that act on the names know each."""
-    assert set(SKY_MODELS) == set(sky.MODELS)
-    assert set(PROCEDURAL_MODELS) == set(clearsky.SHAPES)
-    assert set(composite.DISPLAYS) >= {"srgb", "filmic"}
+def test_the_names_a_config_gives_are_those_the_models_know(tmp_path):
+    """The config's vocabulary (pipeline/vocabulary.py) is what the models act on: every CIE
+    type of the range has its coefficients, every sky model a config may name is built."""
+    assert set(clearsky.CIE_TYPES) == set(range(CIE_TYPE_RANGE[0], CIE_TYPE_RANGE[1] + 1))
+    write_inputs(tmp_path)
+    for model in SKY_MODELS:
+        data = {**base_config(), "sky": {"model": model, **({"hdri": "sky.exr"} if model == "hdri" else {})}}
+        plan = plan_run(resolve(parse_config(data, tmp_path)))
+        assert isinstance(load_sky(plan.config.sky, plan.scenes[0]), sky.Sky), model

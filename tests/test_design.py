@@ -13,7 +13,7 @@ PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "cl
            "canopy", "_raster", "shadow", "albedo", "camera", "foreground", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 
-BASE = {"errors", "paths", "io", "cache", "__init__"}
+BASE = {"errors", "paths", "io", "cache", "vocabulary", "__init__"}
 """Modules every layer may use."""
 
 MAY_IMPORT = {
@@ -45,7 +45,7 @@ def imports(name: str, *, top_level_only: bool = False) -> set[str]:
             visit(child, top and not inner)
 
     visit(tree, True)
-    return {module.split(".")[0] for module in found}
+    return {module.split(".")[0] for module in found} & {path.stem for path in PACKAGE.glob("*.py")}
 
 
 MODULES = sorted(path.stem for path in PACKAGE.glob("*.py"))

@@ -10,7 +10,7 @@ import yaml
 from pipeline import camera, composite, ephemeris, io
 from pipeline.cache import Cache
 from pipeline.cli import main
-from pipeline.composite import REC709_LUMINANCE
+from pipeline.colour import REC709_LUMINANCE
 from pipeline.frame import render_frame
 from pipeline.framing import framing_warnings, seen_ground
 from pipeline.geometry import sky_plane_from_direction
