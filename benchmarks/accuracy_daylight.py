@@ -110,7 +110,8 @@ def cie_types() -> None:
 
 def configs() -> None:
     from pipeline.lighting import reference_lighting
-    from pipeline.plan import load, plan_run
+    from pipeline.plan import plan_run
+    from pipeline.resolve import load
 
     print("| config | sun elevation | direct horizontal klx | diffuse klx | (sun + sky) / sky |")
     print("|---|---|---|---|---|")

@@ -27,7 +27,8 @@ from pipeline.cache import Cache  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import load, plan_run  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 spec = importlib.util.spec_from_file_location("test_framing", ROOT / "tests" / "test_framing.py")
 scenes = importlib.util.module_from_spec(spec)

@@ -43,7 +43,8 @@ from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import load, plan_run, scene_at  # noqa: E402
+from pipeline.plan import plan_run, scene_at  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 from reference import (  # noqa: E402
     angle_between,
     image_transmittance,

@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import cache  # noqa: E402
 from pipeline.cycle import cycle_params, cycle_phase, layer_masks  # noqa: E402
-from pipeline.plan import load, plan_run  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 CONFIG = {
     "canopy": {"height": 8.0, "layout": "isolated",

@@ -37,10 +37,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline import cache  # noqa: E402
-from pipeline.run import _frame_task, file_digest, parse_frames  # noqa: E402
+from pipeline.run import _frame_task  # noqa: E402
+from pipeline.runfolder import file_digest, parse_frames  # noqa: E402
 from pipeline.cycle import cycle_phase  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
-from pipeline.plan import default_workers, load, plan_run  # noqa: E402
+from pipeline.cores import default_workers  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 
 def seconds(call) -> float:

@@ -30,7 +30,8 @@ from pipeline import canopy, shadow  # noqa: E402
 from pipeline.config import preview  # noqa: E402
 from pipeline.cycle import layer_masks  # noqa: E402
 from pipeline.inputs import grove_of  # noqa: E402
-from pipeline.plan import load, plan_run  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 from test_canopy import reference_rasterize  # noqa: E402
 
 

@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.plan import load  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 
 def preview_run(config: Path, code: Path, work: Path) -> tuple[float, float, float]:

@@ -33,8 +33,10 @@ import scipy.fft
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.run import parse_frames  # noqa: E402
-from pipeline.plan import default_workers, load, plan_run  # noqa: E402
+from pipeline.runfolder import parse_frames  # noqa: E402
+from pipeline.cores import default_workers  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 
 def sunshade(*args) -> float:

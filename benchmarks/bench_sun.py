@@ -31,7 +31,8 @@ from pipeline import sky as sky_models  # noqa: E402
 from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import load, plan_run, scene_at  # noqa: E402
+from pipeline.plan import plan_run, scene_at  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 
 
 def round_trip_seconds(shape, workers, repeats=3) -> float:

@@ -5,6 +5,9 @@ disk" and "The cache's checks").
 Why one module: the layout on disk, the checks and the locking are one contract; split, its
 invariants (an item folder that exists is complete or was damaged afterwards) would be spread
 over several files.
+
+numpy is imported in the functions that read or write arrays, so that checking a run's items by
+their files' stamps (a resume with nothing to do) starts without it.
 """
 
 from __future__ import annotations
@@ -24,10 +27,12 @@ import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from filelock import FileLock, Timeout
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: Mixed into every key. Change it whenever the code that computes any cached product changes
 #: its result, so that old items are never read for new code (they age out through ``prune``).
@@ -93,6 +98,7 @@ def parse_size(text: str | int) -> int:
 
     Raises ValueError naming the text if it is not a non-negative size.
     """
+    import numpy as np  # not at the top: see the module docstring
     if isinstance(text, (int, np.integer)) and not isinstance(text, bool):
         if text < 0:
             raise ValueError(f"invalid size {text!r}: must not be negative")
@@ -111,6 +117,7 @@ def parse_size(text: str | int) -> int:
 
 def _canonical(value: Any, where: str) -> Any:
     """A JSON-able, canonical form of a parameter value; ``where`` names it in errors."""
+    import numpy as np  # not at the top: see the module docstring
     if value is None or isinstance(value, (bool, str)):
         return value
     if isinstance(value, np.bool_):
@@ -188,6 +195,7 @@ def key_of(kind: str, params: Mapping[str, Any]) -> str:
 
 def _crc32(array: np.ndarray) -> int:
     """CRC-32 of the bytes of a C-contiguous array (zlib.crc32, chunked)."""
+    import numpy as np  # not at the top: see the module docstring
     return _crc32_of(array.reshape(-1).view(np.uint8))
 
 
@@ -285,6 +293,7 @@ class Cache:
         stamp : ``{file: [crc32, size, inode, mtime_ns, ctime_ns, created]}`` of the item's
             arrays (``created``: when this copy was written, from meta.json).
         """
+        import numpy as np  # not at the top: see the module docstring
         meta_path = path / META
         try:
             with open(meta_path, "rb") as f:
@@ -529,6 +538,7 @@ class Cache:
 
     def _write(self, path: Path, kind: str, key: str, params, arrays: dict) -> None:
         """Write ``arrays`` as item ``path`` atomically: temp folder, arrays, meta, rename."""
+        import numpy as np  # not at the top: see the module docstring
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.parent / f"{_TMP}{key}-{os.getpid()}-{secrets.token_hex(4)}"
         os.mkdir(tmp)
@@ -702,6 +712,7 @@ class Cache:
 
 def _normalize(arrays: Any, kind: str) -> dict[str, np.ndarray]:
     """Check what ``compute`` returned; arrays made C-contiguous (not copied if they are)."""
+    import numpy as np  # not at the top: see the module docstring
     if not isinstance(arrays, Mapping) or not arrays:
         raise TypeError(f"compute for cache kind {kind!r} must return a non-empty dict of "
                         f"arrays, not {type(arrays).__name__}")

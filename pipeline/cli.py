@@ -17,13 +17,13 @@ import sys
 import time
 import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from . import __version__, io, paths
-from .cache import ENV_VAR, Cache, cache_dir, parse_size
-from .composite import display_ground, display_sky
+from . import __version__, paths
 from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
+
+if TYPE_CHECKING:
+    from .cache import Cache
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
@@ -191,6 +191,8 @@ def _flag_path(flag: str, value) -> Path:
 
 def _store(explicit) -> Cache:
     """The cache at --cache, else $SUNSHADE_CACHE, else ./cache, its path checked first."""
+    from .cache import ENV_VAR, Cache, cache_dir
+
     flag, value = ("--cache", explicit) if explicit else (f"${ENV_VAR}", os.environ.get(ENV_VAR))
     if value:
         _flag_path(flag, value)
@@ -218,7 +220,7 @@ def _load(args, *, named_frames: bool = True):
     """The config of ``args.config`` read, validated and resolved: every command's one loader
     (``named_frames``: see config.load_config)."""
     from .config import load_config
-    from .plan import resolve
+    from .resolve import resolve
 
     return resolve(load_config(args.config, named_frames=named_frames))
 
@@ -237,7 +239,7 @@ def _run_check(args) -> int:
     """
     from .cycle import disk_needed
     from .plan import check_inputs
-    from .run import check_outputs
+    from .runfolder import check_outputs
 
     config = _load(args)
     plan = check_inputs(config)
@@ -258,6 +260,7 @@ def _run_check(args) -> int:
 
 def _framing_lines(plan) -> list[str]:
     """The resolved windows and camera, each marked (placed) where the plan placed it."""
+    import numpy as np
 
     def mark(key):
         return " (placed)" if key in plan.auto else ""
@@ -293,9 +296,8 @@ def _run_render(args) -> int:
     from dataclasses import replace
 
     from .config import preview
-    from .plan import default_workers
-    from .run import (MAX_JOBS_PER_CORE, check_outputs, missing_folders, parse_frames,
-                      remove_if_empty, render_run)
+    from .cores import MAX_JOBS_PER_CORE, default_workers
+    from .runfolder import check_outputs, nothing_to_do, parse_frames
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
@@ -318,16 +320,9 @@ def _run_render(args) -> int:
                        f"start {jobs} processes on {default_workers()} cores; the most is {most} "
                        f"({MAX_JOBS_PER_CORE} a core)")
     check_outputs(config)
-    new = missing_folders(config.output.folder)
-    try:
-        summary = render_run(config, frames=frames, store=store,
-                             jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                             cluster_timeout=args.cluster_timeout,
-                             progress=_Progress(sys.stderr),
-                             warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
-    except BaseException:
-        remove_if_empty(new)
-        raise
+    summary = None if args.force else nothing_to_do(config, store, frames, jobs=args.jobs, scheduler=args.scheduler)
+    if summary is None:
+        summary = _render_run(config, store, frames, args)
     made = f"; video {summary.video}" if summary.video else ""
     count = len(summary.rendered)
     print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "
@@ -335,8 +330,26 @@ def _run_render(args) -> int:
     return 0
 
 
+def _render_run(config, store, frames, args):
+    """``run.render_run`` of the command's frames; the folders it made are removed if it fails
+    and leaves them empty."""
+    from .run import render_run
+    from .runfolder import missing_folders, remove_if_empty
+
+    new = missing_folders(config.output.folder)
+    try:
+        return render_run(config, frames=frames, store=store,
+                             jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                             cluster_timeout=args.cluster_timeout,
+                             progress=_Progress(sys.stderr),
+                             warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
+    except BaseException:
+        remove_if_empty(new)
+        raise
+
+
 def _verify_run(config, store) -> int:
-    from .run import frame_files, verify_run
+    from .runfolder import frame_files, verify_run
 
     checked = verify_run(config, store=store)
     for what, frames in (("damaged", checked.damaged), ("foreign", checked.foreign)):
@@ -402,6 +415,10 @@ def _run_ground(args) -> int:
     Write the ground irradiance (RGB float32, linear, radiance x sr) over ground.window at
     ground.pixel metres, north-up, as an EXR.
     """
+    import numpy as np
+
+    from . import io
+    from .composite import display_ground
     from .ground import render_ground
     from .plan import plan_run
 
@@ -455,6 +472,9 @@ def _run_frame(args) -> int:
     exposed and display-transformed (camera.exposure, camera.display); an .exr stays scene-
     linear radiance with its metadata.
     """
+    import numpy as np
+
+    from . import io
     from .composite import display
     from .frame import render_frame
     from .plan import plan_run
@@ -496,6 +516,7 @@ def _run_mask(args) -> int:
     leaves projected along the sun onto the canopy plane, north-up: the coarse mask of the
     whole canopy, or with --fine the fine mask under the sun window.
     """
+    from . import io
     from .cycle import layer_masks
     from .plan import plan_run
 
@@ -532,6 +553,10 @@ def _run_sky(args) -> int:
     top row at the zenith, centre column north, east at three quarters of the width; the
     lower half is below the horizon.
     """
+    import numpy as np
+
+    from . import io
+    from .composite import display_sky
     from .inputs import load_sky
     from .plan import scene_at
 
@@ -573,7 +598,7 @@ def _run_figures(args) -> int:
     (16), and S(t) through the 2024 eclipse at Dallas.
     """
     from .figures import FIGURES, write_figures
-    from .run import check_folder
+    from .runfolder import check_folder
 
     folder = _flag_path("--output", args.output)
     check_folder(folder)
@@ -594,6 +619,8 @@ def _run_cache(args) -> int:
 
     The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.
     """
+    from .cache import parse_size
+
     store = _store(args.cache)
     root = store.root
     if args.config is not None and args.action not in ("list", "prune"):

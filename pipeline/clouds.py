@@ -309,7 +309,7 @@ class CloudLayer:
     altitude: float
     wind: tuple[float, float]
     thickness: float
-    seed: int = 0
+    seed: int
     albedo: float = 1.0
     asymmetry: float = 0.85
     softness: float = 0.5

@@ -132,12 +132,12 @@ class CloudsConfig:
     """cover : fraction of sky covered; scale : feature size [m]; altitude [m]; wind : (east,
     north) [m/s]; thickness : optical depth of a full cloud; seed."""
 
-    cover: float
-    scale: float
-    altitude: float
-    wind: tuple[float, float]
-    thickness: float
-    seed: int
+    cover: float = 0.4
+    scale: float = 800.0
+    altitude: float = 2000.0
+    wind: tuple[float, float] = (8.0, 2.0)
+    thickness: float = 1.0
+    seed: int = 1
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,7 @@ class SkyConfig:
     """model : a name in ``vocabulary.SKY_MODELS``; radiance : linear RGB of a uniform sky;
     hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
     Procedural (models 'cie' and 'preetham', ``vocabulary.PROCEDURAL_MODELS``): turbidity (the Linke
-    turbidity factor; with turbidity_auto None until ``plan.resolve`` looks it up in the
+    turbidity factor; with turbidity_auto None until ``resolve.resolve`` looks it up in the
     climatology for the site and the middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
     time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
     sky, 0 for the sun alone). haze : extinction length of the air the camera looks through, 0
@@ -919,12 +919,12 @@ def _parse_procedural(s: _Section, model: str) -> dict:
     if s.has("clouds"):
         cs = s.section("clouds")
         clouds = CloudsConfig(
-            cover=cs.number("cover", 0.4, at_least=0.0, below=1.0 + 1e-9),
-            scale=cs.number("scale", 800.0, above=0.0),
-            altitude=cs.number("altitude", 2000.0, above=0.0),
-            wind=cs.numbers("wind", 2, (8.0, 2.0)),
-            thickness=cs.number("thickness", 1.0, at_least=0.0),
-            seed=cs.integer("seed", 1, at_least=0),
+            cover=cs.number("cover", CloudsConfig.cover, at_least=0.0, below=1.0 + 1e-9),
+            scale=cs.number("scale", CloudsConfig.scale, above=0.0),
+            altitude=cs.number("altitude", CloudsConfig.altitude, above=0.0),
+            wind=cs.numbers("wind", 2, CloudsConfig.wind),
+            thickness=cs.number("thickness", CloudsConfig.thickness, at_least=0.0),
+            seed=cs.integer("seed", CloudsConfig.seed, at_least=0),
         )
         cs.done()
     skylight = s.number("skylight", SkyConfig.skylight, at_least=0.0, below=100.0)

@@ -29,7 +29,8 @@ from .config import Config, parse_config
 from .cycle import layer_masks
 from .frame import FrameResult, render_frame
 from .inputs import load_sky
-from .plan import RunPlan, plan_run, resolve, scene_at
+from .plan import RunPlan, plan_run, scene_at
+from .resolve import resolve
 from .geometry import Grid, I0, projected_solid_angle
 
 FIGURES = (

@@ -16,7 +16,8 @@ from .cycle import foreground_item
 from .ground import GroundResult, blend_band, render_ground
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
-from .plan import RunPlan, Scene, default_workers
+from .cores import default_workers
+from .plan import RunPlan, Scene
 
 
 def foreground_passes(plan: RunPlan, cycle_frame: int, store: cache.Cache,

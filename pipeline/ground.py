@@ -14,7 +14,8 @@ from . import sky as sky_models
 from .cycle import cycle_item
 from .geometry import Grid, sky_grid, sky_offset
 from .inputs import load_sky
-from .plan import LayerPlan, RunPlan, default_workers
+from .cores import default_workers
+from .plan import LayerPlan, RunPlan
 
 
 @dataclass(frozen=True)

@@ -1,135 +1,30 @@
-"""The plan stage: a config made into a RunPlan, every per-run value the later stages need.
+"""The plan stage: a resolved config made into a RunPlan, every per-run value the later stages
+need.
 
-Only this stage (with ``framing``, ``lighting`` and ``inputs``) reads the config: the cycle,
-ground and frame stages take the plan, a frame's scene and the cache (docs/design.md,
-"Stages"). The compute limits live here, checked before anything is made.
+Only this stage (with ``resolve``, ``framing``, ``lighting`` and ``inputs``) reads the config:
+the cycle, ground and frame stages take the plan, a frame's scene and the cache
+(docs/design.md, "Stages"). The plan's rasters are checked against the compute limits of
+``resolve`` before any is made.
 """
 
 from __future__ import annotations
 
-import math
-import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
-from . import canopy, daylight, ephemeris, io, shadow
+from . import canopy, ephemeris, io, shadow
 from . import sky as sky_models
 from .camera import Camera
-from .config import CanopyLayer, Config, load_config, size_text
+from .config import CanopyLayer, Config, size_text
 from .errors import ConfigError
 from .framing import AUTO_SUN_MASK, frame_scene
 from .geometry import Grid, sky_plane_from_direction, tangent_axes
 from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
-from .vocabulary import PROCEDURAL_MODELS, TURBIDITY_RANGE
-
-MAX_GROUND_PIXELS = 64_000_000
-"""Most pixels of the coarse ground raster, and of a canopy plane's mask. [1]"""
-MAX_FFT_CELLS = 128_000_000
-"""Most cells of any transform. [1]"""
-MAX_SUN_PIXELS = 16_000_000
-"""Most pixels of the sun's fine ground raster. [1]"""
-BYTES_PER_CELL = 52
-"""Memory a raster cell takes while a frame is made, for the messages. [B]"""
-MIN_SUN_ELEVATION = math.radians(2.0)
-"""The procedural sky needs the sun at least this high. [rad]"""
-SUN_SPAN_SAMPLES = 20_000
-"""Most moments at which the sun is checked over a site's time span."""
-
-
-def default_workers() -> int:
-    """FFT threads: the cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
-
-
-def load(path) -> Config:
-    """A config file read, validated and resolved (``resolve``): what every command runs.
-    Raises ConfigError naming the file and key."""
-    return resolve(load_config(path))
-
-
-def resolve(config: Config) -> Config:
-    """The config checked against the compute limits and the sun's path, with ``turbidity:
-    auto`` looked up (the Linke climatology at the site and the middle of the time span,
-    within TURBIDITY_RANGE). Raises ConfigError naming the key."""
-    _check_limits(config)
-    sky = config.sky
-    if sky.site is not None:
-        _check_sun(config)
-        if sky.turbidity is None:
-            lo, hi = TURBIDITY_RANGE
-            middle = sky.site.start + (sky.site.end - sky.site.start) / 2
-            turbidity = min(max(daylight.linke_turbidity(middle, sky.site.latitude, sky.site.longitude), lo), hi)
-            config = replace(config, sky=replace(sky, turbidity=turbidity))
-    return config
-
-
-def _check_limits(config: Config) -> None:
-    """Refuse given windows, canopy planes and sky squares whose rasters would pass the limits."""
-    ground, layout = config.ground, config.canopy.layout
-    if ground.window is not None:
-        _check_pixels(config, "ground.pixel", ground.window, ground.pixel, MAX_GROUND_PIXELS)
-    if ground.sun_pixel is not None and (ground.sun_window or ground.window):
-        _check_pixels(config, "ground.sun_pixel", ground.sun_window or ground.window, ground.sun_pixel,
-                      MAX_SUN_PIXELS)
-    images = config.canopy.trees is None
-    for index, layer in enumerate(config.canopy.layers):
-        key = "canopy.size" if len(config.canopy.layers) == 1 else f"canopy.layers[{index}].size"
-        pixels = [side / ground.pixel for side in layer.size]
-        if pixels[0] * pixels[1] > MAX_GROUND_PIXELS:
-            raise ConfigError(config.where(key), f"the canopy would be {pixels[0] * pixels[1]:.3g} pixels "
-                              f"at ground.pixel {ground.pixel:g} m; the most is {MAX_GROUND_PIXELS:.3g}")
-        if layout == "isolated" and images and ground.window is not None:  # an automatic window: the plan
-            window = ground.window
-            fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
-                (window[3] - window[1]) / ground.pixel + pixels[1])
-            if fft > MAX_FFT_CELLS:
-                raise ConfigError(config.where(key), f"canopy and window together need a {fft:.3g}-cell "
-                                  f"transform, about {size_text(fft * BYTES_PER_CELL)}; the most is "
-                                  f"{MAX_FFT_CELLS:.3g}: raise ground.pixel")
-    if layout == "periodic":
-        for layer in config.canopy.layers:
-            n = 2 * shadow.sky_half_cells(layer.height, ground.pixel, config.sky.alpha) + 1
-            if n * n > shadow.MAX_SKY_CELLS:
-                raise ConfigError(config.where("sky.alpha"), f"the sky square at "
-                                  f"{math.degrees(config.sky.alpha):g} degrees would be {n} x {n} cells "
-                                  f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
-
-
-def _check_pixels(config: Config, key, window, pixel, most):
-    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
-    if cells > most:
-        raise ConfigError(config.where(key), f"the window would be {cells:.3g} pixels, about "
-                          f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
-
-
-def _check_sun(config: Config) -> None:
-    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at time.start and
-    time.end and at every frame's moment between (at most SUN_SPAN_SAMPLES of them, evenly
-    spread, so a night is never missed): name the first moment it is not."""
-    site = config.sky.site
-    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
-    least = math.degrees(MIN_SUN_ELEVATION)
-    for key, when in (("start", site.start), ("end", site.end)):
-        sun, _ = ephemeris.sun_and_moon(place, when)
-        if sun.elevation < MIN_SUN_ELEVATION:
-            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {math.degrees(sun.elevation):.1f} "
-                              f"degrees above the horizon then; the least is {least:g}")
-    count = min(config.animation.frames, SUN_SPAN_SAMPLES)
-    for i in range(count):
-        when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
-        sun, _ = ephemeris.sun_and_moon(place, when)
-        if sun.elevation < MIN_SUN_ELEVATION:
-            raise ConfigError(config.where("sky.time"), f"the sun is {math.degrees(sun.elevation):.1f} "
-                              f"degrees above the horizon at {when.isoformat()}, between time.start and "
-                              f"time.end; the procedural sky needs it at least {least:g} degrees high all "
-                              f"through (a span that crosses the night)")
-
+from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
+from .vocabulary import PROCEDURAL_MODELS
 
 @dataclass(frozen=True)
 class Scene:
@@ -253,7 +148,7 @@ def plan_run(config: Config) -> RunPlan:
     ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's path over the
     animation (``frame_scene``). ``config`` must be resolved (``resolve``)."""
     if config.sky.model in PROCEDURAL_MODELS and config.sky.turbidity is None:
-        raise ValueError("plan_run needs a resolved config (plan.resolve): turbidity: auto is not looked up")
+        raise ValueError("plan_run needs a resolved config (resolve.resolve): turbidity: auto is not looked up")
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
     has_sun = scenes[0].sun is not None
     projection = (0.0, 0.0)

@@ -19,25 +19,18 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import hashlib
 import json
 import logging
-import os
-import platform
-import re
 import threading
 import time
 import warnings
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
-from importlib import metadata
-from pathlib import Path
 
 import filelock
 import joblib
 import numpy as np
 
-from . import __version__, cache, io, paths
+from . import __version__, cache, io
 from .composite import display
 from .config import Config
 from .errors import RunError, SunshadeError, portable
@@ -45,60 +38,11 @@ from .cycle import cycle_phase, record_config_items
 from .frame import render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
-from .plan import RunPlan, check_inputs, default_workers
-
-MAX_JOBS_PER_CORE = 4
-"""Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
-frame's rasters."""
-RUN_FILE = "run.json"
-MAX_RUNS = 100
-"""run.json keeps the record of this many latest renders of a config."""
-INDEX_FILE = "index.json"
-INDEX_FORMAT = 1
-LOCK_FILE = ".sunshade.lock"
-VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
-             "ephem", "filelock", "dask", "distributed")
-
-
-class FrameWarning(UserWarning):
-    """A frame found damaged, or made from a cache item found damaged since: rendered again."""
-
-
-def parse_frames(text: str, count: int) -> tuple[int, ...]:
-    """Frame indices from a list like ``0-47,100`` (ranges inclusive), sorted and unique; every
-    one must lie in 0..count-1. Raises RunError naming the bad part."""
-    frames = set()
-    for part in text.split(","):
-        part = part.strip()
-        try:
-            if "-" in part[1:]:
-                first, last = (int(v) for v in part.split("-", 1) if v.strip())
-            else:
-                first = last = int(part)
-        except ValueError:
-            raise RunError(f"--frames: {part!r} is not a frame or a range like 0-47") from None
-        if last < first:
-            raise RunError(f"--frames: the range {part} runs backwards")
-        if first < 0 or last >= count:
-            raise RunError(f"--frames: {part} is outside 0..{count - 1} (animation.frames is {count})")
-        frames.update(range(first, last + 1))
-    return tuple(sorted(frames))
-
-
-def frame_files(config: Config, frame: int) -> tuple[Path, Path]:
-    """(EXR, PNG) paths of output ``frame``: ``NAME.0007.exr``, the number zero-padded to four
-    digits or to the width of the last frame's number."""
-    width = max(4, len(str(config.animation.frames - 1)))
-    stem = f"{config.output.name}.{frame:0{width}d}"
-    return config.output.folder / f"{stem}.exr", config.output.folder / f"{stem}.png"
-
-
-def video_file(config: Config) -> Path | None:
-    """The run's video file, or None when ``output.video`` is none."""
-    if config.output.video == "none":
-        return None
-    return config.output.folder / f"{config.output.name}.{config.output.video}"
-
+from .cores import jobs_and_threads
+from .plan import RunPlan, check_inputs
+from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, file_stamp, frame_files, make_folder,
+                        read_index, read_run_file, remove_temporaries, resolved_config, video_file,
+                        write_index, write_run_file)
 
 _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
            "sunshade:sun_fraction": "sun_fraction", "sunshade:sun_azimuth_elevation": "sun",
@@ -144,126 +88,6 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
     return attributes
 
 
-def file_digest(path) -> str:
-    """BLAKE2b (16 bytes, hex) of a file's bytes."""
-    with open(path, "rb") as f:
-        return hashlib.file_digest(f, lambda: hashlib.blake2b(digest_size=16)).hexdigest()
-
-
-def _file_stamp(path: Path) -> dict:
-    """What index.json records of a frame file just written: name, size [B], digest, and its
-    inode and modification and change times [ns] (unchanged, the file is taken as it was)."""
-    digest = file_digest(path)
-    st = os.stat(path)
-    return {"name": path.name, "bytes": st.st_size, "blake2b": digest,
-            "stat": [st.st_ino, st.st_mtime_ns, st.st_ctime_ns]}
-
-
-def _file_problem(path: Path, stamp: dict, *, full: bool) -> tuple[str | None, dict | None]:
-    """(problem in words or None, the stamp with the file's current inode and times when its
-    bytes were read and found as recorded). The digest is computed only when the size,
-    inode or times differ from ``stamp``, or with ``full``."""
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        return "is missing", None
-    except OSError as exc:
-        return f"is unreadable ({exc.strerror or exc})", None
-    if st.st_size != stamp["bytes"]:
-        return f"has {st.st_size} bytes, not the {stamp['bytes']} written (truncated or replaced)", None
-    identity = [st.st_ino, st.st_mtime_ns, st.st_ctime_ns]
-    if not full and identity == stamp["stat"]:
-        return None, None
-    try:
-        digest = file_digest(path)
-    except OSError as exc:
-        return f"is unreadable ({exc.strerror or exc})", None
-    if digest != stamp["blake2b"]:
-        return "holds other bytes than those written (corrupted or replaced)", None
-    return None, (None if identity == stamp["stat"] else {**stamp, "stat": identity})
-
-
-@dataclass(frozen=True)
-class FrameCheck:
-    """The frames of a run folder for one config.
-
-    done : {frame: its index.json entry} -- files as written, by this config, from sound
-        cache items. damaged : {frame: problem} -- files not as written (truncated, corrupted,
-        replaced, missing, unreadable), or made from a cache item found damaged since.
-    foreign : {frame: why} -- files there but not recorded for this config (made by another
-        config, or not in index.json). Other frames have no files yet.
-    """
-
-    done: dict
-    damaged: dict
-    foreign: dict
-
-
-def check_frames(config: Config, digest: str, store: cache.Cache, index: dict, *,
-                 full: bool = False, repair: bool = True) -> FrameCheck:
-    """Check every frame of the animation against ``index`` (the frames of index.json).
-
-    A file whose size, inode and times are as recorded is taken as written (nothing is read);
-    otherwise, or with ``full``, its BLAKE2b digest is compared. Each cache item a done frame
-    was made from is looked at the same way (``cache.Cache.recheck``; fully with ``full``).
-    ``repair``: remove cache items found damaged, so that they are computed again. Entries
-    whose files or items were read and found as recorded get their new stamps in ``index``.
-    """
-    done, damaged, foreign = {}, {}, {}
-    items = {}  # (item, stamp as JSON) -> problem or None, each looked at once
-    for frame in range(config.animation.frames):
-        files = frame_files(config, frame)
-        entry = index.get(str(frame))
-        try:
-            if entry is None or entry["config_hash"] != digest:
-                if any(path.exists() for path in files):
-                    foreign[frame] = ("not recorded in index.json" if entry is None
-                                      else "made by another config")
-                continue
-            problem = None
-            for path, kind in zip(files, ("exr", "png")):
-                problem, fresh = _file_problem(path, entry["files"][kind], full=full)
-                if problem:
-                    problem = f"{path.name} {problem}"
-                    break
-                if fresh:
-                    entry["files"][kind] = fresh
-            for item, stamp in entry["items"].items():
-                if problem:
-                    break
-                tag = (item, json.dumps(stamp, sort_keys=True))
-                if tag not in items:
-                    items[tag] = store.recheck(item, stamp, fresh=full, repair=repair)
-                if items[tag]:
-                    problem = f"made from {items[tag]}"
-                elif item in store.served:
-                    entry["items"][item] = store.served[item]
-        except (KeyError, IndexError, TypeError, AttributeError, ValueError):
-            problem = "its entry in index.json is unreadable"
-        if problem:
-            damaged[frame] = problem
-        else:
-            done[frame] = entry
-    return FrameCheck(done, damaged, foreign)
-
-
-def verify_run(config: Config, *, store: cache.Cache) -> FrameCheck:
-    """Check a run folder without writing anything: every frame file's digest and every
-    cache item the frames were made from, fully."""
-    index = _read_index(config.output.folder)
-    return check_frames(config, config.digest(), store, index, full=True, repair=False)
-
-
-@dataclass(frozen=True)
-class RunSummary:
-    """What a run did: frames rendered and skipped, the video (None: not made), timings [s]."""
-
-    rendered: tuple[int, ...]
-    skipped: tuple[int, ...]
-    video: Path | None
-    timings: dict
-
-
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
                progress=None, warn=None, cluster_timeout: float | None = None) -> RunSummary:
@@ -290,19 +114,18 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
     if scheduler:
         _reach(scheduler)  # an unreachable scheduler fails before anything is written
-    folder = _make_folder(config.output.folder)
-    jobs = jobs or config.render.jobs or default_workers()
-    threads = 1 if scheduler else max(1, default_workers() // jobs)
+    folder = make_folder(config.output.folder)
+    jobs, threads = jobs_and_threads(jobs or config.render.jobs, scheduler)
     lock = filelock.FileLock(folder / LOCK_FILE, timeout=0)
     try:
         lock.acquire()
     except filelock.Timeout:
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
     try:
-        _remove_temporaries(folder)
+        remove_temporaries(folder)
         if (folder / INDEX_FILE).is_dir():
             raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
-        index = _read_index(folder)
+        index = read_index(folder)
         before = json.dumps(index, sort_keys=True)
         checked = check_frames(config, digest, store, index)
         for frame, problem in sorted(checked.damaged.items()):
@@ -310,7 +133,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; {action}",
                           FrameWarning, stacklevel=2)
         if json.dumps(index, sort_keys=True) != before:
-            _write_index(folder, index)
+            write_index(folder, index)
         records = {f: (checked.done[f]["record"] if f in checked.done else None)
                    for f in range(config.animation.frames)}
         todo = [f for f in frames if force or records[f] is None]
@@ -332,15 +155,15 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                     for category, text in caught:  # raised in a worker: said here, once
                         warnings.warn(text, category, stacklevel=2)
                     index[str(frame)] = entry
-                    _write_index(folder, index)
+                    write_index(folder, index)
                     records[frame] = entry["record"]
                     for stage, value in seconds.items():
                         stages[stage] = stages.get(stage, 0.0) + value
                 timings["frames"] = time.perf_counter() - mark
-        video = _video(config, digest, records, _read_run_file(folder), progress, timings,
+        video = _video(config, digest, records, read_run_file(folder), progress, timings,
                        force=force or bool(checked.damaged))
         timings["total"] = time.perf_counter() - started
-        _write_run_file(config, plan, digest, records, video, timings, jobs=jobs, threads=threads,
+        write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs, threads=threads,
                         scheduler=scheduler, rendered=todo)
     finally:
         lock.release()
@@ -381,7 +204,7 @@ def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int)
     io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()
-    entry = {"config_hash": digest, "files": {"exr": _file_stamp(exr), "png": _file_stamp(png)},
+    entry = {"config_hash": digest, "files": {"exr": file_stamp(exr), "png": file_stamp(png)},
              "items": dict(store.served), "record": frame_record(config, frame, digest)}
     timings["digest"] = time.perf_counter() - mark
     return frame, timings, entry, [(w.category, str(w.message)) for w in caught]
@@ -515,161 +338,3 @@ def _reach(scheduler: str) -> None:
                        f"({exc.strerror or exc})") from None
 
 
-def _make_folder(folder: Path) -> Path:
-    """Create the output folder (and its parents). Raises RunError if it cannot be written."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".probe-{id(folder)}"
-        probe.touch()
-        probe.unlink()
-    except OSError as exc:
-        raise RunError(f"{folder}: cannot write the output folder ({exc.strerror or exc})") from None
-    return folder
-
-
-def check_folder(folder: Path) -> None:
-    """Raise RunError unless ``folder`` could be created and written, touching nothing: the
-    nearest folder that exists must be a writable folder."""
-    existing = folder
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise RunError(f"{folder}: {existing} is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise RunError(f"{folder}: cannot write the output folder ({existing} is not writable)")
-
-
-def missing_folders(folder: Path) -> list[Path]:
-    """``folder`` and those of its parents that do not exist yet, innermost first."""
-    missing = []
-    while not folder.exists() and folder != folder.parent:
-        missing.append(folder)
-        folder = folder.parent
-    return missing
-
-
-def remove_if_empty(folders: list[Path]) -> None:
-    """Remove the ``folders`` (innermost first) that a failed run made and left empty but for
-    its lock file, so that a failing run leaves nothing new behind."""
-    for folder in folders:
-        with contextlib.suppress(OSError):
-            (folder / LOCK_FILE).unlink(missing_ok=True)
-            folder.rmdir()
-
-
-def check_outputs(config: Config) -> None:
-    """Raise RunError unless the run's files could be written, touching nothing: the folder
-    (``check_folder``), every name within the system's limits (``paths.problem``), and no
-    frame, video, lock or run.json name taken by a folder."""
-    folder = config.output.folder
-    if problem := paths.problem(folder):
-        raise RunError(f"{folder}: {problem}")
-    check_folder(folder)
-    names = {RUN_FILE, LOCK_FILE} | ({video_file(config).name} if video_file(config) else set())
-    for path in (*frame_files(config, config.animation.frames - 1), *(folder / n for n in names)):
-        if problem := paths.problem(path):
-            raise RunError(f"{path}: {problem}")
-    if folder.is_dir():
-        frame = re.compile(rf"{re.escape(config.output.name)}\.\d+\.(exr|png)")
-        for entry in os.scandir(folder):
-            if (entry.name in names or frame.fullmatch(entry.name)) and entry.is_dir():
-                raise RunError(f"{entry.path}: is a folder where the run writes a file; move it")
-
-
-def _remove_temporaries(folder: Path) -> None:
-    """Remove the half-written files a killed run left (we hold the folder's lock)."""
-    for path in folder.glob(".*.tmp-*"):
-        path.unlink(missing_ok=True)
-
-
-def _read_index(folder: Path) -> dict:
-    """The frames recorded in the folder's index.json ({frame as text: entry}); empty, with a
-    FrameWarning, if it is unreadable (its frames are then rendered again)."""
-    path = folder / INDEX_FILE
-    try:
-        document = json.loads(path.read_bytes())
-    except FileNotFoundError:
-        return {}
-    except (OSError, ValueError) as exc:
-        document = exc
-    if not (isinstance(document, dict) and document.get("format") == INDEX_FORMAT
-            and isinstance(document.get("frames"), dict)):
-        warnings.warn(f"{path} is unreadable or of another format; its frames are not taken "
-                      "as done", FrameWarning, stacklevel=3)
-        return {}
-    return document["frames"]
-
-
-def _write_index(folder: Path, index: dict) -> None:
-    """index.json, written atomically (a temporary name, then renamed). Raises RunError naming
-    the file if it cannot be written."""
-    path = folder / INDEX_FILE
-    temporary = path.with_name(f".{INDEX_FILE}.tmp-{os.getpid()}")
-    try:
-        temporary.write_text(json.dumps({"format": INDEX_FORMAT, "frames": index},
-                                        separators=(",", ":")) + "\n")
-        temporary.replace(path)
-    except OSError as exc:
-        temporary.unlink(missing_ok=True)
-        raise RunError(f"{path}: cannot write ({exc.strerror or exc})") from None
-
-
-def _read_run_file(folder: Path) -> dict:
-    try:
-        return json.loads((folder / RUN_FILE).read_text())
-    except (OSError, ValueError):
-        return {}
-
-
-def resolved_config(config: Config, plan: RunPlan) -> dict:
-    """The config as run: with the ground windows and the camera the plan placed where the
-    config left them out, so that run.json says what was rendered."""
-    values = asdict(config)
-    values.pop("lines")
-    values["ground"]["window"] = list(plan.window.extent)
-    if plan.sun_window is not None:
-        values["ground"]["sun_window"] = list(plan.sun_window.extent)
-        values["ground"]["sun_pixel"] = plan.sun_window.pixel
-    view = plan.camera
-    values["camera"].update(position=list(view.position), yaw=view.yaw, pitch=view.pitch,
-                            look_at=None if "camera" in plan.auto else values["camera"]["look_at"])
-    values["placed"] = list(plan.auto)
-    return values
-
-
-def _write_run_file(config, plan, digest, records, video, timings, *, jobs, threads, scheduler,
-                    rendered):
-    """run.json: the resolved config (windows and camera as placed) and its hash, versions,
-    the command's settings, timings, per done frame S and the sun and moon (degrees), and
-    ``runs``: one entry (time, frames rendered, settings, timings) per render that did work, the
-    earlier ones kept, so that a re-run that finds every frame done leaves the record of the
-    runs that made them. Written atomically."""
-    versions = {"python": platform.python_version(), "sunshade": __version__}
-    for name in VERSIONED:
-        with contextlib.suppress(metadata.PackageNotFoundError):
-            versions[name] = metadata.version(name)
-    previous = _read_run_file(config.output.folder)
-    runs = previous.get("runs", []) if previous.get("config_hash") == digest else []
-    if not runs and previous.get("config_hash") == digest and "timings" in previous:
-        runs = [{"frames": None, "settings": previous.get("settings"), "timings": previous["timings"]}]
-    runs = (runs + [{"finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                     "frames": len(rendered), "video": "video" in timings,
-                     "settings": {"jobs": jobs, "threads": threads, "scheduler": scheduler},
-                     "timings": timings}])[-MAX_RUNS:]
-    worked = [run for run in runs if run["frames"] is None or run["frames"] or run.get("video")]
-    last = worked[-1] if worked else runs[-1]
-    document = {
-        "config_file": str(config.path),
-        "config_hash": digest,
-        "config": resolved_config(config, plan),
-        "versions": versions,
-        "settings": last["settings"],
-        "timings": last["timings"],
-        "runs": runs,
-        "frames": [record for record in records.values() if record is not None],
-        "video": video,
-    }
-    path = config.output.folder / RUN_FILE
-    temporary = path.with_name(f".{RUN_FILE}.tmp-run")
-    temporary.write_text(json.dumps(document, indent=1, default=str) + "\n")
-    temporary.replace(path)

@@ -9,7 +9,8 @@ import yaml
 from pipeline import io
 from pipeline.cli import main
 from pipeline.config import parse_config
-from pipeline.plan import plan_run, resolve
+from pipeline.plan import plan_run
+from pipeline.resolve import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 """The repository."""

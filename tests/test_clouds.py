@@ -338,7 +338,7 @@ def test_footprint_filters_the_pattern_like_a_box_average():
     """With a footprint the field is the pattern averaged over about that width on the layer:
     its variance falls as the footprint grows, the mean stays, and a footprint below a texel
     changes nothing."""
-    layer = CloudLayer(cover=0.5, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0)
+    layer = CloudLayer(cover=0.5, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0, seed=0)
     rng = np.random.default_rng(5)
     s = rng.uniform(-2, 2, size=(20000, 2))
     sharp = layer.field(s, 0.0)
@@ -364,7 +364,7 @@ def test_a_footprints_coverage_is_the_mean_coverage_within_it(texels_across):
     and, far off, loses the thin clouds altogether)."""
     from pipeline.clouds import _knots
 
-    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0)
+    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0, seed=0)
     s = np.random.default_rng(1).uniform(-1, 1, size=(300, 2))
     width = texels_across * layer.texel / layer.altitude  # [tan]
     offsets = ((np.arange(24) + 0.5) / 24 - 0.5) * width
@@ -383,7 +383,7 @@ def test_the_field_bends_smoothly_between_texels():
     """Magnified, the field has no kinks at the texel lines (bilinear reading had one at each,
     whence the blocky cloud edges): along a line sampled at 1/64 texel, the slope changes from
     step to step by under 5 % of the largest slope."""
-    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0)
+    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0, seed=0)
     step = layer.texel / layer.altitude / 64  # [tan]
     t = np.arange(64 * 12) * step
     s = np.column_stack([0.1 + t, 0.05 + 0.37 * t])  # across texel lines of both axes
@@ -395,7 +395,7 @@ def test_a_long_footprint_blurs_along_its_length_only():
     """Near the horizon a pixel's footprint is long along the radius and narrow across it:
     filtered as such, the field keeps more of its detail than filtered round at the long width,
     and about as much as filtered round at the narrow width over the long one's taps."""
-    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0)
+    layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0, seed=0)
     texel = layer.texel / layer.altitude
     s = np.random.default_rng(2).uniform(-3, 3, size=(5000, 2))
     long_thin = layer.field(s, 0.0, footprint=np.broadcast_to([32 * texel, 2 * texel], s.shape)).std()

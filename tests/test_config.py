@@ -1,5 +1,5 @@
 """The config parser and its validation: every bad value refused with one line naming the key
-(and the YAML line where there is one), the plan's limits and sun checks (``plan.resolve``),
+(and the YAML line where there is one), the plan's limits and sun checks (``resolve.resolve``),
 the names a config may give."""
 
 from pathlib import Path
@@ -10,7 +10,8 @@ from pipeline import clearsky, sky
 from pipeline.config import load_config, parse_config
 from pipeline.errors import ConfigError
 from pipeline.inputs import load_sky
-from pipeline.plan import plan_run, resolve
+from pipeline.plan import plan_run
+from pipeline.resolve import resolve
 from pipeline.vocabulary import CIE_TYPE_RANGE, SKY_MODELS
 
 from scenes import base_config, set_key, write_config, write_inputs

@@ -11,7 +11,7 @@ from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
 
 from pipeline.daylight import clear_daylight, linke_turbidity, perez_efficacy
-from pipeline.plan import load
+from pipeline.resolve import load
 
 from scenes import base_config, write_config, write_inputs
 

@@ -3,6 +3,8 @@ source: which module imports which, no import cycle, no module far over 500 line
 reason written at its top."""
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,18 +15,20 @@ PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "cl
            "canopy", "_raster", "shadow", "albedo", "camera", "foreground", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 
-BASE = {"errors", "paths", "io", "cache", "vocabulary", "__init__"}
+BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}
 """Modules every layer may use."""
 
 MAY_IMPORT = {
     "config": {"constants"},
+    "resolve": {"config"} | PHYSICS,
     "inputs": {"config"} | PHYSICS,
     "framing": {"config", "inputs", "plan"} | PHYSICS,
-    "plan": {"config", "framing", "inputs"} | PHYSICS,
+    "plan": {"config", "resolve", "framing", "inputs"} | PHYSICS,
     "lighting": {"config", "plan", "inputs"} | PHYSICS,
     "cycle": {"config", "plan", "inputs"} | PHYSICS,
     "ground": {"config", "plan", "cycle", "inputs"} | PHYSICS,
     "frame": {"config", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
+    "runfolder": {"config"},
 }
 """The stages and what each may import besides BASE (docs/design.md)."""
 
@@ -54,6 +58,16 @@ MODULES = sorted(path.stem for path in PACKAGE.glob("*.py"))
 @pytest.mark.parametrize("name", sorted(PHYSICS & set(MODULES)))
 def test_the_physics_knows_no_config_and_no_stage(name):
     assert imports(name) <= PHYSICS | BASE, imports(name) - PHYSICS - BASE
+
+
+def test_a_resume_with_nothing_to_do_imports_no_numpy():
+    """The command, the config and the run folder's checks (docs/design.md): a resume that
+    finds every frame done is decided without numpy, a stage or a physics module."""
+    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runfolder; "
+            "print(sorted(m for m in sys.modules if m == 'numpy' or m.startswith('pipeline.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=PACKAGE.parent).stdout
+    assert "numpy" not in out and "pipeline.plan" not in out, out
 
 
 @pytest.mark.parametrize("name", sorted(MAY_IMPORT))

@@ -7,7 +7,7 @@ from pipeline import errors
 from pipeline.cli import BadInput
 from pipeline.config import ConfigError
 from pipeline.io import ImageError
-from pipeline.run import RunError
+from pipeline.errors import RunError
 
 EXAMPLES = [
     ConfigError("cfg.yaml:3: canopy.height", "must be above 0 (got -1)"),

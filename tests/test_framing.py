@@ -15,7 +15,8 @@ from pipeline.frame import render_frame
 from pipeline.framing import framing_warnings, seen_ground
 from pipeline.geometry import sky_plane_from_direction
 from pipeline.lighting import auto_exposures, meter, reference_lighting, with_exposures
-from pipeline.plan import load, plan_run, scene_at
+from pipeline.plan import plan_run, scene_at
+from pipeline.resolve import load
 
 ROOT = Path(__file__).resolve().parents[1]
 

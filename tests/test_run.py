@@ -15,7 +15,8 @@ import yaml
 
 from pipeline import io
 from pipeline.cli import main
-from pipeline.run import RunError, parse_frames
+from pipeline.errors import RunError
+from pipeline.runfolder import parse_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -402,8 +403,10 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     from dataclasses import replace
 
     from pipeline.cache import CacheWarning
-    from pipeline.plan import load, plan_run
-    from pipeline.run import _frame_task, frame_files
+    from pipeline.plan import plan_run
+    from pipeline.resolve import load
+    from pipeline.run import _frame_task
+    from pipeline.runfolder import frame_files
 
     config_path, files, run, cache = finished
     config = load(config_path)

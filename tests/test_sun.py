@@ -19,7 +19,8 @@ import yaml
 from pipeline import cache, ephemeris, io
 from pipeline.ground import render_ground
 from pipeline.inputs import load_sky
-from pipeline.plan import load, plan_run, scene_at
+from pipeline.plan import plan_run, scene_at
+from pipeline.resolve import load
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc
 
 from reference import (

@@ -1,0 +1,119 @@
+"""The config resolved for a run: checked against the compute limits and the sun over its time
+span, ``turbidity: auto`` looked up. The first step of the plan stage (docs/design.md, "Stages").
+
+The physics a check needs is imported only when a config asks for it (a site and time, a
+periodic forest, an automatic turbidity), so that a command on a config with an explicit sun,
+a resume with nothing to do among them, starts in a fraction of a second.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from .config import Config, load_config, size_text
+from .errors import ConfigError
+from .vocabulary import TURBIDITY_RANGE
+
+MAX_GROUND_PIXELS = 64_000_000
+"""Most pixels of the coarse ground raster, and of a canopy plane's mask. [1]"""
+MAX_FFT_CELLS = 128_000_000
+"""Most cells of any transform. [1]"""
+MAX_SUN_PIXELS = 16_000_000
+"""Most pixels of the sun's fine ground raster. [1]"""
+BYTES_PER_CELL = 52
+"""Memory a raster cell takes while a frame is made, for the messages. [B]"""
+MIN_SUN_ELEVATION = math.radians(2.0)
+"""The procedural sky needs the sun at least this high. [rad]"""
+SUN_SPAN_SAMPLES = 20_000
+"""Most moments at which the sun is checked over a site's time span."""
+
+
+def load(path) -> Config:
+    """A config file read, validated and resolved (``resolve``): what every command runs.
+    Raises ConfigError naming the file and key."""
+    return resolve(load_config(path))
+
+
+def resolve(config: Config) -> Config:
+    """The config checked against the compute limits and the sun's path, with ``turbidity:
+    auto`` looked up (the Linke climatology at the site and the middle of the time span,
+    within TURBIDITY_RANGE). Raises ConfigError naming the key."""
+    _check_limits(config)
+    sky = config.sky
+    if sky.site is not None:
+        _check_sun(config)
+        if sky.turbidity is None:
+            lo, hi = TURBIDITY_RANGE
+            middle = sky.site.start + (sky.site.end - sky.site.start) / 2
+            from .daylight import linke_turbidity  # pvlib: seconds to import, only when asked for
+
+            turbidity = min(max(linke_turbidity(middle, sky.site.latitude, sky.site.longitude), lo), hi)
+            config = replace(config, sky=replace(sky, turbidity=turbidity))
+    return config
+
+
+def _check_limits(config: Config) -> None:
+    """Refuse given windows, canopy planes and sky squares whose rasters would pass the limits."""
+    ground, layout = config.ground, config.canopy.layout
+    if ground.window is not None:
+        _check_pixels(config, "ground.pixel", ground.window, ground.pixel, MAX_GROUND_PIXELS)
+    if ground.sun_pixel is not None and (ground.sun_window or ground.window):
+        _check_pixels(config, "ground.sun_pixel", ground.sun_window or ground.window, ground.sun_pixel,
+                      MAX_SUN_PIXELS)
+    images = config.canopy.trees is None
+    for index, layer in enumerate(config.canopy.layers):
+        key = "canopy.size" if len(config.canopy.layers) == 1 else f"canopy.layers[{index}].size"
+        pixels = [side / ground.pixel for side in layer.size]
+        if pixels[0] * pixels[1] > MAX_GROUND_PIXELS:
+            raise ConfigError(config.where(key), f"the canopy would be {pixels[0] * pixels[1]:.3g} pixels "
+                              f"at ground.pixel {ground.pixel:g} m; the most is {MAX_GROUND_PIXELS:.3g}")
+        if layout == "isolated" and images and ground.window is not None:  # an automatic window: the plan
+            window = ground.window
+            fft = ((window[2] - window[0]) / ground.pixel + pixels[0]) * (
+                (window[3] - window[1]) / ground.pixel + pixels[1])
+            if fft > MAX_FFT_CELLS:
+                raise ConfigError(config.where(key), f"canopy and window together need a {fft:.3g}-cell "
+                                  f"transform, about {size_text(fft * BYTES_PER_CELL)}; the most is "
+                                  f"{MAX_FFT_CELLS:.3g}: raise ground.pixel")
+    if layout == "periodic":
+        from . import shadow
+
+        for layer in config.canopy.layers:
+            n = 2 * shadow.sky_half_cells(layer.height, ground.pixel, config.sky.alpha) + 1
+            if n * n > shadow.MAX_SKY_CELLS:
+                raise ConfigError(config.where("sky.alpha"), f"the sky square at "
+                                  f"{math.degrees(config.sky.alpha):g} degrees would be {n} x {n} cells "
+                                  f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
+
+
+def _check_pixels(config: Config, key, window, pixel, most):
+    cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
+    if cells > most:
+        raise ConfigError(config.where(key), f"the window would be {cells:.3g} pixels, about "
+                          f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
+
+
+def _check_sun(config: Config) -> None:
+    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at time.start and
+    time.end and at every frame's moment between (at most SUN_SPAN_SAMPLES of them, evenly
+    spread, so a night is never missed): name the first moment it is not."""
+    from . import ephemeris
+
+    site = config.sky.site
+    place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
+    least = math.degrees(MIN_SUN_ELEVATION)
+    for key, when in (("start", site.start), ("end", site.end)):
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {math.degrees(sun.elevation):.1f} "
+                              f"degrees above the horizon then; the least is {least:g}")
+    count = min(config.animation.frames, SUN_SPAN_SAMPLES)
+    for i in range(count):
+        when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
+        sun, _ = ephemeris.sun_and_moon(place, when)
+        if sun.elevation < MIN_SUN_ELEVATION:
+            raise ConfigError(config.where("sky.time"), f"the sun is {math.degrees(sun.elevation):.1f} "
+                              f"degrees above the horizon at {when.isoformat()}, between time.start and "
+                              f"time.end; the procedural sky needs it at least {least:g} degrees high all "
+                              f"through (a span that crosses the night)")
