@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from pipeline.albedo import grass_albedo
+from pipeline import camera
+from pipeline.albedo import grass_albedo, stochastic_tiling
 
 
 def test_grass_albedo_is_a_plausible_albedo_on_its_grid():
@@ -39,9 +40,6 @@ def test_grass_albedo_is_deterministic_by_seed():
 
 
 # ---- stochastic tiling (Heitz & Neyret 2018) ----------------------------------------------
-
-from pipeline import camera  # noqa: E402
-from pipeline.albedo import stochastic_tiling  # noqa: E402
 
 
 def _tiled(size_px=256, period=4.0):

@@ -2,11 +2,13 @@
 a bright line at the horizon, the albedo's visible repetition, a seam at the sun window's edge,
 periodic trees missing beyond the first tile."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import yaml
 
-from pipeline import cache
+from pipeline import cache, camera as cameras, canopy, foreground, io
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.cycle import foreground_item
 from pipeline.frame import render_frame
@@ -49,8 +51,6 @@ def test_the_horizon_has_no_line_brighter_or_darker_than_the_sky_and_ground_besi
     few pixels above and below it (1% slack): no bright line (the hazed far ground tends to the
     sky just above the horizon) and no dark one (an HDRI's own ground, below its horizon, is not
     blended into the sky above ours)."""
-    from pipeline import io
-
     changes = {}
     if sky == "clouds":
         changes = {"sky.clouds": {"cover": 0.4, "scale": 800.0}}
@@ -75,8 +75,6 @@ def test_a_periodic_forest_stands_on_every_tile_in_view():
     """One tree in a 10 m tile, the camera looking along a row of tiles: the trunk of every
     copy out to 60 m covers the image where the copy's trunk projects (independently, by
     camera.project_points), and the gaps between the copies' trunks stay open."""
-    from pipeline import camera as cameras, canopy, foreground
-
     tile = 10.0
     grove = canopy.grow_grove(canopy.GroveParams(count=1, seed=4, crown_radius=2.0, leaves_per_tree=200,
                                                  height=6.0, layout="periodic", tile=tile))
@@ -108,8 +106,6 @@ def test_no_seam_at_the_sun_windows_edge(tmp_path, mask_value):
     camera straight down over the sun window's west edge, white ground, no haze: along each
     row, the largest step between neighbouring pixels within 4 pixels of the edge is no larger
     than the largest step inside either side (the fine sun-resolved ground and the coarse one)."""
-    from pipeline import io
-
     rng = np.random.default_rng(7)
     mask = np.full((60, 60, 1), mask_value, np.float32) if mask_value else rng.random((60, 60, 1)).astype(np.float32)
     io.write_exr(tmp_path / "mask.exr", mask)
@@ -139,9 +135,7 @@ def test_forest_yaml_has_its_trees_on_the_tiles_around_the_camera(tmp_path):
     """configs/forest.yaml with few leaves and a small image: the trunk of every tree of every
     tile whose foot lies in view within 25 m covers the image where it projects, at 1 m above
     the ground; before, only the trees of the first tile stood."""
-    from pathlib import Path
 
-    from pipeline import camera as cameras
 
     root = Path(__file__).resolve().parents[1]
     data = yaml.safe_load((root / "configs" / "forest.yaml").read_text())

@@ -12,16 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.cache import (
-    CODE_VERSION,
-    ENV_VAR,
-    MAX_PARAM_ARRAY_SIZE,
-    Cache,
-    CacheWarning,
-    cache_dir,
-    key_of,
-    parse_size,
-)
+from pipeline.cache import (CODE_VERSION, ENV_VAR, MAX_PARAM_ARRAY_SIZE, Cache, CacheWarning, cache_dir,
+                            key_of, parse_size)
+from pipeline.cli import main
 from pipeline.geometry import Grid
 
 PARAMS = {"frame": 3, "height": 10.0, "grid": Grid((0.0, 64.0), 0.25, (256, 256)),
@@ -35,7 +28,6 @@ def spectrum(seed: int = 0, shape=(64, 33)) -> np.ndarray:
 
 class Counter:
     """A compute function that counts its calls and returns fixed arrays."""
-
     def __init__(self, seed: int = 0):
         self.calls = 0
         self.seed = seed
@@ -253,7 +245,6 @@ def test_meta_records_what_the_item_is(tmp_path):
 
 def _race_worker(root, marker_dir, barrier, results):
     """Child process: wait for the other one, then ask for the same item."""
-
     def compute():
         (Path(marker_dir) / f"computed-{os.getpid()}").write_text("")
         time.sleep(0.5)
@@ -475,8 +466,6 @@ def test_recheck_tells_whether_an_item_is_still_what_was_served(tmp_path):
 
 
 def test_cache_verify_reports_a_damaged_header_in_one_line(tmp_path, capsys):
-    from pipeline.cli import main
-
     cache = Cache(tmp_path)
     cache.get_or_compute("mask", PARAMS, Counter())
     npy = item_of(cache) / "spectrum.npy"

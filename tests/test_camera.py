@@ -9,21 +9,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from pipeline.camera import (
-    LOD_BIAS,
-    MAX_TAPS,
-    Camera,
-    background,
-    footprints,
-    ground_hits,
-    ground_view,
-    image_rays,
-    mipmap,
-    project_points,
-    sample_footprint,
-    sample_footprints,
-    sky_view,
-)
+from pipeline.camera import (LOD_BIAS, MAX_TAPS, Camera, background, footprints, ground_hits, ground_view,
+                             image_rays, mipmap, project_points, sample_footprint, sample_footprints,
+                             sky_view)
 from pipeline.geometry import Grid
 from pipeline.sky import EquirectSky, ProceduralSky, SunDisc, UniformSky
 

@@ -1,7 +1,10 @@
 import numpy as np
 import pytest
 
-from pipeline.canopy import occlusion_on_lattice, tile_on_lattice, transmittance_from_image
+from pipeline.canopy import (FlutterParams, GroveParams, Leaves, Shapes, Wood, _capsule_pieces, _ellipses,
+                             _translates, coverage_fragments, grove_bounds, grove_mask, grow_grove,
+                             layer_index, leaves_at, occlusion_on_lattice, project, rasterize_transmittance,
+                             shapes_bounds, tile_on_lattice, transmittance_from_image)
 from pipeline.geometry import Grid
 
 from reference import image_transmittance
@@ -63,22 +66,6 @@ def test_periodic_tile_wraps_and_keeps_the_mean():
 
 # --- procedural grove, flutter, projection and anti-aliased rasterization -----------------------
 
-from pipeline.canopy import (  # noqa: E402
-    FlutterParams,
-    GroveParams,
-    Leaves,
-    Shapes,
-    Wood,
-    coverage_fragments,
-    grove_bounds,
-    grove_mask,
-    grow_grove,
-    layer_index,
-    leaves_at,
-    project,
-    rasterize_transmittance,
-    shapes_bounds,
-)
 
 NO_WOOD = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
 
@@ -298,7 +285,6 @@ def test_layers_split_the_grove_by_nearest_plane():
 # (pipeline/canopy.py before the loops moved to pipeline/_raster.py, verbatim but for names; the
 # shapes' preparation, _ellipses, _capsule_pieces and _translates, is shared)
 
-from pipeline.canopy import _capsule_pieces, _ellipses, _translates  # noqa: E402
 
 _CHUNK = 1 << 17  # samples evaluated at once [count]
 _OPAQUE = np.float32(1.0 - 2.0**-20)  # coverage clipped below 1 before -log(1 - c)
@@ -356,7 +342,6 @@ def _square_cdf(t, a, b):
     tail = np.where(s <= 0.5 * (a - b), 0.5 - s / a,
                     np.square(np.maximum(0.5 * (a + b) - s, 0)) / (2 * a * b + 1e-12))
     return np.where(t < 0, tail, 1 - tail)
-
 
 
 def _reference_scatter(center, half, params, feature, thickness, distance, select, owner, *, shape, period, out,

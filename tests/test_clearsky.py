@@ -4,7 +4,8 @@ Preetham's shape and colour."""
 import numpy as np
 import pytest
 
-from pipeline.clearsky import CIE_TYPES, cie_relative_luminance, preetham_relative, relative_sky, zenith_chromaticity
+from pipeline.clearsky import (CIE_TYPES, cie_relative_luminance, preetham_relative, relative_sky,
+                               zenith_chromaticity)
 from pipeline.colour import REC709_LUMINANCE
 
 # ISO 15469:2004 / CIE S 011/E:2003, Table 1 (gradation groups I-VI: a, b), Table 2 (indicatrix

@@ -4,12 +4,15 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from pipeline import io
-from pipeline.cli import main
+from pipeline.cache import Cache
+from pipeline.cli import _Progress, main
 
 from scenes import assert_refused, base_config, set_key, write_config
+from test_run import TINY
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -187,8 +190,6 @@ def test_console_script_runs_as_a_real_process(inputs):
 
 
 def test_cache_command_lists_verifies_and_prunes(tmp_path, capsys):
-    from pipeline.cache import Cache
-
     store = Cache(tmp_path / "c")
     for seed in range(3):
         store.get_or_compute("spectrum", {"seed": seed}, lambda: {"a": np.zeros(4096, np.float32)})
@@ -219,7 +220,6 @@ def test_output_that_is_a_folder_writes_nothing(inputs, capsys):
 
 def test_mask_alpha_is_ignored_not_premultiplied(inputs):
     folder, out = inputs
-    import OpenImageIO as oiio
 
     rgba = np.zeros((40, 40, 4), np.uint8)
     rgba[..., :3] = 255  # open sky everywhere, alpha 0: a painter's transparent layer
@@ -359,8 +359,6 @@ class _Stream(__import__("io").StringIO):
 
 
 def test_progress_is_a_bar_on_a_terminal_and_log_lines_elsewhere():
-    from pipeline.cli import _Progress
-
     terminal, log = _Stream(True), _Stream(False)
     for stream in (terminal, log):
         progress = _Progress(stream)
@@ -406,8 +404,6 @@ def test_sky_and_ground_write_a_png_alone(inputs):
 def test_cache_list_groups_items_by_config_and_takes_one(tmp_path, capsys):
     """Two configs rendered into one cache: the listing names each with its items, size and
     cycle frames; with a config, only its items; prune with a config removes only its."""
-    from test_run import TINY
-
     cache = tmp_path / "cache"
     configs = []
     for name, seed in (("first", 3), ("second", 4)):
@@ -432,8 +428,6 @@ def test_cache_list_groups_items_by_config_and_takes_one(tmp_path, capsys):
 
 
 def test_cache_list_into_a_closed_pipe_and_a_missing_cache_folder(tmp_path):
-    from pipeline.cache import Cache
-
     store = Cache(tmp_path / "c")
     for seed in range(400):
         store.get_or_compute("spectrum", {"seed": seed}, lambda: {"a": np.zeros(4, np.float32)})

@@ -3,13 +3,8 @@ import pytest
 from scipy import integrate
 
 from pipeline import clouds
-from pipeline.clouds import (
-    CloudLayer,
-    delta_eddington_transmittance,
-    fractal_noise,
-    single_scattering_flux_transmittance,
-    two_stream_diffuse_transmittance,
-)
+from pipeline.clouds import (CloudLayer, _knots, delta_eddington_transmittance, fractal_noise,
+                             single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 
 SUN = np.array([80.0, 78.0, 75.0])  # normal irradiance above the cloud [klx]
 SKY = np.array([14.0, 17.0, 22.0])  # clear-sky horizontal irradiance [klx]
@@ -362,8 +357,6 @@ def test_a_footprints_coverage_is_the_mean_coverage_within_it(texels_across):
     mean of the sharp coverage over that footprint (24 x 24 point samples, the reference),
     closer than the coverage of the filtered field (which draws a hard edge through a pixel
     and, far off, loses the thin clouds altogether)."""
-    from pipeline.clouds import _knots
-
     layer = CloudLayer(cover=0.4, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=1.0, seed=0)
     s = np.random.default_rng(1).uniform(-1, 1, size=(300, 2))
     width = texels_across * layer.texel / layer.altitude  # [tan]

@@ -6,6 +6,7 @@ from scipy import integrate
 
 from pipeline import composite
 from pipeline.colour import REC709_LUMINANCE
+from pipeline.composite import display, white_balance
 
 
 @pytest.fixture
@@ -98,8 +99,6 @@ def test_display_transforms():
 
 
 def test_white_balance_makes_the_chosen_light_grey_and_keeps_its_luminance():
-    from pipeline.composite import white_balance
-
     sun, sky = np.array([70.0, 71.0, 62.0]), np.array([9.0, 13.0, 22.0])  # a warm sun, a blue sky [klx]
     luma = np.asarray(REC709_LUMINANCE, dtype=np.float64)
     for setting, light in (("daylight", sun + sky), ("shade", sky)):
@@ -115,8 +114,6 @@ def test_white_balance_makes_the_chosen_light_grey_and_keeps_its_luminance():
 
 
 def test_display_applies_the_white_balance_before_the_tone_curve():
-    from pipeline.composite import display
-
     radiance = np.full((2, 2, 3), 0.2, dtype=np.float32)
     plain = display(radiance, exposure=1.0, transform="srgb")
     warm = display(radiance, exposure=1.0, transform="srgb", balance=np.array([1.5, 1.0, 0.5]))

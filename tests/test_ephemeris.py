@@ -8,15 +8,8 @@ from datetime import datetime, timedelta, timezone
 import numpy as np
 import pytest
 
-from pipeline.ephemeris import (
-    BodyPosition,
-    Site,
-    contact_times,
-    moon_offset_from_sun,
-    obscured_fraction,
-    separation,
-    sun_and_moon,
-)
+from pipeline.ephemeris import (BodyPosition, Site, contact_times, moon_offset_from_sun, obscured_fraction,
+                                separation, sun_and_moon)
 
 UTC = timezone.utc
 CDT = timezone(timedelta(hours=-5))

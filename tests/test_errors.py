@@ -6,8 +6,8 @@ import pytest
 from pipeline import errors
 from pipeline.cli import BadInput
 from pipeline.config import ConfigError
-from pipeline.io import ImageError
 from pipeline.errors import RunError
+from pipeline.io import ImageError
 
 EXAMPLES = [
     ConfigError("cfg.yaml:3: canopy.height", "must be above 0 (got -1)"),

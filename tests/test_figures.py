@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from pipeline import composite, figures, io
-from pipeline.plan import plan_run
 from pipeline.cli import main
 from pipeline.geometry import I0
+from pipeline.plan import plan_run
 
 
 @pytest.fixture(scope="module")

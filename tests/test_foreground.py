@@ -4,17 +4,9 @@ import pytest
 from pipeline import canopy
 from pipeline.camera import Camera, project_points
 from pipeline.canopy import Leaves, Wood
-from pipeline.foreground import (
-    LEAF_REFLECTANCE,
-    LEAF_TRANSMITTANCE,
-    ForegroundPasses,
-    check_passes_size,
-    leaf_sun_visibility,
-    read_passes,
-    sky_exposure,
-    sun_visibility,
-    tree_passes,
-)
+from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, TIP_TAPER, ForegroundPasses,
+                                 check_passes_size, leaf_sun_visibility, read_passes, sky_exposure,
+                                 stem_visibility, sun_visibility, taper_wood, tree_passes)
 from pipeline.io import ImageError, write_exr
 
 E_SUN = np.array([90.0, 85.0, 80.0])  # [klx]
@@ -293,8 +285,6 @@ def test_default_grove_renders(capsys):
 
 # ---- smooth tapered stems (issue 18) ---------------------------------------------------------
 
-from pipeline.foreground import TIP_TAPER, taper_wood  # noqa: E402
-
 
 def _bent_trunk():
     """Three capsules end to end, bent at the two joints, radii stepping down 0.2, 0.16, 0.12 m."""
@@ -346,8 +336,6 @@ def test_stem_pieces_are_shaded_by_leaves_not_by_each_other():
     pieces in the leaf's shadow get visibility about 0, the others about 1 (in the old
     capsule-wide visibility each segment got one value, and the round ends of consecutive
     pieces would shade each other)."""
-    from pipeline.foreground import stem_visibility
-
     wood = Wood(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 3.0]]), np.array([[0.0, 0.0, 3.0], [0.0, 0.0, 6.0]]),
                 np.array([0.2, 0.15]))
     pieces, _ = taper_wood(wood)

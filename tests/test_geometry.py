@@ -2,21 +2,9 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline.geometry import (
-    I0,
-    Grid,
-    cos4_antiderivative,
-    direction_from_sky_plane,
-    direction_vector,
-    fold,
-    lattice_offset,
-    normalized,
-    projected_solid_angle,
-    sky_grid,
-    sky_offset,
-    sky_plane_from_direction,
-    tangent_axes,
-)
+from pipeline.geometry import (I0, Grid, cos4_antiderivative, direction_from_sky_plane, direction_vector,
+                               fold, lattice_offset, normalized, projected_solid_angle, sky_grid, sky_offset,
+                               sky_plane_from_direction, tangent_axes)
 
 
 def test_grid_is_north_up_with_pixel_centres():

@@ -7,16 +7,22 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
+import filelock
 import imageio.v2 as imageio
 import pytest
 import yaml
 
 from pipeline import io
-from pipeline.cli import main
+from pipeline.cache import CacheWarning
+from pipeline.cli import _size, main
 from pipeline.errors import RunError
-from pipeline.runfolder import parse_frames
+from pipeline.plan import plan_run
+from pipeline.resolve import load
+from pipeline.run import _frame_task
+from pipeline.runfolder import frame_files, parse_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -208,8 +214,6 @@ def test_parse_frames():
 
 
 def test_a_second_render_in_the_same_folder_is_refused(reference, tmp_path):
-    import filelock
-
     config, _ = reference
     run = tmp_path / "run"
     run.mkdir()
@@ -400,13 +404,7 @@ def test_an_index_that_is_a_folder_stops_the_run_before_any_work(reference, tmp_
 def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(finished, tmp_path):
     """What a frame task (run in a worker process by joblib or Dask) returns: the cache
     warnings it raised, for the command to say, and the items it read, repaired."""
-    from dataclasses import replace
 
-    from pipeline.cache import CacheWarning
-    from pipeline.plan import plan_run
-    from pipeline.resolve import load
-    from pipeline.run import _frame_task
-    from pipeline.runfolder import frame_files
 
     config_path, files, run, cache = finished
     config = load(config_path)
@@ -458,7 +456,6 @@ def test_check_says_the_disk_a_run_needs(reference, capsys):
     config, _ = reference
     assert main(["check", str(config)]) == 0
     line = next(l for l in capsys.readouterr().out.splitlines() if l.strip().startswith("disk:"))
-    from pipeline.cli import _size
 
     used = sum(p.stat().st_size for p in (config.parent / "cache").rglob("*.npy"))
     assert f"cache {_size(used)}" in line or abs(float(line.split("cache ")[1].split()[0]) /

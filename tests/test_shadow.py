@@ -5,13 +5,8 @@ from pipeline import canopy, shadow
 from pipeline.geometry import Grid, fold, sky_grid, sky_offset
 from pipeline.sky import EquirectSky, SkyRaster, UniformSky
 
-from reference import (
-    direct_sum,
-    equirect_patch,
-    image_transmittance,
-    monte_carlo_irradiance,
-    monte_carlo_patch,
-)
+from reference import (direct_sum, equirect_patch, image_transmittance, monte_carlo_irradiance,
+                       monte_carlo_patch)
 
 
 def random_case(rng, channels):

@@ -2,11 +2,21 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import yaml
+from ladybug.skymodel import estimate_illuminance_from_irradiance
+from pvlib import atmosphere, clearsky
+from scipy.integrate import quad
 
-from pipeline.geometry import I0, sky_grid, sky_plane_from_direction
-from pipeline.sky import EquirectSky, UniformSky
+from pipeline import io
+from pipeline.cli import main
+from pipeline.colour import REC709_LUMINANCE
+from pipeline.constants import SUN_ANGULAR_RADIUS
+from pipeline.ephemeris import obscured_fraction
+from pipeline.geometry import I0, projected_solid_angle, sky_grid, sky_offset, sky_plane_from_direction
+from pipeline.sky import (EquirectSky, MoonDisc, ProceduralSky, Sky, SunDisc, UniformSky, cut_sun,
+                          sun_disc_radiance, sun_kernel)
 
-from reference import equirect_patch
+from reference import equirect_patch, unit_vector
 
 
 def square(half, q):
@@ -91,18 +101,6 @@ def test_raster_off_the_sky_counts_as_outside():
 
 # --- the procedural sky (Preetham et al. 1999), sun kernel, moon, clouds --------------------------
 
-from scipy.integrate import quad
-
-from pipeline.ephemeris import obscured_fraction
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.geometry import sky_offset
-from pipeline.sky import (
-    MoonDisc,
-    ProceduralSky,
-    SunDisc,
-    sun_disc_radiance,
-    sun_kernel,
-)
 
 LUMA = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 NO_LIMB = (0.0, 0.0, 0.0)
@@ -157,9 +155,6 @@ def moon_at(sun, separation, position_angle=0.7, radius=None):
 def reference_daylight(elevation, turbidity, altitude):
     """Independent: pvlib's Ineichen clear sky, its light turned into klx by ladybug-core's Perez
     et al. (1990) efficacies (W = 2 cm); returns (direct horizontal, diffuse horizontal). [klx]"""
-    from ladybug.skymodel import estimate_illuminance_from_irradiance
-    from pvlib import atmosphere, clearsky
-
     zenith = 90.0 - elevation
     am = atmosphere.get_absolute_airmass(atmosphere.get_relative_airmass(zenith), atmosphere.alt2pres(altitude))
     sky = clearsky.ineichen(zenith, am, turbidity, altitude=altitude, dni_extra=1366.1)
@@ -315,8 +310,6 @@ def test_procedural_raster_total_outside_and_folding():
 
 
 def test_procedural_raster_cells_are_radiance_times_projected_solid_angle():
-    from pipeline.geometry import projected_solid_angle
-
     sky = sun_sky(45.0, 30.0)
     grid = square(100, 0.02)  # interpolated nodes every 0.02 / 0.02 = 1 cell: exact centres
     raster = sky.raster(grid)
@@ -339,7 +332,6 @@ def test_unshadowed_is_raster_total_plus_sun_kernel():
 
 class Overcast:
     """A test-only cloud layer: transmittance 0.5 everywhere and a uniform grey glow."""
-
     def __init__(self, glow):
         self.glow = glow
         self.calls = []
@@ -358,7 +350,6 @@ def test_clouds_compose_by_the_protocol():
     cloudy = ProceduralSky(clear.turbidity, clear.sun, clouds=clouds, time=12.5)
     grid = square(150, 0.02)
     a, b = clear.raster(grid), cloudy.raster(grid)
-    from pipeline.geometry import projected_solid_angle
 
     np.testing.assert_allclose(b.weighted, 0.5 * a.weighted + 2.0 * projected_solid_angle(grid)[None], rtol=1e-5)
     assert b.total == pytest.approx(0.5 * a.total + 2.0 * np.pi, rel=1e-3)
@@ -405,11 +396,6 @@ def test_procedural_sky_refuses_bad_input():
 
 
 # --- an HDRI's sun cut out into the fine kernel (cut_sun) --------------------------------------
-
-from pipeline.constants import SUN_ANGULAR_RADIUS
-from pipeline.sky import cut_sun
-
-from reference import unit_vector
 
 
 def texel_directions(height, width, rotation=0.0):
@@ -490,8 +476,6 @@ def test_cut_sun_leaves_skies_without_a_sun_alone():
 
 def test_skylight_scales_the_blue_sky_and_leaves_the_sun():
     """skylight 0 is the sun alone (the paper's Fig. 11); 0.5 halves the clear sky."""
-    from dataclasses import replace
-
     sky = sun_sky(45.0)
     dark, half = replace(sky, skylight=0.0), replace(sky, skylight=0.5)
     s = np.array([[0.3, -0.2], [1.5, 0.4]])
@@ -505,10 +489,7 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
     """What a user sees: the hemisphere integral of the `sunshade sky` image (texels' exact
     projected solid angles, the sun disc deposited in it) is the light `sunshade ground` gives
     ground that no leaf shades, and both are the standard models' daylight."""
-    import yaml
 
-    from pipeline import io
-    from pipeline.cli import main
 
     rng = np.random.default_rng(0)
     io.write_png(tmp_path / "mask.png", np.where(rng.random((40, 40)) < 0.4, 0.0, 1.0).astype(np.float32)[..., None])
@@ -529,8 +510,6 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
 
 
 # --- the one sky interface (sky.Sky) ----------------------------------------------------------
-
-from pipeline.sky import Sky
 
 
 def protocol_skies():

@@ -23,19 +23,9 @@ from pipeline.plan import plan_run, scene_at
 from pipeline.resolve import load
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc
 
-from reference import (
-    angle_between,
-    disc_directions,
-    image_transmittance,
-    limb_darkened_profile,
-    monte_carlo_irradiance,
-    monte_carlo_sun,
-    offset_direction,
-    pinhole_irradiance,
-    pinhole_spot_moments,
-    sun_radiance_function,
-    tangent_frame,
-)
+from reference import (angle_between, disc_directions, image_transmittance, limb_darkened_profile,
+                       monte_carlo_irradiance, monte_carlo_sun, offset_direction, pinhole_irradiance,
+                       pinhole_spot_moments, sun_radiance_function, tangent_frame)
 
 HEIGHT = 8.0
 """Canopy height of every case. [m]"""
