@@ -253,7 +253,7 @@ def _run_check(args) -> int:
         print(line)
     frames, cycle = disk_needed(plan)
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
-          f"cache {_size(cycle)}")
+          f"cache at most {_size(cycle)}")
     _warn(plan)
     return 0
 

@@ -129,10 +129,11 @@ def _product_key(plan, layer, frame):
 
 
 def disk_needed(plan: RunPlan) -> tuple[float, float]:
-    """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and every
-    cycle product at its exact size: per layer and cycle frame the coarse spectrum (complex64
-    half spectrum of its FFT, or of one tile) and the fine one, per cycle frame the built-in
-    trees' passes (sun, sky: 3 float32, alpha and haze: 1)."""
+    """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and the
+    most the cycle products take: per layer and cycle frame the coarse spectrum (complex64 half
+    spectrum of its FFT, or of one tile) and the fine one at their exact sizes, per cycle frame
+    the built-in trees' passes (sun, sky: 3 float32, alpha and haze: 1) over the whole frame
+    (they are stored cut to the pixels the trees touch: ``cut_to_trees``)."""
     config = plan.config
     width, height = config.camera.resolution
     frames = config.animation.frames * width * height * FRAME_BYTES_PER_PIXEL[config.output.half]
@@ -220,6 +221,7 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
             "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
                      "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
+            "stored": "cut to the trees",  # cut_to_trees
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
                 "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
                 "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
@@ -228,8 +230,9 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
 def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
     """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance:
     ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
-    a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols). The shading is
-    linear in each channel's light, so a frame scales them by the run's Lighting.
+    a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols), ``haze`` (rows,
+    cols), all cut to the box of the pixels the trees touch (``cut_to_trees``; ``box``). The
+    shading is linear in each channel's light, so a frame scales them by the run's Lighting.
     Memory-mapped, read-only."""
     config = plan.config
 
@@ -261,6 +264,26 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
         if passes.haze is not None:
             item["haze"] = passes.haze
-        return item
+        return cut_to_trees(item)
 
     return store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute)
+
+
+def cut_to_trees(passes: dict) -> dict:
+    """Full-frame passes (rows, cols[, 3]) cut to the box of the pixels where any of them is
+    not 0, with ``box`` (row_start, row_stop, col_start, col_stop) [pixel]: outside it a frame is
+    its background, so nothing is lost, and a grove that fills a tenth of the picture is stored
+    in about a tenth of the bytes."""
+    touched = np.zeros(passes["alpha"].shape, dtype=bool)
+    for values in passes.values():
+        touched |= values.reshape(*touched.shape, -1).any(axis=-1)
+    rows, cols = np.flatnonzero(touched.any(axis=1)), np.flatnonzero(touched.any(axis=0))
+    box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1) if len(rows) else (0, 0, 0, 0)
+    cut = {name: np.ascontiguousarray(values[box[0]:box[1], box[2]:box[3]]) for name, values in passes.items()}
+    return {**cut, "box": np.array(box, dtype=np.int64)}
+
+
+def tree_box(item: dict) -> tuple[slice, slice]:
+    """The (rows, cols) slices of the frame that ``foreground_item``'s passes cover."""
+    r0, r1, c0, c1 = (int(v) for v in item["box"])
+    return slice(r0, r1), slice(c0, c1)

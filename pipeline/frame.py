@@ -12,7 +12,7 @@ import numpy as np
 
 from . import cache, camera, composite
 from .colour import REC709_LUMINANCE
-from .cycle import foreground_item
+from .cycle import foreground_item, tree_box
 from .ground import GroundResult, blend_band, render_ground
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
@@ -22,8 +22,10 @@ from .plan import RunPlan, Scene
 
 def foreground_passes(plan: RunPlan, cycle_frame: int, store: cache.Cache,
                       light: Lighting | None = None):
-    """(F_sun, F_sky, alpha) of the config's foreground at ``cycle_frame`` [kcd/m^2], the
-    built-in trees lit by ``light`` (default: the run's reference Lighting); None without one."""
+    """(F_sun, F_sky, alpha, region) of the config's foreground at ``cycle_frame`` [kcd/m^2]:
+    the built-in trees lit by ``light`` (default: the run's reference Lighting) over the
+    (rows, cols) slices ``region`` of the frame they touch, or imported passes over the whole
+    frame; None without a foreground."""
     config = plan.config
     fg = config.foreground
     if fg.model == "trees":
@@ -35,10 +37,10 @@ def foreground_passes(plan: RunPlan, cycle_frame: int, store: cache.Cache,
         sun_down = light.sun_irradiance * (light.sun_direction[2] if light.sun_direction is not None else 0.0)
         sky = item["sky"] * (light.sky_irradiance * (1.0 + bounce)).astype(np.float32)
         sun = item["sun"] * light.sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
-        return sky + sun, sky, item["alpha"]
+        return sky + sun, sky, item["alpha"], tree_box(item)
     if fg.model == "passes":
         passes = imported_passes(fg, plan.camera, cycle_frame)
-        return passes.sun, passes.sky, passes.alpha
+        return passes.sun, passes.sky, passes.alpha, (slice(None), slice(None))
     return None
 
 
@@ -98,7 +100,6 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
     sky_scale = _sky_scale(sky, light)
-    atmosphere = None
     if config.sky.haze > 0:
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
@@ -113,14 +114,18 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
         veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
         if veiled is not None:  # the haze in front of the trees, as in front of the ground
-            veil = veiled[..., None] * (camera.horizon_sky(view, sky)[None] / np.float32(sky_scale))
-            passes = (passes[0] + veil, passes[1] + veil, passes[2])
+            horizon = camera.horizon_sky(view, sky)[None, passes[3][1]]
+            veil = veiled[..., None] * (horizon / np.float32(sky_scale))
+            passes = (passes[0] + veil, passes[1] + veil, *passes[2:])
     if passes is None:
         empty = np.zeros_like(background)
-        passes = (empty, empty, empty[..., 0])
-    radiance = composite.composite_frame(
-        background, sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
-        sun_fraction=sun_fraction, sky_scale=sky_scale, atmosphere=atmosphere)
+        passes = (empty, empty, empty[..., 0], (slice(None), slice(None)))
+    # outside the passes' region the trees add nothing: 0 + B, as composite_frame gives there
+    radiance = np.asarray(background, dtype=np.float32) + np.float32(0.0)
+    region = passes[3]
+    radiance[region] = composite.composite_frame(
+        background[region], sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
+        sun_fraction=sun_fraction, sky_scale=sky_scale)
     if plan.exposures is not None and plan.exposures[frame] is not None:
         exposure = plan.exposures[frame]
     elif config.camera.auto_exposure is not None:

@@ -7,7 +7,7 @@ import numpy as np
 import yaml
 
 from pipeline import cache, io
-from pipeline.cycle import cycle_phase
+from pipeline.cycle import cut_to_trees, cycle_phase, tree_box
 from pipeline.ground import render_ground
 
 from scenes import plan_of, tiny_grove
@@ -63,3 +63,21 @@ def test_two_processes_rendering_the_same_frame_share_one_item(tmp_path):
     store = cache.Cache(tmp_path / "cache")
     assert len(store.list()) == 1 and store.verify() == []
     np.testing.assert_array_equal(io.read_image(tmp_path / "g0.exr"), io.read_image(tmp_path / "g1.exr"))
+
+
+def test_passes_cut_to_the_trees_lose_nothing():
+    """Pasted back into a frame of zeros, the cut passes are the passes, bit for bit; passes
+    that touch no pixel keep an empty box."""
+    rng = np.random.default_rng(5)
+    passes = {"sun": np.zeros((40, 60, 3), np.float32), "sky": np.zeros((40, 60, 3), np.float32),
+              "alpha": np.zeros((40, 60), np.float32), "haze": np.zeros((40, 60), np.float32)}
+    passes["alpha"][12:20, 30:41] = rng.random((8, 11))
+    passes["sun"][25, 7] = 0.5  # a lone lit pixel outside the trees' coverage is kept too
+    cut = cut_to_trees(passes)
+    assert list(cut["box"]) == [12, 26, 7, 41]
+    for name, full in passes.items():
+        again = np.zeros_like(full)
+        again[tree_box(cut)] = cut[name]
+        np.testing.assert_array_equal(again, full)
+    empty = cut_to_trees({name: np.zeros_like(values) for name, values in passes.items()})
+    assert list(empty["box"]) == [0, 0, 0, 0] and empty["alpha"].size == 0

@@ -451,12 +451,17 @@ def test_an_unreachable_scheduler_writes_nothing(tmp_path):
 
 
 def test_check_says_the_disk_a_run_needs(reference, capsys):
-    """The cache part of the estimate is the cycle products' exact array sizes: against the
-    reference run's cache on disk (its .npy headers and meta.json files are the difference)."""
+    """The cache part of the estimate is the most the cycle products take: the spectra at their
+    exact array sizes, the trees' passes over the whole frame. Against the reference run's cache
+    on disk: the spectra within 2% (the .npy headers), the passes within the whole frame."""
     config, _ = reference
     assert main(["check", str(config)]) == 0
     line = next(l for l in capsys.readouterr().out.splitlines() if l.strip().startswith("disk:"))
-
-    used = sum(p.stat().st_size for p in (config.parent / "cache").rglob("*.npy"))
-    assert f"cache {_size(used)}" in line or abs(float(line.split("cache ")[1].split()[0]) /
-                                                  float(_size(used).split()[0]) - 1) < 0.02, (line, used)
+    estimate = float(line.split("cache at most ")[1].split()[0]) * 1024 ** (" KMG".index(line.split(
+        "cache at most ")[1].split()[1][0]) if line.split("cache at most ")[1].split()[1] != "B" else 0)
+    cache = config.parent / "cache"
+    spectra = sum(p.stat().st_size for p in (cache / "spectra").rglob("*.npy"))
+    passes = sum(p.stat().st_size for p in (cache / "foreground").rglob("*.npy"))
+    cycle, (width, height) = 3, (96, 64)  # TINY
+    assert spectra + passes <= estimate * 1.02, (line, spectra, passes)
+    assert estimate <= (spectra + cycle * 8 * 4 * width * height) * 1.02, (line, spectra, passes)
