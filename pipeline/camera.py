@@ -388,7 +388,38 @@ def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS
 
 
 def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
-    """``sample_footprints``, channels first: (channels, n) float32.
+    """``sample_footprints``, channels first: (channels, n) float32: compiled
+    (``_filter.filtered``), footprint by footprint, with the arithmetic of ``_filtered_arrays``."""
+    n = len(fp)
+    if n == 0:
+        return np.zeros((mip.channels, 0), dtype=np.float32)
+    from . import _filter
+
+    taps, level, blend = _in_blocks(functools.partial(_filter_choice, mip, lod_bias), fp.major, fp.minor,
+                                    size=_BLOCK)
+    out = np.empty((mip.channels, n), dtype=np.float32)
+    x, y, major, ex, ey = _float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
+    _filter.filtered(*_level_tables(mip), mip.outside == "periodic", x, y, np.arange(n), major, ex, ey,
+                     taps, level, blend, out)
+    return out
+
+
+def _float64(*arrays) -> tuple:
+    """The arrays as contiguous float64 (no copy when they are)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
+
+
+def _level_tables(mip: MipMap) -> tuple:
+    """What the compiled loops need of a MipMap: the flat texels, the channels, and per level
+    the offset (int64), shape (rows, cols) int64, origin (x, y) and texel size (px, py) float64."""
+    return (mip.texels.reshape(-1), mip.channels, np.asarray(mip.offsets, dtype=np.int64),
+            np.asarray(mip.shapes, dtype=np.int64).reshape(-1, 2),
+            np.asarray(mip.origins, dtype=np.float64).reshape(-1, 2),
+            np.asarray(mip.pixels, dtype=np.float64).reshape(-1, 2))
+
+
+def _filtered_arrays(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
+    """``_filtered`` with whole arrays (numpy), the reference of the compiled loops.
 
     The footprints are grouped by level (and whether they blend two) and sorted by tap count
     within a group; each run of up to _CHUNK footprints of a group is filtered at once, tap by
