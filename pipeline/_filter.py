@@ -29,9 +29,9 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
     fc = np.float32(col - c0f)
     fr = np.float32(row - r0f)
     c0, r0 = int(c0f), int(r0f)
-    if periodic:
-        c0 = c0 % cols
-        r0 = r0 % rows
+    if periodic:  # a mask for a power of two, as camera._wrap: no division
+        c0 = c0 & (cols - 1) if cols & (cols - 1) == 0 else c0 % cols
+        r0 = r0 & (rows - 1) if rows & (rows - 1) == 0 else r0 % rows
     return ((r0 * (cols + 2) + c0) + offset + cols + 3) * channels, fc, fr
 
 
@@ -165,15 +165,31 @@ def _unit_hash(key):
     return np.float64(z >> np.uint64(11)) / 9007199254740992.0
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x, read_y, read_pixel,
+          read_weight):
+    """Appends the read of vertex (va, vb) of weight w for footprint j at (x, y) [m] when
+    w >= skip (``albedo.StochasticTiling.offsets``); returns the new count of reads."""
+    if not w >= skip:
+        return count
+    key = (np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))
+    key ^= seed_key
+    read_x[count] = x + _unit_hash(key) * period_x
+    read_y[count] = y + _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * period_y
+    read_pixel[count] = j
+    read_weight[count] = w
+    return count + 1
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def tiling_reads(x, y, cell, seed, sharpness, skip, period_x, period_y, weight, read_x, read_y, read_pixel,
-                 read_weight):
+def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, read_y, read_pixel, read_weight):
     """The reads of ``albedo.StochasticTiling.sample``: per footprint j the lattice triangle's
-    three vertices and sharpened weights (``weights``, ``**sharpness``, renormalised) into
-    ``weight`` (3, n) float64, and each read of weight ``skip`` or more, footprint by footprint
-    in vertex order: its point, (x, y) moved by the vertex's offset (``offsets``), into
-    ``read_x``, ``read_y``, its footprint into ``read_pixel`` and its weight into
-    ``read_weight`` (each (3 n,), filled from the start). Returns the count of reads."""
+    three vertices and weights (``weights``) raised to the fourth power (BLEND_SHARPNESS, as
+    two squarings) and renormalised, into ``weight`` (3, n) float64, and each read of weight
+    ``skip`` or more, footprint by footprint in vertex order: its point, (x, y) moved by the
+    vertex's offset (``offsets``), into ``read_x``, ``read_y``, its footprint into
+    ``read_pixel`` and its weight into ``read_weight`` (each (3 n,), filled from the start).
+    Returns the count of reads."""
     root3 = np.sqrt(3.0)
     seed_key = np.uint64(seed) * np.uint64(0x165667B19E3779F9)
     count = 0
@@ -192,44 +208,96 @@ def tiling_reads(x, y, cell, seed, sharpness, skip, period_x, period_y, weight, 
             a0, b0, w0 = ja + 1, jb + 1, fa + fb - 1.0
             a1, b1, w1 = ja + 1, jb, 1.0 - fb
             a2, b2, w2 = ja, jb + 1, 1.0 - fa
-        w0, w1, w2 = w0**sharpness, w1**sharpness, w2**sharpness
+        w0 *= w0
+        w0 *= w0
+        w1 *= w1
+        w1 *= w1
+        w2 *= w2
+        w2 *= w2
         total = w0 + w1 + w2
-        weight[0, j], weight[1, j], weight[2, j] = w0 / total, w1 / total, w2 / total
-        for i, va, vb in ((0, a0, b0), (1, a1, b1), (2, a2, b2)):
-            if not weight[i, j] >= skip:
-                continue
-            key = (np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))
-            key ^= seed_key
-            read_x[count] = x[j] + _unit_hash(key) * period_x
-            read_y[count] = y[j] + _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * period_y
-            read_pixel[count] = j
-            read_weight[count] = weight[i, j]
-            count += 1
+        w0 /= total
+        w1 /= total
+        w2 /= total
+        weight[0, j], weight[1, j], weight[2, j] = w0, w1, w2
+        count = _read(count, j, w0, a0, b0, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w1, a1, b1, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w2, a2, b2, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
     return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _component(lookups, lv, up, k, g, norm, tb):
+    """Component k mapped back from the Gaussian g through the lookups of levels lv and up,
+    blended by tb (``tiling_lookup``)."""
+    bins = lookups.shape[2]
+    position = min(max((g / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+    low = min(int(np.floor(position)), bins - 2)
+    frac = position - low
+    here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
+    there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
+    return here * (1.0 - tb) + there * tb
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """``tiling_lookup`` for three channels, in scalars."""
+    n = out.shape[1]
+    last = lookups.shape[0] - 1
+    reads = values.shape[1]
+    r = 0
+    for j in range(n):
+        g0 = g1 = g2 = 0.0
+        while r < reads and read_pixel[r] == j:
+            w = read_weight[r]
+            g0 += w * np.float64(values[0, r])
+            g1 += w * np.float64(values[1, r])
+            g2 += w * np.float64(values[2, r])
+            r += 1
+        norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
+        lv = int(level[j])
+        up = min(lv + 1, last)
+        tb = np.float64(blend[j])
+        c0 = _component(lookups, lv, up, 0, g0, norm, tb)
+        c1 = _component(lookups, lv, up, 1, g1, norm, tb)
+        c2 = _component(lookups, lv, up, 2, g2, norm, tb)
+        for m in range(3):
+            value = center[m] + (((0.0 + c0 * basis[m, 0]) + c1 * basis[m, 1]) + c2 * basis[m, 2])
+            out[m, j] = np.float32(value if not value < 0.0 else 0.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
     """The rest of ``albedo.StochasticTiling.sample``: the reads' means ``values`` (channels, m)
-    float32 summed by weight (in read order) into each footprint's Gaussian g, divided by the
-    root of the sum of its squared weights ``weight`` (3, n), mapped back through the inverse
-    lookups of its level and the next, blended by ``blend``, and out of the principal axes: the
-    albedo into ``out`` (channels, n) float32, held at 0 or more."""
+    float32, footprint by footprint (``tiling_reads``' order), summed by weight into the
+    footprint's Gaussian g, divided by the root of the sum of its squared weights ``weight``
+    (3, n), mapped back through the inverse lookups of its level and the next, blended by
+    ``blend``, and out of the principal axes: the albedo into ``out`` (channels, n) float32,
+    held at 0 or more."""
     channels, n = out.shape
     bins, last = lookups.shape[2], lookups.shape[0] - 1
-    g = np.zeros((n, channels), dtype=np.float64)
-    for r in range(values.shape[1]):
-        j = read_pixel[r]
-        for k in range(channels):
-            g[j, k] += read_weight[r] * np.float64(values[k, r])
+    reads = values.shape[1]
+    if channels == 3:
+        _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
+        return
+    g = np.empty(channels, dtype=np.float64)
     comp = np.empty(channels, dtype=np.float64)
+    r = 0
     for j in range(n):
+        for k in range(channels):
+            g[k] = 0.0
+        while r < reads and read_pixel[r] == j:
+            for k in range(channels):
+                g[k] += read_weight[r] * np.float64(values[k, r])
+            r += 1
         norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
         lv = int(level[j])
         up = min(lv + 1, last)
         tb = np.float64(blend[j])
         for k in range(channels):
-            position = min(max((g[j, k] / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+            position = min(max((g[k] / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
             low = min(int(np.floor(position)), bins - 2)
             frac = position - low
             here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
@@ -241,3 +309,75 @@ def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups
                 acc += comp[i] * basis[m, i]
             value = center[m] + acc
             out[m, j] = np.float32(value if not value < 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _axes(dxdu, dxdv, dydu, dydv):
+    """``camera._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
+    (major, minor, ex, ey)."""
+    a = dxdu * dxdu + dxdv * dxdv
+    b = dxdu * dydu + dxdv * dydv
+    c = dydu * dydu + dydv * dydv
+    bb = b * b
+    half = a - c
+    half *= half
+    half *= 0.25
+    half += bb
+    half = np.sqrt(half)
+    big = a + c
+    big *= 0.5
+    big += half
+    major = np.sqrt(big)
+    minor = dxdu * dydv
+    minor -= dxdv * dydu
+    minor = abs(minor)
+    minor /= major
+    if not major > 0:
+        minor = 0.0
+    big_c = big - c
+    big_a = big - a
+    if big_c * big_c + bb >= bb + big_a * big_a:
+        ex, ey = big_c, b
+    else:
+        ex, ey = b, big_a
+    norm = np.sqrt(ex * ex + ey * ey)
+    if not np.isfinite(norm):
+        norm = np.hypot(ex, ey)
+    if norm <= 1e-12 * max(big, 1e-300):
+        return major, minor, 1.0, 0.0
+    return major, minor, ex / norm, ey / norm
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def row_footprints(rows, part, width, height, focal, position, right, up, forward, min_downward,
+                   x, y, major, minor, ex, ey, distance):
+    """``camera._row_footprints`` (``_row_hits`` and ``_footprint_axes``) pixel by pixel, the
+    same float64 operations in the same order, into (r width,) arrays; ``distance`` float32."""
+    height_m = position[2]
+    fx0, fx1 = right[0] / focal, right[1] / focal
+    fz0 = right[2] / focal
+    gx0, gx1, gz0 = -up[0] / focal, -up[1] / focal, -up[2] / focal
+    i = 0
+    for q in range(rows.shape[0]):
+        p = part[q]
+        v = rows[q] + 1.0 - 0.5 * p
+        down = (0.5 * height - v) / focal
+        for col in range(width):
+            u = col + 0.5
+            across = (u - 0.5 * width) / focal
+            wx = forward[0] + across * right[0] + down * up[0]
+            wy = forward[1] + across * right[1] + down * up[1]
+            w_z = forward[2] + across * right[2] + down * up[2]
+            wz = min(w_z, -min_downward)
+            t = height_m / -wz
+            x[i] = position[0] + t * wx
+            y[i] = position[1] + t * wy
+            slope = fz0 / wz
+            dxdu = t * (fx0 - wx * slope) * 1.0
+            dydu = t * (fx1 - wy * slope) * 1.0
+            slope = gz0 / wz
+            dxdv = t * (gx0 - wx * slope) * p
+            dydv = t * (gx1 - wy * slope) * p
+            major[i], minor[i], ex[i], ey[i] = _axes(dxdu, dxdv, dydu, dydv)
+            distance[i] = np.float32(t * np.sqrt(wx * wx + wy * wy + w_z * w_z))
+            i += 1

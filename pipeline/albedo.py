@@ -183,8 +183,10 @@ class StochasticTiling:
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
-        m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(BLEND_SHARPNESS), float(SKIP_WEIGHT),
-                                 float(px), float(py), weight, read_x, read_y, read_pixel, read_weight)
+        if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
+            return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
+        m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
+                                 weight, read_x, read_y, read_pixel, read_weight)
         taps, level, blend = camera._in_blocks(functools.partial(camera._filter_choice, self.gaussian, lod_bias),
                                                major, fp.minor, size=camera._BLOCK)
         values = np.empty((self.channels, m), dtype=np.float32)

@@ -786,8 +786,7 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
     if len(rows):
-        *ellipses, distance_rows = _in_blocks(functools.partial(_row_footprints, camera), rows, part,
-                                              size=max(1, _BLOCK // camera.width))
+        *ellipses, distance_rows = _row_footprints(camera, rows, part)  # compiled: no blocks needed
         fp = Footprints(*ellipses)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
@@ -810,7 +809,23 @@ def _filtered_chain(maps, fp: Footprints) -> np.ndarray:
 
 def _row_footprints(camera: Camera, rows, part):
     """The ``Footprints`` fields and the distances of the pixels of some image rows that see
-    ground (``_row_hits``), each (r width,) float64 (the distances float32)."""
+    ground (``_row_hits``), each (r width,) float64 (the distances float32): compiled
+    (``_filter.row_footprints``), the operations of ``_row_footprints_arrays``."""
+    from . import _filter
+
+    n = len(rows) * camera.width
+    x, y, major, minor, ex, ey = (np.empty(n) for _ in range(6))
+    distance = np.empty(n, dtype=np.float32)
+    right, up, forward = camera.basis
+    _filter.row_footprints(np.asarray(rows, dtype=np.float64), np.asarray(part, dtype=np.float64),
+                           camera.width, camera.height, float(camera.focal),
+                           np.asarray(camera.position, dtype=np.float64), right, up, forward, MIN_DOWNWARD,
+                           x, y, major, minor, ex, ey, distance)
+    return x, y, major, minor, ex, ey, distance
+
+
+def _row_footprints_arrays(camera: Camera, rows, part):
+    """``_row_footprints`` with whole arrays (numpy), the reference of the compiled loop."""
     x, y, *jacobian, distance = (u.ravel() for u in _row_hits(camera, rows, part))
     return (x, y, *_footprint_axes(*jacobian), distance.astype(np.float32))
 

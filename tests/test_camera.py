@@ -304,6 +304,25 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     assert np.isnan(camera._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
 
 
+@pytest.mark.parametrize("view", [
+    Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=np.radians(60.0), width=160, height=90),
+    Camera((1.0, 2.0, 30.0), 0.3, -np.pi / 2, 1.0, 60, 40),  # straight down
+    Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 133, 101),  # level: the horizon inside a row
+])
+def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
+    """camera._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
+    and _footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
+    from pipeline import camera
+
+    rows, part = camera._ground_rows(view)
+    got = camera._row_footprints(view, rows, part)
+    want = camera._row_footprints_arrays(view, rows, part)
+    assert len(got) == len(want) == 7 and len(got[0]) == len(rows) * view.width > 0
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype
+        np.testing.assert_array_equal(g, w)
+
+
 def test_footprints_serve_several_rasters():
     rng = np.random.default_rng(9)
     grid = Grid((0.0, 1.6), 0.05, (32, 32))
