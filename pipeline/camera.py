@@ -83,8 +83,13 @@ def image_rays(camera: Camera, u, v) -> np.ndarray:
 
 def pixel_rays(camera: Camera) -> np.ndarray:
     """Directions (height, width, 3) through every pixel centre, as ``image_rays``."""
-    v, u = np.mgrid[0:camera.height, 0:camera.width] + 0.5
-    return image_rays(camera, u, v)
+    right, up, forward = camera.basis
+    x = (np.arange(camera.width, dtype=np.float64) + 0.5 - 0.5 * camera.width) / camera.focal
+    y = (0.5 * camera.height - (np.arange(camera.height, dtype=np.float64) + 0.5)) / camera.focal
+    out = np.empty((camera.height, camera.width, 3))
+    for k in range(3):  # image_rays' (forward + x right) + y up, one component at a time
+        np.add((forward[k] + x * right[k])[None, :], (y * up[k])[:, None], out=out[..., k])
+    return out
 
 
 def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

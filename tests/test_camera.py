@@ -323,6 +323,19 @@ def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
         np.testing.assert_array_equal(g, w)
 
 
+def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
+    """pixel_rays (one component at a time, from the row and column offsets) against
+    image_rays on the full grid of pixel centres, which it replaces."""
+    from pipeline.camera import pixel_rays
+
+    for view in (Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=1.0, width=64, height=36),
+                 Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 33, 101)):
+        v, u = np.mgrid[0:view.height, 0:view.width] + 0.5
+        got = pixel_rays(view)
+        assert got.shape == (view.height, view.width, 3) and got.dtype == np.float64
+        np.testing.assert_array_equal(got, image_rays(view, u, v))
+
+
 def test_footprints_serve_several_rasters():
     rng = np.random.default_rng(9)
     grid = Grid((0.0, 1.6), 0.05, (32, 32))
