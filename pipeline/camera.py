@@ -241,8 +241,8 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
     texels = np.empty((sum(sizes), channels), dtype=np.float32)
     for lv, start, size in zip(levels, offsets, sizes):
         stored = texels[start : start + size].reshape(lv.shape[0] + 2, lv.shape[1] + 2, channels)
-        if outside == "constant":
-            stored[...] = value
+        if outside == "constant":  # the border only, then the level: each texel written once
+            stored[0], stored[-1], stored[1:-1, 0], stored[1:-1, -1] = value, value, value, value
             stored[1:-1, 1:-1] = lv
         else:
             stored[...] = np.pad(lv, ((1, 1), (1, 1), (0, 0)), mode="wrap")
@@ -293,7 +293,9 @@ def _pair_mean(a: np.ndarray, axis: int) -> np.ndarray:
     """Mean of neighbouring pairs along ``axis`` (even length)."""
     even = a[(slice(None),) * axis + (slice(0, None, 2),)]
     odd = a[(slice(None),) * axis + (slice(1, None, 2),)]
-    return (0.5 * (even + odd)).astype(np.float32)
+    out = np.add(even, odd, dtype=np.float32)
+    out *= np.float32(0.5)
+    return out
 
 
 def _box_resample(a: np.ndarray, axis: int, start: float, length: float, count: int) -> np.ndarray:
