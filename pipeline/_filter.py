@@ -5,7 +5,7 @@ The method is the one documented in ``camera.sample_footprint`` and ``albedo``: 
 it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
 and the same order of operations as the array version (``camera._tap_mean``, ``_bilinear``), so
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
-The tap counts, levels and blends come from ``camera._filter_choice`` (arrays), computed once
+The tap counts, levels and blends come from ``camera._filter_choice`` (``filter_choice``), computed once
 for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to import.
 """
 
@@ -381,3 +381,46 @@ def row_footprints(rows, part, width, height, focal, position, right, up, forwar
             major[i], minor[i], ex[i], ey[i] = _axes(dxdu, dxdv, dydu, dydv)
             distance[i] = np.float32(t * np.sqrt(wx * wx + wy * wy + w_z * w_z))
             i += 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, blend):
+    """``camera._filter_choice`` footprint by footprint, the same float64 operations: the tap
+    count into ``taps`` (int8), the level into ``level`` (int16) and the blend towards the next
+    into ``blend`` (float32)."""
+    big = np.finfo(np.float64).max
+    top = float(count - 1)
+    for j in range(major.shape[0]):
+        a, b = major[j], minor[j]
+        ratio = a / (b if b >= texel or b != b else texel)  # np.maximum: NaN wins
+        if ratio != ratio:
+            ratio = 1.0
+        elif ratio == np.inf:
+            ratio = float(max_taps)
+        elif ratio == -np.inf:
+            ratio = -big
+        ratio -= 1e-3
+        ratio = np.ceil(ratio)
+        n = min(max(ratio, 1.0), float(max_taps))
+        lod = a / np.float64(np.int8(n))
+        if b != b or lod != lod:
+            lod = np.nan
+        elif b > lod:
+            lod = b
+        lod /= texel
+        lod = np.log2(lod)
+        lod += lod_bias
+        if lod != lod:
+            lod = 0.0
+        lod = min(max(lod, 0.0), top)
+        floor = np.floor(lod)
+        k = np.int16(floor)
+        t = lod - floor
+        if t > 1.0 - 1e-6:
+            k += np.int16(1)
+            t = 0.0
+        elif t < 1e-6:
+            t = 0.0
+        taps[j] = np.int8(n)
+        level[j] = k
+        blend[j] = np.float32(t)

@@ -8,7 +8,6 @@ channel. [1]
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,8 +186,7 @@ class StochasticTiling:
             return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
         m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
-        taps, level, blend = camera._in_blocks(functools.partial(camera._filter_choice, self.gaussian, lod_bias),
-                                               major, fp.minor, size=camera._BLOCK)
+        taps, level, blend = camera._filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
         _filter.filtered(*camera._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
@@ -213,7 +211,7 @@ class StochasticTiling:
                                       fp.ex, fp.ey)
             g += np.where(w[i] < skip, 0.0, w[i]) * camera._filtered_arrays(self.gaussian, moved, lod_bias)
         g /= np.sqrt(np.sum(w * w, axis=0))
-        _, level, blend = camera._filter_choice(self.gaussian, lod_bias, fp.major, fp.minor)
+        _, level, blend = camera._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
         level = level.astype(np.intp)
         upper = np.minimum(level + 1, self.gaussian.count - 1)
         position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)

@@ -402,8 +402,7 @@ def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
         return np.zeros((mip.channels, 0), dtype=np.float32)
     from . import _filter
 
-    taps, level, blend = _in_blocks(functools.partial(_filter_choice, mip, lod_bias), fp.major, fp.minor,
-                                    size=_BLOCK)
+    taps, level, blend = _filter_choice(mip, lod_bias, fp.major, fp.minor)
     out = np.empty((mip.channels, n), dtype=np.float32)
     x, y, major, ex, ey = _float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
     _filter.filtered(*_level_tables(mip), mip.outside == "periodic", x, y, np.arange(n), major, ex, ey,
@@ -436,7 +435,7 @@ def _filtered_arrays(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray
     n = len(fp)
     if n == 0:
         return np.zeros((mip.channels, 0), dtype=np.float32)
-    taps, level, blend = _in_blocks(functools.partial(_filter_choice, mip, lod_bias), fp.major, fp.minor,
+    taps, level, blend = _in_blocks(functools.partial(_filter_choice_arrays, mip, lod_bias), fp.major, fp.minor,
                                     size=_BLOCK)
     group = 2 * level + (blend > 0)
     if mip.outside == "constant":
@@ -499,7 +498,20 @@ def _outside_means(mip: MipMap) -> np.ndarray:
 def _filter_choice(mip: MipMap, lod_bias: float, major, minor):
     """Each footprint's tap count (n,) int8, level k (n,) int16 and blend t (n,) float32 in
     [0, 1) towards level k + 1 (0: level k alone), as ``sample_footprint`` says, from its
-    ellipse's box widths ``major`` and ``minor`` (n,) [m]."""
+    ellipse's box widths ``major`` and ``minor`` (n,) [m]: compiled (``_filter.filter_choice``),
+    the operations of ``_filter_choice_arrays``."""
+    from . import _filter
+
+    major, minor = _float64(major, minor)
+    n = len(major)
+    taps, level, blend = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int16), np.empty(n, dtype=np.float32)
+    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
+    _filter.filter_choice(texel, float(lod_bias), mip.count, MAX_TAPS, major, minor, taps, level, blend)
+    return taps, level, blend
+
+
+def _filter_choice_arrays(mip: MipMap, lod_bias: float, major, minor):
+    """``_filter_choice`` with whole arrays (numpy), the reference of the compiled loop."""
     texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS, copy=False)

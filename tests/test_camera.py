@@ -336,6 +336,27 @@ def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
         np.testing.assert_array_equal(got, image_rays(view, u, v))
 
 
+def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
+    """camera._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
+    replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
+    long, and zero, NaN and infinite widths."""
+    from pipeline import camera
+
+    rng = np.random.default_rng(5)
+    mip = mipmap(rng.random((30, 27, 3)).astype(np.float32), Grid((0.0, 1.0), 0.005, (30, 27)), value=0.1)
+    n = 200000
+    major = np.exp(rng.uniform(-12.0, 12.0, n)) * 0.005
+    minor = major * rng.uniform(0.0, 1.2, n)
+    major[:100], minor[100:200], minor[200:300] = 0.0, 0.0, np.inf
+    major[300:400], minor[400:500], major[500:600] = np.nan, np.nan, np.inf
+    for bias in (LOD_BIAS, 0.0, 0.7):
+        got = camera._filter_choice(mip, bias, major, minor)
+        want = camera._filter_choice_arrays(mip, bias, major.copy(), minor.copy())
+        for g, w in zip(got, want):
+            assert g.dtype == w.dtype
+            np.testing.assert_array_equal(g, w)
+
+
 def test_footprints_serve_several_rasters():
     rng = np.random.default_rng(9)
     grid = Grid((0.0, 1.6), 0.05, (32, 32))
