@@ -41,14 +41,20 @@ def _bilinear(flat, first, channels, step, k, fc, fr):
     ``step`` the flat stride of a stored row: ``camera._bilinear``'s float32 arithmetic, each
     corner read as ``flat[o:].take(first, mode="clip")``."""
     size = flat.shape[0]
-    o = k
-    a = flat[o + min(max(first, 0), size - o - 1)]
-    o = channels + k
-    b = flat[o + min(max(first, 0), size - o - 1)]
-    o = step + k
-    c = flat[o + min(max(first, 0), size - o - 1)]
-    o = step + channels + k
-    d = flat[o + min(max(first, 0), size - o - 1)]
+    if first >= 0 and first + step + 2 * channels <= size:  # always, but for NaN coordinates
+        a = flat[first + k]
+        b = flat[first + channels + k]
+        c = flat[first + step + k]
+        d = flat[first + step + channels + k]
+    else:
+        o = k
+        a = flat[o + min(max(first, 0), size - o - 1)]
+        o = channels + k
+        b = flat[o + min(max(first, 0), size - o - 1)]
+        o = step + k
+        c = flat[o + min(max(first, 0), size - o - 1)]
+        o = step + channels + k
+        d = flat[o + min(max(first, 0), size - o - 1)]
     b -= a
     b *= fc
     a += b
