@@ -167,23 +167,24 @@ class StochasticTiling:
         """The tiled albedo averaged over ground footprints ``fp`` (camera.Footprints):
         (channels, n) float32. [1]
 
-        Compiled (``_filter.tiling``), one pass per footprint: the three reads share the
-        footprint's tap count and levels, and a read whose sharpened weight is under SKIP_WEIGHT
-        is left out (its Gaussian term taken as its mean, 0). ``sample_arrays`` is the same
-        with whole arrays and every read, the reference."""
+        Compiled (``_filter``): the lattice weights and offsets of every footprint, its reads
+        of weight SKIP_WEIGHT or more (the others left out: their Gaussian term taken as its
+        mean, 0; about 1.95 reads a pixel instead of 3), filtered with the footprint's tap
+        count and levels, chosen once for its reads, then the blend and the inverse lookups.
+        ``sample_arrays(fp, lod_bias=, skip=SKIP_WEIGHT)`` is the reference (numpy)."""
         from . import _filter, camera
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
         if n == 0:
             return out
+        if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
+            return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
         x, y, major, ex, ey = camera._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
         weight = np.empty((3, n))
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
-        if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
-            return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
         m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
         taps, level, blend = camera._filter_choice(self.gaussian, lod_bias, major, fp.minor)
