@@ -93,7 +93,11 @@ def main() -> None:
             t, sky_haze, atmosphere = composite.aerial_perspective(
                 distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
                 sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-            sun, sky, alpha = render.foreground_passes(config, plan, i, store, light)
+            passes = render.foreground_passes(config, plan, i, store, light)
+            if passes is None:  # no trees in front (as render_frame)
+                empty = np.zeros_like(background)
+                passes = (empty, empty, empty[..., 0])
+            sun, sky, alpha = passes
             frames[i] = composite.composite_frame(t[..., None] * background + sky_haze, sun_pass=sun,
                                                   sky_pass=sky, alpha=alpha, sun_fraction=0.7,
                                                   atmosphere=atmosphere)
@@ -125,7 +129,8 @@ def main() -> None:
 
         n = args.frames
         t_resample, t_blend, t_write = (median_seconds(f, n) for f in (resample, blend, write))
-        t_raw, t_ground, t_whole, t_passes = (median_seconds(f, n) for f in (write_raw, ground, whole, passes))
+        t_raw, t_ground, t_whole = (median_seconds(f, n) for f in (write_raw, ground, whole))
+        t_passes = median_seconds(passes, n) if config.foreground.model == "trees" else float("nan")
         base = bilinear_baseline(view)
         shapes = [getattr(part, "fft_shape", None) for layer in plan.layers for part in (layer.sun, layer.coarse)]
         bare = sum(round_trip_seconds(shape, args.threads) for shape in shapes if shape is not None)
