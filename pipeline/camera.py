@@ -808,10 +808,23 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
         *ellipses, distance_rows = _row_footprints(camera, rows, part)  # compiled: no blocks needed
         fp = Footprints(*ellipses)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
-        rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
+        rho = _albedo_in_view(camera, albedo)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
         distance[rows] = distance_rows.reshape(len(rows), camera.width)
     return radiance, fraction.copy(), distance
+
+
+@functools.lru_cache(maxsize=2)
+def _albedo_in_view(camera: Camera, albedo) -> np.ndarray:
+    """The albedo (channels, n) float32 (read-only) of the ground pixels of ``camera``'s view
+    (``ground_view``'s footprints, rows first), for a MipMap or a laying with ``sample``. It
+    depends on the view and the albedo alone, so the frames of a run, whose camera stands
+    still, read it once (the lru_cache holds the albedo, so its id is not reused)."""
+    rows, part = _ground_rows(camera)
+    fp = Footprints(*_row_footprints(camera, rows, part)[:6])
+    rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
+    rho.flags.writeable = False
+    return rho
 
 
 def _filtered_chain(maps, fp: Footprints) -> np.ndarray:

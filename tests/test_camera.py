@@ -357,6 +357,39 @@ def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
             np.testing.assert_array_equal(g, w)
 
 
+def test_ground_view_reads_the_albedo_once_per_view():
+    """The albedo seen by a camera depends on the view alone: a second frame of the same
+    camera and albedo gives the same radiance without sampling the albedo again; another
+    camera samples it anew."""
+    from pipeline import camera as cam
+
+    rng = np.random.default_rng(12)
+    grid = Grid((-2.0, 6.0), 0.05, (160, 80))
+    tile = mipmap(rng.random((40, 40, 3)).astype(np.float32), Grid((0.0, 2.0), 0.05, (40, 40)),
+                  outside="periodic", period=(2.0, 2.0))
+
+    class Counting:
+        calls = 0
+
+        def sample(self, fp, *, lod_bias):
+            Counting.calls += 1
+            return cam._filtered(tile, fp, lod_bias)
+
+    albedo = Counting()
+    view = Camera.look_at((0.0, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
+    light = [mipmap(rng.random((160, 80, 3)).astype(np.float32) + f, grid, value=np.full(3, 1.0 + f))
+             for f in (0.0, 1.0)]
+    first = ground_view(view, irradiance=light[0], albedo=albedo)[0]
+    second = ground_view(view, irradiance=light[1], albedo=albedo)[0]
+    assert Counting.calls == 1
+    np.testing.assert_array_equal(first, ground_view(view, irradiance=light[0], albedo=tile)[0])
+    np.testing.assert_array_equal(second, ground_view(view, irradiance=light[1], albedo=tile)[0])
+    assert not np.array_equal(first, second)
+    other = Camera.look_at((0.5, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
+    ground_view(other, irradiance=light[0], albedo=albedo)
+    assert Counting.calls == 2
+
+
 def test_footprints_serve_several_rasters():
     rng = np.random.default_rng(9)
     grid = Grid((0.0, 1.6), 0.05, (32, 32))
