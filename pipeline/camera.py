@@ -805,8 +805,7 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
     if len(rows):
-        *ellipses, distance_rows = _row_footprints(camera, rows, part)  # compiled: no blocks needed
-        fp = Footprints(*ellipses)
+        fp, distance_rows = _view_footprints(camera)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _albedo_in_view(camera, albedo)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
@@ -814,14 +813,24 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     return radiance, fraction.copy(), distance
 
 
+@functools.lru_cache(maxsize=1)
+def _view_footprints(camera: Camera):
+    """``ground_view``'s Footprints of the pixels of the image rows that see ground, rows
+    first, and their distances (n,) float32 [m] (``_row_footprints``): made once for the
+    frames of a run, whose camera stands still. Not to be written to (left writable: numba
+    compiles read-only arrays as another type)."""
+    rows, part = _ground_rows(camera)
+    *ellipses, distance = _row_footprints(camera, rows, part)
+    return Footprints(*ellipses), distance
+
+
 @functools.lru_cache(maxsize=2)
 def _albedo_in_view(camera: Camera, albedo) -> np.ndarray:
     """The albedo (channels, n) float32 (read-only) of the ground pixels of ``camera``'s view
-    (``ground_view``'s footprints, rows first), for a MipMap or a laying with ``sample``. It
-    depends on the view and the albedo alone, so the frames of a run, whose camera stands
-    still, read it once (the lru_cache holds the albedo, so its id is not reused)."""
-    rows, part = _ground_rows(camera)
-    fp = Footprints(*_row_footprints(camera, rows, part)[:6])
+    (``_view_footprints``), for a MipMap or a laying with ``sample``. It depends on the view
+    and the albedo alone, so the frames of a run, whose camera stands still, read it once (the
+    lru_cache holds the albedo, so its id is not reused)."""
+    fp, _ = _view_footprints(camera)
     rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
     rho.flags.writeable = False
     return rho
