@@ -2,12 +2,15 @@
 camera, haze and compositing, writing; and the foreground passes per cycle frame. Each beside
 a baseline measured in the same run.
 
-    python benchmarks/bench_frame.py [--frames 4] [--threads 2]
+    python benchmarks/bench_frame.py [--frames 4] [--threads 2] [--config configs/eclipse.yaml --cache DIR]
 
 Default grove (bench_cycle.CONFIG) with drifting clouds, the camera placed by default, 1280 x
-720. Baselines: one bilinear lookup per pixel of a 2048^2 RGB raster with
-scipy.ndimage.map_coordinates (order 1, no filtering), and writing the same pixels as raw
-.npy bytes.
+720; or the first frames of ``--config`` as it stands (its cycle products in ``--cache``).
+The ground is read as frames read it (the albedo laid by stochastic tiling). Baselines: one
+bilinear lookup per pixel of a 2048^2 RGB raster with scipy.ndimage.map_coordinates (order 1,
+no filtering); the bare FFT work of the ground raster (rfft2 + irfft2 of a 3-channel float32
+stack at each layer's fine and coarse FFT shapes, as bench_sun); writing the same pixels as
+raw .npy bytes.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_cycle import CONFIG  # noqa: E402
-from bench_sun import median_seconds  # noqa: E402
+from bench_sun import median_seconds, round_trip_seconds  # noqa: E402
 
 from pipeline import cache, camera, canopy, composite, foreground, io, render  # noqa: E402
 from pipeline.run import frame_attributes  # noqa: E402
@@ -51,6 +54,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=4)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--config", default=None, help="a config to time instead of the grove")
+    parser.add_argument("--cache", default=None, help="its cache folder (default: a fresh one)")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="sunshade-bench-"))
     try:
@@ -60,9 +65,9 @@ def main() -> None:
         config_dict["animation"] = {"frames": args.frames}
         path = work / "grove.yaml"
         path.write_text(yaml.safe_dump(config_dict))
-        config = load_config(path)
+        config = load_config(args.config or path)
         plan = render.plan_run(config)
-        store = cache.Cache(work / "cache")
+        store = cache.Cache(Path(args.cache) if args.cache and args.config else work / "cache")
         render.cycle_phase(config, plan, store, jobs=2, workers=1)
         view = render.camera_of(config, plan)
         light = render.reference_lighting(config, plan)
@@ -72,7 +77,7 @@ def main() -> None:
         skies = [render.load_sky(config.sky, render.scene_at(config, f)) for f in range(args.frames)]
         grounds = [render.render_ground(config, frame=f, store=store, plan=plan, workers=args.threads,
                                         sky=skies[f], outer=True) for f in range(args.frames)]
-        albedo = render.albedo_mipmap(config.ground)
+        albedo = render.ground_albedo(config.ground)  # as render_frame reads it
         backgrounds = {}
 
         def resample(i):
@@ -88,7 +93,11 @@ def main() -> None:
             t, sky_haze, atmosphere = composite.aerial_perspective(
                 distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
                 sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-            sun, sky, alpha = render.foreground_passes(config, plan, i, store, light)
+            passes = render.foreground_passes(config, plan, i, store, light)
+            if passes is None:  # no trees in front (as render_frame)
+                empty = np.zeros_like(background)
+                passes = (empty, empty, empty[..., 0])
+            sun, sky, alpha = passes
             frames[i] = composite.composite_frame(t[..., None] * background + sky_haze, sun_pass=sun,
                                                   sky_pass=sky, alpha=alpha, sun_fraction=0.7,
                                                   atmosphere=atmosphere)
@@ -120,15 +129,23 @@ def main() -> None:
 
         n = args.frames
         t_resample, t_blend, t_write = (median_seconds(f, n) for f in (resample, blend, write))
-        t_raw, t_ground, t_whole, t_passes = (median_seconds(f, n) for f in (write_raw, ground, whole, passes))
+        t_raw, t_ground, t_whole = (median_seconds(f, n) for f in (write_raw, ground, whole))
+        t_passes = median_seconds(passes, n) if config.foreground.model == "trees" else float("nan")
         base = bilinear_baseline(view)
+        shapes = [getattr(part, "fft_shape", None) for layer in plan.layers for part in (layer.sun, layer.coarse)]
+        bare = sum(round_trip_seconds(shape, args.threads) for shape in shapes if shape is not None)
+        t_exr = median_seconds(lambda i: io.write_exr(work / f"e.{i:04d}.exr", frames[i], half=True), n)
+        t_png = median_seconds(lambda i: io.write_png(
+            work / f"p.{i:04d}.png", composite.display(frames[i], exposure=result.exposure)), n)
         print(f"resampling ground and sky: {t_resample * 1e3:.0f} ms; unfiltered bilinear lookup "
               f"of a 2048^2 RGB raster: {base * 1e3:.0f} ms; ratio {t_resample / base:.1f}")
         print(f"haze and compositing: {t_blend * 1e3:.0f} ms")
-        print(f"writing half EXR + PNG: {t_write * 1e3:.0f} ms; raw .npy of the same pixels: "
-              f"{t_raw * 1e3:.1f} ms; ratio {t_write / t_raw:.0f}")
+        print(f"writing half EXR + PNG: {t_write * 1e3:.0f} ms (EXR {t_exr * 1e3:.0f}, PNG with display "
+              f"{t_png * 1e3:.0f}); raw .npy of the same pixels: {t_raw * 1e3:.1f} ms; ratio {t_write / t_raw:.0f}")
         print(f"ground raster: {t_ground * 1e3:.0f} ms; whole frame (no writing): {t_whole * 1e3:.0f} ms "
-              f"(median of {n} frames, {args.threads} FFT threads)")
+              f"(median of {n} frames, {args.threads} FFT threads); bare FFT work of the ground raster "
+              f"{bare * 1e3:.0f} ms: frame / bare FFT {t_whole / bare:.1f}, beyond the ground raster "
+              f"{(t_whole - t_ground) / bare:.1f}")
         print(f"foreground passes per cycle frame (sun visibility + passes, "
               f"{len(grove.leaves.center)} leaves): {t_passes:.2f} s")
     finally:

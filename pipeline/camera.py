@@ -83,8 +83,13 @@ def image_rays(camera: Camera, u, v) -> np.ndarray:
 
 def pixel_rays(camera: Camera) -> np.ndarray:
     """Directions (height, width, 3) through every pixel centre, as ``image_rays``."""
-    v, u = np.mgrid[0:camera.height, 0:camera.width] + 0.5
-    return image_rays(camera, u, v)
+    right, up, forward = camera.basis
+    x = (np.arange(camera.width, dtype=np.float64) + 0.5 - 0.5 * camera.width) / camera.focal
+    y = (0.5 * camera.height - (np.arange(camera.height, dtype=np.float64) + 0.5)) / camera.focal
+    out = np.empty((camera.height, camera.width, 3))
+    for k in range(3):  # image_rays' (forward + x right) + y up, one component at a time
+        np.add((forward[k] + x * right[k])[None, :], (y * up[k])[:, None], out=out[..., k])
+    return out
 
 
 def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,8 +241,8 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
     texels = np.empty((sum(sizes), channels), dtype=np.float32)
     for lv, start, size in zip(levels, offsets, sizes):
         stored = texels[start : start + size].reshape(lv.shape[0] + 2, lv.shape[1] + 2, channels)
-        if outside == "constant":
-            stored[...] = value
+        if outside == "constant":  # the border only, then the level: each texel written once
+            stored[0], stored[-1], stored[1:-1, 0], stored[1:-1, -1] = value, value, value, value
             stored[1:-1, 1:-1] = lv
         else:
             stored[...] = np.pad(lv, ((1, 1), (1, 1), (0, 0)), mode="wrap")
@@ -288,7 +293,9 @@ def _pair_mean(a: np.ndarray, axis: int) -> np.ndarray:
     """Mean of neighbouring pairs along ``axis`` (even length)."""
     even = a[(slice(None),) * axis + (slice(0, None, 2),)]
     odd = a[(slice(None),) * axis + (slice(1, None, 2),)]
-    return (0.5 * (even + odd)).astype(np.float32)
+    out = np.add(even, odd, dtype=np.float32)
+    out *= np.float32(0.5)
+    return out
 
 
 def _box_resample(a: np.ndarray, axis: int, start: float, length: float, count: int) -> np.ndarray:
@@ -388,7 +395,37 @@ def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS
 
 
 def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
-    """``sample_footprints``, channels first: (channels, n) float32.
+    """``sample_footprints``, channels first: (channels, n) float32: compiled
+    (``_filter.filtered``), footprint by footprint, with the arithmetic of ``_filtered_arrays``."""
+    n = len(fp)
+    if n == 0:
+        return np.zeros((mip.channels, 0), dtype=np.float32)
+    from . import _filter
+
+    taps, level, blend = _filter_choice(mip, lod_bias, fp.major, fp.minor)
+    out = np.empty((mip.channels, n), dtype=np.float32)
+    x, y, major, ex, ey = _float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
+    _filter.filtered(*_level_tables(mip), mip.outside == "periodic", x, y, np.arange(n), major, ex, ey,
+                     taps, level, blend, out)
+    return out
+
+
+def _float64(*arrays) -> tuple:
+    """The arrays as contiguous float64 (no copy when they are)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
+
+
+def _level_tables(mip: MipMap) -> tuple:
+    """What the compiled loops need of a MipMap: the flat texels, the channels, and per level
+    the offset (int64), shape (rows, cols) int64, origin (x, y) and texel size (px, py) float64."""
+    return (mip.texels.reshape(-1), mip.channels, np.asarray(mip.offsets, dtype=np.int64),
+            np.asarray(mip.shapes, dtype=np.int64).reshape(-1, 2),
+            np.asarray(mip.origins, dtype=np.float64).reshape(-1, 2),
+            np.asarray(mip.pixels, dtype=np.float64).reshape(-1, 2))
+
+
+def _filtered_arrays(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
+    """``_filtered`` with whole arrays (numpy), the reference of the compiled loops.
 
     The footprints are grouped by level (and whether they blend two) and sorted by tap count
     within a group; each run of up to _CHUNK footprints of a group is filtered at once, tap by
@@ -398,7 +435,7 @@ def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
     n = len(fp)
     if n == 0:
         return np.zeros((mip.channels, 0), dtype=np.float32)
-    taps, level, blend = _in_blocks(functools.partial(_filter_choice, mip, lod_bias), fp.major, fp.minor,
+    taps, level, blend = _in_blocks(functools.partial(_filter_choice_arrays, mip, lod_bias), fp.major, fp.minor,
                                     size=_BLOCK)
     group = 2 * level + (blend > 0)
     if mip.outside == "constant":
@@ -461,7 +498,20 @@ def _outside_means(mip: MipMap) -> np.ndarray:
 def _filter_choice(mip: MipMap, lod_bias: float, major, minor):
     """Each footprint's tap count (n,) int8, level k (n,) int16 and blend t (n,) float32 in
     [0, 1) towards level k + 1 (0: level k alone), as ``sample_footprint`` says, from its
-    ellipse's box widths ``major`` and ``minor`` (n,) [m]."""
+    ellipse's box widths ``major`` and ``minor`` (n,) [m]: compiled (``_filter.filter_choice``),
+    the operations of ``_filter_choice_arrays``."""
+    from . import _filter
+
+    major, minor = _float64(major, minor)
+    n = len(major)
+    taps, level, blend = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int16), np.empty(n, dtype=np.float32)
+    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
+    _filter.filter_choice(texel, float(lod_bias), mip.count, MAX_TAPS, major, minor, taps, level, blend)
+    return taps, level, blend
+
+
+def _filter_choice_arrays(mip: MipMap, lod_bias: float, major, minor):
+    """``_filter_choice`` with whole arrays (numpy), the reference of the compiled loop."""
     texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS, copy=False)
@@ -755,14 +805,35 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
     if len(rows):
-        *ellipses, distance_rows = _in_blocks(functools.partial(_row_footprints, camera), rows, part,
-                                              size=max(1, _BLOCK // camera.width))
-        fp = Footprints(*ellipses)
+        fp, distance_rows = _view_footprints(camera)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
-        rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
+        rho = _albedo_in_view(camera, albedo)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
         distance[rows] = distance_rows.reshape(len(rows), camera.width)
     return radiance, fraction.copy(), distance
+
+
+@functools.lru_cache(maxsize=1)
+def _view_footprints(camera: Camera):
+    """``ground_view``'s Footprints of the pixels of the image rows that see ground, rows
+    first, and their distances (n,) float32 [m] (``_row_footprints``): made once for the
+    frames of a run, whose camera stands still. Not to be written to (left writable: numba
+    compiles read-only arrays as another type)."""
+    rows, part = _ground_rows(camera)
+    *ellipses, distance = _row_footprints(camera, rows, part)
+    return Footprints(*ellipses), distance
+
+
+@functools.lru_cache(maxsize=2)
+def _albedo_in_view(camera: Camera, albedo) -> np.ndarray:
+    """The albedo (channels, n) float32 (read-only) of the ground pixels of ``camera``'s view
+    (``_view_footprints``), for a MipMap or a laying with ``sample``. It depends on the view
+    and the albedo alone, so the frames of a run, whose camera stands still, read it once (the
+    lru_cache holds the albedo, so its id is not reused)."""
+    fp, _ = _view_footprints(camera)
+    rho = _filtered(albedo, fp, LOD_BIAS) if isinstance(albedo, MipMap) else albedo.sample(fp, lod_bias=LOD_BIAS)
+    rho.flags.writeable = False
+    return rho
 
 
 def _filtered_chain(maps, fp: Footprints) -> np.ndarray:
@@ -779,7 +850,23 @@ def _filtered_chain(maps, fp: Footprints) -> np.ndarray:
 
 def _row_footprints(camera: Camera, rows, part):
     """The ``Footprints`` fields and the distances of the pixels of some image rows that see
-    ground (``_row_hits``), each (r width,) float64 (the distances float32)."""
+    ground (``_row_hits``), each (r width,) float64 (the distances float32): compiled
+    (``_filter.row_footprints``), the operations of ``_row_footprints_arrays``."""
+    from . import _filter
+
+    n = len(rows) * camera.width
+    x, y, major, minor, ex, ey = (np.empty(n) for _ in range(6))
+    distance = np.empty(n, dtype=np.float32)
+    right, up, forward = camera.basis
+    _filter.row_footprints(np.asarray(rows, dtype=np.float64), np.asarray(part, dtype=np.float64),
+                           camera.width, camera.height, float(camera.focal),
+                           np.asarray(camera.position, dtype=np.float64), right, up, forward, MIN_DOWNWARD,
+                           x, y, major, minor, ex, ey, distance)
+    return x, y, major, minor, ex, ey, distance
+
+
+def _row_footprints_arrays(camera: Camera, rows, part):
+    """``_row_footprints`` with whole arrays (numpy), the reference of the compiled loop."""
     x, y, *jacobian, distance = (u.ravel() for u in _row_hits(camera, rows, part))
     return (x, y, *_footprint_axes(*jacobian), distance.astype(np.float32))
 

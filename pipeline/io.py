@@ -7,6 +7,7 @@ crash never leaves a half-written file under the real name.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 from pathlib import Path
@@ -101,16 +102,39 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
     pixels always give the same bytes.
     """
     pixels = np.asarray(pixels, dtype=np.float32)
-    noise = np.random.default_rng(0).random(pixels.shape, dtype=np.float32)
-    noise -= np.random.default_rng(1).random(pixels.shape, dtype=np.float32)
-    codes = np.floor(np.clip(pixels, 0.0, 1.0) * 255.0 + 0.5 + 0.5 * noise)
-    data = np.ascontiguousarray(np.clip(codes, 0, 255).astype(np.uint8))
+    codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
+    codes *= 255.0
+    codes += 0.5
+    codes += _half_dither(pixels.shape)
+    np.floor(codes, out=codes)
+    np.clip(codes, 0, 255, out=codes)
+    data = codes.astype(np.uint8)
     rows, cols, channels = data.shape
     spec = oiio.ImageSpec(cols, rows, channels, "uint8")
-    spec.attribute("png:compressionLevel", 3)  # a third of the time of zlib's 6, files 5% larger
+    # zlib level 2 on rows filtered by "sub" (libpng's PNG_FILTER_SUB): 1280 x 720 frames in
+    # about 50 ms, where level 3 with libpng's adaptive choice of filter took 120-160 ms, in
+    # files about 1 % larger; lossless either way
+    spec.attribute("png:compressionLevel", 2)
+    spec.attribute("png:filter", PNG_FILTER_SUB)
     for name, value in (attributes or {}).items():
         spec.attribute(name, value)
     _write_atomic(path, spec, data)
+
+
+PNG_FILTER_SUB = 0x10
+"""libpng's PNG_FILTER_SUB: each byte less the one a pixel to its left."""
+
+
+@functools.lru_cache(maxsize=4)
+def _half_dither(shape) -> np.ndarray:
+    """Half the fixed-seed dither of ``write_png``, (shape) float32 in (-0.5, 0.5): the
+    difference of two uniform fields of seeds 0 and 1, halved; made once per frame size
+    (read-only)."""
+    noise = np.random.default_rng(0).random(shape, dtype=np.float32)
+    noise -= np.random.default_rng(1).random(shape, dtype=np.float32)
+    noise *= 0.5
+    noise.flags.writeable = False
+    return noise
 
 
 VIDEO_FORMATS = (".mp4", ".gif")
@@ -122,7 +146,9 @@ def write_video(path, frames, *, fps: float) -> int:
 
     ``.mp4``: H.264 in yuv420p, which browsers play; frames of odd width or height are padded
     by repeating their last column or row (yuv420p needs even sizes). One encoder thread and
-    no time stamps in the header, so the same frames give the same bytes.
+    no time stamps in the header, so the same frames give the same bytes. x264's "veryfast"
+    preset: at CRF 18 it encoded the eclipse frames in 22 ms each instead of 58 ("medium"), in
+    files of the same size, 0.3 dB PSNR lower (39.1 dB).
     ``.gif``: through Pillow, an adaptive palette per frame, looping.
     """
     path = Path(path)
@@ -146,7 +172,7 @@ def write_video(path, frames, *, fps: float) -> int:
             writer = imageio.get_writer(
                 temporary, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
                 macro_block_size=1, quality=None, output_params=[
-                    "-crf", "18", "-threads", "1", "-movflags", "+faststart",
+                    "-crf", "18", "-preset", "veryfast", "-threads", "1", "-movflags", "+faststart",
                     "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact"])
             try:
                 for frame in frames:

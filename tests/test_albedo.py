@@ -87,3 +87,49 @@ def test_stochastic_tiling_keeps_the_tiles_histogram_and_mean_at_every_scale():
         laid = tiling.sample(_points(x[:5000], y[:5000], width), lod_bias=camera.LOD_BIAS).T
         np.testing.assert_allclose(laid.mean(axis=0), plain.mean(axis=0), rtol=0.02)
         np.testing.assert_allclose(laid.std(axis=0), plain.std(axis=0), rtol=0.25, atol=1e-4)
+
+
+def _view_footprints(width=320, height=180):
+    """The ground footprints of a camera 1.7 m up looking 30 degrees down: near pixels a few
+    millimetres across, far ones metres long, up to the horizon."""
+    view = camera.Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=np.radians(60.0),
+                                 width=width, height=height)
+    rows, part = camera._ground_rows(view)
+    *ellipses, _ = camera._row_footprints(view, rows, part)
+    return camera.Footprints(*ellipses)
+
+
+def test_compiled_tiling_matches_the_array_version(monkeypatch):
+    """StochasticTiling.sample (compiled, one pass) against sample_arrays (the former numpy
+    code, kept as the reference), every read taken and with reads under SKIP_WEIGHT left out
+    alike: the same albedo within float32 rounding."""
+    from pipeline import albedo
+
+    _, tiling = _tiled(size_px=128, period=2.0)
+    fp = _view_footprints()
+    for skip in (0.0, albedo.SKIP_WEIGHT):
+        monkeypatch.setattr(albedo, "SKIP_WEIGHT", skip)
+        got = tiling.sample(fp, lod_bias=camera.LOD_BIAS)
+        want = tiling.sample_arrays(fp, lod_bias=camera.LOD_BIAS, skip=skip)
+        assert got.dtype == np.float32 and got.shape == want.shape == (3, len(fp))
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+
+
+def test_skipping_light_reads_changes_the_albedo_by_little():
+    """Reads of sharpened weight under SKIP_WEIGHT are left out: about two reads a pixel
+    instead of three, and the albedo moves by under 4 % of its mean anywhere (measured 2.9 %)
+    and by 0.1 % RMS (measured 0.06 %)."""
+    from pipeline import albedo
+
+    _, tiling = _tiled(size_px=128, period=2.0)
+    fp = _view_footprints()
+    _, w = tiling.weights(fp.x, fp.y)
+    w = w**albedo.BLEND_SHARPNESS
+    w /= w.sum(axis=0)
+    assert 1.8 < np.mean(np.sum(w >= albedo.SKIP_WEIGHT, axis=0)) < 2.2
+    every = tiling.sample_arrays(fp, lod_bias=camera.LOD_BIAS, skip=0.0)
+    skipped = tiling.sample(fp, lod_bias=camera.LOD_BIAS)
+    difference = np.abs(skipped.astype(np.float64) - every)
+    assert difference.max() < 0.04 * every.mean()
+    assert np.sqrt(np.mean(difference**2)) < 1e-3 * every.mean()
+    assert difference.max() > 0  # reads were left out

@@ -254,6 +254,130 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
     np.testing.assert_allclose(got, reference_footprint_samples(mip, x, y, jac), rtol=2e-5, atol=2e-6)
 
 
+@pytest.mark.parametrize("outside, shape, channels", [
+    ("constant", (27, 45), 3), ("constant", (32, 32), 2), ("periodic", (32, 64), 3),
+    ("periodic", (27, 45), 1), ("periodic", (30, 40), 4),
+])
+def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels):
+    """camera._filtered (numba, footprint by footprint) against camera._filtered_arrays (numpy,
+    grouped by level), the reference it replaces: the same float32 arithmetic in the same order
+    gives the same bits, for every level, blend and tap count, far points, degenerate
+    footprints and a NaN outside value (the finer rasters of a chain)."""
+    from pipeline import camera
+
+    rng = np.random.default_rng(21)
+    raster = rng.random(shape + (channels,)).astype(np.float32)
+    grid = Grid((-1.3, 0.9), 0.05, shape)
+    x_min, y_min, x_max, y_max = grid.extent
+    if outside == "constant":
+        value = rng.random(channels)
+        value[0] = np.nan
+        mip = mipmap(raster, grid, outside="constant", value=value)
+    else:
+        mip = mipmap(raster, grid, outside="periodic", period=(x_max - x_min, 0.9 * (y_max - y_min)))
+    n = 3000
+    x = rng.uniform(x_min - 1.0, x_max + 1.0, n)
+    y = rng.uniform(y_min - 1.0, y_max + 1.0, n)
+    x[:40] = rng.uniform(-4e5, 4e5, 40)
+    scale = np.exp(rng.uniform(np.log(0.001), np.log(50.0), n))
+    jac = rng.normal(0.0, 1.0, (n, 2, 2)) * scale[:, None, None]
+    jac[40:300, :, 1] *= rng.uniform(5.0, 40.0, (260, 1))
+    jac[300:310] = 0.0
+    fp = footprints(x, y, jac)
+    for bias in (LOD_BIAS, 0.0, 1.3):
+        got = camera._filtered(mip, fp, bias)
+        want = camera._filtered_arrays(mip, fp, bias)
+        assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
+        np.testing.assert_array_equal(got, want)
+    assert np.isnan(camera._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
+
+
+@pytest.mark.parametrize("view", [
+    Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=np.radians(60.0), width=160, height=90),
+    Camera((1.0, 2.0, 30.0), 0.3, -np.pi / 2, 1.0, 60, 40),  # straight down
+    Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 133, 101),  # level: the horizon inside a row
+])
+def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
+    """camera._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
+    and _footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
+    from pipeline import camera
+
+    rows, part = camera._ground_rows(view)
+    got = camera._row_footprints(view, rows, part)
+    want = camera._row_footprints_arrays(view, rows, part)
+    assert len(got) == len(want) == 7 and len(got[0]) == len(rows) * view.width > 0
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype
+        np.testing.assert_array_equal(g, w)
+
+
+def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
+    """pixel_rays (one component at a time, from the row and column offsets) against
+    image_rays on the full grid of pixel centres, which it replaces."""
+    from pipeline.camera import pixel_rays
+
+    for view in (Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=1.0, width=64, height=36),
+                 Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 33, 101)):
+        v, u = np.mgrid[0:view.height, 0:view.width] + 0.5
+        got = pixel_rays(view)
+        assert got.shape == (view.height, view.width, 3) and got.dtype == np.float64
+        np.testing.assert_array_equal(got, image_rays(view, u, v))
+
+
+def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
+    """camera._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
+    replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
+    long, and zero, NaN and infinite widths."""
+    from pipeline import camera
+
+    rng = np.random.default_rng(5)
+    mip = mipmap(rng.random((30, 27, 3)).astype(np.float32), Grid((0.0, 1.0), 0.005, (30, 27)), value=0.1)
+    n = 200000
+    major = np.exp(rng.uniform(-12.0, 12.0, n)) * 0.005
+    minor = major * rng.uniform(0.0, 1.2, n)
+    major[:100], minor[100:200], minor[200:300] = 0.0, 0.0, np.inf
+    major[300:400], minor[400:500], major[500:600] = np.nan, np.nan, np.inf
+    for bias in (LOD_BIAS, 0.0, 0.7):
+        got = camera._filter_choice(mip, bias, major, minor)
+        want = camera._filter_choice_arrays(mip, bias, major.copy(), minor.copy())
+        for g, w in zip(got, want):
+            assert g.dtype == w.dtype
+            np.testing.assert_array_equal(g, w)
+
+
+def test_ground_view_reads_the_albedo_once_per_view():
+    """The albedo seen by a camera depends on the view alone: a second frame of the same
+    camera and albedo gives the same radiance without sampling the albedo again; another
+    camera samples it anew."""
+    from pipeline import camera as cam
+
+    rng = np.random.default_rng(12)
+    grid = Grid((-2.0, 6.0), 0.05, (160, 80))
+    tile = mipmap(rng.random((40, 40, 3)).astype(np.float32), Grid((0.0, 2.0), 0.05, (40, 40)),
+                  outside="periodic", period=(2.0, 2.0))
+
+    class Counting:
+        calls = 0
+
+        def sample(self, fp, *, lod_bias):
+            Counting.calls += 1
+            return cam._filtered(tile, fp, lod_bias)
+
+    albedo = Counting()
+    view = Camera.look_at((0.0, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
+    light = [mipmap(rng.random((160, 80, 3)).astype(np.float32) + f, grid, value=np.full(3, 1.0 + f))
+             for f in (0.0, 1.0)]
+    first = ground_view(view, irradiance=light[0], albedo=albedo)[0]
+    second = ground_view(view, irradiance=light[1], albedo=albedo)[0]
+    assert Counting.calls == 1
+    np.testing.assert_array_equal(first, ground_view(view, irradiance=light[0], albedo=tile)[0])
+    np.testing.assert_array_equal(second, ground_view(view, irradiance=light[1], albedo=tile)[0])
+    assert not np.array_equal(first, second)
+    other = Camera.look_at((0.5, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
+    ground_view(other, irradiance=light[0], albedo=albedo)
+    assert Counting.calls == 2
+
+
 def test_footprints_serve_several_rasters():
     rng = np.random.default_rng(9)
     grid = Grid((0.0, 1.6), 0.05, (32, 32))

@@ -60,3 +60,21 @@ def test_bad_video_format_or_no_frames_writes_nothing(tmp_path):
     with pytest.raises(io.ImageError, match="no frames"):
         io.write_video(tmp_path / "v.mp4", [], fps=24)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_png_holds_the_dithered_codes_and_is_deterministic(tmp_path):
+    """write_png (cached dither, in-place arithmetic, zlib level 2 on "sub"-filtered rows)
+    decodes to exactly the codes of the dither written out in full as it was first made:
+    floor(clip(p, 0, 1) 255 + 0.5 + (u0 - u1) / 2), u0 and u1 uniform of seeds 0 and 1."""
+    rng = np.random.default_rng(4)
+    pixels = rng.uniform(-0.2, 1.2, (37, 53, 3)).astype(np.float32)
+    pixels[:5] = np.linspace(0.0, 1.0, 53, dtype=np.float32)[None, :, None]  # a smooth ramp
+    noise = np.random.default_rng(0).random(pixels.shape, dtype=np.float32)
+    noise -= np.random.default_rng(1).random(pixels.shape, dtype=np.float32)
+    want = np.clip(np.floor(np.clip(pixels, 0.0, 1.0) * 255.0 + 0.5 + 0.5 * noise), 0, 255).astype(np.uint8)
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    io.write_png(a, pixels)
+    io.write_png(b, pixels.copy())
+    np.testing.assert_array_equal(imageio.imread(a), want)
+    assert a.read_bytes() == b.read_bytes()
+    np.testing.assert_array_equal(pixels[5:], pixels[5:].copy())  # input not changed

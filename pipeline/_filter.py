@@ -1,0 +1,432 @@
+"""Compiled loops of the camera's anisotropic filtering (``camera._filtered``) and of the
+stochastic tiling of the ground albedo (``albedo.StochasticTiling.sample``).
+
+The method is the one documented in ``camera.sample_footprint`` and ``albedo``: these loops do
+it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
+and the same order of operations as the array version (``camera._tap_mean``, ``_bilinear``), so
+that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
+The tap counts, levels and blends come from ``camera._filter_choice`` (``filter_choice``), computed once
+for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to import.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _first_texel(channels, offset, rows, cols, periodic, col, row):
+    """``camera._first_texel`` of one point: the flat index of channel 0 of the first of the four
+    texels of a bilinear sample at texel coordinates (col, row), and the fractions (fc, fr)
+    float32 beyond it."""
+    if not periodic:
+        col = min(max(col, -1.0), float(cols))
+        row = min(max(row, -1.0), float(rows))
+    c0f, r0f = np.floor(col), np.floor(row)
+    fc = np.float32(col - c0f)
+    fr = np.float32(row - r0f)
+    c0, r0 = int(c0f), int(r0f)
+    if periodic:  # a mask for a power of two, as camera._wrap: no division
+        c0 = c0 & (cols - 1) if cols & (cols - 1) == 0 else c0 % cols
+        r0 = r0 & (rows - 1) if rows & (rows - 1) == 0 else r0 % rows
+    return ((r0 * (cols + 2) + c0) + offset + cols + 3) * channels, fc, fr
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _bilinear(flat, first, channels, step, k, fc, fr):
+    """Channel ``k`` of the bilinear sample whose first texel is ``first`` (``_first_texel``),
+    ``step`` the flat stride of a stored row: ``camera._bilinear``'s float32 arithmetic, each
+    corner read as ``flat[o:].take(first, mode="clip")``."""
+    size = flat.shape[0]
+    if first >= 0 and first + step + 2 * channels <= size:  # always, but for NaN coordinates
+        a = flat[first + k]
+        b = flat[first + channels + k]
+        c = flat[first + step + k]
+        d = flat[first + step + channels + k]
+    else:
+        o = k
+        a = flat[o + min(max(first, 0), size - o - 1)]
+        o = channels + k
+        b = flat[o + min(max(first, 0), size - o - 1)]
+        o = step + k
+        c = flat[o + min(max(first, 0), size - o - 1)]
+        o = step + channels + k
+        d = flat[o + min(max(first, 0), size - o - 1)]
+    b -= a
+    b *= fc
+    a += b
+    d -= c
+    d *= fc
+    c += d
+    c -= a
+    c *= fr
+    a += c
+    return a
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _coords(x0, y0, px, py, sx, sy, dx, dy):
+    """``camera._texel_coords`` of one point and step."""
+    col = (sx - x0) * (1.0 / px) - 0.5
+    row = (y0 - sy) * (1.0 / py) - 0.5
+    dcol = dx * (1.0 / px)
+    drow = dy * (-1.0 / py)
+    lim, dlim = 2.0**52, 2.0**48
+    col = min(max(col, -lim), lim)
+    row = min(max(row, -lim), lim)
+    dcol = min(max(dcol, -dlim), dlim)
+    drow = min(max(drow, -dlim), dlim)
+    return col, row, dcol, drow
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
+             level, blend, out):
+    """``camera._filtered``: each read's mean into ``out`` (channels, m) float32.
+
+    Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint
+    j = footprint[r] (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples (``camera._tap_mean``, the same float32 arithmetic
+    in the same order), in level level[j] blended by blend[j] towards the next when > 0. The
+    body is written out in full for three channels (a helper function that returns the three
+    means, even inlined, ran three times slower) and channel by channel otherwise."""
+    for r in range(x.shape[0]):
+        j = footprint[r]
+        lv, t, n = int(level[j]), blend[j], int(taps[j])
+        blended = t > 0
+        spacing = major[j] / n
+        first = (0.5 - 0.5 * n) * spacing
+        sx, sy, dx, dy = x[r] + first * ex[j], y[r] + first * ey[j], spacing * ex[j], spacing * ey[j]
+        col0, row0, dcol, drow = _coords(origins[lv, 0], origins[lv, 1], pixels[lv, 0], pixels[lv, 1],
+                                         sx, sy, dx, dy)
+        rows, cols, off = shapes[lv, 0], shapes[lv, 1], offsets[lv]
+        colb0, rowb0, dcolb, drowb = col0, row0, dcol, drow
+        rowsb, colsb, offb = rows, cols, off
+        if blended:
+            colb0, rowb0, dcolb, drowb = _coords(origins[lv + 1, 0], origins[lv + 1, 1], pixels[lv + 1, 0],
+                                                 pixels[lv + 1, 1], sx, sy, dx, dy)
+            rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
+        step, stepb = (cols + 2) * channels, (colsb + 2) * channels
+        nf = np.float32(n)
+        if channels == 3:
+            col, row, colb, rowb = col0, row0, colb0, rowb0
+            t0 = t1 = t2 = np.float32(0.0)
+            for i in range(n):
+                f, fc, fr = _first_texel(3, off, rows, cols, periodic, col, row)
+                s0 = _bilinear(flat, f, 3, step, 0, fc, fr)
+                s1 = _bilinear(flat, f, 3, step, 1, fc, fr)
+                s2 = _bilinear(flat, f, 3, step, 2, fc, fr)
+                col += dcol
+                row += drow
+                if blended:
+                    f, fc, fr = _first_texel(3, offb, rowsb, colsb, periodic, colb, rowb)
+                    u0 = _bilinear(flat, f, 3, stepb, 0, fc, fr)
+                    u1 = _bilinear(flat, f, 3, stepb, 1, fc, fr)
+                    u2 = _bilinear(flat, f, 3, stepb, 2, fc, fr)
+                    colb += dcolb
+                    rowb += drowb
+                    s0 += (u0 - s0) * t
+                    s1 += (u1 - s1) * t
+                    s2 += (u2 - s2) * t
+                if i == 0:
+                    t0, t1, t2 = s0, s1, s2
+                else:
+                    t0 += s0
+                    t1 += s1
+                    t2 += s2
+            out[0, r] = t0 / nf
+            out[1, r] = t1 / nf
+            out[2, r] = t2 / nf
+            continue
+        for k in range(channels):
+            col, row, colb, rowb = col0, row0, colb0, rowb0
+            total = np.float32(0.0)
+            for i in range(n):
+                f, fc, fr = _first_texel(channels, off, rows, cols, periodic, col, row)
+                s = _bilinear(flat, f, channels, step, k, fc, fr)
+                col += dcol
+                row += drow
+                if blended:
+                    f, fc, fr = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
+                    u = _bilinear(flat, f, channels, stepb, k, fc, fr)
+                    colb += dcolb
+                    rowb += drowb
+                    s += (u - s) * t
+                if i == 0:
+                    total = s
+                else:
+                    total += s
+            out[k, r] = total / nf
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _unit_hash(key):
+    """``albedo._unit_hash`` of one uint64 key."""
+    z = key + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return np.float64(z >> np.uint64(11)) / 9007199254740992.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x, read_y, read_pixel,
+          read_weight):
+    """Appends the read of vertex (va, vb) of weight w for footprint j at (x, y) [m] when
+    w >= skip (``albedo.StochasticTiling.offsets``); returns the new count of reads."""
+    if not w >= skip:
+        return count
+    key = (np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))
+    key ^= seed_key
+    read_x[count] = x + _unit_hash(key) * period_x
+    read_y[count] = y + _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * period_y
+    read_pixel[count] = j
+    read_weight[count] = w
+    return count + 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, read_y, read_pixel, read_weight):
+    """The reads of ``albedo.StochasticTiling.sample``: per footprint j the lattice triangle's
+    three vertices and weights (``weights``) raised to the fourth power (BLEND_SHARPNESS, as
+    two squarings) and renormalised, into ``weight`` (3, n) float64, and each read of weight
+    ``skip`` or more, footprint by footprint in vertex order: its point, (x, y) moved by the
+    vertex's offset (``offsets``), into ``read_x``, ``read_y``, its footprint into
+    ``read_pixel`` and its weight into ``read_weight`` (each (3 n,), filled from the start).
+    Returns the count of reads."""
+    root3 = np.sqrt(3.0)
+    seed_key = np.uint64(seed) * np.uint64(0x165667B19E3779F9)
+    count = 0
+    for j in range(x.shape[0]):
+        a = x[j] / cell
+        b = y[j] / cell
+        sa, sb = a - b / root3, 2.0 * b / root3
+        ia, ib = np.floor(sa), np.floor(sb)
+        fa, fb = sa - ia, sb - ib
+        ja, jb = np.int64(ia), np.int64(ib)
+        if fa + fb < 1.0:
+            a0, b0, w0 = ja, jb, 1.0 - fa - fb
+            a1, b1, w1 = ja, jb + 1, fb
+            a2, b2, w2 = ja + 1, jb, fa
+        else:
+            a0, b0, w0 = ja + 1, jb + 1, fa + fb - 1.0
+            a1, b1, w1 = ja + 1, jb, 1.0 - fb
+            a2, b2, w2 = ja, jb + 1, 1.0 - fa
+        w0 *= w0
+        w0 *= w0
+        w1 *= w1
+        w1 *= w1
+        w2 *= w2
+        w2 *= w2
+        total = w0 + w1 + w2
+        w0 /= total
+        w1 /= total
+        w2 /= total
+        weight[0, j], weight[1, j], weight[2, j] = w0, w1, w2
+        count = _read(count, j, w0, a0, b0, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w1, a1, b1, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w2, a2, b2, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+    return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _component(lookups, lv, up, k, g, norm, tb):
+    """Component k mapped back from the Gaussian g through the lookups of levels lv and up,
+    blended by tb (``tiling_lookup``)."""
+    bins = lookups.shape[2]
+    position = min(max((g / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+    low = min(int(np.floor(position)), bins - 2)
+    frac = position - low
+    here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
+    there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
+    return here * (1.0 - tb) + there * tb
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """``tiling_lookup`` for three channels, in scalars."""
+    n = out.shape[1]
+    last = lookups.shape[0] - 1
+    reads = values.shape[1]
+    r = 0
+    for j in range(n):
+        g0 = g1 = g2 = 0.0
+        while r < reads and read_pixel[r] == j:
+            w = read_weight[r]
+            g0 += w * np.float64(values[0, r])
+            g1 += w * np.float64(values[1, r])
+            g2 += w * np.float64(values[2, r])
+            r += 1
+        norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
+        lv = int(level[j])
+        up = min(lv + 1, last)
+        tb = np.float64(blend[j])
+        c0 = _component(lookups, lv, up, 0, g0, norm, tb)
+        c1 = _component(lookups, lv, up, 1, g1, norm, tb)
+        c2 = _component(lookups, lv, up, 2, g2, norm, tb)
+        for m in range(3):
+            value = center[m] + (((0.0 + c0 * basis[m, 0]) + c1 * basis[m, 1]) + c2 * basis[m, 2])
+            out[m, j] = np.float32(value if not value < 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """The rest of ``albedo.StochasticTiling.sample``: the reads' means ``values`` (channels, m)
+    float32, footprint by footprint (``tiling_reads``' order), summed by weight into the
+    footprint's Gaussian g, divided by the root of the sum of its squared weights ``weight``
+    (3, n), mapped back through the inverse lookups of its level and the next, blended by
+    ``blend``, and out of the principal axes: the albedo into ``out`` (channels, n) float32,
+    held at 0 or more."""
+    channels, n = out.shape
+    bins, last = lookups.shape[2], lookups.shape[0] - 1
+    reads = values.shape[1]
+    if channels == 3:
+        _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
+        return
+    g = np.empty(channels, dtype=np.float64)
+    comp = np.empty(channels, dtype=np.float64)
+    r = 0
+    for j in range(n):
+        for k in range(channels):
+            g[k] = 0.0
+        while r < reads and read_pixel[r] == j:
+            for k in range(channels):
+                g[k] += read_weight[r] * np.float64(values[k, r])
+            r += 1
+        norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
+        lv = int(level[j])
+        up = min(lv + 1, last)
+        tb = np.float64(blend[j])
+        for k in range(channels):
+            position = min(max((g[k] / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+            low = min(int(np.floor(position)), bins - 2)
+            frac = position - low
+            here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
+            there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
+            comp[k] = here * (1.0 - tb) + there * tb
+        for m in range(channels):
+            acc = 0.0
+            for i in range(channels):
+                acc += comp[i] * basis[m, i]
+            value = center[m] + acc
+            out[m, j] = np.float32(value if not value < 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _axes(dxdu, dxdv, dydu, dydv):
+    """``camera._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
+    (major, minor, ex, ey)."""
+    a = dxdu * dxdu + dxdv * dxdv
+    b = dxdu * dydu + dxdv * dydv
+    c = dydu * dydu + dydv * dydv
+    bb = b * b
+    half = a - c
+    half *= half
+    half *= 0.25
+    half += bb
+    half = np.sqrt(half)
+    big = a + c
+    big *= 0.5
+    big += half
+    major = np.sqrt(big)
+    minor = dxdu * dydv
+    minor -= dxdv * dydu
+    minor = abs(minor)
+    minor /= major
+    if not major > 0:
+        minor = 0.0
+    big_c = big - c
+    big_a = big - a
+    if big_c * big_c + bb >= bb + big_a * big_a:
+        ex, ey = big_c, b
+    else:
+        ex, ey = b, big_a
+    norm = np.sqrt(ex * ex + ey * ey)
+    if not np.isfinite(norm):
+        norm = np.hypot(ex, ey)
+    if norm <= 1e-12 * max(big, 1e-300):
+        return major, minor, 1.0, 0.0
+    return major, minor, ex / norm, ey / norm
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def row_footprints(rows, part, width, height, focal, position, right, up, forward, min_downward,
+                   x, y, major, minor, ex, ey, distance):
+    """``camera._row_footprints`` (``_row_hits`` and ``_footprint_axes``) pixel by pixel, the
+    same float64 operations in the same order, into (r width,) arrays; ``distance`` float32."""
+    height_m = position[2]
+    fx0, fx1 = right[0] / focal, right[1] / focal
+    fz0 = right[2] / focal
+    gx0, gx1, gz0 = -up[0] / focal, -up[1] / focal, -up[2] / focal
+    i = 0
+    for q in range(rows.shape[0]):
+        p = part[q]
+        v = rows[q] + 1.0 - 0.5 * p
+        down = (0.5 * height - v) / focal
+        for col in range(width):
+            u = col + 0.5
+            across = (u - 0.5 * width) / focal
+            wx = forward[0] + across * right[0] + down * up[0]
+            wy = forward[1] + across * right[1] + down * up[1]
+            w_z = forward[2] + across * right[2] + down * up[2]
+            wz = min(w_z, -min_downward)
+            t = height_m / -wz
+            x[i] = position[0] + t * wx
+            y[i] = position[1] + t * wy
+            slope = fz0 / wz
+            dxdu = t * (fx0 - wx * slope) * 1.0
+            dydu = t * (fx1 - wy * slope) * 1.0
+            slope = gz0 / wz
+            dxdv = t * (gx0 - wx * slope) * p
+            dydv = t * (gx1 - wy * slope) * p
+            major[i], minor[i], ex[i], ey[i] = _axes(dxdu, dxdv, dydu, dydv)
+            distance[i] = np.float32(t * np.sqrt(wx * wx + wy * wy + w_z * w_z))
+            i += 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, blend):
+    """``camera._filter_choice`` footprint by footprint, the same float64 operations: the tap
+    count into ``taps`` (int8), the level into ``level`` (int16) and the blend towards the next
+    into ``blend`` (float32)."""
+    big = np.finfo(np.float64).max
+    top = float(count - 1)
+    for j in range(major.shape[0]):
+        a, b = major[j], minor[j]
+        ratio = a / (b if b >= texel or b != b else texel)  # np.maximum: NaN wins
+        if ratio != ratio:
+            ratio = 1.0
+        elif ratio == np.inf:
+            ratio = float(max_taps)
+        elif ratio == -np.inf:
+            ratio = -big
+        ratio -= 1e-3
+        ratio = np.ceil(ratio)
+        n = min(max(ratio, 1.0), float(max_taps))
+        lod = a / np.float64(np.int8(n))
+        if b != b or lod != lod:
+            lod = np.nan
+        elif b > lod:
+            lod = b
+        lod /= texel
+        lod = np.log2(lod)
+        lod += lod_bias
+        if lod != lod:
+            lod = 0.0
+        lod = min(max(lod, 0.0), top)
+        floor = np.floor(lod)
+        k = np.int16(floor)
+        t = lod - floor
+        if t > 1.0 - 1e-6:
+            k += np.int16(1)
+            t = 0.0
+        elif t < 1e-6:
+            t = 0.0
+        taps[j] = np.int8(n)
+        level[j] = k
+        blend[j] = np.float32(t)
