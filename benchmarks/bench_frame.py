@@ -31,9 +31,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_cycle import CONFIG  # noqa: E402
 from bench_sun import median_seconds, round_trip_seconds  # noqa: E402
 
-from pipeline import cache, camera, canopy, composite, foreground, io, render  # noqa: E402
+from pipeline import cache, camera, canopy, composite, foreground, io  # noqa: E402
+from pipeline.cycle import cycle_phase  # noqa: E402
+from pipeline.frame import foreground_passes, irradiance_maps, render_frame  # noqa: E402
+from pipeline.ground import render_ground  # noqa: E402
+from pipeline.inputs import grove_of, ground_albedo, load_sky  # noqa: E402
+from pipeline.lighting import reference_lighting  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.resolve import load  # noqa: E402
 from pipeline.run import frame_attributes  # noqa: E402
-from pipeline.config import load_config  # noqa: E402
 
 
 def bilinear_baseline(view: camera.Camera, repeats=3) -> float:
@@ -65,23 +71,23 @@ def main() -> None:
         config_dict["animation"] = {"frames": args.frames}
         path = work / "grove.yaml"
         path.write_text(yaml.safe_dump(config_dict))
-        config = load_config(args.config or path)
-        plan = render.plan_run(config)
+        config = load(args.config or path)
+        plan = plan_run(config)
         store = cache.Cache(Path(args.cache) if args.cache and args.config else work / "cache")
-        render.cycle_phase(config, plan, store, jobs=2, workers=1)
-        view = render.camera_of(config, plan)
-        light = render.reference_lighting(config, plan)
+        cycle_phase(plan, store, jobs=2, workers=1)
+        view = plan.camera
+        light = reference_lighting(plan)
         print(f"camera {view.width} x {view.height}; ground raster {plan.sun_window.shape} at "
               f"{plan.sun_window.pixel} m, coarse {plan.window.shape} at {plan.window.pixel} m")
 
-        skies = [render.load_sky(config.sky, render.scene_at(config, f)) for f in range(args.frames)]
-        grounds = [render.render_ground(config, frame=f, store=store, plan=plan, workers=args.threads,
-                                        sky=skies[f], outer=True) for f in range(args.frames)]
-        albedo = render.ground_albedo(config.ground)  # as render_frame reads it
+        skies = [load_sky(config.sky, plan.scenes[f]) for f in range(args.frames)]
+        grounds = [render_ground(plan, f, store=store, workers=args.threads, sky=skies[f], outer=True)
+                   for f in range(args.frames)]
+        albedo = ground_albedo(config.ground)  # as render_frame reads it
         backgrounds = {}
 
         def resample(i):
-            backgrounds[i] = camera.background(view, irradiance=render.irradiance_maps(config, grounds[i]),
+            backgrounds[i] = camera.background(view, irradiance=irradiance_maps(plan, grounds[i]),
                                                albedo=albedo, sky=skies[i])
 
         frames = {}
@@ -93,16 +99,17 @@ def main() -> None:
             t, sky_haze, atmosphere = composite.aerial_perspective(
                 distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
                 sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-            passes = render.foreground_passes(config, plan, i, store, light)
+            passes = foreground_passes(plan, i, store, light)
             if passes is None:  # no trees in front (as render_frame)
                 empty = np.zeros_like(background)
-                passes = (empty, empty, empty[..., 0])
-            sun, sky, alpha = passes
-            frames[i] = composite.composite_frame(t[..., None] * background + sky_haze, sun_pass=sun,
-                                                  sky_pass=sky, alpha=alpha, sun_fraction=0.7,
-                                                  atmosphere=atmosphere)
+                passes = (empty, empty, empty[..., 0], (slice(None), slice(None)))
+            sun, sky, alpha, region = passes
+            behind = t[..., None] * background + sky_haze
+            frames[i] = behind + np.float32(0.0)
+            frames[i][region] = composite.composite_frame(behind[region], sun_pass=sun, sky_pass=sky, alpha=alpha,
+                                                          sun_fraction=0.7, atmosphere=atmosphere[region])
 
-        result = render.render_frame(config, frame=0, store=store, plan=plan, workers=args.threads)
+        result = render_frame(plan, 0, store=store, workers=args.threads)
 
         def write(i):
             io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()), half=True)
@@ -112,13 +119,12 @@ def main() -> None:
             np.save(work / f"raw.{i}.npy", frames[i])
 
         def ground(i):
-            render.render_ground(config, frame=i, store=store, plan=plan, workers=args.threads, sky=skies[i],
-                                 outer=True)
+            render_ground(plan, i, store=store, workers=args.threads, sky=skies[i], outer=True)
 
         def whole(i):
-            render.render_frame(config, frame=i, store=store, plan=plan, workers=args.threads)
+            render_frame(plan, i, store=store, workers=args.threads)
 
-        grove, flutter = render._grove(config.canopy)
+        grove, flutter = grove_of(config.canopy)
 
         def passes(i):
             leaves = canopy.leaves_at(grove, flutter, i)

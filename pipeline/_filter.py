@@ -11,7 +11,6 @@ for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to 
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
@@ -114,17 +113,11 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
             col, row, colb, rowb = col0, row0, colb0, rowb0
             t0 = t1 = t2 = np.float32(0.0)
             for i in range(n):
-                f, fc, fr = _first_texel(3, off, rows, cols, periodic, col, row)
-                s0 = _bilinear(flat, f, 3, step, 0, fc, fr)
-                s1 = _bilinear(flat, f, 3, step, 1, fc, fr)
-                s2 = _bilinear(flat, f, 3, step, 2, fc, fr)
+                s0, s1, s2 = _bilinear3(flat, off, rows, cols, periodic, col, row, step)
                 col += dcol
                 row += drow
                 if blended:
-                    f, fc, fr = _first_texel(3, offb, rowsb, colsb, periodic, colb, rowb)
-                    u0 = _bilinear(flat, f, 3, stepb, 0, fc, fr)
-                    u1 = _bilinear(flat, f, 3, stepb, 1, fc, fr)
-                    u2 = _bilinear(flat, f, 3, stepb, 2, fc, fr)
+                    u0, u1, u2 = _bilinear3(flat, offb, rowsb, colsb, periodic, colb, rowb, stepb)
                     colb += dcolb
                     rowb += drowb
                     s0 += (u0 - s0) * t
@@ -318,6 +311,14 @@ def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _bilinear3(flat, off, rows, cols, periodic, col, row, step):
+    """The three channels of the bilinear sample at (col, row) of the level at ``off``."""
+    f, fc, fr = _first_texel(3, off, rows, cols, periodic, col, row)
+    return (_bilinear(flat, f, 3, step, 0, fc, fr), _bilinear(flat, f, 3, step, 1, fc, fr),
+            _bilinear(flat, f, 3, step, 2, fc, fr))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _axes(dxdu, dxdv, dydu, dydv):
     """``camera._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
     (major, minor, ex, ey)."""
@@ -352,6 +353,16 @@ def _axes(dxdu, dxdv, dydu, dydv):
     if norm <= 1e-12 * max(big, 1e-300):
         return major, minor, 1.0, 0.0
     return major, minor, ex / norm, ey / norm
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def footprint_axes(dxdu, dxdv, dydu, dydv):
+    """``_axes`` of every Jacobian (each (n,) float64): (major, minor, ex, ey), each (n,)."""
+    n = dxdu.shape[0]
+    out = np.empty((4, n))
+    for i in range(n):
+        out[0, i], out[1, i], out[2, i], out[3, i] = _axes(dxdu[i], dxdv[i], dydu[i], dydv[i])
+    return out[0], out[1], out[2], out[3]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

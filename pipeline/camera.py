@@ -10,6 +10,10 @@ Below the rays, the perspective view of the ground and the sky (the background o
 ``mipmap``, ``footprints`` and ``sample_footprint(s)`` (anisotropic, area-averaged reading of
 ground rasters), ``ground_hits`` and ``ground_view`` (the Lambertian ground, its anti-aliased
 horizon and distances), ``sky_view`` and ``background``.
+
+Why one module: the camera's rays, its ground footprints and the filtered reads of the
+ground, albedo and sky share the footprint and mip-map conventions; the compiled loops are in
+``_filter.py``.
 """
 
 from __future__ import annotations
@@ -586,42 +590,11 @@ def _texel_coords(mip: MipMap, level: int, x, y, dx, dy):
 def _footprint_axes(dxdu, dxdv, dydu, dydv):
     """Box widths (major, minor) [m] and the major axis's unit vector (ex, ey) [1], each (n,)
     float64, of the ellipse with the second moments of the parallelogram spanned by the columns
-    (dxdu, dydu) and (dxdv, dydv) [m per pixel] (each (n,)) of the footprint's Jacobian."""
-    a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
-    b = dxdu * dydu + dxdv * dydv
-    c = dydu * dydu + dydv * dydv
-    bb = b * b
-    half = a - c
-    half *= half
-    half *= 0.25
-    half += bb
-    np.sqrt(half, out=half)
-    big = a + c  # the larger eigenvalue
-    big *= 0.5
-    big += half
-    major = np.sqrt(big)
-    minor = dxdu * dydv
-    minor -= dxdv * dydu
-    np.abs(minor, out=minor)  # the area
-    with np.errstate(divide="ignore", invalid="ignore"):
-        minor /= major
-    minor[~(major > 0)] = 0.0
-    # eigenvector of the larger eigenvalue: the better conditioned of (big - c, b), (b, big - a)
-    big_c = np.subtract(big, c, out=c)
-    big_a = np.subtract(big, a, out=a)
-    first = big_c * big_c + bb >= bb + big_a * big_a
-    ex, ey = np.where(first, big_c, b), np.where(first, b, big_a)
-    norm = np.sqrt(ex * ex + ey * ey)
-    overflow = ~np.isfinite(norm)
-    if overflow.any():
-        norm[overflow] = np.hypot(ex[overflow], ey[overflow])
-    round_ = norm <= 1e-12 * np.maximum(big, 1e-300)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ex /= norm
-        ey /= norm
-    ex[round_] = 1.0
-    ey[round_] = 0.0
-    return major, minor, ex, ey
+    (dxdu, dydu) and (dxdv, dydv) [m per pixel] (each (n,)) of the footprint's Jacobian: J J^T =
+    [[a, b], [b, c]], its larger eigenvalue and eigenvector (``_filter.footprint_axes``)."""
+    from . import _filter
+
+    return _filter.footprint_axes(*(np.ascontiguousarray(v, dtype=np.float64) for v in (dxdu, dxdv, dydu, dydv)))
 
 
 def _bilinear(mip: MipMap, level: int, col, row) -> np.ndarray:

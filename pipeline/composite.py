@@ -101,6 +101,21 @@ def henyey_greenstein(cos_scattering_angle, asymmetry):
     return c.dtype.type((1.0 - g * g) / (4.0 * np.pi)) / d
 
 
+def haze_transmittance(distance: np.ndarray, length: float) -> np.ndarray:
+    """exp(-d / length) (rows, cols) float32 of a homogeneous haze of extinction length
+    ``length`` [m] over the distances ``d`` [m] (inf where the sky is seen: 1, the sky model
+    holds its own haze). [1]"""
+    return _transmittance(distance, length).astype(np.float32)
+
+
+def _transmittance(distance, length: float) -> np.ndarray:
+    """``haze_transmittance`` in float64."""
+    distance = np.asarray(distance, dtype=np.float64)
+    ground = np.isfinite(distance)
+    depth = np.where(ground, distance, 0.0) / length if length > 0 else np.zeros_like(distance)
+    return np.where(ground, np.exp(-depth), 1.0)
+
+
 def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float, sun_direction,
                        sun_irradiance, sky_irradiance, albedo: float = 0.9, g: float = 0.6):
     """A homogeneous haze between the camera and the ground (single scattering, no shadows).
@@ -117,10 +132,7 @@ def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float,
     haze is the paper's atmosphere, added times S. Sky light is taken as scattered evenly:
     radiance albedo E_sky / (2 pi) per unit of optical depth.
     """
-    distance = np.asarray(distance, dtype=np.float64)
-    ground = np.isfinite(distance)
-    depth = np.where(ground, distance, 0.0) / length if length > 0 else np.zeros_like(distance)
-    transmittance = np.where(ground, np.exp(-depth), 1.0)
+    transmittance = _transmittance(distance, length)
     veil = (1.0 - transmittance)[..., None]
     phase = henyey_greenstein(np.asarray(view, dtype=np.float64) @ np.asarray(sun_direction), g)
     sun_haze = veil * (albedo * phase)[..., None] * np.asarray(sun_irradiance)

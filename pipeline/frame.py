@@ -104,11 +104,7 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
-        rays = camera.pixel_rays(view)
-        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-        transmittance = composite.aerial_perspective(
-            distance, rays, length=config.sky.haze, sun_direction=np.array([0.0, 0.0, 1.0]),
-            sun_irradiance=np.zeros(3), sky_irradiance=np.zeros(3))[0][..., None]
+        transmittance = composite.haze_transmittance(distance, config.sky.haze)[..., None]
         background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
     passes = foreground_passes(plan, frame % config.canopy.cycle, store, light)
     if passes is not None and config.foreground.model == "trees" and sky_scale > 0:

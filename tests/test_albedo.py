@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pipeline import camera
+from pipeline import albedo, camera
 from pipeline.albedo import grass_albedo, stochastic_tiling
 
 
@@ -103,8 +103,6 @@ def test_compiled_tiling_matches_the_array_version(monkeypatch):
     """StochasticTiling.sample (compiled, one pass) against sample_arrays (the former numpy
     code, kept as the reference), every read taken and with reads under SKIP_WEIGHT left out
     alike: the same albedo within float32 rounding."""
-    from pipeline import albedo
-
     _, tiling = _tiled(size_px=128, period=2.0)
     fp = _view_footprints()
     for skip in (0.0, albedo.SKIP_WEIGHT):
@@ -119,8 +117,6 @@ def test_skipping_light_reads_changes_the_albedo_by_little():
     """Reads of sharpened weight under SKIP_WEIGHT are left out: about two reads a pixel
     instead of three, and the albedo moves by under 4 % of its mean anywhere (measured 2.9 %)
     and by 0.1 % RMS (measured 0.06 %)."""
-    from pipeline import albedo
-
     _, tiling = _tiled(size_px=128, period=2.0)
     fp = _view_footprints()
     _, w = tiling.weights(fp.x, fp.y)

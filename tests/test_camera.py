@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from pipeline import camera
 from pipeline.camera import (LOD_BIAS, MAX_TAPS, Camera, background, footprints, ground_hits, ground_view,
-                             image_rays, mipmap, project_points, sample_footprint, sample_footprints,
-                             sky_view)
+                             image_rays, mipmap, pixel_rays, project_points, sample_footprint,
+                             sample_footprints, sky_view)
 from pipeline.geometry import Grid
 from pipeline.sky import EquirectSky, ProceduralSky, SunDisc, UniformSky
 
@@ -263,8 +264,6 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     grouped by level), the reference it replaces: the same float32 arithmetic in the same order
     gives the same bits, for every level, blend and tap count, far points, degenerate
     footprints and a NaN outside value (the finer rasters of a chain)."""
-    from pipeline import camera
-
     rng = np.random.default_rng(21)
     raster = rng.random(shape + (channels,)).astype(np.float32)
     grid = Grid((-1.3, 0.9), 0.05, shape)
@@ -300,8 +299,6 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
 def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
     """camera._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
     and _footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
-    from pipeline import camera
-
     rows, part = camera._ground_rows(view)
     got = camera._row_footprints(view, rows, part)
     want = camera._row_footprints_arrays(view, rows, part)
@@ -314,8 +311,6 @@ def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
 def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
     """pixel_rays (one component at a time, from the row and column offsets) against
     image_rays on the full grid of pixel centres, which it replaces."""
-    from pipeline.camera import pixel_rays
-
     for view in (Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=1.0, width=64, height=36),
                  Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 33, 101)):
         v, u = np.mgrid[0:view.height, 0:view.width] + 0.5
@@ -328,8 +323,6 @@ def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
     """camera._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
     replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
     long, and zero, NaN and infinite widths."""
-    from pipeline import camera
-
     rng = np.random.default_rng(5)
     mip = mipmap(rng.random((30, 27, 3)).astype(np.float32), Grid((0.0, 1.0), 0.005, (30, 27)), value=0.1)
     n = 200000
@@ -349,8 +342,6 @@ def test_ground_view_reads_the_albedo_once_per_view():
     """The albedo seen by a camera depends on the view alone: a second frame of the same
     camera and albedo gives the same radiance without sampling the albedo again; another
     camera samples it anew."""
-    from pipeline import camera as cam
-
     rng = np.random.default_rng(12)
     grid = Grid((-2.0, 6.0), 0.05, (160, 80))
     tile = mipmap(rng.random((40, 40, 3)).astype(np.float32), Grid((0.0, 2.0), 0.05, (40, 40)),
@@ -361,7 +352,7 @@ def test_ground_view_reads_the_albedo_once_per_view():
 
         def sample(self, fp, *, lod_bias):
             Counting.calls += 1
-            return cam._filtered(tile, fp, lod_bias)
+            return camera._filtered(tile, fp, lod_bias)
 
     albedo = Counting()
     view = Camera.look_at((0.0, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
@@ -572,3 +563,56 @@ def test_procedural_sky_matches_its_model():
     # a view down to the horizon stays finite
     low = Camera((0.0, 0.0, 1.7), yaw, np.radians(-5), np.radians(40), 31, 21)
     assert np.all(np.isfinite(sky_view(low, sky)))
+
+
+def reference_footprint_axes(dxdu, dxdv, dydu, dydv):
+    """The numpy arithmetic that camera._footprint_axes compiles (its former body)."""
+    a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
+    b = dxdu * dydu + dxdv * dydv
+    c = dydu * dydu + dydv * dydv
+    bb = b * b
+    half = a - c
+    half *= half
+    half *= 0.25
+    half += bb
+    np.sqrt(half, out=half)
+    big = a + c  # the larger eigenvalue
+    big *= 0.5
+    big += half
+    major = np.sqrt(big)
+    minor = dxdu * dydv
+    minor -= dxdv * dydu
+    np.abs(minor, out=minor)  # the area
+    with np.errstate(divide="ignore", invalid="ignore"):
+        minor /= major
+    minor[~(major > 0)] = 0.0
+    big_c = np.subtract(big, c, out=c)
+    big_a = np.subtract(big, a, out=a)
+    first = big_c * big_c + bb >= bb + big_a * big_a
+    ex, ey = np.where(first, big_c, b), np.where(first, b, big_a)
+    norm = np.sqrt(ex * ex + ey * ey)
+    overflow = ~np.isfinite(norm)
+    if overflow.any():
+        norm[overflow] = np.hypot(ex[overflow], ey[overflow])
+    round_ = norm <= 1e-12 * np.maximum(big, 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ex /= norm
+        ey /= norm
+    ex[round_] = 1.0
+    ey[round_] = 0.0
+    return major, minor, ex, ey
+
+
+def test_footprint_axes_are_the_numpy_arithmetic_bit_for_bit():
+    """The compiled footprint ellipse against its numpy reference on random Jacobians, round
+    footprints, zero ones and ones whose moments overflow: the same bits."""
+    rng = np.random.default_rng(11)
+    entries = rng.normal(size=(4, 20000)) * np.exp(rng.uniform(-20, 20, size=(1, 20000)))
+    entries[:, :100] = 0.0  # a point
+    entries[:, 100:200] = [[1.0], [0.0], [0.0], [1.0]]  # round
+    entries[:, 200:300] *= 1e160  # moments overflow
+    got = camera._footprint_axes(*entries)
+    with np.errstate(all="ignore"):
+        want = reference_footprint_axes(*(e.copy() for e in entries))
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)

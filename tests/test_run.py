@@ -17,7 +17,7 @@ import yaml
 
 from pipeline import io
 from pipeline.cache import CacheWarning
-from pipeline.cli import _size, main
+from pipeline.cli import main
 from pipeline.errors import RunError
 from pipeline.plan import plan_run
 from pipeline.resolve import load
