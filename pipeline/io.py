@@ -108,7 +108,7 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
     codes += _half_dither(pixels.shape)
     np.floor(codes, out=codes)
     np.clip(codes, 0, 255, out=codes)
-    data = codes.astype(np.uint8)
+    data = np.ascontiguousarray(codes.astype(np.uint8))  # a transposed view keeps its strides
     rows, cols, channels = data.shape
     spec = oiio.ImageSpec(cols, rows, channels, "uint8")
     # zlib level 2 on rows filtered by "sub" (libpng's PNG_FILTER_SUB): 1280 x 720 frames in

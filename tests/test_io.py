@@ -78,3 +78,13 @@ def test_png_holds_the_dithered_codes_and_is_deterministic(tmp_path):
     np.testing.assert_array_equal(imageio.imread(a), want)
     assert a.read_bytes() == b.read_bytes()
     np.testing.assert_array_equal(pixels[5:], pixels[5:].copy())  # input not changed
+
+
+def test_a_png_of_a_transposed_view_holds_its_pixels(tmp_path):
+    """Pixels given as a view with other strides (a moved axis) are written as they are seen."""
+    rng = np.random.default_rng(3)
+    channels_first = rng.random((3, 20, 30)).astype(np.float32)
+    view = np.moveaxis(channels_first, 0, -1)
+    io.write_png(tmp_path / "view.png", view)
+    io.write_png(tmp_path / "copy.png", np.ascontiguousarray(view))
+    assert (tmp_path / "view.png").read_bytes() == (tmp_path / "copy.png").read_bytes()
