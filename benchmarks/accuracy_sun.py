@@ -33,7 +33,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -44,7 +43,8 @@ from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run, scene_at  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.config import parse_config  # noqa: E402
+from pipeline.resolve import resolve  # noqa: E402
 from reference import (  # noqa: E402
     angle_between,
     image_transmittance,
@@ -101,8 +101,7 @@ def scene(folder):
                    "sun_window": [cx - 0.5, cy - 0.5, cx + 0.5, cy + 0.5]},
         "animation": {"frames": 1},
     }
-    (folder / "leaves.yaml").write_text(yaml.safe_dump(config))
-    return load(folder / "leaves.yaml"), mask
+    return resolve(parse_config(config, folder)), mask
 
 
 def pixel_strata(points, rays, pixel, rng):

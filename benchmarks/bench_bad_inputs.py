@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from test_cli import write_inputs  # noqa: E402
+from scenes import write_inputs  # noqa: E402
 from test_hostile import CASES, PEAK  # noqa: E402
 
 

@@ -19,14 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import scipy.fft as sfft
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import cache  # noqa: E402
 from pipeline.cycle import cycle_params, cycle_phase, layer_masks  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.config import parse_config  # noqa: E402
+from pipeline.resolve import resolve  # noqa: E402
 
 CONFIG = {
     "canopy": {"height": 8.0, "layout": "isolated",
@@ -63,9 +63,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="sunshade-bench-"))
     try:
         CONFIG["canopy"]["flutter"]["cycle"] = args.cycle
-        path = work / "grove.yaml"
-        path.write_text(yaml.safe_dump(CONFIG))
-        plan = plan_run(load(path))
+        plan = plan_run(resolve(parse_config(CONFIG, work)))
         layer = plan.layers[0]
         store = cache.Cache(work / "cache")
         print(f"coarse window {plan.window.shape}, canopy mask {layer.canopy.shape} -> FFT "

@@ -23,7 +23,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -38,7 +37,8 @@ from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import grove_of, ground_albedo, load_sky  # noqa: E402
 from pipeline.lighting import reference_lighting  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.config import parse_config  # noqa: E402
+from pipeline.resolve import load, resolve  # noqa: E402
 from pipeline.run import frame_attributes  # noqa: E402
 
 
@@ -69,9 +69,7 @@ def main() -> None:
         config_dict["sky"] = {**CONFIG["sky"], "clouds": {"cover": 0.4}}
         config_dict["canopy"] = {**CONFIG["canopy"], "flutter": {"cycle": args.frames}}
         config_dict["animation"] = {"frames": args.frames}
-        path = work / "grove.yaml"
-        path.write_text(yaml.safe_dump(config_dict))
-        config = load(args.config or path)
+        config = load(args.config) if args.config else resolve(parse_config(config_dict, work))
         plan = plan_run(config)
         store = cache.Cache(Path(args.cache) if args.cache and args.config else work / "cache")
         cycle_phase(plan, store, jobs=2, workers=1)

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import scipy.fft as sfft
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -32,7 +31,8 @@ from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run, scene_at  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.config import parse_config  # noqa: E402
+from pipeline.resolve import resolve  # noqa: E402
 
 
 def round_trip_seconds(shape, workers, repeats=3) -> float:
@@ -68,9 +68,7 @@ def main() -> None:
                                                          "offset_end": [0.1, 0.0]}}
         config_dict["canopy"] = {**CONFIG["canopy"], "flutter": {"cycle": args.frames}}
         config_dict["animation"] = {"frames": args.frames}
-        path = work / "grove.yaml"
-        path.write_text(yaml.safe_dump(config_dict))
-        config = load(path)
+        config = resolve(parse_config(config_dict, work))
         plan = plan_run(config)
         layer = plan.layers[0]
         store = cache.Cache(work / "cache")

@@ -3,7 +3,7 @@
 Relative luminance from the CIE standard general sky (ISO 15469:2004 / CIE S 011/E:2003, 15 types)
 or from Preetham, Shirley & Smits (1999); chromaticity from Preetham's model. The shapes carry no
 absolute level: ``sky.ProceduralSky`` scales them to the diffuse illuminance of ``daylight``
-(docs/method.md, "Daylight in absolute units"). Angles in radians; directions by the cosine of
+(docs/method.md, "The procedural sky": daylight in absolute units). Angles in radians; directions by the cosine of
 their zenith angle and their angle ``gamma`` from the sun.
 """
 

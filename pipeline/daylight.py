@@ -3,7 +3,7 @@
 The clear-sky irradiance of Ineichen & Perez (2002) from pvlib, turned into illuminance with the
 luminous efficacy model of Perez et al. (1990), and the Linke turbidity climatology of pvlib.
 The sky's angular shape is ``clearsky``'s; ``sky.ProceduralSky`` scales that shape to these
-levels (docs/method.md, "Daylight in absolute units").
+levels (docs/method.md, "The procedural sky": daylight in absolute units).
 
 pvlib is imported inside the functions: its import is slow (measured in docs/accuracy.md), and a
 command that draws no sky (``--help``, a resume with nothing to do) should not pay it.

@@ -13,7 +13,8 @@ CIE_TYPE_RANGE = (1, 15)
 
 DEFAULT_CIE_TYPE = 12
 """The clear sky drawn when a config names no type: CIE type 12, the standard clear sky of low
-illuminance turbidity (docs/accuracy.md, "The clear sky", says how it was chosen)."""
+illuminance turbidity (docs/accuracy.md, "Daylight: the clear sky in absolute units", says how it
+was chosen)."""
 
 TURBIDITY_RANGE = (1.5, 10.0)
 """Linke turbidity factors accepted: the climatology's values lie within (about 1.8 to 7), and

@@ -100,3 +100,19 @@ def test_a_long_module_says_why_at_its_top(name):
     text = (PACKAGE / f"{name}.py").read_text()
     if text.count("\n") > 550:
         assert "Why one module" in (ast.get_docstring(ast.parse(text)) or ""), name
+
+
+def test_the_docs_the_code_cites_exist():
+    """Every 'docs/NAME.md, "Section"' a comment or docstring cites names a heading there."""
+    import re
+
+    docs = PACKAGE.parent / "docs"
+    cited = set()
+    for path in PACKAGE.glob("*.py"):
+        text = " ".join(path.read_text().split())
+        cited |= set(re.findall(r'docs/(\w+\.md), "([^"]+)"', text))
+    assert cited
+    for name, section in sorted(cited):
+        headings = [line.lstrip("#").strip() for line in (docs / name).read_text().splitlines()
+                    if line.startswith("#")]
+        assert any(h.startswith(section) for h in headings), (name, section)

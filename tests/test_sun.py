@@ -14,18 +14,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import yaml
 
 from pipeline import cache, ephemeris, io
 from pipeline.ground import render_ground
 from pipeline.inputs import load_sky
 from pipeline.plan import plan_run, scene_at
-from pipeline.resolve import load
 from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc
 
 from reference import (angle_between, disc_directions, image_transmittance, limb_darkened_profile,
                        monte_carlo_irradiance, monte_carlo_sun, offset_direction, pinhole_irradiance,
                        pinhole_spot_moments, sun_radiance_function, tangent_frame)
+from scenes import config_of
 
 HEIGHT = 8.0
 """Canopy height of every case. [m]"""
@@ -77,9 +76,7 @@ def pinhole_config(folder, mask, *, elevation, azimuth, moon=None, frames=1, hal
                    "pixel": 0.05},
         "animation": {"frames": frames},
     }
-    path = folder / f"{name}-{mask.split('.')[0]}.yaml"
-    path.write_text(yaml.safe_dump(config))
-    return load(path)
+    return config_of(config, folder)
 
 
 def spot(folder, store, **case):
@@ -314,15 +311,13 @@ def test_opaque_canopy_stops_the_sun_and_its_edge_casts_the_penumbra(tmp_path, s
     sx, sy = sun_point(elevation, azimuth)
     edge = float(2.0 - HEIGHT * sx)  # the shadow of x = 2 along the sun's centre
     y0 = float(-HEIGHT * sy)
-    config_path = tmp_path / "square.yaml"
-    config_path.write_text(yaml.safe_dump({
+    config = config_of({
         "canopy": {"mask": "square.png", "size": [4, 4], "center": [0, 0], "height": HEIGHT},
         "sky": {"model": "procedural", "turbidity": 3,
                 "sun": {"elevation": elevation, "azimuth": azimuth}},
         "ground": {"window": [edge - 0.4, y0 - 0.1, edge + 0.4, y0 + 0.1], "pixel": 0.05},
         "animation": {"frames": 1},
-    }))
-    config = load(config_path)
+    }, tmp_path)
     result = render_ground(plan_run(config), store=store)
     grid = result.grid
     row = grid.shape[0] // 2
