@@ -25,6 +25,17 @@ def read_image(path) -> np.ndarray:
     colour is not multiplied by alpha, so a mask is read as the linear numbers it holds.
     Raises ImageError naming the file.
     """
+    return _read(path, "float").astype(np.float32, copy=False)
+
+
+def read_codes(path) -> np.ndarray:
+    """The 8-bit codes of an 8-bit image file (a frame's PNG) as uint8 (rows, cols, channels),
+    without a float round trip. Raises ImageError naming the file."""
+    return _read(path, "uint8")
+
+
+def _read(path, kind: str) -> np.ndarray:
+    """Pixels as stored, in OpenImageIO's ``kind`` (``float``, ``uint8``), (rows, cols, channels)."""
     path = Path(path)
     if not path.is_file():
         raise ImageError(path, "no such file")
@@ -36,13 +47,13 @@ def read_image(path) -> np.ndarray:
             raise ImageError(path, f"cannot read image ({oiio.geterror().strip() or 'unknown format'})")
         try:
             spec = inp.spec()
-            pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+            pixels = inp.read_image(0, 0, 0, spec.nchannels, kind)
             error = inp.geterror()
         finally:
             inp.close()
     if pixels is None or error:
         raise ImageError(path, f"cannot read image ({error.strip() or 'truncated or corrupt'})")
-    pixels = np.asarray(pixels, dtype=np.float32)
+    pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[..., None]
     return pixels

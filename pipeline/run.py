@@ -229,7 +229,7 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
 
     def pictures():
         for frame in range(count):
-            yield io.read_image(frame_files(config, frame)[1])
+            yield io.read_codes(frame_files(config, frame)[1])
             if progress:
                 progress("video", frame + 1, count)
 

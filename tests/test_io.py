@@ -88,3 +88,14 @@ def test_a_png_of_a_transposed_view_holds_its_pixels(tmp_path):
     io.write_png(tmp_path / "view.png", view)
     io.write_png(tmp_path / "copy.png", np.ascontiguousarray(view))
     assert (tmp_path / "view.png").read_bytes() == (tmp_path / "copy.png").read_bytes()
+
+
+def test_a_pngs_codes_read_as_they_are_stored(tmp_path):
+    """read_codes gives the 8-bit codes that read_image gives as fractions of 255."""
+    rng = np.random.default_rng(4)
+    io.write_png(tmp_path / "p.png", rng.random((12, 17, 3)).astype(np.float32))
+    codes = io.read_codes(tmp_path / "p.png")
+    assert codes.dtype == np.uint8 and codes.shape == (12, 17, 3)
+    fractions = io.read_image(tmp_path / "p.png")
+    np.testing.assert_array_equal(codes, np.floor(fractions * 255.0 + 0.5).astype(np.uint8))
+    assert np.abs(codes / 255.0 - fractions).max() < 1e-6
