@@ -28,6 +28,7 @@ def box_pixels(center, half, rows, cols):
             total += int(w) * int(h)
     return total
 
+
 _OPAQUE = np.float32(1.0 - 2.0**-20)
 
 

@@ -339,10 +339,10 @@ def _render_run(config, store, frames, args):
     new = missing_folders(config.output.folder)
     try:
         return render_run(config, frames=frames, store=store,
-                             jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                             cluster_timeout=args.cluster_timeout,
-                             progress=_Progress(sys.stderr),
-                             warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
+                          jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                          cluster_timeout=args.cluster_timeout,
+                          progress=_Progress(sys.stderr),
+                          warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
     except BaseException:
         remove_if_empty(new)
         raise

@@ -40,8 +40,6 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
     return srgb_encode(exposed / (1.0 + exposed))
 
 
-
-
 def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray:
     """Per-channel gains (3,) of a von Kries white balance: the chosen light (``WHITE_BALANCES``)
     comes out grey, its luminance kept. sun_irradiance, sky_irradiance : (3,) horizontal

@@ -39,4 +39,3 @@ def problem(text) -> str | None:
     if len(whole) > PATH_MAX:
         return f"the path is {len(whole)} bytes long; the most is {PATH_MAX}"
     return None
-

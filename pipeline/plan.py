@@ -26,6 +26,7 @@ from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_ma
 from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
 from .vocabulary import PROCEDURAL_MODELS
 
+
 @dataclass(frozen=True)
 class Scene:
     """The sky's state at one output frame.

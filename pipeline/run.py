@@ -163,8 +163,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         video = _video(config, digest, records, read_run_file(folder), progress, timings,
                        force=force or bool(checked.damaged))
         timings["total"] = time.perf_counter() - started
-        write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs, threads=threads,
-                        scheduler=scheduler, rendered=todo)
+        write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
+                       threads=threads, scheduler=scheduler, rendered=todo)
     finally:
         lock.release()
     return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),
@@ -336,5 +336,3 @@ def _reach(scheduler: str) -> None:
     except OSError as exc:
         raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler "
                        f"({exc.strerror or exc})") from None
-
-

@@ -333,8 +333,6 @@ def _flush(accum, pending: list) -> None:
     pending.clear()
 
 
-
-
 # ---------------------------------------------------------------------------------------------
 # Procedural sky: a clear sky at the absolute levels of ``daylight`` (Ineichen & Perez 2002 with
 # the Perez et al. 1990 efficacies) shaped by ``clearsky`` (CIE standard general sky or Preetham
@@ -942,4 +940,3 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
     sun = SunDisc(float(np.arctan2(direction[0], direction[1]) % (2.0 * np.pi)), elevation,
                   angular_radius, tuple(limb_darkening))
     return EquirectSky(image, sky.rotation, sun, energy / direction[2])
-

@@ -100,4 +100,3 @@ def set_key(config, dotted, value):
     else:
         node[keys[-1]] = value
     return config
-

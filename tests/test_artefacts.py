@@ -135,8 +135,6 @@ def test_forest_yaml_has_its_trees_on_the_tiles_around_the_camera(tmp_path):
     """configs/forest.yaml with few leaves and a small image: the trunk of every tree of every
     tile whose foot lies in view within 25 m covers the image where it projects, at 1 m above
     the ground; before, only the trees of the first tile stood."""
-
-
     root = Path(__file__).resolve().parents[1]
     data = yaml.safe_load((root / "configs" / "forest.yaml").read_text())
     data["canopy"]["trees"]["leaves_per_tree"] = 300

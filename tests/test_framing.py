@@ -304,5 +304,3 @@ def test_a_frames_auto_exposure_is_the_same_rendered_alone_or_in_a_run(tmp_path)
         [meter(plan, plan.scenes[f], light) for f in range(24)],
         reference=light.unshadowed, frame_time=1 / 24, time_constant=0.05, limits=(-4.0, 10.0))
     assert whole == pytest.approx(series, rel=1e-6)  # the untruncated lag
-
-

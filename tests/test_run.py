@@ -404,8 +404,6 @@ def test_an_index_that_is_a_folder_stops_the_run_before_any_work(reference, tmp_
 def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(finished, tmp_path):
     """What a frame task (run in a worker process by joblib or Dask) returns: the cache
     warnings it raised, for the command to say, and the items it read, repaired."""
-
-
     config_path, files, run, cache = finished
     config = load(config_path)
     config = replace(config, output=replace(config.output, folder=tmp_path / "out"))
@@ -439,6 +437,7 @@ def test_frames_made_from_an_item_found_damaged_elsewhere_render_again_pruned_do
     assert main(["cache", "clear", "--cache", str(cache)]) == 0
     code, out, err = render_in_process(config, run, cache, capsys)
     assert code == 0 and "0 frames rendered, 8 already done" in out
+
 
 def test_an_unreachable_scheduler_writes_nothing(tmp_path):
     pytest.importorskip("distributed")

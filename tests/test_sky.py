@@ -489,8 +489,6 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
     """What a user sees: the hemisphere integral of the `sunshade sky` image (texels' exact
     projected solid angles, the sun disc deposited in it) is the light `sunshade ground` gives
     ground that no leaf shades, and both are the standard models' daylight."""
-
-
     rng = np.random.default_rng(0)
     io.write_png(tmp_path / "mask.png", np.where(rng.random((40, 40)) < 0.4, 0.0, 1.0).astype(np.float32)[..., None])
     config = {"canopy": {"mask": "mask.png", "size": [4.0, 4.0], "height": 3.0},
