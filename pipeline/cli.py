@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__, paths
+from .cores import CLUSTER_TIMEOUT
 from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
 
 if TYPE_CHECKING:
@@ -124,7 +125,7 @@ def _parser():
                         "the output folder must be on a file system every worker shares)")
     render.add_argument("--cluster-timeout", type=float, default=None, metavar="SECONDS",
                         help="with --scheduler: end the run (resumably) once the cluster has had "
-                        "no scheduler or no workers this long (default: docs/runs.md)")
+                        f"no scheduler or no workers this long (default {CLUSTER_TIMEOUT:g})")
     render.add_argument("--output", default=None, help="output folder (default: output.folder)")
     render.add_argument("--force", action="store_true", help="render the frames and the video "
                         "again even if done")
@@ -694,7 +695,7 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
     for kind in sorted({item.kind for item in left.values()}):
         own = [item for item in left.values() if item.kind == kind]
         lines.append(f"{'(no recorded config)':<24} {_size(sum(i.bytes for i in own)):>10}  "
-                     f"{len(own)} {kind} items")
+                     f"{len(own)} {kind} item{'' if len(own) == 1 else 's'}")
     lines.append(f"{len(items)} items, {_size(sum(i.bytes for i in items))} in {store.root}")
     return lines
 

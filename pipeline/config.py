@@ -671,11 +671,11 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
 
 MAX_FRAMES = 100_000
 """Most output frames of one animation (a run plans and checks every frame before it starts)."""
-FRAME_BYTES_PER_PIXEL = {True: 4.2, False: 7.4}
+FRAME_BYTES_PER_PIXEL = {True: 4.6, False: 7.8}
 """Disk a finished frame takes per pixel, its EXR (half floats: True; float32: False, PIZ) and
-its PNG together: 3.9 MB for a 1280 x 720 frame of configs/eclipse.yaml in half floats (its 240
-frames took 933 MB, docs/accuracy.md); float32 adds 2 bytes a pixel. About: the compression
-follows the picture. [B]"""
+its PNG together: 4.2 MB for a 1280 x 720 frame of configs/eclipse.yaml in half floats (its 240
+frames took 966.6 MiB, docs/accuracy.md); float32 adds about 3.2 bytes a pixel. About: the
+compression follows the picture. [B]"""
 
 
 def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConfig, output: OutputConfig) -> None:

@@ -1,4 +1,5 @@
-"""The cores a run uses: how many frames are rendered at once and with how many FFT threads."""
+"""The machines a run uses: how many frames are rendered at once, with how many FFT threads,
+and how long a lost Dask cluster is waited for."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ import os
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
 frame's rasters."""
+CLUSTER_TIMEOUT = 30.0
+"""How long a run waits for a lost Dask cluster (no scheduler, or no workers) before it ends
+with one line saying how to resume. [s]"""
 
 
 def default_workers() -> int:

@@ -167,19 +167,21 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
 
 def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
     """Record in the cache which items are this config's (``CONFIG_INDEX``/<hash of its path>
-    .json: its name, path and keys, those of earlier versions of it kept), written atomically."""
+    .json: its name, path and keys, those of earlier versions of it (a preview's among them)
+    kept, and the longest cycle among them), written atomically."""
     config = plan.config
     folder = store.root / CONFIG_INDEX
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{hashlib.sha256(str(config.path).encode()).hexdigest()[:16]}.json"
     try:
-        keys = set(json.loads(path.read_text()).get("keys", []))
-    except (OSError, ValueError, AttributeError):
-        keys = set()
+        earlier = json.loads(path.read_text())
+        keys, cycle = set(earlier.get("keys", [])), int(earlier.get("cycle", 0))
+    except (OSError, ValueError, AttributeError, TypeError):
+        keys, cycle = set(), 0
     keys |= set(config_item_keys(plan))
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     temporary.write_text(json.dumps({"name": config.output.name, "config": str(config.path),
-                                     "cycle": config.canopy.cycle, "keys": sorted(keys)}))
+                                     "cycle": max(cycle, config.canopy.cycle), "keys": sorted(keys)}))
     temporary.replace(path)
 
 

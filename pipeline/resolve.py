@@ -106,14 +106,20 @@ def _check_sun(config: Config) -> None:
     for key, when in (("start", site.start), ("end", site.end)):
         sun, _ = ephemeris.sun_and_moon(place, when)
         if sun.elevation < MIN_SUN_ELEVATION:
-            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {math.degrees(sun.elevation):.1f} "
-                              f"degrees above the horizon then; the least is {least:g}")
+            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {_height(sun.elevation)} then; "
+                              f"the procedural sky needs it at least {least:g} degrees high")
     count = min(config.animation.frames, SUN_SPAN_SAMPLES)
     for i in range(count):
         when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
         sun, _ = ephemeris.sun_and_moon(place, when)
         if sun.elevation < MIN_SUN_ELEVATION:
-            raise ConfigError(config.where("sky.time"), f"the sun is {math.degrees(sun.elevation):.1f} "
-                              f"degrees above the horizon at {when.isoformat()}, between time.start and "
-                              f"time.end; the procedural sky needs it at least {least:g} degrees high all "
-                              f"through (a span that crosses the night)")
+            raise ConfigError(config.where("sky.time"), f"the sun is {_height(sun.elevation)} at "
+                              f"{when.isoformat()}, between time.start and time.end; the procedural sky "
+                              f"needs it at least {least:g} degrees high all through (a span that crosses "
+                              f"the night)")
+
+
+def _height(elevation: float) -> str:
+    """'12.3 degrees above the horizon', or below it. [rad]"""
+    side = "above" if elevation >= 0 else "below"
+    return f"{abs(math.degrees(elevation)):.1f} degrees {side} the horizon"

@@ -38,7 +38,7 @@ from .cycle import cycle_phase, record_config_items
 from .frame import render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
-from .cores import jobs_and_threads
+from .cores import CLUSTER_TIMEOUT, jobs_and_threads
 from .plan import RunPlan, check_inputs
 from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, file_stamp, frame_files, make_folder,
                         read_index, read_run_file, remove_temporaries, resolved_config, video_file,
@@ -236,11 +236,6 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
     io.write_video(path, pictures(), fps=config.animation.fps)
     timings["video"] = time.perf_counter() - mark
     return {"file": path.name, "config_hash": digest, "frames": count, "bytes": path.stat().st_size}
-
-
-CLUSTER_TIMEOUT = 30.0
-"""How long a run waits for a lost Dask cluster (no scheduler, or no workers) before it ends
-with one line saying how to resume. [s]"""
 
 
 @contextlib.contextmanager

@@ -206,7 +206,8 @@ def check_folder(folder: Path) -> None:
     while not existing.exists():
         existing = existing.parent
     if not existing.is_dir():
-        raise RunError(f"{folder}: {existing} is a file, not a folder")
+        raise RunError(f"{folder}: is a file, not a folder" if existing == folder
+                       else f"{folder}: {existing} is a file, not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise RunError(f"{folder}: cannot write the output folder ({existing} is not writable)")
 

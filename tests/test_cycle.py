@@ -7,7 +7,8 @@ import numpy as np
 import yaml
 
 from pipeline import cache, io
-from pipeline.cycle import cut_to_trees, cycle_phase, tree_box
+from pipeline.cycle import (config_item_keys, cut_to_trees, cycle_phase, record_config_items, recorded_configs,
+                            tree_box)
 from pipeline.ground import render_ground
 
 from scenes import plan_of, tiny_grove
@@ -81,3 +82,16 @@ def test_passes_cut_to_the_trees_lose_nothing():
         np.testing.assert_array_equal(again, full)
     empty = cut_to_trees({name: np.zeros_like(values) for name, values in passes.items()})
     assert list(empty["box"]) == [0, 0, 0, 0] and empty["alpha"].size == 0
+
+
+def test_a_config_recorded_twice_keeps_its_longest_cycle(tmp_path):
+    """A preview (a shorter flutter cycle) recorded after the full run keeps both runs' items
+    and the full cycle, so that `cache list` says 'cycle frames 3 of 3', not '3 of 1'."""
+    store = cache.Cache(tmp_path / "cache")
+    full = plan_of(tiny_grove(), tmp_path)
+    quick = plan_of(tiny_grove(**{"canopy.flutter": {"cycle": 1}}), tmp_path)
+    record_config_items(full, store)
+    record_config_items(quick, store)
+    (entry,) = recorded_configs(store)
+    assert entry["cycle"] == 3
+    assert entry["keys"] == set(config_item_keys(full)) | set(config_item_keys(quick))
