@@ -4,6 +4,8 @@ and how long a lost Dask cluster is waited for."""
 from __future__ import annotations
 
 import os
+import threading
+import time
 
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
@@ -26,3 +28,31 @@ def jobs_and_threads(jobs: int | None, scheduler: str | None) -> tuple[int, int]
     equal share of the cores, or one thread each on a cluster (``scheduler``)."""
     jobs = jobs or default_workers()
     return jobs, 1 if scheduler else max(1, default_workers() // jobs)
+
+
+def end_if_orphaned(command: int | None) -> None:
+    """End this process (exit code 1) when it is a worker process of ``command`` (a process ID)
+    and that command is gone, killed even by SIGKILL: the worker's parent is then another
+    process, and nothing would record what it renders. Called as each task starts; the first
+    call also leaves a thread that looks once a second (ORPHAN_CHECK), for a worker that waits
+    for tasks that will not come. Nothing happens in the command's own process (``--jobs 1``)
+    or on a cluster (``command`` None)."""
+    global _watched
+    if command is None or os.getpid() == command:
+        return
+    if os.getppid() != command:
+        os._exit(1)
+    if _watched != command:
+        _watched = command
+        threading.Thread(target=_watch, args=(command,), daemon=True, name="sunshade-orphan-check").start()
+
+
+ORPHAN_CHECK = 1.0
+"""How often a worker process looks whether its command is still there. [s]"""
+_watched = None
+
+
+def _watch(command: int) -> None:
+    while os.getppid() == command:
+        time.sleep(ORPHAN_CHECK)
+    os._exit(1)

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import cache, canopy, foreground, shadow
 from .config import FRAME_BYTES_PER_PIXEL
+from .cores import end_if_orphaned
 from .errors import portable
 from .inputs import grove_of, load_mask
 from .plan import RunPlan
@@ -92,12 +93,14 @@ def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.C
 
 
 def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
-                workers: int = 1, progress=None, cycle_frames=None) -> int:
+                workers: int = 1, progress=None, cycle_frames=None, command: int | None = None) -> int:
     """Every cycle product for every cycle frame (each layer's spectra, the foreground passes of
     built-in trees), or for ``cycle_frames`` only: those already stored are checked here, the
     missing ones computed in parallel over cycle frames by joblib processes (each with
     ``workers`` FFT threads; the backend is joblib's current one, Dask included).
-    ``progress(done, total)`` is called as items finish. Returns the number of items computed."""
+    ``progress(done, total)`` is called as items finish; ``command``: the PID whose worker
+    processes end when it is gone (``cores.end_if_orphaned``). Returns the number of items
+    computed."""
     config = plan.config
     frames = range(config.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
     tasks = [(layer, frame) for frame in frames for layer in range(len(config.canopy.layers))]
@@ -111,7 +114,7 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
         return 0
     computed = 0
     results = joblib.Parallel(n_jobs=min(jobs, len(missing)), return_as="generator")(
-        joblib.delayed(_cycle_task)(plan, layer, frame, str(store.root), workers)
+        joblib.delayed(_cycle_task)(plan, layer, frame, str(store.root), workers, command)
         for layer, frame in missing)
     for misses in results:
         computed += misses
@@ -200,7 +203,8 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
 
 
 @portable
-def _cycle_task(plan, layer, frame, root, workers) -> int:
+def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
+    end_if_orphaned(command)
     store = cache.Cache(root)
     if layer is None:
         foreground_item(plan, frame, store)

@@ -21,6 +21,7 @@ import concurrent.futures
 import contextlib
 import json
 import logging
+import os
 import threading
 import time
 import warnings
@@ -38,7 +39,7 @@ from .cycle import cycle_phase, record_config_items
 from .frame import render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
-from .cores import CLUSTER_TIMEOUT, jobs_and_threads
+from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads
 from .plan import RunPlan, check_inputs
 from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, file_stamp, frame_files, make_folder,
                         read_index, read_run_file, remove_temporaries, resolved_config, video_file,
@@ -142,7 +143,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             plan = with_exposures(plan, todo)
             with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
                 mark = time.perf_counter()
-                cycle_phase(plan, store, jobs=jobs, workers=threads,
+                command = None if scheduler else os.getpid()  # whose local workers end with it
+                cycle_phase(plan, store, jobs=jobs, workers=threads, command=command,
                             cycle_frames={f % config.canopy.cycle for f in todo},
                             progress=progress and (lambda done, total: progress("cycle", done, total)))
                 timings["cycle"] = time.perf_counter() - mark
@@ -150,7 +152,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
                 for frame, seconds, entry, caught in _frame_phase(
-                        plan, store, todo, digest, jobs=jobs, threads=threads,
+                        plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
                         progress=progress):
                     for category, text in caught:  # raised in a worker: said here, once
                         warnings.warn(text, category, stacklevel=2)
@@ -171,12 +173,12 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                       video_file(config) if video else None, timings)
 
 
-def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress):
+def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None):
     """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
     frame is written."""
     if progress:
         progress("frames", 0, len(todo))
-    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads)
+    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command)
              for frame in todo)
     results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
@@ -186,10 +188,11 @@ def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress):
 
 
 @portable
-def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int):
+def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text)): a worker's
     warnings are said by the process that runs the command."""
+    end_if_orphaned(command)
     config, timings = plan.config, {}
     store = cache.Cache(root)
     with warnings.catch_warnings(record=True) as caught:

@@ -168,3 +168,39 @@ def test_a_cluster_without_workers_ends_the_run_and_writes_nothing(tmp_path, sho
     assert error_lines(err) == [err.strip().splitlines()[-1]], err
     assert "lost the cluster (no workers for 1 s)" in err and "Traceback" not in err
     assert not (tmp_path / "new").exists()
+
+
+def state(pid: int) -> tuple[str, int] | None:
+    """(state letter, parent PID) of a process from /proc, or None once it is gone."""
+    with contextlib.suppress(OSError):
+        letter, parent = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[:2]
+        return letter, int(parent)
+    return None
+
+
+def children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid``."""
+    return [int(name) for name in os.listdir("/proc") if name.isdigit()
+            and (found := state(int(name))) is not None and found[1] == pid and found[0] != "Z"]
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="reads /proc")
+def test_the_workers_of_a_killed_render_end_with_it(tmp_path):
+    """SIGKILL to the command while its two worker processes render: within a few seconds no
+    process it started is left (before, the workers rendered on and then idled for minutes)."""
+    config = write_config(tmp_path, {**TINY, "animation": {"frames": 400, "fps": 12}})
+    process = sunshade("render", config, "--jobs", "2", "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+    started = time.monotonic()
+    while not list((tmp_path / "run").glob("*.0003.png")) and time.monotonic() - started < 120:
+        time.sleep(0.05)
+    workers = children(process.pid)
+    assert len(workers) >= 2, workers
+    process.kill()
+    process.wait(timeout=30)  # not communicate(): a worker left alive would hold the pipes open
+    process.stdout.close()
+    process.stderr.close()
+    deadline = time.monotonic() + 10.0
+    while (left := [pid for pid in workers if (state(pid) or ("Z",))[0] != "Z"]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert left == []
+    assert len(list((tmp_path / "run").glob("*.png"))) < 400
