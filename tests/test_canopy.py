@@ -431,12 +431,16 @@ def test_compiled_rasteriser_matches_the_array_one_shape_by_shape(seed):
             assert np.abs(rasterize_transmittance(one, grid) - reference_rasterize(one, grid)).max() <= 1e-3
 
 
+def leaves_and_wood(rng, count: int) -> Shapes:
+    """``count`` random leaves over about 5 m and 12 random capsule pieces among them."""
+    leaves = random_leaves(rng, count, low=-0.5, high=4.5, pixel=0.04)
+    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
+    return Shapes(leaves.center, leaves.axis_a, leaves.axis_b, wood.start, wood.end, wood.radius)
+
+
 @pytest.mark.parametrize("period", [None, (2.3, 1.7)])
 def test_compiled_rasteriser_matches_the_array_one_on_many_leaves(period):
-    rng = np.random.default_rng(9)
-    shapes = random_leaves(rng, 4000, low=-0.5, high=4.5, pixel=0.04)
-    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
-    shapes = Shapes(shapes.center, shapes.axis_a, shapes.axis_b, wood.start, wood.end, wood.radius)
+    shapes = leaves_and_wood(np.random.default_rng(9), 4000)
     for grid in (Grid((0.0, 4.0), 0.04, (100, 100)), Grid((-1.13, 5.21), 0.031, (170, 190))):
         new, old = rasterize_transmittance(shapes, grid, period=period), reference_rasterize(shapes, grid, period=period)
         assert new.dtype == np.float32 and new.shape == grid.shape
@@ -473,10 +477,7 @@ def reference_fragments(shapes, grid, *, period=None):
 
 @pytest.mark.parametrize("period", [None, (2.3, 1.7)])
 def test_coverage_fragments_match_the_array_rasteriser(period):
-    rng = np.random.default_rng(12)
-    leaves = random_leaves(rng, 1500, low=-0.5, high=4.5, pixel=0.04)
-    wood = random_shapes(rng, 4, 12, low=0.0, high=4.0, scale=0.5)
-    shapes = Shapes(leaves.center, leaves.axis_a, leaves.axis_b, wood.start, wood.end, wood.radius)
+    shapes = leaves_and_wood(np.random.default_rng(12), 1500)
     grid = Grid((-0.13, 4.21), 0.037, (120, 110))
     pixel, coverage, shape = coverage_fragments(shapes, grid, period=period)
     assert pixel.dtype == np.int64 and coverage.dtype == np.float32 and shape.dtype == np.int64
