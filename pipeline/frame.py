@@ -113,15 +113,14 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
             horizon = camera.horizon_sky(view, sky)[None, passes[3][1]]
             veil = veiled[..., None] * (horizon / np.float32(sky_scale))
             passes = (passes[0] + veil, passes[1] + veil, *passes[2:])
-    if passes is None:
-        empty = np.zeros_like(background)
-        passes = (empty, empty, empty[..., 0], (slice(None), slice(None)))
-    # outside the passes' region the trees add nothing: 0 + B, as composite_frame gives there
+    # outside the passes' region, and everywhere without a foreground, the trees add nothing:
+    # 0 + B, the same bits composite_frame gives with passes of 0
     radiance = np.asarray(background, dtype=np.float32) + np.float32(0.0)
-    region = passes[3]
-    radiance[region] = composite.composite_frame(
-        background[region], sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
-        sun_fraction=sun_fraction, sky_scale=sky_scale)
+    if passes is not None:
+        region = passes[3]
+        radiance[region] = composite.composite_frame(
+            background[region], sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
+            sun_fraction=sun_fraction, sky_scale=sky_scale)
     if plan.exposures is not None and plan.exposures[frame] is not None:
         exposure = plan.exposures[frame]
     elif config.camera.auto_exposure is not None:
