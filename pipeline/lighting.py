@@ -4,7 +4,8 @@ stage: each function takes the RunPlan."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import functools
+from dataclasses import astuple, dataclass, replace
 
 import numpy as np
 
@@ -34,9 +35,21 @@ class Lighting:
         return self.sky_irradiance + self.sun_irradiance * self.sun_direction[2]
 
 
+@functools.lru_cache(maxsize=8)
 def reference_lighting(plan: RunPlan) -> Lighting:
     """The run's Lighting: the clear sky of the config with its sun at the projection
-    direction (the middle frame's), no clouds and no moon."""
+    direction (the middle frame's), no clouds and no moon. Made once per plan (every frame
+    asks for it): its arrays are read-only."""
+    return Lighting(*(None if a is None else _read_only(a) for a in astuple(_reference_lighting(plan))))
+
+
+def _read_only(values) -> np.ndarray:
+    copy = np.array(values)
+    copy.setflags(write=False)
+    return copy
+
+
+def _reference_lighting(plan: RunPlan) -> Lighting:
     config = plan.config
     s = np.append(plan.projection, 1.0)
     direction = s / np.linalg.norm(s)
