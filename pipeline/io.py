@@ -105,9 +105,10 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
     _write_atomic(path, spec, pixels)
 
 
-def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
+def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
     """Write display-referred pixels in [0, 1] (rows, cols, channels) as an 8-bit PNG, with
-    ``attributes`` (str or int) as text chunks.
+    ``attributes`` (str or int) as text chunks. Returns the codes written (rows, cols,
+    channels) uint8: what ``read_codes`` reads back.
 
     A fixed-seed dither of one code value breaks the banding of smooth gradients; the same
     pixels always give the same bytes.
@@ -130,6 +131,7 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> None:
     for name, value in (attributes or {}).items():
         spec.attribute(name, value)
     _write_atomic(path, spec, data)
+    return data
 
 
 PNG_FILTER_SUB = 0x10

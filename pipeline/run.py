@@ -138,6 +138,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         records = {f: (checked.done[f]["record"] if f in checked.done else None)
                    for f in range(config.animation.frames)}
         todo = [f for f in frames if force or records[f] is None]
+        previous, remake_video, stream = read_run_file(folder), force or bool(checked.damaged), None
         timings["check"] = time.perf_counter() - started
         if todo:
             plan = with_exposures(plan, todo)
@@ -151,19 +152,30 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 record_config_items(plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
-                for frame, seconds, entry, caught in _frame_phase(
-                        plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
-                        progress=progress):
-                    for category, text in caught:  # raised in a worker: said here, once
-                        warnings.warn(text, category, stacklevel=2)
-                    index[str(frame)] = entry
-                    write_index(folder, index)
-                    records[frame] = entry["record"]
-                    for stage, value in seconds.items():
-                        stages[stage] = stages.get(stage, 0.0) + value
+                stream = _VideoStream.start(config, digest, records, todo, previous,
+                                            force=remake_video)
+                try:
+                    for frame, seconds, entry, caught, codes in _frame_phase(
+                            plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
+                            progress=progress, codes=stream is not None):
+                        for category, text in caught:  # raised in a worker: said here, once
+                            warnings.warn(text, category, stacklevel=2)
+                        index[str(frame)] = entry
+                        write_index(folder, index)
+                        records[frame] = entry["record"]
+                        for stage, value in seconds.items():
+                            stages[stage] = stages.get(stage, 0.0) + value
+                        if stream:
+                            stream.add(frame, codes)
+                except BaseException:
+                    if stream:
+                        stream.abort()
+                    raise
                 timings["frames"] = time.perf_counter() - mark
-        video = _video(config, digest, records, read_run_file(folder), progress, timings,
-                       force=force or bool(checked.damaged))
+        if stream:
+            video = stream.finish(progress, timings)
+        else:
+            video = _video(config, digest, records, previous, progress, timings, force=remake_video)
         timings["total"] = time.perf_counter() - started
         write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
                        threads=threads, scheduler=scheduler, rendered=todo)
@@ -173,12 +185,12 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                       video_file(config) if video else None, timings)
 
 
-def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None):
+def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):
     """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
     frame is written."""
     if progress:
         progress("frames", 0, len(todo))
-    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command)
+    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command, codes)
              for frame in todo)
     results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
@@ -188,10 +200,12 @@ def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=
 
 
 @portable
-def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None):
+def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None,
+                codes: bool = False):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
-    its index.json entry, the warnings raised meanwhile as (category, text)): a worker's
-    warnings are said by the process that runs the command."""
+    its index.json entry, the warnings raised meanwhile as (category, text), the PNG's 8-bit
+    codes if ``codes`` else None): a worker's warnings are said by the process that runs the
+    command, and the codes go to the video it encodes meanwhile (``_VideoStream``)."""
     end_if_orphaned(command)
     config, timings = plan.config, {}
     store = cache.Cache(root)
@@ -204,13 +218,13 @@ def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int,
     io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half)
     picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display,
                       balance=result.balance)
-    io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
+    written = io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()
     entry = {"config_hash": digest, "files": {"exr": file_stamp(exr), "png": file_stamp(png)},
              "items": dict(store.served), "record": frame_record(config, frame, digest)}
     timings["digest"] = time.perf_counter() - mark
-    return frame, timings, entry, [(w.category, str(w.message)) for w in caught]
+    return frame, timings, entry, [(w.category, str(w.message)) for w in caught], written if codes else None
 
 
 def _video(config: Config, digest: str, records: dict, previous: dict, progress, timings, *,
@@ -221,14 +235,13 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
     path = video_file(config)
     if path is None:
         return None
-    count = config.animation.frames
-    made = previous.get("video") or {}
-    if (not force and made.get("config_hash") == digest and made.get("frames") == count
-            and path.is_file() and path.stat().st_size == made.get("bytes")):
+    made = _current_video(config, digest, previous, force=force)
+    if made is not None:
         return made
     if any(record is None for record in records.values()):
         return None
     mark = time.perf_counter()
+    count = config.animation.frames
 
     def pictures():
         for frame in range(count):
@@ -238,7 +251,95 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
 
     io.write_video(path, pictures(), fps=config.animation.fps)
     timings["video"] = time.perf_counter() - mark
-    return {"file": path.name, "config_hash": digest, "frames": count, "bytes": path.stat().st_size}
+    return _video_entry(config, digest)
+
+
+def _current_video(config: Config, digest: str, previous: dict, *, force) -> dict | None:
+    """The ``previous`` run.json's video entry if the video on disk is of this config (and not
+    ``force``), else None."""
+    path, made = video_file(config), previous.get("video") or {}
+    if (not force and made.get("config_hash") == digest and made.get("frames") == config.animation.frames
+            and path.is_file() and path.stat().st_size == made.get("bytes")):
+        return made
+    return None
+
+
+def _video_entry(config: Config, digest: str) -> dict:
+    """run.json's entry of the video just written."""
+    path = video_file(config)
+    return {"file": path.name, "config_hash": digest, "frames": config.animation.frames,
+            "bytes": path.stat().st_size}
+
+
+class _VideoStream:
+    """The video encoded while the frames are rendered, when this run ends with every frame
+    done (docs/runs.md, "The video"): a thread hands the encoder each frame's codes in order as
+    soon as it and every frame before it are done, those rendered now as their workers return
+    them (``add``), those done before read from their PNGs; the same frames in the same order
+    as ``_video`` reads, so the same bytes. The encoder writes under a temporary name: a run
+    that fails or is killed leaves no video."""
+
+    def __init__(self, config: Config, digest: str, fresh):
+        self.config, self.digest, self.fresh = config, digest, set(fresh)
+        self.arrived, self.fed, self.aborted, self.error = {}, 0, False, None
+        self.ready = threading.Condition()
+        self.thread = threading.Thread(target=self._encode, name="sunshade-video", daemon=True)
+        self.thread.start()
+
+    @classmethod
+    def start(cls, config: Config, digest: str, records: dict, todo, previous: dict, *, force):
+        """A stream if the run makes a video and ends with every frame done, else None."""
+        fresh = set(todo)
+        if (video_file(config) is None or _current_video(config, digest, previous, force=force) is not None
+                or any(records[f] is None and f not in fresh for f in range(config.animation.frames))):
+            return None
+        return cls(config, digest, fresh)
+
+    def add(self, frame: int, codes: np.ndarray) -> None:
+        with self.ready:
+            self.arrived[frame] = codes
+            self.ready.notify()
+
+    def abort(self) -> None:
+        """Stop the encoder and leave no video."""
+        with self.ready:
+            self.aborted = True
+            self.ready.notify()
+        self.thread.join()
+
+    def finish(self, progress, timings) -> dict:
+        """Wait for the encoder (its progress said as ``video``); the video's run.json entry."""
+        mark, count = time.perf_counter(), self.config.animation.frames
+        while self.thread.is_alive():
+            if progress:
+                progress("video", self.fed, count)
+            self.thread.join(0.25)
+        if self.error is not None:
+            raise self.error
+        if progress:
+            progress("video", count, count)
+        timings["video"] = time.perf_counter() - mark
+        return _video_entry(self.config, self.digest)
+
+    def _pictures(self):
+        for frame in range(self.config.animation.frames):
+            if frame in self.fresh:
+                with self.ready:
+                    while frame not in self.arrived and not self.aborted:
+                        self.ready.wait()
+                    if self.aborted:
+                        raise RunError("the video was abandoned with its run")
+                    codes = self.arrived.pop(frame)
+            else:
+                codes = io.read_codes(frame_files(self.config, frame)[1])
+            yield codes
+            self.fed = frame + 1
+
+    def _encode(self) -> None:
+        try:
+            io.write_video(video_file(self.config), self._pictures(), fps=self.config.animation.fps)
+        except BaseException as error:  # said by finish(), in the command's thread
+            self.error = error
 
 
 @contextlib.contextmanager

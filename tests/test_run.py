@@ -108,6 +108,16 @@ def test_jobs_two_gives_the_same_bytes(reference, tmp_path):
     assert_same_files(tmp_path / "run", files)
 
 
+def test_the_video_made_while_rendering_is_the_one_made_from_the_pngs(reference, tmp_path):
+    config, files = reference
+    run, cache = tmp_path / "run", config.parent / "cache"
+    run_to_end("render", config, "--output", run, "--cache", cache)
+    (run / "tiny.mp4").unlink()
+    out = run_to_end("render", config, "--output", run, "--cache", cache)
+    assert "0 frames rendered, 8 already done" in out  # the video alone, from the PNGs
+    assert_same_files(run, files)
+
+
 def test_a_second_run_has_nothing_to_do(reference, capsys):
     config, files = reference
     folder = config.parent / "run"
@@ -156,7 +166,8 @@ KILL_POINTS = [
     ("in the cycle phase", "2", lambda run, cache: cache_items(cache) >= 1),
     ("after two frames", "2", lambda run, cache: pngs(run) >= 2),
     ("after five frames", "1", lambda run, cache: pngs(run) >= 5),
-    ("at the video", "2", lambda run, cache: pngs(run) >= 8 or any(run.glob(".tiny.tmp-*.mp4"))),
+    # the video is encoded as the frames are done: killed with it half written
+    ("at the video", "2", lambda run, cache: pngs(run) >= 6 and any(run.glob(".tiny.tmp-*.mp4"))),
 ]
 
 
@@ -410,7 +421,7 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     (tmp_path / "out").mkdir()
     (item,) = [i for i in items_of_frame(run, 4) if i.startswith("foreground")]
     flip(npy_of(cache, item, "sky.npy"), -17)
-    frame, _, entry, caught = _frame_task(plan_run(config), 4, str(cache), config.digest(), 1)
+    frame, _, entry, caught, codes = _frame_task(plan_run(config), 4, str(cache), config.digest(), 1)
     assert frame == 4 and [category for category, _ in caught] == [CacheWarning]
     assert f"cache item {item[:23]} was damaged (sky.npy: checksum mismatch" in caught[0][1]
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
