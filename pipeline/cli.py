@@ -217,13 +217,14 @@ def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
     return out
 
 
-def _load(args, *, named_frames: bool = True):
-    """The config of ``args.config`` read, validated and resolved: every command's one loader
-    (``named_frames``: see config.load_config)."""
+def _load(args, *, named_frames: bool = True, resolved: bool = True):
+    """The config of ``args.config`` read, validated and (``resolved``) resolved: every
+    command's one loader (``named_frames``: see config.load_config)."""
     from .config import load_config
     from .resolve import resolve
 
-    return resolve(load_config(args.config, named_frames=named_frames))
+    config = load_config(args.config, named_frames=named_frames)
+    return resolve(config) if resolved else config
 
 
 def _check_threads(args) -> None:
@@ -298,6 +299,7 @@ def _run_render(args) -> int:
 
     from .config import preview
     from .cores import MAX_JOBS_PER_CORE, default_workers
+    from .resolve import resolve, source_digest
     from .runfolder import check_outputs, nothing_to_do, parse_frames
 
     if args.jobs is not None and args.jobs < 1:
@@ -305,25 +307,32 @@ def _run_render(args) -> int:
     if args.cluster_timeout is not None and not 0 < args.cluster_timeout < 1e6:
         raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
     store = _store(args.cache)
-    config = _load(args)
+    written = _load(args, resolved=False)  # resolved below, unless a resume has nothing to do
     if args.output is not None:
         folder = _flag_path("--output", args.output).expanduser().absolute()
-        config = replace(config, output=replace(config.output, folder=folder))
+        written = replace(written, output=replace(written.output, folder=folder))
+    config = preview(written) if args.preview else written
     if args.preview:
-        full, config = config, preview(config)
-        print(_preview_line(full, config), flush=True)
+        print(_preview_line(written, config), flush=True)
+
+    def resolved():
+        return preview(resolve(written)) if args.preview else resolve(written)
+
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     if args.verify:
-        return _verify_run(config, store)
+        return _verify_run(resolved(), store)
     jobs, most = args.jobs or config.render.jobs, MAX_JOBS_PER_CORE * default_workers()
     if jobs and jobs > most and args.scheduler is None:
         raise BadInput(f"{'--jobs' if args.jobs else f'{args.config}: render.jobs'} {jobs} would "
                        f"start {jobs} processes on {default_workers()} cores; the most is {most} "
                        f"({MAX_JOBS_PER_CORE} a core)")
     check_outputs(config)
-    summary = None if args.force else nothing_to_do(config, store, frames, jobs=args.jobs, scheduler=args.scheduler)
+    source_hash = source_digest(config)
+    summary = None if args.force else nothing_to_do(config, store, frames, jobs=args.jobs, scheduler=args.scheduler,
+                                                    source_hash=source_hash)
     if summary is None:
-        summary = _render_run(config, store, frames, args)
+        config = resolved()
+        summary = _render_run(config, store, frames, args, source_hash)
     made = f"; video {summary.video}" if summary.video else ""
     count = len(summary.rendered)
     print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "
@@ -331,7 +340,7 @@ def _run_render(args) -> int:
     return 0
 
 
-def _render_run(config, store, frames, args):
+def _render_run(config, store, frames, args, source_hash):
     """``run.render_run`` of the command's frames; the folders it made are removed if it fails
     and leaves them empty."""
     from .run import render_run
@@ -341,7 +350,7 @@ def _render_run(config, store, frames, args):
     try:
         return render_run(config, frames=frames, store=store,
                           jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                          cluster_timeout=args.cluster_timeout,
+                          cluster_timeout=args.cluster_timeout, source_hash=source_hash,
                           progress=_Progress(sys.stderr),
                           warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
     except BaseException:

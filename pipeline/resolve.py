@@ -8,6 +8,7 @@ a resume with nothing to do among them, starts in a fraction of a second.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import replace
 
@@ -33,6 +34,19 @@ def load(path) -> Config:
     """A config file read, validated and resolved (``resolve``): what every command runs.
     Raises ConfigError naming the file and key."""
     return resolve(load_config(path))
+
+
+def source_digest(config: Config) -> str:
+    """Hash of what ``resolve`` makes of a config (16 hex): the config as written and, with
+    ``turbidity: auto``, the version of pvlib whose climatology is looked up. A run records it
+    beside the resolved config's hash, so that a resume with nothing to do knows that hash
+    without resolving (docs/runs.md, "Resume")."""
+    parts = [config.digest()]
+    if config.sky.site is not None and config.sky.turbidity is None:
+        from importlib import metadata
+
+        parts.append(f"pvlib {metadata.version('pvlib')}")
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
 
 
 def resolve(config: Config) -> Config:

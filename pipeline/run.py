@@ -91,7 +91,8 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress=None, warn=None, cluster_timeout: float | None = None) -> RunSummary:
+               progress=None, warn=None, cluster_timeout: float | None = None,
+               source_hash: str | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -99,7 +100,9 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     jobs : processes at once (default ``render.jobs``, else one per core); each gets
         cores // jobs FFT threads (one on a cluster). scheduler : a dask.distributed scheduler
         address (``tcp://host:8786``) to run the tasks on instead. cluster_timeout : how long
-        a lost cluster is waited for (default CLUSTER_TIMEOUT). [s]
+        a lost cluster is waited for (default CLUSTER_TIMEOUT). [s] source_hash : the hash of
+        the config as written (``resolve.source_digest``), recorded in run.json for the next
+        resume (``runfolder.nothing_to_do``).
     progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
         ``video``. warn : called with each one-line warning of the plan
         (``framing.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
@@ -178,7 +181,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             video = _video(config, digest, records, previous, progress, timings, force=remake_video)
         timings["total"] = time.perf_counter() - started
         write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
-                       threads=threads, scheduler=scheduler, rendered=todo)
+                       threads=threads, scheduler=scheduler, rendered=todo, source_hash=source_hash)
     finally:
         lock.release()
     return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),

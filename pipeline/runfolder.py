@@ -311,8 +311,9 @@ def resolved_config(config: Config, plan) -> dict:
 
 
 def write_run_file(config, resolved: dict, digest, records, video, timings, *, jobs, threads, scheduler,
-                   rendered):
-    """run.json: the resolved config (windows and camera as placed: ``resolved_config``) and its hash, versions,
+                   rendered, source_hash=None):
+    """run.json: the resolved config (windows and camera as placed: ``resolved_config``) and its
+    hash, the hash of the config as written (``resolve.source_digest``; None: not known), versions,
     the command's settings, timings, per done frame S and the sun and moon (degrees), and
     ``runs``: one entry (time, frames rendered, settings, timings) per render that did work, the
     earlier ones kept, so that a re-run that finds every frame done leaves the record of the
@@ -334,6 +335,7 @@ def write_run_file(config, resolved: dict, digest, records, video, timings, *, j
     document = {
         "config_file": str(config.path),
         "config_hash": digest,
+        "source_hash": source_hash,
         "config": resolved,
         "versions": versions,
         "settings": last["settings"],
@@ -358,17 +360,24 @@ class RunSummary:
     timings: dict
 
 
-def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, scheduler=None) -> RunSummary | None:
+def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, scheduler=None,
+                  source_hash: str | None = None) -> RunSummary | None:
     """A resume with nothing to do, decided from the files' stamps alone (no numpy, no plan):
     when every frame of ``frames`` (default: all) is done for this config (``check_frames``,
     nothing found damaged) and the video is made or not due yet, the run is recorded in
     run.json as ``run.render_run`` records a render that found everything done, and its
     RunSummary returned. None when there is anything else to do or to say (work, damage, a
-    busy folder, no run.json of this config yet): ``run.render_run`` then does it."""
+    busy folder, no run.json of this config yet): ``run.render_run`` then does it.
+
+    ``config`` may be the config as written, not resolved, with its ``source_hash``
+    (``resolve.source_digest``): when run.json records that same hash, the resolved config's
+    hash is the one it records beside it, and nothing is resolved (no ephemeris, no pvlib)."""
     started = time.perf_counter()
     folder = config.output.folder
     previous = read_run_file(folder)
     digest = config.digest()
+    if source_hash is not None and previous.get("source_hash") == source_hash:
+        digest = previous.get("config_hash")
     if previous.get("config_hash") != digest or "config" not in previous:
         return None
     count = config.animation.frames
@@ -397,7 +406,8 @@ def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, sched
         timings = {"check": time.perf_counter() - started}
         timings["total"] = timings["check"]
         write_run_file(config, previous["config"], digest, records, video if made else None, timings,
-                       jobs=jobs, threads=threads, scheduler=scheduler, rendered=())
+                       jobs=jobs, threads=threads, scheduler=scheduler, rendered=(),
+                       source_hash=previous.get("source_hash"))
     finally:
         lock.release()
     return RunSummary((), frames, path if made else None, timings)

@@ -136,6 +136,31 @@ def test_a_second_run_has_nothing_to_do(reference, capsys):
     assert record["config"]["ground"]["window"] == pytest.approx([-4, -4, 4, 4])
 
 
+def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
+    """A site, a time and ``turbidity: auto``: the first run resolves the config (the ephemeris
+    checks the sun, pvlib looks the turbidity up) and records the hash of the config as
+    written; a resume with nothing to do reads the resolved hash beside it and imports neither
+    (docs/runs.md, "Resume"); a changed config is resolved again."""
+    sky = {"model": "cie", "turbidity": "auto",
+           "site": {"latitude": 32.78, "longitude": -96.80, "elevation": 140.0},
+           "time": {"start": "2024-04-08T17:23:15Z", "end": "2024-04-08T17:24:15Z"}}
+    config = write_config(tmp_path, {**TINY, "sky": sky, "animation": {"frames": 2, "fps": 12},
+                                     "output": {"video": "none"}})
+    run, cache = tmp_path / "run", tmp_path / "cache"
+    run_to_end("render", config, "--output", run, "--cache", cache)
+    record = json.loads((run / "run.json").read_text())
+    assert record["config"]["sky"]["turbidity"] > 1 and record["source_hash"] != record["config_hash"]
+    code = ("import sys; from pipeline.cli import main; main(sys.argv[1:]); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy', 'pvlib')"
+            " or m in ('pipeline.ephemeris', 'pipeline.plan')))")
+    again = subprocess.run([sys.executable, "-c", code, "render", str(config), "--output", str(run),
+                            "--cache", str(cache)], capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    assert "0 frames rendered, 2 already done" in again and again.strip().endswith("[]"), again
+    assert json.loads((run / "run.json").read_text())["source_hash"] == record["source_hash"]
+    config.write_text(config.read_text().replace("17:24:15Z", "17:25:15Z"))  # a new span
+    assert "2 frames rendered" in run_to_end("render", config, "--output", run, "--cache", cache)
+
+
 def kill_when(process, ready, *, timeout=120.0) -> bool:
     """SIGKILL the process and its workers as soon as ``ready()``; False if it ended first."""
     deadline = time.monotonic() + timeout
