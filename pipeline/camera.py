@@ -503,14 +503,35 @@ def _filter_choice(mip: MipMap, lod_bias: float, major, minor):
     """Each footprint's tap count (n,) int8, level k (n,) int16 and blend t (n,) float32 in
     [0, 1) towards level k + 1 (0: level k alone), as ``sample_footprint`` says, from its
     ellipse's box widths ``major`` and ``minor`` (n,) [m]: compiled (``_filter.filter_choice``),
-    the operations of ``_filter_choice_arrays``."""
+    the operations of ``_filter_choice_arrays``. The choice depends on the footprints and the
+    mip map's finest texel and level count alone, so the frames of a run, whose camera and
+    rasters' grids stand still, make it once for the same footprint arrays
+    (``_view_footprints``): the last few choices are kept with those arrays (not to be written
+    to; left writable, as numba compiles read-only arrays as another type)."""
+    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
+    key = (id(major), id(minor), texel, float(lod_bias), mip.count)
+    kept = _CHOICES.get(key)
+    if kept is not None and kept[0] is major and kept[1] is minor:
+        return kept[2]
+    choice = _new_filter_choice(texel, mip.count, lod_bias, major, minor)
+    _CHOICES[key] = (major, minor, choice)  # the arrays kept too: their ids are not reused
+    while len(_CHOICES) > 4:
+        del _CHOICES[next(iter(_CHOICES))]
+    return choice
+
+
+_CHOICES: dict = {}
+"""``_filter_choice``'s last choices: (id major, id minor, texel, lod bias, levels) -> (major,
+minor, (taps, level, blend))."""
+
+
+def _new_filter_choice(texel: float, count: int, lod_bias: float, major, minor):
     from . import _filter
 
     major, minor = _float64(major, minor)
     n = len(major)
     taps, level, blend = np.empty(n, dtype=np.int8), np.empty(n, dtype=np.int16), np.empty(n, dtype=np.float32)
-    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
-    _filter.filter_choice(texel, float(lod_bias), mip.count, MAX_TAPS, major, minor, taps, level, blend)
+    _filter.filter_choice(texel, float(lod_bias), count, MAX_TAPS, major, minor, taps, level, blend)
     return taps, level, blend
 
 
@@ -853,11 +874,20 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     Each pixel cut by the horizon is sampled at the centre of its sky part; pixels wholly below
     the horizon are 0. [radiance]
     """
-    fraction = ground_fraction_rows(camera)
     out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    rows, w, s, footprint = _sky_rays(camera)
+    if len(rows):
+        out[rows] = sky.view_radiance(w, s, footprint)
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _sky_rays(camera: Camera):
+    """``sky_view``'s image rows that see sky, and their pixels' unit vectors w, sky-plane
+    points s and footprints: made once for the frames of a run, whose camera stands still.
+    Read-only."""
+    fraction = ground_fraction_rows(camera)
     rows = np.flatnonzero(fraction < 1)
-    if len(rows) == 0:
-        return out
     v = (rows + 0.5 * (1.0 - fraction[rows]))[:, None]
     u = np.arange(camera.width, dtype=np.float64)[None, :] + 0.5
     w = image_rays(camera, u, v)
@@ -865,8 +895,9 @@ def sky_view(camera: Camera, sky) -> np.ndarray:
     wz = np.maximum(w[..., 2], MIN_UPWARD)
     s = np.stack([w[..., 0] / wz, w[..., 1] / wz], axis=-1)
     footprint = np.stack(np.broadcast_arrays(1.0 / (camera.focal * wz * wz), 1.0 / (camera.focal * wz)), axis=-1)
-    out[rows] = sky.view_radiance(w, s, footprint)
-    return out
+    for array in (rows, w, s, footprint):
+        array.flags.writeable = False
+    return rows, w, s, footprint
 
 
 def horizon_sky(camera: Camera, sky) -> np.ndarray:
@@ -930,4 +961,7 @@ def background(camera: Camera, *, irradiance, albedo: MipMap, sky):
     ground, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
     sky_radiance = sky_view(camera, sky)
     f = fraction[..., None]
-    return (f * ground + (1.0 - f) * sky_radiance).astype(np.float32), distance
+    ground *= f  # f ground + (1 - f) sky in float32, in place
+    sky_radiance *= 1.0 - f
+    ground += sky_radiance
+    return ground, distance
