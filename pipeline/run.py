@@ -299,6 +299,8 @@ class _VideoStream:
         return cls(config, digest, fresh)
 
     def add(self, frame: int, codes: np.ndarray) -> None:
+        if not self.thread.is_alive():  # the encoder failed: finish() says why; keep nothing
+            return
         with self.ready:
             self.arrived[frame] = codes
             self.ready.notify()
