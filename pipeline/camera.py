@@ -797,14 +797,25 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     fraction = np.broadcast_to(ground_fraction_rows(camera).astype(np.float32)[:, None],
                                (camera.height, camera.width))
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
-    distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
     if len(rows):
-        fp, distance_rows = _view_footprints(camera)
+        fp, _ = _view_footprints(camera)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _albedo_in_view(camera, albedo)
         radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
-        distance[rows] = distance_rows.reshape(len(rows), camera.width)
-    return radiance, fraction.copy(), distance
+    return radiance, fraction.copy(), ground_distance(camera).copy()
+
+
+@functools.lru_cache(maxsize=1)
+def ground_distance(camera: Camera) -> np.ndarray:
+    """(height, width) float32 distance from the pinhole to the ground point each pixel sees,
+    along the ray (``ground_view``'s), inf where no ground is seen: made once for the frames of
+    a run, whose camera stands still. Read-only. [m]"""
+    rows, _ = _ground_rows(camera)
+    distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
+    if len(rows):
+        distance[rows] = _view_footprints(camera)[1].reshape(len(rows), camera.width)
+    distance.flags.writeable = False
+    return distance
 
 
 @functools.lru_cache(maxsize=1)

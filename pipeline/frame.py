@@ -5,6 +5,7 @@ cache."""
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -94,7 +95,7 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True)
     clock.lap("ground")
     view = plan.camera
-    background, distance = camera.background(
+    background, _ = camera.background(
         view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
     clock.lap("camera")
     light = reference_lighting(plan)
@@ -104,8 +105,9 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
-        transmittance = composite.haze_transmittance(distance, config.sky.haze)[..., None]
-        background = transmittance * background + (1.0 - transmittance) * camera.horizon_sky(view, sky)[None]
+        transmittance, veil = _haze_of_view(view, config.sky.haze)
+        background *= transmittance  # in place, float32: T B + (1 - T) L_horizon
+        background += veil * camera.horizon_sky(view, sky)[None]
     passes = foreground_passes(plan, frame % config.canopy.cycle, store, light)
     if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
         veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
@@ -132,6 +134,18 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
     clock.lap("composite")
     return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
+
+
+@functools.lru_cache(maxsize=2)
+def _haze_of_view(view: camera.Camera, haze: float) -> tuple[np.ndarray, np.ndarray]:
+    """The haze's transmittance T (height, width, 1) float32 over the ground the camera sees
+    (1 at the sky) and 1 - T [1]: they depend on the camera and the haze alone, so the frames of
+    a run make them once. Read-only."""
+    transmittance = composite.haze_transmittance(camera.ground_distance(view), haze)[..., None]
+    veil = 1.0 - transmittance
+    for array in (transmittance, veil):
+        array.flags.writeable = False
+    return transmittance, veil
 
 
 class _Stopwatch:
