@@ -33,69 +33,75 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _square_cdf(t, a, b, inv_a, inv_2ab):
+def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free, with the
-    reciprocals 1 / a and 1 / (2 a b + 1e-12) given)."""
+    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free). One division:
+    the branch's denominator, a or 2 a b + 1e-12, is chosen first (the same bits as 1 / a and
+    1 / (2 a b + 1e-12) computed apart)."""
     s = abs(t)
     edge = max(np.float32(0.5) * (a + b) - s, np.float32(0.0))
-    tail = np.float32(0.5) - s * inv_a if s <= np.float32(0.5) * (a - b) else edge * edge * inv_2ab
+    slope = s <= np.float32(0.5) * (a - b)
+    inv = np.float32(1.0) / (a if slope else np.float32(2.0) * a * b + np.float32(1e-12))
+    tail = np.float32(0.5) - s * inv if slope else edge * edge * inv
     return tail if t < 0 else np.float32(1.0) - tail
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _cover(d, nx, ny, kf, thick):
     """Coverage of one sub-sample from its signed distance d and normal (nx, ny) [pixel]; thick
-    >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in."""
+    >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in.
+    It is exactly 0 where d k >= _CLEAR and exactly 1 where d k <= -_CLEAR and thick < 0 (the
+    trapezoid, |n| <= 1, is at most sqrt(2) / 2 wide on either side of its centre)."""
     nx, ny = abs(nx), abs(ny)
     a = max(max(nx, ny), np.float32(0.7071))
     b = min(nx, ny)
-    inv_a = np.float32(1.0) / a
-    inv_2ab = np.float32(1.0) / (np.float32(2.0) * a * b + np.float32(1e-12))
     t = d * -kf
-    cover = _square_cdf(t, a, b, inv_a, inv_2ab)
+    cover = _square_cdf(t, a, b)
     if thick >= 0:
-        cover -= _square_cdf(t - thick, a, b, inv_a, inv_2ab)
+        cover -= _square_cdf(t - thick, a, b)
     return cover
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _samples(rx, ry, w, h, k, dxs, dys):
     """Sub-sample offsets from the shape's centre [pixel] over its w x h box, k x k per pixel,
-    row by row (float32, as the array version computes them); returns their count."""
-    kf = np.float32(k)
+    sub-sample by sub-sample: the (sy, sx)-th of every pixel, row by row, then the next
+    (float32, as the array version computes them: k is a power of two, so multiplying by 1 / k
+    gives the bits of dividing by k); returns their count."""
+    step = np.float32(1.0) / np.float32(k)
     m = 0
-    for r in range(h):
-        for sy in range(k):
-            dy = (np.float32(r * k + sy) + np.float32(0.5)) / kf - ry
-            for j in range(w * k):
-                dxs[m] = (np.float32(j) + np.float32(0.5)) / kf - rx
-                dys[m] = dy
-                m += 1
+    for sy in range(k):
+        for sx in range(k):
+            for r in range(h):
+                dy = (np.float32(r * k + sy) + np.float32(0.5)) * step - ry
+                for c in range(w):
+                    dxs[m] = (np.float32(c * k + sx) + np.float32(0.5)) * step - rx
+                    dys[m] = dy
+                    m += 1
     return m
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _pixel_cover(buf, w, k, r, c):
-    """Mean of the k x k sub-sample coverages of box pixel (r, c)."""
-    acc = np.float32(0.0)
-    for sy in range(k):
-        base = (r * k + sy) * w * k + c * k
-        for sx in range(k):
-            acc += buf[base + sx]
-    return acc / np.float32(k * k)
+def _sum_samples(buf, n, k):
+    """Each of the n pixels' k x k sub-sample coverages (as ``_samples`` orders them) summed
+    into buf[:n], in the order (sy, sx) of the array version, all pixels at once."""
+    for s in range(1, k * k):
+        for p in range(n):
+            buf[p] += buf[s * n + p]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
-    """The coverages of a w x h box at (x0, y0), from its sub-samples ``buf``, clipped just
-    below 1: transmittance[row, col] multiplied by 1 - cover, or, where ``fragments`` (pixel,
-    coverage, shape) has room, fragments appended at ``count``. Returns the new count."""
+    """The coverages of a w x h box at (x0, y0), buf[:w h] (the sums of ``_sum_samples``)
+    divided by k k, clipped just below 1: transmittance[row, col] multiplied by 1 - cover, or,
+    where ``fragments`` (pixel, coverage, shape) has room, fragments appended at ``count``.
+    Returns the new count."""
     pixel, coverage, source = fragments
+    mean = np.float32(1.0) / np.float32(k * k)  # a power of two: the bits of dividing
     if pixel.shape[0]:
         for r in range(h):
             for c in range(w):
-                cover = _pixel_cover(buf, w, k, r, c)
+                cover = buf[r * w + c] * mean
                 if cover > 0:
                     pixel[count] = (y0 + r) * transmittance.shape[1] + x0 + c
                     coverage[count] = min(cover, _OPAQUE)
@@ -104,7 +110,7 @@ def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
     else:
         for r in range(h):
             for c in range(w):
-                cover = _pixel_cover(buf, w, k, r, c)
+                cover = buf[r * w + c] * mean
                 if cover > 0:
                     transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE))
     return count
@@ -182,6 +188,7 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
             inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
             d = (gauge - ab) * (gauge + eps) * inv
             buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
+        _sum_samples(buf, w * h, k)
         count = _deposit(buf, w, h, k, x0, y0, transmittance, fragments, owner[i], count)
     return count
 
@@ -210,17 +217,16 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
             length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
             inv = np.float32(1.0) / length
             buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
+        _sum_samples(buf, w * h, k)
         for r in range(h):
             # only the pixels of the piece's stretch of the axis, judged at their centres in
-            # float64 as before: the others' sub-samples are cleared
+            # float64 as before: the others' coverage is cleared
             cy = float(r) + 0.5 - float(ry) - float(y0)
             for c in range(w):
                 cx = float(c) + 0.5 - float(rx) - float(x0)
                 t = (cx * float(ex) + cy * float(ey)) * float(inverse)
                 if not (t >= float(t_lo) and t < float(t_hi)):
-                    for sy in range(k):
-                        for sx in range(k):
-                            buf[(r * k + sy) * w * k + c * k + sx] = 0.0
+                    buf[r * w + c] = 0.0
         count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
     return count
 
