@@ -16,14 +16,16 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def box_pixels(center, half, rows, cols):
-    """How many pixels the boxes of ``center``, ``half`` [pixel] (m, 2) hold within the raster."""
+def box_pixels(center, half, place, index, rows, cols):
+    """How many pixels the boxes (centre center[place], half-size half[index]) [pixel] hold
+    within the raster."""
     total = 0
-    for i in range(center.shape[0]):
-        w = min(max(math.ceil(center[i, 0] + half[i, 0]), 0.0), float(cols)) - \
-            min(max(math.floor(center[i, 0] - half[i, 0]), 0.0), float(cols))
-        h = min(max(math.ceil(center[i, 1] + half[i, 1]), 0.0), float(rows)) - \
-            min(max(math.floor(center[i, 1] - half[i, 1]), 0.0), float(rows))
+    for ii in range(place.shape[0]):
+        c, i = place[ii], index[ii]
+        w = min(max(math.ceil(center[c, 0] + half[i, 0]), 0.0), float(cols)) - \
+            min(max(math.floor(center[c, 0] - half[i, 0]), 0.0), float(cols))
+        h = min(max(math.ceil(center[c, 1] + half[i, 1]), 0.0), float(rows)) - \
+            min(max(math.floor(center[c, 1] - half[i, 1]), 0.0), float(rows))
         if w > 0 and h > 0:
             total += int(w) * int(h)
     return total
@@ -141,33 +143,36 @@ def _grown(buffer, size):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _next_box(ii, center, half, index, feature, thickness, most, transmittance, samples):
+def _next_box(ii, center, half, place, index, feature, thickness, most, transmittance, samples):
     """The ii-th box to draw, as ``_box`` gives it: (shape index i, col, row, width, height, k,
-    thick, the sample buffers ``samples`` (x, y, coverage) grown to hold its sub-samples)."""
-    i = index[ii]
+    thick, its centre relative to (col, row) (float32) [pixel], the sample buffers ``samples``
+    (x, y, coverage) grown to hold its sub-samples)."""
+    i, cx, cy = index[ii], center[place[ii], 0], center[place[ii], 1]
     rows, cols = transmittance.shape
-    x0, y0, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
-                                  feature[i], thickness[i], rows, cols, most)
+    x0, y0, w, h, k, thick = _box(cx, cy, half[i, 0], half[i, 1], feature[i], thickness[i], rows, cols, most)
     n = w * h * k * k
-    return i, x0, y0, w, h, k, thick, (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
+    return i, x0, y0, w, h, k, thick, np.float32(cx - x0), np.float32(cy - y0), \
+        (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
+def ellipses(center, half, place, index, prm, feature, thickness, most, transmittance, fragments, owner,
+             count):
     """Every ellipse's coverage c of every pixel of its box: ``transmittance`` (rows, cols)
     float64 multiplied by 1 - c, or, if the arrays ``fragments`` (flat pixel int64, coverage
     float32, shape int64) are not empty, fragments appended from ``count`` (returns the count;
     ``transmittance`` then only gives the raster's shape).
 
-    center, half (m, 2) float64: the boxes' centres and half-sizes (u, v) [pixel], in the order
-    drawn (translates of a periodic canopy included); index (m,): the ellipse of each, into
-    prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,)
-    (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most: the most
-    sub-samples of one box before k is lowered."""
+    center (q, 2), half (n, 2) float64: the boxes' centres and the ellipses' box half-sizes
+    (u, v) [pixel]; place, index (m,): the boxes in the order drawn (translates of a periodic
+    canopy included), each's centre center[place] and its ellipse, into half, prm (n, 4)
+    float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,) (2 B)
+    [pixel] and owner (n,) (the shape number a fragment carries); most: the most sub-samples
+    of one box before k is lowered."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(center.shape[0]):
-        i, x0, y0, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
-                                                       transmittance, samples)
+    for ii in range(place.shape[0]):
+        i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, place, index, feature,
+                                                               thickness, most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples
@@ -175,7 +180,7 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
         ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
         ab, bb, aa = major * minor, minor * minor, major * major
         eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
-        m = _samples(np.float32(center[ii, 0] - x0), np.float32(center[ii, 1] - y0), w, h, k, dxs, dys)
+        m = _samples(rx, ry, w, h, k, dxs, dys)
         for j in range(m):
             dx, dy = dxs[j], dys[j]
             p = dx * ex + dy * ey
@@ -194,15 +199,15 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def capsules(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
+def capsules(center, half, place, index, prm, feature, thickness, most, transmittance, fragments, owner,
+             count):
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(center.shape[0]):
-        i, bx, by, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
-                                                       transmittance, samples)
-        rx, ry = np.float32(center[ii, 0] - bx), np.float32(center[ii, 1] - by)
+    for ii in range(place.shape[0]):
+        i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, place, index, feature,
+                                                               thickness, most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples
@@ -264,6 +269,18 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
         _turn(axis_u[i], swing_axis[i], c, s, u_out[i])
         _turn(turned, swing_axis[i], c, s, v_out[i])
     return c_out, u_out, v_out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def onto(points, sx, sy, offset):
+    """canopy.project's map of ``points`` (n, 3) [m] along the sun's sky-plane point (sx, sy)
+    [tan] onto the plane z = offset [m]: (n, 2) [m], in one pass (numpy's operations, in order)."""
+    out = np.empty((points.shape[0], 2))
+    for i in range(points.shape[0]):
+        z = points[i, 2] - offset
+        out[i, 0] = points[i, 0] - z * sx
+        out[i, 1] = points[i, 1] - z * sy
+    return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
