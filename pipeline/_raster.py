@@ -71,15 +71,27 @@ def _samples(rx, ry, w, h, k, dxs, dys):
     (float32, as the array version computes them: k is a power of two, so multiplying by 1 / k
     gives the bits of dividing by k); returns their count."""
     step = np.float32(1.0) / np.float32(k)
-    m = 0
+    n = w * h
+    # x of the planes (0, sx): their first row, then copies of it; y of the planes (sy, 0)
+    for c in range(w * k):
+        dxs[(c % k) * n + c // k] = (np.float32(c) + np.float32(0.5)) * step - rx
+    for sx in range(k):
+        for p in range(w, n):
+            dxs[sx * n + p] = dxs[sx * n + p - w]
     for sy in range(k):
+        for r in range(h):
+            dy = (np.float32(r * k + sy) + np.float32(0.5)) * step - ry
+            for c in range(w):
+                dys[sy * k * n + r * w + c] = dy
+    for sy in range(k):  # every other plane copies them
         for sx in range(k):
-            for r in range(h):
-                dy = (np.float32(r * k + sy) + np.float32(0.5)) * step - ry
-                for c in range(w):
-                    dxs[m] = (np.float32(c * k + sx) + np.float32(0.5)) * step - rx
-                    dys[m] = dy
-                    m += 1
+            plane = (sy * k + sx) * n
+            for p in range(n):
+                if sy > 0:
+                    dxs[plane + p] = dxs[sx * n + p]
+                if sx > 0:
+                    dys[plane + p] = dys[sy * k * n + p]
+    m = k * k * n
     return m
 
 
