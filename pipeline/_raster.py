@@ -16,19 +16,36 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def box_pixels(center, half, place, index, rows, cols):
-    """How many pixels the boxes (centre center[place], half-size half[index]) [pixel] hold
+def box_pixels(center, half, index, rows, cols):
+    """How many pixels the boxes (centre ``center`` (m, 2), half-size half[index]) [pixel] hold
     within the raster."""
     total = 0
-    for ii in range(place.shape[0]):
-        c, i = place[ii], index[ii]
-        w = min(max(math.ceil(center[c, 0] + half[i, 0]), 0.0), float(cols)) - \
-            min(max(math.floor(center[c, 0] - half[i, 0]), 0.0), float(cols))
-        h = min(max(math.ceil(center[c, 1] + half[i, 1]), 0.0), float(rows)) - \
-            min(max(math.floor(center[c, 1] - half[i, 1]), 0.0), float(rows))
+    for ii in range(index.shape[0]):
+        i = index[ii]
+        w = min(max(math.ceil(center[ii, 0] + half[i, 0]), 0.0), float(cols)) - \
+            min(max(math.floor(center[ii, 0] - half[i, 0]), 0.0), float(cols))
+        h = min(max(math.ceil(center[ii, 1] + half[i, 1]), 0.0), float(rows)) - \
+            min(max(math.floor(center[ii, 1] - half[i, 1]), 0.0), float(rows))
         if w > 0 and h > 0:
             total += int(w) * int(h)
     return total
+
+
+@njit(cache=True, nogil=True)
+def in_order(order, center, half, prm, feature, thickness, owner):
+    """The shapes' arrays taken in the order ``order`` (prm as float32): the kernels then read
+    them one after another, not at random (docs/accuracy.md, "The leaf rasteriser")."""
+    n = order.shape[0]
+    center_out, half_out, prm_out = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, prm.shape[1]), np.float32)
+    feature_out, thickness_out, owner_out = np.empty(n), np.empty(n), np.empty(n, owner.dtype)
+    for ii in range(n):
+        i = order[ii]
+        center_out[ii, 0], center_out[ii, 1], half_out[ii, 0], half_out[ii, 1] = \
+            center[i, 0], center[i, 1], half[i, 0], half[i, 1]
+        for j in range(prm.shape[1]):
+            prm_out[ii, j] = prm[i, j]
+        feature_out[ii], thickness_out[ii], owner_out[ii] = feature[i], thickness[i], owner[i]
+    return center_out, half_out, prm_out, feature_out, thickness_out, owner_out
 
 
 _OPAQUE = np.float32(1.0 - 2.0**-20)
@@ -155,11 +172,11 @@ def _grown(buffer, size):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _next_box(ii, center, half, place, index, feature, thickness, most, transmittance, samples):
+def _next_box(ii, center, half, index, feature, thickness, most, transmittance, samples):
     """The ii-th box to draw, as ``_box`` gives it: (shape index i, col, row, width, height, k,
     thick, its centre relative to (col, row) (float32) [pixel], the sample buffers ``samples``
     (x, y, coverage) grown to hold its sub-samples)."""
-    i, cx, cy = index[ii], center[place[ii], 0], center[place[ii], 1]
+    i, cx, cy = index[ii], center[ii, 0], center[ii, 1]
     rows, cols = transmittance.shape
     x0, y0, w, h, k, thick = _box(cx, cy, half[i, 0], half[i, 1], feature[i], thickness[i], rows, cols, most)
     n = w * h * k * k
@@ -168,23 +185,21 @@ def _next_box(ii, center, half, place, index, feature, thickness, most, transmit
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(center, half, place, index, prm, feature, thickness, most, transmittance, fragments, owner,
-             count):
+def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
     """Every ellipse's coverage c of every pixel of its box: ``transmittance`` (rows, cols)
     float64 multiplied by 1 - c, or, if the arrays ``fragments`` (flat pixel int64, coverage
     float32, shape int64) are not empty, fragments appended from ``count`` (returns the count;
     ``transmittance`` then only gives the raster's shape).
 
-    center (q, 2), half (n, 2) float64: the boxes' centres and the ellipses' box half-sizes
-    (u, v) [pixel]; place, index (m,): the boxes in the order drawn (translates of a periodic
-    canopy included), each's centre center[place] and its ellipse, into half, prm (n, 4)
-    float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,) (2 B)
-    [pixel] and owner (n,) (the shape number a fragment carries); most: the most sub-samples
-    of one box before k is lowered."""
+    center (m, 2) float64: the boxes' centres (u, v) [pixel], in the order drawn (translates of
+    a periodic canopy included); index (m,): the ellipse of each, into half (n, 2) (box
+    half-sizes), prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B),
+    thickness (n,) (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most:
+    the most sub-samples of one box before k is lowered."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(place.shape[0]):
-        i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, place, index, feature,
-                                                               thickness, most, transmittance, samples)
+    for ii in range(index.shape[0]):
+        i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
+                                                               most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples
@@ -211,15 +226,14 @@ def ellipses(center, half, place, index, prm, feature, thickness, most, transmit
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def capsules(center, half, place, index, prm, feature, thickness, most, transmittance, fragments, owner,
-             count):
+def capsules(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
     """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(place.shape[0]):
-        i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, place, index, feature,
-                                                               thickness, most, transmittance, samples)
+    for ii in range(index.shape[0]):
+        i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
+                                                               most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples

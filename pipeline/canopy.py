@@ -469,17 +469,18 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
     parts = []
     for primitive, kernel, offset in ((_ellipses(shapes, grid), _raster.ellipses, 0),
                                       (_capsule_pieces(shapes, grid), _raster.capsules, len(shapes.center))):
-        center, half, params, feature, thickness = primitive[:5]
+        center, half, params, feature, thickness, owner = primitive
         if period_px is None:
-            # row by row, for the cache (a radix sort of 16-bit rows)
-            index = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
-            place = index
+            # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
+            order = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
+            center, half, params, feature, thickness, owner = _raster.in_order(
+                order, center, half, params, feature, thickness, owner)
+            index = np.arange(len(order))
         else:
             index, center = _translates(center, half, period_px, grid.shape)
-            place = np.arange(len(index))
-        parts.append((kernel, center, half, place, index, params.astype(np.float32), feature, thickness,
-                      primitive[-1] + offset))
-    size = sum(_raster.box_pixels(*part[1:5], rows, cols) for part in parts) if emit else 0
+            params = params.astype(np.float32)
+        parts.append((kernel, center, half, index, params, feature, thickness, owner + offset))
+    size = sum(_raster.box_pixels(*part[1:4], rows, cols) for part in parts) if emit else 0
     fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
     transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
     for kernel, *arrays, owner in parts:
