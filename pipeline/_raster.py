@@ -50,8 +50,13 @@ def in_order(order, center, half, prm, feature, thickness, owner):
 
 _OPAQUE = np.float32(1.0 - 2.0**-20)
 
+# inline="always" (numba inlines before typing, which costs compile time) only where it was
+# measured to matter, the box loop's helpers that take the sample buffers; LLVM inlines the
+# small arithmetic ones (_square_cdf, _cover, _turn) as fast (docs/accuracy.md, "The leaf
+# rasteriser").
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
     b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free). One division:
@@ -65,7 +70,7 @@ def _square_cdf(t, a, b):
     return tail if t < 0 else np.float32(1.0) - tail
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cover(d, nx, ny, kf, thick):
     """Coverage of one sub-sample from its signed distance d and normal (nx, ny) [pixel]; thick
     >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in.
@@ -262,7 +267,7 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
     return count
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _turn(v, k, c, s, out):
     """Rodrigues: ``v`` (3,) turned about the unit axis ``k`` (3,) by the angle of cosine c and
     sine s, into ``out`` (3,)."""
