@@ -52,8 +52,8 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 
 # inline="always" (numba inlines before typing, which costs compile time) only where it was
 # measured to matter, the box loop's helpers that take the sample buffers; LLVM inlines the
-# small arithmetic ones (_square_cdf, _cover, _turn) as fast (docs/accuracy.md, "The leaf
-# rasteriser").
+# small arithmetic ones (_square_cdf, _cover, _turn) as fast
+# (docs/accuracy.md, "The leaf rasteriser").
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
