@@ -16,86 +16,128 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def box_pixels(center, half, rows, cols):
-    """How many pixels the boxes of ``center``, ``half`` [pixel] (m, 2) hold within the raster."""
+def box_pixels(center, half, index, rows, cols):
+    """How many pixels the boxes (centre ``center`` (m, 2), half-size half[index]) [pixel] hold
+    within the raster."""
     total = 0
-    for i in range(center.shape[0]):
-        w = min(max(math.ceil(center[i, 0] + half[i, 0]), 0.0), float(cols)) - \
-            min(max(math.floor(center[i, 0] - half[i, 0]), 0.0), float(cols))
-        h = min(max(math.ceil(center[i, 1] + half[i, 1]), 0.0), float(rows)) - \
-            min(max(math.floor(center[i, 1] - half[i, 1]), 0.0), float(rows))
+    for ii in range(index.shape[0]):
+        i = index[ii]
+        w = min(max(math.ceil(center[ii, 0] + half[i, 0]), 0.0), float(cols)) - \
+            min(max(math.floor(center[ii, 0] - half[i, 0]), 0.0), float(cols))
+        h = min(max(math.ceil(center[ii, 1] + half[i, 1]), 0.0), float(rows)) - \
+            min(max(math.floor(center[ii, 1] - half[i, 1]), 0.0), float(rows))
         if w > 0 and h > 0:
             total += int(w) * int(h)
     return total
 
 
+@njit(cache=True, nogil=True)
+def in_order(order, center, half, prm, feature, thickness, owner):
+    """The shapes' arrays taken in the order ``order`` (prm as float32): the kernels then read
+    them one after another, not at random (docs/accuracy.md, "The leaf rasteriser")."""
+    n = order.shape[0]
+    center_out, half_out, prm_out = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, prm.shape[1]), np.float32)
+    feature_out, thickness_out, owner_out = np.empty(n), np.empty(n), np.empty(n, owner.dtype)
+    for ii in range(n):
+        i = order[ii]
+        center_out[ii, 0], center_out[ii, 1], half_out[ii, 0], half_out[ii, 1] = \
+            center[i, 0], center[i, 1], half[i, 0], half[i, 1]
+        for j in range(prm.shape[1]):
+            prm_out[ii, j] = prm[i, j]
+        feature_out[ii], thickness_out[ii], owner_out[ii] = feature[i], thickness[i], owner[i]
+    return center_out, half_out, prm_out, feature_out, thickness_out, owner_out
+
+
 _OPAQUE = np.float32(1.0 - 2.0**-20)
 
+# inline="always" (numba inlines before typing, which costs compile time) only where it was
+# measured to matter, the box loop's helpers that take the sample buffers; LLVM inlines the
+# small arithmetic ones (_square_cdf, _cover, _turn) as fast
+# (docs/accuracy.md, "The leaf rasteriser").
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _square_cdf(t, a, b, inv_a, inv_2ab):
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free, with the
-    reciprocals 1 / a and 1 / (2 a b + 1e-12) given)."""
+    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free). One division:
+    the branch's denominator, a or 2 a b + 1e-12, is chosen first (the same bits as 1 / a and
+    1 / (2 a b + 1e-12) computed apart)."""
     s = abs(t)
     edge = max(np.float32(0.5) * (a + b) - s, np.float32(0.0))
-    tail = np.float32(0.5) - s * inv_a if s <= np.float32(0.5) * (a - b) else edge * edge * inv_2ab
+    slope = s <= np.float32(0.5) * (a - b)
+    inv = np.float32(1.0) / (a if slope else np.float32(2.0) * a * b + np.float32(1e-12))
+    tail = np.float32(0.5) - s * inv if slope else edge * edge * inv
     return tail if t < 0 else np.float32(1.0) - tail
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cover(d, nx, ny, kf, thick):
     """Coverage of one sub-sample from its signed distance d and normal (nx, ny) [pixel]; thick
-    >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in."""
+    >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in.
+    It is exactly 0 where d k >= _CLEAR and exactly 1 where d k <= -_CLEAR and thick < 0 (the
+    trapezoid, |n| <= 1, is at most sqrt(2) / 2 wide on either side of its centre)."""
     nx, ny = abs(nx), abs(ny)
     a = max(max(nx, ny), np.float32(0.7071))
     b = min(nx, ny)
-    inv_a = np.float32(1.0) / a
-    inv_2ab = np.float32(1.0) / (np.float32(2.0) * a * b + np.float32(1e-12))
     t = d * -kf
-    cover = _square_cdf(t, a, b, inv_a, inv_2ab)
+    cover = _square_cdf(t, a, b)
     if thick >= 0:
-        cover -= _square_cdf(t - thick, a, b, inv_a, inv_2ab)
+        cover -= _square_cdf(t - thick, a, b)
     return cover
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _samples(rx, ry, w, h, k, dxs, dys):
     """Sub-sample offsets from the shape's centre [pixel] over its w x h box, k x k per pixel,
-    row by row (float32, as the array version computes them); returns their count."""
-    kf = np.float32(k)
-    m = 0
-    for r in range(h):
-        for sy in range(k):
-            dy = (np.float32(r * k + sy) + np.float32(0.5)) / kf - ry
-            for j in range(w * k):
-                dxs[m] = (np.float32(j) + np.float32(0.5)) / kf - rx
-                dys[m] = dy
-                m += 1
+    sub-sample by sub-sample: the (sy, sx)-th of every pixel, row by row, then the next
+    (float32, as the array version computes them: k is a power of two, so multiplying by 1 / k
+    gives the bits of dividing by k); returns their count."""
+    step = np.float32(1.0) / np.float32(k)
+    n = w * h
+    # x of the planes (0, sx): their first row, then copies of it; y of the planes (sy, 0)
+    for c in range(w * k):
+        dxs[(c % k) * n + c // k] = (np.float32(c) + np.float32(0.5)) * step - rx
+    for sx in range(k):
+        for p in range(w, n):
+            dxs[sx * n + p] = dxs[sx * n + p - w]
+    for sy in range(k):
+        for r in range(h):
+            dy = (np.float32(r * k + sy) + np.float32(0.5)) * step - ry
+            for c in range(w):
+                dys[sy * k * n + r * w + c] = dy
+    for sy in range(k):  # every other plane copies them
+        for sx in range(k):
+            plane = (sy * k + sx) * n
+            for p in range(n):
+                if sy > 0:
+                    dxs[plane + p] = dxs[sx * n + p]
+                if sx > 0:
+                    dys[plane + p] = dys[sy * k * n + p]
+    m = k * k * n
     return m
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _pixel_cover(buf, w, k, r, c):
-    """Mean of the k x k sub-sample coverages of box pixel (r, c)."""
-    acc = np.float32(0.0)
-    for sy in range(k):
-        base = (r * k + sy) * w * k + c * k
-        for sx in range(k):
-            acc += buf[base + sx]
-    return acc / np.float32(k * k)
+def _sum_samples(buf, n, k):
+    """Each of the n pixels' k x k sub-sample coverages (as ``_samples`` orders them) summed
+    into buf[:n], in the order (sy, sx) of the array version, all pixels at once."""
+    for s in range(1, k * k):
+        for p in range(n):
+            buf[p] += buf[s * n + p]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
-    """The coverages of a w x h box at (x0, y0), from its sub-samples ``buf``, clipped just
-    below 1: transmittance[row, col] multiplied by 1 - cover, or, where ``fragments`` (pixel,
-    coverage, shape) has room, fragments appended at ``count``. Returns the new count."""
+    """The coverages of a w x h box at (x0, y0), buf[:w h] (the sums of ``_sum_samples``)
+    divided by k k, clipped just below 1: transmittance[row, col] multiplied by 1 - cover, or,
+    where ``fragments`` (pixel, coverage, shape) has room, fragments appended at ``count``.
+    Returns the new count."""
     pixel, coverage, source = fragments
+    mean = np.float32(1.0) / np.float32(k * k)  # a power of two: the bits of dividing
     if pixel.shape[0]:
         for r in range(h):
             for c in range(w):
-                cover = _pixel_cover(buf, w, k, r, c)
+                cover = buf[r * w + c] * mean
                 if cover > 0:
                     pixel[count] = (y0 + r) * transmittance.shape[1] + x0 + c
                     coverage[count] = min(cover, _OPAQUE)
@@ -104,7 +146,7 @@ def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
     else:
         for r in range(h):
             for c in range(w):
-                cover = _pixel_cover(buf, w, k, r, c)
+                cover = buf[r * w + c] * mean
                 if cover > 0:
                     transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE))
     return count
@@ -137,13 +179,14 @@ def _grown(buffer, size):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _next_box(ii, center, half, index, feature, thickness, most, transmittance, samples):
     """The ii-th box to draw, as ``_box`` gives it: (shape index i, col, row, width, height, k,
-    thick, the sample buffers ``samples`` (x, y, coverage) grown to hold its sub-samples)."""
-    i = index[ii]
+    thick, its centre relative to (col, row) (float32) [pixel], the sample buffers ``samples``
+    (x, y, coverage) grown to hold its sub-samples)."""
+    i, cx, cy = index[ii], center[ii, 0], center[ii, 1]
     rows, cols = transmittance.shape
-    x0, y0, w, h, k, thick = _box(center[ii, 0], center[ii, 1], half[ii, 0], half[ii, 1],
-                                  feature[i], thickness[i], rows, cols, most)
+    x0, y0, w, h, k, thick = _box(cx, cy, half[i, 0], half[i, 1], feature[i], thickness[i], rows, cols, most)
     n = w * h * k * k
-    return i, x0, y0, w, h, k, thick, (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
+    return i, x0, y0, w, h, k, thick, np.float32(cx - x0), np.float32(cy - y0), \
+        (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -153,15 +196,15 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
     float32, shape int64) are not empty, fragments appended from ``count`` (returns the count;
     ``transmittance`` then only gives the raster's shape).
 
-    center, half (m, 2) float64: the boxes' centres and half-sizes (u, v) [pixel], in the order
-    drawn (translates of a periodic canopy included); index (m,): the ellipse of each, into
-    prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B), thickness (n,)
-    (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most: the most
-    sub-samples of one box before k is lowered."""
+    center (m, 2) float64: the boxes' centres (u, v) [pixel], in the order drawn (translates of
+    a periodic canopy included); index (m,): the ellipse of each, into half (n, 2) (box
+    half-sizes), prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B),
+    thickness (n,) (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most:
+    the most sub-samples of one box before k is lowered."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(center.shape[0]):
-        i, x0, y0, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
-                                                       transmittance, samples)
+    for ii in range(index.shape[0]):
+        i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
+                                                               most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples
@@ -169,7 +212,7 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
         ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
         ab, bb, aa = major * minor, minor * minor, major * major
         eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
-        m = _samples(np.float32(center[ii, 0] - x0), np.float32(center[ii, 1] - y0), w, h, k, dxs, dys)
+        m = _samples(rx, ry, w, h, k, dxs, dys)
         for j in range(m):
             dx, dy = dxs[j], dys[j]
             p = dx * ex + dy * ey
@@ -182,6 +225,7 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
             inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
             d = (gauge - ab) * (gauge + eps) * inv
             buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
+        _sum_samples(buf, w * h, k)
         count = _deposit(buf, w, h, k, x0, y0, transmittance, fragments, owner[i], count)
     return count
 
@@ -192,10 +236,9 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
     piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
     of the axis whose pixels (judged at their centres) the piece draws."""
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(center.shape[0]):
-        i, bx, by, w, h, k, thick, samples = _next_box(ii, center, half, index, feature, thickness, most,
-                                                       transmittance, samples)
-        rx, ry = np.float32(center[ii, 0] - bx), np.float32(center[ii, 1] - by)
+    for ii in range(index.shape[0]):
+        i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
+                                                               most, transmittance, samples)
         if w == 0:
             continue
         dxs, dys, buf = samples
@@ -210,22 +253,21 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
             length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
             inv = np.float32(1.0) / length
             buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
+        _sum_samples(buf, w * h, k)
         for r in range(h):
             # only the pixels of the piece's stretch of the axis, judged at their centres in
-            # float64 as before: the others' sub-samples are cleared
+            # float64 as before: the others' coverage is cleared
             cy = float(r) + 0.5 - float(ry) - float(y0)
             for c in range(w):
                 cx = float(c) + 0.5 - float(rx) - float(x0)
                 t = (cx * float(ex) + cy * float(ey)) * float(inverse)
                 if not (t >= float(t_lo) and t < float(t_hi)):
-                    for sy in range(k):
-                        for sx in range(k):
-                            buf[(r * k + sy) * w * k + c * k + sx] = 0.0
+                    buf[r * w + c] = 0.0
         count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
     return count
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _turn(v, k, c, s, out):
     """Rodrigues: ``v`` (3,) turned about the unit axis ``k`` (3,) by the angle of cosine c and
     sine s, into ``out`` (3,)."""
@@ -258,6 +300,18 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
         _turn(axis_u[i], swing_axis[i], c, s, u_out[i])
         _turn(turned, swing_axis[i], c, s, v_out[i])
     return c_out, u_out, v_out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def onto(points, sx, sy, offset):
+    """canopy.project's map of ``points`` (n, 3) [m] along the sun's sky-plane point (sx, sy)
+    [tan] onto the plane z = offset [m]: (n, 2) [m], in one pass (numpy's operations, in order)."""
+    out = np.empty((points.shape[0], 2))
+    for i in range(points.shape[0]):
+        z = points[i, 2] - offset
+        out[i, 0] = points[i, 0] - z * sx
+        out[i, 1] = points[i, 1] - z * sy
+    return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -238,9 +238,18 @@ class Shapes:
 
     def subset(self, leaves=slice(None), wood=slice(None)) -> "Shapes":
         """The ellipses selected by ``leaves`` and capsules selected by ``wood`` (boolean masks,
-        index arrays or slices)."""
+        index arrays or slices). A boolean mask that selects everything keeps the arrays
+        themselves (a single canopy plane's layer selects every shape)."""
+        leaves, wood = _every(leaves, len(self.center)), _every(wood, len(self.radius))
         return Shapes(self.center[leaves], self.axis_a[leaves], self.axis_b[leaves],
                       self.start[wood], self.end[wood], self.radius[wood])
+
+
+def _every(select, n: int):
+    """``select``, or slice(None) where it is a boolean mask (n,) that is true everywhere."""
+    if isinstance(select, np.ndarray) and select.dtype == bool and select.shape == (n,) and select.all():
+        return slice(None)
+    return select
 
 
 def grow_grove(params: GroveParams = GroveParams()) -> Grove:
@@ -368,10 +377,12 @@ def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: floa
     r / |n_xy| with n the unit normal to both the sun and the segment (r for an upright trunk,
     r / cos(theta) for a branch across the sun); its end caps are approximated as round. [m]
     """
+    from . import _raster
+
     s = np.asarray(sun, dtype=np.float64)
 
-    def onto(points, offset=plane_height):
-        return points[..., :2] - (points[..., 2:3] - offset) * s
+    def onto(points, offset=plane_height):  # P_xy - (P_z - offset) s, compiled, the same bits
+        return _raster.onto(np.ascontiguousarray(points, dtype=np.float64), float(s[0]), float(s[1]), float(offset))
 
     if wood is None:
         wood = Wood(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
@@ -458,17 +469,18 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
     parts = []
     for primitive, kernel, offset in ((_ellipses(shapes, grid), _raster.ellipses, 0),
                                       (_capsule_pieces(shapes, grid), _raster.capsules, len(shapes.center))):
-        center, half, params, feature, thickness = primitive[:5]
+        center, half, params, feature, thickness, owner = primitive
         if period_px is None:
-            # row by row, for the cache (a radix sort of 16-bit rows)
-            index = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
-            center, half = center[index], half[index]
+            # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
+            order = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
+            center, half, params, feature, thickness, owner = _raster.in_order(
+                order, center, half, params, feature, thickness, owner)
+            index = np.arange(len(order))
         else:
             index, center = _translates(center, half, period_px, grid.shape)
-            half = half[index]
-        parts.append((kernel, center, half, index, params.astype(np.float32), feature, thickness,
-                      primitive[-1] + offset))
-    size = sum(_raster.box_pixels(part[1], part[2], rows, cols) for part in parts) if emit else 0
+            params = params.astype(np.float32)
+        parts.append((kernel, center, half, index, params, feature, thickness, owner + offset))
+    size = sum(_raster.box_pixels(*part[1:4], rows, cols) for part in parts) if emit else 0
     fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
     transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
     for kernel, *arrays, owner in parts:
