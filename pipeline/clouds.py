@@ -8,6 +8,7 @@ physical model of a layer, each part tuned against the others.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -254,13 +255,101 @@ def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.
     return coefficients
 
 
-def _read(key, level: int, coords) -> np.ndarray:
-    """The noise level ``level`` at lattice coordinates ``coords`` (2, m) [texel of that level],
-    wrapped: cubic B-spline interpolation at level 0 (where a camera magnifies the lattice),
-    bilinear at the box-filtered coarser levels (read only where it minifies them)."""
-    if level == 0:
-        return ndimage.map_coordinates(_spline(*key), coords, order=3, mode="grid-wrap", prefilter=False)
-    return ndimage.map_coordinates(_noise_levels(*key)[level], coords, order=1, mode="grid-wrap")
+@lru_cache(maxsize=8)
+def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
+    """What ``_field_loop`` reads: (every level in one flat float64 array, each level's offset
+    in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
+    (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
+    levels = (_spline(seed, texels, period, spectral_slope),) + _noise_levels(seed, texels, period, spectral_slope)[1:]
+    sides = np.array([level.shape[0] for level in levels], dtype=np.intp)
+    offsets = np.concatenate([[0], np.cumsum([level.size for level in levels])[:-1]]).astype(np.intp)
+    flat = np.concatenate([level.reshape(-1) for level in levels])
+    flat.setflags(write=False)
+    return flat, offsets, sides
+
+
+def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out):
+    """The reads of ``CloudLayer.field`` in one loop over samples and taps (compiled by
+    ``_compiled_field_loop``); ``out`` (m,) gets the field. [dimensionless]
+
+    rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
+    direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
+        else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
+        each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
+    B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
+    the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
+    scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
+    value x row weight x column weight.
+    """
+    n_levels = sides.shape[0]
+    weights = np.empty((2, 4))
+    index = np.empty((2, 4), dtype=np.intp)
+    for i in range(rows.shape[0]):
+        n_taps = 1 if direct else taps[i]
+        total = 0.0
+        for t in range(n_taps):
+            if direct:
+                at_row, at_col = rows[i], cols[i]
+            else:
+                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
+                at_row = rows[i] + -ey[i] * step
+                at_col = cols[i] + ex[i] * step
+            k = 0 if direct else k0[i]
+            upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+            finer = 0.0
+            for level in range(k, k + 2 if upper else k + 1):
+                side = sides[level]
+                order = 3 if level == 0 else 1
+                for axis in range(2):
+                    x = at_row if axis == 0 else at_col
+                    if not direct:
+                        x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
+                    if x < 0:  # scipy's grid-wrap of a coordinate
+                        x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
+                    elif x > side - 1:
+                        x = 0.0 if side <= 1 else x - side * int(x / side)
+                    if not x > -1.0:  # NaN: scipy's constant 0
+                        break
+                    start = int(math.floor(x)) - order // 2
+                    f = x - math.floor(x)
+                    if order == 3:
+                        z = 1.0 - f
+                        weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+                        weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+                        weights[axis, 0] = z * z * z / 6.0
+                    else:
+                        weights[axis, 0] = 1.0 - f
+                    last = 1.0
+                    for j in range(order):
+                        last -= weights[axis, j]
+                    weights[axis, order] = last
+                    wraps = start < 0 or start + order >= side
+                    for j in range(order + 1):
+                        index[axis, j] = (start + j) % side if wraps else start + j
+                value = 0.0
+                if x > -1.0:
+                    base = offsets[level]
+                    for a in range(order + 1):
+                        row = base + index[0, a] * side
+                        for b in range(order + 1):
+                            value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
+                if level == k:
+                    finer = value
+                else:
+                    value = finer + blend[i] * (value - finer)
+            total += value / n_taps if not direct else value
+        out[i] = total
+    return out
+
+
+@lru_cache(maxsize=1)
+def _compiled_field_loop():
+    """``_field_loop`` compiled by numba (imported here, on first use: it costs 0.3 s to
+    import; the compiled code is cached on disk)."""
+    from numba import njit
+
+    return njit(cache=True, nogil=True, error_model="numpy")(_field_loop)
 
 
 @lru_cache(maxsize=64)
@@ -383,42 +472,25 @@ class CloudLayer:
         np.multiply(s[:, 0], per_texel, out=coords[1])
         coords[1] -= shift_col
         key = self._noise_key()
-        levels = _noise_levels(*key)
+        flat, offsets, sides = _packed(*key)
+        loop = _compiled_field_loop()
+        out = np.empty(s.shape[0])
         if footprint is None:
-            return _read(key, 0, coords).reshape(shape)
+            unused = np.empty(0)
+            loop(flat, offsets, sides, coords[0], coords[1], True, np.empty(0, dtype=np.intp),
+                 np.empty(0, dtype=np.intp), unused, unused, unused, unused, out)
+            return out.reshape(shape)
         along, across = self._widths(shape, footprint)
         major, minor = np.maximum(along, across), np.minimum(along, across)
         taps = np.clip(np.ceil(major / np.maximum(minor, 1.0) - 1e-9), 1, MAX_TAPS).astype(np.intp)
-        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(levels) - 1.0)
+        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(sides) - 1.0)
         # the major axis on the lattice (row grows with -y): the radius, or across it
         radius = np.hypot(s[:, 0], s[:, 1])
         ex = np.where(radius > 0, s[:, 0] / np.maximum(radius, 1e-300), 1.0)
         ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
         ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
-        # grouped by the finer level read and, within a group, by tap count (most first), so
-        # that the samples of each tap are a contiguous run
-        k0 = np.minimum(np.floor(level).astype(np.intp), len(levels) - 1)
-        blend = level - k0
-        order = np.lexsort((-taps, k0))
-        coords, taps, k0, blend, major, ex, ey = (a[..., order] for a in (coords, taps, k0, blend, major, ex, ey))
-        out = np.zeros(len(level))
-        starts = np.flatnonzero(np.diff(k0, prepend=-1))
-        for a, b in zip(starts, np.append(starts[1:], len(k0))):
-            k = int(k0[a])
-            for t in range(int(taps[a])):
-                m = a + int(np.count_nonzero(taps[a:b] > t))  # taps[a:b] is non-increasing
-                step = ((t + 0.5) / taps[a:m] - 0.5) * major[a:m]  # [texel] from the centre
-                at = coords[:, a:m] + np.stack([-ey[a:m] * step, ex[a:m] * step])
-                value = _read(key, k, (at + 0.5) / 2.0**k - 0.5)  # texel centres of level k
-                upper = blend[a:m] > 0
-                if k + 1 < len(levels) and upper.any():
-                    finer = value[upper]
-                    coarser = _read(key, k + 1, (at[:, upper] + 0.5) / 2.0 ** (k + 1) - 0.5)
-                    value[upper] = finer + blend[a:m][upper] * (coarser - finer)
-                out[a:m] += value / taps[a:m]
-        result = np.empty_like(out)
-        result[order] = out
-        out = result
+        k0 = np.minimum(np.floor(level).astype(np.intp), len(sides) - 1)
+        loop(flat, offsets, sides, coords[0], coords[1], False, taps, k0, level - k0, major, ex, ey, out)
         return out.reshape(shape)
 
     def _widths(self, shape, footprint):
