@@ -34,6 +34,13 @@ _QUAD_NODES = 192  # Gauss-Legendre nodes per angle in the single-scattering flu
 # --------------------------------------------------------------------------- physics functions
 
 
+# numpy's Gauss-Legendre and Gauss-Hermite nodes and weights, cached: numpy finds them as the
+# eigenvalues of a matrix at each call (50 ms for 192 nodes on a busy machine, several times a
+# frame). Callers must not write to them.
+_leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
+_hermegauss = lru_cache(maxsize=4)(np.polynomial.hermite_e.hermegauss)
+
+
 def _phi(x):
     """(1 - exp(-x)) / x for x >= 0, with phi(0) = 1. [dimensionless]"""
     x = np.asarray(x)
@@ -94,7 +101,7 @@ def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     mu0 = float(sun_cosine)
-    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    x, w = _leggauss(int(nodes))
     theta = 0.25 * np.pi * (x + 1.0)  # zenith of the view, (0, pi/2)
     w_theta = 0.25 * np.pi * w
     phi = 0.5 * np.pi * (x + 1.0)  # azimuth from the sun, (0, pi); the integrand is even
@@ -525,7 +532,7 @@ class CloudLayer:
             return np.interp(field, values, levels)
         along, across = self._widths(s.shape[:-1], footprint)
         spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
-        nodes, weights = np.polynomial.hermite_e.hermegauss(_HERMITE_NODES)
+        nodes, weights = _hermegauss(_HERMITE_NODES)
         out = np.zeros(field.shape)
         for z, w in zip(nodes, weights / weights.sum()):
             out += w * np.interp(field + z * spread, values, levels)
@@ -545,7 +552,12 @@ class CloudLayer:
         return np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
 
     def _multiple_tables(self, sun_cosine):
-        """(tau nodes, m_sun, m_sky) of the multiple-scattering term for this sun."""
+        """(tau nodes, m_sun, m_sky) of the multiple-scattering term for this sun (cached: a
+        frame asks for them several times with the same sun)."""
+        return _multiple_tables(self, float(sun_cosine))
+
+    def _tables(self, sun_cosine):
+        """``_multiple_tables`` computed."""
         t = np.linspace(0.0, 1.0, _TAU_NODES)
         tau = self.thickness * t * t  # denser near 0, where S1 bends most
         g, w = self.asymmetry, self.albedo
@@ -632,3 +644,12 @@ class CloudLayer:
                                  sky_irradiance=sky_irradiance,
                                  multiple_scattering=multiple_scattering, tau=tau)
         return transmittance, radiance
+
+
+@lru_cache(maxsize=16)
+def _multiple_tables(layer: CloudLayer, sun_cosine: float) -> tuple:
+    """``CloudLayer._multiple_tables``, cached per layer and sun; read-only arrays."""
+    tables = layer._tables(sun_cosine)
+    for table in tables:
+        table.setflags(write=False)
+    return tables

@@ -22,7 +22,7 @@ others' helpers.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -475,9 +475,14 @@ def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon
     return value * cover[..., None]
 
 
+# numpy's Gauss-Legendre nodes and weights, cached: numpy finds them as the eigenvalues of a
+# matrix at each call, several times a frame. Callers must not write to them.
+_leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
+
+
 def _gauss_legendre(a, b, n):
     """Nodes and weights of n-point Gauss-Legendre on [a, b] (arrays broadcast, nodes on the last axis)."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = _leggauss(n)
     a, b = np.asarray(a, dtype=np.float64)[..., None], np.asarray(b, dtype=np.float64)[..., None]
     return a + (b - a) * (x + 1.0) / 2.0, (b - a) / 2.0 * w
 
