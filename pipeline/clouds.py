@@ -631,14 +631,16 @@ class CloudLayer:
             np.multiply(sun_weight[..., None], sun_rgb.astype(f32), out=out)
         return out
 
-    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True):
-        """``(transmittance(s, time), radiance(s, time, ...))`` sampling the pattern once.
+    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True,
+              footprint=None):
+        """``(transmittance(s, time, footprint), radiance(s, time, ..., footprint=footprint))``
+        sampling the pattern once.
 
         Same arguments and units as ``radiance``; returns ((...), (..., 3)).
         [dimensionless], [kcd/m^2]
         """
         s = np.asarray(s, dtype=np.float64)
-        tau = self.optical_depth(s, time)
+        tau = self.optical_depth(s, time, footprint)
         transmittance = np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
         radiance = self.radiance(s, time, sun_s=sun_s, sun_irradiance=sun_irradiance,
                                  sky_irradiance=sky_irradiance,

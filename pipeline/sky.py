@@ -348,6 +348,8 @@ def _flush(accum, pending: list) -> None:
 #       -> (..., 3) light scattered towards the observer [kcd/m^2], given the sun's sky-plane
 #       point, its normal irradiance above the clouds after the atmosphere and the moon [klx], and
 #       the clear sky's horizontal irradiance [klx].
+#   clouds.shade(s, time, *, sun_s, sun_irradiance, sky_irradiance, footprint=None), optional ->
+#       (transmittance, radiance) as the two above return them, the pattern sampled once.
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
@@ -648,8 +650,18 @@ class ProceduralSky:
         L = self.clear_radiance(s)
         if self.clouds is None:
             return L
-        L *= np.clip(self.clouds.transmittance(s, self.time, footprint), 0.0, 1.0)[..., None]
-        return L + self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light)
+        transmittance, glow = self._cloud_shade(s, footprint)
+        L *= np.clip(transmittance, 0.0, 1.0)[..., None]
+        return L + glow
+
+    def _cloud_shade(self, s, footprint=None):
+        """The clouds' (transmittance (...), radiance (..., 3) [kcd/m^2]) at sky-plane points s
+        (..., 2) [tan]: by their ``shade`` where they have one (the pattern sampled once)."""
+        shade = getattr(self.clouds, "shade", None)
+        if shade is not None:
+            return shade(s, self.time, footprint=footprint, **self._cloud_light)
+        return (self.clouds.transmittance(s, self.time, footprint),
+                self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light))
 
     def view_radiance(self, w, s, footprint=None) -> np.ndarray:
         """``radiance(s, footprint)`` (..., 3) at the sky-plane points s (..., 2) of the unit
@@ -735,8 +747,9 @@ class ProceduralSky:
             L = along[:, row_at[part]] * (1 - f) + along[:, row_at[part] + 1] * f
             if self.clouds is not None:
                 s = np.stack(np.broadcast_arrays(x, y[part]), axis=-1)
-                L *= np.clip(self.clouds.transmittance(s, self.time), 0.0, 1.0).astype(np.float32)
-                L += np.moveaxis(self.clouds.radiance(s, self.time, **self._cloud_light), -1, 0)
+                transmittance, glow = self._cloud_shade(s)
+                L *= np.clip(transmittance, 0.0, 1.0).astype(np.float32)
+                L += np.moveaxis(glow, -1, 0)
             weighted[:, part] = L * weights[part]
         outside = self._outside(grid.extent, self.radiance)
         if fold_period is not None:
