@@ -21,7 +21,7 @@ others' helpers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 from typing import Protocol, runtime_checkable
 
@@ -629,7 +629,15 @@ class ProceduralSky:
     @cached_property
     def _relative_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
-        return self._outside(None, self._relative_sky)
+        s, weight = _outside_nodes(None)
+        return (_relative_nodes(self._clear_key, None) * weight[..., None]).sum(axis=(0, 1, 2))
+
+    @cached_property
+    def _clear_key(self) -> ProceduralSky:
+        """This sky without what does not shape the clear sky (the sun's size and limb, moon,
+        clouds, time, skylight): the key of the caches of its shape."""
+        return replace(self, sun=SunDisc(self.sun.azimuth, self.sun.elevation), moon=None, clouds=None,
+                       time=0.0, skylight=1.0)
 
     @cached_property
     def zenith_luminance(self) -> float:
@@ -647,7 +655,11 @@ class ProceduralSky:
         L_clear T + cloud glow. ``footprint``: None, or the sky-plane width each point stands
         for (scalar or (...)) [tan], over which the cloud pattern is filtered (a camera's
         pixel near the horizon spans kilometres of cloud deck). [kcd/m^2]"""
-        L = self.clear_radiance(s)
+        return self._with_clouds(self.clear_radiance(s), s, footprint)
+
+    def _with_clouds(self, L, s, footprint=None) -> np.ndarray:
+        """The clear-sky radiance L (..., 3) [kcd/m^2] at sky-plane points s behind the clouds:
+        L T + cloud glow (L itself, scaled in place, without clouds). [kcd/m^2]"""
         if self.clouds is None:
             return L
         transmittance, glow = self._cloud_shade(s, footprint)
@@ -681,42 +693,20 @@ class ProceduralSky:
     @cached_property
     def sky_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the sky with clouds (3,), no sun disc. [klx]"""
-        return self._outside(None, self.radiance)
+        return self._outside(None)
 
     def unshadowed(self) -> np.ndarray:
         """Horizontal irradiance of the open sky and sun (3,): any raster's total plus the sun kernel's sum. [klx]"""
         return self.sky_irradiance + self.sun_irradiance()
 
-    def _outside(self, extent, radiance, *, n_azimuth=1024, n_zenith=32) -> np.ndarray:
-        """Irradiance [klx] of the sky outside the sky-plane rectangle ``extent`` (x_min, y_min, x_max,
-        y_max) [tan] (None: the whole hemisphere): for each azimuth (midpoint rule) the ray from the
-        zenith leaves the rectangle at exact zenith angles; the outside parts of the ray are integrated
-        with Gauss-Legendre in theta of L cos(theta) sin(theta)."""
-        phi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
-        d = np.stack([np.sin(phi), np.cos(phi)], axis=-1)
-        t_in = np.zeros(n_azimuth)
-        t_out = np.zeros(n_azimuth)
-        if extent is not None:
-            lo = np.array(extent[:2])
-            hi = np.array(extent[2:])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                a, b = lo / d, hi / d
-            near, far = np.minimum(a, b), np.maximum(a, b)
-            parallel = d == 0.0
-            inside = (lo <= 0.0) & (hi >= 0.0)
-            near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
-            far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
-            t_in = np.maximum(near.max(axis=1), 0.0)
-            t_out = far.min(axis=1)
-            hit = t_out > t_in
-            t_in, t_out = np.where(hit, t_in, 0.0), np.where(hit, t_out, 0.0)
-        a = np.stack([np.zeros(n_azimuth), np.arctan(t_out)], axis=1)
-        b = np.stack([np.arctan(t_in), np.full(n_azimuth, np.pi / 2)], axis=1)
-        theta, w = _gauss_legendre(a, b, n_zenith)  # (n_azimuth, 2, n_zenith)
-        tan = np.tan(theta)
-        s = np.stack([tan * d[:, None, None, 0], tan * d[:, None, None, 1]], axis=-1)
-        weight = w * np.cos(theta) * np.sin(theta) * (2.0 * np.pi / n_azimuth)
-        return (radiance(s) * weight[..., None]).sum(axis=(0, 1, 2))
+    def _outside(self, extent) -> np.ndarray:
+        """Irradiance [klx] of the sky (``radiance``) outside the sky-plane rectangle ``extent``
+        (x_min, y_min, x_max, y_max) [tan] (None: the whole hemisphere), by the quadrature of
+        ``_outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
+        with this clear sky (``_relative_nodes``)."""
+        s, weight = _outside_nodes(extent)
+        L = _relative_nodes(self._clear_key, extent) * (self.zenith_luminance * self._sky_dimming)
+        return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
@@ -751,7 +741,7 @@ class ProceduralSky:
                 L *= np.clip(transmittance, 0.0, 1.0).astype(np.float32)
                 L += np.moveaxis(glow, -1, 0)
             weighted[:, part] = L * weights[part]
-        outside = self._outside(grid.extent, self.radiance)
+        outside = self._outside(grid.extent)
         if fold_period is not None:
             weighted = fold(weighted, sky_offset(grid), fold_period)
             grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
@@ -794,6 +784,51 @@ class ProceduralSky:
         texel = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
         np.add.at(image, (row, col), energy / texel[:, None])
         return image.astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _outside_nodes(extent, n_azimuth=1024, n_zenith=32) -> tuple:
+    """(sky-plane points s (n_azimuth, 2, n_zenith, 2) [tan], weights (n_azimuth, 2, n_zenith)
+    [sr]) of the irradiance outside the rectangle ``extent`` (x_min, y_min, x_max, y_max) [tan]
+    (None: the whole hemisphere): for each azimuth (midpoint rule) the ray from the zenith leaves
+    the rectangle at exact zenith angles; the outside parts of the ray are integrated with
+    Gauss-Legendre in theta of L cos(theta) sin(theta). Read-only, cached."""
+    phi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
+    d = np.stack([np.sin(phi), np.cos(phi)], axis=-1)
+    t_in = np.zeros(n_azimuth)
+    t_out = np.zeros(n_azimuth)
+    if extent is not None:
+        lo = np.array(extent[:2])
+        hi = np.array(extent[2:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = lo / d, hi / d
+        near, far = np.minimum(a, b), np.maximum(a, b)
+        parallel = d == 0.0
+        inside = (lo <= 0.0) & (hi >= 0.0)
+        near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
+        far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
+        t_in = np.maximum(near.max(axis=1), 0.0)
+        t_out = far.min(axis=1)
+        hit = t_out > t_in
+        t_in, t_out = np.where(hit, t_in, 0.0), np.where(hit, t_out, 0.0)
+    a = np.stack([np.zeros(n_azimuth), np.arctan(t_out)], axis=1)
+    b = np.stack([np.arctan(t_in), np.full(n_azimuth, np.pi / 2)], axis=1)
+    theta, w = _gauss_legendre(a, b, n_zenith)  # (n_azimuth, 2, n_zenith)
+    tan = np.tan(theta)
+    s = np.stack([tan * d[:, None, None, 0], tan * d[:, None, None, 1]], axis=-1)
+    weight = w * np.cos(theta) * np.sin(theta) * (2.0 * np.pi / n_azimuth)
+    s.setflags(write=False)
+    weight.setflags(write=False)
+    return s, weight
+
+
+@lru_cache(maxsize=8)
+def _relative_nodes(clear: ProceduralSky, extent) -> np.ndarray:
+    """``clear._relative_sky`` at the nodes of ``_outside_nodes(extent)`` (..., 3), read-only,
+    cached: the clear sky's shape is the same in every frame while the sun stands still. [1]"""
+    relative = clear._relative_sky(_outside_nodes(extent)[0])
+    relative.setflags(write=False)
+    return relative
 
 
 def _lerp_nodes(n: int, k: int):
