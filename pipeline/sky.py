@@ -630,7 +630,7 @@ class ProceduralSky:
     def _relative_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
         s, weight = _outside_nodes(None)
-        return (_relative_nodes(self._clear_key, None) * weight[..., None]).sum(axis=(0, 1, 2))
+        return (_relative_nodes(self._clear_key, _outside_nodes, None) * weight[..., None]).sum(axis=(0, 1, 2))
 
     @cached_property
     def _clear_key(self) -> ProceduralSky:
@@ -705,7 +705,7 @@ class ProceduralSky:
         ``_outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
         with this clear sky (``_relative_nodes``)."""
         s, weight = _outside_nodes(extent)
-        L = _relative_nodes(self._clear_key, extent) * (self.zenith_luminance * self._sky_dimming)
+        L = _relative_nodes(self._clear_key, _outside_nodes, extent) * (self.zenith_luminance * self._sky_dimming)
         return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
@@ -721,10 +721,11 @@ class ProceduralSky:
         """
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
-        row_nodes, row_at, row_frac = _lerp_nodes(rows, k)
-        col_nodes, col_at, col_frac = _lerp_nodes(cols, k)
-        x, y = grid.ground_from_raster(row_nodes[:, None], col_nodes[None, :])
-        nodes = np.moveaxis(self.clear_radiance(np.stack(np.broadcast_arrays(x, y), axis=-1)), -1, 0)
+        _, row_at, row_frac = _lerp_nodes(rows, k)
+        _, col_at, col_frac = _lerp_nodes(cols, k)
+        # clear_radiance at the nodes, the shape computed once for all frames (_relative_nodes)
+        relative = _relative_nodes(self._clear_key, _raster_nodes, grid, k)
+        nodes = np.moveaxis(relative * (self.zenith_luminance * self._sky_dimming), -1, 0)
         nodes = nodes.astype(np.float32)
         along = nodes[:, :, col_at] * (1 - col_frac) + nodes[:, :, col_at + 1] * col_frac  # (3, nodes, cols)
         weights = projected_solid_angle(grid).astype(np.float32)
@@ -823,10 +824,22 @@ def _outside_nodes(extent, n_azimuth=1024, n_zenith=32) -> tuple:
 
 
 @lru_cache(maxsize=8)
-def _relative_nodes(clear: ProceduralSky, extent) -> np.ndarray:
-    """``clear._relative_sky`` at the nodes of ``_outside_nodes(extent)`` (..., 3), read-only,
-    cached: the clear sky's shape is the same in every frame while the sun stands still. [1]"""
-    relative = clear._relative_sky(_outside_nodes(extent)[0])
+def _raster_nodes(grid: Grid, k: int) -> tuple:
+    """(sky-plane points (nodes, nodes, 2) [tan],) of the clear sky's nodes in ``raster``: every
+    k-th cell centre of ``grid`` and the last (``_lerp_nodes``). Read-only, cached."""
+    rows, cols = grid.shape
+    x, y = grid.ground_from_raster(_lerp_nodes(rows, k)[0][:, None], _lerp_nodes(cols, k)[0][None, :])
+    s = np.stack(np.broadcast_arrays(x, y), axis=-1)
+    s.setflags(write=False)
+    return (s,)
+
+
+@lru_cache(maxsize=16)
+def _relative_nodes(clear: ProceduralSky, nodes, *where) -> np.ndarray:
+    """``clear._relative_sky`` (..., 3) at the points ``nodes(*where)[0]`` (``_outside_nodes``,
+    ``_raster_nodes``), read-only, cached: the clear sky's shape is the same in every frame while
+    the sun stands still. [1]"""
+    relative = clear._relative_sky(nodes(*where)[0])
     relative.setflags(write=False)
     return relative
 
