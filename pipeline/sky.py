@@ -885,6 +885,45 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         raise ValueError(f"q must be positive [tan], got {q}")
     if sun.elevation - r <= 1e-3:
         raise ValueError("the sun disc must lie wholly above the horizon for its sky-plane kernel")
+    grid, h_sub, samples = _kernel_samples(sky, q)
+    dimming = sky.sun_cloud_transmittance if isinstance(sky, ProceduralSky) else None
+    out = np.zeros((3, grid.shape[0] * grid.shape[1]))
+    for idx, disc, cos4 in samples:
+        L = disc if dimming is None else disc * dimming  # as ProceduralSky._sun_samples dims it
+        out[:, idx] = np.einsum("kijc,kij->ck", L, cos4) * h_sub**2
+    weighted = out.reshape(3, *grid.shape).astype(np.float32)
+    return SkyRaster(grid, weighted, np.zeros(3))
+
+
+KERNEL_CACHE_SAMPLES = 1 << 20
+"""Most sub-samples of a sun kernel whose undimmed samples (``_kernel_samples``) are kept for the
+next frame: 32 MB of them, to a kernel of 64 x 64 cells at 8 x 8 sub-samples. [count]"""
+
+
+def _kernel_samples(sky, q: float) -> tuple:
+    """(grid, sub-sample side h_sub [tan], ((cells, undimmed sun radiance (k, n, n, 3), cos^4(theta)
+    (k, n, n)), ...)) of ``sun_kernel``: its sub-samples by chunks of cells, before the clouds
+    dim the sun. Kept
+    (``_kept_kernel_samples``) for a procedural sky, whose sun changes far more slowly than its
+    clouds, where there are at most KERNEL_CACHE_SAMPLES of them. [kcd/m^2 for a procedural sky]"""
+    if isinstance(sky, ProceduralSky):
+        key = replace(sky, clouds=None, time=0.0)
+        try:
+            hash(key)
+        except TypeError:
+            pass
+        else:
+            grid, cells, n = _kernel_layout(sky, q)
+            if len(cells) * n * n <= KERNEL_CACHE_SAMPLES:
+                return _kept_kernel_samples(key, q)
+    return _kept_kernel_samples.__wrapped__(sky, q)
+
+
+def _kernel_layout(sky, q: float) -> tuple:
+    """(grid, flat indices of the cells that can hold any of the disc, sub-samples n per cell
+    side) of ``sun_kernel``."""
+    sun = sky.sun
+    r = sun.angular_radius
     # the disc's bounding box on the sky plane, from points on its limb
     _, e1, e2 = tangent_axes(sun.azimuth, sun.elevation)
     psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
@@ -899,7 +938,6 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     grid = sky_grid((r0, c0), shape, q)
     minor = min(x_max - x_min, y_max - y_min) / q
     n = int(min(128, max(8, np.ceil(128.0 / minor))))
-    h_sub = q / n
     # cells that can hold any of the disc: centre within r + half a cell diagonal (in angle)
     rr, cc = np.indices(shape)
     cx, cy = grid.ground_from_raster(rr, cc)
@@ -908,9 +946,17 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     reach = r + q * 0.75 * centres[..., 2]  # a cell spans at most q cos(theta) x sqrt(2)/2 in angle
     near = _angle(centres, sky.sun_direction) <= reach
     cells = np.flatnonzero(near.ravel())
+    return grid, cells, n
+
+
+@lru_cache(maxsize=4)
+def _kept_kernel_samples(sky, q: float) -> tuple:
+    """``_kernel_samples`` computed (cached for the keys ``_kernel_samples`` gives it)."""
+    grid, cells, n = _kernel_layout(sky, q)
+    h_sub = q / n
+    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
     offsets = (np.arange(n) + 0.5) / n - 0.5
     ox, oy = np.meshgrid(offsets * q, -offsets * q)
-    out = np.zeros((3, shape[0] * shape[1]))
 
     def footprint(centre, rho):
         # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho
@@ -918,6 +964,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         norm = np.maximum(np.linalg.norm(away, axis=-1), 1e-300)
         return h_sub * cos_t * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
 
+    chunks = []
     chunk = max(1, (1 << 20) // (n * n))
     for lo in range(0, len(cells), chunk):
         idx = cells[lo : lo + chunk]
@@ -925,10 +972,13 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         sy = cy.ravel()[idx, None, None] + oy
         cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
         w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
-        L = sky._sun_samples(w, footprint)
-        out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
-    weighted = out.reshape(3, *shape).astype(np.float32)
-    return SkyRaster(grid, weighted, np.zeros(3))
+        disc = _disc_samples(w, footprint, sky.sun, sky.sun_direction, sky.sun_normal_irradiance,
+                             getattr(sky, "moon", None))
+        cos4 = cos_t**4
+        for a in (idx, disc, cos4):
+            a.setflags(write=False)
+        chunks.append((idx, disc, cos4))
+    return grid, h_sub, tuple(chunks)
 
 
 def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: int = 3,
