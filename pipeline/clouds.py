@@ -465,6 +465,23 @@ class CloudLayer:
             wider one (a camera's pixel near the horizon is 1 / cos(theta) times longer along
             the radius than across it on the sky plane: filtered round, the far cloud deck was
             smeared sideways into stepped bands)."""
+        shape, coords, taps = self._taps(s, time, footprint)
+        flat, offsets, sides = _packed(*self._noise_key())
+        out = np.empty(coords.shape[1])
+        if taps is None:
+            unused, none = np.empty(0), np.empty(0, dtype=np.intp)
+            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
+                                   unused, unused, unused, out)
+        else:
+            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], False, *taps, out)
+        return out.reshape(shape)
+
+    def _taps(self, s, time, footprint=None) -> tuple:
+        """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
+        axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
+        None without a footprint, else the taps as ``_field_loop`` takes them: (count (m,), finer
+        level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
+        axis ex, ey (m,) on the lattice))."""
         s = np.asarray(s, dtype=np.float64)
         n = self.texels
         per_texel = self.altitude / self.texel
@@ -472,33 +489,26 @@ class CloudLayer:
         shift_col = np.mod(self.wind[0] * float(time) / self.texel, n)
         shift_row = np.mod(-self.wind[1] * float(time) / self.texel, n)
         shape = s.shape[:-1]
-        s = s.reshape(-1, 2)  # map_coordinates wants at least one axis
+        s = s.reshape(-1, 2)  # at least one axis
         coords = np.empty((2, s.shape[0]))
         np.multiply(s[:, 1], -per_texel, out=coords[0])
         coords[0] -= shift_row
         np.multiply(s[:, 0], per_texel, out=coords[1])
         coords[1] -= shift_col
-        key = self._noise_key()
-        flat, offsets, sides = _packed(*key)
-        loop = _compiled_field_loop()
-        out = np.empty(s.shape[0])
         if footprint is None:
-            unused = np.empty(0)
-            loop(flat, offsets, sides, coords[0], coords[1], True, np.empty(0, dtype=np.intp),
-                 np.empty(0, dtype=np.intp), unused, unused, unused, unused, out)
-            return out.reshape(shape)
+            return shape, coords, None
+        levels = len(_packed(*self._noise_key())[2])
         along, across = self._widths(shape, footprint)
         major, minor = np.maximum(along, across), np.minimum(along, across)
         taps = np.clip(np.ceil(major / np.maximum(minor, 1.0) - 1e-9), 1, MAX_TAPS).astype(np.intp)
-        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(sides) - 1.0)
+        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, levels - 1.0)
         # the major axis on the lattice (row grows with -y): the radius, or across it
         radius = np.hypot(s[:, 0], s[:, 1])
         ex = np.where(radius > 0, s[:, 0] / np.maximum(radius, 1e-300), 1.0)
         ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
         ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
-        k0 = np.minimum(np.floor(level).astype(np.intp), len(sides) - 1)
-        loop(flat, offsets, sides, coords[0], coords[1], False, taps, k0, level - k0, major, ex, ey, out)
-        return out.reshape(shape)
+        k0 = np.minimum(np.floor(level).astype(np.intp), levels - 1)
+        return shape, coords, (taps, k0, level - k0, major, ex, ey)
 
     def _widths(self, shape, footprint):
         """A footprint (``field``) as its widths along the radius and across it, each

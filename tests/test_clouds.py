@@ -402,8 +402,9 @@ def test_a_long_footprint_blurs_along_its_length_only():
 
 
 def reference_field(cl, s, time, footprint=None):
-    """``CloudLayer.field`` as numpy and scipy.ndimage.map_coordinates compute it (the code the
-    compiled loop replaced): the reference the compiled loop is held to, bit for bit."""
+    """``CloudLayer.field`` as numpy and scipy.ndimage.map_coordinates computed it, from where
+    ``CloudLayer._taps`` says to read (the code the compiled loop replaced): the reference the
+    compiled loop is held to, bit for bit."""
     from scipy import ndimage
 
     key = cl._noise_key()
@@ -415,33 +416,13 @@ def reference_field(cl, s, time, footprint=None):
                                            prefilter=False)
         return ndimage.map_coordinates(levels[level], coords, order=1, mode="grid-wrap")
 
-    s = np.asarray(s, dtype=np.float64)
-    n = cl.texels
-    per_texel = cl.altitude / cl.texel
-    shift_col = np.mod(cl.wind[0] * float(time) / cl.texel, n)
-    shift_row = np.mod(-cl.wind[1] * float(time) / cl.texel, n)
-    shape = s.shape[:-1]
-    s = s.reshape(-1, 2)
-    coords = np.empty((2, s.shape[0]))
-    np.multiply(s[:, 1], -per_texel, out=coords[0])
-    coords[0] -= shift_row
-    np.multiply(s[:, 0], per_texel, out=coords[1])
-    coords[1] -= shift_col
-    if footprint is None:
+    shape, coords, taps = cl._taps(s, time, footprint)
+    if taps is None:
         return read(0, coords).reshape(shape)
-    along, across = cl._widths(shape, footprint)
-    major, minor = np.maximum(along, across), np.minimum(along, across)
-    taps = np.clip(np.ceil(major / np.maximum(minor, 1.0) - 1e-9), 1, clouds.MAX_TAPS).astype(np.intp)
-    level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(levels) - 1.0)
-    radius = np.hypot(s[:, 0], s[:, 1])
-    ex = np.where(radius > 0, s[:, 0] / np.maximum(radius, 1e-300), 1.0)
-    ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
-    ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
-    k0 = np.minimum(np.floor(level).astype(np.intp), len(levels) - 1)
-    blend = level - k0
+    taps, k0, blend, major, ex, ey = taps
     order = np.lexsort((-taps, k0))
     coords, taps, k0, blend, major, ex, ey = (a[..., order] for a in (coords, taps, k0, blend, major, ex, ey))
-    out = np.zeros(len(level))
+    out = np.zeros(len(k0))
     starts = np.flatnonzero(np.diff(k0, prepend=-1))
     for a, b in zip(starts, np.append(starts[1:], len(k0))):
         k = int(k0[a])
