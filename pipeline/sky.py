@@ -629,7 +629,7 @@ class ProceduralSky:
     @cached_property
     def _relative_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
-        s, weight = _outside_nodes(None)
+        weight = _outside_nodes(None)[1]
         return (_relative_nodes(self._clear_key, _outside_nodes, None) * weight[..., None]).sum(axis=(0, 1, 2))
 
     @cached_property
