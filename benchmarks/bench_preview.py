@@ -9,6 +9,11 @@ folder with a fresh cache; the first frame counts as shown when its PNG is in pl
 the same command runs with its ``pipeline`` package first on PYTHONPATH; the ratio is printed.
 Prints wall seconds (median over ``--repeats``), the CPU seconds of the process and its
 workers, and the load average, which says how busy the machine was.
+
+Before the timed runs of a config, each revision renders its frame 0 once, untimed, in a
+throw-away folder: numba compiles the loops a config needs into the revision's own
+``__pycache__`` on its first run (several seconds in each worker), which a fresh checkout of the
+baseline would otherwise pay inside its timing and this tree, already warm, would not.
 """
 
 from __future__ import annotations
@@ -31,6 +36,23 @@ sys.path.insert(0, str(ROOT))
 from pipeline.resolve import load  # noqa: E402
 
 
+def command(config: Path, work: Path, *extra: str) -> list[str]:
+    """The preview command of ``config`` into ``work``/out with the cache in ``work``/cache."""
+    return [sys.executable, "-m", "pipeline.cli", "render", str(config), "--preview", "--output",
+            str(work / "out"), "--cache", str(work / "cache"), *extra]
+
+
+def warm(config: Path, code: Path) -> None:
+    """Render frame 0 of the preview once with ``code``, untimed, so that numba's cache of the
+    loops the config needs is filled (see the module docstring)."""
+    work = Path(tempfile.mkdtemp(prefix="sunshade-bench-preview-warm-"))
+    try:
+        subprocess.run(command(config, work, "--frames", "0"), cwd=work, env={**os.environ, "PYTHONPATH": str(code)},
+                       check=True, capture_output=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 def preview_run(config: Path, code: Path, work: Path) -> tuple[float, float, float]:
     """(seconds to the first frame's PNG, seconds to the end, CPU seconds) of one preview."""
     name = load(config).output.name
@@ -38,9 +60,8 @@ def preview_run(config: Path, code: Path, work: Path) -> tuple[float, float, flo
     env = {**os.environ, "PYTHONPATH": str(code)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
-    process = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "render", str(config), "--preview",
-                                "--output", str(out), "--cache", str(work / "cache")],
-                               cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(command(config, work), cwd=work, env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
     first = None
     while process.poll() is None:
         if first is None and any((out / "preview").glob(f"{name}.[0-9][0-9][0-9][0-9].png")):
@@ -79,6 +100,8 @@ def main() -> None:
                        check=True, capture_output=True)
     try:
         for config in map(Path, args.configs):
+            for code in (ROOT,) if baseline is None else (ROOT, baseline):
+                warm(config.resolve(), code)
             load = os.getloadavg()[0]
             first, total, cpu = measure(config.resolve(), ROOT, args.repeats)
             line = (f"{config.name}: first frame {first:.1f} s, done {total:.1f} s, CPU {cpu:.1f} s "

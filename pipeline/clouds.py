@@ -8,6 +8,7 @@ physical model of a layer, each part tuned against the others.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -31,6 +32,13 @@ _QUAD_NODES = 192  # Gauss-Legendre nodes per angle in the single-scattering flu
 
 
 # --------------------------------------------------------------------------- physics functions
+
+
+# numpy's Gauss-Legendre and Gauss-Hermite nodes and weights, cached: numpy finds them as the
+# eigenvalues of a matrix at each call (50 ms for 192 nodes on a busy machine, several times a
+# frame). Callers must not write to them.
+_leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
+_hermegauss = lru_cache(maxsize=4)(np.polynomial.hermite_e.hermegauss)
 
 
 def _phi(x):
@@ -93,7 +101,7 @@ def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     mu0 = float(sun_cosine)
-    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    x, w = _leggauss(int(nodes))
     theta = 0.25 * np.pi * (x + 1.0)  # zenith of the view, (0, pi/2)
     w_theta = 0.25 * np.pi * w
     phi = 0.5 * np.pi * (x + 1.0)  # azimuth from the sun, (0, pi); the integrand is even
@@ -254,13 +262,101 @@ def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.
     return coefficients
 
 
-def _read(key, level: int, coords) -> np.ndarray:
-    """The noise level ``level`` at lattice coordinates ``coords`` (2, m) [texel of that level],
-    wrapped: cubic B-spline interpolation at level 0 (where a camera magnifies the lattice),
-    bilinear at the box-filtered coarser levels (read only where it minifies them)."""
-    if level == 0:
-        return ndimage.map_coordinates(_spline(*key), coords, order=3, mode="grid-wrap", prefilter=False)
-    return ndimage.map_coordinates(_noise_levels(*key)[level], coords, order=1, mode="grid-wrap")
+@lru_cache(maxsize=8)
+def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
+    """What ``_field_loop`` reads: (every level in one flat float64 array, each level's offset
+    in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
+    (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
+    levels = (_spline(seed, texels, period, spectral_slope),) + _noise_levels(seed, texels, period, spectral_slope)[1:]
+    sides = np.array([level.shape[0] for level in levels], dtype=np.intp)
+    offsets = np.concatenate([[0], np.cumsum([level.size for level in levels])[:-1]]).astype(np.intp)
+    flat = np.concatenate([level.reshape(-1) for level in levels])
+    flat.setflags(write=False)
+    return flat, offsets, sides
+
+
+def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out):
+    """The reads of ``CloudLayer.field`` in one loop over samples and taps (compiled by
+    ``_compiled_field_loop``); ``out`` (m,) gets the field. [dimensionless]
+
+    rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
+    direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
+        else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
+        each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
+    B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
+    the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
+    scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
+    value x row weight x column weight.
+    """
+    n_levels = sides.shape[0]
+    weights = np.empty((2, 4))
+    index = np.empty((2, 4), dtype=np.intp)
+    for i in range(rows.shape[0]):
+        n_taps = 1 if direct else taps[i]
+        total = 0.0
+        for t in range(n_taps):
+            if direct:
+                at_row, at_col = rows[i], cols[i]
+            else:
+                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
+                at_row = rows[i] + -ey[i] * step
+                at_col = cols[i] + ex[i] * step
+            k = 0 if direct else k0[i]
+            upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+            finer = 0.0
+            for level in range(k, k + 2 if upper else k + 1):
+                side = sides[level]
+                order = 3 if level == 0 else 1
+                for axis in range(2):
+                    x = at_row if axis == 0 else at_col
+                    if not direct:
+                        x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
+                    if x < 0:  # scipy's grid-wrap of a coordinate
+                        x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
+                    elif x > side - 1:
+                        x = 0.0 if side <= 1 else x - side * int(x / side)
+                    if not x > -1.0:  # NaN: scipy's constant 0
+                        break
+                    start = int(math.floor(x)) - order // 2
+                    f = x - math.floor(x)
+                    if order == 3:
+                        z = 1.0 - f
+                        weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+                        weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+                        weights[axis, 0] = z * z * z / 6.0
+                    else:
+                        weights[axis, 0] = 1.0 - f
+                    last = 1.0
+                    for j in range(order):
+                        last -= weights[axis, j]
+                    weights[axis, order] = last
+                    wraps = start < 0 or start + order >= side
+                    for j in range(order + 1):
+                        index[axis, j] = (start + j) % side if wraps else start + j
+                value = 0.0
+                if x > -1.0:
+                    base = offsets[level]
+                    for a in range(order + 1):
+                        row = base + index[0, a] * side
+                        for b in range(order + 1):
+                            value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
+                if level == k:
+                    finer = value
+                else:
+                    value = finer + blend[i] * (value - finer)
+            total += value / n_taps if not direct else value
+        out[i] = total
+    return out
+
+
+@lru_cache(maxsize=1)
+def _compiled_field_loop():
+    """``_field_loop`` compiled by numba (imported here, on first use: it costs 0.3 s to
+    import; the compiled code is cached on disk)."""
+    from numba import njit
+
+    return njit(cache=True, nogil=True, error_model="numpy")(_field_loop)
 
 
 @lru_cache(maxsize=64)
@@ -369,6 +465,23 @@ class CloudLayer:
             wider one (a camera's pixel near the horizon is 1 / cos(theta) times longer along
             the radius than across it on the sky plane: filtered round, the far cloud deck was
             smeared sideways into stepped bands)."""
+        shape, coords, taps = self._taps(s, time, footprint)
+        flat, offsets, sides = _packed(*self._noise_key())
+        out = np.empty(coords.shape[1])
+        if taps is None:
+            unused, none = np.empty(0), np.empty(0, dtype=np.intp)
+            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
+                                   unused, unused, unused, out)
+        else:
+            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], False, *taps, out)
+        return out.reshape(shape)
+
+    def _taps(self, s, time, footprint=None) -> tuple:
+        """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
+        axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
+        None without a footprint, else the taps as ``_field_loop`` takes them: (count (m,), finer
+        level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
+        axis ex, ey (m,) on the lattice))."""
         s = np.asarray(s, dtype=np.float64)
         n = self.texels
         per_texel = self.altitude / self.texel
@@ -376,50 +489,26 @@ class CloudLayer:
         shift_col = np.mod(self.wind[0] * float(time) / self.texel, n)
         shift_row = np.mod(-self.wind[1] * float(time) / self.texel, n)
         shape = s.shape[:-1]
-        s = s.reshape(-1, 2)  # map_coordinates wants at least one axis
+        s = s.reshape(-1, 2)  # at least one axis
         coords = np.empty((2, s.shape[0]))
         np.multiply(s[:, 1], -per_texel, out=coords[0])
         coords[0] -= shift_row
         np.multiply(s[:, 0], per_texel, out=coords[1])
         coords[1] -= shift_col
-        key = self._noise_key()
-        levels = _noise_levels(*key)
         if footprint is None:
-            return _read(key, 0, coords).reshape(shape)
+            return shape, coords, None
+        levels = len(_packed(*self._noise_key())[2])
         along, across = self._widths(shape, footprint)
         major, minor = np.maximum(along, across), np.minimum(along, across)
         taps = np.clip(np.ceil(major / np.maximum(minor, 1.0) - 1e-9), 1, MAX_TAPS).astype(np.intp)
-        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, len(levels) - 1.0)
+        level = np.clip(np.log2(np.maximum(np.maximum(minor, major / taps), 1e-300)), 0.0, levels - 1.0)
         # the major axis on the lattice (row grows with -y): the radius, or across it
         radius = np.hypot(s[:, 0], s[:, 1])
         ex = np.where(radius > 0, s[:, 0] / np.maximum(radius, 1e-300), 1.0)
         ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
         ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
-        # grouped by the finer level read and, within a group, by tap count (most first), so
-        # that the samples of each tap are a contiguous run
-        k0 = np.minimum(np.floor(level).astype(np.intp), len(levels) - 1)
-        blend = level - k0
-        order = np.lexsort((-taps, k0))
-        coords, taps, k0, blend, major, ex, ey = (a[..., order] for a in (coords, taps, k0, blend, major, ex, ey))
-        out = np.zeros(len(level))
-        starts = np.flatnonzero(np.diff(k0, prepend=-1))
-        for a, b in zip(starts, np.append(starts[1:], len(k0))):
-            k = int(k0[a])
-            for t in range(int(taps[a])):
-                m = a + int(np.count_nonzero(taps[a:b] > t))  # taps[a:b] is non-increasing
-                step = ((t + 0.5) / taps[a:m] - 0.5) * major[a:m]  # [texel] from the centre
-                at = coords[:, a:m] + np.stack([-ey[a:m] * step, ex[a:m] * step])
-                value = _read(key, k, (at + 0.5) / 2.0**k - 0.5)  # texel centres of level k
-                upper = blend[a:m] > 0
-                if k + 1 < len(levels) and upper.any():
-                    finer = value[upper]
-                    coarser = _read(key, k + 1, (at[:, upper] + 0.5) / 2.0 ** (k + 1) - 0.5)
-                    value[upper] = finer + blend[a:m][upper] * (coarser - finer)
-                out[a:m] += value / taps[a:m]
-        result = np.empty_like(out)
-        result[order] = out
-        out = result
-        return out.reshape(shape)
+        k0 = np.minimum(np.floor(level).astype(np.intp), levels - 1)
+        return shape, coords, (taps, k0, level - k0, major, ex, ey)
 
     def _widths(self, shape, footprint):
         """A footprint (``field``) as its widths along the radius and across it, each
@@ -453,7 +542,7 @@ class CloudLayer:
             return np.interp(field, values, levels)
         along, across = self._widths(s.shape[:-1], footprint)
         spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
-        nodes, weights = np.polynomial.hermite_e.hermegauss(_HERMITE_NODES)
+        nodes, weights = _hermegauss(_HERMITE_NODES)
         out = np.zeros(field.shape)
         for z, w in zip(nodes, weights / weights.sum()):
             out += w * np.interp(field + z * spread, values, levels)
@@ -473,7 +562,12 @@ class CloudLayer:
         return np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
 
     def _multiple_tables(self, sun_cosine):
-        """(tau nodes, m_sun, m_sky) of the multiple-scattering term for this sun."""
+        """(tau nodes, m_sun, m_sky) of the multiple-scattering term for this sun (cached: a
+        frame asks for them several times with the same sun)."""
+        return _multiple_tables(self, float(sun_cosine))
+
+    def _tables(self, sun_cosine):
+        """``_multiple_tables`` computed."""
         t = np.linspace(0.0, 1.0, _TAU_NODES)
         tau = self.thickness * t * t  # denser near 0, where S1 bends most
         g, w = self.asymmetry, self.albedo
@@ -547,16 +641,27 @@ class CloudLayer:
             np.multiply(sun_weight[..., None], sun_rgb.astype(f32), out=out)
         return out
 
-    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True):
-        """``(transmittance(s, time), radiance(s, time, ...))`` sampling the pattern once.
+    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True,
+              footprint=None):
+        """``(transmittance(s, time, footprint), radiance(s, time, ..., footprint=footprint))``
+        sampling the pattern once.
 
         Same arguments and units as ``radiance``; returns ((...), (..., 3)).
         [dimensionless], [kcd/m^2]
         """
         s = np.asarray(s, dtype=np.float64)
-        tau = self.optical_depth(s, time)
+        tau = self.optical_depth(s, time, footprint)
         transmittance = np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
         radiance = self.radiance(s, time, sun_s=sun_s, sun_irradiance=sun_irradiance,
                                  sky_irradiance=sky_irradiance,
                                  multiple_scattering=multiple_scattering, tau=tau)
         return transmittance, radiance
+
+
+@lru_cache(maxsize=16)
+def _multiple_tables(layer: CloudLayer, sun_cosine: float) -> tuple:
+    """``CloudLayer._multiple_tables``, cached per layer and sun; read-only arrays."""
+    tables = layer._tables(sun_cosine)
+    for table in tables:
+        table.setflags(write=False)
+    return tables

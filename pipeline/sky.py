@@ -21,8 +21,8 @@ others' helpers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, replace
+from functools import cached_property, lru_cache
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -348,6 +348,8 @@ def _flush(accum, pending: list) -> None:
 #       -> (..., 3) light scattered towards the observer [kcd/m^2], given the sun's sky-plane
 #       point, its normal irradiance above the clouds after the atmosphere and the moon [klx], and
 #       the clear sky's horizontal irradiance [klx].
+#   clouds.shade(s, time, *, sun_s, sun_irradiance, sky_irradiance, footprint=None), optional ->
+#       (transmittance, radiance) as the two above return them, the pattern sampled once.
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
@@ -475,9 +477,14 @@ def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon
     return value * cover[..., None]
 
 
+# numpy's Gauss-Legendre nodes and weights, cached: numpy finds them as the eigenvalues of a
+# matrix at each call, several times a frame. Callers must not write to them.
+_leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
+
+
 def _gauss_legendre(a, b, n):
     """Nodes and weights of n-point Gauss-Legendre on [a, b] (arrays broadcast, nodes on the last axis)."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = _leggauss(n)
     a, b = np.asarray(a, dtype=np.float64)[..., None], np.asarray(b, dtype=np.float64)[..., None]
     return a + (b - a) * (x + 1.0) / 2.0, (b - a) / 2.0 * w
 
@@ -622,7 +629,15 @@ class ProceduralSky:
     @cached_property
     def _relative_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
-        return self._outside(None, self._relative_sky)
+        weight = _outside_nodes(None)[1]
+        return (_relative_nodes(self._clear_key, _outside_nodes, None) * weight[..., None]).sum(axis=(0, 1, 2))
+
+    @cached_property
+    def _clear_key(self) -> ProceduralSky:
+        """This sky without what does not shape the clear sky (the sun's size and limb, moon,
+        clouds, time, skylight): the key of the caches of its shape."""
+        return replace(self, sun=SunDisc(self.sun.azimuth, self.sun.elevation), moon=None, clouds=None,
+                       time=0.0, skylight=1.0)
 
     @cached_property
     def zenith_luminance(self) -> float:
@@ -640,11 +655,25 @@ class ProceduralSky:
         L_clear T + cloud glow. ``footprint``: None, or the sky-plane width each point stands
         for (scalar or (...)) [tan], over which the cloud pattern is filtered (a camera's
         pixel near the horizon spans kilometres of cloud deck). [kcd/m^2]"""
-        L = self.clear_radiance(s)
+        return self._with_clouds(self.clear_radiance(s), s, footprint)
+
+    def _with_clouds(self, L, s, footprint=None) -> np.ndarray:
+        """The clear-sky radiance L (..., 3) [kcd/m^2] at sky-plane points s behind the clouds:
+        L T + cloud glow (L itself, scaled in place, without clouds). [kcd/m^2]"""
         if self.clouds is None:
             return L
-        L *= np.clip(self.clouds.transmittance(s, self.time, footprint), 0.0, 1.0)[..., None]
-        return L + self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light)
+        transmittance, glow = self._cloud_shade(s, footprint)
+        L *= np.clip(transmittance, 0.0, 1.0)[..., None]
+        return L + glow
+
+    def _cloud_shade(self, s, footprint=None):
+        """The clouds' (transmittance (...), radiance (..., 3) [kcd/m^2]) at sky-plane points s
+        (..., 2) [tan]: by their ``shade`` where they have one (the pattern sampled once)."""
+        shade = getattr(self.clouds, "shade", None)
+        if shade is not None:
+            return shade(s, self.time, footprint=footprint, **self._cloud_light)
+        return (self.clouds.transmittance(s, self.time, footprint),
+                self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light))
 
     def view_radiance(self, w, s, footprint=None) -> np.ndarray:
         """``radiance(s, footprint)`` (..., 3) at the sky-plane points s (..., 2) of the unit
@@ -664,42 +693,20 @@ class ProceduralSky:
     @cached_property
     def sky_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the sky with clouds (3,), no sun disc. [klx]"""
-        return self._outside(None, self.radiance)
+        return self._outside(None)
 
     def unshadowed(self) -> np.ndarray:
         """Horizontal irradiance of the open sky and sun (3,): any raster's total plus the sun kernel's sum. [klx]"""
         return self.sky_irradiance + self.sun_irradiance()
 
-    def _outside(self, extent, radiance, *, n_azimuth=1024, n_zenith=32) -> np.ndarray:
-        """Irradiance [klx] of the sky outside the sky-plane rectangle ``extent`` (x_min, y_min, x_max,
-        y_max) [tan] (None: the whole hemisphere): for each azimuth (midpoint rule) the ray from the
-        zenith leaves the rectangle at exact zenith angles; the outside parts of the ray are integrated
-        with Gauss-Legendre in theta of L cos(theta) sin(theta)."""
-        phi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
-        d = np.stack([np.sin(phi), np.cos(phi)], axis=-1)
-        t_in = np.zeros(n_azimuth)
-        t_out = np.zeros(n_azimuth)
-        if extent is not None:
-            lo = np.array(extent[:2])
-            hi = np.array(extent[2:])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                a, b = lo / d, hi / d
-            near, far = np.minimum(a, b), np.maximum(a, b)
-            parallel = d == 0.0
-            inside = (lo <= 0.0) & (hi >= 0.0)
-            near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
-            far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
-            t_in = np.maximum(near.max(axis=1), 0.0)
-            t_out = far.min(axis=1)
-            hit = t_out > t_in
-            t_in, t_out = np.where(hit, t_in, 0.0), np.where(hit, t_out, 0.0)
-        a = np.stack([np.zeros(n_azimuth), np.arctan(t_out)], axis=1)
-        b = np.stack([np.arctan(t_in), np.full(n_azimuth, np.pi / 2)], axis=1)
-        theta, w = _gauss_legendre(a, b, n_zenith)  # (n_azimuth, 2, n_zenith)
-        tan = np.tan(theta)
-        s = np.stack([tan * d[:, None, None, 0], tan * d[:, None, None, 1]], axis=-1)
-        weight = w * np.cos(theta) * np.sin(theta) * (2.0 * np.pi / n_azimuth)
-        return (radiance(s) * weight[..., None]).sum(axis=(0, 1, 2))
+    def _outside(self, extent) -> np.ndarray:
+        """Irradiance [klx] of the sky (``radiance``) outside the sky-plane rectangle ``extent``
+        (x_min, y_min, x_max, y_max) [tan] (None: the whole hemisphere), by the quadrature of
+        ``_outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
+        with this clear sky (``_relative_nodes``)."""
+        s, weight = _outside_nodes(extent)
+        L = _relative_nodes(self._clear_key, _outside_nodes, extent) * (self.zenith_luminance * self._sky_dimming)
+        return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
@@ -714,10 +721,11 @@ class ProceduralSky:
         """
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
-        row_nodes, row_at, row_frac = _lerp_nodes(rows, k)
-        col_nodes, col_at, col_frac = _lerp_nodes(cols, k)
-        x, y = grid.ground_from_raster(row_nodes[:, None], col_nodes[None, :])
-        nodes = np.moveaxis(self.clear_radiance(np.stack(np.broadcast_arrays(x, y), axis=-1)), -1, 0)
+        _, row_at, row_frac = _lerp_nodes(rows, k)
+        _, col_at, col_frac = _lerp_nodes(cols, k)
+        # clear_radiance at the nodes, the shape computed once for all frames (_relative_nodes)
+        relative = _relative_nodes(self._clear_key, _raster_nodes, grid, k)
+        nodes = np.moveaxis(relative * (self.zenith_luminance * self._sky_dimming), -1, 0)
         nodes = nodes.astype(np.float32)
         along = nodes[:, :, col_at] * (1 - col_frac) + nodes[:, :, col_at + 1] * col_frac  # (3, nodes, cols)
         weights = projected_solid_angle(grid).astype(np.float32)
@@ -730,10 +738,11 @@ class ProceduralSky:
             L = along[:, row_at[part]] * (1 - f) + along[:, row_at[part] + 1] * f
             if self.clouds is not None:
                 s = np.stack(np.broadcast_arrays(x, y[part]), axis=-1)
-                L *= np.clip(self.clouds.transmittance(s, self.time), 0.0, 1.0).astype(np.float32)
-                L += np.moveaxis(self.clouds.radiance(s, self.time, **self._cloud_light), -1, 0)
+                transmittance, glow = self._cloud_shade(s)
+                L *= np.clip(transmittance, 0.0, 1.0).astype(np.float32)
+                L += np.moveaxis(glow, -1, 0)
             weighted[:, part] = L * weights[part]
-        outside = self._outside(grid.extent, self.radiance)
+        outside = self._outside(grid.extent)
         if fold_period is not None:
             weighted = fold(weighted, sky_offset(grid), fold_period)
             grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
@@ -778,6 +787,63 @@ class ProceduralSky:
         return image.astype(np.float32)
 
 
+@lru_cache(maxsize=8)
+def _outside_nodes(extent, n_azimuth=1024, n_zenith=32) -> tuple:
+    """(sky-plane points s (n_azimuth, 2, n_zenith, 2) [tan], weights (n_azimuth, 2, n_zenith)
+    [sr]) of the irradiance outside the rectangle ``extent`` (x_min, y_min, x_max, y_max) [tan]
+    (None: the whole hemisphere): for each azimuth (midpoint rule) the ray from the zenith leaves
+    the rectangle at exact zenith angles; the outside parts of the ray are integrated with
+    Gauss-Legendre in theta of L cos(theta) sin(theta). Read-only, cached."""
+    phi = (np.arange(n_azimuth) + 0.5) * (2.0 * np.pi / n_azimuth)
+    d = np.stack([np.sin(phi), np.cos(phi)], axis=-1)
+    t_in = np.zeros(n_azimuth)
+    t_out = np.zeros(n_azimuth)
+    if extent is not None:
+        lo = np.array(extent[:2])
+        hi = np.array(extent[2:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = lo / d, hi / d
+        near, far = np.minimum(a, b), np.maximum(a, b)
+        parallel = d == 0.0
+        inside = (lo <= 0.0) & (hi >= 0.0)
+        near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
+        far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
+        t_in = np.maximum(near.max(axis=1), 0.0)
+        t_out = far.min(axis=1)
+        hit = t_out > t_in
+        t_in, t_out = np.where(hit, t_in, 0.0), np.where(hit, t_out, 0.0)
+    a = np.stack([np.zeros(n_azimuth), np.arctan(t_out)], axis=1)
+    b = np.stack([np.arctan(t_in), np.full(n_azimuth, np.pi / 2)], axis=1)
+    theta, w = _gauss_legendre(a, b, n_zenith)  # (n_azimuth, 2, n_zenith)
+    tan = np.tan(theta)
+    s = np.stack([tan * d[:, None, None, 0], tan * d[:, None, None, 1]], axis=-1)
+    weight = w * np.cos(theta) * np.sin(theta) * (2.0 * np.pi / n_azimuth)
+    s.setflags(write=False)
+    weight.setflags(write=False)
+    return s, weight
+
+
+@lru_cache(maxsize=8)
+def _raster_nodes(grid: Grid, k: int) -> tuple:
+    """(sky-plane points (nodes, nodes, 2) [tan],) of the clear sky's nodes in ``raster``: every
+    k-th cell centre of ``grid`` and the last (``_lerp_nodes``). Read-only, cached."""
+    rows, cols = grid.shape
+    x, y = grid.ground_from_raster(_lerp_nodes(rows, k)[0][:, None], _lerp_nodes(cols, k)[0][None, :])
+    s = np.stack(np.broadcast_arrays(x, y), axis=-1)
+    s.setflags(write=False)
+    return (s,)
+
+
+@lru_cache(maxsize=16)
+def _relative_nodes(clear: ProceduralSky, nodes, *where) -> np.ndarray:
+    """``clear._relative_sky`` (..., 3) at the points ``nodes(*where)[0]`` (``_outside_nodes``,
+    ``_raster_nodes``), read-only, cached: the clear sky's shape is the same in every frame while
+    the sun stands still. [1]"""
+    relative = clear._relative_sky(nodes(*where)[0])
+    relative.setflags(write=False)
+    return relative
+
+
 def _lerp_nodes(n: int, k: int):
     """Nodes every k of n indices (the last one included) and, for each index, the node interval it
     falls in (``at``, ``at + 1`` valid) and its fraction along it (float32)."""
@@ -819,6 +885,45 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         raise ValueError(f"q must be positive [tan], got {q}")
     if sun.elevation - r <= 1e-3:
         raise ValueError("the sun disc must lie wholly above the horizon for its sky-plane kernel")
+    grid, h_sub, samples = _kernel_samples(sky, q)
+    dimming = sky.sun_cloud_transmittance if isinstance(sky, ProceduralSky) else None
+    out = np.zeros((3, grid.shape[0] * grid.shape[1]))
+    for idx, disc, cos4 in samples:
+        L = disc if dimming is None else disc * dimming  # as ProceduralSky._sun_samples dims it
+        out[:, idx] = np.einsum("kijc,kij->ck", L, cos4) * h_sub**2
+    weighted = out.reshape(3, *grid.shape).astype(np.float32)
+    return SkyRaster(grid, weighted, np.zeros(3))
+
+
+KERNEL_CACHE_SAMPLES = 1 << 20
+"""Most sub-samples of a sun kernel whose undimmed samples (``_kernel_samples``) are kept for the
+next frame: 32 MB of them, to a kernel of 64 x 64 cells at 8 x 8 sub-samples. [count]"""
+
+
+def _kernel_samples(sky, q: float) -> tuple:
+    """(grid, sub-sample side h_sub [tan], ((cells, undimmed sun radiance (k, n, n, 3), cos^4(theta)
+    (k, n, n)), ...)) of ``sun_kernel``: its sub-samples by chunks of cells, before the clouds
+    dim the sun. Kept
+    (``_kept_kernel_samples``) for a procedural sky, whose sun changes far more slowly than its
+    clouds, where there are at most KERNEL_CACHE_SAMPLES of them. [kcd/m^2 for a procedural sky]"""
+    if isinstance(sky, ProceduralSky):
+        key = replace(sky, clouds=None, time=0.0)
+        try:
+            hash(key)
+        except TypeError:
+            pass
+        else:
+            grid, cells, n = _kernel_layout(sky, q)
+            if len(cells) * n * n <= KERNEL_CACHE_SAMPLES:
+                return _kept_kernel_samples(key, q)
+    return _kept_kernel_samples.__wrapped__(sky, q)
+
+
+def _kernel_layout(sky, q: float) -> tuple:
+    """(grid, flat indices of the cells that can hold any of the disc, sub-samples n per cell
+    side) of ``sun_kernel``."""
+    sun = sky.sun
+    r = sun.angular_radius
     # the disc's bounding box on the sky plane, from points on its limb
     _, e1, e2 = tangent_axes(sun.azimuth, sun.elevation)
     psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
@@ -833,7 +938,6 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     grid = sky_grid((r0, c0), shape, q)
     minor = min(x_max - x_min, y_max - y_min) / q
     n = int(min(128, max(8, np.ceil(128.0 / minor))))
-    h_sub = q / n
     # cells that can hold any of the disc: centre within r + half a cell diagonal (in angle)
     rr, cc = np.indices(shape)
     cx, cy = grid.ground_from_raster(rr, cc)
@@ -842,9 +946,17 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     reach = r + q * 0.75 * centres[..., 2]  # a cell spans at most q cos(theta) x sqrt(2)/2 in angle
     near = _angle(centres, sky.sun_direction) <= reach
     cells = np.flatnonzero(near.ravel())
+    return grid, cells, n
+
+
+@lru_cache(maxsize=4)
+def _kept_kernel_samples(sky, q: float) -> tuple:
+    """``_kernel_samples`` computed (cached for the keys ``_kernel_samples`` gives it)."""
+    grid, cells, n = _kernel_layout(sky, q)
+    h_sub = q / n
+    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
     offsets = (np.arange(n) + 0.5) / n - 0.5
     ox, oy = np.meshgrid(offsets * q, -offsets * q)
-    out = np.zeros((3, shape[0] * shape[1]))
 
     def footprint(centre, rho):
         # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho
@@ -852,6 +964,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         norm = np.maximum(np.linalg.norm(away, axis=-1), 1e-300)
         return h_sub * cos_t * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
 
+    chunks = []
     chunk = max(1, (1 << 20) // (n * n))
     for lo in range(0, len(cells), chunk):
         idx = cells[lo : lo + chunk]
@@ -859,10 +972,13 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
         sy = cy.ravel()[idx, None, None] + oy
         cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
         w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
-        L = sky._sun_samples(w, footprint)
-        out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
-    weighted = out.reshape(3, *shape).astype(np.float32)
-    return SkyRaster(grid, weighted, np.zeros(3))
+        disc = _disc_samples(w, footprint, sky.sun, sky.sun_direction, sky.sun_normal_irradiance,
+                             getattr(sky, "moon", None))
+        cos4 = cos_t**4
+        for a in (idx, disc, cos4):
+            a.setflags(write=False)
+        chunks.append((idx, disc, cos4))
+    return grid, h_sub, tuple(chunks)
 
 
 def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: int = 3,

@@ -344,6 +344,30 @@ class Overcast:
         return np.full(np.shape(s)[:-1] + (3,), self.glow)
 
 
+class TwoCalls:
+    """A cloud layer seen through the protocol's two calls alone (no ``shade``)."""
+    def __init__(self, layer):
+        self.transmittance, self.radiance = layer.transmittance, layer.radiance
+
+
+def test_clouds_sampled_once_by_shade_give_what_the_two_calls_give():
+    """The sky samples a layer with ``shade`` once where the protocol's two calls sampled it
+    twice: the same raster and radiance, to the bit, with and without a footprint."""
+    from pipeline.clouds import CloudLayer
+
+    layer = CloudLayer(cover=0.5, scale=400.0, altitude=1500.0, wind=(9.0, -4.0), thickness=8.0, seed=3,
+                       texels=256)
+    once, twice = (replace(sun_sky(40.0, 100.0), clouds=c, time=30.0) for c in (layer, TwoCalls(layer)))
+    grid = square(40, 0.05)
+    a, b = once.raster(grid), twice.raster(grid)
+    np.testing.assert_array_equal(a.weighted, b.weighted)
+    assert a.outside.tolist() == b.outside.tolist()
+    s = np.random.default_rng(0).normal(0, 2, (500, 2))
+    footprint = np.abs(np.random.default_rng(1).normal(0, 0.02, (500, 2)))
+    for fp in (None, footprint):
+        np.testing.assert_array_equal(once.radiance(s, fp), twice.radiance(s, fp))
+
+
 def test_clouds_compose_by_the_protocol():
     clear = sun_sky(40.0, 100.0)
     clouds = Overcast(glow=2.0)
