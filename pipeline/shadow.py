@@ -107,9 +107,14 @@ def plan_isolated(window: Grid, canopy: Grid, *, height: float, alpha: float) ->
 
 
 def occlusion_spectrum(occlusion: np.ndarray, plan: IsolatedPlan, *, workers: int = 1):
-    """rfft2 of the occlusion raster ``o = 1 - m`` (rows, cols), zero-padded to the plan (complex64)."""
+    """rfft2 of the occlusion raster ``o = 1 - m`` (rows, cols), zero-padded to the plan (complex64).
+
+    As two passes, the rows' rfft then the columns' FFT, so that the rows of padding (about
+    half of them) are not transformed: the same sums as ``rfft2(o, s=plan.fft_shape)``. This is
+    done per frame, from the stored occlusion (docs/accuracy.md, "The cache")."""
     o = np.asarray(occlusion, dtype=np.float32)
-    return sfft.rfft2(o, s=plan.fft_shape, axes=(-2, -1), workers=workers)
+    rows = sfft.rfft(o, n=plan.fft_shape[1], axis=-1, workers=workers)
+    return sfft.fft(rows, n=plan.fft_shape[0], axis=-2, workers=workers, overwrite_x=True)
 
 
 def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: int = 1):
