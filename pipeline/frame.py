@@ -136,6 +136,24 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
 
 
+def compile_loops(plan: RunPlan) -> None:
+    """Compile the camera stage's loops (numba) in this process, or load them from numba's
+    cache on disk, by resampling a tiny view of the plan's ground and sky. A render's command
+    calls it while its workers make the cycle products (``run.render_run``), so that after an
+    install the workers of the frame phase load the loops instead of each compiling them
+    (docs/accuracy.md, "The frame phase"). Nothing is kept; any error is left to the frames."""
+    try:
+        config, view = plan.config, plan.camera
+        tiny = camera.Camera(view.position, view.yaw, view.pitch, view.vertical_fov, width=8, height=6)
+        empty = np.zeros((*plan.window.shape, 3), dtype=np.float32)
+        maps = (camera.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
+                camera.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
+        camera.background(tiny, irradiance=maps, albedo=ground_albedo(config.ground),
+                          sky=load_sky(config.sky, plan.scenes[0]))
+    except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
+        pass
+
+
 @functools.lru_cache(maxsize=2)
 def _haze_of_view(view: camera.Camera, haze: float) -> tuple[np.ndarray, np.ndarray]:
     """The haze's transmittance T (height, width, 1) float32 over the ground the camera sees

@@ -36,7 +36,7 @@ from .composite import display
 from .config import Config
 from .errors import RunError, SunshadeError, portable
 from .cycle import cycle_phase, record_config_items
-from .frame import render_frame
+from .frame import compile_loops, render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
 from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads
@@ -148,6 +148,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
                 mark = time.perf_counter()
                 command = None if scheduler else os.getpid()  # whose local workers end with it
+                if jobs > 1 and not scheduler:  # the frames' loops compiled meanwhile, here, once
+                    threading.Thread(target=compile_loops, args=(plan,), daemon=True).start()
                 cycle_phase(plan, store, jobs=jobs, workers=threads, command=command,
                             cycle_frames={f % config.canopy.cycle for f in todo},
                             progress=progress and (lambda done, total: progress("cycle", done, total)))

@@ -1,3 +1,6 @@
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -5,7 +8,7 @@ from pipeline import cache, io
 from pipeline.frame import render_frame
 from pipeline.ground import blend_band
 
-from scenes import plan_of, tiny_grove
+from scenes import ROOT, plan_of, tiny_grove
 
 
 def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
@@ -25,3 +28,26 @@ def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
         ground = blend_band(ground, result.ground.grid, *result.ground.outer)
     np.testing.assert_allclose(result.radiance, ground / np.pi, rtol=2e-3)
     assert result.sun_fraction == pytest.approx(1.0)
+
+
+def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path):
+    """``compile_loops`` (a render's command runs it while its workers make the cycle
+    products) compiles every loop of the camera stage with the types a frame passes: in a
+    fresh process, rendering a frame after it compiles nothing more in ``pipeline._filter``."""
+    code = (
+        "import sys; sys.path.insert(0, 'tests')\n"
+        "from pathlib import Path\n"
+        "from pipeline import _filter, cache\n"
+        "from pipeline.frame import compile_loops, render_frame\n"
+        "from scenes import plan_of, tiny_grove\n"
+        "folder = Path(sys.argv[1])\n"
+        "plan = plan_of(tiny_grove(**{'sky.clouds': {'cover': 0.4, 'scale': 300.0}}), folder)\n"
+        "compile_loops(plan)\n"
+        "loops = [f for f in vars(_filter).values() if hasattr(f, 'signatures')]\n"
+        "before = {f.__name__: len(f.signatures) for f in loops}\n"
+        "assert sum(before.values()) > 0, before\n"
+        "render_frame(plan, 0, store=cache.Cache(folder / 'cache'))\n"
+        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops if len(f.signatures) > before[f.__name__]})\n")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True,
+                         check=True, cwd=ROOT).stdout
+    assert out.strip() == "{}", out
