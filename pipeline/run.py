@@ -125,6 +125,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         lock.acquire()
     except filelock.Timeout:
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
+    compiling = None  # the thread of compile_loops, if started
     try:
         remove_temporaries(folder)
         if (folder / INDEX_FILE).is_dir():
@@ -149,7 +150,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 mark = time.perf_counter()
                 command = None if scheduler else os.getpid()  # whose local workers end with it
                 if jobs > 1 and not scheduler:  # the frames' loops compiled meanwhile, here, once
-                    threading.Thread(target=compile_loops, args=(plan,), daemon=True).start()
+                    compiling = threading.Thread(target=compile_loops, args=(plan,), daemon=True)
+                    compiling.start()
                 cycle_phase(plan, store, jobs=jobs, workers=threads, command=command,
                             cycle_frames={f % config.canopy.cycle for f in todo},
                             progress=progress and (lambda done, total: progress("cycle", done, total)))
@@ -185,6 +187,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
                        threads=threads, scheduler=scheduler, rendered=todo, source_hash=source_hash)
     finally:
+        if compiling is not None:  # never left writing numba's cache as the command ends
+            compiling.join()
         lock.release()
     return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),
                       video_file(config) if video else None, timings)
