@@ -41,7 +41,8 @@ from .framing import framing_warnings
 from .lighting import with_exposures
 from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads
 from .plan import RunPlan, check_inputs
-from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, file_stamp, frame_files, make_folder,
+from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, current_video, file_stamp,
+                        frame_files, make_folder,
                         read_index, read_run_file, remove_temporaries, resolved_config, video_file,
                         write_index, write_run_file)
 
@@ -244,7 +245,7 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
     path = video_file(config)
     if path is None:
         return None
-    made = _current_video(config, digest, previous, force=force)
+    made = current_video(config, digest, previous, force=force)
     if made is not None:
         return made
     if any(record is None for record in records.values()):
@@ -261,16 +262,6 @@ def _video(config: Config, digest: str, records: dict, previous: dict, progress,
     io.write_video(path, pictures(), fps=config.animation.fps)
     timings["video"] = time.perf_counter() - mark
     return _video_entry(config, digest)
-
-
-def _current_video(config: Config, digest: str, previous: dict, *, force) -> dict | None:
-    """The ``previous`` run.json's video entry if the video on disk is of this config (and not
-    ``force``), else None."""
-    path, made = video_file(config), previous.get("video") or {}
-    if (not force and made.get("config_hash") == digest and made.get("frames") == config.animation.frames
-            and path.is_file() and path.stat().st_size == made.get("bytes")):
-        return made
-    return None
 
 
 def _video_entry(config: Config, digest: str) -> dict:
@@ -299,7 +290,7 @@ class _VideoStream:
     def start(cls, config: Config, digest: str, records: dict, todo, previous: dict, *, force):
         """A stream if the run makes a video and ends with every frame done, else None."""
         fresh = set(todo)
-        if (video_file(config) is None or _current_video(config, digest, previous, force=force) is not None
+        if (video_file(config) is None or current_video(config, digest, previous, force=force) is not None
                 or any(records[f] is None and f not in fresh for f in range(config.animation.frames))):
             return None
         return cls(config, digest, fresh)

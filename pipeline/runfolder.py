@@ -77,6 +77,17 @@ def video_file(config: Config) -> Path | None:
     return config.output.folder / f"{config.output.name}.{config.output.video}"
 
 
+def current_video(config: Config, digest: str, previous: dict, *, force: bool = False) -> dict | None:
+    """The ``previous`` run.json's video entry if the video on disk is of this config, all its
+    frames (and not ``force``), else None (also when the config makes no video)."""
+    path, made = video_file(config), previous.get("video") or {}
+    if (path is not None and not force and made.get("config_hash") == digest
+            and made.get("frames") == config.animation.frames
+            and path.is_file() and path.stat().st_size == made.get("bytes")):
+        return made
+    return None
+
+
 def file_digest(path) -> str:
     """BLAKE2b (16 bytes, hex) of a file's bytes."""
     with open(path, "rb") as f:
@@ -396,18 +407,16 @@ def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, sched
         if (caught or checked.damaged or any(f not in checked.done for f in frames)
                 or json.dumps(index, sort_keys=True) != before):
             return None
-        video, path = previous.get("video") or {}, video_file(config)
-        made = (path is not None and video.get("config_hash") == digest and video.get("frames") == count
-                and path.is_file() and path.stat().st_size == video.get("bytes"))
-        if path is not None and not made and len(checked.done) == count:
+        made = current_video(config, digest, previous)
+        if video_file(config) is not None and made is None and len(checked.done) == count:
             return None  # the video is due
         jobs, threads = jobs_and_threads(jobs or config.render.jobs, scheduler)
         records = {f: checked.done[f]["record"] if f in checked.done else None for f in range(count)}
         timings = {"check": time.perf_counter() - started}
         timings["total"] = timings["check"]
-        write_run_file(config, previous["config"], digest, records, video if made else None, timings,
+        write_run_file(config, previous["config"], digest, records, made, timings,
                        jobs=jobs, threads=threads, scheduler=scheduler, rendered=(),
                        source_hash=previous.get("source_hash"))
     finally:
         lock.release()
-    return RunSummary((), frames, path if made else None, timings)
+    return RunSummary((), frames, video_file(config) if made else None, timings)
