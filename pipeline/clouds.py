@@ -350,13 +350,60 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     return out
 
 
-@lru_cache(maxsize=1)
-def _compiled_field_loop():
-    """``_field_loop`` compiled by numba (imported here, on first use: it costs 0.3 s to
-    import; the compiled code is cached on disk)."""
+def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
+    """The multiple-scattering weights of ``CloudLayer.radiance`` at optical depths ``tau`` (m,)
+    (compiled by ``_compiled``): ``sun_weight`` (m,) float32 gets float32(interp(tau, nodes,
+    tables[0])) added, ``sky_weight`` (m,) float32 is set to float32(interp(tau, nodes,
+    tables[1])), each interpolation that of ``np.interp`` operation for operation (the node at
+    or below tau by binary search, the ends held, the slope of the interval times the distance
+    from its first node plus its first value, and where that is NaN the same from the other
+    end), so the weights are the same to the bit. ``nodes`` strictly increasing."""
+    last = nodes.shape[0] - 1
+    slopes = np.empty((2, last))  # as np.interp's, per interval
+    for k in range(2):
+        for j in range(last):
+            slopes[k, j] = (tables[k, j + 1] - tables[k, j]) / (nodes[j + 1] - nodes[j])
+    values = np.empty(2)
+    lo = 0
+    for i in range(tau.shape[0]):
+        x = tau[i]
+        # the interval [nodes[lo], nodes[lo + 1]) that holds x, for both tables: the previous
+        # point's (neighbours are alike), else found by bisection
+        if x == x and nodes[0] <= x < nodes[last] and not nodes[lo] <= x < nodes[lo + 1]:
+            lo, hi = 0, last
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if nodes[mid] <= x:
+                    lo = mid
+                else:
+                    hi = mid
+        for k in range(2):
+            if x != x:
+                values[k] = x
+            elif x >= nodes[last]:
+                values[k] = tables[k, last]
+            elif x < nodes[0]:
+                values[k] = tables[k, 0]
+            elif nodes[lo] == x:
+                values[k] = tables[k, lo]
+            else:
+                value = slopes[k, lo] * (x - nodes[lo]) + tables[k, lo]
+                if value != value:
+                    value = slopes[k, lo] * (x - nodes[lo + 1]) + tables[k, lo + 1]
+                    if value != value and tables[k, lo] == tables[k, lo + 1]:
+                        value = tables[k, lo]
+                values[k] = value
+        sun_weight[i] += np.float32(values[0])
+        sky_weight[i] = np.float32(values[1])
+
+
+@lru_cache(maxsize=4)
+def _compiled(loop):
+    """``loop`` (``_field_loop``, ``_scattering_loop``) compiled by numba (imported here, on
+    first use: it costs 0.3 s to import; the compiled code is cached on disk)."""
     from numba import njit
 
-    return njit(cache=True, nogil=True, error_model="numpy")(_field_loop)
+    return njit(cache=True, nogil=True, error_model="numpy")(loop)
 
 
 @lru_cache(maxsize=64)
@@ -470,10 +517,10 @@ class CloudLayer:
         out = np.empty(coords.shape[1])
         if taps is None:
             unused, none = np.empty(0), np.empty(0, dtype=np.intp)
-            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
+            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
                                    unused, unused, unused, out)
         else:
-            _compiled_field_loop()(flat, offsets, sides, coords[0], coords[1], False, *taps, out)
+            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], False, *taps, out)
         return out.reshape(shape)
 
     def _taps(self, s, time, footprint=None) -> tuple:
@@ -632,8 +679,10 @@ class CloudLayer:
         out = np.empty(s.shape[:-1] + (3,), dtype=f32)
         if multiple_scattering:
             nodes, m_sun, m_sky = self._multiple_tables(mu0)
-            sun_weight += np.interp(tau, nodes, m_sun * (mu0 / np.pi)).astype(f32)
-            sky_weight = np.interp(tau, nodes, m_sky / np.pi).astype(f32)
+            sky_weight = np.empty_like(sun_weight)  # the np.interp of tables [1/sr], compiled
+            _compiled(_scattering_loop)(np.ascontiguousarray(tau, dtype=np.float64).reshape(-1), nodes,
+                                        np.stack([m_sun * (mu0 / np.pi), m_sky / np.pi]),
+                                        sun_weight.reshape(-1), sky_weight.reshape(-1))
             for c in range(3):
                 np.multiply(sun_weight, f32(sun_rgb[c]), out=out[..., c])
                 out[..., c] += sky_weight * f32(sky_rgb[c])

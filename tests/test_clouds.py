@@ -462,3 +462,16 @@ def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed):
         for footprint in (round_, long_, 3.0 * texel):
             np.testing.assert_array_equal(cl.field(s, time, footprint),
                                           reference_field(cl, s, time, footprint))
+
+
+def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
+    layer = CloudLayer(cover=0.5, scale=800.0, altitude=2000.0, wind=(0.0, 0.0), thickness=6.0, seed=0)
+    nodes, m_sun, m_sky = layer._multiple_tables(0.6)
+    tables = np.stack([m_sun * (0.6 / np.pi), m_sky / np.pi])
+    rng = np.random.default_rng(6)
+    tau = np.concatenate([rng.random(20000) * 6.5 - 0.2, nodes, [np.nan, -np.inf, np.inf]])
+    start = rng.random(tau.size).astype(np.float32)
+    sun, sky = start.copy(), np.empty_like(start)
+    clouds._compiled(clouds._scattering_loop)(tau, nodes, tables, sun, sky)
+    assert sun.tobytes() == (start + np.interp(tau, nodes, tables[0]).astype(np.float32)).tobytes()
+    assert sky.tobytes() == np.interp(tau, nodes, tables[1]).astype(np.float32).tobytes()
