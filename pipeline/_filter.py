@@ -1,8 +1,12 @@
-"""Compiled loops of the camera's anisotropic filtering (``camera._filtered``) and of the
-stochastic tiling of the ground albedo (``albedo.StochasticTiling.sample``).
+"""Compiled loops of the frame phase's resampling: the camera's anisotropic filtering
+(``camera._filtered``) and mip levels (``camera._constant_mipmap``), the stochastic tiling of the
+ground albedo (``albedo.StochasticTiling.sample``), the bilinear resampling of the coarse ground
+under the sun window (``shadow.resample_bilinear``) and the haze over the view
+(``frame._apply_haze``). Each does what its array version does, float32 operation for float32
+operation in the same order, and the tests hold it to that version's bits.
 
-The method is the one documented in ``camera.sample_footprint`` and ``albedo``: these loops do
-it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
+The filtering's method is the one documented in ``camera.sample_footprint`` and ``albedo``:
+these loops do it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
 and the same order of operations as the array version (``camera._tap_mean``, ``_bilinear``), so
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
 The tap counts, levels and blends come from ``camera._filter_choice`` (``filter_choice``), computed once
@@ -441,3 +445,88 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
         taps[j] = np.int8(n)
         level[j] = k
         blend[j] = np.float32(t)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def halve_level(texels, source, rows, cols, target):
+    """``camera._constant_levels``'s step, into a mip map's ``texels`` (n, channels): the level
+    stored at ``source`` (rows, cols, with its border of the outside value) averaged 2 x 2 into
+    the level at ``target`` (ceil(rows / 2), ceil(cols / 2)), pairs of rows first, then pairs of
+    columns, each sum halved in float32. An odd size's missing row or column is the border's
+    value, as the padding of the array version."""
+    channels = texels.shape[1]
+    step, out_rows, out_cols = cols + 2, (rows + 1) // 2, (cols + 1) // 2
+    half = np.float32(0.5)
+    for i in range(out_rows):
+        top = source + (2 * i + 1) * step + 1
+        bottom = top + step
+        out = target + (i + 1) * (out_cols + 2) + 1
+        for j in range(out_cols):
+            for k in range(channels):
+                left = (texels[top + 2 * j, k] + texels[bottom + 2 * j, k]) * half
+                right = (texels[top + 2 * j + 1, k] + texels[bottom + 2 * j + 1, k]) * half
+                texels[out + j, k] = (left + right) * half
+
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
+    """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel, R and C given by the
+    columns they read and their weights, k per row (n, k): each output value the float32 sum,
+    from 0 and in that order, of weights times values, as scipy's sparse products; rows first,
+    then columns. raster (channels, rows, cols) float32, out (channels, R rows, C rows) float32."""
+    along = np.empty(raster.shape[2], dtype=np.float32)
+    for ch in range(raster.shape[0]):
+        for i in range(out.shape[1]):
+            along[:] = 0.0
+            for p in range(row_at.shape[1]):
+                weight, row = row_weight[i, p], row_at[i, p]
+                for c in range(raster.shape[2]):
+                    along[c] += weight * raster[ch, row, c]
+            if col_at.shape[1] == 2:  # bilinear: two reads a value, unrolled
+                for j in range(out.shape[2]):
+                    total = np.float32(0.0) + col_weight[j, 0] * along[col_at[j, 0]]
+                    out[ch, i, j] = total + col_weight[j, 1] * along[col_at[j, 1]]
+            else:
+                for j in range(out.shape[2]):
+                    total = np.float32(0.0)
+                    for p in range(col_at.shape[1]):
+                        total += col_weight[j, p] * along[col_at[j, p]]
+                    out[ch, i, j] = total
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def haze_over(background, transmittance, veil, horizon):
+    """``frame.render_frame``'s haze, in place: background (rows, cols, 3) float32 becomes
+    ``T B + (1 - T) L_horizon + 0`` with T ``transmittance`` and 1 - T ``veil`` (rows, cols, 1),
+    L_horizon ``horizon`` (cols, 3), in the float32 operations and order of the array version
+    (``B *= T; B += veil * L; B + 0``, the last turning -0 into +0)."""
+    zero = np.float32(0.0)
+    for i in range(background.shape[0]):
+        for j in range(background.shape[1]):
+            t, v = transmittance[i, j, 0], veil[i, j, 0]
+            for k in range(background.shape[2]):
+                background[i, j, k] = (background[i, j, k] * t + v * horizon[j, k]) + zero
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow, weights, out):
+    """Rows ``first`` to ``first + count`` of ``sky.ProceduralSky.raster``'s weighted raster
+    ``out`` (3, rows, cols) float32: the clear sky ``along`` (3, nodes, cols) float32
+    interpolated between node rows ``row_at`` and ``row_at + 1`` by ``row_frac`` (float32),
+    where ``clouded`` times the clouds' transmittance (n, cols) float64 clipped to [0, 1] and
+    plus their ``glow`` (n, cols, 3) float32, times the cells' solid angles ``weights`` (rows,
+    cols) float32: the float32 operations of the array version, in its order."""
+    one = np.float32(1.0)
+    for r in range(count):
+        row = first + r
+        f = row_frac[row]
+        g = one - f
+        a = row_at[row]
+        for c in range(3):
+            for j in range(out.shape[2]):
+                value = along[c, a, j] * g + along[c, a + 1, j] * f
+                if clouded:
+                    value *= np.float32(min(max(transmittance[r, j], 0.0), 1.0))
+                    value += glow[r, j, c]
+                out[c, row, j] = value * weights[row, j]

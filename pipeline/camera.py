@@ -224,38 +224,60 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
         if value is None or period is not None:
             raise ValueError('outside="constant" takes a value and no period')
         value = np.broadcast_to(np.asarray(value, dtype=np.float32), (channels,)).copy()
-        levels = _constant_levels(a, value)
-        origins = (tuple(float(v) for v in grid.origin),) * len(levels)
-        pixels = tuple((grid.pixel * 2.0**k,) * 2 for k in range(len(levels)))
-    else:
-        if period is None or value is not None:
-            raise ValueError('outside="periodic" takes a period and no value')
-        px, py = (float(v) for v in period)
-        x_min, y_min, x_max, y_max = grid.extent
-        if not (px > 0 and py > 0):
-            raise ValueError(f"period must be positive, got {period}")
-        if px > (x_max - x_min) * (1 + 1e-9) or py > (y_max - y_min) * (1 + 1e-9):
-            raise ValueError(f"the raster ({x_max - x_min} x {y_max - y_min} m) must cover one period {period}")
-        levels = _periodic_levels(a, px / grid.pixel, py / grid.pixel)
-        origins = ((float(x_min), float(y_min + py)),) * len(levels)
-        pixels = tuple((px / lv.shape[1], py / lv.shape[0]) for lv in levels)
-        value, period = None, (px, py)
-    sizes = [(lv.shape[0] + 2) * (lv.shape[1] + 2) for lv in levels]
-    offsets = tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)[:-1]]))
-    texels = np.empty((sum(sizes), channels), dtype=np.float32)
-    for lv, start, size in zip(levels, offsets, sizes):
-        stored = texels[start : start + size].reshape(lv.shape[0] + 2, lv.shape[1] + 2, channels)
-        if outside == "constant":  # the border only, then the level: each texel written once
-            stored[0], stored[-1], stored[1:-1, 0], stored[1:-1, -1] = value, value, value, value
-            stored[1:-1, 1:-1] = lv
-        else:
-            stored[...] = np.pad(lv, ((1, 1), (1, 1), (0, 0)), mode="wrap")
+        return _constant_mipmap(a, grid, value)
+    if period is None or value is not None:
+        raise ValueError('outside="periodic" takes a period and no value')
+    px, py = (float(v) for v in period)
+    x_min, y_min, x_max, y_max = grid.extent
+    if not (px > 0 and py > 0):
+        raise ValueError(f"period must be positive, got {period}")
+    if px > (x_max - x_min) * (1 + 1e-9) or py > (y_max - y_min) * (1 + 1e-9):
+        raise ValueError(f"the raster ({x_max - x_min} x {y_max - y_min} m) must cover one period {period}")
+    levels = _periodic_levels(a, px / grid.pixel, py / grid.pixel)
     shapes = tuple((lv.shape[0], lv.shape[1]) for lv in levels)
-    return MipMap(texels, shapes, offsets, origins, pixels, outside, value, period)
+    texels, offsets = _stored_levels(shapes, channels)
+    for lv, start in zip(levels, offsets):
+        stored = texels[start : start + (lv.shape[0] + 2) * (lv.shape[1] + 2)]
+        stored.reshape(lv.shape[0] + 2, lv.shape[1] + 2, channels)[...] = np.pad(lv, ((1, 1), (1, 1), (0, 0)), mode="wrap")
+    origins = ((float(x_min), float(y_min + py)),) * len(levels)
+    pixels = tuple((px / lv.shape[1], py / lv.shape[0]) for lv in levels)
+    return MipMap(texels, shapes, offsets, origins, pixels, "periodic", None, (px, py))
+
+
+def _stored_levels(shapes, channels: int) -> tuple[np.ndarray, tuple]:
+    """An empty ``MipMap.texels`` for levels of ``shapes`` (rows, cols) stored with their
+    borders, one after another, and the offset of each level's first stored texel."""
+    sizes = [(rows + 2) * (cols + 2) for rows, cols in shapes]
+    offsets = tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)[:-1]]))
+    return np.empty((sum(sizes), channels), dtype=np.float32), offsets
+
+
+def _constant_mipmap(a: np.ndarray, grid, value: np.ndarray) -> MipMap:
+    """``mipmap`` with ``outside="constant"``: the levels of ``_constant_levels``, each made in
+    place in the stored texels from the one before (``_filter.halve_level``, the same float32
+    operations in the same order: the border holds the padding's value)."""
+    from . import _filter
+
+    shapes = [tuple(a.shape[:2])]
+    while max(shapes[-1]) > 1:
+        shapes.append(tuple((n + 1) // 2 for n in shapes[-1]))
+    channels = a.shape[2]
+    texels, offsets = _stored_levels(shapes, channels)
+    for k, ((rows, cols), start) in enumerate(zip(shapes, offsets)):
+        stored = texels[start : start + (rows + 2) * (cols + 2)].reshape(rows + 2, cols + 2, channels)
+        stored[0], stored[-1], stored[1:-1, 0], stored[1:-1, -1] = value, value, value, value
+        if k == 0:
+            stored[1:-1, 1:-1] = a
+        else:
+            _filter.halve_level(texels, offsets[k - 1], *shapes[k - 1], start)
+    origins = (tuple(float(v) for v in grid.origin),) * len(shapes)
+    pixels = tuple((grid.pixel * 2.0**k,) * 2 for k in range(len(shapes)))
+    return MipMap(texels, tuple(shapes), offsets, origins, pixels, "constant", value, None)
 
 
 def _constant_levels(a: np.ndarray, value: np.ndarray) -> list:
-    """Levels of a raster on a plane of ``value``: pad to even sizes with the value, average 2 x 2."""
+    """Levels of a raster on a plane of ``value``: pad to even sizes with the value, average 2 x 2
+    (the reference of ``_constant_mipmap``, which tests/test_camera.py holds to the same bits)."""
     levels = [a]
     while max(a.shape[:2]) > 1:
         rows, cols = a.shape[:2]
@@ -786,23 +808,36 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
             albedo and E each averaged over its ground footprint (``ground_hits``,
             ``sample_footprint``); 0 where no ground is seen. [radiance]
         ground_fraction : (height, width) float32 -- the fraction of the pixel below the horizon:
-            the anti-aliased horizon. [1]
+            the anti-aliased horizon; read-only, made once per camera. [1]
         distance : (height, width) float32 -- from the pinhole to the ground point seen, along
-            the ray (for aerial perspective); inf where no ground is seen. [m]
+            the ray (for aerial perspective); inf where no ground is seen; read-only, made
+            once per camera. [m]
 
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
     rows, part = _ground_rows(camera)
-    fraction = np.broadcast_to(ground_fraction_rows(camera).astype(np.float32)[:, None],
-                               (camera.height, camera.width))
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if len(rows):
         fp, _ = _view_footprints(camera)
         e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _albedo_in_view(camera, albedo)
-        radiance[rows] = (e * rho * np.float32(1.0 / np.pi)).T.reshape(len(rows), camera.width, -1)
-    return radiance, fraction.copy(), ground_distance(camera).copy()
+        e = np.multiply(e, rho, out=e if len(e) >= len(rho) else None)  # (e rho) / pi in float32
+        e *= np.float32(1.0 / np.pi)
+        radiance[rows] = e.T.reshape(len(rows), camera.width, -1)
+    return radiance, _ground_fractions(camera)[0], ground_distance(camera)
+
+
+@functools.lru_cache(maxsize=1)
+def _ground_fractions(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """``ground_view``'s ground fraction f (height, width) float32 and 1 - f (height, width, 1):
+    they depend on the camera alone. Read-only."""
+    fraction = np.broadcast_to(ground_fraction_rows(camera).astype(np.float32)[:, None],
+                               (camera.height, camera.width)).copy()
+    rest = 1.0 - fraction[..., None]
+    for array in (fraction, rest):
+        array.flags.writeable = False
+    return fraction, rest
 
 
 @functools.lru_cache(maxsize=1)
@@ -971,8 +1006,7 @@ def background(camera: Camera, *, irradiance, albedo: MipMap, sky):
     """
     ground, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
     sky_radiance = sky_view(camera, sky)
-    f = fraction[..., None]
-    ground *= f  # f ground + (1 - f) sky in float32, in place
-    sky_radiance *= 1.0 - f
+    ground *= fraction[..., None]  # f ground + (1 - f) sky in float32, in place
+    sky_radiance *= _ground_fractions(camera)[1]
     ground += sky_radiance
     return ground, distance

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -105,9 +105,9 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
-        transmittance, veil = _haze_of_view(view, config.sky.haze)
-        background *= transmittance  # in place, float32: T B + (1 - T) L_horizon
-        background += veil * camera.horizon_sky(view, sky)[None]
+        _apply_haze(background, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, sky))
+    else:
+        background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0
     passes = foreground_passes(plan, frame % config.canopy.cycle, store, light)
     if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
         veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
@@ -116,8 +116,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
             veil = veiled[..., None] * (horizon / np.float32(sky_scale))
             passes = (passes[0] + veil, passes[1] + veil, *passes[2:])
     # outside the passes' region, and everywhere without a foreground, the trees add nothing:
-    # 0 + B, the same bits composite_frame gives with passes of 0
-    radiance = np.asarray(background, dtype=np.float32) + np.float32(0.0)
+    # B + 0 (above), the same bits composite_frame gives with passes of 0
+    radiance = background
     if passes is not None:
         region = passes[3]
         radiance[region] = composite.composite_frame(
@@ -137,21 +137,39 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
 
 
 def compile_loops(plan: RunPlan) -> None:
-    """Compile the camera stage's loops (numba) in this process, or load them from numba's
-    cache on disk, by resampling a tiny view of the plan's ground and sky. A render's command
-    calls it while its workers make the cycle products (``run.render_run``), so that after an
-    install the workers of the frame phase load the loops instead of each compiling them
-    (docs/accuracy.md, "The frame phase"). Nothing is kept; any error is left to the frames."""
+    """Compile the frame phase's loops (numba) in this process, or load them from numba's
+    cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
+    making a tiny sky raster and blend band. A render's command calls it while its workers make the cycle products
+    (``run.render_run``), so that after an install the workers of the frame phase load the
+    loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
+    kept; any error is left to the frames."""
     try:
         config, view = plan.config, plan.camera
         tiny = camera.Camera(view.position, view.yaw, view.pitch, view.vertical_fov, width=8, height=6)
         empty = np.zeros((*plan.window.shape, 3), dtype=np.float32)
         maps = (camera.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
                 camera.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
-        camera.background(tiny, irradiance=maps, albedo=ground_albedo(config.ground),
-                          sky=load_sky(config.sky, plan.scenes[0]))
+        sky = load_sky(config.sky, plan.scenes[0])
+        background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky)
+        share = np.ones((tiny.height, tiny.width, 1), dtype=np.float32)
+        share.flags.writeable = False  # as _haze_of_view's
+        _apply_haze(background, share, share, camera.horizon_sky(tiny, sky))
+        sky.raster(replace(plan.window, origin=(0.0, 0.0), pixel=0.01, shape=(2, 2)))  # the ground stage's, tiny
+        coarse = replace(plan.window, shape=(2, 2))
+        blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
+                   np.zeros((2, 2, 3), dtype=np.float32), coarse)
     except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
         pass
+
+
+def _apply_haze(background, transmittance, veil, horizon) -> None:
+    """``background`` (rows, cols, 3) float32, in place: T B + (1 - T) L_horizon + 0, T the haze's
+    transmittance (rows, cols, 1), L_horizon (cols, 3) the sky at the horizon; compiled
+    (``_filter.haze_over``), the float32 operations, in order, of ``B *= T; B += (1 - T) L;
+    B + 0`` on arrays (tests/test_frame.py holds it to them)."""
+    from . import _filter
+
+    _filter.haze_over(background, transmittance, veil, np.ascontiguousarray(horizon, dtype=np.float32))
 
 
 @functools.lru_cache(maxsize=2)

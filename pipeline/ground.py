@@ -5,6 +5,7 @@ with the fine mask spectrum on the sun window (Max 1991, Fig. 7 and section 3; d
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,12 +145,25 @@ def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_gri
     band's inner side on, with zero slope at both ends. Both rasters hold the same light
     (the fine sun kernel and the coarse one have the same sum), so the blend keeps the mean.
     """
+    weight, rest = _band_weights(fine_grid, coarse_grid.pixel)
+    under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)
+    out = weight * fine  # float32 throughout: w f + (1 - w) u
+    out += rest * under
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def _band_weights(fine_grid: Grid, coarse_pixel: float) -> tuple[np.ndarray, np.ndarray]:
+    """``blend_band``'s weight w of the fine raster (rows, cols, 1) float32 and 1 - w: they depend
+    on the grids alone, so the frames of a run make them once. Read-only."""
     rows, cols = fine_grid.shape
     shorter = min(rows, cols) * fine_grid.pixel
-    width = max(BLEND_BAND_PIXELS * coarse_grid.pixel, BLEND_BAND_SHARE[0] * shorter)
+    width = max(BLEND_BAND_PIXELS * coarse_pixel, BLEND_BAND_SHARE[0] * shorter)
     width = min(width, BLEND_BAND_SHARE[1] * shorter)
     across = lambda n: (np.minimum(np.arange(n), n - 1 - np.arange(n)) + 0.5) * fine_grid.pixel  # noqa: E731
     t = np.clip(np.minimum(across(rows)[:, None], across(cols)[None, :]) / width, 0.0, 1.0)
     weight = (t * t * (3.0 - 2.0 * t)).astype(np.float32)[..., None]
-    under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)
-    return (weight * fine + (1.0 - weight) * under).astype(np.float32)
+    rest = 1.0 - weight
+    for array in (weight, rest):
+        array.flags.writeable = False
+    return weight, rest

@@ -29,6 +29,7 @@ Spectra are complex64 (float32 rasters); ``workers`` is the FFT thread count.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -261,16 +262,40 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
 def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarray:
     """``raster`` (channels, rows, cols) on ``grid`` sampled bilinearly at the pixel centres of
     ``target`` (same units, axes aligned), edges held: the coarse sky light under the fine sun
-    window. Separable: a sparse interpolation matrix per axis, ``R @ raster @ C.T``."""
+    window. Separable: a sparse interpolation matrix per axis, ``R @ raster @ C.T``, applied by
+    a compiled loop (``_filter.resample_separable``) with the float32 arithmetic of scipy's
+    sparse products, which tests/test_shadow.py holds it to."""
+    from . import _filter
+
+    out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
+    image = np.ascontiguousarray(raster, dtype=np.float32).reshape(-1, *grid.shape)
+    _filter.resample_separable(image, *_interpolations(grid, target), out.reshape(-1, *target.shape))
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _interpolations(grid: Grid, target: Grid) -> tuple:
+    """``interpolation_matrices`` as the rows and weights that ``_filter.resample_separable``
+    reads: (row_at, row_weight, col_at, col_weight), each (n, k), in the matrices' stored order.
+    They depend on the grids alone, so the frames of a run make them once. Read-only."""
+    tables = []
+    for matrix in interpolation_matrices(grid, target):
+        k = matrix.nnz // matrix.shape[0]  # the same in every row (_interpolation)
+        assert np.array_equal(matrix.indptr, np.arange(matrix.shape[0] + 1) * k)
+        tables += [matrix.indices.astype(np.int64).reshape(-1, k),
+                   matrix.data.astype(np.float32, copy=False).reshape(-1, k)]
+    for table in tables:
+        table.flags.writeable = False
+    return tuple(tables)
+
+
+def interpolation_matrices(grid: Grid, target: Grid):
+    """``resample_bilinear``'s sparse matrices R and C (scipy CSR) along rows and columns."""
     x, _ = target.ground_from_raster(0.0, np.arange(target.shape[1]))
     _, y = target.ground_from_raster(np.arange(target.shape[0]), 0.0)
     r, _ = grid.raster_from_ground(0.0, y)
     _, c = grid.raster_from_ground(x, 0.0)
-    rows, cols = _interpolation(r, grid.shape[0]), _interpolation(c, grid.shape[1])
-    out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
-    for channel, image in zip(out.reshape(-1, *target.shape), raster.reshape(-1, *grid.shape)):
-        channel[...] = (cols @ (rows @ image).T).T
-    return out
+    return _interpolation(r, grid.shape[0]), _interpolation(c, grid.shape[1])
 
 
 def _interpolation(u, n: int):

@@ -719,6 +719,8 @@ class ProceduralSky:
         cells at the sun where the Perez circumsolar term has a cusp; measured in
         docs/accuracy.md); clouds are evaluated at every cell centre.
         """
+        from . import _filter
+
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
         _, row_at, row_frac = _lerp_nodes(rows, k)
@@ -728,20 +730,20 @@ class ProceduralSky:
         nodes = np.moveaxis(relative * (self.zenith_luminance * self._sky_dimming), -1, 0)
         nodes = nodes.astype(np.float32)
         along = nodes[:, :, col_at] * (1 - col_frac) + nodes[:, :, col_at + 1] * col_frac  # (3, nodes, cols)
-        weights = projected_solid_angle(grid).astype(np.float32)
+        weights = _solid_angles32(grid)
         weighted = np.empty((3, rows, cols), dtype=np.float32)
         x, y = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
         step = max(1, (1 << 20) // cols)
+        transmittance, glow = np.empty((0, 0)), np.empty((0, 0, 3), dtype=np.float32)  # no clouds
         for lo in range(0, rows, step):  # bounded memory
             part = slice(lo, lo + step)
-            f = row_frac[part, None]
-            L = along[:, row_at[part]] * (1 - f) + along[:, row_at[part] + 1] * f
             if self.clouds is not None:
-                s = np.stack(np.broadcast_arrays(x, y[part]), axis=-1)
-                transmittance, glow = self._cloud_shade(s)
-                L *= np.clip(transmittance, 0.0, 1.0).astype(np.float32)
-                L += np.moveaxis(glow, -1, 0)
-            weighted[:, part] = L * weights[part]
+                transmittance, glow = self._cloud_shade(np.stack(np.broadcast_arrays(x, y[part]), axis=-1))
+            # compiled: the clear sky between node rows, the clouds' transmittance and glow,
+            # the solid angles, as L = lerp; L *= clip(T, 0, 1); L += glow; L * weights
+            _filter.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), self.clouds is not None,
+                             np.ascontiguousarray(transmittance, dtype=np.float64),
+                             np.ascontiguousarray(glow, dtype=np.float32), weights, weighted)
         outside = self._outside(grid.extent)
         if fold_period is not None:
             weighted = fold(weighted, sky_offset(grid), fold_period)
@@ -842,6 +844,14 @@ def _relative_nodes(clear: ProceduralSky, nodes, *where) -> np.ndarray:
     relative = clear._relative_sky(nodes(*where)[0])
     relative.setflags(write=False)
     return relative
+
+
+@lru_cache(maxsize=8)
+def _solid_angles32(grid: Grid) -> np.ndarray:
+    """``projected_solid_angle(grid)`` as float32, made once per grid (read-only). [sr]"""
+    weights = projected_solid_angle(grid).astype(np.float32)
+    weights.flags.writeable = False
+    return weights
 
 
 def _lerp_nodes(n: int, k: int):

@@ -77,6 +77,21 @@ def test_constant_levels_keep_the_integral(shape):
     assert mip.shapes[-1] == (1, 1)
 
 
+@pytest.mark.parametrize("shape", [(716, 1261), (27, 45), (1, 7), (6, 1)])
+@pytest.mark.parametrize("value", [0.3, np.nan])
+def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
+    # the compiled halving (_filter.halve_level) against the numpy levels it replaced
+    raster = np.random.default_rng(3).random(shape + (3,)).astype(np.float32) * 7.0
+    value = np.full(3, value, dtype=np.float32)
+    mip = mipmap(raster, Grid((0.0, 0.0), 0.5, shape), outside="constant", value=value)
+    levels = camera._constant_levels(raster, value)
+    assert mip.shapes == tuple(level.shape[:2] for level in levels)
+    for k, level in enumerate(levels):
+        assert mip.level(k).tobytes() == level.tobytes()
+    stored = mip.texels[mip.offsets[-1]:].reshape(3, 3, 3)
+    assert stored[0].tobytes() == np.broadcast_to(value, (3, 3)).tobytes()
+
+
 @pytest.mark.parametrize("shape, period_px", [((32, 32), (32, 32)), ((27, 45), (45, 27)),
                                                ((30, 40), (21.5, 13.25))])
 def test_periodic_levels_keep_the_mean(shape, period_px):

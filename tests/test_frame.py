@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from pipeline import cache, io
-from pipeline.frame import render_frame
+from pipeline.frame import _apply_haze, render_frame
 from pipeline.ground import blend_band
 
 from scenes import ROOT, plan_of, tiny_grove
@@ -32,7 +32,7 @@ def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
 
 def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path):
     """``compile_loops`` (a render's command runs it while its workers make the cycle
-    products) compiles every loop of the camera stage with the types a frame passes: in a
+    products) compiles every loop of the frame phase with the types a frame passes: in a
     fresh process, rendering a frame after it compiles nothing more in ``pipeline._filter``."""
     code = (
         "import sys; sys.path.insert(0, 'tests')\n"
@@ -51,3 +51,18 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout
     assert out.strip() == "{}", out
+
+
+def test_the_compiled_haze_has_the_bits_of_the_array_operations():
+    rng = np.random.default_rng(5)
+    background = rng.normal(size=(37, 53, 3)).astype(np.float32) * 40.0
+    transmittance = rng.random((37, 53, 1), dtype=np.float32)
+    background[::7, ::5], transmittance[::7, ::5] = -0.0, 1.0
+    veil = 1.0 - transmittance
+    horizon = rng.random((53, 3), dtype=np.float32) * 9.0
+    horizon[::5] = -0.0  # with the -0 above: -0 T + 0 (-0) is -0, and + 0 makes it +0
+    expected = background * transmittance
+    expected += veil * horizon[None]
+    expected = expected + np.float32(0.0)
+    _apply_haze(background, transmittance, veil, horizon)
+    assert background.tobytes() == expected.tobytes()

@@ -260,3 +260,15 @@ def test_resample_bilinear_reproduces_a_linear_field():
     out = shadow.resample_bilinear(field, coarse, fine)
     xf, yf = fine.ground_from_raster(np.arange(20)[:, None], np.arange(25)[None, :])
     np.testing.assert_allclose(out, np.stack([2 * xf - 3 * yf + 1, xf + yf]), atol=1e-5)
+
+
+@pytest.mark.parametrize("fine", [Grid((-1.3, 1.1), 0.07, (40, 55)), Grid((-4.0, 4.0), 0.3, (30, 1)),
+                                  Grid((-1.0, 1.0), 0.013, (150, 160))])
+def test_resample_bilinear_has_the_bits_of_the_sparse_products(fine):
+    # the compiled loop against the scipy products it replaced, beyond the edges too
+    coarse = Grid((-2.0, 2.0), 0.5, (8, 9))
+    field = np.random.default_rng(4).normal(size=(3, 8, 9)).astype(np.float32) * 50.0
+    rows, cols = shadow.interpolation_matrices(coarse, fine)
+    expected = np.stack([(cols @ (rows @ image).T).T for image in field])
+    assert expected.dtype == np.float32
+    assert shadow.resample_bilinear(field, coarse, fine).tobytes() == expected.tobytes()

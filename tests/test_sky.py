@@ -7,7 +7,7 @@ from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
 from scipy.integrate import quad
 
-from pipeline import io
+from pipeline import _filter, io
 from pipeline.cli import main
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.constants import SUN_ANGULAR_RADIUS
@@ -581,3 +581,28 @@ def test_sky_protocol_values_keep_each_models_meaning():
     procedural = skies["procedural"]
     s = w[:, :2] / w[:, 2:]
     assert np.array_equal(procedural.view_radiance(w, s, 0.02), procedural.radiance(s, footprint=0.02))
+
+
+@pytest.mark.parametrize("clouded", [False, True])
+def test_the_compiled_sky_rows_have_the_bits_of_the_array_operations(clouded):
+    # _filter.sky_rows against the numpy operations ProceduralSky.raster made before it
+    rng = np.random.default_rng(7)
+    rows, cols, nodes = 23, 31, 4
+    along = rng.random((3, nodes, cols), dtype=np.float32) * 5.0
+    row_at = np.minimum(np.arange(rows) // 8, nodes - 2)
+    row_frac = rng.random(rows, dtype=np.float32)
+    weights = rng.random((rows, cols), dtype=np.float32) * 1e-3
+    transmittance = rng.random((rows, cols)) * 1.4 - 0.2  # clipped to [0, 1]
+    glow = rng.random((rows, cols, 3), dtype=np.float32)
+    f = row_frac[:, None]
+    expected = along[:, row_at] * (1 - f) + along[:, row_at + 1] * f
+    if clouded:
+        expected *= np.clip(transmittance, 0.0, 1.0).astype(np.float32)
+        expected += np.moveaxis(glow, -1, 0)
+    expected = expected * weights
+    out = np.empty((3, rows, cols), dtype=np.float32)
+    for lo in (0, 10):  # in two parts, as the raster's bounded chunks
+        part = slice(lo, 10 if lo == 0 else rows)
+        _filter.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), clouded,
+                         np.ascontiguousarray(transmittance[part]), np.ascontiguousarray(glow[part]), weights, out)
+    assert out.tobytes() == expected.tobytes()
