@@ -133,6 +133,10 @@ class UniformSky:
         return SkyRaster(grid, weighted, outside)
 
 
+KEPT_RASTERS = 4
+"""Most sky-plane rasters an ``EquirectSky`` keeps (a run asks for one or two per layer). [count]"""
+
+
 @dataclass(frozen=True)
 class EquirectSky:
     """A sky from an equirectangular image (HDRI), texels taken as piecewise constant.
@@ -200,6 +204,28 @@ class EquirectSky:
         return np.einsum("r,rcn->n", weight, self.image[:rows].astype(np.float64))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+        """``_raster``, kept on this sky for the next call with the same grid and fold (read-only:
+        a still image gives every frame of a run the same raster; it cost seconds a frame)."""
+        key = (grid, None if fold_period is None else tuple(int(n) for n in fold_period))
+        try:
+            kept = self._rasters.get(key)
+        except TypeError:  # a grid given with lists: not kept
+            return self._raster(grid, fold_period=fold_period)
+        if kept is None:
+            kept = self._raster(grid, fold_period=fold_period)
+            for array in (kept.weighted, kept.outside):
+                array.flags.writeable = False
+            if len(self._rasters) >= KEPT_RASTERS:
+                self._rasters.pop(next(iter(self._rasters)))
+            self._rasters[key] = kept
+        return kept
+
+    @cached_property
+    def _rasters(self) -> dict:
+        """``raster``'s results by (grid, fold period), oldest first."""
+        return {}
+
+    def _raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
         """Area-averaged resampling onto ``grid`` that keeps every texel's energy.
 
         Each texel is cut into sub-texels no larger than half a cell on the sky plane; each

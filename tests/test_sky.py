@@ -606,3 +606,18 @@ def test_the_compiled_sky_rows_have_the_bits_of_the_array_operations(clouded):
         _filter.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), clouded,
                          np.ascontiguousarray(transmittance[part]), np.ascontiguousarray(glow[part]), weights, out)
     assert out.tobytes() == expected.tobytes()
+
+
+def test_an_hdri_keeps_its_rasters_read_only():
+    # a still image gives every frame the same raster: made once per grid and fold, not changed
+    image = np.random.default_rng(8).random((32, 64, 3), dtype=np.float32)
+    sky = EquirectSky(image)
+    grid = sky_grid((-20, -20), (40, 40), 0.05)
+    first = sky.raster(grid)
+    assert sky.raster(grid) is first and not first.weighted.flags.writeable
+    assert first.weighted.tobytes() == sky._raster(grid).weighted.tobytes()
+    folded = sky.raster(grid, fold_period=(16, 16))
+    assert folded is not first and folded.weighted.shape == (3, 16, 16)
+    assert folded.weighted.tobytes() == sky._raster(grid, fold_period=(16, 16)).weighted.tobytes()
+    other = sky.raster(sky_grid((-10, -10), (20, 20), 0.05))
+    assert other.weighted.shape == (3, 20, 20) and sky.raster(grid) is first
