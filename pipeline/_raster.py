@@ -337,3 +337,31 @@ def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
         prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3] = math.cos(angle), math.sin(angle), major, max(minor, 1e-4)
         minor_out[i], thick[i] = minor, 2 * minor
     return c_px, half, prm, minor_out, thick
+
+
+@njit(cache=True, nogil=True)
+def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n_up, n_rel, nearest, farthest,
+                   leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky):
+    """``foreground.tree_passes``'s leaf fragments (those whose ``shape`` is under ``leaves``),
+    fragment by fragment with the float64 operations of its array version in their order: the
+    depth where the pixel's ray meets the leaf's plane, ``n_rel / (n . ray)`` with n . ray kept
+    from 0 (1e-12), clamped to [nearest, farthest] of the leaf; the leaf's sun and sky light.
+    flat : pixel index (row cols + col); n_* : the leaf normal's components along the camera's
+    forward, right and up, and along the leaf from the pinhole; outputs frag_depth (n,),
+    frag_sun and frag_sky (n, 3)."""
+    half_cols, half_rows = 0.5 * cols, 0.5 * rows
+    for f in range(flat.shape[0]):
+        s = shape[f]
+        if s >= leaves:
+            continue
+        pu = flat[f] % cols + 0.5
+        pv = flat[f] // cols + 0.5
+        across = (n_forward[s] + ((pu - half_cols) / focal) * n_right[s]) + ((half_rows - pv) / focal) * n_up[s]
+        hit = n_rel[s] / (across if abs(across) > 1e-12 else 1e-12)
+        if hit == hit:  # np.clip: NaN stays
+            hit = hit if hit > nearest[s] else nearest[s]
+            hit = hit if hit < farthest[s] else farthest[s]
+        frag_depth[f] = hit
+        for c in range(3):
+            frag_sun[f, c] = leaf_sky[s, c] + leaf_sun[s, c]
+            frag_sky[f, c] = leaf_sky[s, c]

@@ -343,15 +343,13 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     frag_sun = np.empty((len(flat), 3))
     frag_sky = np.empty((len(flat), 3))
 
-    # leaf fragments: depth of the leaf's plane along the pixel's ray, clamped to the leaf
-    i = shape[is_leaf]
+    # leaf fragments: depth of the leaf's plane along the pixel's ray (n . ray, the ray at unit
+    # depth), clamped to the leaf; compiled, the operations of _leaf_fragments_arrays
+    from . import _raster
+
     n_forward, n_right, n_up, n_rel = normal @ forward, normal @ right, normal @ up, np.sum(normal * rel, axis=1)
-    across = (n_forward[i] + ((pu[is_leaf] - 0.5 * cols) / focal) * n_right[i]
-              + ((0.5 * rows - pv[is_leaf]) / focal) * n_up[i])  # n . ray, the ray at unit depth
-    hit = n_rel[i] / np.where(np.abs(across) > 1e-12, across, 1e-12)
-    frag_depth[is_leaf] = np.clip(hit, (depth - reach)[i], (depth + reach)[i])
-    frag_sun[is_leaf] = leaf_sky[i] + leaf_sun[i]
-    frag_sky[is_leaf] = leaf_sky[i]
+    _raster.leaf_fragments(flat, shape, len(kept), cols, rows, float(focal), n_forward, n_right, n_up, n_rel,
+                           depth - reach, depth + reach, leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky)
 
     # wood fragments: the cylinder's front surface and normal at the pixel
     j = shape[~is_leaf] - len(kept)
@@ -400,6 +398,21 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                           for c in range(3)], axis=-1).reshape(rows, cols, 3)
     return ForegroundPasses(sun_image.astype(np.float32), sky_image.astype(np.float32),
                             alpha.astype(np.float32), haze_image)
+
+
+def _leaf_fragments_arrays(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n_up, n_rel, nearest,
+                           farthest, leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky) -> None:
+    """``_raster.leaf_fragments`` on arrays: its reference (tests/test_foreground.py)."""
+    row, col = np.divmod(flat, cols)
+    pu, pv = col + 0.5, row + 0.5
+    is_leaf = shape < leaves
+    i = shape[is_leaf]
+    across = (n_forward[i] + ((pu[is_leaf] - 0.5 * cols) / focal) * n_right[i]
+              + ((0.5 * rows - pv[is_leaf]) / focal) * n_up[i])
+    hit = n_rel[i] / np.where(np.abs(across) > 1e-12, across, 1e-12)
+    frag_depth[is_leaf] = np.clip(hit, nearest[i], farthest[i])
+    frag_sun[is_leaf] = leaf_sky[i] + leaf_sun[i]
+    frag_sky[is_leaf] = leaf_sky[i]
 
 
 BARK_FURROWS = (14, 23)

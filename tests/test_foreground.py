@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pipeline import canopy
+from pipeline import _raster, canopy, foreground
 from pipeline.camera import Camera, project_points
 from pipeline.canopy import Leaves, Wood
 from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, TIP_TAPER, ForegroundPasses,
@@ -349,3 +349,20 @@ def test_stem_pieces_are_shaded_by_leaves_not_by_each_other():
     assert shaded.any() and lit.any()
     assert np.all(visibility[shaded] < 0.05)
     assert np.all(visibility[lit] > 0.98)
+
+
+def test_the_compiled_leaf_fragments_have_the_bits_of_the_array_version():
+    rng = np.random.default_rng(9)
+    leaves, wood, cols, rows, n = 40, 6, 37, 23, 5000
+    flat = rng.integers(0, rows * cols, n)
+    shape = rng.integers(0, leaves + wood, n)
+    per_leaf = [rng.normal(size=leaves) for _ in range(4)]
+    per_leaf[0][:3] = 0.0  # n . ray near 0: kept from 0
+    depth, reach = rng.random(leaves) * 9 + 1, rng.random(leaves) * 0.05
+    light = [rng.random((leaves, 3)) for _ in range(2)]
+    outputs = []
+    for kernel in (_raster.leaf_fragments, foreground._leaf_fragments_arrays):
+        out = (np.full(n, -1.0), np.full((n, 3), -1.0), np.full((n, 3), -1.0))  # wood left as it is
+        kernel(flat, shape, leaves, cols, rows, 31.7, *per_leaf, depth - reach, depth + reach, *light, *out)
+        outputs.append(b"".join(a.tobytes() for a in out))
+    assert outputs[0] == outputs[1]
