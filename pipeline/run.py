@@ -160,8 +160,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 record_config_items(plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
-                stream = _VideoStream.start(config, digest, records, todo, previous,
-                                            force=remake_video)
+                stream = _VideoStream.start(config, digest, records, todo, previous, force=remake_video,
+                                            in_process=jobs == 1 and not scheduler)
                 try:
                     for frame, seconds, entry, caught, codes in _frame_phase(
                             plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
@@ -287,10 +287,15 @@ class _VideoStream:
         self.thread.start()
 
     @classmethod
-    def start(cls, config: Config, digest: str, records: dict, todo, previous: dict, *, force):
-        """A stream if the run makes a video and ends with every frame done, else None."""
+    def start(cls, config: Config, digest: str, records: dict, todo, previous: dict, *, force, in_process):
+        """A stream if the run makes a video and ends with every frame done, else None; None
+        too when the frames render ``in_process``: the encoder is a forked process, and a fork
+        while this process's FFT threads take work ends the FFT ("Work item submitted after
+        shutdown": scipy's pocketfft stops its thread pool at every fork), so the video is
+        then encoded after the frames."""
         fresh = set(todo)
-        if (video_file(config) is None or current_video(config, digest, previous, force=force) is not None
+        if (in_process or video_file(config) is None
+                or current_video(config, digest, previous, force=force) is not None
                 or any(records[f] is None and f not in fresh for f in range(config.animation.frames))):
             return None
         return cls(config, digest, fresh)
