@@ -151,7 +151,7 @@ def main() -> None:
               f"{bare * 1e3:.0f} ms: frame / bare FFT {t_whole / bare:.1f}, beyond the ground raster "
               f"{(t_whole - t_ground) / bare:.1f}")
         print(f"foreground passes per cycle frame (sun visibility + passes, "
-              f"{len(grove.leaves.center)} leaves): {t_passes:.2f} s")
+              f"{len(grove.leaves.center)} leaves): {t_passes:.3f} s")
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

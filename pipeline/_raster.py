@@ -365,3 +365,36 @@ def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n
         for c in range(3):
             frag_sun[f, c] = leaf_sky[s, c] + leaf_sun[s, c]
             frag_sky[f, c] = leaf_sky[s, c]
+
+
+@njit(cache=True, nogil=True)
+def scatter_light(flat, weight, frag_sun, frag_sky, pixels):
+    """``foreground.tree_passes``'s sun and sky images (pixels, 3) float64: each fragment's
+    light (n, 3) times its ``weight`` (n,) added to its pixel ``flat`` (n,), fragment after
+    fragment from 0 — the sums, in the order, of ``np.bincount(flat, weights=weight *
+    light[:, c])`` per channel."""
+    sun = np.zeros((pixels, 3))
+    sky = np.zeros((pixels, 3))
+    for f in range(flat.shape[0]):
+        p, w = flat[f], weight[f]
+        for c in range(3):
+            sun[p, c] += w * frag_sun[f, c]
+            sky[p, c] += w * frag_sky[f, c]
+    return sun, sky
+
+
+@njit(cache=True, nogil=True)
+def leaf_heights(shape, leaves, px, py, cx, cy, slope_x, slope_y, h_center, reach, height):
+    """``foreground._visibility``'s leaf fragments (those whose ``shape`` is under ``leaves``):
+    the height towards the light of the leaf's plane over the fragment's point (px, py) [m],
+    its rise from the centre (cx, cy) along the plane's slopes clamped to [-reach, reach] of
+    the leaf, with the float64 operations of the array version in their order, into ``height``."""
+    for f in range(shape.shape[0]):
+        s = shape[f]
+        if s >= leaves:
+            continue
+        rise = (px[f] - cx[s]) * slope_x[s] + (py[f] - cy[s]) * slope_y[s]
+        if rise == rise:  # np.clip: NaN stays
+            rise = rise if rise > -reach[s] else -reach[s]
+            rise = rise if rise < reach[s] else reach[s]
+        height[f] = h_center[s] + rise

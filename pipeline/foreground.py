@@ -182,12 +182,13 @@ def _visibility(leaves: Leaves, wood: Wood, s, pixel):
     px, py = grid.ground_from_raster(row, col)
     is_leaf = shape < n_leaves
     height = np.empty(len(flat))
-    i = shape[is_leaf]
     h_center, h_u, h_v = leaves.center @ s, leaves.axis_u @ s, leaves.axis_v @ s
     slope_x, slope_y = _plane_slope(shapes.axis_a, shapes.axis_b, h_u, h_v)
-    reach = np.hypot(h_u, h_v)
-    rise = (px[is_leaf] - shapes.center[i, 0]) * slope_x[i] + (py[is_leaf] - shapes.center[i, 1]) * slope_y[i]
-    height[is_leaf] = h_center[i] + np.clip(rise, -reach[i], reach[i])
+    # leaf fragments: h_center + clip(rise, -reach, reach) per fragment, compiled
+    from . import _raster
+
+    _raster.leaf_heights(shape, n_leaves, px, py, *(np.ascontiguousarray(shapes.center[:, k]) for k in (0, 1)),
+                         slope_x, slope_y, h_center, np.hypot(h_u, h_v), height)
     j = shape[~is_leaf] - n_leaves
     a0, a1 = shapes.start[j], shapes.end[j]
     t = _along(np.column_stack([px[~is_leaf], py[~is_leaf]]) - a0, a1 - a0)
@@ -392,10 +393,8 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                                  minlength=rows * cols).reshape(rows, cols).astype(np.float32)
     optical = np.bincount(flat, weights=-np.log1p(-coverage.astype(np.float64)), minlength=rows * cols)
     alpha = -np.expm1(-optical).reshape(rows, cols)
-    sun_image = np.stack([np.bincount(flat, weights=weight * frag_sun[:, c], minlength=rows * cols)
-                          for c in range(3)], axis=-1).reshape(rows, cols, 3)
-    sky_image = np.stack([np.bincount(flat, weights=weight * frag_sky[:, c], minlength=rows * cols)
-                          for c in range(3)], axis=-1).reshape(rows, cols, 3)
+    sun_image, sky_image = (image.reshape(rows, cols, 3) for image in _raster.scatter_light(
+        flat, weight, np.ascontiguousarray(frag_sun), np.ascontiguousarray(frag_sky), rows * cols))
     return ForegroundPasses(sun_image.astype(np.float32), sky_image.astype(np.float32),
                             alpha.astype(np.float32), haze_image)
 

@@ -366,3 +366,32 @@ def test_the_compiled_leaf_fragments_have_the_bits_of_the_array_version():
         kernel(flat, shape, leaves, cols, rows, 31.7, *per_leaf, depth - reach, depth + reach, *light, *out)
         outputs.append(b"".join(a.tobytes() for a in out))
     assert outputs[0] == outputs[1]
+
+
+def test_the_compiled_scatter_of_light_has_the_bits_of_bincount():
+    rng = np.random.default_rng(10)
+    pixels, n = 300, 20000
+    flat = rng.integers(0, pixels, n)
+    weight = rng.random(n)
+    light = [rng.random((n, 3)) * 50.0 for _ in range(2)]
+    sun, sky = _raster.scatter_light(flat, weight, *light, pixels)
+    for image, each in zip((sun, sky), light):
+        expected = np.stack([np.bincount(flat, weights=weight * each[:, c], minlength=pixels) for c in range(3)], axis=-1)
+        assert image.tobytes() == expected.tobytes()
+
+
+def test_the_compiled_leaf_heights_have_the_bits_of_the_array_version():
+    rng = np.random.default_rng(11)
+    leaves, wood, n = 50, 5, 8000
+    shape = rng.integers(0, leaves + wood, n)
+    px, py = rng.normal(size=(2, n)) * 3.0
+    cx, cy, slope_x, slope_y, h_center = rng.normal(size=(5, leaves))
+    reach = rng.random(leaves) * 0.1
+    height = np.full(n, -7.0)
+    _raster.leaf_heights(shape, leaves, px, py, cx, cy, slope_x, slope_y, h_center, reach, height)
+    expected = np.full(n, -7.0)  # wood fragments left as they are
+    is_leaf = shape < leaves
+    i = shape[is_leaf]
+    rise = (px[is_leaf] - cx[i]) * slope_x[i] + (py[is_leaf] - cy[i]) * slope_y[i]
+    expected[is_leaf] = h_center[i] + np.clip(rise, -reach[i], reach[i])
+    assert height.tobytes() == expected.tobytes()
