@@ -7,7 +7,9 @@ CONFIG defaults to configs/eclipse.yaml, the default main job. Four runs of
 ``sunshade render CONFIG --frames ...`` in fresh folders:
 
 1. --jobs 2 with an empty cache: the cycle phase of the cycle frames those frames use (cold);
-2. --jobs 1 and 3. --jobs 2 with that cache warm: the frame phase, frames per second;
+2. --jobs 1 and 3. --jobs 2 with that cache warm: the frame phase, frames per second; with
+   --jobs 1 the frame phase beside its stages' sum, so how much of the writing the next
+   frame's rendering hides (docs/runs.md, "Writing");
 4. the same command again with nothing left to do: its wall time (target: at most 1 s), beside
    the wall time of a bare ``python -c "import pipeline.cli"`` (the start-up every command pays).
 
@@ -113,7 +115,12 @@ def main() -> None:
         shares = ", ".join(f"{name} {value / count:.2f} s ({100 * value / total:.0f}%)"
                            for name, value in stages.items())
         print(f"stages per frame, --jobs {jobs}: {shares}")
-    ground = runs[1][1]["frame_stages"]["ground"] / count
+    stages = runs[1][1]["frame_stages"]
+    serial, phase = sum(stages.values()), runs[1][1]["frames"]
+    print(f"--jobs 1: frame phase {phase:.1f} s against its stages one after another {serial:.1f} s "
+          f"(writing {stages['write']:.1f} s): {100 * (serial - phase) / stages['write']:.0f}% of the "
+          f"writing hidden behind the next frame's rendering")
+    ground = stages["ground"] / count
     print(f"ground stage {ground:.3f} s per frame vs bare rfft2 + irfft2 of its FFT shapes "
           f"{floor:.3f} s: ratio {ground / floor:.1f}")
     if "video" in cold_timings:

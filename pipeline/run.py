@@ -197,16 +197,43 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
 
 def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):
     """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
-    frame is written."""
+    frame is written. With one job the frames render here, one after another, and each frame's
+    files are written by a thread while the next frame renders (``_frames_here``)."""
     if progress:
         progress("frames", 0, len(todo))
-    tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command, codes)
-             for frame in todo)
-    results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
+    if jobs == 1 and command is not None:
+        results = _frames_here(plan, store, todo, digest, threads, codes)
+    else:
+        tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command, codes)
+                 for frame in todo)
+        results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
         yield result
         if progress:
             progress("frames", done, len(todo))
+
+
+def _frames_here(plan, store, todo, digest, threads, codes):
+    """``_frame_task`` over ``todo`` in this process, its writing overlapped with the next
+    frame's rendering: a thread writes frame k's EXR and PNG while frame k + 1 renders, so the
+    writing costs no wall time where a core is free (docs/runs.md, "Writing"). Yields each
+    frame as its files are written, in order; at most one frame waits to be written. Where a
+    frame's rendering fails (or is interrupted), the frame before it is written and yielded
+    first, so it is recorded as it was before the overlap."""
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="sunshade-write") as writer:
+        writing = None
+        for frame in todo:
+            try:
+                rendered = _render_task(plan, frame, str(store.root), threads)
+            except BaseException:
+                if writing is not None:
+                    yield writing.result()
+                raise
+            if writing is not None:
+                yield writing.result()
+            writing = writer.submit(_write_task, plan.config, rendered, digest, codes)
+        if writing is not None:
+            yield writing.result()
 
 
 @portable
@@ -217,10 +244,22 @@ def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int,
     codes if ``codes`` else None): a worker's warnings are said by the process that runs the
     command, and the codes go to the video it encodes meanwhile (``_VideoStream``)."""
     end_if_orphaned(command)
-    config, timings = plan.config, {}
-    store = cache.Cache(root)
+    return _write_task(plan.config, _render_task(plan, frame, root, threads), digest, codes)
+
+
+def _render_task(plan: RunPlan, frame: int, root: str, threads: int):
+    """Render one frame: (frame, its ``FrameResult``, stage seconds [s], the cache items it
+    was made from (``cache.Cache.served``), the warnings raised meanwhile as (category, text))."""
+    timings, store = {}, cache.Cache(root)
     with warnings.catch_warnings(record=True) as caught:
         result = render_frame(plan, frame, store=store, workers=threads, timings=timings)
+    return frame, result, timings, dict(store.served), [(w.category, str(w.message)) for w in caught]
+
+
+def _write_task(config: Config, rendered, digest: str, codes: bool):
+    """Write a frame that ``_render_task`` rendered: its EXR, then its PNG. Returns what
+    ``_frame_task`` returns."""
+    frame, result, timings, served, caught = rendered
     mark = time.perf_counter()
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
@@ -232,9 +271,9 @@ def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int,
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()
     entry = {"config_hash": digest, "files": {"exr": file_stamp(exr), "png": file_stamp(png)},
-             "items": dict(store.served), "record": frame_record(config, frame, digest)}
+             "items": served, "record": frame_record(config, frame, digest)}
     timings["digest"] = time.perf_counter() - mark
-    return frame, timings, entry, [(w.category, str(w.message)) for w in caught], written if codes else None
+    return frame, timings, entry, caught, written if codes else None
 
 
 def _video(config: Config, digest: str, records: dict, previous: dict, progress, timings, *,

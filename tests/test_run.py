@@ -21,7 +21,8 @@ from pipeline.cli import main
 from pipeline.errors import RunError
 from pipeline.plan import plan_run
 from pipeline.resolve import load
-from pipeline.run import _frame_task
+from pipeline.cache import Cache
+from pipeline.run import _frame_task, _frames_here
 from pipeline.runfolder import frame_files, parse_frames
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -452,6 +453,25 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
     for path in frame_files(config, 4):
         assert path.read_bytes() == files[path.name]
+
+
+def test_with_one_job_a_frame_rendered_before_a_failure_is_written_and_yielded(finished, tmp_path):
+    """``--jobs 1`` writes frame k while frame k + 1 renders: frames come out in order, with the
+    reference's bytes, and when a frame fails to render (99 is past the animation's end) the
+    frame before it is still written and handed back before the error."""
+    config_path, files, _, cache = finished
+    config = load(config_path)
+    config = replace(config, output=replace(config.output, folder=tmp_path / "out"))
+    (tmp_path / "out").mkdir()
+    frames = _frames_here(plan_run(config), Cache(cache), [5, 3, 99], config.digest(), 1, False)
+    assert [next(frames)[0], next(frames)[0]] == [5, 3]
+    with pytest.raises(IndexError):
+        next(frames)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "tiny.0003.exr", "tiny.0003.png", "tiny.0005.exr", "tiny.0005.png"]
+    for frame in (3, 5):
+        for path in frame_files(config, frame):
+            assert path.read_bytes() == files[path.name]
 
 
 def test_frames_made_from_an_item_found_damaged_elsewhere_render_again_pruned_do_not(finished, capsys):
