@@ -275,14 +275,32 @@ def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tup
     return flat, offsets, sides
 
 
-def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out):
+TILE_BLEND = 0.125
+"""Width of the band about each edge of a copy of the tile, as a fraction of the tile's side, over
+which the copies on both sides blend (``_field_loop``). [1]"""
+
+
+_MASK32 = 0xFFFFFFFF
+
+
+def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
+                seed, base_row, base_col):
     """The reads of ``CloudLayer.field`` in one loop over samples and taps (compiled by
-    ``_compiled_field_loop``); ``out`` (m,) gets the field. [dimensionless]
+    ``_compiled``); ``out`` (m,) gets the field. [dimensionless]
 
     rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
     direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
         else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
         each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    seed, base_row, base_col : the layer's seed, and the index of the copy of the tile whose
+        centre is at lattice coordinates (0, 0) (the drift's whole tiles, ``CloudLayer._taps``).
+
+    The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols) drawn
+    from a hash of (seed, copy) (uniform in [0, side) texels of level 0), so that
+    the pattern does not repeat (a repeating tile lines its copies up towards the horizon,
+    docs/method.md, "The cloud pattern"); in a band ``TILE_BLEND`` of the side wide about each
+    edge a read blends the copies on both sides, ``sum w v / sqrt(sum w^2)`` (variance preserving, Heitz & Neyret
+    2018) with smoothstep weights. A read inside one copy is that copy's read alone, bit for bit.
     Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
     B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
     the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
@@ -290,61 +308,111 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     value x row weight x column weight.
     """
     n_levels = sides.shape[0]
+    side0 = sides[0]
+    band = TILE_BLEND * side0
     weights = np.empty((2, 4))
     index = np.empty((2, 4), dtype=np.intp)
+    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
+    shares = np.empty((2, 2))  # per axis: their smoothstep weights
     for i in range(rows.shape[0]):
         n_taps = 1 if direct else taps[i]
         total = 0.0
         for t in range(n_taps):
             if direct:
-                at_row, at_col = rows[i], cols[i]
+                tap_row, tap_col = rows[i], cols[i]
             else:
                 step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
-                at_row = rows[i] + -ey[i] * step
-                at_col = cols[i] + ex[i] * step
-            k = 0 if direct else k0[i]
-            upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
-            finer = 0.0
-            for level in range(k, k + 2 if upper else k + 1):
-                side = sides[level]
-                order = 3 if level == 0 else 1
-                for axis in range(2):
-                    x = at_row if axis == 0 else at_col
-                    if not direct:
-                        x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
-                    if x < 0:  # scipy's grid-wrap of a coordinate
-                        x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
-                    elif x > side - 1:
-                        x = 0.0 if side <= 1 else x - side * int(x / side)
-                    if not x > -1.0:  # NaN: scipy's constant 0
-                        break
-                    start = int(math.floor(x)) - order // 2
-                    f = x - math.floor(x)
-                    if order == 3:
-                        z = 1.0 - f
-                        weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
-                        weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
-                        weights[axis, 0] = z * z * z / 6.0
+                tap_row = rows[i] + -ey[i] * step
+                tap_col = cols[i] + ex[i] * step
+            count_row = count_col = 1
+            for axis in range(2):
+                x = tap_row if axis == 0 else tap_col
+                copy = math.floor(x / side0 + 0.5)
+                edge = x - (copy - 0.5) * side0  # [texel] from the copy's lower edge
+                copies[axis, 0] = copy + (base_row if axis == 0 else base_col)
+                shares[axis, 0] = 1.0
+                if edge < 0.5 * band or edge > side0 - 0.5 * band:
+                    u = edge / band + 0.5 if edge < 0.5 * band else (edge - side0) / band + 0.5
+                    u = min(max(u, 0.0), 1.0)
+                    upper_share = u * u * (3.0 - 2.0 * u)
+                    if edge < 0.5 * band:
+                        copies[axis, 1] = copies[axis, 0]
+                        copies[axis, 0] -= 1
                     else:
-                        weights[axis, 0] = 1.0 - f
-                    last = 1.0
-                    for j in range(order):
-                        last -= weights[axis, j]
-                    weights[axis, order] = last
-                    wraps = start < 0 or start + order >= side
-                    for j in range(order + 1):
-                        index[axis, j] = (start + j) % side if wraps else start + j
-                value = 0.0
-                if x > -1.0:
-                    base = offsets[level]
-                    for a in range(order + 1):
-                        row = base + index[0, a] * side
-                        for b in range(order + 1):
-                            value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
-                if level == k:
-                    finer = value
-                else:
-                    value = finer + blend[i] * (value - finer)
+                        copies[axis, 1] = copies[axis, 0] + 1
+                    shares[axis, 0] = 1.0 - upper_share
+                    shares[axis, 1] = upper_share
+                    if axis == 0:
+                        count_row = 2
+                    else:
+                        count_col = 2
+            weighted = 0.0
+            squares = 0.0
+            for cr in range(count_row):
+                for cc in range(count_col):
+                    shift_row = shift_col = 0.0
+                    if copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
+                        h = seed & _MASK32
+                        for key in range(3):  # lowbias32 of the seed, the row, the column
+                            h ^= (copies[0, cr] if key == 0 else copies[1, cc] if key == 1 else 0) & _MASK32
+                            h ^= h >> 16
+                            h = (h * 0x7FEB352D) & _MASK32  # its low 32 bits, however it wraps
+                            h ^= h >> 15
+                            h = (h * 0x846CA68B) & _MASK32
+                            h ^= h >> 16
+                            if key == 1:
+                                shift_row = float(h % side0)
+                        shift_col = float(h % side0)
+                    w = shares[0, cr] * shares[1, cc]
+                    at_row = tap_row + shift_row
+                    at_col = tap_col + shift_col
+                    k = 0 if direct else k0[i]
+                    upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+                    finer = 0.0
+                    for level in range(k, k + 2 if upper else k + 1):
+                        side = sides[level]
+                        order = 3 if level == 0 else 1
+                        for axis in range(2):
+                            x = at_row if axis == 0 else at_col
+                            if not direct:
+                                x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
+                            if x < 0:  # scipy's grid-wrap of a coordinate
+                                x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
+                            elif x > side - 1:
+                                x = 0.0 if side <= 1 else x - side * int(x / side)
+                            if not x > -1.0:  # NaN: scipy's constant 0
+                                break
+                            start = int(math.floor(x)) - order // 2
+                            f = x - math.floor(x)
+                            if order == 3:
+                                z = 1.0 - f
+                                weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 0] = z * z * z / 6.0
+                            else:
+                                weights[axis, 0] = 1.0 - f
+                            last = 1.0
+                            for j in range(order):
+                                last -= weights[axis, j]
+                            weights[axis, order] = last
+                            wraps = start < 0 or start + order >= side
+                            for j in range(order + 1):
+                                index[axis, j] = (start + j) % side if wraps else start + j
+                        value = 0.0
+                        if x > -1.0:
+                            base = offsets[level]
+                            for a in range(order + 1):
+                                row = base + index[0, a] * side
+                                for b in range(order + 1):
+                                    value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
+                        if level == k:
+                            finer = value
+                        else:
+                            value = finer + blend[i] * (value - finer)
+                    weighted += w * value
+                    squares += w * w
+            if count_row * count_col > 1:
+                value = weighted / math.sqrt(squares)
             total += value / n_taps if not direct else value
         out[i] = total
     return out
@@ -515,13 +583,23 @@ class CloudLayer:
         shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
         out = np.empty(coords.shape[1])
+        copies = (self.seed, *self._drifted_copies(time))
         if taps is None:
             unused, none = np.empty(0), np.empty(0, dtype=np.intp)
             _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
-                                   unused, unused, unused, out)
+                                   unused, unused, unused, out, *copies)
         else:
-            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], False, *taps, out)
+            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], False, *taps, out, *copies)
         return out.reshape(shape)
+
+    def _drift(self, time) -> tuple[float, float]:
+        """How far the pattern has drifted at ``time`` [s], (rows, cols) [texel]."""
+        return -self.wind[1] * float(time) / self.texel, self.wind[0] * float(time) / self.texel
+
+    def _drifted_copies(self, time) -> tuple[int, int]:
+        """The copy of the tile (row, col) that ``_taps``'s lattice coordinates (0, 0) are the
+        centre of at ``time`` [s]: the drift's whole tiles, negated (``_field_loop``)."""
+        return tuple(-int(math.floor(drift / self.texels)) for drift in self._drift(time))
 
     def _taps(self, s, time, footprint=None) -> tuple:
         """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
@@ -533,8 +611,8 @@ class CloudLayer:
         n = self.texels
         per_texel = self.altitude / self.texel
         # Drift reduced modulo the tile first, so that late frames keep full precision.
-        shift_col = np.mod(self.wind[0] * float(time) / self.texel, n)
-        shift_row = np.mod(-self.wind[1] * float(time) / self.texel, n)
+        drift_row, drift_col = self._drift(time)
+        shift_col, shift_row = np.mod(drift_col, n), np.mod(drift_row, n)
         shape = s.shape[:-1]
         s = s.reshape(-1, 2)  # at least one axis
         coords = np.empty((2, s.shape[0]))

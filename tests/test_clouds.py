@@ -384,6 +384,26 @@ def test_the_field_bends_smoothly_between_texels():
     assert np.abs(np.diff(slope)).max() < 0.05 * np.abs(slope).max()
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_pattern_does_not_repeat_with_the_tile(seed):
+    """The plane is laid with shifted copies of the tile: one tile along a lattice axis or its
+    diagonal the field is another (a repeating tile lined its copies up towards the horizon,
+    where a pixel's footprint runs along an axis over many copies: a dark or light streak from
+    the horizon up, docs/method.md, "The cloud pattern"). Magnified 64 times, the field crosses
+    a copy's edge without a seam."""
+    cl = layer(seed=seed, wind=(8.0, 2.0))
+    period = cl.period * cl.scale / cl.altitude  # one tile [tan]
+    x = np.linspace(0.1, 0.1 + 6 * period, 6 * 1000, endpoint=False)
+    for y, shift in ((0.0, (period, 0.0)), (0.3 * period, (0.0, period)), (0.0, (period, period))):
+        s = np.stack([x, np.full_like(x, y)], -1)
+        here, there = cl.field(s, 5.0), cl.field(s + shift, 5.0)
+        assert abs(np.corrcoef(here, there)[0, 1]) < 0.2
+    step = cl.texel / cl.altitude / 64  # [tan]
+    t = 0.5 * period + (np.arange(64 * 12) - 64 * 6) * step  # across a copy's edge at time 0
+    steps = np.abs(np.diff(cl.field(np.column_stack([t, 0.05 + 0.37 * (t - t[0])]), 0.0)))
+    assert steps.max() < 1.5 * np.percentile(steps, 99)  # no seam: no step stands out
+
+
 def test_a_long_footprint_blurs_along_its_length_only():
     """Near the horizon a pixel's footprint is long along the radius and narrow across it:
     filtered as such, the field keeps more of its detail than filtered round at the long width,
@@ -401,14 +421,34 @@ def test_a_long_footprint_blurs_along_its_length_only():
 # 7. the compiled reads -----------------------------------------------------------------------
 
 
+def tile_shift(seed: int, row: int, col: int, side: int) -> np.ndarray:
+    """The shift (rows, cols) [texel] of copy (row, col) of the cloud tile, as
+    ``clouds._field_loop`` draws it: none for copy (0, 0), else Wellons's lowbias32 hash of the
+    seed, the row and the column, in turn (32-bit words)."""
+    if row == 0 and col == 0:
+        return np.zeros(2)
+    mask, h, shifts = 0xFFFFFFFF, seed & 0xFFFFFFFF, []
+    for key in (row, col, 0):
+        h ^= key & mask
+        h ^= h >> 16
+        h = h * 0x7FEB352D & mask
+        h ^= h >> 15
+        h = h * 0x846CA68B & mask
+        h ^= h >> 16
+        shifts.append(float(h % side))
+    return np.array(shifts[1:])
+
+
 def reference_field(cl, s, time, footprint=None):
-    """``CloudLayer.field`` as numpy and scipy.ndimage.map_coordinates computed it, from where
-    ``CloudLayer._taps`` says to read (the code the compiled loop replaced): the reference the
-    compiled loop is held to, bit for bit."""
+    """``CloudLayer.field`` as numpy and scipy.ndimage.map_coordinates compute it, from where
+    ``CloudLayer._taps`` says to read: the reference the compiled loop is held to, bit for bit.
+    The plane is laid with the tile's shifted copies, blended near their edges, written here
+    for all four combinations of the copies on either side at once (those not read weigh 0)."""
     from scipy import ndimage
 
     key = cl._noise_key()
     levels = clouds._noise_levels(*key)
+    n, base = cl.texels, np.array(cl._drifted_copies(time))[:, None]
 
     def read(level, coords):
         if level == 0:
@@ -416,9 +456,28 @@ def reference_field(cl, s, time, footprint=None):
                                            prefilter=False)
         return ndimage.map_coordinates(levels[level], coords, order=1, mode="grid-wrap")
 
+    def tiled(at, read_at):
+        copy = np.floor(at / n + 0.5)
+        edge = at - (copy - 0.5) * n
+        band = clouds.TILE_BLEND * n
+        low, high = edge < 0.5 * band, edge > n - 0.5 * band
+        u = np.clip(np.where(low, edge / band + 0.5, (edge - n) / band + 0.5), 0.0, 1.0)
+        upper = np.where(low | high, u * u * (3.0 - 2.0 * u), 0.0)
+        shares = (np.where(low | high, 1.0 - upper, 1.0), upper)  # lower and upper copy, per axis
+        first = (copy + base - low).astype(np.int64)
+        weighted = squares = 0.0
+        for r in range(2):
+            for c in range(2):
+                w = shares[r][0] * shares[c][1]
+                shift = np.array([tile_shift(cl.seed, int(i), int(j), n)
+                                  for i, j in zip(first[0] + r, first[1] + c)]).T.reshape(at.shape)
+                weighted = weighted + w * read_at(at + shift)
+                squares = squares + w * w
+        return weighted / np.sqrt(squares)
+
     shape, coords, taps = cl._taps(s, time, footprint)
     if taps is None:
-        return read(0, coords).reshape(shape)
+        return tiled(coords, lambda at: read(0, at)).reshape(shape)
     taps, k0, blend, major, ex, ey = taps
     order = np.lexsort((-taps, k0))
     coords, taps, k0, blend, major, ex, ey = (a[..., order] for a in (coords, taps, k0, blend, major, ex, ey))
@@ -430,13 +489,17 @@ def reference_field(cl, s, time, footprint=None):
             m = a + int(np.count_nonzero(taps[a:b] > t))
             step = ((t + 0.5) / taps[a:m] - 0.5) * major[a:m]
             at = coords[:, a:m] + np.stack([-ey[a:m] * step, ex[a:m] * step])
-            value = read(k, (at + 0.5) / 2.0**k - 0.5)
-            upper = blend[a:m] > 0
-            if k + 1 < len(levels) and upper.any():
-                finer = value[upper]
-                coarser = read(k + 1, (at[:, upper] + 0.5) / 2.0 ** (k + 1) - 0.5)
-                value[upper] = finer + blend[a:m][upper] * (coarser - finer)
-            out[a:m] += value / taps[a:m]
+
+            def both_levels(at, k=k, blend=blend[a:m]):
+                value = read(k, (at + 0.5) / 2.0**k - 0.5)
+                upper = blend > 0
+                if k + 1 < len(levels) and upper.any():
+                    finer = value[upper]
+                    coarser = read(k + 1, (at[:, upper] + 0.5) / 2.0 ** (k + 1) - 0.5)
+                    value[upper] = finer + blend[upper] * (coarser - finer)
+                return value
+
+            out[a:m] += tiled(at, both_levels) / taps[a:m]
     result = np.empty_like(out)
     result[order] = out
     return result.reshape(shape)
