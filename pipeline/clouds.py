@@ -314,6 +314,8 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     index = np.empty((2, 4), dtype=np.intp)
     copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
     shares = np.empty((2, 2))  # per axis: their smoothstep weights
+    last_row = last_col = 0  # the last copy hashed, and its shift
+    last_shift_row = last_shift_col = 0.0
     for i in range(rows.shape[0]):
         n_taps = 1 if direct else taps[i]
         total = 0.0
@@ -351,7 +353,9 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
             for cr in range(count_row):
                 for cc in range(count_col):
                     shift_row = shift_col = 0.0
-                    if copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
+                    if copies[0, cr] == last_row and copies[1, cc] == last_col:  # as the last read's
+                        shift_row, shift_col = last_shift_row, last_shift_col
+                    elif copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
                         h = seed & _MASK32
                         for key in range(3):  # lowbias32 of the seed, the row, the column
                             h ^= (copies[0, cr] if key == 0 else copies[1, cc] if key == 1 else 0) & _MASK32
@@ -363,6 +367,8 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
                             if key == 1:
                                 shift_row = float(h % side0)
                         shift_col = float(h % side0)
+                        last_row, last_col = copies[0, cr], copies[1, cc]
+                        last_shift_row, last_shift_col = shift_row, shift_col
                     w = shares[0, cr] * shares[1, cc]
                     at_row = tap_row + shift_row
                     at_col = tap_col + shift_col
