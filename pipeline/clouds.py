@@ -293,7 +293,7 @@ def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
         else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
         each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
     seed, base_row, base_col : the layer's seed, and the index of the copy of the tile whose
-        centre is at lattice coordinates (0, 0) (the drift's whole tiles, ``CloudLayer._taps``).
+        centre is at lattice coordinates (0, 0) (``CloudLayer._drifted_copies``).
 
     The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols) drawn
     from a hash of (seed, copy) (uniform in [0, side) texels of level 0), so that
@@ -517,7 +517,7 @@ class CloudLayer:
         [0, 1]; 0 gives hard edges. [dimensionless]
     spectral_slope : slope of the 1-D power spectrum of a transect (5/3: Cahalan & Snider
         1989). [dimensionless]
-    period : side of the repeating tile in units of ``scale``. [dimensionless]
+    period : side of the noise tile (laid as shifted copies) in units of ``scale``. [dimensionless]
     texels : lattice side of the noise tile. [count]
     """
 
