@@ -1,9 +1,10 @@
 """Compiled loops of the frame phase's resampling: the camera's anisotropic filtering
 (``camera._filtered``) and mip levels (``camera._constant_mipmap``), the stochastic tiling of the
 ground albedo (``albedo.StochasticTiling.sample``), the bilinear resampling of the coarse ground
-under the sun window (``shadow.resample_bilinear``) and the haze over the view
-(``frame._apply_haze``). Each does what its array version does, float32 operation for float32
-operation in the same order, and the tests hold it to that version's bits.
+under the sun window (``shadow.resample_bilinear``), the haze over the view
+(``frame._apply_haze``) and the cloud pattern's filtered reads (``clouds.CloudLayer.field``).
+Each does what its array version does, float32 operation for float32 operation in the same
+order (the clouds' reads: scipy's float64 ones), and the tests hold it to that version's bits.
 
 The filtering's method is the one documented in ``camera.sample_footprint`` and ``albedo``:
 these loops do it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
@@ -11,10 +12,15 @@ and the same order of operations as the array version (``camera._tap_mean``, ``_
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
 The tap counts, levels and blends come from ``camera._filter_choice`` (``filter_choice``), computed once
 for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to import.
+
+Why one module: the frame phase's compiled reads share numba's lazy import and its cache on
+disk, and pieces of them live once, here: the hash of a lattice vertex's offsets
+(``_vertex_key``, ``_unit_hash``) serves the albedo's tiling and the cloud tile's copies alike.
 """
 
 from __future__ import annotations
 
+import math
 
 import numpy as np
 from numba import njit
@@ -160,12 +166,28 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _unit_hash(key):
-    """``albedo._unit_hash`` of one uint64 key."""
+    """``albedo.unit_hash`` of one uint64 key."""
     z = key + np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     z = z ^ (z >> np.uint64(31))
     return np.float64(z >> np.uint64(11)) / 9007199254740992.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _seed_key(seed):
+    """``albedo.vertex_keys``'s share of the seed."""
+    return np.uint64(seed) * np.uint64(0x165667B19E3779F9)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _vertex_key(va, vb, seed_key):
+    """``albedo.vertex_keys`` of one lattice vertex (va, vb), ``seed_key`` from ``_seed_key``."""
+    return ((np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))) ^ seed_key
+
+
+_SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
+"""``albedo.SECOND_KEY``."""
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -175,10 +197,9 @@ def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x,
     w >= skip (``albedo.StochasticTiling.offsets``); returns the new count of reads."""
     if not w >= skip:
         return count
-    key = (np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))
-    key ^= seed_key
+    key = _vertex_key(va, vb, seed_key)
     read_x[count] = x + _unit_hash(key) * period_x
-    read_y[count] = y + _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * period_y
+    read_y[count] = y + _unit_hash(key ^ _SECOND_KEY) * period_y
     read_pixel[count] = j
     read_weight[count] = w
     return count + 1
@@ -194,7 +215,7 @@ def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, rea
     ``read_pixel`` and its weight into ``read_weight`` (each (3 n,), filled from the start).
     Returns the count of reads."""
     root3 = np.sqrt(3.0)
-    seed_key = np.uint64(seed) * np.uint64(0x165667B19E3779F9)
+    seed_key = _seed_key(seed)
     count = 0
     for j in range(x.shape[0]):
         a = x[j] / cell
@@ -530,3 +551,140 @@ def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow
                     value *= np.float32(min(max(transmittance[r, j], 0.0), 1.0))
                     value += glow[r, j, c]
                 out[c, row, j] = value * weights[row, j]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
+                tile_blend, seed, base_row, base_col):
+    """The reads of ``clouds.CloudLayer.field`` in one loop over samples and taps; ``out`` (m,)
+    gets the field. [dimensionless]
+
+    rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
+    direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
+        else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
+        each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    tile_blend : ``clouds.TILE_BLEND``. seed, base_row, base_col : the layer's seed, and the
+        index of the copy of the tile whose centre is at lattice coordinates (0, 0)
+        (``CloudLayer._drifted_copies``).
+
+    The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols),
+    uniform in [0, side) texels of level 0, as the ground albedo's stochastic tiling shifts its
+    lattice vertices (``_vertex_key``, ``_unit_hash``), so that the pattern does not repeat (a
+    repeating tile lines its copies up towards the horizon, docs/method.md, "The cloud
+    pattern"); in a band ``tile_blend`` of the side wide about each edge a read blends the
+    copies on both sides, ``sum w v / sqrt(sum w^2)`` (variance preserving, Heitz & Neyret
+    2018) with smoothstep weights. A read inside one copy is that copy's read alone, bit for bit.
+    Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
+    B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
+    the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
+    scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
+    value x row weight x column weight.
+    """
+    n_levels = sides.shape[0]
+    side0 = sides[0]
+    band = tile_blend * side0
+    seed_key = _seed_key(seed)
+    weights = np.empty((2, 4))
+    index = np.empty((2, 4), dtype=np.intp)
+    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
+    shares = np.empty((2, 2))  # per axis: their smoothstep weights
+    last_row = last_col = 0  # the last copy hashed, and its shift
+    last_shift_row = last_shift_col = 0.0
+    for i in range(rows.shape[0]):
+        n_taps = 1 if direct else taps[i]
+        total = 0.0
+        for t in range(n_taps):
+            if direct:
+                tap_row, tap_col = rows[i], cols[i]
+            else:
+                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
+                tap_row = rows[i] + -ey[i] * step
+                tap_col = cols[i] + ex[i] * step
+            count_row = count_col = 1
+            for axis in range(2):
+                x = tap_row if axis == 0 else tap_col
+                copy = math.floor(x / side0 + 0.5)
+                edge = x - (copy - 0.5) * side0  # [texel] from the copy's lower edge
+                copies[axis, 0] = copy + (base_row if axis == 0 else base_col)
+                shares[axis, 0] = 1.0
+                if edge < 0.5 * band or edge > side0 - 0.5 * band:
+                    u = edge / band + 0.5 if edge < 0.5 * band else (edge - side0) / band + 0.5
+                    u = min(max(u, 0.0), 1.0)
+                    upper_share = u * u * (3.0 - 2.0 * u)
+                    if edge < 0.5 * band:
+                        copies[axis, 1] = copies[axis, 0]
+                        copies[axis, 0] -= 1
+                    else:
+                        copies[axis, 1] = copies[axis, 0] + 1
+                    shares[axis, 0] = 1.0 - upper_share
+                    shares[axis, 1] = upper_share
+                    if axis == 0:
+                        count_row = 2
+                    else:
+                        count_col = 2
+            weighted = 0.0
+            squares = 0.0
+            for cr in range(count_row):
+                for cc in range(count_col):
+                    shift_row = shift_col = 0.0
+                    if copies[0, cr] == last_row and copies[1, cc] == last_col:  # as the last read's
+                        shift_row, shift_col = last_shift_row, last_shift_col
+                    elif copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
+                        key = _vertex_key(copies[0, cr], copies[1, cc], seed_key)
+                        shift_row = _unit_hash(key) * side0
+                        shift_col = _unit_hash(key ^ _SECOND_KEY) * side0
+                        last_row, last_col = copies[0, cr], copies[1, cc]
+                        last_shift_row, last_shift_col = shift_row, shift_col
+                    w = shares[0, cr] * shares[1, cc]
+                    at_row = tap_row + shift_row
+                    at_col = tap_col + shift_col
+                    k = 0 if direct else k0[i]
+                    upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+                    finer = 0.0
+                    for level in range(k, k + 2 if upper else k + 1):
+                        side = sides[level]
+                        order = 3 if level == 0 else 1
+                        for axis in range(2):
+                            x = at_row if axis == 0 else at_col
+                            if not direct:
+                                x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
+                            if x < 0:  # scipy's grid-wrap of a coordinate
+                                x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
+                            elif x > side - 1:
+                                x = 0.0 if side <= 1 else x - side * int(x / side)
+                            if not x > -1.0:  # NaN: scipy's constant 0
+                                break
+                            start = int(math.floor(x)) - order // 2
+                            f = x - math.floor(x)
+                            if order == 3:
+                                z = 1.0 - f
+                                weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 0] = z * z * z / 6.0
+                            else:
+                                weights[axis, 0] = 1.0 - f
+                            last = 1.0
+                            for j in range(order):
+                                last -= weights[axis, j]
+                            weights[axis, order] = last
+                            wraps = start < 0 or start + order >= side
+                            for j in range(order + 1):
+                                index[axis, j] = (start + j) % side if wraps else start + j
+                        value = 0.0
+                        if x > -1.0:
+                            base = offsets[level]
+                            for a in range(order + 1):
+                                row = base + index[0, a] * side
+                                for b in range(order + 1):
+                                    value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
+                        if level == k:
+                            finer = value
+                        else:
+                            value = finer + blend[i] * (value - finer)
+                    weighted += w * value
+                    squares += w * w
+            if count_row * count_col > 1:
+                value = weighted / math.sqrt(squares)
+            total += value / n_taps if not direct else value
+        out[i] = total
+    return out

@@ -157,11 +157,10 @@ class StochasticTiling:
 
     def offsets(self, vertices) -> np.ndarray:
         """Each lattice vertex's offset (..., 2) into the tile, uniform in [0, period). [m]"""
-        v = np.asarray(vertices, dtype=np.int64).astype(np.uint64)
-        key = v[..., 0] * np.uint64(0x9E3779B97F4A7C15) ^ v[..., 1] * np.uint64(0xC2B2AE3D27D4EB4F)
-        key ^= np.uint64(self.seed) * np.uint64(0x165667B19E3779F9)
+        v = np.asarray(vertices, dtype=np.int64)
+        key = vertex_keys(v[..., 0], v[..., 1], self.seed)
         px, py = self.texture.period
-        return np.stack([_unit_hash(key) * px, _unit_hash(key ^ np.uint64(0xD6E8FEB86659FD93)) * py], -1)
+        return np.stack([unit_hash(key) * px, unit_hash(key ^ SECOND_KEY) * py], -1)
 
     def sample(self, fp, *, lod_bias: float) -> np.ndarray:
         """The tiled albedo averaged over ground footprints ``fp`` (camera.Footprints):
@@ -228,7 +227,22 @@ class StochasticTiling:
         return np.clip(out, 0.0, None).astype(np.float32)
 
 
-def _unit_hash(key: np.ndarray) -> np.ndarray:
+def vertex_keys(va, vb, seed: int) -> np.ndarray:
+    """uint64 hash keys of lattice vertices (va, vb) (int64 arrays) under ``seed``: a vertex's
+    offsets are ``unit_hash(key)`` and ``unit_hash(key ^ SECOND_KEY)`` times the period (the
+    stochastic tiling's, and the cloud tile's copies, ``_filter.cloud_field``)."""
+    va = np.asarray(va, dtype=np.int64).astype(np.uint64)
+    vb = np.asarray(vb, dtype=np.int64).astype(np.uint64)
+    key = va * np.uint64(0x9E3779B97F4A7C15) ^ vb * np.uint64(0xC2B2AE3D27D4EB4F)
+    key ^= np.uint64(seed) * np.uint64(0x165667B19E3779F9)
+    return key
+
+
+SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
+"""Xored into a vertex's key for its second offset (``vertex_keys``)."""
+
+
+def unit_hash(key: np.ndarray) -> np.ndarray:
     """splitmix64's finaliser (Steele, Lea & Flood 2014) of uint64 keys, as floats in [0, 1)."""
     z = key + np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)

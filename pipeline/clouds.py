@@ -264,7 +264,7 @@ def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.
 
 @lru_cache(maxsize=8)
 def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
-    """What ``_field_loop`` reads: (every level in one flat float64 array, each level's offset
+    """What ``_filter.cloud_field`` reads: (every level in one flat float64 array, each level's offset
     in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
     (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
     levels = (_spline(seed, texels, period, spectral_slope),) + _noise_levels(seed, texels, period, spectral_slope)[1:]
@@ -277,151 +277,7 @@ def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tup
 
 TILE_BLEND = 0.125
 """Width of the band about each edge of a copy of the tile, as a fraction of the tile's side, over
-which the copies on both sides blend (``_field_loop``). [1]"""
-
-
-_MASK32 = 0xFFFFFFFF
-
-
-def _field_loop(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
-                seed, base_row, base_col):
-    """The reads of ``CloudLayer.field`` in one loop over samples and taps (compiled by
-    ``_compiled``); ``out`` (m,) gets the field. [dimensionless]
-
-    rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
-    direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
-        else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
-        each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
-    seed, base_row, base_col : the layer's seed, and the index of the copy of the tile whose
-        centre is at lattice coordinates (0, 0) (``CloudLayer._drifted_copies``).
-
-    The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols) drawn
-    from a hash of (seed, copy) (uniform in [0, side) texels of level 0), so that
-    the pattern does not repeat (a repeating tile lines its copies up towards the horizon,
-    docs/method.md, "The cloud pattern"); in a band ``TILE_BLEND`` of the side wide about each
-    edge a read blends the copies on both sides, ``sum w v / sqrt(sum w^2)`` (variance preserving, Heitz & Neyret
-    2018) with smoothstep weights. A read inside one copy is that copy's read alone, bit for bit.
-    Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
-    B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
-    the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
-    scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
-    value x row weight x column weight.
-    """
-    n_levels = sides.shape[0]
-    side0 = sides[0]
-    band = TILE_BLEND * side0
-    weights = np.empty((2, 4))
-    index = np.empty((2, 4), dtype=np.intp)
-    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
-    shares = np.empty((2, 2))  # per axis: their smoothstep weights
-    last_row = last_col = 0  # the last copy hashed, and its shift
-    last_shift_row = last_shift_col = 0.0
-    for i in range(rows.shape[0]):
-        n_taps = 1 if direct else taps[i]
-        total = 0.0
-        for t in range(n_taps):
-            if direct:
-                tap_row, tap_col = rows[i], cols[i]
-            else:
-                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
-                tap_row = rows[i] + -ey[i] * step
-                tap_col = cols[i] + ex[i] * step
-            count_row = count_col = 1
-            for axis in range(2):
-                x = tap_row if axis == 0 else tap_col
-                copy = math.floor(x / side0 + 0.5)
-                edge = x - (copy - 0.5) * side0  # [texel] from the copy's lower edge
-                copies[axis, 0] = copy + (base_row if axis == 0 else base_col)
-                shares[axis, 0] = 1.0
-                if edge < 0.5 * band or edge > side0 - 0.5 * band:
-                    u = edge / band + 0.5 if edge < 0.5 * band else (edge - side0) / band + 0.5
-                    u = min(max(u, 0.0), 1.0)
-                    upper_share = u * u * (3.0 - 2.0 * u)
-                    if edge < 0.5 * band:
-                        copies[axis, 1] = copies[axis, 0]
-                        copies[axis, 0] -= 1
-                    else:
-                        copies[axis, 1] = copies[axis, 0] + 1
-                    shares[axis, 0] = 1.0 - upper_share
-                    shares[axis, 1] = upper_share
-                    if axis == 0:
-                        count_row = 2
-                    else:
-                        count_col = 2
-            weighted = 0.0
-            squares = 0.0
-            for cr in range(count_row):
-                for cc in range(count_col):
-                    shift_row = shift_col = 0.0
-                    if copies[0, cr] == last_row and copies[1, cc] == last_col:  # as the last read's
-                        shift_row, shift_col = last_shift_row, last_shift_col
-                    elif copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
-                        h = seed & _MASK32
-                        for key in range(3):  # lowbias32 of the seed, the row, the column
-                            h ^= (copies[0, cr] if key == 0 else copies[1, cc] if key == 1 else 0) & _MASK32
-                            h ^= h >> 16
-                            h = (h * 0x7FEB352D) & _MASK32  # its low 32 bits, however it wraps
-                            h ^= h >> 15
-                            h = (h * 0x846CA68B) & _MASK32
-                            h ^= h >> 16
-                            if key == 1:
-                                shift_row = float(h % side0)
-                        shift_col = float(h % side0)
-                        last_row, last_col = copies[0, cr], copies[1, cc]
-                        last_shift_row, last_shift_col = shift_row, shift_col
-                    w = shares[0, cr] * shares[1, cc]
-                    at_row = tap_row + shift_row
-                    at_col = tap_col + shift_col
-                    k = 0 if direct else k0[i]
-                    upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
-                    finer = 0.0
-                    for level in range(k, k + 2 if upper else k + 1):
-                        side = sides[level]
-                        order = 3 if level == 0 else 1
-                        for axis in range(2):
-                            x = at_row if axis == 0 else at_col
-                            if not direct:
-                                x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
-                            if x < 0:  # scipy's grid-wrap of a coordinate
-                                x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
-                            elif x > side - 1:
-                                x = 0.0 if side <= 1 else x - side * int(x / side)
-                            if not x > -1.0:  # NaN: scipy's constant 0
-                                break
-                            start = int(math.floor(x)) - order // 2
-                            f = x - math.floor(x)
-                            if order == 3:
-                                z = 1.0 - f
-                                weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
-                                weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
-                                weights[axis, 0] = z * z * z / 6.0
-                            else:
-                                weights[axis, 0] = 1.0 - f
-                            last = 1.0
-                            for j in range(order):
-                                last -= weights[axis, j]
-                            weights[axis, order] = last
-                            wraps = start < 0 or start + order >= side
-                            for j in range(order + 1):
-                                index[axis, j] = (start + j) % side if wraps else start + j
-                        value = 0.0
-                        if x > -1.0:
-                            base = offsets[level]
-                            for a in range(order + 1):
-                                row = base + index[0, a] * side
-                                for b in range(order + 1):
-                                    value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
-                        if level == k:
-                            finer = value
-                        else:
-                            value = finer + blend[i] * (value - finer)
-                    weighted += w * value
-                    squares += w * w
-            if count_row * count_col > 1:
-                value = weighted / math.sqrt(squares)
-            total += value / n_taps if not direct else value
-        out[i] = total
-    return out
+which the copies on both sides blend (``_filter.cloud_field``). [1]"""
 
 
 def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
@@ -473,7 +329,7 @@ def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
 
 @lru_cache(maxsize=4)
 def _compiled(loop):
-    """``loop`` (``_field_loop``, ``_scattering_loop``) compiled by numba (imported here, on
+    """``loop`` (``_scattering_loop``) compiled by numba (imported here, on
     first use: it costs 0.3 s to import; the compiled code is cached on disk)."""
     from numba import njit
 
@@ -589,13 +445,15 @@ class CloudLayer:
         shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
         out = np.empty(coords.shape[1])
-        copies = (self.seed, *self._drifted_copies(time))
+        from ._filter import cloud_field  # numba, imported on first use
+
+        copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
         if taps is None:
             unused, none = np.empty(0), np.empty(0, dtype=np.intp)
-            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], True, none, none, unused,
-                                   unused, unused, unused, out, *copies)
+            cloud_field(flat, offsets, sides, coords[0], coords[1], True, none, none, unused, unused, unused,
+                        unused, out, *copies)
         else:
-            _compiled(_field_loop)(flat, offsets, sides, coords[0], coords[1], False, *taps, out, *copies)
+            cloud_field(flat, offsets, sides, coords[0], coords[1], False, *taps, out, *copies)
         return out.reshape(shape)
 
     def _drift(self, time) -> tuple[float, float]:
@@ -604,13 +462,13 @@ class CloudLayer:
 
     def _drifted_copies(self, time) -> tuple[int, int]:
         """The copy of the tile (row, col) that ``_taps``'s lattice coordinates (0, 0) are the
-        centre of at ``time`` [s]: the drift's whole tiles, negated (``_field_loop``)."""
+        centre of at ``time`` [s]: the drift's whole tiles, negated (``_filter.cloud_field``)."""
         return tuple(-int(math.floor(drift / self.texels)) for drift in self._drift(time))
 
     def _taps(self, s, time, footprint=None) -> tuple:
         """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
         axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
-        None without a footprint, else the taps as ``_field_loop`` takes them: (count (m,), finer
+        None without a footprint, else the taps as ``_filter.cloud_field`` takes them: (count (m,), finer
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
         s = np.asarray(s, dtype=np.float64)

@@ -3,6 +3,7 @@ import pytest
 from scipy import integrate
 
 from pipeline import clouds
+from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
 from pipeline.clouds import (CloudLayer, _knots, delta_eddington_transmittance, fractal_noise,
                              single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 
@@ -421,22 +422,14 @@ def test_a_long_footprint_blurs_along_its_length_only():
 # 7. the compiled reads -----------------------------------------------------------------------
 
 
-def tile_shift(seed: int, row: int, col: int, side: int) -> np.ndarray:
-    """The shift (rows, cols) [texel] of copy (row, col) of the cloud tile, as
-    ``clouds._field_loop`` draws it: none for copy (0, 0), else Wellons's lowbias32 hash of the
-    seed, the row and the column, in turn (32-bit words)."""
-    if row == 0 and col == 0:
-        return np.zeros(2)
-    mask, h, shifts = 0xFFFFFFFF, seed & 0xFFFFFFFF, []
-    for key in (row, col, 0):
-        h ^= key & mask
-        h ^= h >> 16
-        h = h * 0x7FEB352D & mask
-        h ^= h >> 15
-        h = h * 0x846CA68B & mask
-        h ^= h >> 16
-        shifts.append(float(h % side))
-    return np.array(shifts[1:])
+def tile_shifts(seed: int, rows, cols, side: int) -> np.ndarray:
+    """The shifts (2, m) [texel] of copies (rows, cols) (m,) of the cloud tile: none for copy
+    (0, 0), else the copy's offsets as the ground albedo's stochastic tiling draws a lattice
+    vertex's (``albedo.vertex_keys``)."""
+    key = vertex_keys(rows, cols, seed)
+    shifts = np.stack([unit_hash(key), unit_hash(key ^ SECOND_KEY)]) * side
+    shifts[:, (rows == 0) & (cols == 0)] = 0.0
+    return shifts
 
 
 def reference_field(cl, s, time, footprint=None):
@@ -469,8 +462,7 @@ def reference_field(cl, s, time, footprint=None):
         for r in range(2):
             for c in range(2):
                 w = shares[r][0] * shares[c][1]
-                shift = np.array([tile_shift(cl.seed, int(i), int(j), n)
-                                  for i, j in zip(first[0] + r, first[1] + c)]).T.reshape(at.shape)
+                shift = tile_shifts(cl.seed, first[0] + r, first[1] + c, n).reshape(at.shape)
                 weighted = weighted + w * read_at(at + shift)
                 squares = squares + w * w
         return weighted / np.sqrt(squares)
