@@ -287,20 +287,20 @@ def _tree_bases(p: GroveParams) -> np.ndarray:
     """Trunk feet (count, 2) [m], at least a crown radius apart where space allows."""
     rng = np.random.default_rng([p.seed, 0])
     spread = 0.8 * p.crown_radius * np.sqrt(max(p.count - 1, 0)) if p.spread is None else p.spread
-    bases = []
-    for _ in range(p.count):
+    bases = np.empty((p.count, 2))
+    for i in range(p.count):
         for _attempt in range(100):
             if p.layout == "periodic":
                 xy = np.asarray(p.center) + (rng.random(2) - 0.5) * p.tile
-                near = [np.abs((xy - b + p.tile / 2) % p.tile - p.tile / 2) for b in bases]
+                near = np.abs((xy - bases[:i] + p.tile / 2) % p.tile - p.tile / 2)
             else:
                 radius, angle = spread * np.sqrt(rng.random()), 2 * np.pi * rng.random()
                 xy = np.asarray(p.center) + radius * np.array([np.cos(angle), np.sin(angle)])
-                near = [xy - b for b in bases]
-            if all(np.hypot(*d) >= p.crown_radius for d in near):
+                near = xy - bases[:i]
+            if np.all(np.hypot(near[:, 0], near[:, 1]) >= p.crown_radius):
                 break
-        bases.append(xy)
-    return np.reshape(bases, (-1, 2))
+        bases[i] = xy
+    return bases
 
 
 def _grow_tree(rng, base, p: GroveParams) -> dict:
