@@ -263,7 +263,10 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
     rows, cols, channels = tile.shape
     flat = tile.reshape(-1, channels)
     center = flat.mean(axis=0)
-    _, basis = np.linalg.eigh(np.cov(flat - center, rowvar=False).reshape(channels, channels))
+    if len(flat) < 2:  # one texel: no spread to decorrelate (its covariance is undefined)
+        basis = np.eye(channels)
+    else:
+        _, basis = np.linalg.eigh(np.cov(flat - center, rowvar=False).reshape(channels, channels))
     components = _times(flat - center, basis)
     gaussian = np.empty((len(flat), channels), dtype=np.float32)
     quantiles = ndtri((np.arange(len(flat)) + 0.5) / len(flat)).astype(np.float32)
