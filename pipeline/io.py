@@ -18,6 +18,12 @@ import OpenImageIO as oiio
 from .errors import ImageError
 
 
+MAX_IMAGE_VALUES = 2**29
+"""Most values (width x height x channels) an image read may hold: its header is read first, and
+a larger image (a decompression bomb, a mistaken file) is refused before any pixel is decoded.
+A 16384 x 8192 RGB HDRI holds 4.0e8. [1]"""
+
+
 def read_image(path) -> np.ndarray:
     """Pixels of an image file as float32 (rows, cols, channels), values as stored.
 
@@ -47,6 +53,11 @@ def _read(path, kind: str) -> np.ndarray:
             raise ImageError(path, f"cannot read image ({oiio.geterror().strip() or 'unknown format'})")
         try:
             spec = inp.spec()
+            values = spec.width * spec.height * spec.nchannels
+            if spec.width < 1 or spec.height < 1 or values > MAX_IMAGE_VALUES:
+                raise ImageError(path, f"is {spec.width} x {spec.height} pixels of {spec.nchannels} channel"
+                                 f"{'' if spec.nchannels == 1 else 's'} ({values:.3g} values); the most is {MAX_IMAGE_VALUES:.3g} "
+                                 f"({MAX_IMAGE_VALUES * 4 / 2**30:g} GiB as floats)")
             pixels = inp.read_image(0, 0, 0, spec.nchannels, kind)
             error = inp.geterror()
         finally:
