@@ -1,7 +1,9 @@
 """Every hostile config of tests/test_hostile.py through ``sunshade check`` and ``sunshade render``
-as real processes: exit code, wall time, peak resident memory and stderr lines, beside a bare
-``python -c "import pipeline.cli"`` (the start-up every command pays). Target (issue 16): exit
-2, one line, nothing written, within 3 s and 300 MB.
+as real processes, and the inputs of issue 33 that are files or flags (a folder name that is not
+UTF-8, an image bomb, a cache that cannot be written, a scheduler address, an --output that is
+not UTF-8): exit code, wall time, peak resident memory and stderr lines, beside a bare
+``python -c "import pipeline.cli"`` (the start-up every command pays). Target (issues 16 and
+33): exit 2, one line, nothing written, within 3 s and 300 MB.
 
     python benchmarks/bench_bad_inputs.py
 
@@ -20,8 +22,52 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from scenes import write_inputs  # noqa: E402
-from test_hostile import CASES, PEAK  # noqa: E402
+import yaml  # noqa: E402
+from scenes import base_config, write_inputs  # noqa: E402
+from test_hostile import CASES, NOT_UTF8, PEAK, a_png_header, unwritable_folder  # noqa: E402
+
+
+def not_utf8_folder(folder: Path) -> list[str]:
+    """The mask through a link into a folder whose name is not UTF-8."""
+    (folder / NOT_UTF8).mkdir(exist_ok=True)
+    (folder / NOT_UTF8 / "mask.png").write_bytes((folder / "mask.png").read_bytes())
+    if not (folder / "link").is_symlink():
+        (folder / "link").symlink_to(folder / NOT_UTF8)
+    config = base_config()
+    config["canopy"]["mask"] = "link/mask.png"
+    (folder / "config.yaml").write_text(yaml.safe_dump(config))
+    return []
+
+
+def image_bomb(folder: Path) -> list[str]:
+    a_png_header(folder / "mask.png", 30_000, 30_000)
+    return []
+
+
+def read_only_cache(folder: Path) -> list[str]:
+    return ["--cache", str(unwritable_folder(folder) / "cache")]
+
+
+def config_text(text: bytes):
+    def make(folder: Path) -> list[str]:
+        (folder / "config.yaml").write_bytes(text)
+        return []
+    return make
+
+
+def flags(*args):
+    return lambda folder: list(args)
+
+
+FILE_CASES = [  # issue 33: the inputs that are files or flags; each makes them in the folder and
+    # returns render's extra flags (its --cache replaces out/cache); check takes no flags, and
+    # passes where only a flag is bad
+    ("folder name not UTF-8", not_utf8_folder),
+    ("image bomb 30000 x 30000", image_bomb),
+    ("cache on a folder not writable", read_only_cache),
+    ("scheduler port not a number", flags("--scheduler", "tcp://127.0.0.1:eighty")),
+    ("--output not UTF-8", flags("--output", f"out/{NOT_UTF8}")),
+]
 
 
 def measured(args, cwd) -> tuple[int, float, float, int]:
@@ -37,14 +83,15 @@ def main():
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
         code, seconds, peak, _ = measured(["-c", "import pipeline.cli"], ROOT)
-        print(f"{'bare start-up':<28} {seconds:5.2f} s {peak:5.0f} MB")
+        print(f"{'bare start-up':<32} {seconds:5.2f} s {peak:5.0f} MB")
         worst = (0.0, 0.0)
-        for name, text, _ in CASES:
+        for name, make in [(name, config_text(text)) for name, text, _ in CASES] + FILE_CASES:
             write_inputs(folder)
-            (folder / "config.yaml").write_bytes(text)
-            row = f"{name:<28}"
+            (folder / "config.yaml").write_text(yaml.safe_dump(base_config()))
+            extra = make(folder)
+            row = f"{name:<32}"
             for command in (["check", "config.yaml"],
-                            ["render", "config.yaml", "--output", "out/run", "--cache", "out/cache"]):
+                            ["render", "config.yaml", "--output", "out/run", "--cache", "out/cache", *extra]):
                 code, seconds, peak, lines = measured(["-m", "pipeline.cli", *command], folder)
                 worst = (max(worst[0], seconds), max(worst[1], peak))
                 row += f" | {command[0]}: exit {code}, {seconds:4.2f} s, {peak:4.0f} MB, {lines} line"

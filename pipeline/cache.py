@@ -21,6 +21,7 @@ import os
 import re
 import secrets
 import shutil
+import tempfile
 import time
 import warnings
 import zlib
@@ -272,6 +273,21 @@ class Cache:
 
     def __repr__(self) -> str:
         return f"Cache({str(self.root)!r})"
+
+    def writing_problem(self) -> str | None:
+        """Why items cannot be written under the root, in words, or None: a folder is made and
+        removed in the root (or, where the root does not exist yet, in the nearest folder above
+        it), so that a read-only file system or a folder of no rights is found before any work."""
+        folder = self.root
+        while not folder.exists() and folder.parent != folder:
+            folder = folder.parent
+        if not folder.is_dir():
+            return f"{folder} is not a folder"
+        try:
+            os.rmdir(tempfile.mkdtemp(prefix=_TMP + "probe-", dir=folder))
+        except OSError as exc:
+            return f"cannot write in {folder} ({exc.strerror or exc})"
+        return None
 
     # -- paths -------------------------------------------------------------------------
 
@@ -577,8 +593,11 @@ class Cache:
     # -- maintenance -------------------------------------------------------------------
 
     def _walk(self):
-        """Yield ("item", kind, key, path), and (".tmp-" or ".del-", kind, key or None, path)
-        for temporary folders; anything not in the cache's layout is skipped."""
+        """Yield ("item", kind, key, path), (".tmp-" or ".del-", kind, key or None, path) for
+        temporary folders, and ("stray", kind, None, path) for anything else inside a kind's
+        folder (a file where an item's folder should be, a folder of another name, a link);
+        what is beside the kind folders in the root (FFTW wisdom, the config records) is not
+        the cache's layout and is skipped."""
         if not self.root.is_dir():
             return
         for kind_dir in sorted(self.root.iterdir()):
@@ -586,15 +605,20 @@ class Cache:
                     or not _NAME_RE.fullmatch(kind_dir.name):
                 continue
             for prefix_dir in sorted(kind_dir.iterdir()):
-                if not re.fullmatch(r"[0-9a-f]{2}", prefix_dir.name) or not prefix_dir.is_dir():
+                if not re.fullmatch(r"[0-9a-f]{2}", prefix_dir.name) or not prefix_dir.is_dir() \
+                        or prefix_dir.is_symlink():
+                    yield "stray", kind_dir.name, None, prefix_dir
                     continue
                 for entry in sorted(prefix_dir.iterdir()):
                     name = entry.name
-                    if _KEY_RE.fullmatch(name) and name[:2] == prefix_dir.name and entry.is_dir():
+                    folder = entry.is_dir() and not entry.is_symlink()
+                    if _KEY_RE.fullmatch(name) and name[:2] == prefix_dir.name and folder:
                         yield "item", kind_dir.name, name, entry
-                    elif name.startswith((_TMP, _DEL)) and entry.is_dir():
+                    elif name.startswith((_TMP, _DEL)) and folder:
                         key = name[5:69] if _KEY_RE.fullmatch(name[5:69]) else None
                         yield name[:5], kind_dir.name, key, entry
+                    else:
+                        yield "stray", kind_dir.name, None, entry
 
     def _info(self, kind: str, key: str, path: Path) -> CacheItem:
         size = 0
@@ -622,10 +646,26 @@ class Cache:
         return [self._info(kind, key, path) for what, kind, key, path in self._walk()
                 if what == "item"]
 
+    def strays(self, *, remove: bool = False) -> list[tuple[Path, str]]:
+        """Every entry inside a kind's folder that is not an item, nor a temporary folder, with
+        what it is in words: a file where an item's folder should be, say. ``remove=True`` also
+        removes them (nothing but the cache writes in its kinds' folders)."""
+        found = []
+        for what, _kind, _key, path in list(self._walk()):
+            if what == "stray":
+                kind = "a link" if path.is_symlink() else "a folder" if path.is_dir() else "a file"
+                found.append((path, f"{kind} that is not a cache item"))
+                if remove and kind == "a folder":
+                    _remove(path)
+                elif remove:
+                    path.unlink(missing_ok=True)
+        return found
+
     def verify(self, *, remove: bool = False) -> list[tuple[CacheItem, str]]:
         """Check every item fully (sizes, headers, CRC-32 of all files and of meta.json): the
         broken ones, each with its problem in words. ``remove=True`` also removes them (they
-        would be recomputed when next needed anyway). Reads the whole cache."""
+        would be recomputed when next needed anyway). Reads the whole cache; ``strays`` lists
+        what is not an item."""
         problems = []
         for item in self.list():
             try:

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 from . import __version__, paths
 from .cores import CLUSTER_TIMEOUT
-from .errors import BadInput, SunshadeError, WorkerError, one_line_warnings
+from .errors import BadInput, SunshadeError, WorkerError, one_line, one_line_warnings
 
 if TYPE_CHECKING:
     from .cache import Cache
@@ -62,7 +62,7 @@ def _fail(line: str, code: int, debug: bool = False) -> int:
         details = getattr(sys.exception(), "details", "")
         if details:
             print(f"the worker's traceback:\n{details}", file=sys.stderr, end="")
-    print(f"sunshade: error: {' '.join(line.split())}", file=sys.stderr)
+    print(f"sunshade: error: {one_line(line)}", file=sys.stderr)
     return code
 
 
@@ -185,22 +185,28 @@ def _flag_path(flag: str, value) -> Path:
     """The path a flag (or an environment variable) gives, checked by ``paths.problem``;
     raises BadInput naming the flag."""
     if problem := paths.problem(value):
-        shown = str(value).replace("\0", "\\0")
-        raise BadInput(f"{flag} {shown}: {problem}")
+        raise BadInput(f"{flag} {paths.shown(value)}: {problem}")
     return Path(value)
 
 
-def _store(explicit) -> Cache:
-    """The cache at --cache, else $SUNSHADE_CACHE, else ./cache, its path checked first."""
+def _store(explicit, *, writing: bool = True) -> Cache:
+    """The cache at --cache, else $SUNSHADE_CACHE, else ./cache, its path checked first, and
+    (``writing``) that it can be written, before any work (docs/runs.md, "Errors")."""
     from .cache import ENV_VAR, Cache, cache_dir
 
     flag, value = ("--cache", explicit) if explicit else (f"${ENV_VAR}", os.environ.get(ENV_VAR))
     if value:
         _flag_path(flag, value)
+    else:
+        flag = "the cache folder"
     root = cache_dir(explicit)
     if root.exists() and not root.is_dir():
         raise BadInput(f"{flag} {root}: is a file, not a folder")
-    return Cache(root)
+    store = Cache(root)
+    if writing and (problem := store.writing_problem()):
+        raise BadInput(f"{flag} {root}: {problem}; give a cache folder that can be written "
+                       f"(--cache DIR or ${ENV_VAR})")
+    return store
 
 
 def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
@@ -298,7 +304,7 @@ def _run_render(args) -> int:
     from dataclasses import replace
 
     from .config import preview
-    from .cores import MAX_JOBS_PER_CORE, default_workers
+    from .cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
     from .resolve import resolve, source_digest
     from .runfolder import check_outputs, nothing_to_do, parse_frames
 
@@ -306,6 +312,8 @@ def _run_render(args) -> int:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
     if args.cluster_timeout is not None and not 0 < args.cluster_timeout < 1e6:
         raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
+    if args.scheduler is not None and isinstance(problem := scheduler_address(args.scheduler), str):
+        raise BadInput(f"--scheduler {paths.shown(args.scheduler)}: {problem}")
     store = _store(args.cache)
     written = _load(args, resolved=False)  # resolved below, unless a resume has nothing to do
     if args.output is not None:
@@ -631,7 +639,7 @@ def _run_cache(args) -> int:
     """
     from .cache import parse_size
 
-    store = _store(args.cache)
+    store = _store(args.cache, writing=False)
     root = store.root
     if args.config is not None and args.action not in ("list", "prune"):
         raise BadInput(f"cache {args.action} takes no CONFIG (list and prune do)")
@@ -663,10 +671,13 @@ def _run_cache(args) -> int:
     if args.action == "verify":
         count = len(store.list())
         broken = store.verify(remove=args.remove)
-        lines = [f"{item.kind} {item.key[:16]}: {problem}" + (" (removed)" if args.remove else "")
-                 for item, problem in broken]
-        _print_lines([*lines, f"{len(broken)} broken of {count} items"])
-        return 1 if broken and not args.remove else 0
+        strays = store.strays(remove=args.remove)
+        removed = " (removed)" if args.remove else ""
+        lines = [f"{item.kind} {item.key[:16]}: {problem}{removed}" for item, problem in broken]
+        lines += [f"{path}: {problem}{removed}" for path, problem in strays]
+        stray_count = f", {len(strays)} entr{'y' if len(strays) == 1 else 'ies'} not an item" if strays else ""
+        _print_lines([*lines, f"{len(broken)} broken of {count} items{stray_count}"])
+        return 1 if (broken or strays) and not args.remove else 0
     if mine is not None:
         removed = _prune_items(store, mine, limit)
     else:

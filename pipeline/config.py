@@ -23,8 +23,8 @@ import yaml
 from . import __version__, paths
 from .constants import SUN_RADIUS_DEG
 from .errors import ConfigError
-from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, PROCEDURAL_MODELS, SKY_MODELS,
-                         TURBIDITY_RANGE, WHITE_BALANCES)
+from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES, PROCEDURAL_MODELS,
+                         SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
 
 LAYOUTS = ("isolated", "periodic")
 MAX_LEAVES = 1_000_000
@@ -387,7 +387,7 @@ def load_yaml(path):
     MAX_CONFIG_BYTES, at most MAX_YAML_DEPTH deep and MAX_YAML_VALUES values with its aliases
     expanded. Raises ConfigError naming the file (and line) before anything big is built."""
     if problem := paths.problem(path):
-        raise ConfigError(str(path).replace("\x00", "\\0"), f"bad config path: {problem}")
+        raise ConfigError(paths.shown(path), f"bad config path: {problem}")
     path = Path(path)
     try:
         with open(path, "rb") as file:
@@ -528,7 +528,16 @@ class _Section:
             self.fail(name, f"must be at least {at_least:g} (got {value:g})")
         if below is not None and not value < below:
             self.fail(name, f"must be below {below:g} (got {value:g})")
+        self.in_range(name, value)
         return value
+
+    def in_range(self, name, value):
+        """Fail naming the key and its range if ``value`` lies outside NUMBER_RANGES."""
+        limits = NUMBER_RANGES.get(re.sub(r"\[\d+\]", "[]", self.key(name)))
+        if limits is not None and not limits[0] <= value <= limits[1]:
+            least, most, got = (str(v) if isinstance(v, int) else f"{v:g}" if isinstance(v, float) else v
+                                 for v in (*limits[:2], value))
+            self.fail(name, f"must lie in [{least}, {most}]{' ' + limits[2] if limits[2] else ''} (got {got})")
 
     def numbers(self, name, count, default=_MISSING):
         value = self.raw(name, default)
@@ -537,6 +546,7 @@ class _Section:
         for item in value:
             if not _is_number(item) or not math.isfinite(float(item)):
                 self.fail(name, f"must be a list of {count} finite numbers (got {value})")
+            self.in_range(name, float(item))
         return tuple(float(v) for v in value)
 
     def integer(self, name, default=_MISSING, *, at_least=None):
@@ -545,6 +555,7 @@ class _Section:
             self.fail(name, f"must be a whole number, not {_kind(value)}")
         if at_least is not None and value < at_least:
             self.fail(name, f"must be at least {at_least} (got {int(value)})")
+        self.in_range(name, value)
         return int(value)
 
     def utc(self, name):
@@ -558,7 +569,15 @@ class _Section:
             self.fail(name, f"must be a time like \"2024-04-08T18:20:00Z\", not {_kind(value)}")
         if value.tzinfo is None:
             self.fail(name, "must say its time zone, e.g. end in Z for UTC")
-        return value.astimezone(timezone.utc)
+        first, last = (datetime.fromisoformat(t) for t in TIME_RANGE)
+        try:
+            utc = value.astimezone(timezone.utc)
+        except OverflowError:
+            utc = None
+        if utc is None or not first <= utc <= last:
+            self.fail(name, f"must lie from {TIME_RANGE[0][:19]}Z to {TIME_RANGE[1][:19]}Z in UTC, its "
+                      f"offset applied (got {value.isoformat()})")
+        return utc
 
     def mask_files(self, name):
         """One image, or a numbered sequence ``leaves.%04d.png`` from frame 0 (or 1) on."""
@@ -566,14 +585,18 @@ class _Section:
         if not isinstance(value, str) or "%" not in value:
             return (self.file(name),)
         self.check_path(name, value)
-        pattern = (self.ctx.path.parent / value).resolve()
+        pattern = self.resolved(name, value)
+        widths = re.findall(r"%[-#0 +]*(\d*)(?:\.(\d*))?", value)
+        if any(int(n or 0) > paths.NAME_MAX for field in widths for n in field):
+            self.fail(name, f"a number field of width {max(int(n or 0) for f in widths for n in f)} "
+                      f"makes names longer than the most, {paths.NAME_MAX} bytes")
         try:
             names = [Path(str(pattern) % i) for i in range(2)]
         except (TypeError, ValueError):
-            self.fail(name, f"a sequence needs one number field like %04d (got {value!r})")
+            self.fail(name, f"a sequence needs one number field like %04d (got {paths.shown(value)!r})")
         first = next((i for i, n in enumerate(names) if n.is_file()), None)
         if first is None:
-            self.fail(name, f"no such files: {names[0]} or {names[1]}")
+            self.fail(name, f"no such files: {paths.shown(names[0])} or {paths.shown(names[1])}")
         frames = []
         while Path(str(pattern) % (first + len(frames))).is_file():
             frames.append(Path(str(pattern) % (first + len(frames))))
@@ -590,7 +613,7 @@ class _Section:
         if not isinstance(value, str) or not value:
             self.fail(name, f"must be a file name, not {_kind(value)}")
         self.check_path(name, value)
-        path = (self.ctx.path.parent / value).resolve()
+        path = self.resolved(name, value)
         if not path.is_file():
             self.fail(name, f"no such file: {path}")
         try:
@@ -604,6 +627,13 @@ class _Section:
         """Fail naming the key if ``value`` cannot be a path (see ``paths.problem``)."""
         if problem := paths.problem(value):
             self.fail(name, problem)
+
+    def resolved(self, name, value) -> Path:
+        """``value`` relative to the config's folder, made absolute, the whole path checked
+        (the folder too may hold bytes that are not UTF-8)."""
+        path = (self.ctx.path.parent / value).resolve()
+        self.check_path(name, path)
+        return path
 
     def done(self):
         unknown = [k for k in self.data if k not in self.taken]

@@ -15,6 +15,30 @@ CLUSTER_TIMEOUT = 30.0
 with one line saying how to resume. [s]"""
 
 
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
+"""The dask.distributed protocols of a --scheduler address, each HOST:PORT."""
+
+
+def scheduler_address(text: str) -> tuple[str, int] | str:
+    """(host, port) of a dask.distributed scheduler address, ``tcp://HOST:PORT`` or
+    ``HOST:PORT`` (tls://, ws:// and wss:// too), checked without connecting; else what is
+    wrong with it, in words."""
+    from urllib.parse import urlsplit
+
+    address = urlsplit(text if "://" in text else f"tcp://{text}")
+    try:
+        port = address.port
+    except ValueError:  # not a number, or past 65535
+        port = -1
+    if address.scheme not in SCHEDULER_SCHEMES:
+        return f"the protocol must be one of {', '.join(s + '://' for s in SCHEDULER_SCHEMES)}"
+    if not address.hostname or port is None:
+        return "must be an address HOST:PORT, e.g. tcp://127.0.0.1:8786"
+    if not 1 <= port <= 65535:
+        return "the port must be a whole number from 1 to 65535"
+    return address.hostname, port
+
+
 def default_workers() -> int:
     """FFT threads: the cores this process may use."""
     try:

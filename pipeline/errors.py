@@ -14,6 +14,11 @@ import traceback
 import warnings
 from pathlib import Path
 
+from .paths import SHOWN_MAX, shown
+
+LINE_MAX = 1000
+"""Longest line an error or warning shows; past it the line is cut in the middle. [character]"""
+
 
 class SunshadeError(Exception):
     """Bad input, or a run that cannot go on: ``str(error)`` is the one line to show."""
@@ -66,15 +71,23 @@ class WorkerError(Exception):
         return self.args[0]
 
 
+def one_line(text: str) -> str:
+    """``text`` as one line for the user: white space folded, every word (a path, a name) over
+    SHOWN_MAX characters and the whole line over LINE_MAX cut in the middle with its length
+    (``paths.shown``), so that no input can make a message long."""
+    words = [shown(word) if len(word) > SHOWN_MAX else word for word in str(text).split()]
+    return shown(" ".join(words), LINE_MAX)
+
+
 def one_line_warnings() -> None:
     """Show warnings in this process as one line each, ``sunshade: warning: ...``, without
     the source line Python adds, on standard error (also where a caller records warnings)."""
-    warnings.formatwarning = lambda message, *_, **__: f"sunshade: warning: {message}\n"
+    warnings.formatwarning = lambda message, *_, **__: f"sunshade: warning: {one_line(message)}\n"
     warnings.showwarning = _show_warning
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"sunshade: warning: {message}", file=file or sys.stderr)
+    print(f"sunshade: warning: {one_line(message)}", file=file or sys.stderr)
 
 
 def portable(task):

@@ -1,8 +1,9 @@
 """Paths from the config and the command line, checked in one place before any use.
 
-``problem`` says what is wrong with a path as text (a NUL byte, a name or path longer than the
-system allows, a ``~user`` that names no user), so that the caller can report it in one line
-naming its key or flag (docs/runs.md, "Errors").
+``problem`` says what is wrong with a path as text (a NUL byte, bytes that are not UTF-8, a
+name or path longer than the system allows, a ``~user`` that names no user), so that the
+caller can report it in one line naming its key or flag; ``shown`` writes any path or name for
+such a line (docs/runs.md, "Errors").
 """
 
 from __future__ import annotations
@@ -14,13 +15,21 @@ NAME_MAX = 255
 """Longest file or folder name, in bytes (Linux, macOS and Windows file systems). [byte]"""
 PATH_MAX = 4095
 """Longest whole path, in bytes (Linux's PATH_MAX less its NUL). [byte]"""
+SHOWN_MAX = 120
+"""Longest path or name a message shows whole; a longer one is cut in the middle. [character]"""
 
 
 def problem(text) -> str | None:
-    """What keeps ``text`` from being a usable path, in a few words, or None if nothing."""
+    """What keeps ``text`` from being a usable path, in a few words, or None if nothing.
+
+    The whole path is checked as it will be used (made absolute against the working folder):
+    a folder name of bytes that are not UTF-8 (from an old archive, say) is refused here,
+    since the image library takes only UTF-8 names."""
     if not isinstance(text, (str, os.PathLike)):
         return f"must be a path, not {type(text).__name__}"
     text = os.fspath(text)
+    if isinstance(text, bytes):
+        return "must be a path, not bytes"
     if "\x00" in text:
         return "contains a NUL byte"
     if not text:
@@ -32,6 +41,11 @@ def problem(text) -> str | None:
         whole = os.fsencode(os.path.abspath(expanded))
     except UnicodeError:
         return "is not a valid file name in this system's encoding"
+    try:
+        whole.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return (f"{shown(whole)} holds a byte that is not UTF-8 (0x{whole[exc.start]:02x}); "
+                "rename the file or folder")
     for part in Path(expanded).parts:
         size = len(os.fsencode(part))
         if size > NAME_MAX:
@@ -39,3 +53,26 @@ def problem(text) -> str | None:
     if len(whole) > PATH_MAX:
         return f"the path is {len(whole)} bytes long; the most is {PATH_MAX}"
     return None
+
+
+def shown(text, most: int = SHOWN_MAX) -> str:
+    """``text`` (a path, a name, bytes) as a message shows it: bytes that are not UTF-8 as
+    ``\\xe9``, a NUL as ``\\0``, and past ``most`` characters cut in the middle with its length:
+    ``/a/very/lo...ng/name (4000 characters)``."""
+    if isinstance(text, os.PathLike):
+        text = os.fspath(text)
+    if isinstance(text, str):
+        text = os.fsencode(text) if _encodes(text) else text.encode("utf-8", "backslashreplace")
+    text = text.decode("utf-8", "backslashreplace").replace("\x00", "\\0")
+    if len(text) <= most:
+        return text
+    half = (most - 3) // 2
+    return f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
+
+
+def _encodes(text: str) -> bool:
+    try:
+        os.fsencode(text)
+        return True
+    except UnicodeError:
+        return False

@@ -39,7 +39,7 @@ from .cycle import cycle_phase, record_config_items
 from .frame import compile_loops, render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
-from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads
+from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
 from .plan import RunPlan, check_inputs
 from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, current_video, file_stamp,
                         frame_files, make_folder,
@@ -467,17 +467,16 @@ class _Watchdog:
 
 
 def _reach(scheduler: str) -> None:
-    """Raise RunError unless the scheduler answers: a TCP connection to a ``tcp://host:port``
-    address (refused at once, or 10 s for a host that does not answer), a client for others."""
+    """Raise RunError unless the scheduler's address is one (``cores.scheduler_address``) and it
+    answers: a TCP connection to its host and port (refused at once, or 10 s for a host that
+    does not answer)."""
     import socket
-    from urllib.parse import urlsplit
 
-    address = urlsplit(scheduler if "://" in scheduler else f"tcp://{scheduler}")
-    if address.scheme != "tcp" or not address.hostname or not address.port:
-        with _backend(scheduler):
-            return
+    address = scheduler_address(scheduler)
+    if isinstance(address, str):
+        raise RunError(f"--scheduler {scheduler}: {address}")
     try:
-        socket.create_connection((address.hostname, address.port), timeout=10.0).close()
+        socket.create_connection(address, timeout=10.0).close()
     except OSError as exc:
         raise RunError(f"--scheduler {scheduler}: cannot reach the scheduler "
                        f"({exc.strerror or exc})") from None

@@ -27,3 +27,46 @@ WHITE_BALANCES = ("daylight", "shade", "none")
 """What a picture shows as white, as a camera's white balance: ``daylight`` the open ground's
 light (sun and sky), ``shade`` the sky's light alone (the shade under trees comes out neutral and
 the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
+
+SEED_MAX = 2**63 - 1
+"""Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer."""
+
+NUMBER_RANGES = {
+    "animation.fps": (0.01, 1000.0, "frames per second"),
+    "ground.window": (-1e5, 1e5, "m"),
+    "ground.sun_window": (-1e5, 1e5, "m"),
+    "ground.pixel": (0.0, 100.0, "m"),
+    "ground.albedo_size": (0.01, 1e4, "m"),
+    "canopy.size": (0.0, 1e5, "m"),
+    "canopy.center": (-1e5, 1e5, "m"),
+    "canopy.height": (0.01, 1000.0, "m"),
+    "canopy.layers[].size": (0.0, 1e5, "m"),
+    "canopy.layers[].center": (-1e5, 1e5, "m"),
+    "canopy.layers[].height": (0.01, 1000.0, "m"),
+    "canopy.trees.count": (1, 1000, "trees"),
+    "canopy.trees.seed": (0, SEED_MAX, ""),
+    "canopy.trees.crown_radius": (0.0, 100.0, "m"),
+    "canopy.trees.leaf_length": (0.001, 10.0, "m"),
+    "canopy.trees.spread": (0.0, 1e4, "m"),
+    "canopy.flutter.cycle": (1, 100_000, "frames"),
+    "sky.moon.offset_start": (-90.0, 90.0, "degrees"),
+    "sky.moon.offset_end": (-90.0, 90.0, "degrees"),
+    "sky.clouds.scale": (1.0, 1e6, "m"),
+    "sky.clouds.altitude": (0.0, 1e5, "m"),
+    "sky.clouds.wind": (-300.0, 300.0, "m/s"),
+    "sky.clouds.thickness": (0.0, 1000.0, ""),
+    "sky.clouds.seed": (0, SEED_MAX, ""),
+    "sky.haze": (0.0, 1e9, "m"),
+    "camera.position": (-1e5, 1e5, "m"),
+    "camera.look_at": (-1e5, 1e5, "m"),
+    "camera.fov": (0.01, 170.0, "degrees"),
+}
+"""The range [least, most] and unit of every number a config may give that the code cannot
+compute with at any size (a layer's key written ``layers[]``): lengths, speeds, rates and counts
+that overflow a raster, a time or a hash past them. The parser refuses a number outside its
+range, naming the key and the range (docs/runs.md, "Errors"); the other bounds a key has
+(above 0, below 90 degrees) are checked with it."""
+
+TIME_RANGE = ("0001-01-02T00:00:00+00:00", "9999-12-30T23:59:59+00:00")
+"""The first and last UTC times a config may give (sky.time), its offset applied: a day inside
+the calendar that Python's dates can hold, so that the searches about a time stay in it."""

@@ -477,3 +477,33 @@ def test_cache_verify_reports_a_damaged_header_in_one_line(tmp_path, capsys):
     assert out.splitlines() == [f"mask {key_of('mask', PARAMS)[:16]}: spectrum.npy: checksum "
                                 "mismatch (corrupted)", "1 broken of 1 items"]
     assert err == ""
+
+
+def test_cache_verify_reports_every_entry_that_is_not_an_item(tmp_path, capsys):
+    """Issue 33: a file where an item's folder should be, a folder of another name, a stray file
+    in a kind's folder and a link are each a line of ``cache verify``; --remove removes them and
+    keeps the item and what lies beside the kinds in the root."""
+    cache = Cache(tmp_path)
+    cache.get_or_compute("mask", PARAMS, Counter())
+    key = "ab" * 32
+    strays = [tmp_path / "mask" / "ab" / key, tmp_path / "mask" / "not-a-prefix", tmp_path / "mask" / "notes.txt",
+              tmp_path / "mask" / "ab" / ("cd" * 32)]
+    strays[0].parent.mkdir()
+    strays[0].write_text("a file where an item's folder should be")
+    strays[1].mkdir()
+    strays[2].write_text("notes")
+    strays[3].symlink_to(item_of(cache))
+    (tmp_path / "wisdom.pickle").write_bytes(b"kept")
+    assert main(["cache", "verify", "--cache", str(tmp_path)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert sorted(out[:-1]) == sorted([f"{strays[0]}: a file that is not a cache item",
+                                       f"{strays[1]}: a folder that is not a cache item",
+                                       f"{strays[2]}: a file that is not a cache item",
+                                       f"{strays[3]}: a link that is not a cache item"])
+    assert out[-1] == "0 broken of 1 items, 4 entries not an item"
+    assert main(["cache", "verify", "--cache", str(tmp_path), "--remove"]) == 0
+    capsys.readouterr()
+    assert not any(p.exists() or p.is_symlink() for p in strays)
+    assert item_of(cache).is_dir() and (tmp_path / "wisdom.pickle").exists()
+    assert main(["cache", "verify", "--cache", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.splitlines() == ["0 broken of 1 items"]

@@ -2,14 +2,17 @@
 naming the key, flag or file, and writes nothing; the ones that once hung or took gigabytes run
 as real processes, their memory measured."""
 
+import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
-from pipeline import paths
+from pipeline import io, paths
 from pipeline.cli import main
 from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
 
@@ -96,6 +99,29 @@ CASES = [  # name, the config's bytes, the words of the message
      "sky.time: the sun is 0.3 degrees below the horizon at 2024-06-01T19:42"),
     ("latitude a hair above 90", with_sky(site(90.0000000001, "2024-06-21T10:00:00Z", "2024-06-21T11:00:00Z")).encode(),
      "sky.site.latitude: must lie in [-90, 90] degrees"),
+    # issue 33: numbers and dates past what the code computes with, each refused with its range
+    ("frame rate of 1e-300 with clouds", with_sky({"model": "procedural", "clouds": {"cover": 0.4}},
+                                                  animation={"fps": 1e-300}).encode(),
+     "animation.fps: must lie in [0.01, 1000] frames per second (got 1e-300)"),
+    ("year 9999 run past by its offset", with_sky(site(48.85, "9999-12-30T20:00:00-05:00",
+                                                       "9999-12-30T21:00:00-05:00")).encode(),
+     "sky.time.start: must lie from 0001-01-02T00:00:00Z to 9999-12-30T23:59:59Z in UTC, its offset applied "
+     "(got 9999-12-30T20:00:00-05:00)"),
+    ("year 1 run before by its offset", with_sky(site(48.85, "0001-01-01T02:00:00+05:00",
+                                                      "0001-01-01T03:00:00+05:00")).encode(),
+     "sky.time.start: must lie from 0001-01-02T00:00:00Z"),
+    ("wind faster than any", with_sky({"model": "procedural", "clouds": {"wind": [1e300, 0.0]}}).encode(),
+     "sky.clouds.wind: must lie in [-300, 300] m/s (got 1e+300)"),
+    ("cloud seed past 64 bits", with_sky({"model": "procedural", "clouds": {"seed": 2**64}}).encode(),
+     "sky.clouds.seed: must lie in [0, 9223372036854775807] (got 18446744073709551616)"),
+    ("canopy higher than any", yaml.safe_dump({**base_config(), "canopy": {**base_config()["canopy"],
+                                                                          "height": 1e300}}).encode(),
+     "canopy.height: must lie in [0.01, 1000] m (got 1e+300)"),
+    ("a hundred thousand trees", yaml.safe_dump({**base_config(), "canopy": {
+        "trees": {"count": 100000, "leaves_per_tree": 1}}}).encode(),
+     "canopy.trees.count: must lie in [1, 1000] trees (got 100000)"),
+    ("mask sequence of absurd width", YAML_TEXT.replace("mask: mask.png", "mask: leaves.%0999999999d.png").encode(),
+     "canopy.mask: a number field of width 999999999 makes names longer than the most, 255 bytes"),
 ]
 
 
@@ -117,10 +143,14 @@ def test_truncated_png_is_one_line_without_libpng_s_own(inputs, capfd):
 FLAGS = [  # render's flags: name, arguments, the words of the message
     ("jobs not a number", ["--jobs", "abc"], "argument --jobs: invalid int value: 'abc' (see sunshade render --help)"),
     ("unknown flag", ["--jbos", "2"], "unrecognized arguments: --jbos 2"),
-    ("scheduler not an address", ["--scheduler", "no-port-here"], "--scheduler no-port-here: cannot reach the scheduler"),
+    ("scheduler not an address", ["--scheduler", "no-port-here"], "--scheduler no-port-here: must be an address HOST:PORT"),
+    ("scheduler port not a number", ["--scheduler", "tcp://127.0.0.1:eighty"],
+     "--scheduler tcp://127.0.0.1:eighty: the port must be a whole number from 1 to 65535"),
+    ("scheduler port past 65535", ["--scheduler", "127.0.0.1:99999"], "the port must be a whole number from 1 to 65535"),
+    ("scheduler of another protocol", ["--scheduler", "http://127.0.0.1:8786"], "the protocol must be one of tcp://"),
     ("cache of no user", ["--cache", "~no-such-user-x/cache"], "--cache ~no-such-user-x/cache: cannot resolve"),
     ("cache with a NUL", ["--cache", "a\x00b"], "--cache a\\0b: contains a NUL byte"),
-    ("output name too long", ["--output", "o" * 300], "--output " + "o" * 300 + ": the name"),
+    ("output name too long", ["--output", "o" * 300], f"--output {'o' * 58}...{'o' * 58} (300 characters): the name"),
     ("cluster timeout of 0", ["--cluster-timeout", "0"], "--cluster-timeout must be above 0 s"),
     ("a million jobs", ["--jobs", "1000000"], "--jobs 1000000 would start 1000000 processes on"),
 ]
@@ -239,3 +269,133 @@ def test_a_bad_config_path_is_one_line(inputs, capfd, name, words):
         err = capfd.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err, err
     assert tree(out) == []
+
+
+# -- issue 33: the second pass ----------------------------------------------------------
+
+NOT_UTF8 = os.fsdecode(b"old-\xe9t\xe9")
+"""A folder name of Latin-1 bytes (an old archive's), not UTF-8: Python holds it as surrogates."""
+
+
+def test_a_folder_name_that_is_not_utf8_is_one_line_naming_the_key(inputs, capfd):
+    folder, out = inputs
+    (folder / NOT_UTF8).mkdir()
+    (folder / NOT_UTF8 / "mask.png").write_bytes((folder / "mask.png").read_bytes())
+    (folder / "link").symlink_to(folder / NOT_UTF8)  # the config's own text is UTF-8
+    config = write_config(folder, {**base_config(), "canopy": {**base_config()["canopy"], "mask": "link/mask.png"}})
+    assert_refused(config, out, capfd, "canopy.mask: ")
+    assert_refused(config, out, capfd, r"old-\xe9t\xe9/mask.png holds a byte that is not UTF-8 (0xe9)")
+
+
+@pytest.mark.parametrize("flag", ["--output", "--cache"])
+def test_a_flag_path_that_is_not_utf8_is_one_line_naming_the_flag(inputs, capfd, flag):
+    folder, out = inputs
+    config = write_config(folder, base_config())
+    argv = ["render", str(config), flag, str(out / NOT_UTF8)]
+    assert main(argv) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"sunshade: error: {flag} ")
+    assert r"old-\xe9t\xe9 holds a byte that is not UTF-8 (0xe9)" in err, err
+    assert tree(out) == []
+
+
+def a_png_header(path, width, height):
+    """A PNG whose header says ``width`` x ``height`` 8-bit grey and whose data holds 4 rows: a
+    decompression bomb's first bytes (the whole of one would decode to width x height bytes).
+    A text chunk of 10 kB passes OpenImageIO's own check of a header against its file's size."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = zlib.compress(b"\0" * (width + 1) * 4)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+                     + chunk(b"tEXt", b"Comment\0" + b"x" * 10_000) + chunk(b"IDAT", rows) + chunk(b"IEND", b""))
+
+
+def test_an_image_too_large_is_refused_from_its_header_naming_file_and_size(inputs, capfd):
+    folder, out = inputs
+    a_png_header(folder / "mask.png", 30_000, 30_000)
+    assert_refused(write_config(folder, base_config()), out, capfd,
+                   f"{folder / 'mask.png'}: is 30000 x 30000 pixels of 1 channel (9e+08 values); the most "
+                   "is 5.37e+08 (2 GiB as floats)")
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (8, 8)], ids=["1x1", "one row", "one column", "constant"])
+def test_degenerate_images_work_as_albedo_mask_and_sky(inputs, capfd, shape):
+    """Each image of one value renders as that value: no warning, no error."""
+    folder, out = inputs
+    io.write_png(folder / "albedo.png", np.full((*shape, 3), 0.4, np.float32))
+    io.write_png(folder / "mask.png", np.full((*shape, 1), 1.0, np.float32))
+    io.write_exr(folder / "sky.exr", np.full((*shape, 3), 1.0, np.float32))
+    small = {"camera": {"resolution": [32, 18]}, "ground": {**base_config()["ground"], "albedo": "albedo.png"}}
+    configs = [{**base_config(), **small},
+               {**base_config(), **small, "sky": {"model": "hdri", "hdri": "sky.exr", "alpha": 80.0}}]
+    for number, config in enumerate(configs):
+        path = write_config(folder, config, f"config{number}.yaml")
+        assert main(["frame", str(path), "-o", str(out / f"f{number}.exr")]) == 0
+        assert capfd.readouterr().err == ""
+        assert np.all(np.isfinite(io.read_image(out / f"f{number}.exr")))
+
+
+def test_stochastic_tiling_of_one_texel_is_that_texel():
+    from pipeline import albedo, camera
+    from pipeline.geometry import Grid
+
+    texel = np.array([[[0.2, 0.3, 0.4]]], np.float32)
+    tiling = albedo.stochastic_tiling(camera.mipmap(texel, Grid((0.0, 1.0), 1.0, (1, 1)), outside="periodic",
+                                                    period=(1.0, 1.0)))
+    assert np.allclose(tiling.mean, texel[0, 0])
+    assert np.all(np.isfinite(tiling.lookups)) and np.allclose(tiling.basis, np.eye(3))
+
+
+def unwritable_folder(tmp_path) -> Path:
+    """A folder in which no file can be made: one of mode 555 for a user, /sys/kernel for root
+    (whom a mode does not stop)."""
+    if os.geteuid() != 0:
+        folder = tmp_path / "read-only"
+        folder.mkdir(mode=0o555)
+        return folder
+    return Path("/sys/kernel")
+
+
+@pytest.mark.parametrize("command", ["render", "ground", "frame"])
+def test_a_cache_that_cannot_be_written_is_found_before_any_work(inputs, capfd, command):
+    folder, out = inputs
+    cache = unwritable_folder(folder) / "cache"
+    config = write_config(folder, base_config())
+    argv = {"render": ["render", str(config), "--output", str(out / "run")],
+            "ground": ["ground", str(config), "-o", str(out / "g.exr")],
+            "frame": ["frame", str(config), "-o", str(out / "f.exr")]}[command]
+    assert main([*argv, "--cache", str(cache)]) == 2
+    captured = capfd.readouterr()
+    assert captured.out == ""  # no progress: nothing was computed
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"sunshade: error: --cache {cache}: cannot write in "), err
+    assert err.endswith("give a cache folder that can be written (--cache DIR or $SUNSHADE_CACHE)")
+    assert tree(out) == [] and not cache.exists()
+
+
+@pytest.mark.parametrize("name", ["mask sequence of absurd width", "a hundred thousand trees"])
+def test_what_once_took_gigabytes_or_minutes_ends_small_issue_33(inputs, name):
+    test_what_once_hung_or_took_gigabytes_ends_small(inputs, name)
+
+
+def test_an_image_bomb_ends_small(inputs):
+    folder, out = inputs
+    a_png_header(folder / "mask.png", 30_000, 30_000)
+    config = write_config(folder, base_config())
+    code, err, _, peak = run_peak(["check", config], folder)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "30000 x 30000 pixels" in err, err
+    assert peak < MOST_MEMORY, f"{peak / 1e6:.0f} MB"
+
+
+def test_a_long_message_is_cut_in_the_middle_with_its_length(inputs, capfd):
+    folder, out = inputs
+    name = "/".join(["d" * 200] * 15) + "/leaves-%04d.png"  # 3000 characters in names the system allows
+    config = write_config(folder, YAML_TEXT.replace("mask: mask.png", f"mask: {name}"))
+    assert main(["check", str(config)]) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err) < 600 and "canopy.mask: no such files:" in err, err
+    assert err.count(f".png ({len(str(folder / name))} characters)") == 2 and err.count("...") == 2, err
