@@ -596,12 +596,12 @@ class Cache:
         """Yield ("item", kind, key, path), (".tmp-" or ".del-", kind, key or None, path) for
         temporary folders, and ("stray", kind, None, path) for anything else inside a kind's
         folder (a file where an item's folder should be, a folder of another name, a link);
-        what is beside the kind folders in the root (FFTW wisdom, the config records) is not
-        the cache's layout and is skipped."""
+        what is beside the kinds' folders in the root (the locks, the damaged items' records,
+        FFTW wisdom, the config records) is not an item's place and is skipped."""
         if not self.root.is_dir():
             return
         for kind_dir in sorted(self.root.iterdir()):
-            if kind_dir.name == LOCKS or not kind_dir.is_dir() or kind_dir.is_symlink() \
+            if kind_dir.name in (LOCKS, DAMAGED) or not kind_dir.is_dir() or kind_dir.is_symlink() \
                     or not _NAME_RE.fullmatch(kind_dir.name):
                 continue
             for prefix_dir in sorted(kind_dir.iterdir()):

@@ -482,7 +482,7 @@ def test_cache_verify_reports_a_damaged_header_in_one_line(tmp_path, capsys):
 def test_cache_verify_reports_every_entry_that_is_not_an_item(tmp_path, capsys):
     """Issue 33: a file where an item's folder should be, a folder of another name, a stray file
     in a kind's folder and a link are each a line of ``cache verify``; --remove removes them and
-    keeps the item and what lies beside the kinds in the root."""
+    keeps the item and what lies beside the kinds in the root (damaged items' records too)."""
     cache = Cache(tmp_path)
     cache.get_or_compute("mask", PARAMS, Counter())
     key = "ab" * 32
@@ -494,6 +494,8 @@ def test_cache_verify_reports_every_entry_that_is_not_an_item(tmp_path, capsys):
     strays[2].write_text("notes")
     strays[3].symlink_to(item_of(cache))
     (tmp_path / "wisdom.pickle").write_bytes(b"kept")
+    (tmp_path / "damaged").mkdir()  # the records of items found damaged are the cache's own
+    (tmp_path / "damaged" / f"{key}.json").write_text("[]")
     assert main(["cache", "verify", "--cache", str(tmp_path)]) == 1
     out = capsys.readouterr().out.splitlines()
     assert sorted(out[:-1]) == sorted([f"{strays[0]}: a file that is not a cache item",
@@ -505,5 +507,6 @@ def test_cache_verify_reports_every_entry_that_is_not_an_item(tmp_path, capsys):
     capsys.readouterr()
     assert not any(p.exists() or p.is_symlink() for p in strays)
     assert item_of(cache).is_dir() and (tmp_path / "wisdom.pickle").exists()
+    assert (tmp_path / "damaged" / f"{key}.json").exists()
     assert main(["cache", "verify", "--cache", str(tmp_path)]) == 0
     assert capsys.readouterr().out.splitlines() == ["0 broken of 1 items"]
