@@ -137,3 +137,25 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
     assert before[0] / before[20] > 10**1.5
     assert np.all(np.diff(before) < 0) and np.all(np.diff(after) > 0)
     assert np.max(before[:-1] / before[1:]) < 2.0 and np.max(after[1:] / after[:-1]) < 2.0
+
+
+def test_the_totality_config_exposes_totality_without_clipping():
+    # the shipped config's auto-exposure limits hold the light of mid-totality (about 15.5
+    # stops under the day): the exposure meters it instead of stopping at its most
+    from pathlib import Path
+
+    from pipeline import composite
+    from pipeline.resolve import load
+
+    config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
+    auto = config.camera.auto_exposure
+    sky, day = totality(), dallas_sky(C2 + (C3 - C2) / 2, moon=False)
+    reference = day.sky_irradiance + day.total_sun_irradiance()
+    readings = np.geomspace(reference, sky.sky_irradiance, 60)  # four and a half decades down
+    readings = np.concatenate([readings, np.repeat(readings[-1:], 40, axis=0)])
+    exposure = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
+                                       time_constant=auto.time_constant, limits=auto.limits,
+                                       stops=config.camera.exposure)
+    metered = np.pi * 2.0**config.camera.exposure / (readings[-1] @ Y)
+    assert exposure[-1] == pytest.approx(metered, rel=1e-3)
+    assert np.log2(exposure[-1] / composite.exposure_for(reference)) < auto.limits[1]
