@@ -133,7 +133,7 @@ def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius)
     with the kernel exp(-rho / DIFFUSION_LENGTH) / (2 pi DIFFUSION_LENGTH^2) (the light that
     diffuses sideways into the umbra, multiple scattering), on a MAP_CELLS x MAP_CELLS map of
     half-width ``extent`` [m] centred on the observer, rows north-up. [1]"""
-    from scipy.signal import fftconvolve
+    from scipy import fft
 
     n, extent = MAP_CELLS, MAP_EXTENT
     cell = 2.0 * extent / n
@@ -146,8 +146,11 @@ def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius)
     k = (np.arange(-half, half + 1)) * cell
     kernel = np.exp(-np.hypot(*np.meshgrid(k, k)) / DIFFUSION_LENGTH)
     kernel /= kernel.sum()
-    padded = np.pad(s, half, mode="edge")
-    return fftconvolve(padded, kernel, mode="same")[half:-half, half:-half], extent
+    padded = np.pad(s, half, mode="edge")  # beyond the map: its edge's values
+    shape = [fft.next_fast_len(n + 4 * half + 1, real=True)] * 2
+    product = fft.rfft2(padded, shape) * fft.rfft2(kernel, shape)
+    full = fft.irfft2(product, shape)
+    return full[2 * half:2 * half + n, 2 * half:2 * half + n], extent
 
 
 def _map_lookup(field, extent, x, y):

@@ -116,7 +116,7 @@ def test_dallas_totality_matches_the_published_sky():
 
 
 def test_the_light_falls_smoothly_into_totality_and_rises_after():
-    # open ground (sun times S plus the sky) every 3 s through second and third contact; the
+    # open ground (sun times S plus the sky) every 5 s through second and third contact; the
     # moon placed about the mid-totality sun at its true offset from the sun of the moment, so
     # that the clear sky's shape is computed once (the sun moves 0.03 degrees in 2 minutes)
     from pipeline.plan import offset_direction
@@ -130,11 +130,11 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
         sky = ProceduralSky(3.08, fixed, moon=MoonDisc(azimuth, elevation, moon.angular_radius), altitude=140.0)
         return float((sky.sky_irradiance + sky.sun_fraction() * sky.total_sun_irradiance()) @ Y)
 
-    before = np.array([light(C2 + timedelta(seconds=t)) for t in range(-60, 13, 3)])
-    after = np.array([light(C3 + timedelta(seconds=t)) for t in range(-12, 61, 3)])
+    before = np.array([light(C2 + timedelta(seconds=t)) for t in range(-60, 11, 5)])
+    after = np.array([light(C3 + timedelta(seconds=t)) for t in range(-10, 61, 5)])
     # 1.5 decades from a minute before C2 to C2 (the published 2 to 2.5 are not reached: the
     # sky at C2 is 6 times that of mid-totality; docs/accuracy.md, "The eclipse sky")
-    assert before[0] / before[20] > 10**1.5
+    assert before[0] / before[12] > 10**1.5
     assert np.all(np.diff(before) < 0) and np.all(np.diff(after) > 0)
     assert np.max(before[:-1] / before[1:]) < 2.0 and np.max(after[1:] / after[:-1]) < 2.0
 
