@@ -42,11 +42,12 @@ SHARP_LIMIT = 0.002
 99.8% obscuration, the depth to which Sharp, Silverman & Lloyd (1971) found the sky to behave as
 attenuated sunlight. Above it the sky is exactly the clear sky times S. [1]"""
 
-MULTIPLE_SCATTERING = 0.74
-"""k, the multiple-scattering floor over the single-scattered light: calibrated so that the
-zenith of the 2024 eclipse at Dallas at mid-totality comes out about 1e-4 of its daytime value
-(Sharp et al. 1971; measured in docs/accuracy.md, "The eclipse sky"), with
-DIFFUSION_LENGTH chosen so that the 0-10 degree band is more than 5 times the zenith. [1]"""
+MULTIPLE_SCATTERING = 0.10
+"""k, the multiple-scattering floor's factor: calibrated at the 2024 eclipse at Dallas so that
+the open ground's light at second contact lies two decades under its light a minute before (the
+published fall is 2-2.5 decades). It then gives 2.5 lx at mid-totality (published 1-5 lx) and a
+zenith of 5e-5 of its daytime value (Sharp et al. 1971: about 1e-4); with k = 0.18 the zenith
+would be 1e-4 and the fall 1.8 decades (docs/accuracy.md, "The eclipse sky"). [1]"""
 
 EARTH_RADIUS = 6_371_000.0
 """Mean radius of the Earth, for the height of a point along a line of sight. [m]"""
@@ -72,11 +73,11 @@ TABLE_ELEVATIONS = 33
 TABLE_AZIMUTHS = 72
 """Azimuths of the direction table, 5 degrees apart. [count]"""
 
-DIFFUSION_LENGTH = 20_000.0
+DIFFUSION_LENGTH = 50_000.0
 """Length over which light diffuses sideways into the umbra by multiple scattering (the kernel
-of ``diffused_fraction``): a calibration choice (docs/method.md, "The eclipse sky"): shorter makes the
-sky near the horizon, whose lines of sight reach towards the umbra's edge, brighter beside the
-zenith (20 km: 5.8 times at Dallas 2024; 50 km: 4.1). [m]"""
+of ``diffused_fraction``), a calibration choice (docs/method.md, "The eclipse sky"): shorter
+makes the sky at second contact brighter beside mid-totality (at Dallas 2024, k recalibrated:
+20 km, 5.7 times; 50 km, 1.9 times) and the light's fall before second contact shallower. [m]"""
 
 FLOOR_HEIGHT = 2_000.0
 """Height of the horizontal path that colours the multiply scattered light (``floor_colour``). [m]"""

@@ -714,12 +714,20 @@ class ProceduralSky:
     def _dimming_at(self, s) -> np.ndarray:
         """Factor on the clear sky at sky-plane points s (..., 2) [tan]: ``_sky_dimming`` (3,)
         above 99.8% obscuration; deeper, (..., 3)
-        (1 - b) S + b (F(w) + k c M(w)) times skylight (``eclipse``). [1]"""
+        (1 - b) S + b (F(w) + k c M(w) G(w)) times skylight (``eclipse``), G the clear sky's
+        shape 90 degrees from the sun over its shape at w (no circumsolar glow in the multiply
+        scattered light). [1]"""
         b = self._deep
         if not b:
             return self._sky_dimming
-        f, m = self._eclipse_field(_unit(s))
-        deep = f + eclipse.MULTIPLE_SCATTERING * eclipse.floor_colour(self.turbidity) * m
+        w = _unit(s)
+        f, m = self._eclipse_field(w)
+        # the multiply scattered light has no circumsolar glow: the clear sky's shape at 90
+        # degrees from the sun (its gradation with zenith angle kept), over its shape here
+        glowless = clearsky.relative_sky(w[..., 2], np.full(w.shape[:-1], np.pi / 2),
+                                         sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
+                                         shape=self.shape, cie_type=self.cie_type) / self._relative_sky(s)
+        deep = f + eclipse.MULTIPLE_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
         return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
 
     def corona_radiance(self, w) -> np.ndarray:
