@@ -160,3 +160,24 @@ def test_the_totality_config_exposes_totality_without_clipping():
     metered = np.pi * 2.0**config.camera.exposure / (readings[-1] @ Y)
     assert exposure[-1] == pytest.approx(metered, rel=1e-3)
     assert np.log2(exposure[-1] / composite.exposure_for(reference)) < auto.limits[1]
+
+
+def test_the_crescents_are_reversed_after_third_contact():
+    # the lit sliver of the sun (its kernel's centroid from the disc's centre) lies on the far
+    # side 20 s after C3 from where it was 20 s before C2 (131 degrees round at Dallas, off the
+    # centre line: the moon's path misses the sun's centre): the pinhole images turn round
+    from pipeline.geometry import sky_offset
+    from pipeline.sky import sun_kernel
+
+    def sliver(when):
+        sky = dallas_sky(when)
+        kernel = sun_kernel(sky, sky.sun.angular_radius / 8)
+        weight = kernel.weighted[1]
+        rows, cols = np.indices(weight.shape)
+        x, y = kernel.grid.ground_from_raster(rows, cols)
+        centre = np.array([(weight * x).sum(), (weight * y).sum()]) / weight.sum()
+        return (centre - sky.sun_point) / sky.sun.angular_radius
+
+    before, after = sliver(C2 - timedelta(seconds=20)), sliver(C3 + timedelta(seconds=20))
+    assert np.linalg.norm(before) > 0.5 and np.linalg.norm(after) > 0.5  # thin slivers near the limb
+    assert before @ after / (np.linalg.norm(before) * np.linalg.norm(after)) < -0.5
