@@ -653,10 +653,8 @@ class ProceduralSky:
 
     def _relative_sky(self, s) -> np.ndarray:
         """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1. [1]"""
-        s = np.asarray(s, dtype=np.float64)
-        cos_zenith = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
-        w = np.stack([s[..., 0] * cos_zenith, s[..., 1] * cos_zenith, cos_zenith], axis=-1)
-        return clearsky.relative_sky(cos_zenith, _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
+        w = _unit(s)
+        return clearsky.relative_sky(w[..., 2], _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
                                      turbidity=self.turbidity, shape=self.shape, cie_type=self.cie_type)
 
     @cached_property
@@ -732,7 +730,8 @@ class ProceduralSky:
 
     def corona_radiance(self, w) -> np.ndarray:
         """The corona (``eclipse.corona_profile``) at unit vectors w (..., 3) times b, 0 behind
-        the moon and beyond ``eclipse.CORONA_REACH`` solar radii: B(r) / B_sun of the sun's clear mean disc radiance E_n / (pi r^2). [kcd/m^2]"""
+        the moon and beyond ``eclipse.CORONA_REACH`` solar radii: B(r) / B_sun of the sun's
+        clear mean disc radiance E_n / (pi r^2). [kcd/m^2]"""
         w = np.asarray(w, dtype=np.float64)
         r = self.sun.angular_radius
         mean_disc = self.sun_normal_irradiance / (np.pi * r * r)
@@ -744,7 +743,8 @@ class ProceduralSky:
     @cached_property
     def corona_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of ``corona_radiance`` (the moon taken as concentric with the
-        sun, ``eclipse.corona_beyond``, out to ``eclipse.CORONA_REACH``), dimmed by the cloud towards the sun. [klx]"""
+        sun, ``eclipse.corona_beyond``, out to ``eclipse.CORONA_REACH``), dimmed by the cloud
+        towards the sun. [klx]"""
         if not self._deep:
             return np.zeros(3)
         beyond = (eclipse.corona_beyond(self.moon.angular_radius / self.sun.angular_radius)
