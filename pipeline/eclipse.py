@@ -22,9 +22,12 @@ moon's shadow; c the colour of that sideways path (``floor_colour``); k calibrat
 (``MULTIPLE_SCATTERING``). The deep-eclipse model is blended in below S = ``SHARP_LIMIT`` so that
 it meets the clear sky times S continuously:
 
-    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k c M(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1),
+    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k c M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1),
 
-plus, during the deep eclipse, b times the corona (``corona_profile``) outside the moon.
+G(w) the clear sky's shape 90 degrees from the sun over its shape at w (the multiply scattered
+light keeps the gradation with zenith angle, not the circumsolar glow, which needs the direct
+sun; ``ProceduralSky._dimming_at``); plus, during the deep eclipse, b times the corona
+(``corona_profile``) outside the moon.
 
 Units: radians, metres; the factors are dimensionless. [1]
 """
@@ -92,7 +95,8 @@ CORONA_REACH = 16.0
 """Solar radii out to which the corona is drawn (its light beyond: 2.4% of it, left out). [1]"""
 
 RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
-"""The R, G, B wavelengths of ``sky.sun_colour``. [um]"""
+"""Representative wavelengths of the R, G, B channels: the eclipse sky's and the sun's colour
+(``sky.sun_colour``). [um]"""
 
 
 def deep_weight(sun_fraction: float) -> float:

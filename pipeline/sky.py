@@ -379,8 +379,9 @@ def _flush(accum, pending: list) -> None:
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
-RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
-"""Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation. [um]"""
+RGB_WAVELENGTHS = eclipse.RGB_WAVELENGTHS
+"""Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation
+(``eclipse.RGB_WAVELENGTHS``, which the eclipse sky's channels share). [um]"""
 
 LIMB_DARKENING = (0.52, 0.59, 0.68)
 """Linear limb-darkening coefficients u of I(mu) / I(1) = 1 - u (1 - mu) for R, G, B. G: the
@@ -400,8 +401,8 @@ def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
     """Colour of the sun's direct light after the atmosphere, scaled to Rec.709 luminance 1: the
     direct transmittance for R, G, B of Preetham et al. (1999, appendix A.1), Rayleigh
     tau_R = exp(-0.008735 lambda^-4.08 m) times Angstrom aerosol tau_a = exp(-beta lambda^-1.3 m),
-    beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um], m the Kasten & Young (1989) relative air
-    mass of pvlib. Only the ratios between the channels are kept: the level is ``daylight``'s.
+    beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um] (``eclipse.vertical_optical_depths``), m
+    the Kasten & Young (1989) relative air mass of pvlib. Only the ratios between the channels are kept: the level is ``daylight``'s.
 
     zenith : sun zenith angle, in [0, pi/2). [rad]   turbidity : T. [1]
     Returns (3,) float64. [1]
@@ -409,9 +410,8 @@ def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
     from pvlib import atmosphere
 
     m = float(atmosphere.get_relative_airmass(float(np.degrees(zenith)), "kastenyoung1989"))
-    lam = RGB_WAVELENGTHS
-    beta = 0.04608 * turbidity - 0.04586
-    transmittance = np.exp(-m * (0.008735 * lam**-4.08 + beta * lam**-1.3))
+    rayleigh, aerosol = eclipse.vertical_optical_depths(turbidity)
+    transmittance = np.exp(-m * (rayleigh + aerosol))
     return transmittance / (transmittance @ np.asarray(REC709_LUMINANCE, dtype=np.float64))
 
 
