@@ -729,26 +729,23 @@ class ProceduralSky:
         return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
 
     def corona_radiance(self, w) -> np.ndarray:
-        """The corona (``eclipse.corona_profile``) at unit vectors w (..., 3) times b, 0 behind
-        the moon and beyond ``eclipse.CORONA_REACH`` solar radii: B(r) / B_sun of the sun's
-        clear mean disc radiance E_n / (pi r^2). [kcd/m^2]"""
+        """The corona as drawn (``eclipse.corona_drawn``: Baumbach's profile, ending with no edge
+        at ``eclipse.CORONA_REACH`` solar radii) at unit vectors w (..., 3) times b, 0 behind
+        the moon: B(r) / B_sun of the sun's clear mean disc radiance E_n / (pi r^2). [kcd/m^2]"""
         w = np.asarray(w, dtype=np.float64)
         r = self.sun.angular_radius
         mean_disc = self.sun_normal_irradiance / (np.pi * r * r)
-        distance = _angle(w, self.sun_direction) / r
-        profile = np.where(distance <= eclipse.CORONA_REACH, eclipse.corona_profile(distance), 0.0)
+        profile = eclipse.corona_drawn(_angle(w, self.sun_direction) / r)
         profile = np.where(_angle(w, self.moon_direction) >= self.moon.angular_radius, profile, 0.0)
         return (self._deep * profile)[..., None] * mean_disc
 
     @cached_property
     def corona_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of ``corona_radiance`` (the moon taken as concentric with the
-        sun, ``eclipse.corona_beyond``, out to ``eclipse.CORONA_REACH``), dimmed by the cloud
-        towards the sun. [klx]"""
+        sun, ``eclipse.corona_drawn_beyond``), dimmed by the cloud towards the sun. [klx]"""
         if not self._deep:
             return np.zeros(3)
-        beyond = (eclipse.corona_beyond(self.moon.angular_radius / self.sun.angular_radius)
-                  - eclipse.corona_beyond(eclipse.CORONA_REACH))
+        beyond = eclipse.corona_drawn_beyond(self.moon.angular_radius / self.sun.angular_radius)
         return (self._deep * beyond * self.sun_cloud_transmittance) * self.total_sun_irradiance()
 
     def _corona_cells(self, grid: Grid):

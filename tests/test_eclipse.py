@@ -71,6 +71,10 @@ def test_corona_profile_integral():
     assert eclipse.corona_beyond(1.0) == pytest.approx(1.1e-6, rel=0.05)  # about half a full moon
     tail = flux(1.05, 2.0) + flux(2.0, 30.0)
     assert eclipse.corona_beyond(1.05) - eclipse.corona_beyond(30.0) == pytest.approx(tail, rel=1e-6)
+    drawn = 2 * integrate.quad(lambda r: r * eclipse.corona_drawn(r), 1.05, eclipse.CORONA_REACH,
+                               limit=200, epsabs=0.0, epsrel=1e-10)[0]
+    assert eclipse.corona_drawn_beyond(1.05) == pytest.approx(drawn, rel=1e-6)
+    assert eclipse.corona_drawn(eclipse.CORONA_REACH * (1 - 1e-9)) == pytest.approx(0.0, abs=1e-18)
 
 
 @lru_cache(maxsize=1)
@@ -81,7 +85,7 @@ def totality():
 def test_the_corona_in_the_raster_and_the_equirect_keeps_its_light():
     sky = totality()
     assert sky._deep == 1.0 and sky.sun_fraction() == 0.0
-    expected = sky.corona_irradiance  # out to CORONA_REACH solar radii (2.4% lies beyond)
+    expected = sky.corona_irradiance  # as drawn: out to CORONA_REACH solar radii, with no edge
     # cells of the sky raster near the sun, without the sky: the corona alone
     from pipeline.geometry import sky_grid
 
