@@ -9,8 +9,12 @@
    over the zenith's, and the band's red/blue ratio against the uneclipsed sky's.
 3. configs/eclipse-2024-dallas.yaml from C1 up to 99.8% obscuration (every --step-th frame): the
    open ground's illuminance over the uneclipsed daylight's times S; the largest deviation.
+4. With --calibration: for diffusion lengths of 20 to 80 km, the floor's factor k that puts the
+   zenith at mid-totality at 1e-4 of the day's and the k that puts the light at second contact
+   two decades under the light a minute before (the sky is linear in k: measured at k = 0 and
+   1), and what each k gives (sky 512 px wide).
 
-    python benchmarks/accuracy_eclipse.py [--step N] [--width W]
+    python benchmarks/accuracy_eclipse.py [--step N] [--width W] [--calibration]
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import replace
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -27,12 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import eclipse, io  # noqa: E402
+from pipeline import eclipse, ephemeris, io  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import scene_at  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
-from pipeline.sky import EquirectSky  # noqa: E402
+from pipeline.sky import EquirectSky, MoonDisc, SunDisc  # noqa: E402
 
 Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 TOTALITY = ROOT / "configs" / "eclipse-2024-dallas-totality.yaml"
@@ -107,14 +112,63 @@ def partial_phase(step: int) -> None:
     print(f"  largest deviation {100 * worst:.2f}%")
 
 
+def calibration() -> None:
+    config = load(TOTALITY)
+    s = config.sky.site
+    site = ephemeris.Site(s.latitude, s.longitude, s.elevation)
+    contacts = ephemeris.contact_times(site, s.start, s.end)
+
+    def sky_at(when):
+        sun, moon = ephemeris.sun_and_moon(site, when)
+        scene = replace(scene_at(config, 0), when=when,
+                        sun=SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                        moon=MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+        return load_sky(config.sky, scene)
+
+    c2, c3 = contacts["C2"], contacts["C3"]
+    middle = sky_at(c2 + (c3 - c2) / 2)
+    before = sky_at(c2 - timedelta(seconds=60))
+    minute = 1e3 * float((before.sky_irradiance + before.sun_fraction() * before.total_sun_irradiance()) @ Y)
+    day = replace(middle, moon=None).equirect(512).astype(np.float64)
+    elevation = 90 - (np.arange(256) + 0.5) * 180 / 256
+    band, top = (elevation > 0) & (elevation < 10), elevation > 85
+    day_zenith = (day[top] @ Y).mean()
+    print(f"\n4. calibration at Dallas (a minute before C2: {minute:.3g} lx); the sky is linear in k")
+    kept = eclipse.DIFFUSION_LENGTH, eclipse.MULTIPLE_SCATTERING
+    try:
+        for length in (20e3, 35e3, 50e3, 80e3):
+            eclipse.DIFFUSION_LENGTH = length
+            measured = []
+            for k in (0.0, 1.0):
+                eclipse.MULTIPLE_SCATTERING = k
+                sky = sky_at(c2 + (c3 - c2) / 2)
+                image = sky.equirect(512).astype(np.float64)
+                at_c2 = sky_at(c2)
+                measured.append(np.array([(image[top] @ Y).mean() / day_zenith, 1e3 * sky.sky_irradiance @ Y,
+                                          (image[band] @ Y).mean(), (image[top] @ Y).mean(),
+                                          1e3 * at_c2.sky_irradiance @ Y, *image[band].reshape(-1, 3).mean(axis=0)]))
+            zero, one = measured
+            for target, k in (("zenith 1e-4", (1e-4 - zero[0]) / (one[0] - zero[0])),
+                              ("two decades", (minute / 100 - zero[4]) / (one[4] - zero[4]))):
+                v = zero + k * (one - zero)
+                print(f"  {length / 1e3:3.0f} km, {target}: k {k:.3g}; zenith {v[0]:.2g} of the day's, mid-totality "
+                      f"{v[1]:.3g} lx, band {v[2] / v[3]:.3g} x the zenith, C2 {v[4]:.3g} lx "
+                      f"({np.log10(minute / v[4]):.2f} decades under), band red/blue {v[5] / v[7]:.2f}")
+    finally:
+        eclipse.DIFFUSION_LENGTH, eclipse.MULTIPLE_SCATTERING = kept
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--step", type=int, default=8)
     parser.add_argument("--width", type=int, default=1024)
+    parser.add_argument("--calibration", action="store_true")
     args = parser.parse_args()
     light_curve(args.step)
     totality_sky(args.width)
     partial_phase(args.step * 3)
+    if args.calibration:
+        calibration()
 
 
 if __name__ == "__main__":

@@ -80,7 +80,7 @@ DIFFUSION_LENGTH = 50_000.0
 """Length over which light diffuses sideways into the umbra by multiple scattering (the kernel
 of ``diffused_fraction``), a calibration choice (docs/method.md, "The eclipse sky"): shorter
 makes the sky at second contact brighter beside mid-totality (at Dallas 2024, k recalibrated:
-20 km, 5.7 times; 50 km, 1.9 times) and the light's fall before second contact shallower. [m]"""
+20 km, 5.7 times; 50 km, 1.8 times) and the light's fall before second contact shallower. [m]"""
 
 FLOOR_HEIGHT = 2_000.0
 """Height of the horizontal path that colours the multiply scattered light (``floor_colour``). [m]"""
