@@ -259,11 +259,46 @@ def _run_check(args) -> int:
           f"config hash {config.digest()}")
     for line in _framing_lines(plan):
         print(line)
+    for line in _eclipse_lines(config):
+        print(line)
     frames, cycle = disk_needed(plan)
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
           f"cache at most {_size(cycle)}")
     _warn(plan)
     return 0
+
+
+def _eclipse_lines(config) -> list[str]:
+    """The eclipse at a site-and-time config's place: contacts, greatest obscuration, the
+    duration of totality or annularity, and whether the time span sees it."""
+    site = config.sky.site if config.sky.model != "hdri" else None
+    if site is None:
+        return []
+    from . import ephemeris
+
+    found = ephemeris.circumstances(ephemeris.Site(site.latitude, site.longitude, site.elevation),
+                                    site.start, site.end)
+    if found.kind is None:
+        return ["  eclipse: none within 4 h of the time span (sky.site, sky.time)"]
+
+    def clock(when):
+        return "-" if when is None else when.strftime("%H:%M:%S.") + f"{when.microsecond // 100000}"
+
+    contacts = ", ".join(f"{name} {clock(when)}" for name, when in found.contacts.items())
+    lines = [f"  eclipse: {found.kind}, {found.maximum:%Y-%m-%d}: {contacts} UTC; greatest obscuration "
+             f"{100 * found.obscuration:.2f}% at {clock(found.maximum)}"
+             + ("" if found.central is None else f"; {found.kind == 'total' and 'totality' or 'annularity'} "
+                f"{int(found.central // 60)} min {found.central % 60:.1f} s")]
+    c1 = found.contacts["C1"] or site.start
+    c4 = found.contacts["C4"] or site.end
+    if site.end < c1 or site.start > c4:
+        lines.append(f"  eclipse: the time span {site.start:%H:%M:%S}-{site.end:%H:%M:%S} UTC misses it "
+                     "altogether (sky.time)")
+    else:
+        inside = [name for name, when in found.contacts.items() if when is not None and site.start <= when <= site.end]
+        lines.append(f"  eclipse: the time span {site.start:%H:%M:%S}-{site.end:%H:%M:%S} UTC holds "
+                     f"{', '.join(inside) if inside else 'no contact (it lies between two)'}")
+    return lines
 
 
 def _framing_lines(plan) -> list[str]:

@@ -319,3 +319,51 @@ def contact_times(
             root = brentq(gap, left, times[j], xtol=tolerance)
             result[last] = start_utc + timedelta(seconds=root)
     return result
+
+
+@dataclass(frozen=True)
+class Circumstances:
+    """A solar eclipse as seen from a site: ``contacts`` (C1..C4 -> aware UTC datetime or None),
+    ``maximum`` (time of greatest obscuration), ``obscuration`` (the greatest obscured area
+    fraction [1]), ``kind`` ('total', 'annular', 'partial' or None without an eclipse) and
+    ``central`` (C3 - C2: the duration of totality or annularity [s], None if partial)."""
+
+    contacts: dict
+    maximum: datetime | None
+    obscuration: float
+    kind: str | None
+    central: float | None
+
+
+def circumstances(site: Site, start: datetime, end: datetime, *, margin: float = 4 * 3600.0,
+                  step: float = 10.0) -> Circumstances:
+    """The eclipse nearest the span ``start``..``end`` seen from ``site``: ``contact_times`` over
+    the span widened by ``margin`` [s] on each side (a whole eclipse lasts at most about 3.5 h),
+    the greatest obscuration sampled every ``step`` [s] between the contacts (and refined around
+    C2..C3, where it is 1 for a total eclipse)."""
+    start_utc, end_utc = _utc(start, "start"), _utc(end, "end")
+    lo, hi = start_utc - timedelta(seconds=margin), end_utc + timedelta(seconds=margin)
+    contacts = contact_times(site, lo, hi)
+    first = contacts["C1"] or (lo if contacts["C4"] else None)
+    last = contacts["C4"] or (hi if contacts["C1"] else None)
+    if first is None:
+        return Circumstances(contacts, None, 0.0, None, None)
+    sky = _Sky(site)
+    span = (last - first).total_seconds()
+    times = np.append(np.arange(0.0, span, step), span)
+    date0 = _ephem_date(first)
+    fractions = []
+    for t in times:
+        sun, moon = sky.at(date0 + t / _SECONDS_PER_DAY)
+        fractions.append(obscured_fraction(separation(sun, moon), sun.angular_radius, moon.angular_radius))
+    k = int(np.argmax(fractions))
+    maximum, obscuration = first + timedelta(seconds=float(times[k])), float(fractions[k])
+    kind, central = "partial", None
+    if contacts["C2"] is not None and contacts["C3"] is not None:
+        middle = contacts["C2"] + (contacts["C3"] - contacts["C2"]) / 2
+        sun, moon = sky.at(_ephem_date(middle))
+        kind = "total" if moon.angular_radius > sun.angular_radius else "annular"
+        maximum = middle
+        obscuration = float(obscured_fraction(separation(sun, moon), sun.angular_radius, moon.angular_radius))
+        central = (contacts["C3"] - contacts["C2"]).total_seconds()
+    return Circumstances(contacts, maximum, obscuration, kind, central)

@@ -48,12 +48,13 @@ from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_f
 
 _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
            "sunshade:sun_fraction": "sun_fraction", "sunshade:sun_azimuth_elevation": "sun",
-           "sunshade:moon_azimuth_elevation": "moon", "sunshade:time_utc": "time_utc"}
+           "sunshade:moon_azimuth_elevation": "moon", "sunshade:time_utc": "time_utc",
+           "sunshade:exposure": "exposure"}
 
 
 def frame_record(config: Config, frame: int, digest: str) -> dict | None:
     """What a done frame's EXR says of itself (frame, S, sun and moon azimuth and elevation in
-    degrees, UTC time), or None unless both its files are there and carry ``digest``."""
+    degrees, UTC time, the exposure it got [m^2/kcd]), or None unless both its files are there and carry ``digest``."""
     exr, png = frame_files(config, frame)
     if not (exr.is_file() and png.is_file()):
         return None

@@ -28,7 +28,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy import ndimage
 
-from . import clearsky, daylight
+from . import clearsky, daylight, eclipse
 from .camera import equirect_lookup
 from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
@@ -379,8 +379,9 @@ def _flush(accum, pending: list) -> None:
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
-RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
-"""Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation. [um]"""
+RGB_WAVELENGTHS = eclipse.RGB_WAVELENGTHS
+"""Representative wavelengths of the R, G, B channels for the colour of the sun's attenuation
+(``eclipse.RGB_WAVELENGTHS``, which the eclipse sky's channels share). [um]"""
 
 LIMB_DARKENING = (0.52, 0.59, 0.68)
 """Linear limb-darkening coefficients u of I(mu) / I(1) = 1 - u (1 - mu) for R, G, B. G: the
@@ -400,8 +401,8 @@ def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
     """Colour of the sun's direct light after the atmosphere, scaled to Rec.709 luminance 1: the
     direct transmittance for R, G, B of Preetham et al. (1999, appendix A.1), Rayleigh
     tau_R = exp(-0.008735 lambda^-4.08 m) times Angstrom aerosol tau_a = exp(-beta lambda^-1.3 m),
-    beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um], m the Kasten & Young (1989) relative air
-    mass of pvlib. Only the ratios between the channels are kept: the level is ``daylight``'s.
+    beta = 0.04608 T - 0.04586, at RGB_WAVELENGTHS [um] (``eclipse.vertical_optical_depths``), m
+    the Kasten & Young (1989) relative air mass of pvlib. Only the ratios between the channels are kept: the level is ``daylight``'s.
 
     zenith : sun zenith angle, in [0, pi/2). [rad]   turbidity : T. [1]
     Returns (3,) float64. [1]
@@ -409,9 +410,8 @@ def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
     from pvlib import atmosphere
 
     m = float(atmosphere.get_relative_airmass(float(np.degrees(zenith)), "kastenyoung1989"))
-    lam = RGB_WAVELENGTHS
-    beta = 0.04608 * turbidity - 0.04586
-    transmittance = np.exp(-m * (0.008735 * lam**-4.08 + beta * lam**-1.3))
+    rayleigh, aerosol = eclipse.vertical_optical_depths(turbidity)
+    transmittance = np.exp(-m * (rayleigh + aerosol))
     return transmittance / (transmittance @ np.asarray(REC709_LUMINANCE, dtype=np.float64))
 
 
@@ -474,6 +474,13 @@ def _check_disc(disc, name):
         raise ValueError(f"{name} azimuth and elevation must be finite, |elevation| <= pi/2 [rad]")
     if not (0.0 < disc.angular_radius < 0.1):
         raise ValueError(f"{name} angular_radius must be in (0, 0.1) [rad], got {disc.angular_radius}")
+
+
+def _unit(s) -> np.ndarray:
+    """Unit vectors (..., 3) of sky-plane points s (..., 2). [tan] -> [1]"""
+    s = np.asarray(s, dtype=np.float64)
+    cos_zenith = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+    return np.stack([s[..., 0] * cos_zenith, s[..., 1] * cos_zenith, cos_zenith], axis=-1)
 
 
 def _angle(w, c):
@@ -646,10 +653,8 @@ class ProceduralSky:
 
     def _relative_sky(self, s) -> np.ndarray:
         """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1. [1]"""
-        s = np.asarray(s, dtype=np.float64)
-        cos_zenith = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
-        w = np.stack([s[..., 0] * cos_zenith, s[..., 1] * cos_zenith, cos_zenith], axis=-1)
-        return clearsky.relative_sky(cos_zenith, _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
+        w = _unit(s)
+        return clearsky.relative_sky(w[..., 2], _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
                                      turbidity=self.turbidity, shape=self.shape, cie_type=self.cie_type)
 
     @cached_property
@@ -674,7 +679,93 @@ class ProceduralSky:
 
     def clear_radiance(self, s) -> np.ndarray:
         """Clear-sky radiance at sky-plane points s (..., 2) [tan], eclipse-dimmed, no sun disc. [kcd/m^2]"""
-        return self._relative_sky(s) * (self.zenith_luminance * self._sky_dimming)
+        return self._clear(s)
+
+    def _clear(self, s, corona: bool = True) -> np.ndarray:
+        """``clear_radiance``; ``corona`` False leaves the corona out (``equirect`` deposits it). [kcd/m^2]"""
+        L = self._relative_sky(s) * (self.zenith_luminance * self._dimming_at(s))
+        if corona and self._deep:
+            L = L + self.corona_radiance(_unit(s))
+        return L
+
+    # --- the deep eclipse (docs/method.md, "The eclipse sky") ---------------------------------
+    @cached_property
+    def _deep(self) -> float:
+        """b: the weight of the deep-eclipse sky (``eclipse.deep_weight``), 0 without a moon or
+        above 99.8% obscuration, where the sky is the clear sky times S. [1]"""
+        if self.moon is None:
+            return 0.0
+        return eclipse.deep_weight(float(self.moon_visible @ np.asarray(REC709_LUMINANCE, dtype=np.float64)))
+
+    @cached_property
+    def moon_direction(self) -> np.ndarray:
+        """Unit vector towards the moon's centre (with a moon). [1]"""
+        return direction_vector(self.moon.azimuth, self.moon.elevation)
+
+    @cached_property
+    def _eclipse_field(self) -> eclipse.EclipseField:
+        """F and M of every sky direction at this sun and moon (``eclipse.line_of_sight``)."""
+        return eclipse.EclipseField.compute(
+            sun_direction=self.sun_direction, moon_direction=self.moon_direction,
+            sun_radius=self.sun.angular_radius, moon_radius=self.moon.angular_radius, turbidity=self.turbidity)
+
+    def _dimming_at(self, s) -> np.ndarray:
+        """Factor on the clear sky at sky-plane points s (..., 2) [tan]: ``_sky_dimming`` (3,)
+        above 99.8% obscuration; deeper, (..., 3)
+        (1 - b) S + b (F(w) + k c M(w) G(w)) times skylight (``eclipse``), G the clear sky's
+        shape 90 degrees from the sun over its shape at w (no circumsolar glow in the multiply
+        scattered light). [1]"""
+        b = self._deep
+        if not b:
+            return self._sky_dimming
+        w = _unit(s)
+        f, m = self._eclipse_field(w)
+        # the multiply scattered light has no circumsolar glow: the clear sky's shape at 90
+        # degrees from the sun (its gradation with zenith angle kept), over its shape here
+        glowless = clearsky.relative_sky(w[..., 2], np.full(w.shape[:-1], np.pi / 2),
+                                         sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
+                                         shape=self.shape, cie_type=self.cie_type) / self._relative_sky(s)
+        deep = f + eclipse.MULTIPLE_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
+        return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
+
+    def corona_radiance(self, w) -> np.ndarray:
+        """The corona as drawn (``eclipse.corona_drawn``: Baumbach's profile, ending with no edge
+        at ``eclipse.CORONA_REACH`` solar radii) at unit vectors w (..., 3) times b, 0 behind
+        the moon: B(r) / B_sun of the sun's clear mean disc radiance E_n / (pi r^2). [kcd/m^2]"""
+        w = np.asarray(w, dtype=np.float64)
+        r = self.sun.angular_radius
+        mean_disc = self.sun_normal_irradiance / (np.pi * r * r)
+        profile = eclipse.corona_drawn(_angle(w, self.sun_direction) / r)
+        profile = np.where(_angle(w, self.moon_direction) >= self.moon.angular_radius, profile, 0.0)
+        return (self._deep * profile)[..., None] * mean_disc
+
+    @cached_property
+    def corona_irradiance(self) -> np.ndarray:
+        """Horizontal irradiance (3,) of ``corona_radiance`` (the moon taken as concentric with the
+        sun, ``eclipse.corona_drawn_beyond``), dimmed by the cloud towards the sun. [klx]"""
+        if not self._deep:
+            return np.zeros(3)
+        beyond = eclipse.corona_drawn_beyond(self.moon.angular_radius / self.sun.angular_radius)
+        return (self._deep * beyond * self.sun_cloud_transmittance) * self.total_sun_irradiance()
+
+    def _corona_cells(self, grid: Grid):
+        """(flat cell indices, (3, n) cell integrals of corona L cos^4(theta) dA) of ``grid``'s cells
+        within ``eclipse.CORONA_REACH`` solar radii of the sun, 8 x 8 sub-samples a cell. [klx]"""
+        reach = eclipse.CORONA_REACH * self.sun.angular_radius
+        rows, cols = grid.shape
+        x, y = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
+        near = _angle(_unit(np.stack(np.broadcast_arrays(x, y), axis=-1)), self.sun_direction) <= reach + grid.pixel
+        idx = np.flatnonzero(near)
+        if idx.size == 0:
+            return idx, np.zeros((3, 0))
+        n = 8
+        offsets = ((np.arange(n) + 0.5) / n - 0.5) * grid.pixel
+        ox, oy = np.meshgrid(offsets, -offsets)
+        sx = np.broadcast_to(x, (rows, cols)).ravel()[idx, None, None] + ox
+        sy = np.broadcast_to(y, (rows, cols)).ravel()[idx, None, None] + oy
+        cos4 = 1.0 / (1.0 + sx * sx + sy * sy) ** 2
+        L = self.corona_radiance(_unit(np.stack([sx, sy], axis=-1))) * self.sun_cloud_transmittance
+        return idx, np.einsum("kijc,kij->ck", L, cos4) * (grid.pixel / n) ** 2
 
     def radiance(self, s, footprint=None) -> np.ndarray:
         """Sky radiance without the sun disc at sky-plane points s (..., 2) [tan]:
@@ -714,11 +805,18 @@ class ProceduralSky:
     @cached_property
     def clear_sky_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the clear sky (3,), no sun disc, eclipse-dimmed. [klx]"""
+        if self._deep:
+            s, weight = _outside_nodes(None)
+            L = _relative_nodes(self._clear_key, _outside_nodes, None) * (self.zenith_luminance * self._dimming_at(s))
+            return (L * weight[..., None]).sum(axis=(0, 1, 2))
         return self._relative_irradiance * (self.zenith_luminance * self._sky_dimming)
 
     @cached_property
     def sky_irradiance(self) -> np.ndarray:
-        """Horizontal irradiance of the sky with clouds (3,), no sun disc. [klx]"""
+        """Horizontal irradiance of the sky with clouds (3,), no sun disc (the corona in a deep
+        eclipse included). [klx]"""
+        if self._deep:
+            return self._outside(None) + self.corona_irradiance
         return self._outside(None)
 
     def unshadowed(self) -> np.ndarray:
@@ -731,7 +829,7 @@ class ProceduralSky:
         ``_outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
         with this clear sky (``_relative_nodes``)."""
         s, weight = _outside_nodes(extent)
-        L = _relative_nodes(self._clear_key, _outside_nodes, extent) * (self.zenith_luminance * self._sky_dimming)
+        L = _relative_nodes(self._clear_key, _outside_nodes, extent) * (self.zenith_luminance * self._dimming_at(s))
         return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
@@ -753,7 +851,8 @@ class ProceduralSky:
         _, col_at, col_frac = _lerp_nodes(cols, k)
         # clear_radiance at the nodes, the shape computed once for all frames (_relative_nodes)
         relative = _relative_nodes(self._clear_key, _raster_nodes, grid, k)
-        nodes = np.moveaxis(relative * (self.zenith_luminance * self._sky_dimming), -1, 0)
+        dimming = self._dimming_at(_raster_nodes(grid, k)[0]) if self._deep else self._sky_dimming
+        nodes = np.moveaxis(relative * (self.zenith_luminance * dimming), -1, 0)
         nodes = nodes.astype(np.float32)
         along = nodes[:, :, col_at] * (1 - col_frac) + nodes[:, :, col_at + 1] * col_frac  # (3, nodes, cols)
         weights = _solid_angles32(grid)
@@ -771,6 +870,9 @@ class ProceduralSky:
                              np.ascontiguousarray(transmittance, dtype=np.float64),
                              np.ascontiguousarray(glow, dtype=np.float32), weights, weighted)
         outside = self._outside(grid.extent)
+        if self._deep:  # the corona, cell by cell (its light beyond the grid is left out)
+            idx, corona = self._corona_cells(grid)
+            weighted.reshape(3, -1)[:, idx] += corona.astype(np.float32)
         if fold_period is not None:
             weighted = fold(weighted, sky_offset(grid), fold_period)
             grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
@@ -791,11 +893,25 @@ class ProceduralSky:
         tan = np.tan(theta)[:, None]
         s = np.stack([tan * np.sin(phi), tan * np.cos(phi)], axis=-1)
         image = np.zeros((height, width, 3), dtype=np.float64)
-        image[:upper] = self.radiance(s)
+        image[:upper] = self._with_clouds(self._clear(s, corona=False), s)
         # the sun: samples on a square grid of the plane tangent at the sun (gnomonic)
         r = self.sun.angular_radius
         spacing = min(r / 64.0, np.pi / height / 4.0)
-        n = int(np.ceil((r + 2 * spacing) / spacing))
+        self._deposit(image, lambda w: self._sun_samples(w, lambda centre, rho: spacing), r, spacing)
+        if self._deep:  # the corona, more coarsely: it is smooth beyond the limb
+            spacing = min(r / 16.0, np.pi / height / 4.0)
+            self._deposit(image, lambda w: self.corona_radiance(w) * self.sun_cloud_transmittance,
+                          eclipse.CORONA_REACH * r, spacing)
+        return image.astype(np.float32)
+
+    def _deposit(self, image, radiance, reach: float, spacing: float) -> None:
+        """Add to the equirectangular ``image`` (height, width, 3) [kcd/m^2] the light
+        ``radiance(w)`` (..., 3) [kcd/m^2] within ``reach`` [rad] of the sun, sampled every
+        ``spacing`` [rad] on the plane tangent at the sun, each sample's L cos(theta) d_omega
+        put into its texel over the texel's projected solid angle."""
+        height, width = image.shape[:2]
+        upper = height // 2
+        n = int(np.ceil((reach + 2 * spacing) / spacing))
         g = (np.arange(-n, n + 1)) * spacing
         gx, gy = np.meshgrid(g, g)
         _, e1, e2 = tangent_axes(self.sun.azimuth, self.sun.elevation)
@@ -803,8 +919,7 @@ class ProceduralSky:
         norm = np.linalg.norm(p, axis=-1)
         w = p / norm[..., None]
         d_omega = spacing**2 / norm**3
-        L = self._sun_samples(w, lambda centre, rho: spacing)
-        energy = L * (d_omega * np.maximum(w[..., 2], 0.0))[..., None]
+        energy = radiance(w) * (d_omega * np.maximum(w[..., 2], 0.0))[..., None]
         row = np.minimum((np.arccos(np.clip(w[..., 2], -1, 1)) / np.pi * height).astype(np.int64), height - 1)
         col = np.floor((np.arctan2(w[..., 0], w[..., 1]) / (2 * np.pi) + 0.5) * width).astype(np.int64) % width
         keep = (row < upper) & (energy.sum(axis=-1) > 0)
@@ -812,7 +927,6 @@ class ProceduralSky:
         theta0, theta1 = row * np.pi / height, (row + 1) * np.pi / height
         texel = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
         np.add.at(image, (row, col), energy / texel[:, None])
-        return image.astype(np.float32)
 
 
 @lru_cache(maxsize=8)

@@ -2,6 +2,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from datetime import timedelta
 
 import numpy as np
 import OpenImageIO as oiio
@@ -438,3 +439,19 @@ def test_cache_list_into_a_closed_pipe_and_a_missing_cache_folder(tmp_path):
                            str(tmp_path / "absent")], capture_output=True, text=True, cwd=ROOT)
     assert done.returncode == 2 and "no such cache folder" in done.stderr
     assert not (tmp_path / "absent").exists()
+
+
+def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
+    from dataclasses import replace as swap
+
+    from pipeline.cli import _eclipse_lines
+    from pipeline.resolve import load
+
+    config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
+    lines = _eclipse_lines(config)
+    assert "total" in lines[0] and "C2 18:40:37.8" in lines[0] and "totality 3 min 53.8 s" in lines[0]
+    assert lines[1].endswith("holds C2, C3")
+    site = config.sky.site
+    late = swap(config, sky=swap(config.sky, site=swap(site, start=site.start + timedelta(hours=2),
+                                                          end=site.end + timedelta(hours=2))))
+    assert "misses it altogether" in _eclipse_lines(late)[1]

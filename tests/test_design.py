@@ -11,7 +11,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
-PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "clouds", "ephemeris",
+PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "eclipse", "clouds", "ephemeris",
            "canopy", "_raster", "_filter", "shadow", "albedo", "camera", "foreground", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 

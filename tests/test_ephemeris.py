@@ -346,3 +346,21 @@ def test_site_from_degrees():
     assert site.latitude == pytest.approx(np.deg2rad(32.7767))
     assert site.longitude == pytest.approx(np.deg2rad(-96.7970))
     assert site.elevation == 131.0
+
+
+def test_circumstances_of_a_total_an_annular_and_no_eclipse():
+    from pipeline.ephemeris import circumstances
+
+    # Dallas 2024: the span holds only totality; the whole eclipse is found around it
+    total = circumstances(DALLAS, utc(2024, 4, 8, 18, 41), utc(2024, 4, 8, 18, 42))
+    assert total.kind == "total" and total.obscuration == 1.0
+    assert all(total.contacts[k] is not None for k in ("C1", "C2", "C3", "C4"))
+    assert abs(total.central - 231.5) <= 5.0  # 3 min 51-52 s published (test above)
+    # Albuquerque 2023 October 14, in the annular path: the moon smaller than the sun
+    annular = circumstances(Site.from_degrees(35.0844, -106.6504, 1510.0), utc(2023, 10, 14, 16, 30),
+                            utc(2023, 10, 14, 16, 40))
+    sun, moon = sun_and_moon(Site.from_degrees(35.0844, -106.6504, 1510.0), annular.maximum)
+    assert annular.kind == "annular" and 240.0 < annular.central < 300.0
+    assert annular.obscuration == pytest.approx((moon.angular_radius / sun.angular_radius) ** 2, rel=1e-6)
+    # a day later: nothing
+    assert circumstances(DALLAS, utc(2024, 4, 9, 18, 0), utc(2024, 4, 9, 19, 0)).kind is None

@@ -96,6 +96,8 @@ def test_a_run_writes_every_frame_the_video_and_run_json(reference):
     assert all(0 < s < 1 for s in fractions) and fractions[0] > fractions[-1]  # the moon covers more
     assert record["frames"][0]["sun"] == pytest.approx({"azimuth": 180.0, "elevation": 60.0})
     assert "moon" in record["frames"][0] and record["video"]["frames"] == 8
+    exposure = io.read_attributes(folder / "tiny.0003.exr", ["sunshade:exposure"])["sunshade:exposure"]
+    assert record["frames"][3]["exposure"] == pytest.approx(exposure) and exposure > 0
     assert {"numpy", "OpenImageIO", "python"} <= set(record["versions"])
     assert record["config"]["animation"]["frames"] == 8
     assert record["timings"]["frames"] > 0 and "ground" in record["timings"]["frame_stages"]

@@ -1,0 +1,187 @@
+"""The eclipse sky and the corona (pipeline/eclipse.py, pipeline/sky.py), against independent
+references: the ephemeris at a displaced site, quadrature of the corona's profile, the
+published totality sky (docs/method.md, "The eclipse sky")."""
+
+from datetime import datetime, timedelta, timezone
+from functools import lru_cache
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from pipeline import eclipse, ephemeris
+from pipeline.colour import REC709_LUMINANCE
+from pipeline.geometry import direction_vector
+from pipeline.sky import EquirectSky, MoonDisc, ProceduralSky, SunDisc
+
+DALLAS = ephemeris.Site.from_degrees(32.78, -96.80, 140.0)
+C2 = datetime(2024, 4, 8, 18, 40, 37, 848000, tzinfo=timezone.utc)  # contact_times at DALLAS
+C3 = datetime(2024, 4, 8, 18, 44, 31, 680000, tzinfo=timezone.utc)
+Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
+
+
+def dallas_sky(when, *, moon=True):
+    sun, m = ephemeris.sun_and_moon(DALLAS, when)
+    disc = SunDisc(sun.azimuth, sun.elevation, sun.angular_radius)
+    moon_disc = MoonDisc(m.azimuth, m.elevation, m.angular_radius) if moon else None
+    return ProceduralSky(3.08, disc, moon=moon_disc, altitude=140.0)
+
+
+def test_parallax_gives_the_ephemeris_at_a_displaced_site():
+    # S at a point 80 km east and 60 km north, from the observer's sun and moon by parallax,
+    # against ephem computed for an observer standing there (the ground curves away by d^2 / 2R)
+    when = C2 - timedelta(minutes=3)
+    sun, moon = ephemeris.sun_and_moon(DALLAS, when)
+    east, north = 80e3, 60e3
+    drop = (east**2 + north**2) / (2 * 6_371_000.0)
+    point = np.array([east, north, -drop])
+    lat = DALLAS.latitude + north / 6_371_000.0
+    lon = DALLAS.longitude + east / (6_371_000.0 * np.cos(DALLAS.latitude))
+    there_sun, there_moon = ephemeris.sun_and_moon(ephemeris.Site(lat, lon, DALLAS.elevation), when)
+    expected = 1 - ephemeris.obscured_fraction(ephemeris.separation(there_sun, there_moon),
+                                               there_sun.angular_radius, there_moon.angular_radius)
+    here = 1 - ephemeris.obscured_fraction(ephemeris.separation(sun, moon), sun.angular_radius, moon.angular_radius)
+    got = eclipse.point_sun_fraction(point, sun_direction=direction_vector(sun.azimuth, sun.elevation),
+                                     moon_direction=direction_vector(moon.azimuth, moon.elevation),
+                                     sun_radius=sun.angular_radius, moon_radius=moon.angular_radius)
+    assert abs(expected - here) > 0.01  # the displacement matters ...
+    assert got == pytest.approx(expected, abs=2e-3)  # ... and parallax gets it
+
+
+def test_a_partial_eclipse_sky_is_exactly_the_clear_sky_times_s():
+    # far outside the umbra (S = 0.3): the sky of before, the clear sky times S, to rounding
+    sun = SunDisc(np.radians(150.0), np.radians(50.0))
+    clear = ProceduralSky(3.0, sun)
+    e1 = np.array([np.cos(sun.azimuth), -np.sin(sun.azimuth), 0.0])
+    m = np.cos(0.004) * clear.sun_direction + np.sin(0.004) * e1
+    moon = MoonDisc(float(np.arctan2(m[0], m[1])), float(np.arcsin(m[2])), 1.03 * sun.angular_radius)
+    eclipsed = ProceduralSky(3.0, sun, moon=moon)
+    assert eclipsed._deep == 0.0 and 0.2 < eclipsed.sun_fraction() < 0.5
+    points = np.random.default_rng(1).uniform(-3, 3, (500, 2))
+    np.testing.assert_allclose(eclipsed.radiance(points), clear.radiance(points) * eclipsed.moon_visible, rtol=1e-12)
+    np.testing.assert_allclose(eclipsed.sky_irradiance, clear.sky_irradiance * eclipsed.moon_visible, rtol=1e-12)
+
+
+def test_corona_profile_integral():
+    def flux(a, b):
+        return 2 * integrate.quad(lambda r: r * eclipse.corona_profile(r), a, b, limit=200, epsabs=0.0, epsrel=1e-10)[0]
+
+    numeric = flux(1.0, 2.0) + flux(2.0, 100.0) + flux(100.0, np.inf)
+    assert eclipse.corona_beyond(1.0) == pytest.approx(numeric, rel=1e-6)
+    assert eclipse.corona_beyond(1.0) == pytest.approx(1.1e-6, rel=0.05)  # about half a full moon
+    tail = flux(1.05, 2.0) + flux(2.0, 30.0)
+    assert eclipse.corona_beyond(1.05) - eclipse.corona_beyond(30.0) == pytest.approx(tail, rel=1e-6)
+    drawn = 2 * integrate.quad(lambda r: r * eclipse.corona_drawn(r), 1.05, eclipse.CORONA_REACH,
+                               limit=200, epsabs=0.0, epsrel=1e-10)[0]
+    assert eclipse.corona_drawn_beyond(1.05) == pytest.approx(drawn, rel=1e-6)
+    assert eclipse.corona_drawn(eclipse.CORONA_REACH * (1 - 1e-9)) == pytest.approx(0.0, abs=1e-18)
+
+
+@lru_cache(maxsize=1)
+def totality():
+    return dallas_sky(C2 + (C3 - C2) / 2)
+
+
+def test_the_corona_in_the_raster_and_the_equirect_keeps_its_light():
+    sky = totality()
+    assert sky._deep == 1.0 and sky.sun_fraction() == 0.0
+    expected = sky.corona_irradiance  # as drawn: out to CORONA_REACH solar radii, with no edge
+    # cells of the sky raster near the sun, without the sky: the corona alone
+    from pipeline.geometry import sky_grid
+
+    q = 2e-3
+    centre = sky.sun_point / q
+    grid = sky_grid((int(-centre[1]) - 60, int(centre[0]) - 60), (120, 120), q)
+    idx, cells = sky._corona_cells(grid)
+    assert cells.sum(axis=1) == pytest.approx(expected, rel=0.015)  # 8 x 8 samples of the steep inner corona
+    image = np.zeros((256, 512, 3))
+    sky._deposit(image, sky.corona_radiance, eclipse.CORONA_REACH * sky.sun.angular_radius,
+                 sky.sun.angular_radius / 16)
+    assert EquirectSky(image.astype(np.float32)).total_irradiance() == pytest.approx(expected, rel=0.01)
+
+
+def test_dallas_totality_matches_the_published_sky():
+    # Sharp et al. 1971 and the 2017 sky-quality meters (docs/method.md, "The eclipse sky")
+    sky = totality()
+    image = sky.equirect(512).astype(np.float64)
+    elevation = 90 - (np.arange(256) + 0.5) * 180 / 256
+    lux = 1e3 * EquirectSky(image.astype(np.float32)).total_irradiance() @ Y
+    luminance = image @ Y
+    zenith = 1e3 * luminance[elevation > 85].mean()
+    band = (elevation > 0) & (elevation < 10)
+    assert 0.5 <= lux <= 10.0
+    assert 0.2 <= zenith <= 2.0
+    assert 1e3 * luminance[band].mean() >= 5 * zenith
+    day = dallas_sky(C2 + (C3 - C2) / 2, moon=False).equirect(512).astype(np.float64)
+    red_blue = image[band].reshape(-1, 3).mean(axis=0)
+    day_red_blue = day[band].reshape(-1, 3).mean(axis=0)
+    assert red_blue[0] / red_blue[2] > 1.2 * day_red_blue[0] / day_red_blue[2]
+    assert sky.sky_irradiance @ Y * 1e3 == pytest.approx(lux, rel=0.03)
+
+
+def test_the_light_falls_smoothly_into_totality_and_rises_after():
+    # open ground (sun times S plus the sky) every 5 s through second and third contact; the
+    # moon placed about the mid-totality sun at its true offset from the sun of the moment, so
+    # that the clear sky's shape is computed once (the sun moves 0.03 degrees in 2 minutes)
+    from pipeline.plan import offset_direction
+
+    fixed = totality().sun
+
+    def light(when):
+        sun, moon = ephemeris.sun_and_moon(DALLAS, when)
+        dx, dy = ephemeris.moon_offset_from_sun(sun, moon)
+        azimuth, elevation = offset_direction(fixed.azimuth, fixed.elevation, dx, dy)
+        sky = ProceduralSky(3.08, fixed, moon=MoonDisc(azimuth, elevation, moon.angular_radius), altitude=140.0)
+        return float(sky.sky_irradiance @ Y), float(sky.sun_fraction() * sky.total_sun_irradiance() @ Y)
+
+    sky_before, sun_before = np.array([light(C2 + timedelta(seconds=t)) for t in range(-60, 11, 5)]).T
+    sky_after, sun_after = np.array([light(C3 + timedelta(seconds=t)) for t in range(-10, 61, 5)]).T
+    before, after = sky_before + sun_before, sky_after + sun_after
+    # two decades from a minute before C2 to C2 (published: 2 to 2.5)
+    assert before[0] / before[12] > 100
+    assert np.all(np.diff(before) < 0) and np.all(np.diff(after) > 0)
+    # the sun's last sliver goes in the last seconds; the sky follows with no step
+    assert np.max(sky_before[:-1] / sky_before[1:]) < 1.7 and np.max(sky_after[1:] / sky_after[:-1]) < 1.7
+
+
+def test_the_totality_config_exposes_totality_without_clipping():
+    # the shipped config's auto-exposure limits hold the light of mid-totality (about 15.5
+    # stops under the day): the exposure meters it instead of stopping at its most
+    from pathlib import Path
+
+    from pipeline import composite
+    from pipeline.resolve import load
+
+    config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
+    auto = config.camera.auto_exposure
+    sky, day = totality(), dallas_sky(C2 + (C3 - C2) / 2, moon=False)
+    reference = day.sky_irradiance + day.total_sun_irradiance()
+    readings = np.geomspace(reference, sky.sky_irradiance, 60)  # four and a half decades down
+    readings = np.concatenate([readings, np.repeat(readings[-1:], 40, axis=0)])
+    exposure = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
+                                       time_constant=auto.time_constant, limits=auto.limits,
+                                       stops=config.camera.exposure)
+    metered = np.pi * 2.0**config.camera.exposure / (readings[-1] @ Y)
+    assert exposure[-1] == pytest.approx(metered, rel=1e-3)
+    assert np.log2(exposure[-1] / composite.exposure_for(reference)) < auto.limits[1]
+
+
+def test_the_crescents_are_reversed_after_third_contact():
+    # the lit sliver of the sun (its kernel's centroid from the disc's centre) lies on the far
+    # side 20 s after C3 from where it was 20 s before C2 (131 degrees round at Dallas, off the
+    # centre line: the moon's path misses the sun's centre): the pinhole images turn round
+    from pipeline.geometry import sky_offset
+    from pipeline.sky import sun_kernel
+
+    def sliver(when):
+        sky = dallas_sky(when)
+        kernel = sun_kernel(sky, sky.sun.angular_radius / 8)
+        weight = kernel.weighted[1]
+        rows, cols = np.indices(weight.shape)
+        x, y = kernel.grid.ground_from_raster(rows, cols)
+        centre = np.array([(weight * x).sum(), (weight * y).sum()]) / weight.sum()
+        return (centre - sky.sun_point) / sky.sun.angular_radius
+
+    before, after = sliver(C2 - timedelta(seconds=20)), sliver(C3 + timedelta(seconds=20))
+    assert np.linalg.norm(before) > 0.5 and np.linalg.norm(after) > 0.5  # thin slivers near the limb
+    assert before @ after / (np.linalg.norm(before) * np.linalg.norm(after)) < -0.5
