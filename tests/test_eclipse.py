@@ -144,9 +144,11 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
     assert np.max(sky_before[:-1] / sky_before[1:]) < 1.7 and np.max(sky_after[1:] / sky_after[:-1]) < 1.7
 
 
-def test_the_totality_config_exposes_totality_without_clipping():
-    # the shipped config's auto-exposure limits hold the light of mid-totality (about 15.5
-    # stops under the day): the exposure meters it instead of stopping at its most
+def test_the_totality_config_brings_totality_up_to_dusk_not_black():
+    # the shipped config's auto exposure follows the light of mid-totality (about 15.5 stops
+    # under the day) up to its most, 11 stops: a white ground at totality is then exposed 2 to 6
+    # stops under the day's (dusk: darker than the crescent frames, not black), where the
+    # day's is exposed at 2^stops
     from pathlib import Path
 
     from pipeline import composite
@@ -161,9 +163,12 @@ def test_the_totality_config_exposes_totality_without_clipping():
     exposure = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
                                        time_constant=auto.time_constant, limits=auto.limits,
                                        stops=config.camera.exposure)
-    metered = np.pi * 2.0**config.camera.exposure / (readings[-1] @ Y)
-    assert exposure[-1] == pytest.approx(metered, rel=1e-3)
-    assert np.log2(exposure[-1] / composite.exposure_for(reference)) < auto.limits[1]
+    day_white = exposure[0] * (readings[0] @ Y) / np.pi  # the day's white ground, exposed
+    white = exposure[-1] * (readings[-1] @ Y) / np.pi  # the same ground at totality
+    assert day_white == pytest.approx(2.0**config.camera.exposure, rel=1e-3)
+    assert exposure[-1] == pytest.approx(composite.exposure_for(reference) * 2.0**(auto.limits[1] + config.camera.exposure),
+                                         rel=1e-9)  # held at its most
+    assert 2.0**-6 < white / day_white < 2.0**-2
 
 
 def test_the_crescents_are_reversed_after_third_contact():
