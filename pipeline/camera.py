@@ -816,16 +816,36 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
-    rows, part = _ground_rows(camera)
+    rows, e = _seen_irradiance(camera, irradiance)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if len(rows):
-        fp, _ = _view_footprints(camera)
-        e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _albedo_in_view(camera, albedo)
         e = np.multiply(e, rho, out=e if len(e) >= len(rho) else None)  # (e rho) / pi in float32
         e *= np.float32(1.0 / np.pi)
         radiance[rows] = e.T.reshape(len(rows), camera.width, -1)
     return radiance, _ground_fractions(camera)[0], ground_distance(camera)
+
+
+def ground_irradiance(camera: Camera, *, irradiance) -> np.ndarray:
+    """The ground's horizontal irradiance E (height, width, 3) float32 that each pixel sees,
+    averaged over its ground footprint as ``ground_view`` averages it (the same filtered
+    chain), without the albedo; 0 where no ground is seen. [radiance x sr]"""
+    rows, e = _seen_irradiance(camera, irradiance)
+    out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    if len(rows):
+        out[rows] = e.T.reshape(len(rows), camera.width, -1)
+    return out
+
+
+def _seen_irradiance(camera: Camera, irradiance):
+    """(the image rows that see ground, E (channels, pixels) float32 over their footprints or
+    None without such rows): ``ground_view``'s and ``ground_irradiance``'s read of the
+    irradiance MipMaps (a MipMap or a sequence, finest first). [radiance x sr]"""
+    rows, _ = _ground_rows(camera)
+    if not len(rows):
+        return rows, None
+    fp, _ = _view_footprints(camera)
+    return rows, _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
 
 
 @functools.lru_cache(maxsize=1)

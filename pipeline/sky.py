@@ -776,12 +776,14 @@ class ProceduralSky:
             grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
         return SkyRaster(grid, weighted, outside)
 
-    def equirect(self, width: int) -> np.ndarray:
+    def equirect(self, width: int, *, parts: bool = False):
         """Equirectangular radiance image (width / 2, width, 3) float32 [kcd/m^2] in the module's
         convention (top row at the zenith, centre column north, east at three quarters), with the
         sun disc deposited area-correctly: each of many small samples of the disc carries
         L cos(theta) d_omega into the texel it falls in, divided by that texel's exact projected
-        solid angle, so the image's irradiance equals ``unshadowed()``. Below the horizon: 0."""
+        solid angle, so the image's irradiance equals ``unshadowed()``. Below the horizon: 0.
+        ``parts``: (the image, {"sun": the sun disc alone, "sky": the rest}), each float32 as
+        rounded from the float64 parts the image is the sum of (the light passes)."""
         if width < 4 or width % 2:
             raise ValueError(f"width must be even and at least 4, got {width}")
         height = width // 2
@@ -811,7 +813,10 @@ class ProceduralSky:
         row, col, energy = row[keep], col[keep], energy[keep]
         theta0, theta1 = row * np.pi / height, (row + 1) * np.pi / height
         texel = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
+        sky = image.copy() if parts else None
         np.add.at(image, (row, col), energy / texel[:, None])
+        if parts:
+            return image.astype(np.float32), {"sun": (image - sky).astype(np.float32), "sky": sky.astype(np.float32)}
         return image.astype(np.float32)
 
 

@@ -27,3 +27,9 @@ WHITE_BALANCES = ("daylight", "shade", "none")
 """What a picture shows as white, as a camera's white balance: ``daylight`` the open ground's
 light (sun and sky), ``shade`` the sky's light alone (the shade under trees comes out neutral and
 the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
+
+PASSES = ("sun", "sky", "alpha", "illuminance", "depth")
+"""The light passes a frame's EXR may hold beside its beauty (output.passes; docs/runs.md,
+"Light passes"): ``sun`` and ``sky`` the frame's light from the sun and from the sky (RGB, they
+sum to the beauty), ``alpha`` the foreground's coverage, ``illuminance`` the ground's horizontal
+illuminance [lux], ``depth`` the distance to the ground seen [m]."""
