@@ -6,6 +6,7 @@ render writes as each frame is done, so a run still going or killed has its repo
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import csv
 import json
 import math
@@ -17,7 +18,7 @@ from .runfolder import INDEX_FILE, RUN_FILE
 CSV_FILE = "light.csv"
 CURVE_FILE = "light-curve.png"
 SHEET_FILE = "contact-sheet.png"
-SHEET_FRAMES = 24
+SHEET_FRAMES = 12
 """The contact sheet shows at most this many frames, evenly spread over the done ones."""
 
 COLUMNS = ("frame", "time_s", "time_utc", "sun_elevation_deg", "sun_azimuth_deg", "S", "sun_lux", "sky_lux",
@@ -29,11 +30,19 @@ meter reads of it and the light the camera's exposure is set for [EV100]; that e
 
 
 def frame_records(folder: Path) -> list[dict]:
-    """The done frames' records of a run folder, by frame: those of index.json whose config hash
-    is the one most of its frames have (the run's), else run.json's frames. Raises RunError
-    when the folder holds neither."""
+    """The done frames' records of a run folder, by frame: run.json's when it was written after
+    index.json (a render ended there: the same records, in a file half the size), else
+    those of index.json whose config hash is the one most of its frames have (a run going, or
+    killed), else run.json's. Raises RunError when the folder holds neither."""
     folder = Path(folder)
     entries = []
+    try:
+        if (folder / RUN_FILE).stat().st_mtime_ns >= (folder / INDEX_FILE).stat().st_mtime_ns:
+            records = json.loads((folder / RUN_FILE).read_text()).get("frames")
+            if isinstance(records, list) and records:
+                return sorted((r for r in records if isinstance(r, dict) and "frame" in r), key=lambda r: r["frame"])
+    except (OSError, ValueError, AttributeError):
+        pass
     try:
         entries = list(json.loads((folder / INDEX_FILE).read_bytes()).get("frames", {}).values())
     except (OSError, ValueError, AttributeError):
@@ -112,8 +121,8 @@ def write_light_curve(folder: Path, table, *, eclipse: bool) -> Path | None:
 
     t = [r["time_s"] for r in table]
     floor = 1e-3  # lx: a dark sun is drawn at the axis' foot, not dropped from a log axis
-    fig, (ax, ev) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, height_ratios=(3, 1.4),
-                                 layout="constrained")
+    fig, (ax, ev) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, height_ratios=(3, 1.4))
+    fig.subplots_adjust(left=0.1, right=0.9, top=0.94, bottom=0.09, hspace=0.08)
     for key, label, style in (("open_ground_lux", "open ground (sun + sky)", "k-"),
                               ("sun_lux", "sun", "-"), ("sky_lux", "sky", "-")):
         ax.plot(t, [max(r[key], floor) for r in table], style, label=label, lw=1.5)
@@ -157,7 +166,7 @@ def write_light_curve(folder: Path, table, *, eclipse: bool) -> Path | None:
 
 def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, width: int = 240) -> Path | None:
     """contact-sheet.png: at most ``count`` of the done frames' PNGs, evenly spread, each
-    ``width`` px wide [px] with its number and S, in rows of six. None without a frame's PNG."""
+    ``width`` px wide [px] with its number and S, in rows of four. None without a frame's PNG."""
     from PIL import Image, ImageDraw
 
     found = [(r, Path(folder) / f"{r['file']}.png") for r in records if "file" in r]
@@ -166,13 +175,15 @@ def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, wid
         return None
     if len(found) > count:
         found = [found[round(i * (len(found) - 1) / (count - 1))] for i in range(count)]
-    thumbs = []
-    for record, png in found:
+    def thumbnail(png):
         with Image.open(png) as image:
             image = image.convert("RGB")
             height = max(1, round(image.height * width / image.width))
-            thumbs.append((record, image.resize((width, height), Image.Resampling.BILINEAR)))
-    across, gap, label = min(6, len(thumbs)), 4, 14
+            return image.resize((width, height), Image.Resampling.BILINEAR)
+
+    with concurrent.futures.ThreadPoolExecutor(4) as pool:  # PNG decoding lets go of the GIL
+        thumbs = list(zip((r for r, _ in found), pool.map(thumbnail, [p for _, p in found])))
+    across, gap, label = min(4, len(thumbs)), 4, 14
     cell = (width, max(t.height for _, t in thumbs) + label)
     down = math.ceil(len(thumbs) / across)
     sheet = Image.new("RGB", (across * (cell[0] + gap) + gap, down * (cell[1] + gap) + gap), (32, 32, 32))
@@ -181,7 +192,7 @@ def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, wid
         x, y = gap + (i % across) * (cell[0] + gap), gap + (i // across) * (cell[1] + gap)
         sheet.paste(thumb, (x, y))
         s = record.get("sun_fraction")
-        draw.text((x + 2, y + thumb.height + 1), f"{record['frame']}" + (f"  S {s:.3f}" if s is not None else ""),
+        draw.text((x + 2, y + thumb.height + 1), f"{record['frame']}" + (f"   S = {s:.3f}" if s is not None else ""),
                   fill=(230, 230, 230))
     path = Path(folder) / SHEET_FILE
     temporary = path.with_name(f".{SHEET_FILE}.tmp.png")
@@ -198,6 +209,8 @@ def write_report(folder: Path) -> list[Path]:
     table = rows(records)
     written = [write_csv(folder, table)]
     eclipse = any("moon" in r for r in records)
-    written += [p for p in (write_light_curve(folder, table, eclipse=eclipse),
-                            write_contact_sheet(folder, records)) if p is not None]
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:  # the sheet's PNGs decode meanwhile
+        sheet = pool.submit(write_contact_sheet, folder, records)
+        curve = write_light_curve(folder, table, eclipse=eclipse)
+        written += [p for p in (curve, sheet.result()) if p is not None]
     return written
