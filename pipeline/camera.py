@@ -1017,15 +1017,16 @@ def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) 
     return (upper * (1.0 - fr) + lower * fr).astype(np.float32)
 
 
-def background(camera: Camera, *, irradiance, albedo: MipMap, sky):
+def background(camera: Camera, *, irradiance, albedo: MipMap, sky, seen_sky=None):
     """The background B of the composite: ground and sky blended by the horizon's coverage.
 
     Returns radiance (height, width, 3) float32 = f ground + (1 - f) sky [radiance], with f the
     pixel's ground fraction, and distance (height, width) float32, the ground's (inf where
-    there is no ground) [m]; see ``ground_view`` and ``sky_view``.
+    there is no ground) [m]; see ``ground_view`` and ``sky_view``. ``seen_sky``: the sky's
+    ``sky_view`` made before (not changed), so that a frame's light passes read the sky once.
     """
     ground, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
-    sky_radiance = sky_view(camera, sky)
+    sky_radiance = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()
     ground *= fraction[..., None]  # f ground + (1 - f) sky in float32, in place
     sky_radiance *= _ground_fractions(camera)[1]
     ground += sky_radiance

@@ -133,8 +133,10 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
                            parts=bool({"sun", "sky"} & set(passes)))
     clock.lap("ground")
     view = plan.camera
+    seen_sky = camera.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
+    maps = irradiance_maps(plan, ground)
     background, distance = camera.background(
-        view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
+        view, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky, seen_sky=seen_sky)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
@@ -174,14 +176,15 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     layers = {}
     if passes:
         layers = light_layers(plan, passes, ground=ground, sky=sky, foreground=passes_fg,
-                              sun_fraction=sun_fraction, sky_scale=sky_scale, distance=distance)
+                              sun_fraction=sun_fraction, sky_scale=sky_scale, distance=distance,
+                              seen_sky=seen_sky, maps=maps)
         clock.lap("passes")
     return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance,
                        open_ground_light(sky, exposure, balance), layers)
 
 
 def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground, sun_fraction: float,
-                 sky_scale: float, distance: np.ndarray) -> dict:
+                 sky_scale: float, distance: np.ndarray, seen_sky=None, maps=None) -> dict:
     """The light passes of a frame (docs/runs.md, "Light passes"), {name: (rows, cols, channels)
     float32}, for the names in ``passes``:
 
@@ -194,7 +197,8 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
     ``alpha`` (1): the foreground's coverage A [1] (0 without one). ``illuminance`` (1): the
     horizontal illuminance of the ground each pixel sees [lx] (luminance of the irradiance,
     x 1000; 0 where the pixel sees no ground). ``depth`` (1): the distance to the ground seen,
-    inf at the sky [m]."""
+    inf at the sky [m]. ``seen_sky``: the sky's ``camera.sky_view``, and ``maps`` the ground's
+    ``irradiance_maps``, if made already."""
     config, view = plan.config, plan.camera
     layers = {}
     region = foreground[3] if foreground is not None else None
@@ -204,12 +208,13 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
     if "sun" in passes or "sky" in passes:
         albedo = ground_albedo(config.ground)
         dark = _DarkSky()
-        for name, part, seen_sky in (("sky", ground.sky_part, sky), ("sun", ground.sun_part(), dark)):
+        for name, part, light_of in (("sky", ground.sky_part, sky), ("sun", ground.sun_part(), dark)):
             if name not in passes:
                 continue
-            behind, _ = camera.background(view, irradiance=irradiance_maps(plan, part), albedo=albedo, sky=seen_sky)
+            behind, _ = camera.background(view, irradiance=irradiance_maps(plan, part), albedo=albedo, sky=light_of,
+                                          seen_sky=seen_sky if name == "sky" else None)
             if config.sky.haze > 0:
-                _apply_haze(behind, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, seen_sky))
+                _apply_haze(behind, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, light_of))
             if foreground is not None:
                 f_sun, f_sky = foreground[0], foreground[1]
                 if name == "sky":
@@ -224,7 +229,7 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
     if "alpha" in passes:
         layers["alpha"] = alpha[..., None]
     if "illuminance" in passes:
-        irradiance = camera.ground_irradiance(view, irradiance=irradiance_maps(plan, ground))
+        irradiance = camera.ground_irradiance(view, irradiance=maps or irradiance_maps(plan, ground))
         layers["illuminance"] = (irradiance @ REC709_LUMINANCE.astype(np.float32) * np.float32(LUX_PER_KLX))[..., None]
     if "depth" in passes:
         layers["depth"] = np.asarray(distance, dtype=np.float32)[..., None].copy()

@@ -107,10 +107,11 @@ def contacts(table) -> list[tuple[str, float]]:
     return found
 
 
-def write_light_curve(folder: Path, table, *, eclipse: bool) -> Path | None:
+def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = None) -> Path | None:
     """light-curve.png: the open ground's illuminance from the sun, the sky and both on a log
     axis [lx] with the light the camera's exposure is set for, S on a second axis, against film
-    time [s]; an eclipse's contacts marked. None when no frame has its light recorded."""
+    time [s]; an eclipse's contacts marked; titled with the run's ``name`` (default: the
+    folder's). None when no frame has its light recorded."""
     table = [r for r in table if r["time_s"] is not None]
     if not table:
         return None
@@ -152,7 +153,7 @@ def write_light_curve(folder: Path, table, *, eclipse: bool) -> Path | None:
         ax.text(when, 1.0, f" {label}", transform=ax.get_xaxis_transform(), va="top", fontsize=8,
                 color="tab:purple")
     first, last = table[0].get("time_utc"), table[-1].get("time_utc")
-    title = f"{Path(folder).name}: {len(table)} frames"
+    title = f"{name or Path(folder).name}: {len(table)} frames"
     if first and last:
         title += f", {first[:19]} to {last[11:19]} UTC"
     ax.set_title(title, fontsize=10)
@@ -211,6 +212,7 @@ def write_report(folder: Path) -> list[Path]:
     eclipse = any("moon" in r for r in records)
     with concurrent.futures.ThreadPoolExecutor(1) as pool:  # the sheet's PNGs decode meanwhile
         sheet = pool.submit(write_contact_sheet, folder, records)
-        curve = write_light_curve(folder, table, eclipse=eclipse)
+        name = str(records[0].get("file", "")).rsplit(".", 1)[0] if records else None  # NAME.0000
+        curve = write_light_curve(folder, table, eclipse=eclipse, name=name or None)
         written += [p for p in (curve, sheet.result()) if p is not None]
     return written
