@@ -236,7 +236,11 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         if todo:  # the light curve and contact sheet of what is done (docs/runs.md, "The report")
             from .report import write_report
 
-            write_report(folder)
+            try:
+                write_report(folder)
+            except Exception as exc:  # noqa: BLE001 -- the frames are done; say it, as a warning
+                warnings.warn(f"{folder}: the report was not written ({exc}); `sunshade report {folder}` "
+                              "writes it", FrameWarning, stacklevel=2)
     finally:
         if compiling is not None:  # never left writing numba's cache as the command ends
             compiling.join()
