@@ -250,13 +250,16 @@ class OutputConfig:
     ``folder`` (relative to the current folder; default ``renders/NAME``); video : a name in
     VIDEOS; half : EXR frames in half floats (else float32); passes : the light passes each
     EXR holds as layers beside the beauty, names in ``vocabulary.PASSES`` in their order there
-    (empty: none, and the EXR's bytes are as before passes existed)."""
+    (empty: none, and the EXR's bytes are as before passes existed); report : whether a render
+    that renders frames ends by writing the run's report (light.csv, light curve, contact
+    sheet; docs/runs.md, "The report")."""
 
     name: str
     folder: Path
     video: str = "mp4"
     half: bool = True
     passes: tuple[str, ...] = ()
+    report: bool = True
 
 
 @dataclass(frozen=True)
@@ -269,7 +272,7 @@ class RenderConfig:
     sun_cells: int = 16
 
 
-_NOT_IN_DIGEST = {"output": ("name", "folder", "video"), "render": ("jobs",)}
+_NOT_IN_DIGEST = {"output": ("name", "folder", "video", "report"), "render": ("jobs",)}
 """Values that change where or how fast frames are made, not their bytes."""
 
 
@@ -637,7 +640,7 @@ _VALID_KEYS = {
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
     "foreground": ("model", "sun", "sky", "alpha"),
     "animation": ("frames", "fps"),
-    "output": ("name", "folder", "video", "half", "passes"),
+    "output": ("name", "folder", "video", "half", "passes", "report"),
     "render": ("jobs", "sun_cells"),
 }
 """Every key each section accepts (a layer's index written []), whichever the parser reads:
@@ -723,8 +726,11 @@ def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputC
     if not isinstance(half, bool):
         s.fail("half", f"must be true or false, not {_kind(half)}")
     passes = _parse_passes(s)
+    report = s.raw("report", OutputConfig.report)
+    if not isinstance(report, bool):
+        s.fail("report", f"must be true or false, not {_kind(report)}")
     s.done()
-    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half, passes)
+    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half, passes, report)
 
 
 def _parse_passes(s: _Section) -> tuple[str, ...]:

@@ -233,7 +233,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         timings["total"] = time.perf_counter() - started
         write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
                        threads=threads, scheduler=scheduler, rendered=todo, source_hash=source_hash)
-        if todo:  # the light curve and contact sheet of what is done (docs/runs.md, "The report")
+        if todo and config.output.report:  # the light curve and contact sheet (docs/runs.md, "The report")
             from .report import write_report
 
             try:

@@ -87,6 +87,7 @@ def test_without_passes_the_hash_and_the_frame_are_as_before(tmp_path):
     plain = config_of(grove(), tmp_path)
     assert config_of({**grove(), "output": {"passes": []}}, tmp_path).digest() == plain.digest()
     assert config_of({**grove(), "output": {"passes": ["depth"]}}, tmp_path).digest() != plain.digest()
+    assert config_of({**grove(), "output": {"report": False}}, tmp_path).digest() == plain.digest()
     # the order a config names them in does not matter
     a = config_of({**grove(), "output": {"passes": ["sky", "sun"]}}, tmp_path)
     assert a.output.passes == ("sun", "sky") and a.digest() == config_of(
@@ -185,6 +186,12 @@ def test_frame_and_sky_commands_honour_the_passes(tmp_path, capsys):
     parts = np.stack([layers[f"sun.{c}"] + layers[f"sky.{c}"] for c in "RGB"], axis=-1)
     assert np.abs(parts - beauty).max() <= 1e-6 * beauty.max()
     assert layers["sun.R"].max() > 100 * layers["sky.R"].max()  # the disc is in the sun layer
+
+
+def test_output_report_must_be_true_or_false(inputs, capsys):
+    folder, out = inputs
+    config = write_config(folder, {**grove(), "output": {"report": "yes"}})
+    assert_refused(config, out, capsys, "output.report", commands=("check", "render"))
 
 
 def test_yaml_names_a_single_pass(tmp_path):

@@ -38,6 +38,7 @@ TINY = {
     "camera": {"resolution": [96, 64]},
     "render": {"sun_cells": 8},
     "animation": {"frames": 8, "fps": 12},
+    "output": {"report": False},  # its ~30 renders in their own processes: no matplotlib (test_passes.py)
 }
 
 
