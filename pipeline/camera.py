@@ -816,16 +816,36 @@ def ground_view(camera: Camera, *, irradiance, albedo: MipMap):
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
-    rows, part = _ground_rows(camera)
+    rows, e = _seen_irradiance(camera, irradiance)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if len(rows):
-        fp, _ = _view_footprints(camera)
-        e = _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
         rho = _albedo_in_view(camera, albedo)
         e = np.multiply(e, rho, out=e if len(e) >= len(rho) else None)  # (e rho) / pi in float32
         e *= np.float32(1.0 / np.pi)
         radiance[rows] = e.T.reshape(len(rows), camera.width, -1)
     return radiance, _ground_fractions(camera)[0], ground_distance(camera)
+
+
+def ground_irradiance(camera: Camera, *, irradiance) -> np.ndarray:
+    """The ground's horizontal irradiance E (height, width, 3) float32 that each pixel sees,
+    averaged over its ground footprint as ``ground_view`` averages it (the same filtered
+    chain), without the albedo; 0 where no ground is seen. [radiance x sr]"""
+    rows, e = _seen_irradiance(camera, irradiance)
+    out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    if len(rows):
+        out[rows] = e.T.reshape(len(rows), camera.width, -1)
+    return out
+
+
+def _seen_irradiance(camera: Camera, irradiance):
+    """(the image rows that see ground, E (channels, pixels) float32 over their footprints or
+    None without such rows): ``ground_view``'s and ``ground_irradiance``'s read of the
+    irradiance MipMaps (a MipMap or a sequence, finest first). [radiance x sr]"""
+    rows, _ = _ground_rows(camera)
+    if not len(rows):
+        return rows, None
+    fp, _ = _view_footprints(camera)
+    return rows, _filtered_chain(irradiance if isinstance(irradiance, (tuple, list)) else (irradiance,), fp)
 
 
 @functools.lru_cache(maxsize=1)
@@ -997,15 +1017,16 @@ def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) 
     return (upper * (1.0 - fr) + lower * fr).astype(np.float32)
 
 
-def background(camera: Camera, *, irradiance, albedo: MipMap, sky):
+def background(camera: Camera, *, irradiance, albedo: MipMap, sky, seen_sky=None):
     """The background B of the composite: ground and sky blended by the horizon's coverage.
 
     Returns radiance (height, width, 3) float32 = f ground + (1 - f) sky [radiance], with f the
     pixel's ground fraction, and distance (height, width) float32, the ground's (inf where
-    there is no ground) [m]; see ``ground_view`` and ``sky_view``.
+    there is no ground) [m]; see ``ground_view`` and ``sky_view``. ``seen_sky``: the sky's
+    ``sky_view`` made before (not changed), so that a frame's light passes read the sky once.
     """
     ground, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
-    sky_radiance = sky_view(camera, sky)
+    sky_radiance = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()
     ground *= fraction[..., None]  # f ground + (1 - f) sky in float32, in place
     sky_radiance *= _ground_fractions(camera)[1]
     ground += sky_radiance

@@ -10,18 +10,24 @@ else (the work is in the stages); one place shows the whole command line.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import inspect
 import os
 import sys
 import time
 import traceback
+import types
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__, paths
 from .cores import CLUSTER_TIMEOUT
 from .errors import BadInput, SunshadeError, WorkerError, one_line, one_line_warnings
+from .vocabulary import PASSES
+
+SKY_PASSES = ("sun", "sky")
+"""The light passes ``sunshade sky`` writes (the others need a ground and a camera)."""
 
 if TYPE_CHECKING:
     from .cache import Cache
@@ -143,6 +149,10 @@ def _parser():
 
     frame = command(_run_frame, [config, moment, picture, threads, store])
     frame.add_argument("--half", action="store_true", help="EXR: half floats instead of float32")
+    frame.add_argument("--passes", nargs="?", const=",".join(PASSES), default=None, metavar="NAMES",
+                       help="EXR: also the light passes as layers, comma-separated names of "
+                       f"{', '.join(PASSES)} (default with the flag alone: all; without it: "
+                       "output.passes)")
 
     mask = command(_run_mask, [config, picture])
     mask.add_argument("--frame", type=int, default=0, help="cycle frame (default 0)")
@@ -151,8 +161,15 @@ def _parser():
 
     sky = command(_run_sky, [config, moment, png])
     sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
+    sky.add_argument("--passes", nargs="?", const="sun,sky", default=None, metavar="NAMES",
+                     help="EXR: also the sun disc and the sky without it as layers sun and sky "
+                     "(names: sun, sky; default with the flag alone: both; without it: those of "
+                     "output.passes)")
     sky.add_argument("-o", "--output", required=True, help="output EXR (radiance) or PNG "
                      "(tone-mapped) file")
+
+    report = command(_run_report, [])
+    report.add_argument("folder", help="a run's folder (output.folder), done, going or killed")
 
     figures = command(_run_figures, [store])
     figures.add_argument("--output", default="figures", help="folder (default ./figures)")
@@ -531,23 +548,29 @@ def _run_frame(args) -> int:
     from .composite import display
     from .frame import render_frame
     from .plan import plan_run
-    from .run import frame_attributes
+    from .run import exr_layers, frame_attributes
 
     output = _checked_output(args.output)
     suffix = output.suffix.lower()
     _check_threads(args)
     if args.half and suffix != ".exr":
         raise BadInput("--half is for EXR output")
+    passes = _passes_flag(args.passes, PASSES)
+    if passes and suffix != ".exr":
+        raise BadInput("--passes is for EXR output")
     config = _load(args, named_frames=False)
+    if passes is not None:
+        config = dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes))
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
-    result = render_frame(plan_run(config), args.frame, store=_store(args.cache), workers=args.threads)
+    result = render_frame(plan_run(config), args.frame, store=_store(args.cache), workers=args.threads,
+                          passes=config.output.passes if suffix == ".exr" else ())
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.radiance)):
         raise BadInput(f"{args.config}: the frame overflowed; lower the sky's radiance")
     if suffix == ".exr":
         io.write_exr(output, result.radiance, frame_attributes(config, result, config.digest()),
-                     half=args.half)
+                     half=args.half, layers=exr_layers(result, args.half))
     else:
         io.write_png(output, display(result.radiance, exposure=result.exposure, transform=config.camera.display,
                                      balance=result.balance))
@@ -555,6 +578,18 @@ def _run_frame(args) -> int:
     print(f"sunshade: frame {args.frame}, {cols} x {rows} px, S = {result.sun_fraction:.4f}, "
           f"in {elapsed:.2f} s; wrote {output}")
     return 0
+
+
+def _passes_flag(value, valid) -> tuple[str, ...] | None:
+    """The pass names of a ``--passes NAMES`` flag, in ``vocabulary.PASSES``' order (None: no
+    flag); an unknown name is a one-line error naming the flag."""
+    if value is None:
+        return None
+    names = [n.strip() for n in value.split(",") if n.strip()]
+    for name in names:
+        if name not in valid:
+            raise BadInput(f"--passes: unknown pass {name!r}; valid: {', '.join(valid)}")
+    return tuple(p for p in PASSES if p in names)
 
 
 def _check_frame(frame: int, count: int, flag: str, key: str) -> None:
@@ -618,27 +653,61 @@ def _run_sky(args) -> int:
     png = output if exr is None else (_checked_output(str(output.with_suffix(".png"))) if args.png else None)
     if not 8 <= args.width <= 16384 or args.width % 2:
         raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
+    passes = _passes_flag(args.passes, SKY_PASSES)
     config = _load(args, named_frames=False)
+    if passes is None:
+        passes = tuple(p for p in config.output.passes if p in SKY_PASSES)
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     scene = scene_at(config, args.frame)
     sky = load_sky(config.sky, scene)
     if not hasattr(sky, "equirect"):
         raise BadInput(f"{args.config}: sunshade sky writes the cie and preetham skies (sky.model is "
                        f"{config.sky.model}; an hdri sky is its image)")
-    image = sky.equirect(args.width)
+    image, parts = sky.equirect(args.width, parts=True) if passes else (sky.equirect(args.width), None)
     attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),
                   "sunshade:version": __version__}
     if scene.sun is not None:
         attributes["sunshade:sun_azimuth_elevation"] = (np.degrees(scene.sun.azimuth),
                                                         np.degrees(scene.sun.elevation))
+    layers = None
+    if passes:  # as a frame's: the standard attributes and the layers (docs/runs.md)
+        from .frame import open_ground_light
+        from .run import LAYER_CHANNELS, standard_attributes
+
+        light = open_ground_light(sky, 1.0, None)
+        attributes.update(standard_attributes(
+            dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes)),
+            types.SimpleNamespace(scene=scene, light=light)))
+        attributes.pop("sunshade:camera_ev100", None)  # no camera here
+        layers = {LAYER_CHANNELS[name]: (parts[name], "float") for name in passes}
     written = []
     if exr is not None:
-        io.write_exr(exr, image, attributes)
+        io.write_exr(exr, image, attributes, layers=layers)
         written.append(exr)
     if png is not None:
         io.write_png(png, display_sky(image))
         written.append(png)
     print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _run_report(args) -> int:
+    """write a run's light curve, contact sheet and light.csv into its folder
+
+    Write light.csv (the open ground's light per done frame: lux from the sun and the sky, S,
+    the sun's elevation and azimuth, EV100 and the camera's exposure, the white balance),
+    light-curve.png and contact-sheet.png into a run's folder, from its index.json: a run
+    still going or killed has them for the frames done so far (docs/runs.md, "The report").
+    """
+    from .report import write_report
+
+    folder = _flag_path("FOLDER", args.folder)
+    if not folder.is_dir():
+        raise BadInput(f"{folder}: no such folder")
+    started = time.perf_counter()
+    written = write_report(folder)
+    print(f"sunshade: report in {time.perf_counter() - started:.2f} s; wrote "
+          f"{', '.join(str(p) for p in written)}")
     return 0
 
 

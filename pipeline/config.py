@@ -23,7 +23,7 @@ import yaml
 from . import __version__, paths
 from .constants import SUN_RADIUS_DEG
 from .errors import ConfigError
-from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES, PROCEDURAL_MODELS,
+from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES, PASSES, PROCEDURAL_MODELS,
                          SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
 
 LAYOUTS = ("isolated", "periodic")
@@ -248,12 +248,18 @@ VIDEOS = ("mp4", "gif", "none")
 class OutputConfig:
     """Where a run goes: frames ``name.0000.exr`` and ``.png`` and the video ``name.mp4`` in
     ``folder`` (relative to the current folder; default ``renders/NAME``); video : a name in
-    VIDEOS; half : EXR frames in half floats (else float32)."""
+    VIDEOS; half : EXR frames in half floats (else float32); passes : the light passes each
+    EXR holds as layers beside the beauty, names in ``vocabulary.PASSES`` in their order there
+    (empty: none, and the EXR's bytes are as before passes existed); report : whether a render
+    that renders frames ends by writing the run's report (light.csv, light curve, contact
+    sheet; docs/runs.md, "The report")."""
 
     name: str
     folder: Path
     video: str = "mp4"
     half: bool = True
+    passes: tuple[str, ...] = ()
+    report: bool = True
 
 
 @dataclass(frozen=True)
@@ -266,7 +272,7 @@ class RenderConfig:
     sun_cells: int = 16
 
 
-_NOT_IN_DIGEST = {"output": ("name", "folder", "video"), "render": ("jobs",)}
+_NOT_IN_DIGEST = {"output": ("name", "folder", "video", "report"), "render": ("jobs",)}
 """Values that change where or how fast frames are made, not their bytes."""
 
 
@@ -299,6 +305,8 @@ class Config:
                 values[section].pop(name)
         if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
             values["camera"].pop("auto_exposure")
+        if not values["output"]["passes"]:  # without passes a config hashes as it always did
+            values["output"].pop("passes")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
@@ -662,7 +670,7 @@ _VALID_KEYS = {
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
     "foreground": ("model", "sun", "sky", "alpha"),
     "animation": ("frames", "fps"),
-    "output": ("name", "folder", "video", "half"),
+    "output": ("name", "folder", "video", "half", "passes", "report"),
     "render": ("jobs", "sun_cells"),
 }
 """Every key each section accepts (a layer's index written []), whichever the parser reads:
@@ -747,8 +755,30 @@ def _parse_output(s: _Section, path: Path, named_frames: bool = True) -> OutputC
     half = s.raw("half", OutputConfig.half)
     if not isinstance(half, bool):
         s.fail("half", f"must be true or false, not {_kind(half)}")
+    passes = _parse_passes(s)
+    report = s.raw("report", OutputConfig.report)
+    if not isinstance(report, bool):
+        s.fail("report", f"must be true or false, not {_kind(report)}")
     s.done()
-    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half)
+    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half, passes, report)
+
+
+def _parse_passes(s: _Section) -> tuple[str, ...]:
+    """output.passes: a list of names in PASSES (or one name), each once; returned in PASSES'
+    order, so that the same set of passes hashes and writes the same way."""
+    passes = s.raw("passes", [])
+    if passes is None:
+        passes = []
+    if isinstance(passes, str):
+        passes = [passes]
+    if not isinstance(passes, list):
+        s.fail("passes", f"must be a list of pass names ({', '.join(PASSES)}), not {_kind(passes)}")
+    for name in passes:
+        if name not in PASSES:
+            s.fail("passes", f"unknown pass {name!r}; valid: {', '.join(PASSES)}")
+    if len(set(passes)) != len(passes):
+        s.fail("passes", "names a pass more than once")
+    return tuple(p for p in PASSES if p in passes)
 
 
 def _parse_render(s: _Section) -> RenderConfig:

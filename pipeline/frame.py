@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -70,7 +70,9 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap,
 class FrameResult:
     """radiance : (rows, cols, 3) float32 scene-linear [kcd/m^2]; sun_fraction : S [1];
     scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster;
-    balance : the white balance's gains for display (3,) [1]."""
+    balance : the white balance's gains for display (3,) [1]; light : the open ground's light
+    (``open_ground_light``); layers : the light passes asked for, {name: (rows, cols,
+    channels) float32} (``light_layers``), empty when none were."""
 
     radiance: np.ndarray
     sun_fraction: float
@@ -78,25 +80,63 @@ class FrameResult:
     exposure: float
     ground: GroundResult
     balance: np.ndarray | None = None
+    light: dict | None = None
+    layers: dict = field(default_factory=dict)
+
+
+LUX_PER_KLX = 1000.0
+INCIDENT_METER_C = 250.0
+"""The calibration constant C of an incident-light meter with a flat receptor (ISO 2720:1974,
+240 to 400 for flat receptors; 250 as commonly used): EV100 = log2(E / 2.5), E in lux. [lx s]"""
+
+
+def ev100(lux: float) -> float:
+    """The exposure value at ISO 100 that an incident-light meter gives for horizontal
+    illuminance ``lux`` [lx]: log2(E 100 / C) (``INCIDENT_METER_C``); None without light. [EV]"""
+    return float(np.log2(lux * 100.0 / INCIDENT_METER_C)) if lux > 0 else None
+
+
+def open_ground_light(sky, exposure: float, balance) -> dict:
+    """The light of a frame on open ground, for the run's report and the EXR's attributes:
+    ``sun_lux`` the sun's horizontal illuminance now (its clear light times S) and
+    ``sky_lux`` the sky's (clouds and the moon dim it) [lx, for a procedural sky; an HDRI's or
+    a uniform sky's in its own units x 1000]; ``ev100`` what an incident meter reads of the
+    two together [EV]; ``camera_ev100`` the light the camera's exposure [m^2/kcd] is set for
+    (pi / exposure [klx], a white ground at 1) as EV100; ``white_balance`` the display gains
+    (3,) [1]. Sums by luminance (Rec.709) of the sky model's own irradiances (lighting.meter's
+    reading)."""
+    sun = float(sky.sun_fraction()) * np.asarray(sky.total_sun_irradiance(), dtype=np.float64)
+    sun_lux = float(sun @ REC709_LUMINANCE) * LUX_PER_KLX
+    sky_lux = float(np.asarray(sky.sky_irradiance, dtype=np.float64) @ REC709_LUMINANCE) * LUX_PER_KLX
+    return {"sun_lux": sun_lux, "sky_lux": sky_lux, "ev100": ev100(sun_lux + sky_lux),
+            "camera_ev100": ev100(np.pi / exposure * LUX_PER_KLX) if exposure > 0 else None,
+            "white_balance": [float(g) for g in (np.ones(3) if balance is None else balance)]}
 
 
 def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
-                 workers: int | None = None, timings: dict | None = None) -> FrameResult:
+                 workers: int | None = None, timings: dict | None = None,
+                 passes: tuple[str, ...] | None = None) -> FrameResult:
     """The finished frame at output ``frame`` (Max 1991, Fig. 10): the ground raster under the
     frame's sky, resampled in perspective with the sky; the haze; the foreground passes of its
     cycle frame blended by S and composited over them. ``timings``, if given, receives the
-    seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``."""
+    seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``,
+    and ``passes`` when light passes are made. ``passes``: the light passes to make
+    (``vocabulary.PASSES``; None: the config's ``output.passes``), in ``FrameResult.layers``."""
     config = plan.config
+    passes = config.output.passes if passes is None else tuple(passes)
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     clock = _Stopwatch(timings)
     scene = plan.scenes[frame]
     sky = load_sky(config.sky, scene)
-    ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True)
+    ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
+                           parts=bool({"sun", "sky"} & set(passes)))
     clock.lap("ground")
     view = plan.camera
-    background, _ = camera.background(
-        view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
+    seen_sky = camera.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
+    maps = irradiance_maps(plan, ground)
+    background, distance = camera.background(
+        view, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky, seen_sky=seen_sky)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
@@ -108,20 +148,20 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         _apply_haze(background, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, sky))
     else:
         background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0
-    passes = foreground_passes(plan, frame % config.canopy.cycle, store, light)
-    if passes is not None and config.foreground.model == "trees" and sky_scale > 0:
+    passes_fg = foreground_passes(plan, frame % config.canopy.cycle, store, light)
+    if passes_fg is not None and config.foreground.model == "trees" and sky_scale > 0:
         veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
         if veiled is not None:  # the haze in front of the trees, as in front of the ground
-            horizon = camera.horizon_sky(view, sky)[None, passes[3][1]]
+            horizon = camera.horizon_sky(view, sky)[None, passes_fg[3][1]]
             veil = veiled[..., None] * (horizon / np.float32(sky_scale))
-            passes = (passes[0] + veil, passes[1] + veil, *passes[2:])
+            passes_fg = (passes_fg[0] + veil, passes_fg[1] + veil, *passes_fg[2:])
     # outside the passes' region, and everywhere without a foreground, the trees add nothing:
     # B + 0 (above), the same bits composite_frame gives with passes of 0
     radiance = background
-    if passes is not None:
-        region = passes[3]
+    if passes_fg is not None:
+        region = passes_fg[3]
         radiance[region] = composite.composite_frame(
-            background[region], sun_pass=passes[0], sky_pass=passes[1], alpha=passes[2],
+            background[region], sun_pass=passes_fg[0], sky_pass=passes_fg[1], alpha=passes_fg[2],
             sun_fraction=sun_fraction, sky_scale=sky_scale)
     if plan.exposures is not None and plan.exposures[frame] is not None:
         exposure = plan.exposures[frame]
@@ -133,7 +173,83 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         config.camera.white_balance, sky_irradiance=light.sky_irradiance,
         sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
     clock.lap("composite")
-    return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
+    layers = {}
+    if passes:
+        layers = light_layers(plan, passes, ground=ground, sky=sky, foreground=passes_fg,
+                              sun_fraction=sun_fraction, sky_scale=sky_scale, distance=distance,
+                              seen_sky=seen_sky, maps=maps)
+        clock.lap("passes")
+    return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance,
+                       open_ground_light(sky, exposure, balance), layers)
+
+
+def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground, sun_fraction: float,
+                 sky_scale: float, distance: np.ndarray, seen_sky=None, maps=None) -> dict:
+    """The light passes of a frame (docs/runs.md, "Light passes"), {name: (rows, cols, channels)
+    float32}, for the names in ``passes``:
+
+    ``sun``, ``sky`` (RGB) [kcd/m^2]: the frame's light from the sun and from the sky, each
+    composited as the beauty is (``composite.composite_frame``) from its own part of the
+    ground (``GroundResult.sky_part``, ``sun_part``) seen through the camera and the haze:
+    ``sky = k F_sky + (1 - A) B_sky`` (the veil of haze and the sky seen are sky light) and
+    ``sun = S (F_sun - F_sky) + (1 - A) T B_sun``; the camera, the haze and the composite are
+    linear in the light, so ``sun + sky`` is the beauty to float rounding (tests/test_passes.py).
+    ``alpha`` (1): the foreground's coverage A [1] (0 without one). ``illuminance`` (1): the
+    horizontal illuminance of the ground each pixel sees [lx] (luminance of the irradiance,
+    x 1000; 0 where the pixel sees no ground). ``depth`` (1): the distance to the ground seen,
+    inf at the sky [m]. ``seen_sky``: the sky's ``camera.sky_view``, and ``maps`` the ground's
+    ``irradiance_maps``, if made already."""
+    config, view = plan.config, plan.camera
+    layers = {}
+    region = foreground[3] if foreground is not None else None
+    alpha = np.zeros((view.height, view.width), dtype=np.float32)
+    if region is not None:
+        alpha[region] = foreground[2]
+    if "sun" in passes or "sky" in passes:
+        albedo = ground_albedo(config.ground)
+        dark = _DarkSky()
+        for name, part, light_of in (("sky", ground.sky_part, sky), ("sun", ground.sun_part(), dark)):
+            if name not in passes:
+                continue
+            behind, _ = camera.background(view, irradiance=irradiance_maps(plan, part), albedo=albedo, sky=light_of,
+                                          seen_sky=seen_sky if name == "sky" else None)
+            if config.sky.haze > 0:
+                _apply_haze(behind, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, light_of))
+            if foreground is not None:
+                f_sun, f_sky = foreground[0], foreground[1]
+                if name == "sky":
+                    behind[region] = composite.composite_frame(
+                        behind[region], sun_pass=f_sky, sky_pass=f_sky, alpha=foreground[2],
+                        sun_fraction=sun_fraction, sky_scale=sky_scale)
+                else:
+                    behind[region] = composite.composite_frame(
+                        behind[region], sun_pass=f_sun - f_sky, sky_pass=np.zeros_like(f_sky),
+                        alpha=foreground[2], sun_fraction=sun_fraction, sky_scale=0.0)
+            layers[name] = behind
+    if "alpha" in passes:
+        layers["alpha"] = alpha[..., None]
+    if "illuminance" in passes:
+        irradiance = camera.ground_irradiance(view, irradiance=maps or irradiance_maps(plan, ground))
+        layers["illuminance"] = (irradiance @ REC709_LUMINANCE.astype(np.float32) * np.float32(LUX_PER_KLX))[..., None]
+    if "depth" in passes:
+        layers["depth"] = np.asarray(distance, dtype=np.float32)[..., None].copy()
+    return {name: layers[name] for name in passes if name in layers}
+
+
+class _DarkSky:
+    """A sky that sends no light: the sky the sun pass sees (its light is in the sky pass)."""
+
+    sun = None
+    sky_irradiance = np.zeros(3)
+
+    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+        return np.zeros(np.shape(w)[:-1] + (3,), dtype=np.float32)
+
+    def sun_fraction(self) -> float:
+        return 0.0
+
+    def total_sun_irradiance(self) -> np.ndarray:
+        return np.zeros(3)
 
 
 def compile_loops(plan: RunPlan) -> None:

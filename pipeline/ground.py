@@ -23,42 +23,67 @@ from .plan import LayerPlan, RunPlan
 class GroundResult:
     """irradiance : (rows, cols, 3) float32 [radiance x sr]; grid : its ground Grid [m];
     unshadowed : (3,) irradiance of the open sky; exact : whether every ray that meets the
-    canopy lies inside the sky square (else light from beyond it was taken as unshadowed)."""
+    canopy lies inside the sky square (else light from beyond it was taken as unshadowed);
+    sky_part : the same ground lit by the sky alone, without the sun kernel (a GroundResult
+    whose sky_part is None), when ``render_ground`` was asked for ``parts``, else None."""
 
     irradiance: np.ndarray
     grid: Grid
     unshadowed: np.ndarray
     exact: bool
     outer: tuple[np.ndarray, Grid] | None = None
+    sky_part: GroundResult | None = None
+
+    def sun_part(self) -> GroundResult:
+        """The ground's light from the sun alone: this ground less its ``sky_part``, every
+        raster and total in float32 as subtracted (the two parts sum to this ground to float
+        rounding). [radiance x sr]"""
+        sky = self.sky_part
+        outer = None if self.outer is None else (self.outer[0] - sky.outer[0], self.outer[1])
+        return GroundResult(self.irradiance - sky.irradiance, self.grid,
+                            np.asarray(self.unshadowed) - np.asarray(sky.unshadowed), self.exact, outer)
 
 
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
-                  workers: int | None = None, sky=None, outer: bool = False) -> GroundResult:
+                  workers: int | None = None, sky=None, outer: bool = False,
+                  parts: bool = False) -> GroundResult:
     """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
     raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
     product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
     frame's sky model, loaded when not given. ``outer``: also the coarse raster of the whole
     window with the sun at the coarse cell (the paper's single scale), where the sun window
-    does not cover it: what a camera sees beyond the sun window."""
+    does not cover it: what a camera sees beyond the sun window. ``parts``: also the ground lit
+    by the sky alone (``GroundResult.sky_part``), from the same correlations before the sun
+    kernel's light is added (the light passes, docs/runs.md); with several layers the sky
+    part is combined by the same product rule over its own open-sky total."""
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     sky = sky or load_sky(plan.config.sky, plan.scenes[frame])
     cycle_frame = frame % plan.config.canopy.cycle
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
-    grounds, outers, totals, exact = [], [], [], True
+    grounds, outers, totals, exact, skies = [], [], [], True, []
     for index, layer_plan in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
-        g, total, layer_exact, g_outer = _ground_of_layer(sky, layer_plan, item, plan, workers, outer)
+        g, total, layer_exact, g_outer, sky_only = _ground_of_layer(sky, layer_plan, item, plan, workers, outer, parts)
         grounds.append(g)
         outers.append(g_outer)
         totals.append(total)
+        skies.append(sky_only)
         exact &= layer_exact
     combined = shadow.combine_layers(grounds, totals[0])
     grid = plan.sun_window or plan.window
     around = None
     if outer:
         around = (np.moveaxis(shadow.combine_layers(outers, totals[0]), 0, -1), plan.window)
-    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around)
+    sky_part = None
+    if parts:
+        sky_total = skies[0][1]
+        sky_around = None
+        if outer:
+            sky_around = (np.moveaxis(shadow.combine_layers([s[2] for s in skies], sky_total), 0, -1), plan.window)
+        sky_part = GroundResult(np.moveaxis(shadow.combine_layers([s[0] for s in skies], sky_total), 0, -1),
+                                grid, sky_total, exact, sky_around)
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, sky_part)
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:
@@ -68,10 +93,11 @@ def _covers(inner: Grid, outer: Grid) -> bool:
     return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
 
 
-def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False):
-    """(ground raster, unshadowed total, exact, outer raster or None) of one layer: the coarse
-    sky light, plus the fine sun kernel on the sun window; with ``outer`` also the coarse
-    raster with the sun kernel at the coarse cell."""
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False, parts=False):
+    """(ground raster, unshadowed total, exact, outer raster or None, sky part or None) of one
+    layer: the coarse sky light, plus the fine sun kernel on the sun window; with ``outer``
+    also the coarse raster with the sun kernel at the coarse cell; with ``parts`` the sky part
+    (raster, total, outer raster or None): the same rasters before the sun's light is added."""
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
         grid = coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
@@ -85,14 +111,17 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
         exact = True
     total = raster.total
     g_outer = None
+    sky_only = (g, total, g) if parts else None
     if lp.sun is not None:
         if outer:
             g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
         kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
+        if parts:
+            sky_only = (g.copy(), total, sky_only[2])
         g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
-    return g, total, exact, g_outer
+    return g, total, exact, g_outer, sky_only
 
 
 def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):

@@ -70,6 +70,21 @@ def _read(path, kind: str) -> np.ndarray:
     return pixels
 
 
+def read_layers(path) -> dict[str, np.ndarray]:
+    """The channels of an image file by name (``"R"``, ``"sun.R"``, ``"illuminance.Y"``), each
+    (rows, cols) float32 as stored. Raises ImageError naming the file."""
+    pixels = read_image(path)
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ImageError(path, f"cannot read image ({oiio.geterror().strip()})")
+    try:
+        names = inp.spec().channelnames
+    finally:
+        inp.close()
+    return {name: pixels[..., i] for i, name in enumerate(names)}
+
+
 def read_attributes(path, names) -> dict:
     """The named metadata attributes of an image file (missing ones are None)."""
     with _quiet_stderr():
@@ -99,13 +114,31 @@ def _quiet_stderr():
         os.close(saved)
 
 
-def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False) -> None:
+def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False,
+              layers: dict | None = None) -> None:
     """Write (rows, cols, channels) scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless),
     with ``attributes`` (str, int, float, or a tuple of floats) in its header. No time stamp
-    is written, so the same pixels and attributes always give the same bytes."""
+    is written unless ``attributes`` gives ``DateTime`` (OpenEXR's capDate), so the same pixels
+    and attributes always give the same bytes.
+
+    layers : {channel names: (pixels (rows, cols, len(names)), "half" or "float")} written
+        beside ``pixels`` (channels R, G, B), named in the multi-layer convention
+        (``("sun.R", "sun.G", "sun.B")``, ``("illuminance.Y",)``), each in its own format: a
+        channel whose values pass half's 65504 (lux) is kept in float. None: the file is as
+        without this argument, byte for byte."""
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     rows, cols, channels = pixels.shape
     spec = oiio.ImageSpec(cols, rows, channels, "half" if half else "float")
+    if layers:
+        names, formats = list("RGBA"[:channels]), [spec.format] * channels
+        for layer_names, (layer, kind) in layers.items():
+            names += list(layer_names)
+            formats += [oiio.TypeDesc(kind)] * len(layer_names)
+        pixels = np.concatenate([pixels, *(np.asarray(p, dtype=np.float32).reshape(rows, cols, -1)
+                                           for p, _ in layers.values())], axis=-1)
+        spec = oiio.ImageSpec(cols, rows, len(names), spec.format)
+        spec.channelnames = tuple(names)
+        spec.channelformats = tuple(formats)
     spec.attribute("compression", "piz")
     spec.attribute("DateTime", "")  # else OpenEXR's capDate holds the time of writing
     for name, value in (attributes or {}).items():

@@ -88,7 +88,53 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
                                                                 np.degrees(disc.elevation))
     if result.scene.when is not None:
         attributes["sunshade:time_utc"] = result.scene.when.isoformat()
+    if config.output.passes:  # only then: a frame without passes keeps its bytes
+        attributes.update(standard_attributes(config, result))
     return attributes
+
+
+REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+"""The working space's primaries and white (linear Rec.709, D65) as OpenEXR's chromaticities:
+red x, y, green x, y, blue x, y, white x, y (ITU-R BT.709-6)."""
+
+LAYER_CHANNELS = {"sun": ("sun.R", "sun.G", "sun.B"), "sky": ("sky.R", "sky.G", "sky.B"),
+                  "alpha": ("alpha.A",), "illuminance": ("illuminance.Y",), "depth": ("depth.Z",)}
+"""The EXR channels of each light pass, in the multi-layer convention (layer.channel)."""
+
+
+def standard_attributes(config: Config, result) -> dict:
+    """The EXR header of a frame with light passes (docs/runs.md, "Light passes"): OpenEXR's
+    standard ``chromaticities``; for a site and time its ``latitude``, ``longitude`` [degrees]
+    and ``altitude`` [m], and ``capDate`` (OpenImageIO's ``DateTime``, the frame's UTC time from
+    the config, not the clock) with ``utcOffset`` 0 [s]; and under ``sunshade:`` the open
+    ground's light (``frame.open_ground_light``) [lx, EV]."""
+    attributes = {"chromaticities": REC709_CHROMATICITIES}
+    site = config.sky.site
+    if site is not None:
+        attributes.update({"latitude": float(np.degrees(site.latitude)),
+                           "longitude": float(np.degrees(site.longitude)),
+                           "altitude": float(site.elevation), "utcOffset": 0.0})
+    if result.scene.when is not None:
+        attributes["DateTime"] = result.scene.when.strftime("%Y:%m:%d %H:%M:%S")
+    light = result.light
+    attributes.update({"sunshade:sun_lux": light["sun_lux"], "sunshade:sky_lux": light["sky_lux"],
+                       "sunshade:open_ground_lux": light["sun_lux"] + light["sky_lux"],
+                       "sunshade:white_balance": tuple(light["white_balance"]),
+                       "sunshade:passes": ",".join(config.output.passes)})
+    for name in ("ev100", "camera_ev100"):
+        if light[name] is not None:
+            attributes[f"sunshade:{name}"] = light[name]
+    return attributes
+
+
+def exr_layers(result, half: bool) -> dict | None:
+    """``io.write_exr``'s layers of a frame's light passes (None without any): RGB passes in
+    the beauty's format, single channels in float32 (lux pass half's 65504; depth is inf at the
+    sky)."""
+    if not result.layers:
+        return None
+    return {LAYER_CHANNELS[name]: (pixels, "half" if half and pixels.shape[-1] == 3 else "float")
+            for name, pixels in result.layers.items()}
 
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
@@ -188,6 +234,14 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         timings["total"] = time.perf_counter() - started
         write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
                        threads=threads, scheduler=scheduler, rendered=todo, source_hash=source_hash)
+        if todo and config.output.report:  # the light curve and contact sheet (docs/runs.md, "The report")
+            from .report import write_report
+
+            try:
+                write_report(folder)
+            except Exception as exc:  # noqa: BLE001 -- the frames are done; say it, as a warning
+                warnings.warn(f"{folder}: the report was not written ({exc}); `sunshade report {folder}` "
+                              "writes it", FrameWarning, stacklevel=2)
     finally:
         if compiling is not None:  # never left writing numba's cache as the command ends
             compiling.join()
@@ -265,7 +319,8 @@ def _write_task(config: Config, rendered, digest: str, codes: bool):
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
     exr, png = frame_files(config, frame)
-    io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half)
+    io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half,
+                 layers=exr_layers(result, config.output.half))
     picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display,
                       balance=result.balance)
     written = io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
@@ -273,6 +328,9 @@ def _write_task(config: Config, rendered, digest: str, codes: bool):
     mark = time.perf_counter()
     entry = {"config_hash": digest, "files": {"exr": file_stamp(exr), "png": file_stamp(png)},
              "items": served, "record": frame_record(config, frame, digest)}
+    if entry["record"] is not None and result.light is not None:  # the report's light curve
+        entry["record"]["light"] = {"time_s": float(result.scene.time), "exposure": float(result.exposure),
+                                    **result.light}
     timings["digest"] = time.perf_counter() - mark
     return frame, timings, entry, caught, written if codes else None
 

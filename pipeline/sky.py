@@ -878,12 +878,14 @@ class ProceduralSky:
             grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
         return SkyRaster(grid, weighted, outside)
 
-    def equirect(self, width: int) -> np.ndarray:
+    def equirect(self, width: int, *, parts: bool = False):
         """Equirectangular radiance image (width / 2, width, 3) float32 [kcd/m^2] in the module's
         convention (top row at the zenith, centre column north, east at three quarters), with the
         sun disc deposited area-correctly: each of many small samples of the disc carries
         L cos(theta) d_omega into the texel it falls in, divided by that texel's exact projected
-        solid angle, so the image's irradiance equals ``unshadowed()``. Below the horizon: 0."""
+        solid angle, so the image's irradiance equals ``unshadowed()``. Below the horizon: 0.
+        ``parts``: (the image, {"sun": the sun disc alone, "sky": the rest}), each float32 as
+        rounded from the float64 parts the image is the sum of (the light passes)."""
         if width < 4 or width % 2:
             raise ValueError(f"width must be even and at least 4, got {width}")
         height = width // 2
@@ -897,11 +899,16 @@ class ProceduralSky:
         # the sun: samples on a square grid of the plane tangent at the sun (gnomonic)
         r = self.sun.angular_radius
         spacing = min(r / 64.0, np.pi / height / 4.0)
+        sky = image.copy() if parts else None
         self._deposit(image, lambda w: self._sun_samples(w, lambda centre, rho: spacing), r, spacing)
-        if self._deep:  # the corona, more coarsely: it is smooth beyond the limb
+        if self._deep:  # the corona, more coarsely: it is smooth beyond the limb; not S's light,
+            # so in the sky's part
             spacing = min(r / 16.0, np.pi / height / 4.0)
-            self._deposit(image, lambda w: self.corona_radiance(w) * self.sun_cloud_transmittance,
-                          eclipse.CORONA_REACH * r, spacing)
+            for target in (image, sky) if parts else (image,):
+                self._deposit(target, lambda w: self.corona_radiance(w) * self.sun_cloud_transmittance,
+                              eclipse.CORONA_REACH * r, spacing)
+        if parts:
+            return image.astype(np.float32), {"sun": (image - sky).astype(np.float32), "sky": sky.astype(np.float32)}
         return image.astype(np.float32)
 
     def _deposit(self, image, radiance, reach: float, spacing: float) -> None:

@@ -70,3 +70,9 @@ range, naming the key and the range (docs/runs.md, "Errors"); the other bounds a
 TIME_RANGE = ("0001-01-02T00:00:00+00:00", "9999-12-30T23:59:59+00:00")
 """The first and last UTC times a config may give (sky.time), its offset applied: a day inside
 the calendar that Python's dates can hold, so that the searches about a time stay in it."""
+
+PASSES = ("sun", "sky", "alpha", "illuminance", "depth")
+"""The light passes a frame's EXR may hold beside its beauty (output.passes; docs/runs.md,
+"Light passes"): ``sun`` and ``sky`` the frame's light from the sun and from the sky (RGB, they
+sum to the beauty), ``alpha`` the foreground's coverage, ``illuminance`` the ground's horizontal
+illuminance [lux], ``depth`` the distance to the ground seen [m]."""

@@ -1,0 +1,217 @@
+"""The run's report: the light of each frame as a CSV, its light curve and a contact sheet of its
+frames, written into the run folder (docs/runs.md, "The report"). Read from index.json, which a
+render writes as each frame is done, so a run still going or killed has its report too.
+"""
+
+from __future__ import annotations
+
+import collections
+import concurrent.futures
+import csv
+import json
+import math
+from pathlib import Path
+
+from .errors import RunError
+from .runfolder import INDEX_FILE, RUN_FILE
+
+CSV_FILE = "light.csv"
+CURVE_FILE = "light-curve.png"
+SHEET_FILE = "contact-sheet.png"
+SHEET_FRAMES = 12
+"""The contact sheet shows at most this many frames, evenly spread over the done ones."""
+
+COLUMNS = ("frame", "time_s", "time_utc", "sun_elevation_deg", "sun_azimuth_deg", "S", "sun_lux", "sky_lux",
+           "open_ground_lux", "ev100", "camera_ev100", "exposure_m2_per_kcd", "wb_r", "wb_g", "wb_b")
+"""light.csv's columns: film time [s]; the sun's elevation and azimuth [degrees]; S [1]; the open
+ground's horizontal illuminance from the sun and from the sky and both [lx]; what an incident
+meter reads of it and the light the camera's exposure is set for [EV100]; that exposure
+[m^2/kcd]; the white balance's gains [1]."""
+
+
+def frame_records(folder: Path) -> list[dict]:
+    """The done frames' records of a run folder, by frame: run.json's when it was written after
+    index.json (a render ended there: the same records, in a file half the size), else
+    those of index.json whose config hash is the one most of its frames have (a run going, or
+    killed), else run.json's. Raises RunError when the folder holds neither."""
+    folder = Path(folder)
+    entries = []
+    try:
+        if (folder / RUN_FILE).stat().st_mtime_ns >= (folder / INDEX_FILE).stat().st_mtime_ns:
+            records = json.loads((folder / RUN_FILE).read_text()).get("frames")
+            if isinstance(records, list) and records:
+                return sorted((r for r in records if isinstance(r, dict) and "frame" in r), key=lambda r: r["frame"])
+    except (OSError, ValueError, AttributeError):
+        pass
+    try:
+        entries = list(json.loads((folder / INDEX_FILE).read_bytes()).get("frames", {}).values())
+    except (OSError, ValueError, AttributeError):
+        pass
+    entries = [e for e in entries if isinstance(e, dict) and isinstance(e.get("record"), dict)]
+    if entries:
+        digest = collections.Counter(e.get("config_hash") for e in entries).most_common(1)[0][0]
+        records = [e["record"] for e in entries if e.get("config_hash") == digest]
+    else:
+        try:
+            records = json.loads((folder / RUN_FILE).read_text()).get("frames", [])
+        except (OSError, ValueError, AttributeError):
+            raise RunError(f"{folder}: no run here (neither {INDEX_FILE} nor {RUN_FILE} can be read)") from None
+    return sorted((r for r in records if isinstance(r, dict) and "frame" in r), key=lambda r: r["frame"])
+
+
+def rows(records) -> list[dict]:
+    """light.csv's rows (``COLUMNS``) of frame records; a value a record lacks is empty (frames
+    rendered before the light was recorded)."""
+    out = []
+    for record in records:
+        light = record.get("light") or {}
+        sun = record.get("sun") or {}
+        total = (light["sun_lux"] + light["sky_lux"]) if "sun_lux" in light else None
+        balance = light.get("white_balance") or [None] * 3
+        out.append(dict(zip(COLUMNS, (
+            record["frame"], light.get("time_s"), record.get("time_utc"), sun.get("elevation"), sun.get("azimuth"),
+            record.get("sun_fraction"), light.get("sun_lux"), light.get("sky_lux"), total, light.get("ev100"),
+            light.get("camera_ev100"), light.get("exposure"), *balance))))
+    return out
+
+
+def write_csv(folder: Path, table) -> Path:
+    """light.csv in ``folder`` (comma-separated, a header row; written atomically)."""
+    path = Path(folder) / CSV_FILE
+    temporary = path.with_name(f".{CSV_FILE}.tmp")
+    with open(temporary, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in table:
+            writer.writerow({k: ("" if v is None else v) for k, v in row.items()})
+    temporary.replace(path)
+    return path
+
+
+def contacts(table) -> list[tuple[str, float]]:
+    """An eclipse's contacts as seen in S, (label, time [s]): C1 the first frame with S below 1
+    after one at 1, C2 the first with S at 0, C3 the last at 0, C4 the first back at 1; only
+    those the frames show. Frames dimmed by clouds look the same to S: the caller marks
+    contacts only for a run with a moon."""
+    points = [(r["time_s"], r["S"]) for r in table if r["time_s"] is not None and r["S"] is not None]
+    found, full, dark = [], 1.0 - 1e-6, 1e-6
+    for (t0, s0), (t1, s1) in zip(points, points[1:]):
+        if s0 >= full > s1:
+            found.append(("C1", t1))
+        if s0 > dark >= s1:
+            found.append(("C2", t1))
+        if s0 <= dark < s1:
+            found.append(("C3", t0))
+        if s0 < full <= s1:
+            found.append(("C4", t1))
+    return found
+
+
+def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = None) -> Path | None:
+    """light-curve.png: the open ground's illuminance from the sun, the sky and both on a log
+    axis [lx] with the light the camera's exposure is set for, S on a second axis, against film
+    time [s]; an eclipse's contacts marked; titled with the run's ``name`` (default: the
+    folder's). None when no frame has its light recorded."""
+    table = [r for r in table if r["time_s"] is not None]
+    if not table:
+        return None
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure  # not pyplot: a third less to import, no global state
+
+    t = [r["time_s"] for r in table]
+    floor = 1e-3  # lx: a dark sun is drawn at the axis' foot, not dropped from a log axis
+    fig = Figure(figsize=(8, 5.5))
+    FigureCanvasAgg(fig)
+    ax, ev = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1.4))
+    fig.subplots_adjust(left=0.1, right=0.9, top=0.94, bottom=0.09, hspace=0.08)
+    for key, label, style in (("open_ground_lux", "open ground (sun + sky)", "k-"),
+                              ("sun_lux", "sun", "-"), ("sky_lux", "sky", "-")):
+        ax.plot(t, [max(r[key], floor) for r in table], style, label=label, lw=1.5)
+    metered = [math.pi / r["exposure_m2_per_kcd"] * 1000.0 if r["exposure_m2_per_kcd"] else None for r in table]
+    ax.plot(t, metered, "--", color="0.4", label="camera's exposure set for", lw=1.2)
+    ax.set_yscale("log")
+    lit = [v for r in table for v in (r["open_ground_lux"], r["sky_lux"]) if v and v > 0]
+    if lit:
+        ax.set_ylim(max(min(lit) / 3, floor), max(lit) * 3)
+    ax.set_ylabel("horizontal illuminance [lx]")
+    ax.grid(True, which="both", alpha=0.25)
+    share = ax.twinx()
+    share.plot(t, [r["S"] for r in table], color="tab:red", lw=1.2, label="S")
+    share.set_ylim(-0.02, 1.05)
+    share.set_ylabel("S, the sun's fraction", color="tab:red")
+    handles = ax.get_legend_handles_labels()[0] + share.get_legend_handles_labels()[0]
+    ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
+    ev.plot(t, [r["ev100"] for r in table], "k-", label="incident meter", lw=1.2)
+    ev.plot(t, [r["camera_ev100"] for r in table], "--", color="0.4", label="camera", lw=1.2)
+    ev.set_ylabel("EV100")
+    ev.set_xlabel("film time [s]")
+    ev.grid(True, alpha=0.25)
+    ev.legend(loc="lower left", fontsize=8)
+    for label, when in contacts(table) if eclipse else ():
+        for axis in (ax, ev):
+            axis.axvline(when, color="tab:purple", lw=0.8, ls=":")
+        ax.text(when, 1.0, f" {label}", transform=ax.get_xaxis_transform(), va="top", fontsize=8,
+                color="tab:purple")
+    first, last = table[0].get("time_utc"), table[-1].get("time_utc")
+    title = f"{name or Path(folder).name}: {len(table)} frames"
+    if first and last:
+        title += f", {first[:19]} to {last[11:19]} UTC"
+    ax.set_title(title, fontsize=10)
+    path = Path(folder) / CURVE_FILE
+    temporary = path.with_name(f".{CURVE_FILE}.tmp.png")
+    fig.savefig(temporary, dpi=100, metadata={"Software": None})
+    temporary.replace(path)
+    return path
+
+
+def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, width: int = 240) -> Path | None:
+    """contact-sheet.png: at most ``count`` of the done frames' PNGs, evenly spread, each
+    ``width`` px wide [px] with its number and S, in rows of four. None without a frame's PNG."""
+    from PIL import Image, ImageDraw
+
+    found = [(r, Path(folder) / f"{r['file']}.png") for r in records if "file" in r]
+    found = [(r, p) for r, p in found if p.is_file()]
+    if not found:
+        return None
+    if len(found) > count:
+        found = [found[round(i * (len(found) - 1) / (count - 1))] for i in range(count)]
+    def thumbnail(png):
+        with Image.open(png) as image:
+            image = image.convert("RGB")
+            height = max(1, round(image.height * width / image.width))
+            return image.resize((width, height), Image.Resampling.BILINEAR)
+
+    with concurrent.futures.ThreadPoolExecutor(4) as pool:  # PNG decoding lets go of the GIL
+        thumbs = list(zip((r for r, _ in found), pool.map(thumbnail, [p for _, p in found])))
+    across, gap, label = min(4, len(thumbs)), 4, 14
+    cell = (width, max(t.height for _, t in thumbs) + label)
+    down = math.ceil(len(thumbs) / across)
+    sheet = Image.new("RGB", (across * (cell[0] + gap) + gap, down * (cell[1] + gap) + gap), (32, 32, 32))
+    draw = ImageDraw.Draw(sheet)
+    for i, (record, thumb) in enumerate(thumbs):
+        x, y = gap + (i % across) * (cell[0] + gap), gap + (i // across) * (cell[1] + gap)
+        sheet.paste(thumb, (x, y))
+        s = record.get("sun_fraction")
+        draw.text((x + 2, y + thumb.height + 1), f"{record['frame']}" + (f"   S = {s:.3f}" if s is not None else ""),
+                  fill=(230, 230, 230))
+    path = Path(folder) / SHEET_FILE
+    temporary = path.with_name(f".{SHEET_FILE}.tmp.png")
+    sheet.save(temporary, format="PNG")
+    temporary.replace(path)
+    return path
+
+
+def write_report(folder: Path) -> list[Path]:
+    """light.csv, light-curve.png and contact-sheet.png of the run in ``folder`` from its done
+    frames (``frame_records``); returns the files written. Raises RunError without a run."""
+    folder = Path(folder)
+    records = frame_records(folder)
+    table = rows(records)
+    written = [write_csv(folder, table)]
+    eclipse = any("moon" in r for r in records)
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:  # the sheet's PNGs decode meanwhile
+        sheet = pool.submit(write_contact_sheet, folder, records)
+        name = str(records[0].get("file", "")).rsplit(".", 1)[0] if records else None  # NAME.0000
+        curve = write_light_curve(folder, table, eclipse=eclipse, name=name or None)
+        written += [p for p in (curve, sheet.result()) if p is not None]
+    return written
