@@ -81,7 +81,8 @@ def main_() -> None:
                     if code == 0:
                         code = main(["frame", "c.yaml", "--frame", "2", "-o", "f.png"])
                 lines = err.getvalue().strip().splitlines()
-                print(f"{key} = {value:g} {unit}: exit {code}, {time.perf_counter() - started:.1f} s"
+                shown = value if isinstance(value, int) else f"{value:g}"
+                print(f"{key} = {shown} {unit}: exit {code}, {time.perf_counter() - started:.1f} s"
                       f"{'; ' + lines[-1][:160] if lines and code else ''}", flush=True)
 
 

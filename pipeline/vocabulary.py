@@ -52,7 +52,7 @@ NUMBER_RANGES = {
     "sky.moon.offset_start": (-90.0, 90.0, "degrees"),
     "sky.moon.offset_end": (-90.0, 90.0, "degrees"),
     "sky.clouds.scale": (1.0, 1e6, "m"),
-    "sky.clouds.altitude": (0.0, 1e5, "m"),
+    "sky.clouds.altitude": (1.0, 1e5, "m"),
     "sky.clouds.wind": (-300.0, 300.0, "m/s"),
     "sky.clouds.thickness": (0.0, 1000.0, ""),
     "sky.clouds.seed": (0, SEED_MAX, ""),
