@@ -12,6 +12,7 @@ their files' stamps (a resume with nothing to do) starts without it.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import hashlib
@@ -44,6 +45,17 @@ FORMAT = 1
 
 #: Environment variable naming the cache root when no explicit folder is given.
 ENV_VAR = "SUNSHADE_CACHE"
+
+#: Environment variable giving the cache's budget (``parse_size``) when --cache-size is not given.
+BUDGET_ENV_VAR = "SUNSHADE_CACHE_SIZE"
+
+#: The cache's budget when none is given: at the end of a run the least recently used items it
+#: did not use are removed until the items total at most this. [B]
+DEFAULT_BUDGET = 20 * 1024**3
+
+#: Folder in the root where each run names the items it uses while it runs (a list and a lock
+#: held as long as the run lives), so that no other run's budget removes them.
+RUNS = ".runs"
 
 #: Largest numpy array accepted inside ``params`` (elements); bigger ones must be described
 #: by the parameters that made them instead.
@@ -87,6 +99,13 @@ def cache_dir(explicit: str | os.PathLike[str] | None = None) -> Path:
     else:
         path = Path("cache")
     return path.expanduser().absolute()
+
+
+def cache_budget(explicit: str | None = None) -> int:
+    """The cache's budget [B]: ``explicit`` (--cache-size) if given, else ``$SUNSHADE_CACHE_SIZE``
+    if set and not empty, else DEFAULT_BUDGET. Raises ValueError naming the text (``parse_size``)."""
+    text = explicit if explicit is not None else os.environ.get(BUDGET_ENV_VAR) or None
+    return DEFAULT_BUDGET if text is None else parse_size(text)
 
 
 def parse_size(text: str | int) -> int:
@@ -731,23 +750,75 @@ class Cache:
         self._remove_empty_folders()
         return removed
 
-    def prune(self, max_bytes: int) -> list[CacheItem]:
+    def prune(self, max_bytes: int, *, keep=frozenset()) -> list[CacheItem]:
         """Remove leftover temporary folders, then the least recently used items until the
-        items total at most ``max_bytes`` [B]; returns the items removed, oldest first."""
+        items total at most ``max_bytes`` [B], never an item whose key is in ``keep`` or in use
+        by a live run (``in_use``); returns the items removed, oldest first."""
         if max_bytes < 0:
             raise ValueError(f"max_bytes must not be negative, got {max_bytes}")
         self._remove_stale()
+        kept = set(keep) | self.keys_in_use()
         items = sorted(self.list(), key=lambda item: (item.last_used, item.key))
         total = sum(item.bytes for item in items)
         removed = []
         for item in items:
             if total <= max_bytes:
                 break
+            if item.key in kept:
+                continue
             if _remove(item.path):
                 removed.append(item)
             total -= item.bytes
         self._remove_empty_folders()
         return removed
+
+    @contextlib.contextmanager
+    def in_use(self, keys):
+        """For the block, name ``keys`` as in use by this process: a list in ``RUNS`` and a
+        lock held beside it, which ``keys_in_use`` of any other process reads, so that no
+        prune removes them while the block runs (a killed process's lock is freed by the
+        system, and its list counts no more)."""
+        folder = self.root / RUNS
+        folder.mkdir(parents=True, exist_ok=True)
+        name = f"{os.getpid()}-{secrets.token_hex(4)}"
+        lock = FileLock(str(folder / f"{name}.lock"))
+        lock.acquire()
+        try:
+            listing = folder / f"{name}.json"
+            temporary = folder / f"{_TMP}{name}.json"
+            temporary.write_text(json.dumps(sorted(keys)))
+            os.replace(temporary, listing)
+            try:
+                yield
+            finally:
+                listing.unlink(missing_ok=True)
+        finally:
+            lock.release()
+            Path(lock.lock_file).unlink(missing_ok=True)
+
+    def keys_in_use(self) -> set[str]:
+        """The keys that live runs name as in use (``in_use``); the lists of runs that ended
+        without removing them (killed) are removed."""
+        folder = self.root / RUNS
+        keys: set[str] = set()
+        if not folder.is_dir():
+            return keys
+        for listing in sorted(folder.glob("*.json")):
+            lock = FileLock(str(listing.with_suffix(".lock")))
+            try:
+                lock.acquire(timeout=0)
+            except (Timeout, OSError):  # held: the run lives
+                try:
+                    keys |= set(json.loads(listing.read_text()))
+                except (OSError, ValueError, TypeError):
+                    pass
+                continue
+            try:
+                listing.unlink(missing_ok=True)  # its run is gone
+            finally:
+                lock.release()
+                Path(lock.lock_file).unlink(missing_ok=True)
+        return keys
 
 
 def _normalize(arrays: Any, kind: str) -> dict[str, np.ndarray]:

@@ -105,6 +105,9 @@ def _parser():
     # the options several commands share, each written once
     config = _shared("config", help="YAML config file")
     store = _shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
+    budget = _shared("--cache-size", default=None, metavar="SIZE", help="the cache's budget, e.g. 20G: "
+                     "at the end of a render the least recently used items no live run uses are "
+                     "removed down to it (default $SUNSHADE_CACHE_SIZE, else 20G)")
     threads = _shared("--threads", type=int, default=None, help="FFT threads (default: all cores)")
     png = _shared("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
     moment = _shared("--frame", type=int, default=0, help="output frame (default 0): the sun, moon "
@@ -121,7 +124,7 @@ def _parser():
         sub.set_defaults(run=run)
         return sub
 
-    render = command(_run_render, [config, store])
+    render = command(_run_render, [config, store, budget])
     render.add_argument("--frames", default=None, help="frames to render, e.g. 0-47,100 "
                         "(default: all)")
     render.add_argument("--jobs", type=int, default=None, help="frames rendered at once, each in "
@@ -141,7 +144,7 @@ def _parser():
                         "frames whose files are damaged or not made by this config (exit code "
                         "1 if any), reading every frame and the cache items they were made from")
 
-    command(_run_check, [config])
+    command(_run_check, [config, budget])
 
     ground = command(_run_ground, [config, moment, png, threads, store])
     ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
@@ -226,6 +229,17 @@ def _store(explicit, *, writing: bool = True) -> Cache:
     return store
 
 
+def _budget(args) -> int:
+    """The cache's budget of --cache-size, else $SUNSHADE_CACHE_SIZE, else 20 GiB [B]; raises
+    BadInput naming the flag or variable."""
+    from .cache import BUDGET_ENV_VAR, cache_budget
+
+    try:
+        return cache_budget(args.cache_size)
+    except ValueError as exc:
+        raise BadInput(f"{'--cache-size' if args.cache_size is not None else '$' + BUDGET_ENV_VAR}: {exc}") from None
+
+
 def _checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
     out = _flag_path("--output", path)
     if out.suffix.lower() not in suffixes:
@@ -266,6 +280,7 @@ def _run_check(args) -> int:
     from .plan import check_inputs
     from .runfolder import check_outputs
 
+    budget = _budget(args)
     config = _load(args)
     plan = check_inputs(config)
     check_outputs(config)
@@ -280,7 +295,10 @@ def _run_check(args) -> int:
         print(line)
     frames, cycle = disk_needed(plan)
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
-          f"cache at most {_size(cycle)}")
+          f"cache at most {_size(cycle)}, "
+          + (f"within the cache's budget of {_size(budget)}" if cycle <= budget else
+             f"over the cache's budget of {_size(budget)}: a run keeps its own items, and removes "
+             "every other one; raise it with --cache-size or $SUNSHADE_CACHE_SIZE"))
     _warn(plan)
     return 0
 
@@ -366,6 +384,7 @@ def _run_render(args) -> int:
         raise BadInput(f"--cluster-timeout must be above 0 s (got {args.cluster_timeout})")
     if args.scheduler is not None and isinstance(problem := scheduler_address(args.scheduler), str):
         raise BadInput(f"--scheduler {paths.shown(args.scheduler)}: {problem}")
+    budget = _budget(args)
     store = _store(args.cache)
     written = _load(args, resolved=False)  # resolved below, unless a resume has nothing to do
     if args.output is not None:
@@ -392,15 +411,19 @@ def _run_render(args) -> int:
                                                     source_hash=source_hash)
     if summary is None:
         config = resolved()
-        summary = _render_run(config, store, frames, args, source_hash)
+        summary = _render_run(config, store, frames, args, source_hash, budget)
     made = f"; video {summary.video}" if summary.video else ""
     count = len(summary.rendered)
     print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")
+    if summary.pruned:
+        print(f"sunshade: the cache was over its budget of {_size(budget)}: removed {len(summary.pruned)} "
+              f"item{'' if len(summary.pruned) == 1 else 's'} ({_size(sum(i.bytes for i in summary.pruned))}) "
+              f"that no live run uses, least recently used first; {store.root}")
     return 0
 
 
-def _render_run(config, store, frames, args, source_hash):
+def _render_run(config, store, frames, args, source_hash, budget):
     """``run.render_run`` of the command's frames; the folders it made are removed if it fails
     and leaves them empty."""
     from .run import render_run
@@ -410,7 +433,7 @@ def _render_run(config, store, frames, args, source_hash):
     try:
         return render_run(config, frames=frames, store=store,
                           jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                          cluster_timeout=args.cluster_timeout, source_hash=source_hash,
+                          cluster_timeout=args.cluster_timeout, source_hash=source_hash, budget=budget,
                           progress=_Progress(sys.stderr),
                           warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
     except BaseException:

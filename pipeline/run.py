@@ -35,7 +35,7 @@ from . import __version__, cache, io
 from .composite import display
 from .config import Config
 from .errors import RunError, SunshadeError, portable
-from .cycle import cycle_phase, record_config_items
+from .cycle import config_item_keys, cycle_phase, record_config_items
 from .frame import compile_loops, render_frame
 from .framing import framing_warnings
 from .lighting import with_exposures
@@ -140,7 +140,7 @@ def exr_layers(result, half: bool) -> dict | None:
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
                progress=None, warn=None, cluster_timeout: float | None = None,
-               source_hash: str | None = None) -> RunSummary:
+               source_hash: str | None = None, budget: int | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -150,7 +150,10 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         address (``tcp://host:8786``) to run the tasks on instead. cluster_timeout : how long
         a lost cluster is waited for (default CLUSTER_TIMEOUT). [s] source_hash : the hash of
         the config as written (``resolve.source_digest``), recorded in run.json for the next
-        resume (``runfolder.nothing_to_do``).
+        resume (``runfolder.nothing_to_do``). budget : the cache's budget [B]: at the end the
+        least recently used items that neither this run nor another live one uses are removed
+        until the items total at most this (None: none removed; docs/runs.md, "The cache's
+        budget").
     progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
         ``video``. warn : called with each one-line warning of the plan
         (``framing.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
@@ -174,7 +177,10 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     except filelock.Timeout:
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
     compiling = None  # the thread of compile_loops, if started
+    mine = set(config_item_keys(plan))
+    held = contextlib.ExitStack()
     try:
+        held.enter_context(store.in_use(mine))  # no other run's budget removes them meanwhile
         remove_temporaries(folder)
         if (folder / INDEX_FILE).is_dir():
             raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
@@ -242,12 +248,14 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             except Exception as exc:  # noqa: BLE001 -- the frames are done; say it, as a warning
                 warnings.warn(f"{folder}: the report was not written ({exc}); `sunshade report {folder}` "
                               "writes it", FrameWarning, stacklevel=2)
+        pruned = tuple(store.prune(budget, keep=mine)) if budget is not None else ()
     finally:
         if compiling is not None:  # never left writing numba's cache as the command ends
             compiling.join()
+        held.close()
         lock.release()
     return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),
-                      video_file(config) if video else None, timings)
+                      video_file(config) if video else None, timings, pruned)
 
 
 def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):

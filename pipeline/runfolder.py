@@ -363,12 +363,15 @@ def write_run_file(config, resolved: dict, digest, records, video, timings, *, j
 
 @dataclass(frozen=True)
 class RunSummary:
-    """What a run did: frames rendered and skipped, the video (None: not made), timings [s]."""
+    """What a run did: frames rendered and skipped, the video (None: not made), timings [s],
+    the cache items its budget removed."""
 
     rendered: tuple[int, ...]
     skipped: tuple[int, ...]
     video: Path | None
     timings: dict
+    pruned: tuple = ()
+    """The cache items the cache's budget removed at the end of the run (``Cache.prune``)."""
 
 
 def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, scheduler=None,

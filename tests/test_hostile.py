@@ -152,6 +152,7 @@ FLAGS = [  # render's flags: name, arguments, the words of the message
     ("cache with a NUL", ["--cache", "a\x00b"], "--cache a\\0b: contains a NUL byte"),
     ("output name too long", ["--output", "o" * 300], f"--output {'o' * 58}...{'o' * 58} (300 characters): the name"),
     ("cluster timeout of 0", ["--cluster-timeout", "0"], "--cluster-timeout must be above 0 s"),
+    ("cache size not a size", ["--cache-size", "12X"], "--cache-size: invalid size '12X': expected a number"),
     ("a million jobs", ["--jobs", "1000000"], "--jobs 1000000 would start 1000000 processes on"),
 ]
 

@@ -524,3 +524,53 @@ def test_check_says_the_disk_a_run_needs(reference, capsys):
     cycle, (width, height) = 3, (96, 64)  # TINY
     assert spectra + passes <= estimate * 1.02, (line, spectra, passes)
     assert estimate <= (spectra + cycle * 8 * 4 * width * height) * 1.02, (line, spectra, passes)
+
+
+HOLD = """
+import sys
+from pipeline.cache import Cache
+with Cache(sys.argv[1]).in_use(set(sys.argv[2:])):
+    print("holding", flush=True)
+    sys.stdin.read()
+"""
+"""A live run's part: names the keys as in use until its standard input closes."""
+
+
+def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_run_s_items(tmp_path, capsys):
+    """Issue 32: at the end of a render the least recently used items that no live run uses go,
+    down to the budget: the run's own items stay, and so does an item another process (a real
+    one) holds in use, older though it is; the command says what went in one line."""
+    import numpy as np
+
+    from pipeline.cycle import config_item_keys
+
+    config, run, cache = write_config(tmp_path, {**TINY, "output": {"video": "none", "report": False}}), \
+        tmp_path / "run", tmp_path / "cache"
+    assert render_in_process(config, run, cache, capsys, "--frames", "0-2", "--jobs", "1")[0] == 0  # every cycle frame
+    store = Cache(cache)
+    mine = set(config_item_keys(plan_run(load(config))))
+    others = {name: store.get_or_compute("spectra", {"other": name}, lambda: {"a": np.ones(40_000, np.float32)})
+              for name in ("old", "held")}
+    keys = {item.key: item for item in store.list()}
+    assert mine < set(keys) and len(keys) == len(mine) + 2
+    other_keys = set(keys) - mine
+    for item in keys.values():  # the two others used long ago, the oldest first
+        age = 10_000 if item.key in other_keys else 100
+        os.utime(item.path / "meta.json", (time.time() - age, time.time() - age))
+    held = sorted(other_keys)[0]
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(cache), held], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        budget = sum(item.bytes for item in keys.values()) - 1  # one item over
+        code, out, _ = render_in_process(config, run, cache, capsys, "--frames", "3", "--jobs", "1",
+                                         "--cache-size", str(budget))
+    finally:
+        holder.communicate("")
+    assert code == 0
+    left = {item.key: item for item in store.list()}
+    assert set(left) == mine | {held} and sum(item.bytes for item in left.values()) <= budget
+    assert out.strip().splitlines()[-1].startswith(f"sunshade: the cache was over its budget of ")
+    (gone,) = other_keys - {held}
+    assert f"removed 1 item ({keys[gone].bytes / 1024:.1f} KiB) that no live run uses" in out
+    assert not list((cache / ".runs").glob("*.json"))  # the runs' lists go with them
