@@ -18,6 +18,7 @@ from .ground import GroundResult, blend_band, render_ground
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
 from .cores import default_workers
+from .geometry import sky_grid
 from .plan import RunPlan, Scene
 
 
@@ -95,8 +96,11 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True)
     clock.lap("ground")
     view = plan.camera
-    background, _ = camera.background(
-        view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
+    if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
+        background, _ = camera.background(
+            view, irradiance=irradiance_maps(plan, ground), albedo=ground_albedo(config.ground), sky=sky)
+    else:
+        background = brdf_background(plan, frame, ground, sky, store, workers)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
@@ -134,6 +138,27 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
     clock.lap("composite")
     return FrameResult(radiance, sun_fraction, scene, exposure, ground, balance)
+
+
+def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store: cache.Cache,
+                    workers: int) -> np.ndarray:
+    """The background B (height, width, 3) float32 [kcd/m^2] with the ground's reflectance
+    ``ground.brdf`` (docs/method.md, "The ground's reflectance"): the sun's term at each
+    pixel's own view, the sky's through view bands chosen by ``brdf.choose_bands``."""
+    from . import brdf as reflect
+
+    config, view = plan.config, plan.camera
+    model = config.ground.brdf
+    chooser = plan.layers[0].coarse.sky or sky_grid((-32, -32), (64, 64), 1.0 / 16)
+    raster = sky.raster(chooser)
+    bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
+    terms = reflect.sky_terms(plan, frame, sky, store, workers, bands.directions())
+    sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
+    radiance = reflect.ground_radiance(
+        view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
+        sky_only=irradiance_maps(plan, terms[0]), bands=bands,
+        band_maps=[irradiance_maps(plan, t) for t in terms[1:]], sun_direction=sun, raster=raster)
+    return reflect.background(view, radiance, sky)
 
 
 def compile_loops(plan: RunPlan) -> None:
