@@ -181,60 +181,65 @@ def view_vectors(camera: cam.Camera):
 
 
 def _coarsened(raster, most_cells: int = 4096):
-    """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3) at the
-    block's weighted centre and weights (m,) (channels summed). [1], [radiance x sr]"""
+    """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
+    towards each block's light-weighted centre on the sky plane and weights (m,) (channels
+    summed). [1], [radiance x sr]"""
     e = raster.weighted.sum(axis=0, dtype=np.float64)
-    d = cell_directions(raster.grid)
+    rows, cols = e.shape
+    sx, sy = raster.grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
     step = max(1, int(np.ceil(np.sqrt(e.size / most_cells))))
-    rows, cols = (n // step * step for n in e.shape)
-    if rows == 0 or cols == 0:
-        return d.reshape(-1, 3), e.reshape(-1)
-    blocks = lambda a: a[:rows, :cols].reshape(rows // step, step, cols // step, step, *a.shape[2:])  # noqa: E731
-    weight = blocks(e).sum(axis=(1, 3))
-    centre = (blocks(d) * blocks(e)[..., None]).sum(axis=(1, 3)) / np.maximum(weight, 1e-30)[..., None]
-    centre /= np.maximum(np.linalg.norm(centre, axis=-1, keepdims=True), 1e-30)
-    return centre.reshape(-1, 3), weight.reshape(-1)
+    rows, cols = max(rows // step * step, 1), max(cols // step * step, 1)
+    step_r, step_c = min(step, rows), min(step, cols)
+    blocks = lambda a: a[:rows, :cols].reshape(rows // step_r, step_r, cols // step_c, step_c).sum(axis=(1, 3))  # noqa: E731
+    weight = blocks(e)
+    safe = np.maximum(weight, 1e-30)
+    x = blocks(e * sx) / safe
+    y = blocks(e * sy) / safe
+    w = np.stack([x, y, np.ones_like(x)], axis=-1)
+    return (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3), weight.reshape(-1)
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
-                 most: int = MAX_BANDS, samples: int = 256) -> ViewBands:
-    """The fewest view bands (1 to ``most``) whose blend gives the open sky's term sum_i e_i
+                 most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
+    """View bands, 1 to ``most``, added one at a time where the blend is worst (first the
+    middle, then both ends, then the sampled view zenith of the largest error), until the blend gives the open sky's term sum_i e_i
     s(V, L_i) within ``tolerance`` (relative) at every sampled pixel's own view zenith, against
-    that sum per pixel (brute force over the raster's cells, coarsened to 4096) at the bands'
+    that sum per pixel (brute force over the raster's cells, coarsened to 1024) at the bands'
     azimuth. views : (n, 3) the pixels' view vectors; azimuth of the bands: that of the views'
     mean (the change with azimuth across the image is ``sky_ratio``'s)."""
     views = clamp_view(views)
     pick = views[:: max(1, len(views) // samples)]
-    dirs, e = _coarsened(raster)
+    dirs, e = _coarsened(raster, 1024)
     zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
     mean = views.mean(axis=0)
     azimuth = float(np.arctan2(mean[0], mean[1]))
     # the bands fix the change with distance; the change across (azimuth) is ``sky_ratio``'s
     exact = shape(brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None]) @ e
     lo, hi = float(zenith.min()), float(zenith.max())
-    bands = None
-    for count in range(1, most + 1):
-        zeniths = (0.5 * (lo + hi),) if count == 1 else tuple(np.linspace(lo, hi, count))
-        trial = ViewBands(zeniths, azimuth, 0.0)
+    zeniths = [0.5 * (lo + hi)]
+    while True:  # greedy: the next band goes where the blend is worst
+        trial = ViewBands(tuple(zeniths), azimuth, 0.0)
         at_bands = shape(brdf, trial.directions()[:, None, :], dirs[None]) @ e
-        blended = at_bands @ trial.weights(zenith)
-        error = float(np.max(np.abs(blended - exact) / np.maximum(np.abs(exact), 1e-30)))
-        bands = ViewBands(zeniths, azimuth, error)
-        if error <= tolerance:
-            break
-    return bands
+        relative = np.abs(at_bands @ trial.weights(zenith) - exact) / np.maximum(np.abs(exact), 1e-30)
+        worst = int(np.argmax(relative))
+        bands = ViewBands(trial.zeniths, azimuth, float(relative[worst]))
+        if bands.error <= tolerance or len(zeniths) >= most:
+            return bands
+        zeniths = [lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})
+        if len(zeniths) == len(trial.zeniths):  # the worst sample is a band already
+            return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 24) -> np.ndarray:
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16) -> np.ndarray:
     """Per pixel (n,) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
     over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
-    coarsened to 4096 cells): the factor that makes the banded sky term exact on open ground
+    coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
     and carries the change across the image (view azimuth) that the bands do not hold. Read on
     a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
     bilinearly. views : (n, 3) unit vectors. [1]"""
     from scipy.interpolate import RegularGridInterpolator
 
-    dirs, e = _coarsened(raster)
+    dirs, e = _coarsened(raster, 2048)
     views = clamp_view(views)
     zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
     turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
@@ -248,14 +253,38 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     return RegularGridInterpolator(axes, ratio)(np.stack([zenith, turn], axis=-1)).astype(np.float32)
 
 
+SHAPE_STEP = 0.04
+"""Spacing on the sky plane [tan] (about 2.3 degrees at the zenith, less away from it) of the
+lattice on which ``weighted_raster`` evaluates the shape s(V, L), read bilinearly at the sky
+raster's cells: the shape changes over degrees (its sharpest feature, the hot spot's cusp
+1 / (1 + G), is a cone in G, the distance on this same plane)."""
+
+
+def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
+    """The shape s(view, L) (rows, cols) float32 at the cells of a sky-plane grid: exact on a
+    lattice of spacing at most SHAPE_STEP over the grid, bilinear between (the grid's own
+    cells when they are coarser). [1]"""
+    step = max(1, int(round(SHAPE_STEP / grid.pixel)))
+    if step == 1 or min(grid.shape) < 4 * step:
+        return shape(brdf, np.asarray(view)[None, None, :], cell_directions(grid)).astype(np.float32)
+    from .geometry import Grid
+
+    pitch = step * grid.pixel
+    rows, cols = (int(np.ceil(n / step)) + 3 for n in grid.shape)
+    x0, y0 = grid.origin
+    lattice = Grid((x0 + 0.5 * grid.pixel - 1.5 * pitch, y0 - 0.5 * grid.pixel + 1.5 * pitch), pitch, (rows, cols))
+    coarse = shape(brdf, np.asarray(view)[None, None, :], cell_directions(lattice)).astype(np.float32)
+    return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
+
+
 def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     """The sky raster with each cell's light times the shape s(view, L_cell) (Max's f_r(V, L)
-    on the sky raster, before the correlation), folded after the weighting when
-    ``fold_period`` is given; the light outside the raster times the mean shape over the
+    on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
+    when ``fold_period`` is given; the light outside the raster times the mean shape over the
     raster's outermost ring of cells (the nearest directions to it). [radiance x sr]"""
     from .sky import SkyRaster
 
-    s = shape(brdf, np.asarray(view)[None, None, :], cell_directions(raster.grid)).astype(np.float32)
+    s = shape_on_grid(brdf, view, raster.grid)
     weighted = raster.weighted * s[None]
     ring = np.ones(s.shape, dtype=bool)
     ring[1:-1, 1:-1] = False
@@ -268,30 +297,27 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
 
 
-def sky_terms(plan, frame: int, sky, store, workers: int, views) -> list:
-    """The sky's ground rasters (GroundResult on the coarse window) under the canopy: first
-    unweighted (the Lambertian sky term), then one per view in ``views`` (B, 3) with the sky
-    raster weighted by the shape at that view; layers combined by the paper's product rule,
-    each term with its own open-sky total."""
+def sky_terms(plan, frame: int, sky, store, workers: int, views, ground) -> list:
+    """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
+    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view; layers
+    combined by the paper's product rule, each term with its own open-sky total. ``ground``:
+    the frame's GroundResult with its ``sky_parts`` (each layer's sky raster: an isolated
+    layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
+    folded)."""
     from .cycle import cycle_item
     from .ground import GroundResult
 
     brdf = plan.config.ground.brdf
     cycle_frame = frame % plan.config.canopy.cycle
-    per_term = [[] for _ in range(len(views) + 1)]
-    totals = [None] * (len(views) + 1)
+    per_term = [[] for _ in range(len(views))]
+    totals = [None] * len(views)
     for index, lp in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
         coarse = lp.coarse
         periodic = isinstance(coarse, shadow.PeriodicPlan)
-        if periodic:
-            raw = sky.raster(coarse.sky)
-        else:
-            raw = sky.raster(coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height))
-        rasters = [sky.raster(coarse.sky, fold_period=coarse.tile_shape) if periodic else raw]
-        rasters += [weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
-                    for v in views]
-        for t, raster in enumerate(rasters):
+        raw = sky.raster(coarse.sky) if periodic else ground.sky_parts[2][index]
+        for t, v in enumerate(views):
+            raster = weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
             if periodic:
                 g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
             else:

@@ -18,7 +18,6 @@ from .ground import GroundResult, blend_band, render_ground
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
 from .cores import default_workers
-from .geometry import sky_grid
 from .plan import RunPlan, Scene
 
 
@@ -93,7 +92,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     clock = _Stopwatch(timings)
     scene = plan.scenes[frame]
     sky = load_sky(config.sky, scene)
-    ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True)
+    ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
+                           sky_parts=config.ground.brdf is not None)
     clock.lap("ground")
     view = plan.camera
     if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
@@ -149,15 +149,15 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
 
     config, view = plan.config, plan.camera
     model = config.ground.brdf
-    chooser = plan.layers[0].coarse.sky or sky_grid((-32, -32), (64, 64), 1.0 / 16)
-    raster = sky.raster(chooser)
+    raster = ground.sky_parts[2][0]  # the first layer's sky raster
     bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
-    terms = reflect.sky_terms(plan, frame, sky, store, workers, bands.directions())
+    terms = reflect.sky_terms(plan, frame, sky, store, workers, bands.directions(), ground)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
+    sky_only = GroundResult(ground.sky_parts[0], plan.window, ground.sky_parts[1], ground.exact)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
-        sky_only=irradiance_maps(plan, terms[0]), bands=bands,
-        band_maps=[irradiance_maps(plan, t) for t in terms[1:]], sun_direction=sun, raster=raster)
+        sky_only=irradiance_maps(plan, sky_only), bands=bands,
+        band_maps=[irradiance_maps(plan, t) for t in terms], sun_direction=sun, raster=raster)
     return reflect.background(view, radiance, sky)
 
 

@@ -30,25 +30,32 @@ class GroundResult:
     unshadowed: np.ndarray
     exact: bool
     outer: tuple[np.ndarray, Grid] | None = None
+    sky_parts: tuple | None = None
+    """With ``render_ground(sky_parts=True)``: (sky-only ground (rows, cols, 3) on the coarse
+    window [radiance x sr], its open-sky total (3,), each layer's sky raster as correlated),
+    for a ground reflectance's sky term (``brdf.sky_terms``)."""
 
 
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
-                  workers: int | None = None, sky=None, outer: bool = False) -> GroundResult:
+                  workers: int | None = None, sky=None, outer: bool = False,
+                  sky_parts: bool = False) -> GroundResult:
     """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
     raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
     product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
     frame's sky model, loaded when not given. ``outer``: also the coarse raster of the whole
     window with the sun at the coarse cell (the paper's single scale), where the sun window
-    does not cover it: what a camera sees beyond the sun window."""
+    does not cover it: what a camera sees beyond the sun window. ``sky_parts``: also keep the
+    sky's own share (GroundResult.sky_parts)."""
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     sky = sky or load_sky(plan.config.sky, plan.scenes[frame])
     cycle_frame = frame % plan.config.canopy.cycle
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
-    grounds, outers, totals, exact = [], [], [], True
+    grounds, outers, totals, exact, parts = [], [], [], True, []
     for index, layer_plan in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
-        g, total, layer_exact, g_outer = _ground_of_layer(sky, layer_plan, item, plan, workers, outer)
+        g, total, layer_exact, g_outer = _ground_of_layer(sky, layer_plan, item, plan, workers, outer,
+                                                          parts if sky_parts else None)
         grounds.append(g)
         outers.append(g_outer)
         totals.append(total)
@@ -58,7 +65,12 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
     around = None
     if outer:
         around = (np.moveaxis(shadow.combine_layers(outers, totals[0]), 0, -1), plan.window)
-    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around)
+    kept = None
+    if sky_parts:  # parts: (coarse sky-only ground, raster) per layer
+        sky_total = parts[0][1].total
+        kept = (np.moveaxis(shadow.combine_layers([g for g, _ in parts], sky_total), 0, -1), sky_total,
+                tuple(r for _, r in parts))
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, kept)
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:
@@ -68,10 +80,11 @@ def _covers(inner: Grid, outer: Grid) -> bool:
     return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
 
 
-def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False):
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False, parts=None):
     """(ground raster, unshadowed total, exact, outer raster or None) of one layer: the coarse
     sky light, plus the fine sun kernel on the sun window; with ``outer`` also the coarse
-    raster with the sun kernel at the coarse cell."""
+    raster with the sun kernel at the coarse cell. ``parts``, a list: appends (the coarse sky
+    light, its sky raster), neither written to afterwards."""
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
         grid = coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
@@ -84,6 +97,8 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
                                    workers=workers)
         exact = True
     total = raster.total
+    if parts is not None:
+        parts.append((g, raster))
     g_outer = None
     if lp.sun is not None:
         if outer:
