@@ -12,13 +12,17 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import camera as cam
 from . import shadow
-from .config import BrdfConfig
-from .geometry import fold, sky_grid, sky_offset
+from .geometry import Grid, fold, sky_grid, sky_offset
+from .sky import SkyRaster
+
+if TYPE_CHECKING:
+    from .config import BrdfConfig  # model and parameters: any value with those two fields
 
 VIEW_ZENITH_LIMIT = np.radians(85.0)
 """The view zenith angle the models are read at, at most: a bowl-shaped RPV (k < 1) grows
@@ -267,8 +271,6 @@ def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
     step = max(1, int(round(SHAPE_STEP / grid.pixel)))
     if step == 1 or min(grid.shape) < 4 * step:
         return shape(brdf, np.asarray(view)[None, None, :], cell_directions(grid)).astype(np.float32)
-    from .geometry import Grid
-
     pitch = step * grid.pixel
     rows, cols = (int(np.ceil(n / step)) + 3 for n in grid.shape)
     x0, y0 = grid.origin
@@ -282,8 +284,6 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
     when ``fold_period`` is given; the light outside the raster times the mean shape over the
     raster's outermost ring of cells (the nearest directions to it). [radiance x sr]"""
-    from .sky import SkyRaster
-
     s = shape_on_grid(brdf, view, raster.grid)
     weighted = raster.weighted * s[None]
     ring = np.ones(s.shape, dtype=bool)
@@ -297,38 +297,6 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
 
 
-def sky_terms(plan, frame: int, sky, store, workers: int, views, ground) -> list:
-    """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
-    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view; layers
-    combined by the paper's product rule, each term with its own open-sky total. ``ground``:
-    the frame's GroundResult with its ``sky_parts`` (each layer's sky raster: an isolated
-    layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
-    folded)."""
-    from .cycle import cycle_item
-    from .ground import GroundResult
-
-    brdf = plan.config.ground.brdf
-    cycle_frame = frame % plan.config.canopy.cycle
-    per_term = [[] for _ in range(len(views))]
-    totals = [None] * len(views)
-    for index, lp in enumerate(plan.layers):
-        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
-        coarse = lp.coarse
-        periodic = isinstance(coarse, shadow.PeriodicPlan)
-        raw = sky.raster(coarse.sky) if periodic else ground.sky_parts[2][index]
-        for t, v in enumerate(views):
-            raster = weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
-            if periodic:
-                g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
-            else:
-                g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
-            per_term[t].append(g)
-            if totals[t] is None:
-                totals[t] = raster.total
-    return [GroundResult(np.moveaxis(shadow.combine_layers(gs, totals[t]), 0, -1), plan.window, totals[t], True)
-            for t, gs in enumerate(per_term)]
-
-
 def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_only, bands: ViewBands,
                     band_maps, sun_direction, raster) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
@@ -337,7 +305,7 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_
     E_b the sky's term with the raster weighted at band b's view (``band_maps``, one chain
     each), w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over
     ``raster`` (the sky raster), V(x) each pixel's own view vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
-    blended (docs/method.md, "View bands"). 0 where no ground is seen."""
+    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):

@@ -11,10 +11,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import brdf as reflect
 from . import cache, camera, composite
 from .colour import REC709_LUMINANCE
 from .cycle import foreground_item, tree_box
-from .ground import GroundResult, blend_band, render_ground
+from .ground import GroundResult, blend_band, render_ground, sky_view_terms
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
 from .cores import default_workers
@@ -145,13 +146,11 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     """The background B (height, width, 3) float32 [kcd/m^2] with the ground's reflectance
     ``ground.brdf`` (docs/method.md, "The ground's reflectance"): the sun's term at each
     pixel's own view, the sky's through view bands chosen by ``brdf.choose_bands``."""
-    from . import brdf as reflect
-
     config, view = plan.config, plan.camera
     model = config.ground.brdf
     raster = ground.sky_parts[2][0]  # the first layer's sky raster
     bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
-    terms = reflect.sky_terms(plan, frame, sky, store, workers, bands.directions(), ground)
+    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
     sky_only = GroundResult(ground.sky_parts[0], plan.window, ground.sky_parts[1], ground.exact)
     radiance = reflect.ground_radiance(

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import brdf as brdf_models
 from . import cache, shadow
 from . import sky as sky_models
 from .cycle import cycle_item
@@ -71,6 +72,36 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
         kept = (np.moveaxis(shadow.combine_layers([g for g, _ in parts], sky_total), 0, -1), sky_total,
                 tuple(r for _, r in parts))
     return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, kept)
+
+
+def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: int, views,
+                   ground: GroundResult) -> list:
+    """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
+    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view; layers
+    combined by the paper's product rule, each term with its own open-sky total. ``ground``:
+    the frame's GroundResult with its ``sky_parts`` (each layer's sky raster: an isolated
+    layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
+    folded)."""
+    brdf = plan.config.ground.brdf
+    cycle_frame = frame % plan.config.canopy.cycle
+    per_term = [[] for _ in range(len(views))]
+    totals = [None] * len(views)
+    for index, lp in enumerate(plan.layers):
+        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
+        coarse = lp.coarse
+        periodic = isinstance(coarse, shadow.PeriodicPlan)
+        raw = sky.raster(coarse.sky) if periodic else ground.sky_parts[2][index]
+        for t, v in enumerate(views):
+            raster = brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
+            if periodic:
+                g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+            else:
+                g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+            per_term[t].append(g)
+            if totals[t] is None:
+                totals[t] = raster.total
+    return [GroundResult(np.moveaxis(shadow.combine_layers(gs, totals[t]), 0, -1), plan.window, totals[t], True)
+            for t, gs in enumerate(per_term)]
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:
