@@ -240,21 +240,28 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
     and carries the change across the image (view azimuth) that the bands do not hold. Read on
     a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
-    bilinearly. views : (n, 3) unit vectors. [1]"""
-    from scipy.interpolate import RegularGridInterpolator
-
+    bilinearly (held at its edges). views : (n, 3) unit vectors. [1]"""
     dirs, e = _coarsened(raster, 2048)
     views = clamp_view(views)
     zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
     turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
-    axes = [np.linspace(a.min(), a.min() + max(a.max() - a.min(), 1e-9), lattice) for a in (zenith, turn)]
+    lows = [float(zenith.min()), float(turn.min())]
+    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
+    axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
     z, t = np.meshgrid(*axes, indexing="ij")
     a = bands.azimuth + t
     v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
     own = shape(brdf, v[..., None, :], dirs) @ e
     blended = (shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e) @ bands.weights(axes[0])
-    ratio = own / np.maximum(blended, 1e-30)[:, None]
-    return RegularGridInterpolator(axes, ratio)(np.stack([zenith, turn], axis=-1)).astype(np.float32)
+    ratio = (own / np.maximum(blended, 1e-30)[:, None]).astype(np.float32)
+    # bilinear on the lattice, by hand (a regular grid): fractional indices, held at the edges
+    i = np.clip((zenith - lows[0]) / spans[0] * (lattice - 1), 0.0, lattice - 1.0)
+    j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
+    i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
+    fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
+    top = ratio[i0, j0] * (1 - fj) + ratio[i0, j0 + 1] * fj
+    bottom = ratio[i0 + 1, j0] * (1 - fj) + ratio[i0 + 1, j0 + 1] * fj
+    return top * (1 - fi) + bottom * fi
 
 
 SHAPE_STEP = 0.04
