@@ -1,7 +1,7 @@
 """The sky's term of a ground reflectance (issue 28) in view bands against a per-pixel brute
 force, under a leafy canopy, for several views, suns and band tolerances.
 
-    python benchmarks/accuracy_brdf.py
+    python benchmarks/accuracy_brdf.py [--config configs/lawn-hotspot.yaml [--samples 24]]
 
 A 24 x 24 random leaf mask (60% leaves, 0.25 m pixels, 4 m up) over a 40 x 40 ground window
 (10 m), the CIE clear sky (turbidity 3) on a sky square of 75 degrees, a camera 1.7 m up at a
@@ -11,10 +11,16 @@ direction, the sky raster weighted by the shape at that pixel's own view and cor
 alone (``brdf.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf.choose_bands``
 at each tolerance, the bands' correlations blended by their weights times ``brdf.sky_ratio``.
 Printed: the largest relative error over the sampled pixels and channels, and Lambert's.
+
+With ``--config``: the same on a shipped config's own sky raster, canopy spectrum and camera,
+frame 0, first layer (isolated layouts): ``--samples`` ground cells the camera sees, spread
+near to far and left to right, each brute-forced (its view's weighted raster correlated over
+the whole coarse window), against the bands at each tolerance, read at the same cell.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -40,6 +46,60 @@ TOLERANCES = (0.01, 0.02, 0.05, 1.0)
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config")
+    parser.add_argument("--samples", type=int, default=24)
+    args = parser.parse_args()
+    if args.config:
+        config_case(args.config, args.samples)
+    else:
+        window_cases()
+
+
+def config_case(path: str, samples: int) -> None:
+    """The bands against a per-pixel brute force on a config's frame 0 (see the module's text)."""
+    import tempfile
+
+    from pipeline import cache, camera
+    from pipeline.cycle import cycle_item
+    from pipeline.ground import render_ground, sky_view_terms
+    from pipeline.inputs import load_sky
+    from pipeline.plan import plan_run
+    from pipeline.resolve import load
+
+    plan = plan_run(load(path))
+    brdf, view, layer = plan.config.ground.brdf, plan.camera, plan.layers[0]
+    with tempfile.TemporaryDirectory() as folder:
+        store = cache.Cache(Path(folder))
+        sky = load_sky(plan.config.sky, plan.scenes[0])
+        ground = render_ground(plan, 0, store=store, workers=2, sky=sky, sky_parts=True)
+        item = cycle_item(plan, 0, 0, store, workers=2)
+        raster = ground.sky_parts[2][0]
+        views = R.view_vectors(view)
+        fp, _ = camera._view_footprints(view)
+        r, c = plan.window.raster_from_ground(fp.x, fp.y)
+        inside = np.flatnonzero((r >= 0) & (c >= 0) & (r <= plan.window.shape[0] - 1) & (c <= plan.window.shape[1] - 1))
+        chosen = inside[np.linspace(0, len(inside) - 1, samples).astype(int)]
+        cells = np.round(r[chosen]).astype(int), np.round(c[chosen]).astype(int)
+        brute = np.stack([shadow.ground_isolated(R.weighted_raster(raster, brdf, views[k]), item["coarse"], layer.coarse,
+                                                 workers=2)[:, i, j] for k, i, j in zip(chosen, *cells)], axis=1)
+        lambert = ground.sky_parts[0][cells].T
+        print(f"{path}: {samples} ground cells, view zeniths "
+              f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
+              f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
+        for tolerance in TOLERANCES:
+            bands = R.choose_bands(brdf, raster, views, tolerance=tolerance)
+            terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground)
+            weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2]))
+            banded = sum(weights[b, chosen][None] * t.irradiance[cells].T for b, t in enumerate(terms))
+            banded *= R.sky_ratio(brdf, raster, bands, views)[:, chosen]
+            worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
+            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.total[1]:.3f}, banded {banded[1, worst]:.3f}")
+            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+                  f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
+
+
+def window_cases() -> None:
     occlusion = (np.random.default_rng(3).random((24, 24)) < 0.6).astype(np.float32)
     window, canopy = Grid((-5.0, 5.0), 0.25, (N, N)), Grid((-3.0, 3.0), 0.25, (24, 24))
     plan = shadow.plan_isolated(window, canopy, height=4.0, alpha=np.radians(75.0))
@@ -67,8 +127,9 @@ def main() -> None:
                 bands = R.choose_bands(brdf, raster, flat, tolerance=tolerance)
                 terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d), spectrum, plan)
                          for d in bands.directions()]
-                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2])) * R.sky_ratio(brdf, raster, bands, flat)[None]
+                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2]))
                 banded = sum(w.reshape(N, N)[None] * t for w, t in zip(weights, terms))
+                banded *= R.sky_ratio(brdf, raster, bands, flat).reshape(3, N, N)
                 cells.append(f"{len(bands.zeniths)}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "

@@ -184,11 +184,12 @@ def view_vectors(camera: cam.Camera):
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def _coarsened(raster, most_cells: int = 4096):
+def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
     towards each block's light-weighted centre on the sky plane and weights (m,) (channels
-    summed). [1], [radiance x sr]"""
-    e = raster.weighted.sum(axis=0, dtype=np.float64)
+    summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
+    each = raster.weighted.astype(np.float64)
+    e = each.sum(axis=0)
     rows, cols = e.shape
     sx, sy = raster.grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
     step = max(1, int(np.ceil(np.sqrt(e.size / most_cells))))
@@ -200,7 +201,10 @@ def _coarsened(raster, most_cells: int = 4096):
     x = blocks(e * sx) / safe
     y = blocks(e * sy) / safe
     w = np.stack([x, y, np.ones_like(x)], axis=-1)
-    return (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3), weight.reshape(-1)
+    dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
+    if channels:
+        return dirs, np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
+    return dirs, weight.reshape(-1)
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
@@ -235,13 +239,13 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
 
 
 def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16) -> np.ndarray:
-    """Per pixel (n,) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
+    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
     over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
     coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
     and carries the change across the image (view azimuth) that the bands do not hold. Read on
     a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
     bilinearly (held at its edges). views : (n, 3) unit vectors. [1]"""
-    dirs, e = _coarsened(raster, 2048)
+    dirs, e = _coarsened(raster, 2048, channels=True)
     views = clamp_view(views)
     zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
     turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
@@ -251,16 +255,17 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     z, t = np.meshgrid(*axes, indexing="ij")
     a = bands.azimuth + t
     v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
-    own = shape(brdf, v[..., None, :], dirs) @ e
-    blended = (shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e) @ bands.weights(axes[0])
-    ratio = (own / np.maximum(blended, 1e-30)[:, None]).astype(np.float32)
+    own = shape(brdf, v[..., None, :], dirs) @ e  # (lattice, lattice, channels)
+    blended = np.einsum("bc,bz->zc", shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e,
+                        bands.weights(axes[0]))
+    ratio = np.moveaxis(own / np.maximum(blended, 1e-30)[:, None, :], -1, 0).astype(np.float32)
     # bilinear on the lattice, by hand (a regular grid): fractional indices, held at the edges
     i = np.clip((zenith - lows[0]) / spans[0] * (lattice - 1), 0.0, lattice - 1.0)
     j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
     i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
     fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
-    top = ratio[i0, j0] * (1 - fj) + ratio[i0, j0 + 1] * fj
-    bottom = ratio[i0 + 1, j0] * (1 - fj) + ratio[i0 + 1, j0 + 1] * fj
+    top = ratio[:, i0, j0] * (1 - fj) + ratio[:, i0, j0 + 1] * fj
+    bottom = ratio[:, i0 + 1, j0] * (1 - fj) + ratio[:, i0 + 1, j0 + 1] * fj
     return top * (1 - fi) + bottom * fi
 
 
@@ -324,9 +329,11 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_
     sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
     light = (e_total - e_sky) * sun.astype(np.float32)[None]
     weights = bands.weights(np.arccos(np.clip(clamp_view(views)[:, 2], -1.0, 1.0))).astype(np.float32)
-    weights *= sky_ratio(brdf, raster, bands, views)[None]
+    sky = np.zeros_like(light)
     for b, maps in enumerate(band_maps):
-        light += cam._filtered_chain(maps, fp) * weights[b][None]
+        sky += cam._filtered_chain(maps, fp) * weights[b][None]
+    sky *= sky_ratio(brdf, raster, bands, views)
+    light += sky
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)

@@ -157,8 +157,8 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     bands = R.choose_bands(b, raster, v.reshape(-1, 3))
     terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d), spectrum, plan) for d in bands.directions()]
     weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2]))
-    weights = (weights * R.sky_ratio(b, raster, bands, v.reshape(-1, 3))[None]).reshape(-1, 20, 20)
-    banded = sum(w[None] * t for w, t in zip(weights, terms))
+    banded = sum(w.reshape(20, 20)[None] * t for w, t in zip(weights, terms))
+    banded *= R.sky_ratio(b, raster, bands, v.reshape(-1, 3)).reshape(3, 20, 20)
     brute = np.empty_like(banded)
     for r in range(0, 20, 3):
         for c in range(0, 20, 3):
