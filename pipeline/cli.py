@@ -613,7 +613,8 @@ def _run_figures(args) -> int:
     Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky (5), the
     weighted sky raster (6), the ground raster (7), the finished frame (10), the same with a
     point sun and no sky light (11), the eclipsed ground and frame (12, 13), I0(alpha)/pi
-    (16), and S(t) through the 2024 eclipse at Dallas.
+    (16), S(t) through the 2024 eclipse at Dallas, and, beyond the paper, the ground's
+    reflectance: Lambert beside the grass preset with the sun behind the camera.
     """
     from .figures import FIGURES, write_figures
     from .runfolder import check_folder
