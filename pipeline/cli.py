@@ -583,6 +583,8 @@ def _run_frame(args) -> int:
         raise BadInput("--passes is for EXR output")
     config = _load(args, named_frames=False)
     if passes is not None:
+        if passes and config.ground.brdf is not None:
+            raise BadInput(f"--passes: the light passes are not made with a ground.brdf yet ({args.config})")
         config = dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes))
     _check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
@@ -740,7 +742,8 @@ def _run_figures(args) -> int:
     Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky (5), the
     weighted sky raster (6), the ground raster (7), the finished frame (10), the same with a
     point sun and no sky light (11), the eclipsed ground and frame (12, 13), I0(alpha)/pi
-    (16), and S(t) through the 2024 eclipse at Dallas.
+    (16), S(t) through the 2024 eclipse at Dallas, and, beyond the paper, the ground's
+    reflectance: Lambert beside the grass preset with the sun behind the camera.
     """
     from .figures import FIGURES, write_figures
     from .runfolder import check_folder

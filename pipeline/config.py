@@ -23,7 +23,8 @@ import yaml
 from . import __version__, paths
 from .constants import SUN_RADIUS_DEG
 from .errors import ConfigError
-from .vocabulary import (CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES, PASSES, PROCEDURAL_MODELS,
+from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES,
+                         PASSES, PROCEDURAL_MODELS,
                          SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
 
 LAYOUTS = ("isolated", "periodic")
@@ -180,6 +181,19 @@ class GroundConfig:
     sun_pixel: float | None = None
     albedo: str | Path = "grass"
     albedo_size: float = 4.0
+    brdf: "BrdfConfig | None" = None
+
+
+@dataclass(frozen=True)
+class BrdfConfig:
+    """The ground's reflectance (``ground.brdf``): model, a name in
+    ``vocabulary.BRDF_PARAMETERS``; parameters ((name, value), ...) in that model's order
+    [1]; preset, the name it was given by (``vocabulary.BRDF_PRESETS``) or None. None in
+    GroundConfig is ``lambert``, the paper's constant, on the code path it always had."""
+
+    model: str
+    parameters: tuple[tuple[str, float], ...] = ()
+    preset: str | None = None
 
 
 AUTO_TIME_CONSTANT = 0.2
@@ -307,6 +321,8 @@ class Config:
             values["camera"].pop("auto_exposure")
         if not values["output"]["passes"]:  # without passes a config hashes as it always did
             values["output"].pop("passes")
+        if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did
+            values["ground"].pop("brdf")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
@@ -664,7 +680,8 @@ _VALID_KEYS = {
     "sky.clouds": ("cover", "scale", "altitude", "wind", "thickness", "seed"),
     "sky.site": ("latitude", "longitude", "elevation"),
     "sky.time": ("start", "end"),
-    "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"),
+    "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"),
+    "ground.brdf": ("model", "rho0", "k", "theta", "rho_c", "f_iso", "f_vol", "f_geo"),
     "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
                "white_balance"),
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
@@ -703,6 +720,8 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     render = _parse_render(root.section("render"))
     root.done()
     _check_frames(root, animation, camera, output)
+    if output.passes and ground.brdf is not None:
+        root.fail("output.passes", "the light passes are not made with a ground.brdf yet; give one or the other")
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,
                   root.ctx.lines)
 
@@ -817,8 +836,42 @@ def _parse_ground(s: _Section) -> GroundConfig:
         albedo = s.file("albedo")
     s.raw("albedo", None)
     albedo_size = s.number("albedo_size", GroundConfig.albedo_size, above=0.0)
+    brdf = _parse_brdf(s) if s.has("brdf") else None
     s.done()
-    return GroundConfig(window, pixel, sun_window, sun_pixel, albedo, albedo_size)
+    return GroundConfig(window, pixel, sun_window, sun_pixel, albedo, albedo_size, brdf)
+
+
+def _parse_brdf(s: _Section) -> BrdfConfig | None:
+    """``ground.brdf``: ``lambert`` (None: the Lambertian path), a preset's name, or a mapping
+    ``{model: NAME, PARAMETER: value, ...}``; each parameter inside its model's open range."""
+    value = s.raw("brdf")
+    if isinstance(value, str):
+        if value == "lambert":
+            return None
+        if value not in BRDF_PRESETS:
+            s.fail("brdf", f"unknown value {value!r}; valid: {', '.join(('lambert', *BRDF_PRESETS))}, "
+                   "or a mapping with a model")
+        model, parameters = BRDF_PRESETS[value]
+        return BrdfConfig(model, tuple(parameters.items()), value)
+    b = s.section("brdf")
+    model = b.choice("model", tuple(BRDF_PARAMETERS))
+    ranges = BRDF_PARAMETERS[model]
+    values = {}
+    for name, (low, high, brackets) in ranges.items():
+        if name == "rho_c" and not b.has(name):
+            continue
+        value = values[name] = b.number(name)
+        inside = (low <= value if brackets[0] == "[" else low < value) and (
+            value <= high if brackets[1] == "]" else value < high)
+        if not inside:
+            b.fail(name, f"outside the physical range of {model}'s {name}, {brackets[0]}{low:g}, {high:g}"
+                   f"{brackets[1]} (got {value:g})")
+    if model == "rpv":
+        values.setdefault("rho_c", values["rho0"])
+    b.done()
+    if model == "lambert":
+        return None
+    return BrdfConfig(model, tuple(values.items()))
 
 
 def _parse_canopy(s: _Section, ground: GroundConfig) -> CanopyConfig:

@@ -1,4 +1,5 @@
-"""The paper's figures, remade as PNGs (Max 1991, Figs. 4 to 7, 10 to 13 and 16, and S(t)).
+"""The paper's figures, remade as PNGs (Max 1991, Figs. 4 to 7, 10 to 13 and 16, and S(t)), and
+one beyond it: the ground's reflectance, Lambert beside the grass preset.
 
 Every scene is held here as YAML text, copied from ``configs/grove.yaml``,
 ``configs/grove-point-sun.yaml`` and ``configs/crescents.yaml``, so the figures do not depend on
@@ -14,7 +15,7 @@ backend switch, no global state.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from functools import cached_property
 from pathlib import Path
@@ -63,6 +64,11 @@ FIGURES = (
     ("sun-fraction.png",
      "S(t): the sun fraction through the total solar eclipse of 2024 April 8 seen from Dallas, "
      "with the contacts C1 to C4"),
+    ("brdf-lawn.png",
+     "Beyond the paper: the grove's ground with the sun low behind the camera, Lambert's law "
+     "(left) and the RPV grass preset (right, ground.brdf: grass) at the same exposure: the "
+     "hot spot round the antisolar point at the bottom, the grass darker looking towards the "
+     "sun's side (no trees in front)"),
 )
 """(file name, one-line caption) of every figure, in the order ``write_figures`` writes them."""
 
@@ -127,7 +133,14 @@ POINT_SUN = {"sky": {"sun": {"elevation": 50.0, "azimuth": 150.0, "radius": 0.00
 """configs/grove-point-sun.yaml: the grove lit by a point sun alone (the paper's Fig. 11), as
 its changes to the grove (None: a key removed)."""
 
-SCENES = {"grove": GROVE, "point-sun": (GROVE, POINT_SUN), "crescents": CRESCENTS, "dallas-2024": DALLAS_2024}
+LAWN = {"sky": {"sun": {"elevation": 25.0, "azimuth": 295.0}, "clouds": None},
+        "ground": {"brdf": "grass"}, "camera": {"look_at": [0.0, 0.0, 0.3]}, "foreground": {"model": "none"}}
+"""configs/lawn-hotspot.yaml's idea on the grove: the sun low behind the camera, the RPV grass
+preset, the camera looking down so that the antisolar point (25 degrees below the horizon) is
+in the picture; no trees in front (their passes do not show the ground's reflectance)."""
+
+SCENES = {"grove": GROVE, "point-sun": (GROVE, POINT_SUN), "crescents": CRESCENTS, "dallas-2024": DALLAS_2024,
+          "lawn": (GROVE, LAWN)}
 """Each scene the figures use, by name: its YAML text, or (text, changes to it)."""
 
 _PREVIEW_GROVE = {
@@ -138,6 +151,7 @@ _PREVIEW_GROVE = {
 PREVIEW = {
     "grove": _PREVIEW_GROVE,
     "point-sun": _PREVIEW_GROVE,
+    "lawn": _PREVIEW_GROVE,
     "crescents": {
         "canopy": {"trees": {"leaves_per_tree": 22500, "leaf_length": 0.16}},
         "ground": {"pixel": 0.08, "sun_window": [-1, 0.5, 1, 2.5]},
@@ -452,6 +466,18 @@ def _fig_sun_fraction(scenes: _Scenes) -> np.ndarray:
                              title="S(t): the total solar eclipse of 2024 April 8 from Dallas")
 
 
+def _fig_brdf_lawn(scenes: _Scenes) -> np.ndarray:
+    """The lawn scene's frame 0 with Lambert's law and with its BRDF, side by side, both at the
+    Lambertian frame's exposure and white balance."""
+    config = scenes.config("lawn")
+    lambert = replace(config, ground=replace(config.ground, brdf=None))
+    results = [render_frame(plan_run(c), 0, store=scenes.store) for c in (lambert, config)]
+    shown = [composite.display(r.radiance, exposure=results[0].exposure, balance=results[0].balance,
+                               transform=config.camera.display) for r in results]
+    gap = np.ones((shown[0].shape[0], max(2, shown[0].shape[1] // 100), shown[0].shape[2]), dtype=shown[0].dtype)
+    return np.concatenate([shown[0], gap, shown[1]], axis=1)
+
+
 _MAKERS = {
     "fig04-mask.png": _fig_mask,
     "fig05-sky.png": _fig_sky,
@@ -463,6 +489,7 @@ _MAKERS = {
     "fig13-eclipse-frame.png": _fig_eclipse_frame,
     "fig16-i0.png": _fig_i0,
     "sun-fraction.png": _fig_sun_fraction,
+    "brdf-lawn.png": _fig_brdf_lawn,
 }
 
 

@@ -11,10 +11,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import brdf as reflect
 from . import cache, camera, composite
 from .colour import REC709_LUMINANCE
 from .cycle import foreground_item, tree_box
-from .ground import GroundResult, blend_band, render_ground
+from .ground import GroundResult, blend_band, render_ground, sky_view_terms
 from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
 from .lighting import Lighting, auto_exposures, reference_lighting
 from .cores import default_workers
@@ -130,13 +131,18 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     scene = plan.scenes[frame]
     sky = load_sky(config.sky, scene)
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
-                           parts=bool({"sun", "sky"} & set(passes)))
+                           parts=bool({"sun", "sky"} & set(passes)), coarse_sky=config.ground.brdf is not None)
     clock.lap("ground")
     view = plan.camera
-    seen_sky = camera.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
-    maps = irradiance_maps(plan, ground)
-    background, distance = camera.background(
-        view, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky, seen_sky=seen_sky)
+    if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
+        seen_sky = camera.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
+        maps = irradiance_maps(plan, ground)
+        background, distance = camera.background(
+            view, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky, seen_sky=seen_sky)
+    elif passes:
+        raise ValueError("the light passes split a Lambertian ground's light; ground.brdf has none yet")
+    else:
+        background = brdf_background(plan, frame, ground, sky, store, workers)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
@@ -250,6 +256,25 @@ class _DarkSky:
 
     def total_sun_irradiance(self) -> np.ndarray:
         return np.zeros(3)
+
+
+def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store: cache.Cache,
+                    workers: int) -> np.ndarray:
+    """The background B (height, width, 3) float32 [kcd/m^2] with the ground's reflectance
+    ``ground.brdf`` (docs/method.md, "The ground's reflectance"): the sun's term at each
+    pixel's own view, the sky's through view bands chosen by ``brdf.choose_bands``."""
+    config, view = plan.config, plan.camera
+    model = config.ground.brdf
+    raster = ground.coarse_sky[2][0]  # the first layer's sky raster
+    bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
+    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground)
+    sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
+    sky_only = GroundResult(ground.coarse_sky[0], plan.window, ground.coarse_sky[1], ground.exact)
+    radiance = reflect.ground_radiance(
+        view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
+        sky_only=irradiance_maps(plan, sky_only), bands=bands,
+        band_maps=[irradiance_maps(plan, t) for t in terms], sun_direction=sun, raster=raster)
+    return reflect.background(view, radiance, sky)
 
 
 def compile_loops(plan: RunPlan) -> None:

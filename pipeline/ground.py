@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import brdf as brdf_models
 from . import cache, shadow
 from . import sky as sky_models
 from .cycle import cycle_item
@@ -42,11 +43,15 @@ class GroundResult:
         outer = None if self.outer is None else (self.outer[0] - sky.outer[0], self.outer[1])
         return GroundResult(self.irradiance - sky.irradiance, self.grid,
                             np.asarray(self.unshadowed) - np.asarray(sky.unshadowed), self.exact, outer)
+    coarse_sky: tuple | None = None
+    """With ``render_ground(coarse_sky=True)``: (sky-only ground (rows, cols, 3) on the coarse
+    window [radiance x sr], its open-sky total (3,), each layer's sky raster as correlated),
+    for a ground reflectance's sky term (``brdf.sky_terms``)."""
 
 
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
                   workers: int | None = None, sky=None, outer: bool = False,
-                  parts: bool = False) -> GroundResult:
+                  parts: bool = False, coarse_sky: bool = False) -> GroundResult:
     """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
     raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
     product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
@@ -55,16 +60,18 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
     does not cover it: what a camera sees beyond the sun window. ``parts``: also the ground lit
     by the sky alone (``GroundResult.sky_part``), from the same correlations before the sun
     kernel's light is added (the light passes, docs/runs.md); with several layers the sky
-    part is combined by the same product rule over its own open-sky total."""
+    part is combined by the same product rule over its own open-sky total. ``coarse_sky``:
+    also keep the sky's own share on the coarse window (GroundResult.coarse_sky)."""
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     sky = sky or load_sky(plan.config.sky, plan.scenes[frame])
     cycle_frame = frame % plan.config.canopy.cycle
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
-    grounds, outers, totals, exact, skies = [], [], [], True, []
+    grounds, outers, totals, exact, skies, coarse_skies = [], [], [], True, [], []
     for index, layer_plan in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
-        g, total, layer_exact, g_outer, sky_only = _ground_of_layer(sky, layer_plan, item, plan, workers, outer, parts)
+        g, total, layer_exact, g_outer, sky_only = _ground_of_layer(
+            sky, layer_plan, item, plan, workers, outer, parts, coarse_skies if coarse_sky else None)
         grounds.append(g)
         outers.append(g_outer)
         totals.append(total)
@@ -83,7 +90,42 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
             sky_around = (np.moveaxis(shadow.combine_layers([s[2] for s in skies], sky_total), 0, -1), plan.window)
         sky_part = GroundResult(np.moveaxis(shadow.combine_layers([s[0] for s in skies], sky_total), 0, -1),
                                 grid, sky_total, exact, sky_around)
-    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, sky_part)
+    kept = None
+    if coarse_sky:  # (coarse sky-only ground, raster) per layer
+        sky_total = coarse_skies[0][1].total
+        kept = (np.moveaxis(shadow.combine_layers([g for g, _ in coarse_skies], sky_total), 0, -1), sky_total,
+                tuple(r for _, r in coarse_skies))
+    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, sky_part, kept)
+
+
+def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: int, views,
+                   ground: GroundResult) -> list:
+    """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
+    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view; layers
+    combined by the paper's product rule, each term with its own open-sky total. ``ground``:
+    the frame's GroundResult with its ``coarse_sky`` (each layer's sky raster: an isolated
+    layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
+    folded)."""
+    brdf = plan.config.ground.brdf
+    cycle_frame = frame % plan.config.canopy.cycle
+    per_term = [[] for _ in range(len(views))]
+    totals = [None] * len(views)
+    for index, lp in enumerate(plan.layers):
+        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
+        coarse = lp.coarse
+        periodic = isinstance(coarse, shadow.PeriodicPlan)
+        raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
+        for t, v in enumerate(views):
+            raster = brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
+            if periodic:
+                g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+            else:
+                g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+            per_term[t].append(g)
+            if totals[t] is None:
+                totals[t] = raster.total
+    return [GroundResult(np.moveaxis(shadow.combine_layers(gs, totals[t]), 0, -1), plan.window, totals[t], True)
+            for t, gs in enumerate(per_term)]
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:
@@ -93,11 +135,13 @@ def _covers(inner: Grid, outer: Grid) -> bool:
     return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
 
 
-def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False, parts=False):
+def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False, parts=False, keep=None):
     """(ground raster, unshadowed total, exact, outer raster or None, sky part or None) of one
     layer: the coarse sky light, plus the fine sun kernel on the sun window; with ``outer``
     also the coarse raster with the sun kernel at the coarse cell; with ``parts`` the sky part
-    (raster, total, outer raster or None): the same rasters before the sun's light is added."""
+    (raster, total, outer raster or None): the same rasters before the sun's light is added.
+    ``keep``, a list: appends (the coarse sky light, its sky raster), neither written to
+    afterwards (a ground reflectance's sky term)."""
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
         grid = coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
@@ -110,6 +154,8 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
                                    workers=workers)
         exact = True
     total = raster.total
+    if keep is not None:
+        keep.append((g, raster))
     g_outer = None
     sky_only = (g, total, g) if parts else None
     if lp.sun is not None:

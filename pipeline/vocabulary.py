@@ -76,3 +76,25 @@ PASSES = ("sun", "sky", "alpha", "illuminance", "depth")
 "Light passes"): ``sun`` and ``sky`` the frame's light from the sun and from the sky (RGB, they
 sum to the beauty), ``alpha`` the foreground's coverage, ``illuminance`` the ground's horizontal
 illuminance [lux], ``depth`` the distance to the ground seen [m]."""
+
+BRDF_PARAMETERS = {
+    "lambert": {},
+    "rpv": {"rho0": (0.0, 1.0, "(]"), "k": (0.0, 2.0, "()"), "theta": (-1.0, 1.0, "()"),
+            "rho_c": (0.0, 1.0, "(]")},
+    "rossli": {"f_iso": (0.0, 1.0, "(]"), "f_vol": (0.0, 1.0, "[]"), "f_geo": (0.0, 1.0, "[]")},
+}
+"""The ground's reflectance models (ground.brdf.model) and each one's parameters with their physical
+ranges (least, most, brackets: "(" open, "[" closed) (docs/method.md, "The ground's
+reflectance"): ``lambert`` the paper's constant; ``rpv`` Rahman, Pinty and Verstraete (1993),
+rho0 the amplitude, k the Minnaert bowl (k < 1) or bell (k > 1), theta the Henyey-Greenstein
+asymmetry (negative: backward scattering), rho_c the hot spot (default rho0); ``rossli``
+the MODIS RossThick-LiSparse-Reciprocal kernels' weights (Lucht, Schaaf and Strahler 2000)."""
+
+BRDF_PRESETS = {
+    "grass": ("rpv", {"rho0": 0.06, "k": 0.75, "theta": -0.15, "rho_c": 0.06}),
+    "sand": ("rpv", {"rho0": 0.30, "k": 1.15, "theta": -0.10, "rho_c": 0.30}),
+}
+"""Named ground reflectances a config may give as ``ground.brdf: NAME``. Their numbers are NOT
+taken from a located published table (docs/method.md, "The ground's reflectance", says so):
+chosen inside the RPV model's physical ranges for the shape each surface is known for (grass:
+bowl-shaped with a hot spot; sand: bell-shaped, darker at grazing light, backward scattering)."""

@@ -117,7 +117,7 @@ def test_layer_errors_name_the_layer_key(tmp_path):
 @pytest.mark.parametrize("section,keys", [
     ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
              "time", "moon", "clouds", "skylight", "haze"}),
-    ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size"}),
+    ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"}),
     ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
                 "white_balance"}),
 ])

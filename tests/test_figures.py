@@ -158,3 +158,14 @@ def test_preview_merges_without_touching_the_scene_text():
     assert quick.canopy.trees.leaves_per_tree * quick.canopy.trees.leaf_length**2 == pytest.approx(
         full.canopy.trees.leaves_per_tree * full.canopy.trees.leaf_length**2)
     assert quick.sky == full.sky
+
+
+def test_the_brdf_figure_shows_the_hot_spot_brighter_than_lambert(written):
+    """brdf-lawn.png: Lambert left, grass right, at one exposure: round the antisolar point
+    (bottom middle, the viewer has the sun behind) the grass is brighter."""
+    image = _image(written[0], "brdf-lawn.png")
+    half = image.shape[1] // 2
+    left, right = image[:, : half - 2], image[:, -(half - 2):]
+    rows = slice(int(0.75 * image.shape[0]), None)
+    middle = slice(int(0.4 * left.shape[1]), int(0.6 * left.shape[1]))
+    assert right[rows, middle].mean() > 1.1 * left[rows, middle].mean()

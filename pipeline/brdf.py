@@ -1,0 +1,349 @@
+"""The ground's reflectance f_r(V, L) (Max 1991, eq. 1 and the paragraph after it; docs/method.md,
+"The ground's reflectance"): the models (RPV, RossThick-LiSparse-Reciprocal), their shape
+normalised to the albedo texture, the view bands of the sky's term, and the frame's ground seen
+through them. ``lambert`` never comes here: its frames keep the camera's own path.
+
+Directions are unit vectors (..., 3) in world axes pointing away from the ground: ``v`` towards
+the viewer, ``l`` towards the light. Both conventions of relative azimuth in the literature
+are avoided by writing each model with vectors: the hot spot is v = l (the viewer has the light
+behind), where the phase angle g (cos g = v . l) is 0."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import camera as cam
+from . import shadow
+from .geometry import Grid, fold, sky_grid, sky_offset
+from .sky import SkyRaster
+
+if TYPE_CHECKING:
+    from .config import BrdfConfig  # model and parameters: any value with those two fields
+
+VIEW_ZENITH_LIMIT = np.radians(85.0)
+"""The view zenith angle the models are read at, at most: a bowl-shaped RPV (k < 1) grows
+without bound towards a grazing view (mu_v^(k - 1)), where no measurement supports it. [rad]"""
+
+QUADRATURE = (32, 64)
+"""Gauss-Legendre nodes in cos(zenith) on (0, 1) and equal steps in azimuth of the hemisphere
+quadratures (directional and white-sky reflectance). [count]"""
+
+BAND_TOLERANCE = 0.01
+"""Largest relative error of the open sky's term over the pixels that ``choose_bands`` accepts:
+it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
+
+MAX_BANDS = 8
+"""Most view bands (each one a correlation of the sky raster per canopy layer). [count]"""
+
+
+def reflectance_factor(brdf: BrdfConfig, v, l) -> np.ndarray:
+    """The bidirectional reflectance factor pi f_r(v, l) (...,) float64 of the model [1]; v, l
+    (..., 3) unit vectors above the ground."""
+    p = dict(brdf.parameters)
+    v, l = np.asarray(v, dtype=np.float64), np.asarray(l, dtype=np.float64)
+    if brdf.model == "rpv":
+        return _rpv(v, l, p["rho0"], p["k"], p["theta"], p["rho_c"])
+    if brdf.model == "rossli":
+        return _rossli(v, l, p["f_iso"], p["f_vol"], p["f_geo"])
+    raise ValueError(f"no such reflectance model: {brdf.model!r}")
+
+
+def _slopes(v, l):
+    """cos of both zenith angles, cos g, and the tangent vectors v_xy / mu_v, l_xy / mu_l."""
+    mv, ml = np.maximum(v[..., 2], 1e-9), np.maximum(l[..., 2], 1e-9)
+    tv, tl = v[..., :2] / mv[..., None], l[..., :2] / ml[..., None]
+    return mv, ml, np.clip(np.sum(v * l, axis=-1), -1.0, 1.0), tv, tl
+
+
+def _rpv(v, l, rho0, k, theta, rho_c):
+    """Rahman, Pinty and Verstraete (1993), eqs. 5-9: rho0 M F (1 + R), M the modified Minnaert
+    term (mu_l mu_v)^(k-1) / (mu_l + mu_v)^(1-k), F the Henyey-Greenstein phase function of the
+    phase angle g, (1 - theta^2) / (1 + 2 theta cos g + theta^2)^1.5 (theta < 0: backward), and
+    1 + R = 1 + (1 - rho_c) / (1 + G) the hot spot, G = |tan(th_l) a_l - tan(th_v) a_v| the
+    distance between the two directions on the plane z = 1 (0 at v = l)."""
+    mv, ml, cos_g, tv, tl = _slopes(v, l)
+    minnaert = (mv * ml) ** (k - 1.0) / (mv + ml) ** (1.0 - k)
+    phase = (1.0 - theta * theta) / (1.0 + 2.0 * theta * cos_g + theta * theta) ** 1.5
+    big_g = np.linalg.norm(tl - tv, axis=-1)
+    return rho0 * minnaert * phase * (1.0 + (1.0 - rho_c) / (1.0 + big_g))
+
+
+def _rossli(v, l, f_iso, f_vol, f_geo):
+    """RossThick-LiSparse-Reciprocal (Lucht, Schaaf and Strahler 2000, eqs. 37-45; h/b = 2,
+    b/r = 1): f_iso + f_vol K_vol + f_geo K_geo, xi the phase angle."""
+    mv, ml, cos_xi, tv, tl = _slopes(v, l)
+    xi = np.arccos(cos_xi)
+    k_vol = ((0.5 * np.pi - xi) * cos_xi + np.sin(xi)) / (mv + ml) - 0.25 * np.pi
+    sec = 1.0 / mv + 1.0 / ml
+    d2 = np.sum((tl - tv) ** 2, axis=-1)
+    cross = tl[..., 0] * tv[..., 1] - tl[..., 1] * tv[..., 0]  # tan tan sin(phi)
+    cos_t = np.clip(2.0 * np.sqrt(d2 + cross * cross) / sec, -1.0, 1.0)
+    t = np.arccos(cos_t)
+    overlap = (t - np.sin(t) * cos_t) * sec / np.pi
+    k_geo = overlap - sec + 0.5 * (1.0 + cos_xi) / (mv * ml)
+    return f_iso + f_vol * k_vol + f_geo * k_geo
+
+
+@functools.lru_cache(maxsize=1)
+def _hemisphere():
+    """Quadrature directions (n, 3) of the upper hemisphere and weights (n,) of cos(zenith)
+    d_omega, summing to pi. [1], [sr]"""
+    nodes, weights = np.polynomial.legendre.leggauss(QUADRATURE[0])
+    mu, wmu = 0.5 * (nodes + 1.0), 0.5 * weights
+    phi = (np.arange(QUADRATURE[1]) + 0.5) * 2.0 * np.pi / QUADRATURE[1]
+    m, p = np.meshgrid(mu, phi, indexing="ij")
+    s = np.sqrt(1.0 - m * m)
+    dirs = np.stack([s * np.cos(p), s * np.sin(p), m], axis=-1).reshape(-1, 3)
+    w = (wmu[:, None] * m * (2.0 * np.pi / QUADRATURE[1])).reshape(-1)
+    return dirs, w
+
+
+def directional_reflectance(brdf: BrdfConfig, l) -> np.ndarray:
+    """The directional-hemispherical reflectance (black-sky albedo) (...,) of light from unit
+    vector(s) l (..., 3): (1 / pi) integral of pi f_r cos(theta_v) d_omega_v. [1]"""
+    dirs, w = _hemisphere()
+    l = np.asarray(l, dtype=np.float64)
+    brf = reflectance_factor(brdf, dirs[(None,) * (l.ndim - 1)], l[..., None, :])
+    return brf @ w / np.pi
+
+
+@functools.lru_cache(maxsize=8)
+def white_sky_albedo(brdf: BrdfConfig) -> float:
+    """The bihemispherical reflectance under a uniform sky: (1 / pi) integral of the
+    directional reflectance times cos(theta_l) d_omega_l. [1]"""
+    dirs, w = _hemisphere()
+    return float(directional_reflectance(brdf, dirs[:: QUADRATURE[1]]) @ w[:: QUADRATURE[1]] * QUADRATURE[1] / np.pi)
+
+
+def shape(brdf: BrdfConfig, v, l) -> np.ndarray:
+    """The model's shape pi f_r(v, l) / A (...,) float64, A its white-sky albedo: the factor on
+    the albedo texture's rho / pi, so that under a uniform sky the ground reflects the texture's
+    rho (docs/method.md). v is read at VIEW_ZENITH_LIMIT or nearer the zenith. [1]"""
+    return reflectance_factor(brdf, clamp_view(v), l) / white_sky_albedo(brdf)
+
+
+def clamp_view(v) -> np.ndarray:
+    """Unit vectors v (..., 3) with their zenith angle held to VIEW_ZENITH_LIMIT at most. [1]"""
+    v = np.array(v, dtype=np.float64)
+    low = v[..., 2] < np.cos(VIEW_ZENITH_LIMIT)
+    if np.any(low):
+        across = np.linalg.norm(v[low, :2], axis=-1, keepdims=True)
+        v[low, :2] *= np.sin(VIEW_ZENITH_LIMIT) / np.maximum(across, 1e-12)
+        v[low, 2] = np.cos(VIEW_ZENITH_LIMIT)
+    return v
+
+
+def cell_directions(grid) -> np.ndarray:
+    """Unit vectors (rows, cols, 3) towards the centres of a sky-plane grid's cells. [1]"""
+    rows, cols = grid.shape
+    sx, sy = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
+    w = np.stack(np.broadcast_arrays(sx, sy, np.ones_like(sx)), axis=-1)
+    return w / np.linalg.norm(w, axis=-1, keepdims=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# View bands: the sky's term with V held per band (Max: f_r independent of V over a patch)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ViewBands:
+    """zeniths : (B,) the bands' view zenith angles, near to far [rad]; azimuth : the azimuth of
+    their view direction (from the ground towards the camera) [rad]; error : the largest
+    relative error of the open sky's term over the sampled pixels that ``choose_bands``
+    measured [1]."""
+
+    zeniths: tuple[float, ...]
+    azimuth: float
+    error: float
+
+    def directions(self) -> np.ndarray:
+        """(B, 3) unit view vectors of the bands. [1]"""
+        z = np.asarray(self.zeniths)
+        return np.stack([np.sin(z) * np.sin(self.azimuth), np.sin(z) * np.cos(self.azimuth), np.cos(z)], axis=-1)
+
+    def weights(self, zenith) -> np.ndarray:
+        """(B, n) weights of each band at view zenith angles (n,): linear between neighbouring
+        bands' zeniths (hat functions), held beyond the ends; they sum to 1. [1]"""
+        z = np.asarray(self.zeniths)
+        eye = np.eye(len(z))
+        return np.stack([np.interp(zenith, z, eye[b]) for b in range(len(z))]) if len(z) > 1 \
+            else np.ones((1, np.size(zenith)))
+
+
+def view_vectors(camera: cam.Camera):
+    """Unit vectors (n, 3) from the ground point each ground pixel sees towards the pinhole,
+    for the pixels of ``camera._view_footprints`` (rows first). [1]"""
+    fp, _ = cam._view_footprints(camera)
+    d = np.stack([camera.position[0] - fp.x, camera.position[1] - fp.y,
+                  np.full(fp.x.shape, float(camera.position[2]))], axis=-1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
+    """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
+    towards each block's light-weighted centre on the sky plane and weights (m,) (channels
+    summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
+    each = raster.weighted.astype(np.float64)
+    e = each.sum(axis=0)
+    rows, cols = e.shape
+    sx, sy = raster.grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
+    step = max(1, int(np.ceil(np.sqrt(e.size / most_cells))))
+    rows, cols = max(rows // step * step, 1), max(cols // step * step, 1)
+    step_r, step_c = min(step, rows), min(step, cols)
+    blocks = lambda a: a[:rows, :cols].reshape(rows // step_r, step_r, cols // step_c, step_c).sum(axis=(1, 3))  # noqa: E731
+    weight = blocks(e)
+    safe = np.maximum(weight, 1e-30)
+    x = blocks(e * sx) / safe
+    y = blocks(e * sy) / safe
+    w = np.stack([x, y, np.ones_like(x)], axis=-1)
+    dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
+    if channels:
+        return dirs, np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
+    return dirs, weight.reshape(-1)
+
+
+def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
+                 most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
+    """View bands, 1 to ``most``, added one at a time where the blend is worst (first the
+    middle, then both ends, then the sampled view zenith of the largest error), until the blend gives the open sky's term sum_i e_i
+    s(V, L_i) within ``tolerance`` (relative) at every sampled pixel's own view zenith, against
+    that sum per pixel (brute force over the raster's cells, coarsened to 1024) at the bands'
+    azimuth. views : (n, 3) the pixels' view vectors; azimuth of the bands: that of the views'
+    mean (the change with azimuth across the image is ``sky_ratio``'s)."""
+    views = clamp_view(views)
+    pick = views[:: max(1, len(views) // samples)]
+    dirs, e = _coarsened(raster, 1024)
+    zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
+    mean = views.mean(axis=0)
+    azimuth = float(np.arctan2(mean[0], mean[1]))
+    # the bands fix the change with distance; the change across (azimuth) is ``sky_ratio``'s
+    exact = shape(brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None]) @ e
+    lo, hi = float(zenith.min()), float(zenith.max())
+    zeniths = [0.5 * (lo + hi)]
+    while True:  # greedy: the next band goes where the blend is worst
+        trial = ViewBands(tuple(zeniths), azimuth, 0.0)
+        at_bands = shape(brdf, trial.directions()[:, None, :], dirs[None]) @ e
+        relative = np.abs(at_bands @ trial.weights(zenith) - exact) / np.maximum(np.abs(exact), 1e-30)
+        worst = int(np.argmax(relative))
+        bands = ViewBands(trial.zeniths, azimuth, float(relative[worst]))
+        if bands.error <= tolerance or len(zeniths) >= most:
+            return bands
+        zeniths = [lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})
+        if len(zeniths) == len(trial.zeniths):  # the worst sample is a band already
+            return bands
+
+
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16) -> np.ndarray:
+    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
+    over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
+    coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
+    and carries the change across the image (view azimuth) that the bands do not hold. Read on
+    a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
+    bilinearly (held at its edges). views : (n, 3) unit vectors. [1]"""
+    dirs, e = _coarsened(raster, 2048, channels=True)
+    views = clamp_view(views)
+    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
+    turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
+    lows = [float(zenith.min()), float(turn.min())]
+    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
+    axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
+    z, t = np.meshgrid(*axes, indexing="ij")
+    a = bands.azimuth + t
+    v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
+    own = shape(brdf, v[..., None, :], dirs) @ e  # (lattice, lattice, channels)
+    blended = np.einsum("bc,bz->zc", shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e,
+                        bands.weights(axes[0]))
+    ratio = np.moveaxis(own / np.maximum(blended, 1e-30)[:, None, :], -1, 0).astype(np.float32)
+    # bilinear on the lattice, by hand (a regular grid): fractional indices, held at the edges
+    i = np.clip((zenith - lows[0]) / spans[0] * (lattice - 1), 0.0, lattice - 1.0)
+    j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
+    i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
+    fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
+    top = ratio[:, i0, j0] * (1 - fj) + ratio[:, i0, j0 + 1] * fj
+    bottom = ratio[:, i0 + 1, j0] * (1 - fj) + ratio[:, i0 + 1, j0 + 1] * fj
+    return top * (1 - fi) + bottom * fi
+
+
+SHAPE_STEP = 0.04
+"""Spacing on the sky plane [tan] (about 2.3 degrees at the zenith, less away from it) of the
+lattice on which ``weighted_raster`` evaluates the shape s(V, L), read bilinearly at the sky
+raster's cells: the shape changes over degrees (its sharpest feature, the hot spot's cusp
+1 / (1 + G), is a cone in G, the distance on this same plane)."""
+
+
+def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
+    """The shape s(view, L) (rows, cols) float32 at the cells of a sky-plane grid: exact on a
+    lattice of spacing at most SHAPE_STEP over the grid, bilinear between (the grid's own
+    cells when they are coarser). [1]"""
+    step = max(1, int(round(SHAPE_STEP / grid.pixel)))
+    if step == 1 or min(grid.shape) < 4 * step:
+        return shape(brdf, np.asarray(view)[None, None, :], cell_directions(grid)).astype(np.float32)
+    pitch = step * grid.pixel
+    rows, cols = (int(np.ceil(n / step)) + 3 for n in grid.shape)
+    x0, y0 = grid.origin
+    lattice = Grid((x0 + 0.5 * grid.pixel - 1.5 * pitch, y0 - 0.5 * grid.pixel + 1.5 * pitch), pitch, (rows, cols))
+    coarse = shape(brdf, np.asarray(view)[None, None, :], cell_directions(lattice)).astype(np.float32)
+    return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
+
+
+def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
+    """The sky raster with each cell's light times the shape s(view, L_cell) (Max's f_r(V, L)
+    on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
+    when ``fold_period`` is given; the light outside the raster times the mean shape over the
+    raster's outermost ring of cells (the nearest directions to it). [radiance x sr]"""
+    s = shape_on_grid(brdf, view, raster.grid)
+    weighted = raster.weighted * s[None]
+    ring = np.ones(s.shape, dtype=bool)
+    ring[1:-1, 1:-1] = False
+    e = raster.weighted.sum(axis=0)
+    edge = float((e[ring] * s[ring]).sum() / max(float(e[ring].sum()), 1e-30))
+    grid = raster.grid
+    if fold_period is not None:
+        weighted = fold(weighted, sky_offset(grid), fold_period)
+        grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
+    return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
+
+
+def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_only, bands: ViewBands,
+                    band_maps, sun_direction, raster) -> np.ndarray:
+    """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
+    rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) sum_b w_b(x) E_b(x) ], rho the albedo texture,
+    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part (``sky_only``),
+    E_b the sky's term with the raster weighted at band b's view (``band_maps``, one chain
+    each), w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over
+    ``raster`` (the sky raster), V(x) each pixel's own view vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
+    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
+    rows, _ = cam._ground_rows(camera)
+    radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    if not len(rows):
+        return radiance
+    fp, _ = cam._view_footprints(camera)
+    views = view_vectors(camera)
+    e_total = cam._filtered_chain(total, fp)
+    e_sky = cam._filtered_chain(sky_only, fp)
+    sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
+    light = (e_total - e_sky) * sun.astype(np.float32)[None]
+    weights = bands.weights(np.arccos(np.clip(clamp_view(views)[:, 2], -1.0, 1.0))).astype(np.float32)
+    sky = np.zeros_like(light)
+    for b, maps in enumerate(band_maps):
+        sky += cam._filtered_chain(maps, fp) * weights[b][None]
+    sky *= sky_ratio(brdf, raster, bands, views)
+    light += sky
+    rho = cam._albedo_in_view(camera, albedo)
+    light *= rho
+    light *= np.float32(1.0 / np.pi)
+    radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
+    return radiance
+
+
+def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndarray:
+    """``camera.background`` with the ground's radiance given: f ground + (1 - f) sky."""
+    fraction, rest = cam._ground_fractions(camera)
+    out = ground_radiance_ * fraction[..., None]
+    out += cam.sky_view(camera, sky) * rest
+    return out
