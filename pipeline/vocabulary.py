@@ -91,10 +91,11 @@ asymmetry (negative: backward scattering), rho_c the hot spot (default rho0); ``
 the MODIS RossThick-LiSparse-Reciprocal kernels' weights (Lucht, Schaaf and Strahler 2000)."""
 
 BRDF_PRESETS = {
-    "grass": ("rpv", {"rho0": 0.06, "k": 0.75, "theta": -0.15, "rho_c": 0.06}),
+    "grass": ("rpv", {"rho0": 0.014, "k": 0.810, "theta": -0.169, "rho_c": 0.014}),
     "sand": ("rpv", {"rho0": 0.30, "k": 1.15, "theta": -0.10, "rho_c": 0.30}),
 }
-"""Named ground reflectances a config may give as ``ground.brdf: NAME``. Their numbers are NOT
-taken from a located published table (docs/method.md, "The ground's reflectance", says so):
-chosen inside the RPV model's physical ranges for the shape each surface is known for (grass:
-bowl-shaped with a hot spot; sand: bell-shaped, darker at grazing light, backward scattering)."""
+"""Named ground reflectances a config may give as ``ground.brdf: NAME`` (docs/method.md, "The
+ground's reflectance"): ``grass`` Rahman, Pinty and Verstraete's (1993) fit for grasses in the
+visible band (rho0 = rho_c 0.014, Theta -0.169, k 0.810; their table as reprinted in the SHARM
+manual, Lyapustin 2005); ``sand`` chosen by hand inside the model's ranges (no published fit for
+sand was found): bell-shaped, darker at grazing light, backward scattering."""
