@@ -1,7 +1,8 @@
 """The clear sky's angular shape: where in the sky its light comes from, and its colour.
 
 Relative luminance from the CIE standard general sky (ISO 15469:2004 / CIE S 011/E:2003, 15 types)
-or from Preetham, Shirley & Smits (1999); chromaticity from Preetham's model. The shapes carry no
+or from Preetham, Shirley & Smits (1999); chromaticity from Preetham's model for the clear types and
+from the CIE daylight locus (D series, CIE 15) for the overcast and intermediate ones. The shapes carry no
 absolute level: ``sky.ProceduralSky`` scales them to the diffuse illuminance of ``daylight``
 (docs/method.md, "The procedural sky": daylight in absolute units). Angles in radians; directions by the cosine of
 their zenith angle and their angle ``gamma`` from the sun.
@@ -24,6 +25,31 @@ CIE_TYPES = {t: (*_GRADATION[g], *_INDICATRIX[i]) for t, (g, i) in _TYPE_GROUPS.
 """The 15 CIE standard general skies (ISO 15469:2004, Tables 1 and 2): type -> (a, b, c, d, e),
 gradation groups I-VI and indicatrix groups 1-6. Types 1-5 are overcast, 6-10 partly cloudy,
 11-15 clear (12: clear, low illuminance turbidity; 13: clear, polluted atmosphere)."""
+
+DAYLIGHT_CCT = {**{t: 6504.0 for t in range(1, 6)}, **{t: 7000.0 for t in range(6, 11)}}
+"""Correlated colour temperature of the overcast (1-5) and intermediate (6-10) CIE types, whose sky
+takes the chromaticity of CIE daylight at it (``daylight_chromaticity``): 6504 K is D65 (measured
+overcast skies lie near the daylight locus at 6500-7500 K); the partly cloudy types, with some
+blue sky between the clouds, 7000 K, a choice within that band (docs/method.md, "The procedural
+sky"). The clear types (11-15) keep Preetham's blue sky. [K]"""
+
+
+def daylight_chromaticity(cct: float) -> tuple[float, float]:
+    """CIE xy of the D-series daylight of correlated colour temperature ``cct`` (CIE 15:2004,
+    eqs. 3.3-3.4: x_D a cubic in 1/T on 4000-7000 K and on 7000-25000 K, y_D = -3 x_D^2 +
+    2.870 x_D - 0.275). The CIE's D65 is 6504 K (6500 K before the 1968 change of c2).
+
+    cct : in [4000, 25000]. [K]   Returns (x, y). [1]
+    """
+    t = float(cct)
+    if not 4000.0 <= t <= 25000.0:
+        raise ValueError(f"cct must be in [4000, 25000] K, got {cct}")
+    if t <= 7000.0:
+        x = -4.6070e9 / t**3 + 2.9678e6 / t**2 + 0.09911e3 / t + 0.244063
+    else:
+        x = -2.0064e9 / t**3 + 1.9018e6 / t**2 + 0.24748e3 / t + 0.237040
+    return x, -3.000 * x * x + 2.870 * x - 0.275
+
 
 # Preetham et al. 1999, appendix A.2: Perez coefficients (A..E) = slope * T + intercept, rows Y, x, y.
 _PEREZ_SLOPE = np.array(
@@ -121,16 +147,22 @@ def rgb_from_xyY(x, y, Y) -> np.ndarray:
 
 def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shape: str = "cie",
                  cie_type: int = DEFAULT_CIE_TYPE) -> np.ndarray:
-    """The clear sky's colour and relative luminance: luminance 1 at the zenith, shaped by the CIE
-    type or by Preetham's model (``shape``), coloured by Preetham's chromaticity at ``turbidity``.
+    """The sky's colour and relative luminance: luminance 1 at the zenith, shaped by the CIE
+    type or by Preetham's model (``shape``), coloured by Preetham's chromaticity at ``turbidity``,
+    or, for the overcast and intermediate CIE types (``DAYLIGHT_CCT``), by CIE daylight's.
 
-    cos_zenith : in [0, 1]. [1]   gamma : angle from the sun. [rad]   sun_zenith : [rad]
+    cos_zenith : in [0, 1]. [1]   gamma : angle from the sun. [rad]
+    sun_zenith : [rad]; beyond pi/2 (the sun set, to 96 degrees) the CIE shape follows it and
+        Preetham's colour (and shape) are those at pi/2.
     turbidity : T of the colour (and of the Preetham shape). [1]
     Returns (..., 3) float64 linear Rec.709, zenith luminance 1. [1]
     """
-    Y, x, y = preetham_relative(cos_zenith, gamma, turbidity=turbidity, sun_zenith=sun_zenith)
+    # Preetham's model stops at the horizon: below it (twilight) the colours of sunset are kept
+    Y, x, y = preetham_relative(cos_zenith, gamma, turbidity=turbidity, sun_zenith=min(sun_zenith, np.pi / 2))
     if shape == "cie":
         Y = cie_relative_luminance(cos_zenith, gamma, sun_zenith=sun_zenith, cie_type=cie_type)
+        if cie_type in DAYLIGHT_CCT:
+            x, y = (np.full_like(Y, c) for c in daylight_chromaticity(DAYLIGHT_CCT[cie_type]))
     elif shape != "preetham":
         raise ValueError(f"unknown sky shape {shape!r} (valid: {', '.join(PROCEDURAL_MODELS)})")
     return rgb_from_xyY(x, y, Y)

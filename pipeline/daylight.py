@@ -156,3 +156,79 @@ def linke_turbidity(when: datetime, latitude: float, longitude: float) -> float:
         warnings.simplefilter("ignore")
         value = clearsky.lookup_linke_turbidity(index, float(np.degrees(latitude)), float(np.degrees(longitude)))
     return float(np.asarray(value)[0])
+
+
+# --- low sun and civil twilight (docs/method.md, "The procedural sky": low sun and twilight) ---
+
+TWILIGHT_END = float(np.radians(-6.0))
+"""The lowest sun the sky is drawn for: the end of civil twilight. [rad]"""
+
+TWILIGHT_BLEND = (6.0, 10.0)
+"""Sun elevations between which the horizontal illuminance passes from the USNO curve (below)
+to Ineichen & Perez with the Perez efficacies (above; unchanged there), by a smoothstep in
+log illuminance. Below about 6 degrees pvlib's Ineichen model falls far under the measured
+curve (at 3 degrees, TL 3: 0.4-0.6 of it; docs/accuracy.md). [deg]"""
+
+# Janiczek & DeYoung 1987 (USNO Circular 171), the sun's illuminance program: log10 E [lx] =
+# L0 + L1 x + L2 x^2 + L3 x^3, x = altitude / 90 degrees, per altitude band (lower bound, deg),
+# as reproduced in Vallado, Fundamentals of Astrodynamics and Applications (4th ed. 2013),
+# Table 5-1.
+_USNO_SUN = ((20.0, (3.74, 3.97, -4.07, 1.47)), (5.0, (3.05, 13.28, -45.98, 64.33)),
+             (-0.8, (2.88, 22.26, -207.64, 1034.30)), (-5.0, (2.88, 21.81, -258.11, -858.36)),
+             (-12.0, (2.70, 12.17, -431.69, -1899.83)), (-18.0, (13.84, 262.72, 1447.42, 2797.93)))
+
+
+def usno_illuminance(elevation_deg) -> np.ndarray:
+    """Horizontal illuminance of the sun and the clear sky at the mean sun distance (Janiczek &
+    DeYoung 1987, USNO Circular 171: the curve of its illuminance program, altitude bands of
+    ``_USNO_SUN``); 0 below -18 degrees.
+
+    elevation_deg : the sun's (true) altitude. [deg]   Returns float64 like it. [lx]
+    """
+    h = np.asarray(elevation_deg, dtype=np.float64)
+    x = h / 90.0
+    log_e = np.full(h.shape, -np.inf)
+    for lower, (l0, l1, l2, l3) in reversed(_USNO_SUN):
+        log_e = np.where(h >= lower, l0 + x * (l1 + x * (l2 + x * l3)), log_e)
+    return 10.0**log_e
+
+
+def _smoothstep(t):
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def sky_daylight(sun_elevation: float, linke_turbidity: float, *, altitude: float = 0.0,
+                 distance_factor: float = 1.0, precipitable_water: float = PRECIPITABLE_WATER,
+                 sun_radius: float = float(np.radians(0.2666))) -> ClearDaylight:
+    """The clear sky's direct and diffuse light at any sun from the zenith to the end of civil
+    twilight: ``clear_daylight`` at and above TWILIGHT_BLEND[1]; below, the global horizontal
+    illuminance E of the USNO curve (``usno_illuminance``, times ``distance_factor``) blended
+    into Ineichen & Perez's by a smoothstep in log E over TWILIGHT_BLEND. The sun keeps
+    Ineichen & Perez's direct normal light while its whole disc is up (0 below), and the sky
+    takes the rest: diffuse = E - direct x sin(elevation), at least 5% of E.
+
+    sun_elevation : of the sun's centre, in [TWILIGHT_END, pi/2]. [rad]
+    linke_turbidity, altitude, distance_factor, precipitable_water : as ``clear_daylight``.
+    sun_radius : the disc's angular radius: no direct light below it. [rad]
+    Returns a ClearDaylight ([W/m^2] and [klx]; the irradiances are Ineichen & Perez's).
+    """
+    h = float(np.degrees(sun_elevation))
+    if not sun_elevation >= TWILIGHT_END - 1e-12:
+        raise ValueError(f"the sun at {h:.2f} degrees is below the end of civil twilight "
+                         f"({np.degrees(TWILIGHT_END):g} degrees): no sky is drawn for it")
+    kwargs = dict(altitude=altitude, distance_factor=distance_factor, precipitable_water=precipitable_water)
+    low, high = TWILIGHT_BLEND
+    if h >= high:
+        return clear_daylight(np.pi / 2 - sun_elevation, linke_turbidity, **kwargs)
+    ip = clear_daylight(np.pi / 2 - max(sun_elevation, 1e-4), linke_turbidity, **kwargs)
+    direct = ip.direct_normal_illuminance if sun_elevation > sun_radius else 0.0
+    usno = float(usno_illuminance(h)) * distance_factor / 1000.0
+    w = float(_smoothstep((h - low) / (high - low)))
+    if w > 0.0:
+        modelled = direct * np.sin(sun_elevation) + ip.diffuse_horizontal_illuminance
+        usno = float(np.exp((1.0 - w) * np.log(usno) + w * np.log(modelled)))
+    horizontal = direct * max(np.sin(sun_elevation), 0.0)
+    diffuse = max(usno - horizontal, 0.05 * usno)
+    return ClearDaylight(ip.direct_normal_irradiance if direct else 0.0, ip.diffuse_horizontal_irradiance,
+                         direct, diffuse)

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import camera, canopy
 from .config import Config
-from .geometry import direction_vector, sky_plane_from_direction
+from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
 
 if TYPE_CHECKING:
@@ -274,7 +274,8 @@ def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
     radius = min(sc.sun.angular_radius for sc in scenes)
     lowest = min(sc.sun.elevation for sc in scenes)
     pixel = config.ground.sun_pixel or min(heights) * 2 * np.tan(radius) / config.render.sun_cells
-    image = 2 * max(heights) * np.tan(radius) / np.sin(lowest)  # a pinhole image's length [m]
+    # a pinhole image's length [m]: 1 / sin(h) times its width (geometry.pinhole_image_axes)
+    image = pinhole_image_axes(max(heights), max(lowest, 2.0 * radius), radius)[0]
     area = window if shadow_box is None else _intersect(_grow(shadow_box, image), window) or window
     points, distance = seen_ground(view)
     inside = ((points[:, 0] >= area[0]) & (points[:, 0] <= area[2])

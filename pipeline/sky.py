@@ -528,8 +528,10 @@ class ProceduralSky:
 
     turbidity : Linke turbidity factor TL, in vocabulary.TURBIDITY_RANGE: the levels of sun and
         sky (``daylight.clear_daylight``) and the colours of both. [1]
-    sun : SunDisc -- elevation must be above 0: the model has no twilight (ValueError). Its
-        angular radius gives its distance, so the extraterrestrial irradiance. [rad]
+    sun : SunDisc -- elevation at least ``daylight.TWILIGHT_END`` (-6 degrees, the end of civil
+        twilight; lower: ValueError). Below 10 degrees the levels follow the USNO twilight curve
+        (``daylight.sky_daylight``); with its disc not wholly above the horizon the sun gives no
+        direct light. Its angular radius gives its distance, so the extraterrestrial irradiance. [rad]
     moon : MoonDisc or None.
     clouds : an object with the clouds protocol (module comment above), or None.
     time : passed to the clouds. [s]
@@ -560,8 +562,9 @@ class ProceduralSky:
         lo, hi = TURBIDITY_RANGE
         if not (lo <= self.turbidity <= hi):
             raise ValueError(f"turbidity must be in [{lo}, {hi}], got {self.turbidity}")
-        if not self.sun.elevation > 0.0:
-            raise ValueError(f"sun elevation must be above 0 for the clear sky, got {self.sun.elevation} [rad]")
+        if not self.sun.elevation >= daylight.TWILIGHT_END:
+            raise ValueError(f"sun elevation must be at least {np.degrees(daylight.TWILIGHT_END):g} degrees (the end "
+                             f"of civil twilight) for the sky, got {np.degrees(self.sun.elevation):.2f} degrees")
         if self.shape not in PROCEDURAL_MODELS:
             raise ValueError(f"unknown sky shape {self.shape!r} (valid: {', '.join(PROCEDURAL_MODELS)})")
         if self.cie_type not in clearsky.CIE_TYPES:
@@ -581,14 +584,16 @@ class ProceduralSky:
     @cached_property
     def daylight(self) -> daylight.ClearDaylight:
         """The clear sky's direct and diffuse light at this sun, turbidity, altitude and distance."""
-        return daylight.clear_daylight(np.pi / 2 - self.sun.elevation, self.turbidity, altitude=self.altitude,
-                                       distance_factor=(self.sun.angular_radius / SUN_ANGULAR_RADIUS) ** 2)
+        return daylight.sky_daylight(self.sun.elevation, self.turbidity, altitude=self.altitude,
+                                     distance_factor=(self.sun.angular_radius / SUN_ANGULAR_RADIUS) ** 2,
+                                     sun_radius=self.sun.angular_radius)
 
     @cached_property
     def sun_normal_irradiance(self) -> np.ndarray:
         """Clear, uneclipsed normal irradiance of the sun after the atmosphere (3,): the direct
-        normal illuminance of ``daylight`` in the colour of ``sun_colour``. [klx]"""
-        zenith = np.pi / 2 - self.sun.elevation
+        normal illuminance of ``daylight`` in the colour of ``sun_colour`` (zeros with the disc
+        not wholly up). [klx]"""
+        zenith = min(np.pi / 2 - self.sun.elevation, np.pi / 2)
         return self.daylight.direct_normal_illuminance * sun_colour(zenith, self.turbidity)
 
     def total_sun_irradiance(self) -> np.ndarray:
@@ -631,12 +636,17 @@ class ProceduralSky:
         """S: direct sun power reaching the ground after moon and clouds over that of the clear,
         uneclipsed sun (docs/method.md, "The procedural sky"), weighted by Rec.709 luminance. [1]"""
         e = self.sun_normal_irradiance * REC709_LUMINANCE
+        if not e.sum() > 0:  # a set sun (twilight)
+            return 0.0
         return float(self.sun_cloud_transmittance * (e @ self.moon_visible) / e.sum())
 
     def sun_irradiance(self) -> np.ndarray:
         """Horizontal irradiance of the sun after moon and clouds (3,): the sum of its kernel
         with 16 cells across the disc, which weights each part of a moon-cut disc by its own
-        cos(theta) (its error is measured in docs/accuracy.md). [klx]"""
+        cos(theta) (its error is measured in docs/accuracy.md); zeros when the disc is not
+        wholly above the horizon (``daylight.sky_daylight`` gives it no light then). [klx]"""
+        if self.sun.elevation - self.sun.angular_radius <= 1e-3:
+            return np.zeros(3)
         return sun_kernel(self, self.sun.angular_radius / 8).weighted.sum(axis=(1, 2), dtype=np.float64)
 
     def _sun_samples(self, w, footprint):

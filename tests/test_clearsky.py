@@ -69,3 +69,42 @@ def test_preetham_shape_is_one_at_the_zenith_and_blue():
     assert cie @ np.asarray(REC709_LUMINANCE) == pytest.approx(1.0, rel=1e-4)
     with pytest.raises(ValueError, match="valid: cie, preetham"):
         relative_sky(1.0, theta_s, sun_zenith=theta_s, turbidity=T, shape="perez")
+
+
+# CIE 15:2004, Table T.1 (and ISO 11664-2): the tabulated chromaticities of the CIE illuminants,
+# typed in from the standard, not computed with the D-series formula.
+CIE_TABLE_XY = {5003.0: (0.34567, 0.35850), 6504.0: (0.31271, 0.32902), 7504.0: (0.29902, 0.31485)}
+
+
+@pytest.mark.parametrize("cct", sorted(CIE_TABLE_XY))
+def test_daylight_chromaticity_matches_the_cie_table(cct):
+    from pipeline.clearsky import daylight_chromaticity
+
+    assert np.allclose(daylight_chromaticity(cct), CIE_TABLE_XY[cct], atol=2e-4)
+
+
+def _xy(rgb):
+    from pipeline.colour import XYZ_TO_REC709
+
+    X, Y, Z = np.linalg.solve(XYZ_TO_REC709, np.asarray(rgb, dtype=np.float64))
+    return np.array([X, Y]) / (X + Y + Z)
+
+
+def _distance_to_segment(p, a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    t = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + t * (b - a))))
+
+
+@pytest.mark.parametrize("cie_type", range(1, 11))
+def test_overcast_and_intermediate_skies_are_d65_to_d75(cie_type):
+    """The whole sky's light (its horizontal irradiance, sun left out) lies within 0.01 in xy of the
+    segment from D65 to D75 of the CIE table; the clear type 12 stays bluer, Preetham's."""
+    from pipeline.sky import ProceduralSky, SunDisc
+
+    for elevation in (10.0, 40.0):
+        sky = ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(elevation)), cie_type=cie_type)
+        xy = _xy(sky.clear_sky_irradiance)
+        assert _distance_to_segment(xy, CIE_TABLE_XY[6504.0], CIE_TABLE_XY[7504.0]) < 0.01, xy
+    clear = ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(40.0)), cie_type=12)
+    assert _distance_to_segment(_xy(clear.clear_sky_irradiance), CIE_TABLE_XY[6504.0], CIE_TABLE_XY[7504.0]) > 0.02

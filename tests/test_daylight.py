@@ -10,6 +10,7 @@ import pytest
 from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
 
+from pipeline.colour import REC709_LUMINANCE
 from pipeline.daylight import clear_daylight, linke_turbidity, perez_efficacy
 from pipeline.resolve import load
 
@@ -99,3 +100,91 @@ def test_turbidity_auto_reads_the_climatology_of_the_site_and_month(tmp_path):
     assert sky.turbidity_auto
     assert sky.turbidity == pytest.approx(
         clearsky.lookup_linke_turbidity(pd.DatetimeIndex([middle]), 32.78, -96.80).iloc[0], rel=1e-9)
+
+
+# --- low sun and civil twilight -----------------------------------------------------------------
+# The USNO sun illuminance curve (Janiczek & DeYoung 1987, USNO Circular 171), typed in here from
+# Vallado, Fundamentals of Astrodynamics and Applications, Table 5-1, for the bands from -12 to
+# 20 degrees: (lower bound [deg], L0..L3), log10 E [lx] = L0 + L1 x + L2 x^2 + L3 x^3, x = h / 90.
+USNO_BANDS = ((5.0, (3.05, 13.28, -45.98, 64.33)), (-0.8, (2.88, 22.26, -207.64, 1034.30)),
+              (-5.0, (2.88, 21.81, -258.11, -858.36)), (-12.0, (2.70, 12.17, -431.69, -1899.83)))
+
+
+def usno_table(h):
+    lower, (l0, l1, l2, l3) = next(band for band in USNO_BANDS if h >= band[0])
+    x = h / 90.0
+    return 10.0 ** (l0 + l1 * x + l2 * x**2 + l3 * x**3)
+
+
+def open_ground_lux(elevation_deg, turbidity):
+    """Horizontal illuminance of the procedural sky and its sun on open ground. [lx]"""
+    from pipeline.sky import ProceduralSky, SunDisc
+
+    sky = ProceduralSky(turbidity, SunDisc(np.radians(250.0), np.radians(elevation_deg)))
+    return 1000.0 * float((sky.sky_irradiance + sky.total_sun_irradiance()) @ REC709_LUMINANCE)
+
+
+def test_the_usno_curve_meets_the_ams_glossary_at_sunset_and_the_end_of_civil_twilight():
+    """AMS Glossary of Meteorology, "civil twilight": about 410-585 lx at sunset (the sun's centre
+    0.83 degrees down) and 2-3.5 lx at -6 degrees; the module's curve and the table typed in here agree."""
+    from pipeline.daylight import usno_illuminance
+
+    assert 410.0 <= usno_illuminance(-0.83) <= 585.0
+    assert 2.0 <= usno_illuminance(-6.0) <= 3.5
+    for h in np.arange(-6.0, 10.01, 0.5):
+        assert usno_illuminance(h) == pytest.approx(usno_table(h), rel=1e-9)
+
+
+@pytest.mark.parametrize("turbidity", [2.0, 3.0, 4.5])
+def test_open_ground_follows_the_usno_curve_from_10_degrees_to_civil_twilight(turbidity):
+    for h in range(10, -7, -1):
+        ratio = open_ground_lux(h, turbidity) / usno_table(h)
+        assert 1 / 1.5 <= ratio <= 1.5, (h, ratio)
+
+
+@pytest.mark.parametrize("turbidity", [2.0, 3.0, 4.5])
+def test_twilight_light_has_no_step_over_10_percent_a_tenth_of_a_degree(turbidity):
+    from pipeline.daylight import sky_daylight
+
+    def lux(h):
+        d = sky_daylight(np.radians(h), turbidity)
+        return d.direct_normal_illuminance * max(np.sin(np.radians(h)), 0.0) + d.diffuse_horizontal_illuminance
+
+    tenths = np.arange(-60, 121) / 10.0
+    steps = np.diff(np.log([lux(h) for h in tenths]))
+    # the measured curve itself falls by 10-12% a tenth below -3.3 degrees: there the model may
+    # not step beyond it by more than 10%; above, no step over 10% at all
+    curve = np.diff(np.log([usno_table(h) for h in tenths]))
+    assert np.max(np.abs(steps - curve)) < np.log(1.10)
+    assert np.max(np.abs(steps[tenths[:-1] >= -3.3])) < np.log(1.10)
+
+
+def test_above_the_blend_the_sky_is_ineichen_perez_and_below_twilight_an_error():
+    from pipeline.daylight import clear_daylight, sky_daylight
+    from pipeline.sky import ProceduralSky, SunDisc
+
+    assert sky_daylight(np.radians(10.0), 3.0) == clear_daylight(np.radians(80.0), 3.0)
+    with pytest.raises(ValueError, match="-6.50 degrees"):
+        ProceduralSky(3.0, SunDisc(0.0, np.radians(-6.5)))
+
+
+def test_low_sun_colours_warm_sun_and_horizon_blue_zenith():
+    """At 2 degrees the sun (its air mass about 19) is redder than at 30, the horizon under the sun
+    warmer than D65 and the zenith bluer; after sunset the sky under the sun stays the brightest."""
+    from pipeline.colour import XYZ_TO_REC709
+    from pipeline.sky import ProceduralSky, SunDisc
+
+    def xy(rgb):
+        X, Y, Z = np.linalg.solve(XYZ_TO_REC709, np.asarray(rgb, dtype=np.float64))
+        return np.array([X, Y]) / (X + Y + Z)
+
+    low, high = (ProceduralSky(3.0, SunDisc(np.radians(250.0), np.radians(h))) for h in (2.0, 30.0))
+    assert xy(low.sun_normal_irradiance)[0] > xy(high.sun_normal_irradiance)[0] + 0.05
+    under_sun = 50.0 * np.array([np.sin(np.radians(250.0)), np.cos(np.radians(250.0))])
+    assert xy(low.clear_radiance(under_sun))[0] > 0.3127 + 0.05
+    assert xy(low.clear_radiance(np.zeros(2)))[0] < 0.3127 - 0.02
+    dusk = ProceduralSky(3.0, SunDisc(np.radians(250.0), np.radians(-4.0)))
+    around = [dusk.clear_radiance(50.0 * np.array([np.sin(a), np.cos(a)])) @ REC709_LUMINANCE
+              for a in np.radians(np.arange(0.0, 360.0, 30.0) + 250.0)]
+    assert np.argmax(around) == 0 and around[0] > 10 * (dusk.clear_radiance(np.zeros(2)) @ REC709_LUMINANCE)
+    assert dusk.sun_fraction() == 0.0 and not dusk.sun_irradiance().any()
