@@ -152,7 +152,7 @@ def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
     config = write_config(tmp_path, {**TINY, "sky": sky, "animation": {"frames": 2, "fps": 12},
                                      "output": {"video": "none"}})
     run, cache = tmp_path / "run", tmp_path / "cache"
-    run_to_end("render", config, "--output", run, "--cache", cache)
+    run_to_end("render", config, "--output", run, "--cache", cache, "--jobs", "1")  # no workers to start
     record = json.loads((run / "run.json").read_text())
     assert record["config"]["sky"]["turbidity"] > 1 and record["source_hash"] != record["config_hash"]
     code = ("import sys; from pipeline.cli import main; main(sys.argv[1:]); "
@@ -163,7 +163,7 @@ def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
     assert "0 frames rendered, 2 already done" in again and again.strip().endswith("[]"), again
     assert json.loads((run / "run.json").read_text())["source_hash"] == record["source_hash"]
     config.write_text(config.read_text().replace("17:24:15Z", "17:25:15Z"))  # a new span
-    assert "2 frames rendered" in run_to_end("render", config, "--output", run, "--cache", cache)
+    assert "2 frames rendered" in run_to_end("render", config, "--output", run, "--cache", cache, "--jobs", "1")
 
 
 def kill_when(process, ready, *, timeout=120.0) -> bool:
@@ -240,7 +240,7 @@ def test_a_changed_config_renders_again_only_what_it_changes(reference, tmp_path
 def test_preview_is_small_and_apart(reference, tmp_path):
     config, files = reference
     run_to_end("render", config, "--preview", "--frames", "0-1", "--output", tmp_path / "run",
-               "--cache", tmp_path / "cache")
+               "--cache", tmp_path / "cache", "--jobs", "1")
     image = io.read_image(tmp_path / "run" / "preview" / "tiny.0000.png")
     assert image.shape[:2] == (16, 24)
     assert not list((tmp_path / "run").glob("tiny.*"))
