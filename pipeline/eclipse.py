@@ -76,6 +76,12 @@ TABLE_ELEVATIONS = 33
 TABLE_AZIMUTHS = 72
 """Azimuths of the direction table, 5 degrees apart. [count]"""
 
+METER_TABLE = (17, 36, 96)
+"""(elevations, azimuths, path nodes) of the coarser table an exposure meter reads the deep
+eclipse's horizontal irradiance from: within 0.27% of the full table's (TABLE_ELEVATIONS,
+TABLE_AZIMUTHS, PATH_NODES) at Dallas 2024 from C2 to C3, in a fifth of the time (docs/accuracy.md,
+"The eclipse sky"). [count]"""
+
 DIFFUSION_LENGTH = 50_000.0
 """Length over which light diffuses sideways into the umbra by multiple scattering (the kernel
 of ``diffused_fraction``), a calibration choice (docs/method.md, "The eclipse sky"): shorter
@@ -128,10 +134,11 @@ def point_sun_fraction(points, *, sun_direction, moon_direction, sun_radius, moo
     return 1.0 - obscured_fraction(sep, np.full(sep.shape, sun_radius), np.arcsin(MOON_RADIUS / reach))
 
 
-def _line_nodes():
-    """Distances l along a line of sight [m] (quadratically spaced) and their widths dl [m]."""
-    t = (np.arange(PATH_NODES) + 0.5) / PATH_NODES
-    return PATH_LENGTH * t * t, PATH_LENGTH * 2.0 * t / PATH_NODES
+def _line_nodes(nodes: int = PATH_NODES):
+    """Distances l along a line of sight [m] (``nodes`` of them, quadratically spaced) and their
+    widths dl [m]."""
+    t = (np.arange(nodes) + 0.5) / nodes
+    return PATH_LENGTH * t * t, PATH_LENGTH * 2.0 * t / nodes
 
 
 def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius):
@@ -172,7 +179,7 @@ def _map_lookup(field, extent, x, y):
 
 
 def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon_radius,
-                  turbidity: float) -> tuple[np.ndarray, np.ndarray]:
+                  turbidity: float, nodes: int = PATH_NODES) -> tuple[np.ndarray, np.ndarray]:
     """(F, M), each (n, 3) per R, G, B channel, for unit vectors ``directions`` (n, 3), wz >= 0:
 
     F(w) = integral beta T S dl / integral beta T dl: the clear-sky-weighted uneclipsed fraction
@@ -185,10 +192,10 @@ def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon
     M -> 1 - exp(-tau) when nothing is eclipsed.
 
     sun_direction, moon_direction : (3,) unit vectors; sun_radius, moon_radius : angular radii
-    seen by the observer [rad]; turbidity [1].
+    seen by the observer [rad]; turbidity [1]; nodes : along each line of sight [count].
     """
     w = np.asarray(directions, dtype=np.float64)
-    l, dl = _line_nodes()
+    l, dl = _line_nodes(nodes)
     wz = np.maximum(w[:, 2:3], 0.0)
     z = np.sqrt(EARTH_RADIUS**2 + l * l + 2.0 * EARTH_RADIUS * l * wz) - EARTH_RADIUS  # (n, k)
     tau_r, tau_a = vertical_optical_depths(turbidity)
@@ -231,25 +238,28 @@ class EclipseField:
     table: np.ndarray
 
     @classmethod
-    def compute(cls, **geometry) -> "EclipseField":
-        """The table of ``line_of_sight(..., **geometry)``."""
-        u = np.linspace(0.0, 1.0, TABLE_ELEVATIONS)
+    def compute(cls, *, table=(TABLE_ELEVATIONS, TABLE_AZIMUTHS, PATH_NODES), **geometry) -> "EclipseField":
+        """The table of ``line_of_sight(..., **geometry)``; ``table``: its (elevations,
+        azimuths, path nodes) [count] (METER_TABLE: the meter's coarser one)."""
+        elevations, azimuths, nodes = table
+        u = np.linspace(0.0, 1.0, elevations)
         el = 0.5 * np.pi * u * u
-        az = np.arange(TABLE_AZIMUTHS) * (2.0 * np.pi / TABLE_AZIMUTHS)
+        az = np.arange(azimuths) * (2.0 * np.pi / azimuths)
         e, a = np.meshgrid(el, az, indexing="ij")
         w = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1).reshape(-1, 3)
-        f = np.concatenate(line_of_sight(w, **geometry), axis=-1)
-        f = f.reshape(TABLE_ELEVATIONS, TABLE_AZIMUTHS, 6)
+        f = np.concatenate(line_of_sight(w, nodes=nodes, **geometry), axis=-1)
+        f = f.reshape(elevations, azimuths, 6)
         return cls(np.concatenate([f, f[:, :1]], axis=1))
 
     def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
         """(F, M), each (..., 3), at unit vectors w (..., 3) (wz below 0 taken as the horizon). [1]"""
         w = np.asarray(w, dtype=np.float64)
+        elevations, azimuths = self.table.shape[0], self.table.shape[1] - 1
         el = np.arcsin(np.clip(w[..., 2], 0.0, 1.0))
-        u = np.sqrt(el / (0.5 * np.pi)) * (TABLE_ELEVATIONS - 1)
-        v = (np.arctan2(w[..., 0], w[..., 1]) % (2.0 * np.pi)) / (2.0 * np.pi) * TABLE_AZIMUTHS
-        i = np.minimum(u.astype(np.int64), TABLE_ELEVATIONS - 2)
-        j = np.minimum(v.astype(np.int64), TABLE_AZIMUTHS - 1)
+        u = np.sqrt(el / (0.5 * np.pi)) * (elevations - 1)
+        v = (np.arctan2(w[..., 0], w[..., 1]) % (2.0 * np.pi)) / (2.0 * np.pi) * azimuths
+        i = np.minimum(u.astype(np.int64), elevations - 2)
+        j = np.minimum(v.astype(np.int64), azimuths - 1)
         fu, fv = (u - i)[..., None], (v - j)[..., None]
         t = self.table
         out = ((1 - fu) * ((1 - fv) * t[i, j] + fv * t[i, j + 1])

@@ -13,6 +13,7 @@ from . import albedo as albedos
 from . import camera, canopy, foreground, io
 from . import sky as sky_models
 from .clouds import CloudLayer
+from .eclipse import METER_TABLE
 from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
 from .geometry import Grid
 from .sky import EquirectSky, UniformSky
@@ -22,9 +23,11 @@ if TYPE_CHECKING:
     from .plan import Scene
 
 
-def load_sky(sky: SkyConfig, scene: Scene | None = None):
+def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = False):
     """The sky model of a config at a scene (procedural skies), its image read and checked
-    (negative radiance is taken as 0). Raises io.ImageError."""
+    (negative radiance is taken as 0). ``metering``: for an exposure meter, which reads the
+    light of the whole sky only: a deep eclipse's line-of-sight table is the coarser
+    ``eclipse.METER_TABLE``. Raises io.ImageError."""
     if sky.model == "uniform":
         return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
     if sky.model in PROCEDURAL_MODELS:
@@ -33,7 +36,8 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None):
             c = sky.clouds
             clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
                                 wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
-        return clear_sky(sky, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time)
+        detail = {"eclipse_table": METER_TABLE} if metering else {}
+        return clear_sky(sky, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
     return load_hdri(sky)
 
 

@@ -111,7 +111,7 @@ def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
     """What an incident-light meter on the open ground reads at a frame (3,): the sky's
     horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
     [klx]"""
-    sky = load_sky(plan.config.sky, scene)
+    sky = load_sky(plan.config.sky, scene, metering=True)
     if light.sun_direction is None:
         return light.unshadowed
     return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.total_sun_irradiance())

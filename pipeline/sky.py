@@ -540,6 +540,8 @@ class ProceduralSky:
     shape : the clear sky's angular distribution, a name in ``vocabulary.PROCEDURAL_MODELS``; cie_type : the
         CIE standard general sky type with shape 'cie', 1..15.
     altitude : of the site above sea level. [m]
+    eclipse_table : (elevations, azimuths, path nodes) of a deep eclipse's line-of-sight table
+        (``eclipse.EclipseField``); ``eclipse.METER_TABLE`` for an exposure meter. [count]
 
     Radiance in kcd/m^2, irradiance in klx (linear Rec.709 channels). The clear sky (no moon, no
     clouds, skylight 1) gives the diffuse horizontal illuminance of ``daylight`` and the sun its
@@ -557,6 +559,7 @@ class ProceduralSky:
     shape: str = "cie"
     cie_type: int = DEFAULT_CIE_TYPE
     altitude: float = 0.0
+    eclipse_table: tuple = (eclipse.TABLE_ELEVATIONS, eclipse.TABLE_AZIMUTHS, eclipse.PATH_NODES)
 
     def __post_init__(self):
         lo, hi = TURBIDITY_RANGE
@@ -716,7 +719,7 @@ class ProceduralSky:
     def _eclipse_field(self) -> eclipse.EclipseField:
         """F and M of every sky direction at this sun and moon (``eclipse.line_of_sight``)."""
         return eclipse.EclipseField.compute(
-            sun_direction=self.sun_direction, moon_direction=self.moon_direction,
+            table=self.eclipse_table, sun_direction=self.sun_direction, moon_direction=self.moon_direction,
             sun_radius=self.sun.angular_radius, moon_radius=self.moon.angular_radius, turbidity=self.turbidity)
 
     def _dimming_at(self, s) -> np.ndarray:
