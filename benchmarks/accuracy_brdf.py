@@ -67,9 +67,10 @@ def open_ground() -> None:
     from pipeline import camera as cam
 
     def constant(value):
+        value = np.asarray(value, np.float32).reshape(-1)
+        value = np.broadcast_to(value, (3,)) if value.size == 1 else value
         grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-        return cam.mipmap(np.broadcast_to(np.asarray(value, np.float32), (2, 2, 3)).copy(), grid,
-                          outside="constant", value=np.asarray(value, np.float32))
+        return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
     sky = ProceduralSky(turbidity=3.0, sun=SunDisc(np.radians(315.0), np.radians(30.0)))
     raster = sky.raster(Grid((-4.0, 4.0), 8.0 / 96, (96, 96)))
@@ -85,8 +86,8 @@ def open_ground() -> None:
         bands = R.choose_bands(brdf, raster, views)
         band_sky = [R.shape(brdf, v, dirs) @ e.T for v in bands.directions()]
         radiance = R.ground_radiance(view, brdf, constant(1.0), total=(constant(e.sum(axis=1) + e_sun),),
-                                     sky_only=(constant(e.sum(axis=1)),), bands=bands,
-                                     band_maps=[(constant(b),) for b in band_sky], sun_direction=sky.sun_direction,
+                                     sky_maps=(constant(np.concatenate([e.sum(axis=1), *band_sky])),),
+                                     bands=bands, sun_direction=sky.sun_direction,
                                      raster=raster)
         errors, lambert = [], []
         for r, c in picks:

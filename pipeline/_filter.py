@@ -143,25 +143,30 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
             out[1, r] = t1 / nf
             out[2, r] = t2 / nf
             continue
-        for k in range(channels):
-            col, row, colb, rowb = col0, row0, colb0, rowb0
-            total = np.float32(0.0)
-            for i in range(n):
-                f, fc, fr = _first_texel(channels, off, rows, cols, periodic, col, row)
+        # any other count of channels: each tap's texel found once, then every channel read
+        # there (the same float32 operations per channel, in the same order, as channel by
+        # channel: a stack of many rasters filtered in one pass costs little more per channel)
+        col, row, colb, rowb = col0, row0, colb0, rowb0
+        fb, fcb, frb = 0, np.float32(0.0), np.float32(0.0)
+        for i in range(n):
+            f, fc, fr = _first_texel(channels, off, rows, cols, periodic, col, row)
+            col += dcol
+            row += drow
+            if blended:
+                fb, fcb, frb = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
+                colb += dcolb
+                rowb += drowb
+            for k in range(channels):
                 s = _bilinear(flat, f, channels, step, k, fc, fr)
-                col += dcol
-                row += drow
                 if blended:
-                    f, fc, fr = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
-                    u = _bilinear(flat, f, channels, stepb, k, fc, fr)
-                    colb += dcolb
-                    rowb += drowb
+                    u = _bilinear(flat, fb, channels, stepb, k, fcb, frb)
                     s += (u - s) * t
                 if i == 0:
-                    total = s
+                    out[k, r] = s
                 else:
-                    total += s
-            out[k, r] = total / nf
+                    out[k, r] += s
+        for k in range(channels):
+            out[k, r] /= nf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

@@ -184,6 +184,28 @@ def view_vectors(camera: cam.Camera):
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+@functools.lru_cache(maxsize=1)
+def _camera_views(camera: cam.Camera):
+    """``view_vectors`` held to VIEW_ZENITH_LIMIT (``clamp_view``) (n, 3), their zenith angles
+    (n,) [rad] and azimuths (n,) [rad, from +y towards +x]: they depend on the camera alone, so
+    the frames of a run, whose camera stands still, make them once. Read-only."""
+    views = clamp_view(view_vectors(camera))
+    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
+    azimuth = np.arctan2(views[:, 0], views[:, 1])
+    for array in (views, zenith, azimuth):
+        array.flags.writeable = False
+    return views, zenith, azimuth
+
+
+_COARSE = [None, None]
+"""The last raster ``_coarsened`` was asked for (held, so that its id is not reused) and its
+result: ``choose_bands`` and ``sky_ratio`` coarsen the same raster in one frame."""
+
+SKY_CELLS = 2048
+"""Most cells of the coarsened sky raster on which ``choose_bands`` and ``sky_ratio`` sum the
+open sky's term (blocks of the raster's cells). [count]"""
+
+
 def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
     towards each block's light-weighted centre on the sky plane and weights (m,) (channels
@@ -202,9 +224,9 @@ def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     y = blocks(e * sy) / safe
     w = np.stack([x, y, np.ones_like(x)], axis=-1)
     dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
-    if channels:
-        return dirs, np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
-    return dirs, weight.reshape(-1)
+    per_channel = np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
+    _COARSE[:] = [(raster, most_cells), (dirs, per_channel)]
+    return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
@@ -212,12 +234,12 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     """View bands, 1 to ``most``, added one at a time where the blend is worst (first the
     middle, then both ends, then the sampled view zenith of the largest error), until the blend gives the open sky's term sum_i e_i
     s(V, L_i) within ``tolerance`` (relative) at every sampled pixel's own view zenith, against
-    that sum per pixel (brute force over the raster's cells, coarsened to 1024) at the bands'
+    that sum per pixel (brute force over the raster's cells, coarsened to SKY_CELLS) at the bands'
     azimuth. views : (n, 3) the pixels' view vectors; azimuth of the bands: that of the views'
     mean (the change with azimuth across the image is ``sky_ratio``'s)."""
     views = clamp_view(views)
     pick = views[:: max(1, len(views) // samples)]
-    dirs, e = _coarsened(raster, 1024)
+    dirs, e = _coarsened(raster, SKY_CELLS)
     zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
     mean = views.mean(axis=0)
     azimuth = float(np.arctan2(mean[0], mean[1]))
@@ -238,17 +260,20 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
             return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16) -> np.ndarray:
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
     """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
     over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
     coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
     and carries the change across the image (view azimuth) that the bands do not hold. Read on
     a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
-    bilinearly (held at its edges). views : (n, 3) unit vectors. [1]"""
-    dirs, e = _coarsened(raster, 2048, channels=True)
-    views = clamp_view(views)
-    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
-    turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
+    bilinearly (held at its edges). views : (n, 3) unit vectors; ``angles``, if given, their
+    zenith angles and azimuths after ``clamp_view`` ((n,) each, ``_camera_views``) [rad]. [1]"""
+    dirs, e = _coarsened(raster, SKY_CELLS, channels=True)
+    if angles is None:
+        views = clamp_view(views)
+        angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
+    zenith = angles[0]
+    turn = (angles[1] - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
     lows = [float(zenith.min()), float(turn.min())]
     spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
@@ -264,8 +289,10 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
     i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
     fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
-    top = ratio[:, i0, j0] * (1 - fj) + ratio[:, i0, j0 + 1] * fj
-    bottom = ratio[:, i0 + 1, j0] * (1 - fj) + ratio[:, i0 + 1, j0 + 1] * fj
+    corner = i0 * lattice + j0  # the four lattice values round each pixel, by flat index
+    flat = ratio.reshape(len(ratio), -1)
+    top = flat[:, corner] * (1 - fj) + flat[:, corner + 1] * fj
+    bottom = flat[:, corner + lattice] * (1 - fj) + flat[:, corner + lattice + 1] * fj
     return top * (1 - fi) + bottom * fi
 
 
@@ -309,30 +336,34 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
 
 
-def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_only, bands: ViewBands,
-                    band_maps, sun_direction, raster) -> np.ndarray:
+def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_maps, bands: ViewBands,
+                    sun_direction, raster) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
     rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) sum_b w_b(x) E_b(x) ], rho the albedo texture,
-    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part (``sky_only``),
-    E_b the sky's term with the raster weighted at band b's view (``band_maps``, one chain
-    each), w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over
-    ``raster`` (the sky raster), V(x) each pixel's own view vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
-    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
+    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part and E_b the sky's
+    term with the raster weighted at band b's view, both in ``sky_maps``: one MipMap chain whose
+    channels are E_sky's three, then each band's three (so that the camera's footprints are
+    filtered once for all of them), w_b the bands' weights at the pixel's view zenith, r(x)
+    ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view vector;
+    sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is blended
+    (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):
         return radiance
     fp, _ = cam._view_footprints(camera)
-    views = view_vectors(camera)
+    views, zenith, azimuth = _camera_views(camera)
     e_total = cam._filtered_chain(total, fp)
-    e_sky = cam._filtered_chain(sky_only, fp)
+    stack = cam._filtered_chain(sky_maps, fp)  # (3 + 3 B, n)
+    e_sky = stack[:3]
     sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
-    light = (e_total - e_sky) * sun.astype(np.float32)[None]
-    weights = bands.weights(np.arccos(np.clip(clamp_view(views)[:, 2], -1.0, 1.0))).astype(np.float32)
-    sky = np.zeros_like(light)
-    for b, maps in enumerate(band_maps):
-        sky += cam._filtered_chain(maps, fp) * weights[b][None]
-    sky *= sky_ratio(brdf, raster, bands, views)
+    light = e_total - e_sky
+    light *= sun.astype(np.float32)[None]
+    weights = bands.weights(zenith).astype(np.float32)
+    sky = stack[3:6] * weights[0][None]
+    for b in range(1, len(weights)):
+        sky += stack[3 + 3 * b:6 + 3 * b] * weights[b][None]
+    sky *= sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
     light += sky
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho

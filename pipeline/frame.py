@@ -61,7 +61,7 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap,
         x0, y0, x1, y1 = grid.extent
         if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
             return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
-        value = raster.reshape(-1, 3).mean(axis=0)
+        value = raster.reshape(-1, raster.shape[-1]).mean(axis=0)
     else:
         value = ground.unshadowed
     return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
@@ -266,14 +266,18 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     config, view = plan.config, plan.camera
     model = config.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
-    bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
+    bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
-    sky_only = GroundResult(ground.coarse_sky[0], plan.window, ground.coarse_sky[1], ground.exact)
+    # the sky-only ground and the bands' rasters as the channels of one raster: the camera
+    # filters its footprints once for all of them
+    stacked = GroundResult(np.concatenate([ground.coarse_sky[0], *(t.irradiance for t in terms)], axis=-1),
+                           plan.window, np.concatenate([np.asarray(ground.coarse_sky[1], dtype=np.float64),
+                                                        *(np.asarray(t.unshadowed, dtype=np.float64) for t in terms)]),
+                           ground.exact)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
-        sky_only=irradiance_maps(plan, sky_only), bands=bands,
-        band_maps=[irradiance_maps(plan, t) for t in terms], sun_direction=sun, raster=raster)
+        sky_maps=irradiance_maps(plan, stacked), bands=bands, sun_direction=sun, raster=raster)
     return reflect.background(view, radiance, sky)
 
 

@@ -104,9 +104,10 @@ def _sky():
 
 
 def _constant(value):
+    value = np.asarray(value, np.float32).reshape(-1)
+    value = np.broadcast_to(value, (3,)) if value.size == 1 else value
     grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-    return cam.mipmap(np.broadcast_to(np.asarray(value, np.float32), (2, 2, 3)).copy(), grid,
-                      outside="constant", value=np.asarray(value, np.float32))
+    return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
 
 def test_open_ground_equals_a_quadrature_for_five_view_directions():
@@ -123,8 +124,8 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     e = raster.weighted.reshape(3, -1).astype(np.float64)
     band_sky = [R.shape(b, v, dirs) @ e.T for v in bands.directions()]  # open ground: the raster's sums
     radiance = R.ground_radiance(view, b, _constant(1.0), total=(_constant(raster.weighted.sum((1, 2)) + e_sun),),
-                                 sky_only=(_constant(raster.weighted.sum((1, 2))),), bands=bands,
-                                 band_maps=[(_constant(s),) for s in band_sky], sun_direction=sky.sun_direction,
+                                 sky_maps=(_constant(np.concatenate([raster.weighted.sum((1, 2)), *band_sky])),),
+                                 bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
     rows, _ = cam._ground_rows(view)
     picks = [(rows[-1], 24), (rows[-1], 2), (rows[len(rows) // 2], 40), (rows[len(rows) // 4], 10), (rows[2], 30)]
