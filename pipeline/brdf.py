@@ -161,6 +161,13 @@ class ViewBands:
     azimuth: float
     error: float
 
+    @property
+    def colour(self) -> int:
+        """The band whose term is correlated in every channel (the middle one): it gives the
+        sky light's colour under the canopy; the others are correlated on the channels' sum
+        and give only how the reflectance modulates it (``banded_sky``). [index]"""
+        return len(self.zeniths) // 2
+
     def directions(self) -> np.ndarray:
         """(B, 3) unit view vectors of the bands. [1]"""
         z = np.asarray(self.zeniths)
@@ -210,21 +217,26 @@ def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
     towards each block's light-weighted centre on the sky plane and weights (m,) (channels
     summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
-    each = raster.weighted.astype(np.float64)
-    e = each.sum(axis=0)
-    rows, cols = e.shape
-    sx, sy = raster.grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
-    step = max(1, int(np.ceil(np.sqrt(e.size / most_cells))))
+    held, kept = _COARSE
+    if held is not None and held[0] is raster and held[1] == most_cells:
+        dirs, per_channel = kept
+        return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+    light = raster.weighted
+    count, rows, cols = light.shape
+    step = max(1, int(np.ceil(np.sqrt(rows * cols / most_cells))))
     rows, cols = max(rows // step * step, 1), max(cols // step * step, 1)
     step_r, step_c = min(step, rows), min(step, cols)
-    blocks = lambda a: a[:rows, :cols].reshape(rows // step_r, step_r, cols // step_c, step_c).sum(axis=(1, 3))  # noqa: E731
-    weight = blocks(e)
+    sx, sy = raster.grid.ground_from_raster(np.arange(rows), np.arange(cols))
+    cut = light[:, :rows, :cols].reshape(count, rows // step_r, step_r, cols // step_c, step_c)
+    per_block = cut.sum(axis=(2, 4), dtype=np.float64)  # (channels, block rows, block cols)
+    weight = per_block.sum(axis=0)
     safe = np.maximum(weight, 1e-30)
-    x = blocks(e * sx) / safe
-    y = blocks(e * sy) / safe
+    # the light-weighted centres: x depends on the column alone, y on the row alone
+    x = (cut.sum(axis=(0, 2), dtype=np.float64) * sx.reshape(-1, step_c)).sum(axis=-1) / safe
+    y = (cut.sum(axis=(0, 4), dtype=np.float64) * sy.reshape(-1, step_r)[..., None]).sum(axis=1) / safe
     w = np.stack([x, y, np.ones_like(x)], axis=-1)
     dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
-    per_channel = np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
+    per_channel = per_block.reshape(count, -1).T
     _COARSE[:] = [(raster, most_cells), (dirs, per_channel)]
     return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
 
@@ -261,39 +273,79 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
 
 
 def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
-    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
-    over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
-    coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
-    and carries the change across the image (view azimuth) that the bands do not hold. Read on
-    a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
-    bilinearly (held at its edges). views : (n, 3) unit vectors; ``angles``, if given, their
-    zenith angles and azimuths after ``clamp_view`` ((n,) each, ``_camera_views``) [rad]. [1]"""
+    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own
+    view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives on open ground, the colour band's
+    term sum_i e_i s(V_c, L_i) times the blended modulation sum_b w_b S_b / S_c (S_b = sum_i
+    e'_i s(V_b, L_i), e' the channels' sum), all over the raster coarsened to SKY_CELLS cells:
+    the factor that makes the banded sky term exact on open ground and carries the change
+    across the image (view azimuth) that the bands do not hold. Read on a lattice of
+    ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held
+    at its edges). views : (n, 3) unit vectors; ``angles``, if given, their zenith angles and
+    azimuths after ``clamp_view`` ((n,) each, ``_camera_views``) [rad]. [1]"""
     dirs, e = _coarsened(raster, SKY_CELLS, channels=True)
     if angles is None:
         views = clamp_view(views)
         angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
-    zenith = angles[0]
-    turn = (angles[1] - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
-    lows = [float(zenith.min()), float(turn.min())]
-    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
+    lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
     z, t = np.meshgrid(*axes, indexing="ij")
     a = bands.azimuth + t
     v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
     own = shape(brdf, v[..., None, :], dirs) @ e  # (lattice, lattice, channels)
-    blended = np.einsum("bc,bz->zc", shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e,
-                        bands.weights(axes[0]))
-    ratio = np.moveaxis(own / np.maximum(blended, 1e-30)[:, None, :], -1, 0).astype(np.float32)
-    # bilinear on the lattice, by hand (a regular grid): fractional indices, held at the edges
+    at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
+    summed = at_bands.sum(axis=-1)
+    modulation = summed / max(float(summed[bands.colour]), 1e-30)
+    blended = np.maximum(at_bands[bands.colour][None, :] * (modulation @ bands.weights(axes[0]))[:, None], 1e-30)
+    ratio = np.moveaxis(own / blended[:, None, :], -1, 0).astype(np.float32)
+    flat = ratio.reshape(len(ratio), -1)
+    out = flat[:, corner] * taps[0]
+    out += flat[:, corner + 1] * taps[1]
+    out += flat[:, corner + lattice] * taps[2]
+    out += flat[:, corner + lattice + 1] * taps[3]
+    return out
+
+
+_READS = [None, None]
+"""The last arguments of ``_lattice_reads`` (the zenith array held, so that its id is not
+reused) and its result: a camera's views are the same every frame (``_camera_views``)."""
+
+
+def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
+    """Where ``sky_ratio`` reads its lattice for views of zenith angles and azimuths (n,) each
+    [rad]: the lattice's lowest zenith and turn from ``band_azimuth`` and their spans [rad],
+    the flat index (n,) of each view's first lattice corner and the bilinear weights (4, n)
+    float32 of its four corners (held at the lattice's edges)."""
+    held, kept = _READS
+    if held is not None and held[0] is zenith and held[1] is azimuth and held[2:] == (band_azimuth, lattice):
+        return kept
+    turn = (azimuth - band_azimuth + np.pi) % (2.0 * np.pi) - np.pi
+    lows = [float(zenith.min()), float(turn.min())]
+    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
     i = np.clip((zenith - lows[0]) / spans[0] * (lattice - 1), 0.0, lattice - 1.0)
     j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
     i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
     fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
-    corner = i0 * lattice + j0  # the four lattice values round each pixel, by flat index
-    flat = ratio.reshape(len(ratio), -1)
-    top = flat[:, corner] * (1 - fj) + flat[:, corner + 1] * fj
-    bottom = flat[:, corner + lattice] * (1 - fj) + flat[:, corner + lattice + 1] * fj
-    return top * (1 - fi) + bottom * fi
+    taps = np.stack([(1 - fi) * (1 - fj), (1 - fi) * fj, fi * (1 - fj), fi * fj])
+    kept = (lows, spans, i0 * lattice + j0, taps)
+    _READS[:] = [(zenith, azimuth, band_azimuth, lattice), kept]
+    return kept
+
+
+def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
+    """The sky's term with the reflectance (channels, n) float32 [radiance x sr]:
+    r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch: E_c (channels, n) the colour band's term (the sky
+    raster weighted at its view, every channel, correlated), G_b (B, n) each band's term on
+    the channels' sum (``weighted_raster(summed=True)``; the colour band's is the sum of E_c's
+    channels), w_b (B, n) the bands' weights, r_c (channels, n) ``sky_ratio``: the bands give
+    how the reflectance modulates the sky's light at the point with the view, the colour band
+    its colour, the ratio the open sky's term at the pixel's own view (docs/method.md)."""
+    blend = bands_light[0] * weights[0]
+    for b in range(1, len(weights)):
+        blend += bands_light[b] * weights[b]
+    blend /= np.maximum(colour.sum(axis=0), np.float32(1e-30))
+    sky = colour * blend[None]
+    sky *= ratio
+    return sky
 
 
 SHAPE_STEP = 0.04
@@ -318,13 +370,31 @@ def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
     return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
 
 
-def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
+_SUM = [None, None]
+"""The last raster ``_channel_sum`` was asked for (held) and its channels' sum."""
+
+
+def _channel_sum(raster) -> np.ndarray:
+    """The sky raster's channels summed (1, rows, cols) float32, made once for the bands of a
+    frame. Read-only. [radiance x sr]"""
+    if _SUM[0] is not raster:
+        total = raster.weighted.sum(axis=0, keepdims=True)
+        total.flags.writeable = False
+        _SUM[:] = [raster, total]
+    return _SUM[1]
+
+
+def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
     """The sky raster with each cell's light times the shape s(view, L_cell) (Max's f_r(V, L)
     on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
     when ``fold_period`` is given; the light outside the raster times the mean shape over the
-    raster's outermost ring of cells (the nearest directions to it). [radiance x sr]"""
+    raster's outermost ring of cells (the nearest directions to it). ``summed``: one channel,
+    the channels' sum weighted (the view bands'). [radiance x sr]"""
     s = shape_on_grid(brdf, view, raster.grid)
-    weighted = raster.weighted * s[None]
+    light = _channel_sum(raster) if summed else raster.weighted
+    outside = np.asarray(raster.outside, dtype=np.float64)
+    outside = outside.sum(keepdims=True) if summed else outside
+    weighted = light * s[None]
     ring = np.ones(s.shape, dtype=bool)
     ring[1:-1, 1:-1] = False
     e = raster.weighted.sum(axis=0)
@@ -333,18 +403,21 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     if fold_period is not None:
         weighted = fold(weighted, sky_offset(grid), fold_period)
         grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
-    return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
+    return SkyRaster(grid, weighted.astype(np.float32), outside * edge)
 
 
 def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_maps, bands: ViewBands,
                     sun_direction, raster) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
-    rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) sum_b w_b(x) E_b(x) ], rho the albedo texture,
-    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part and E_b the sky's
-    term with the raster weighted at band b's view, both in ``sky_maps``: one MipMap chain whose
-    channels are E_sky's three, then each band's three (so that the camera's footprints are
-    filtered once for all of them), w_b the bands' weights at the pixel's view zenith, r(x)
-    ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view vector;
+    rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
+    rho the albedo texture,
+    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part and the bands'
+    terms, all in ``sky_maps``: one MipMap chain whose channels are E_sky's three, then each
+    band's, three for the colour band (``ViewBands.colour``), one (the channels' sum) for the
+    others (so that the camera's footprints are filtered once for all of them); the sky's
+    term is ``banded_sky``: w_b the
+    bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster`` (the sky
+    raster), V(x) each pixel's own view vector;
     sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is blended
     (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
@@ -354,17 +427,16 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_
     fp, _ = cam._view_footprints(camera)
     views, zenith, azimuth = _camera_views(camera)
     e_total = cam._filtered_chain(total, fp)
-    stack = cam._filtered_chain(sky_maps, fp)  # (3 + 3 B, n)
+    stack = cam._filtered_chain(sky_maps, fp)  # (3 + 3 + B - 1, n)
     e_sky = stack[:3]
     sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
     light = e_total - e_sky
     light *= sun.astype(np.float32)[None]
     weights = bands.weights(zenith).astype(np.float32)
-    sky = stack[3:6] * weights[0][None]
-    for b in range(1, len(weights)):
-        sky += stack[3 + 3 * b:6 + 3 * b] * weights[b][None]
-    sky *= sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
-    light += sky
+    c = bands.colour
+    colour = stack[3 + c:6 + c]
+    bands_light = np.concatenate([stack[3:3 + c], colour.sum(axis=0)[None], stack[6 + c:]])
+    light += banded_sky(colour, bands_light, weights, sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth)))
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)

@@ -267,7 +267,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     model = config.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
     bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
-    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground)
+    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
     # the sky-only ground and the bands' rasters as the channels of one raster: the camera
     # filters its footprints once for all of them

@@ -122,9 +122,10 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     bands = R.choose_bands(b, raster, views)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
     e = raster.weighted.reshape(3, -1).astype(np.float64)
-    band_sky = [R.shape(b, v, dirs) @ e.T for v in bands.directions()]  # open ground: the raster's sums
+    band_sky = [R.shape(b, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))  # open ground: the raster's sums
+                for k, v in enumerate(bands.directions())]
     radiance = R.ground_radiance(view, b, _constant(1.0), total=(_constant(raster.weighted.sum((1, 2)) + e_sun),),
-                                 sky_maps=(_constant(np.concatenate([raster.weighted.sum((1, 2)), *band_sky])),),
+                                 sky_maps=(_constant(np.concatenate([raster.weighted.sum((1, 2)), *np.atleast_1d(*band_sky)])),),
                                  bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
     rows, _ = cam._ground_rows(view)
@@ -156,10 +157,12 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     v = np.stack([camera_at[0] - gx, camera_at[1] - gy, np.full(gx.shape, camera_at[2])], -1)
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     bands = R.choose_bands(b, raster, v.reshape(-1, 3))
-    terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d), spectrum, plan) for d in bands.directions()]
-    weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2]))
-    banded = sum(w.reshape(20, 20)[None] * t for w, t in zip(weights, terms))
-    banded *= R.sky_ratio(b, raster, bands, v.reshape(-1, 3)).reshape(3, 20, 20)
+    colour = shadow.ground_isolated(R.weighted_raster(raster, b, bands.directions()[bands.colour]), spectrum, plan)
+    terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d, summed=True), spectrum, plan).reshape(-1)
+             for d in bands.directions()]
+    weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2])).astype(np.float32)
+    banded = R.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
+                          R.sky_ratio(b, raster, bands, v.reshape(-1, 3))).reshape(3, 20, 20)
     brute = np.empty_like(banded)
     for r in range(0, 20, 3):
         for c in range(0, 20, 3):
