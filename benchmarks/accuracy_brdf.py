@@ -87,8 +87,8 @@ def open_ground() -> None:
         bands = R.choose_bands(brdf, raster, views)
         band_sky = [R.shape(brdf, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))
                     for k, v in enumerate(bands.directions())]
-        radiance = R.ground_radiance(view, brdf, constant(1.0), total=(constant(e.sum(axis=1) + e_sun),),
-                                     sky_maps=(constant(np.concatenate([e.sum(axis=1), *np.atleast_1d(*band_sky)])),),
+        radiance = R.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
+                                     sky_maps=(constant(np.concatenate(np.atleast_1d(*band_sky))),),
                                      bands=bands, sun_direction=sky.sun_direction,
                                      raster=raster)
         errors, lambert = [], []

@@ -406,42 +406,47 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
     return SkyRaster(grid, weighted.astype(np.float32), outside * edge)
 
 
-def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_maps, bands: ViewBands,
+def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_maps, bands: ViewBands,
                     sun_direction, raster) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
-    rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
-    rho the albedo texture,
-    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part and the bands'
-    terms, all in ``sky_maps``: one MipMap chain whose channels are E_sky's three, then each
-    band's, three for the colour band (``ViewBands.colour``), one (the channels' sum) for the
-    others (so that the camera's footprints are filtered once for all of them); the sky's
-    term is ``banded_sky``: w_b the
-    bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster`` (the sky
-    raster), V(x) each pixel's own view vector;
-    sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is blended
-    (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
+    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
+    rho the albedo texture, E_sun the ground's light from the sun alone (MipMap chain ``sun``,
+    ``GroundResult.sun_part``), and the bands' terms in ``sky_maps``: one MipMap chain whose
+    channels are each band's, three for the colour band (``ViewBands.colour``, E_c), one (the
+    channels' sum, G_b) for the others, so that the camera's footprints are filtered once for
+    all of them; the sky's term is ``banded_sky``: w_b the bands' weights at the pixel's view
+    zenith, r(x) ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view
+    vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
+    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):
         return radiance
     fp, _ = cam._view_footprints(camera)
     views, zenith, azimuth = _camera_views(camera)
-    e_total = cam._filtered_chain(total, fp)
-    stack = cam._filtered_chain(sky_maps, fp)  # (3 + 3 + B - 1, n)
-    e_sky = stack[:3]
-    sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
-    light = e_total - e_sky
-    light *= sun.astype(np.float32)[None]
-    weights = bands.weights(zenith).astype(np.float32)
+    light = cam._filtered_chain(sun, fp)
+    if sun_direction is not None:
+        light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
+    stack = cam._filtered_chain(sky_maps, fp)  # (3 + B - 1, n)
     c = bands.colour
-    colour = stack[3 + c:6 + c]
-    bands_light = np.concatenate([stack[3:3 + c], colour.sum(axis=0)[None], stack[6 + c:]])
+    colour = stack[c:c + 3]
+    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
+    weights = bands.weights(zenith).astype(np.float32)
     light += banded_sky(colour, bands_light, weights, sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth)))
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)
     radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
     return radiance
+
+
+@functools.lru_cache(maxsize=2)
+def _sun_shape(brdf: BrdfConfig, camera: cam.Camera, sun_direction: tuple) -> np.ndarray:
+    """The shape s(V(x), L_sun) (n,) float32 at the camera's ground pixels' own views: made once
+    while neither the camera nor the sun moves. Read-only. [1]"""
+    out = shape(brdf, _camera_views(camera)[0], np.asarray(sun_direction)[None]).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndarray:

@@ -131,7 +131,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     scene = plan.scenes[frame]
     sky = load_sky(config.sky, scene)
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
-                           parts=bool({"sun", "sky"} & set(passes)), coarse_sky=config.ground.brdf is not None)
+                           parts=bool({"sun", "sky"} & set(passes)) or config.ground.brdf is not None,
+                           coarse_sky=config.ground.brdf is not None)
     clock.lap("ground")
     view = plan.camera
     if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
@@ -269,14 +270,12 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
-    # the sky-only ground and the bands' rasters as the channels of one raster: the camera
-    # filters its footprints once for all of them
-    stacked = GroundResult(np.concatenate([ground.coarse_sky[0], *(t.irradiance for t in terms)], axis=-1),
-                           plan.window, np.concatenate([np.asarray(ground.coarse_sky[1], dtype=np.float64),
-                                                        *(np.asarray(t.unshadowed, dtype=np.float64) for t in terms)]),
-                           ground.exact)
+    # the bands' rasters as the channels of one raster: the camera filters its footprints once
+    # for all of them
+    stacked = GroundResult(np.concatenate([t.irradiance for t in terms], axis=-1), plan.window,
+                           np.concatenate([np.asarray(t.unshadowed, dtype=np.float64) for t in terms]), ground.exact)
     radiance = reflect.ground_radiance(
-        view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
+        view, model, ground_albedo(config.ground), sun=irradiance_maps(plan, ground.sun_part()),
         sky_maps=irradiance_maps(plan, stacked), bands=bands, sun_direction=sun, raster=raster)
     return reflect.background(view, radiance, sky)
 

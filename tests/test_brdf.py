@@ -124,8 +124,8 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     e = raster.weighted.reshape(3, -1).astype(np.float64)
     band_sky = [R.shape(b, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))  # open ground: the raster's sums
                 for k, v in enumerate(bands.directions())]
-    radiance = R.ground_radiance(view, b, _constant(1.0), total=(_constant(raster.weighted.sum((1, 2)) + e_sun),),
-                                 sky_maps=(_constant(np.concatenate([raster.weighted.sum((1, 2)), *np.atleast_1d(*band_sky)])),),
+    radiance = R.ground_radiance(view, b, _constant(1.0), sun=(_constant(e_sun),),
+                                 sky_maps=(_constant(np.concatenate(np.atleast_1d(*band_sky))),),
                                  bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
     rows, _ = cam._ground_rows(view)
