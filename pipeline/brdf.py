@@ -65,10 +65,13 @@ def _rpv(v, l, rho0, k, theta, rho_c):
     phase angle g, (1 - theta^2) / (1 + 2 theta cos g + theta^2)^1.5 (theta < 0: backward), and
     1 + R = 1 + (1 - rho_c) / (1 + G) the hot spot, G = |tan(th_l) a_l - tan(th_v) a_v| the
     distance between the two directions on the plane z = 1 (0 at v = l)."""
-    mv, ml, cos_g, tv, tl = _slopes(v, l)
+    # component by component (no (..., 3) temporaries: the shape is read on large lattices)
+    vx, vy, vz, lx, ly, lz = v[..., 0], v[..., 1], v[..., 2], l[..., 0], l[..., 1], l[..., 2]
+    mv, ml = np.maximum(vz, 1e-9), np.maximum(lz, 1e-9)
+    cos_g = np.clip(vx * lx + vy * ly + vz * lz, -1.0, 1.0)
     minnaert = (mv * ml) ** (k - 1.0) / (mv + ml) ** (1.0 - k)
     phase = (1.0 - theta * theta) / (1.0 + 2.0 * theta * cos_g + theta * theta) ** 1.5
-    big_g = np.linalg.norm(tl - tv, axis=-1)
+    big_g = np.sqrt((lx / ml - vx / mv) ** 2 + (ly / ml - vy / mv) ** 2)
     return rho0 * minnaert * phase * (1.0 + (1.0 - rho_c) / (1.0 + big_g))
 
 
@@ -431,13 +434,22 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     c = bands.colour
     colour = stack[c:c + 3]
     bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
-    weights = bands.weights(zenith).astype(np.float32)
+    weights = _band_weights(camera, bands.zeniths)
     light += banded_sky(colour, bands_light, weights, sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth)))
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)
     radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
     return radiance
+
+
+@functools.lru_cache(maxsize=2)
+def _band_weights(camera: cam.Camera, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own view zeniths: the
+    same while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
+    out = ViewBands(zeniths, 0.0, 0.0).weights(_camera_views(camera)[1]).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 @functools.lru_cache(maxsize=2)
