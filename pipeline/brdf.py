@@ -410,7 +410,7 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
 
 
 def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_maps, bands: ViewBands,
-                    sun_direction, raster) -> np.ndarray:
+                    sun_direction, raster, open_light=None) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
     rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
     rho the albedo texture, E_sun the ground's light from the sun alone (MipMap chain ``sun``,
@@ -419,8 +419,13 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     channels' sum, G_b) for the others, so that the camera's footprints are filtered once for
     all of them; the sky's term is ``banded_sky``: w_b the bands' weights at the pixel's view
     zenith, r(x) ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view
-    vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
-    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
+    vector; sun_direction (3,) or None. With ``open_light`` (the colour band's open-sky light
+    (3,) and every band's on the channels' sum (B,)), ``sky_maps`` is instead the one
+    3-channel raster of ``relative_sky`` (1 beyond it), and the sky's term is that read times
+    the same term on open ground at the pixel's view (``open_sky``): the same formula with the
+    per-point part done on the ground raster before the camera reads it. The sun's term is
+    exact per pixel; the sky's is blended (docs/method.md, "The ground's reflectance"). 0
+    where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):
@@ -430,17 +435,67 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     light = cam._filtered_chain(sun, fp)
     if sun_direction is not None:
         light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
-    stack = cam._filtered_chain(sky_maps, fp)  # (3 + B - 1, n)
-    c = bands.colour
-    colour = stack[c:c + 3]
-    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
     weights = _band_weights(camera, bands.zeniths)
-    light += banded_sky(colour, bands_light, weights, sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth)))
+    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
+    if open_light is not None:
+        sky = cam._filtered_chain(sky_maps, fp)  # (3, n), relative to open ground
+        sky *= open_sky(bands, weights, *open_light)
+        sky *= ratio
+        light += sky
+    else:
+        light += _stacked_sky(cam._filtered_chain(sky_maps, fp), bands, weights, ratio)
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)
     radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
     return radiance
+
+
+def _stacked_sky(stack, bands: ViewBands, weights, ratio) -> np.ndarray:
+    """``banded_sky`` of the bands' terms read as one stack (3 + B - 1, n): each band's channel,
+    three for the colour band. [radiance x sr]"""
+    c = bands.colour
+    colour = stack[c:c + 3]
+    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
+    return banded_sky(colour, bands_light, weights, ratio)
+
+
+def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
+    """``banded_sky``'s blend on open ground, before ``sky_ratio`` (3, n) float32: the colour
+    band's open light (3,) times sum_b w_b G_b,open / G_c,open, G_b,open (B,) each band's open
+    light on the channels' sum, w_b (B, n) the weights. [radiance x sr]"""
+    bands_open = np.asarray(bands_open, dtype=np.float64)
+    scale = bands_open / max(float(bands_open[bands.colour]), 1e-30)
+    blend = np.tensordot(scale.astype(np.float32), weights, axes=1)
+    return np.asarray(colour_open, dtype=np.float32)[:, None] * blend[None]
+
+
+def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light, colour_open, bands_open):
+    """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a
+    ground raster (rows, cols, 3) float32 [1]: r-free and 1 on open ground, so the camera can
+    read it like any ground raster (1 beyond it) and ``ground_radiance`` multiply by the open
+    term at each pixel's own view. colour (rows, cols, 3): the colour band's term; bands_light
+    (rows, cols, B): every band's on the channels' sum; the views are each cell's own, from
+    its centre to the camera's pinhole (``_cell_weights``); colour_open (3,), bands_open (B,):
+    the same on open ground. [radiance x sr] in, [1] out"""
+    weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
+    flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
+    colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
+    sky = banded_sky(colour_flat, flat, weights, np.float32(1.0))
+    sky /= np.maximum(open_sky(bands, weights, colour_open, bands_open), np.float32(1e-30))
+    return np.moveaxis(sky, 0, -1).reshape(*grid.shape, 3)
+
+
+@functools.lru_cache(maxsize=2)
+def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
+    cell centres to the camera's pinhole (held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
+    gx, gy = grid.ground_from_raster(np.arange(grid.shape[0])[:, None], np.arange(grid.shape[1])[None, :])
+    across = np.hypot(camera.position[0] - gx, camera.position[1] - gy).reshape(-1)
+    zenith = np.minimum(np.arctan2(across, float(camera.position[2])), VIEW_ZENITH_LIMIT)
+    out = ViewBands(zeniths, 0.0, 0.0).weights(zenith).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 @functools.lru_cache(maxsize=2)

@@ -270,13 +270,27 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
-    # the bands' rasters as the channels of one raster: the camera filters its footprints once
-    # for all of them
-    stacked = GroundResult(np.concatenate([t.irradiance for t in terms], axis=-1), plan.window,
-                           np.concatenate([np.asarray(t.unshadowed, dtype=np.float64) for t in terms]), ground.exact)
+    if config.canopy.layout == "periodic":
+        # the bands' rasters as the channels of one raster, repeated by the tile: the camera
+        # filters its footprints once for all of them, the blend is made per pixel
+        stacked = GroundResult(np.concatenate([t.irradiance for t in terms], axis=-1), plan.window,
+                               np.concatenate([np.asarray(t.unshadowed, dtype=np.float64) for t in terms]),
+                               ground.exact)
+        sky_maps, open_light = irradiance_maps(plan, stacked), None
+    else:
+        # an isolated canopy: the blend made on the ground raster, relative to open ground (1
+        # beyond the window), so that the camera reads three channels
+        c = bands.colour
+        open_light = (np.asarray(terms[c].unshadowed, dtype=np.float64),
+                      np.array([float(np.sum(t.unshadowed)) for t in terms]))
+        relative = reflect.relative_sky(view, plan.window, bands, terms[c].irradiance,
+                                        np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
+                                                        else t.irradiance for k, t in enumerate(terms)], axis=-1),
+                                        *open_light)
+        sky_maps = (camera.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(config.ground), sun=irradiance_maps(plan, ground.sun_part()),
-        sky_maps=irradiance_maps(plan, stacked), bands=bands, sun_direction=sun, raster=raster)
+        sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)
     return reflect.background(view, radiance, sky)
 
 

@@ -173,6 +173,20 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     lambert = shadow.ground_isolated(raster, spectrum, plan)
     assert np.max(np.abs(lambert[sel] / brute[sel] - 1)) > 0.05  # the brute force sees the BRDF
     assert 1 <= len(bands.zeniths) <= R.MAX_BANDS
+    # the frame's isolated-canopy path: the blend made on the ground raster relative to open
+    # ground, times the open term at the cell's own view (no camera filtering here)
+    directions = bands.directions()
+    colour_open = R.weighted_raster(raster, b, directions[bands.colour]).total
+    bands_open = [R.weighted_raster(raster, b, d, summed=True).total[0] for d in directions]
+    view = cam.Camera.look_at(tuple(camera_at), (0.0, 0.0, 0.0), vertical_fov=np.radians(60.0), width=8, height=6)
+    relative = R.relative_sky(view, window, bands, np.moveaxis(colour, 0, -1),
+                              np.stack(terms, axis=-1).reshape(20, 20, -1), colour_open, bands_open)
+    assert relative.shape == (20, 20, 3) and np.all(relative < 1.0)  # shaded everywhere under the leaves
+    cell_weights = R._cell_weights(view, window, bands.zeniths)
+    assert np.allclose(cell_weights, weights, atol=1e-5)  # the cells' own views, from the camera's position
+    opened = R.open_sky(bands, weights, colour_open, bands_open) * R.sky_ratio(b, raster, bands, v.reshape(-1, 3))
+    through = np.moveaxis(relative, -1, 0) * opened.reshape(3, 20, 20)
+    assert np.max(np.abs(through[sel] / brute[sel] - 1)) < 0.02
 
 
 def rossli_by_angles(th_l, th_v, phi, f_iso, f_vol, f_geo):
