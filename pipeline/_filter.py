@@ -693,3 +693,19 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
             total += value / n_taps if not direct else value
         out[i] = total
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def lattice_read(flat, corner, taps, lattice, out):
+    """``brdf.sky_ratio``'s bilinear read of a lattice (channels, lattice * lattice) float32 at
+    n points, into ``out`` (channels, n) float32: point p takes the four values from flat
+    index corner[p] (its first corner), + 1, + lattice, + lattice + 1 with weights taps[:, p],
+    summed in that order in float32 (``brdf._lattice_read_arrays``)."""
+    for p in range(corner.shape[0]):
+        k = corner[p]
+        for c in range(flat.shape[0]):
+            v = flat[c, k] * taps[0, p]
+            v += flat[c, k + 1] * taps[1, p]
+            v += flat[c, k + lattice] * taps[2, p]
+            v += flat[c, k + lattice + 1] * taps[3, p]
+            out[c, p] = v

@@ -238,3 +238,18 @@ def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
     path = write_config(tmp_path, config)
     assert main(["frame", str(path), "--passes", "sun", "-o", str(tmp_path / "f.exr")]) == 2
     assert not (tmp_path / "f.exr").exists()
+
+
+def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
+    """sky_ratio's per-pixel bilinear read of its lattice: the compiled loop against numpy."""
+    from pipeline import _filter
+
+    rng = np.random.default_rng(5)
+    lattice = 6
+    flat = rng.random((3, lattice * lattice)).astype(np.float32)
+    zenith, azimuth = rng.uniform(0.2, 1.4, 50), rng.uniform(-3.0, 3.0, 50)
+    _, _, corner, taps = R._lattice_reads(zenith, azimuth, 0.3, lattice)
+    assert np.allclose(taps.sum(axis=0), 1.0, atol=1e-6) and corner.max() <= lattice * lattice - lattice - 2
+    out = np.empty((3, 50), dtype=np.float32)
+    _filter.lattice_read(flat, corner, taps, lattice, out)
+    assert np.array_equal(out, R._lattice_read_arrays(flat, corner, taps, lattice))
