@@ -297,7 +297,8 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
 def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
     cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
-    making a tiny sky raster and blend band. A render's command calls it while its workers make the cycle products
+    making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
+    lattice as ``brdf.sky_ratio`` does). A render's command calls it while its workers make the cycle products
     (``run.render_run``), so that after an install the workers of the frame phase load the
     loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
     kept; any error is left to the frames."""
@@ -316,6 +317,11 @@ def compile_loops(plan: RunPlan) -> None:
         coarse = replace(plan.window, shape=(2, 2))
         blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
                    np.zeros((2, 2, 3), dtype=np.float32), coarse)
+        if config.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
+            from . import _filter
+
+            _filter.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
+                                 np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
     except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
         pass
 
