@@ -14,7 +14,8 @@ corner, at an edge or over the middle of the window, so that its views span view
 6-83 degrees and 90, 180 or 360 degrees of azimuth. Brute force: at every 4th pixel in each
 direction, the sky raster weighted by the shape at that pixel's own view and correlated for it
 alone (``brdf.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf.choose_bands``
-at each tolerance, the bands' correlations blended by their weights times ``brdf.sky_ratio``.
+at each tolerance, the bands' correlations (the middle band's in every channel, the
+others' of the sky's channels' sum) blended by ``brdf.banded_sky`` with ``brdf.sky_ratio``.
 Printed: the largest relative error over the sampled pixels and channels, and Lambert's.
 
 With ``--config``: the same on a shipped config's own sky raster, canopy spectrum and camera,
@@ -67,9 +68,10 @@ def open_ground() -> None:
     from pipeline import camera as cam
 
     def constant(value):
+        value = np.asarray(value, np.float32).reshape(-1)
+        value = np.broadcast_to(value, (3,)) if value.size == 1 else value
         grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-        return cam.mipmap(np.broadcast_to(np.asarray(value, np.float32), (2, 2, 3)).copy(), grid,
-                          outside="constant", value=np.asarray(value, np.float32))
+        return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
     sky = ProceduralSky(turbidity=3.0, sun=SunDisc(np.radians(315.0), np.radians(30.0)))
     raster = sky.raster(Grid((-4.0, 4.0), 8.0 / 96, (96, 96)))
@@ -83,10 +85,11 @@ def open_ground() -> None:
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)
         bands = R.choose_bands(brdf, raster, views)
-        band_sky = [R.shape(brdf, v, dirs) @ e.T for v in bands.directions()]
-        radiance = R.ground_radiance(view, brdf, constant(1.0), total=(constant(e.sum(axis=1) + e_sun),),
-                                     sky_only=(constant(e.sum(axis=1)),), bands=bands,
-                                     band_maps=[(constant(b),) for b in band_sky], sun_direction=sky.sun_direction,
+        band_sky = [R.shape(brdf, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))
+                    for k, v in enumerate(bands.directions())]
+        radiance = R.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
+                                     sky_maps=(constant(np.concatenate(np.atleast_1d(*band_sky))),),
+                                     bands=bands, sun_direction=sky.sun_direction,
                                      raster=raster)
         errors, lambert = [], []
         for r, c in picks:
@@ -131,10 +134,11 @@ def config_case(path: str, samples: int) -> None:
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
         for tolerance in TOLERANCES:
             bands = R.choose_bands(brdf, raster, views, tolerance=tolerance)
-            terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground)
-            weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2]))
-            banded = sum(weights[b, chosen][None] * t.irradiance[cells].T for b, t in enumerate(terms))
-            banded *= R.sky_ratio(brdf, raster, bands, views)[:, chosen]
+            terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
+            weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2])).astype(np.float32)
+            colour = terms[bands.colour].irradiance[cells].T
+            banded = R.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
+                                  weights[:, chosen], R.sky_ratio(brdf, raster, bands, views)[:, chosen])
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.total[1]:.3f}, banded {banded[1, worst]:.3f}")
             print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
@@ -163,15 +167,18 @@ def window_cases() -> None:
                 for col in range(1, N, STEP):
                     brute[:, r, col] = shadow.ground_isolated(R.weighted_raster(raster, brdf, v[r, col]),
                                                               spectrum, plan)[:, r, col]
-            lambert = np.max(np.abs(shadow.ground_isolated(raster, spectrum, plan)[sel] / brute[sel] - 1))
+            sky_only = shadow.ground_isolated(raster, spectrum, plan)
+            lambert = np.max(np.abs(sky_only[sel] / brute[sel] - 1))
             cells = []
             for tolerance in TOLERANCES:
                 bands = R.choose_bands(brdf, raster, flat, tolerance=tolerance)
-                terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d), spectrum, plan)
+                terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d, summed=True), spectrum, plan).reshape(-1)
                          for d in bands.directions()]
-                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2]))
-                banded = sum(w.reshape(N, N)[None] * t for w, t in zip(weights, terms))
-                banded *= R.sky_ratio(brdf, raster, bands, flat).reshape(3, N, N)
+                colour = shadow.ground_isolated(R.weighted_raster(raster, brdf, bands.directions()[bands.colour]),
+                                                spectrum, plan)
+                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2])).astype(np.float32)
+                banded = R.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
+                                      R.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
                 cells.append(f"{len(bands.zeniths)}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "

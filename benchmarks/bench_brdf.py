@@ -4,8 +4,8 @@ measured in the frame.
 
     python benchmarks/bench_brdf.py [--config configs/lawn-hotspot.yaml] [--frame 0] [--repeats 3]
 
-Times: ``render_frame``'s stages (ground, camera, composite), each frame rendered ``repeats``
-times per reflectance, alternately, after one warm-up of each (cycle products in a temporary
+Times: ``render_frame``'s stages (ground, camera, composite) and the process's CPU time
+(``cpu``, both workers'), each frame rendered ``repeats`` times per reflectance, alternately, after one warm-up of each (cycle products in a temporary
 cache); medians, and the load average. Hot spot: the rendered radiance with the BRDF over the
 Lambertian radiance at the same pixel (the albedo texture, haze and foreground cancel nearly),
 at sunlit ground pixels (ground irradiance at least 0.9 of the open ground's) whose view
@@ -55,17 +55,22 @@ def main() -> None:
         for _ in range(args.repeats):
             for name, plan in plans.items():
                 stages: dict = {}
+                cpu = time.process_time()
                 render_frame(plan, args.frame, store=store, workers=2, timings=stages)
+                stages["cpu"] = time.process_time() - cpu  # both workers' CPU time: steadier under load
                 times[name].append(stages)
     load_average = os.getloadavg()
     print(f"{args.config} frame {args.frame}, {args.repeats} repeats, load average "
           + " ".join(f"{v:.2f}" for v in load_average))
+    wall = lambda r: sum(v for k, v in r.items() if k != "cpu")  # noqa: E731
     for name, runs in times.items():
         stages = {k: float(np.median([r[k] for r in runs])) for k in runs[0]}
-        total = float(np.median([sum(r.values()) for r in runs]))
+        total = float(np.median([wall(r) for r in runs]))
         print(f"  {name:8s} frame {total:6.2f} s (median)   " + "  ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    ratio = float(np.median([sum(b.values()) / sum(a.values()) for a, b in zip(times["lambert"], times["brdf"])]))
-    print(f"  brdf / lambert frame time: {ratio:.2f} (median of the paired repeats)")
+    pairs = list(zip(times["lambert"], times["brdf"]))
+    ratio = float(np.median([wall(b) / wall(a) for a, b in pairs]))
+    cpu_ratio = float(np.median([b["cpu"] / a["cpu"] for a, b in pairs]))
+    print(f"  brdf / lambert frame time: {ratio:.2f} wall, {cpu_ratio:.2f} CPU (medians of the paired repeats)")
     hot_spot(plans["brdf"], args.frame, results)
 
 

@@ -143,25 +143,30 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
             out[1, r] = t1 / nf
             out[2, r] = t2 / nf
             continue
-        for k in range(channels):
-            col, row, colb, rowb = col0, row0, colb0, rowb0
-            total = np.float32(0.0)
-            for i in range(n):
-                f, fc, fr = _first_texel(channels, off, rows, cols, periodic, col, row)
+        # any other count of channels: each tap's texel found once, then every channel read
+        # there (the same float32 operations per channel, in the same order, as channel by
+        # channel: a stack of many rasters filtered in one pass costs little more per channel)
+        col, row, colb, rowb = col0, row0, colb0, rowb0
+        fb, fcb, frb = 0, np.float32(0.0), np.float32(0.0)
+        for i in range(n):
+            f, fc, fr = _first_texel(channels, off, rows, cols, periodic, col, row)
+            col += dcol
+            row += drow
+            if blended:
+                fb, fcb, frb = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
+                colb += dcolb
+                rowb += drowb
+            for k in range(channels):
                 s = _bilinear(flat, f, channels, step, k, fc, fr)
-                col += dcol
-                row += drow
                 if blended:
-                    f, fc, fr = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
-                    u = _bilinear(flat, f, channels, stepb, k, fc, fr)
-                    colb += dcolb
-                    rowb += drowb
+                    u = _bilinear(flat, fb, channels, stepb, k, fcb, frb)
                     s += (u - s) * t
                 if i == 0:
-                    total = s
+                    out[k, r] = s
                 else:
-                    total += s
-            out[k, r] = total / nf
+                    out[k, r] += s
+        for k in range(channels):
+            out[k, r] /= nf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -688,3 +693,19 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
             total += value / n_taps if not direct else value
         out[i] = total
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def lattice_read(flat, corner, taps, lattice, out):
+    """``brdf.sky_ratio``'s bilinear read of a lattice (channels, lattice * lattice) float32 at
+    n points, into ``out`` (channels, n) float32: point p takes the four values from flat
+    index corner[p] (its first corner), + 1, + lattice, + lattice + 1 with weights taps[:, p],
+    summed in that order in float32 (``brdf._lattice_read_arrays``)."""
+    for p in range(corner.shape[0]):
+        k = corner[p]
+        for c in range(flat.shape[0]):
+            v = flat[c, k] * taps[0, p]
+            v += flat[c, k + 1] * taps[1, p]
+            v += flat[c, k + lattice] * taps[2, p]
+            v += flat[c, k + lattice + 1] * taps[3, p]
+            out[c, p] = v

@@ -65,10 +65,13 @@ def _rpv(v, l, rho0, k, theta, rho_c):
     phase angle g, (1 - theta^2) / (1 + 2 theta cos g + theta^2)^1.5 (theta < 0: backward), and
     1 + R = 1 + (1 - rho_c) / (1 + G) the hot spot, G = |tan(th_l) a_l - tan(th_v) a_v| the
     distance between the two directions on the plane z = 1 (0 at v = l)."""
-    mv, ml, cos_g, tv, tl = _slopes(v, l)
+    # component by component (no (..., 3) temporaries: the shape is read on large lattices)
+    vx, vy, vz, lx, ly, lz = v[..., 0], v[..., 1], v[..., 2], l[..., 0], l[..., 1], l[..., 2]
+    mv, ml = np.maximum(vz, 1e-9), np.maximum(lz, 1e-9)
+    cos_g = np.clip(vx * lx + vy * ly + vz * lz, -1.0, 1.0)
     minnaert = (mv * ml) ** (k - 1.0) / (mv + ml) ** (1.0 - k)
     phase = (1.0 - theta * theta) / (1.0 + 2.0 * theta * cos_g + theta * theta) ** 1.5
-    big_g = np.linalg.norm(tl - tv, axis=-1)
+    big_g = np.sqrt((lx / ml - vx / mv) ** 2 + (ly / ml - vy / mv) ** 2)
     return rho0 * minnaert * phase * (1.0 + (1.0 - rho_c) / (1.0 + big_g))
 
 
@@ -161,6 +164,13 @@ class ViewBands:
     azimuth: float
     error: float
 
+    @property
+    def colour(self) -> int:
+        """The band whose term is correlated in every channel (the middle one): it gives the
+        sky light's colour under the canopy; the others are correlated on the channels' sum
+        and give only how the reflectance modulates it (``banded_sky``). [index]"""
+        return len(self.zeniths) // 2
+
     def directions(self) -> np.ndarray:
         """(B, 3) unit view vectors of the bands. [1]"""
         z = np.asarray(self.zeniths)
@@ -184,27 +194,54 @@ def view_vectors(camera: cam.Camera):
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+@functools.lru_cache(maxsize=1)
+def _camera_views(camera: cam.Camera):
+    """``view_vectors`` held to VIEW_ZENITH_LIMIT (``clamp_view``) (n, 3), their zenith angles
+    (n,) [rad] and azimuths (n,) [rad, from +y towards +x]: they depend on the camera alone, so
+    the frames of a run, whose camera stands still, make them once. Read-only."""
+    views = clamp_view(view_vectors(camera))
+    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
+    azimuth = np.arctan2(views[:, 0], views[:, 1])
+    for array in (views, zenith, azimuth):
+        array.flags.writeable = False
+    return views, zenith, azimuth
+
+
+_COARSE = [None, None]
+"""The last raster ``_coarsened`` was asked for (held, so that its id is not reused) and its
+result: ``choose_bands`` and ``sky_ratio`` coarsen the same raster in one frame."""
+
+SKY_CELLS = 2048
+"""Most cells of the coarsened sky raster on which ``choose_bands`` and ``sky_ratio`` sum the
+open sky's term (blocks of the raster's cells). [count]"""
+
+
 def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
     towards each block's light-weighted centre on the sky plane and weights (m,) (channels
     summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
-    each = raster.weighted.astype(np.float64)
-    e = each.sum(axis=0)
-    rows, cols = e.shape
-    sx, sy = raster.grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
-    step = max(1, int(np.ceil(np.sqrt(e.size / most_cells))))
+    held, kept = _COARSE
+    if held is not None and held[0] is raster and held[1] == most_cells:
+        dirs, per_channel = kept
+        return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+    light = raster.weighted
+    count, rows, cols = light.shape
+    step = max(1, int(np.ceil(np.sqrt(rows * cols / most_cells))))
     rows, cols = max(rows // step * step, 1), max(cols // step * step, 1)
     step_r, step_c = min(step, rows), min(step, cols)
-    blocks = lambda a: a[:rows, :cols].reshape(rows // step_r, step_r, cols // step_c, step_c).sum(axis=(1, 3))  # noqa: E731
-    weight = blocks(e)
+    sx, sy = raster.grid.ground_from_raster(np.arange(rows), np.arange(cols))
+    cut = light[:, :rows, :cols].reshape(count, rows // step_r, step_r, cols // step_c, step_c)
+    per_block = cut.sum(axis=(2, 4), dtype=np.float64)  # (channels, block rows, block cols)
+    weight = per_block.sum(axis=0)
     safe = np.maximum(weight, 1e-30)
-    x = blocks(e * sx) / safe
-    y = blocks(e * sy) / safe
+    # the light-weighted centres: x depends on the column alone, y on the row alone
+    x = (cut.sum(axis=(0, 2), dtype=np.float64) * sx.reshape(-1, step_c)).sum(axis=-1) / safe
+    y = (cut.sum(axis=(0, 4), dtype=np.float64) * sy.reshape(-1, step_r)[..., None]).sum(axis=1) / safe
     w = np.stack([x, y, np.ones_like(x)], axis=-1)
     dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
-    if channels:
-        return dirs, np.stack([blocks(c).reshape(-1) for c in each], axis=-1)
-    return dirs, weight.reshape(-1)
+    per_channel = per_block.reshape(count, -1).T
+    _COARSE[:] = [(raster, most_cells), (dirs, per_channel)]
+    return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
@@ -212,12 +249,12 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     """View bands, 1 to ``most``, added one at a time where the blend is worst (first the
     middle, then both ends, then the sampled view zenith of the largest error), until the blend gives the open sky's term sum_i e_i
     s(V, L_i) within ``tolerance`` (relative) at every sampled pixel's own view zenith, against
-    that sum per pixel (brute force over the raster's cells, coarsened to 1024) at the bands'
+    that sum per pixel (brute force over the raster's cells, coarsened to SKY_CELLS) at the bands'
     azimuth. views : (n, 3) the pixels' view vectors; azimuth of the bands: that of the views'
     mean (the change with azimuth across the image is ``sky_ratio``'s)."""
     views = clamp_view(views)
     pick = views[:: max(1, len(views) // samples)]
-    dirs, e = _coarsened(raster, 1024)
+    dirs, e = _coarsened(raster, SKY_CELLS)
     zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
     mean = views.mean(axis=0)
     azimuth = float(np.arctan2(mean[0], mean[1]))
@@ -238,35 +275,89 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
             return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16) -> np.ndarray:
-    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own view, sum_i e_i s(V, L_i),
-    over the bands' blend of it, sum_b w_b sum_i e_i s(V_b, L_i) (both over the raster
-    coarsened to 2048 cells): the factor that makes the banded sky term exact on open ground
-    and carries the change across the image (view azimuth) that the bands do not hold. Read on
-    a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range,
-    bilinearly (held at its edges). views : (n, 3) unit vectors. [1]"""
-    dirs, e = _coarsened(raster, 2048, channels=True)
-    views = clamp_view(views)
-    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
-    turn = (np.arctan2(views[:, 0], views[:, 1]) - bands.azimuth + np.pi) % (2.0 * np.pi) - np.pi
-    lows = [float(zenith.min()), float(turn.min())]
-    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
+    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own
+    view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives on open ground, the colour band's
+    term sum_i e_i s(V_c, L_i) times the blended modulation sum_b w_b S_b / S_c (S_b = sum_i
+    e'_i s(V_b, L_i), e' the channels' sum), all over the raster coarsened to SKY_CELLS cells:
+    the factor that makes the banded sky term exact on open ground and carries the change
+    across the image (view azimuth) that the bands do not hold. Read on a lattice of
+    ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held
+    at its edges). views : (n, 3) unit vectors; ``angles``, if given, their zenith angles and
+    azimuths after ``clamp_view`` ((n,) each, ``_camera_views``) [rad]. [1]"""
+    dirs, e = _coarsened(raster, SKY_CELLS, channels=True)
+    if angles is None:
+        views = clamp_view(views)
+        angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
+    lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
     z, t = np.meshgrid(*axes, indexing="ij")
     a = bands.azimuth + t
     v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
     own = shape(brdf, v[..., None, :], dirs) @ e  # (lattice, lattice, channels)
-    blended = np.einsum("bc,bz->zc", shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e,
-                        bands.weights(axes[0]))
-    ratio = np.moveaxis(own / np.maximum(blended, 1e-30)[:, None, :], -1, 0).astype(np.float32)
-    # bilinear on the lattice, by hand (a regular grid): fractional indices, held at the edges
+    at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
+    summed = at_bands.sum(axis=-1)
+    modulation = summed / max(float(summed[bands.colour]), 1e-30)
+    blended = np.maximum(at_bands[bands.colour][None, :] * (modulation @ bands.weights(axes[0]))[:, None], 1e-30)
+    ratio = np.moveaxis(own / blended[:, None, :], -1, 0).astype(np.float32)
+    from . import _filter
+
+    flat = np.ascontiguousarray(ratio.reshape(len(ratio), -1))
+    out = np.empty((len(ratio), len(corner)), dtype=np.float32)
+    _filter.lattice_read(flat, corner, taps, lattice, out)
+    return out
+
+
+def _lattice_read_arrays(flat, corner, taps, lattice) -> np.ndarray:
+    """``_filter.lattice_read`` with whole arrays (numpy): its reference. (channels, n) float32"""
+    out = flat[:, corner] * taps[0]
+    out += flat[:, corner + 1] * taps[1]
+    out += flat[:, corner + lattice] * taps[2]
+    out += flat[:, corner + lattice + 1] * taps[3]
+    return out
+
+
+_READS = [None, None]
+"""The last arguments of ``_lattice_reads`` (the zenith array held, so that its id is not
+reused) and its result: a camera's views are the same every frame (``_camera_views``)."""
+
+
+def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
+    """Where ``sky_ratio`` reads its lattice for views of zenith angles and azimuths (n,) each
+    [rad]: the lattice's lowest zenith and turn from ``band_azimuth`` and their spans [rad],
+    the flat index (n,) of each view's first lattice corner and the bilinear weights (4, n)
+    float32 of its four corners (held at the lattice's edges)."""
+    held, kept = _READS
+    if held is not None and held[0] is zenith and held[1] is azimuth and held[2:] == (band_azimuth, lattice):
+        return kept
+    turn = (azimuth - band_azimuth + np.pi) % (2.0 * np.pi) - np.pi
+    lows = [float(zenith.min()), float(turn.min())]
+    spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
     i = np.clip((zenith - lows[0]) / spans[0] * (lattice - 1), 0.0, lattice - 1.0)
     j = np.clip((turn - lows[1]) / spans[1] * (lattice - 1), 0.0, lattice - 1.0)
     i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
     fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
-    top = ratio[:, i0, j0] * (1 - fj) + ratio[:, i0, j0 + 1] * fj
-    bottom = ratio[:, i0 + 1, j0] * (1 - fj) + ratio[:, i0 + 1, j0 + 1] * fj
-    return top * (1 - fi) + bottom * fi
+    taps = np.stack([(1 - fi) * (1 - fj), (1 - fi) * fj, fi * (1 - fj), fi * fj])
+    kept = (lows, spans, i0 * lattice + j0, taps)
+    _READS[:] = [(zenith, azimuth, band_azimuth, lattice), kept]
+    return kept
+
+
+def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
+    """The sky's term with the reflectance (channels, n) float32 [radiance x sr]:
+    r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch: E_c (channels, n) the colour band's term (the sky
+    raster weighted at its view, every channel, correlated), G_b (B, n) each band's term on
+    the channels' sum (``weighted_raster(summed=True)``; the colour band's is the sum of E_c's
+    channels), w_b (B, n) the bands' weights, r_c (channels, n) ``sky_ratio``: the bands give
+    how the reflectance modulates the sky's light at the point with the view, the colour band
+    its colour, the ratio the open sky's term at the pixel's own view (docs/method.md)."""
+    blend = bands_light[0] * weights[0]
+    for b in range(1, len(weights)):
+        blend += bands_light[b] * weights[b]
+    blend /= np.maximum(colour.sum(axis=0), np.float32(1e-30))
+    sky = colour * blend[None]
+    sky *= ratio
+    return sky
 
 
 SHAPE_STEP = 0.04
@@ -291,13 +382,31 @@ def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
     return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
 
 
-def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
+_SUM = [None, None]
+"""The last raster ``_channel_sum`` was asked for (held) and its channels' sum."""
+
+
+def _channel_sum(raster) -> np.ndarray:
+    """The sky raster's channels summed (1, rows, cols) float32, made once for the bands of a
+    frame. Read-only. [radiance x sr]"""
+    if _SUM[0] is not raster:
+        total = raster.weighted.sum(axis=0, keepdims=True)
+        total.flags.writeable = False
+        _SUM[:] = [raster, total]
+    return _SUM[1]
+
+
+def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
     """The sky raster with each cell's light times the shape s(view, L_cell) (Max's f_r(V, L)
     on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
     when ``fold_period`` is given; the light outside the raster times the mean shape over the
-    raster's outermost ring of cells (the nearest directions to it). [radiance x sr]"""
+    raster's outermost ring of cells (the nearest directions to it). ``summed``: one channel,
+    the channels' sum weighted (the view bands'). [radiance x sr]"""
     s = shape_on_grid(brdf, view, raster.grid)
-    weighted = raster.weighted * s[None]
+    light = _channel_sum(raster) if summed else raster.weighted
+    outside = np.asarray(raster.outside, dtype=np.float64)
+    outside = outside.sum(keepdims=True) if summed else outside
+    weighted = light * s[None]
     ring = np.ones(s.shape, dtype=bool)
     ring[1:-1, 1:-1] = False
     e = raster.weighted.sum(axis=0)
@@ -306,39 +415,114 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None):
     if fold_period is not None:
         weighted = fold(weighted, sky_offset(grid), fold_period)
         grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
-    return SkyRaster(grid, weighted.astype(np.float32), np.asarray(raster.outside) * edge)
+    return SkyRaster(grid, weighted.astype(np.float32), outside * edge)
 
 
-def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, total, sky_only, bands: ViewBands,
-                    band_maps, sun_direction, raster) -> np.ndarray:
+def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_maps, bands: ViewBands,
+                    sun_direction, raster, open_light=None) -> np.ndarray:
     """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
-    rho / pi [ s(V(x), L_sun) (E - E_sky)(x) + r(x) sum_b w_b(x) E_b(x) ], rho the albedo texture,
-    E the whole ground irradiance (MipMap chain ``total``), E_sky its sky part (``sky_only``),
-    E_b the sky's term with the raster weighted at band b's view (``band_maps``, one chain
-    each), w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over
-    ``raster`` (the sky raster), V(x) each pixel's own view vector; sun_direction (3,) or None. The sun's term is exact per pixel; the sky's is
-    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen."""
+    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
+    rho the albedo texture, E_sun the ground's light from the sun alone (MipMap chain ``sun``,
+    ``GroundResult.sun_part``), and the bands' terms in ``sky_maps``: one MipMap chain whose
+    channels are each band's, three for the colour band (``ViewBands.colour``, E_c), one (the
+    channels' sum, G_b) for the others, so that the camera's footprints are filtered once for
+    all of them; the sky's term is ``banded_sky``: w_b the bands' weights at the pixel's view
+    zenith, r(x) ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view
+    vector; sun_direction (3,) or None. With ``open_light`` (the colour band's open-sky light
+    (3,) and every band's on the channels' sum (B,)), ``sky_maps`` is instead the one
+    3-channel raster of ``relative_sky`` (1 beyond it), and the sky's term is that read times
+    the same term on open ground at the pixel's view (``open_sky``): the same formula with the
+    per-point part done on the ground raster before the camera reads it. The sun's term is
+    exact per pixel; the sky's is blended (docs/method.md, "The ground's reflectance"). 0
+    where no ground is seen."""
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):
         return radiance
     fp, _ = cam._view_footprints(camera)
-    views = view_vectors(camera)
-    e_total = cam._filtered_chain(total, fp)
-    e_sky = cam._filtered_chain(sky_only, fp)
-    sun = shape(brdf, views, sun_direction[None]) if sun_direction is not None else np.ones(len(views))
-    light = (e_total - e_sky) * sun.astype(np.float32)[None]
-    weights = bands.weights(np.arccos(np.clip(clamp_view(views)[:, 2], -1.0, 1.0))).astype(np.float32)
-    sky = np.zeros_like(light)
-    for b, maps in enumerate(band_maps):
-        sky += cam._filtered_chain(maps, fp) * weights[b][None]
-    sky *= sky_ratio(brdf, raster, bands, views)
-    light += sky
+    views, zenith, azimuth = _camera_views(camera)
+    light = cam._filtered_chain(sun, fp)
+    if sun_direction is not None:
+        light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
+    weights = _band_weights(camera, bands.zeniths)
+    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
+    if open_light is not None:
+        sky = cam._filtered_chain(sky_maps, fp)  # (3, n), relative to open ground
+        sky *= open_sky(bands, weights, *open_light)
+        sky *= ratio
+        light += sky
+    else:
+        light += _stacked_sky(cam._filtered_chain(sky_maps, fp), bands, weights, ratio)
     rho = cam._albedo_in_view(camera, albedo)
     light *= rho
     light *= np.float32(1.0 / np.pi)
     radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
     return radiance
+
+
+def _stacked_sky(stack, bands: ViewBands, weights, ratio) -> np.ndarray:
+    """``banded_sky`` of the bands' terms read as one stack (3 + B - 1, n): each band's channel,
+    three for the colour band. [radiance x sr]"""
+    c = bands.colour
+    colour = stack[c:c + 3]
+    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
+    return banded_sky(colour, bands_light, weights, ratio)
+
+
+def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
+    """``banded_sky``'s blend on open ground, before ``sky_ratio`` (3, n) float32: the colour
+    band's open light (3,) times sum_b w_b G_b,open / G_c,open, G_b,open (B,) each band's open
+    light on the channels' sum, w_b (B, n) the weights. [radiance x sr]"""
+    bands_open = np.asarray(bands_open, dtype=np.float64)
+    scale = bands_open / max(float(bands_open[bands.colour]), 1e-30)
+    blend = np.tensordot(scale.astype(np.float32), weights, axes=1)
+    return np.asarray(colour_open, dtype=np.float32)[:, None] * blend[None]
+
+
+def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light, colour_open, bands_open):
+    """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a
+    ground raster (rows, cols, 3) float32 [1]: r-free and 1 on open ground, so the camera can
+    read it like any ground raster (1 beyond it) and ``ground_radiance`` multiply by the open
+    term at each pixel's own view. colour (rows, cols, 3): the colour band's term; bands_light
+    (rows, cols, B): every band's on the channels' sum; the views are each cell's own, from
+    its centre to the camera's pinhole (``_cell_weights``); colour_open (3,), bands_open (B,):
+    the same on open ground. [radiance x sr] in, [1] out"""
+    weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
+    flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
+    colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
+    sky = banded_sky(colour_flat, flat, weights, np.float32(1.0))
+    sky /= np.maximum(open_sky(bands, weights, colour_open, bands_open), np.float32(1e-30))
+    return np.moveaxis(sky, 0, -1).reshape(*grid.shape, 3)
+
+
+@functools.lru_cache(maxsize=2)
+def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
+    cell centres to the camera's pinhole (held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
+    gx, gy = grid.ground_from_raster(np.arange(grid.shape[0])[:, None], np.arange(grid.shape[1])[None, :])
+    across = np.hypot(camera.position[0] - gx, camera.position[1] - gy).reshape(-1)
+    zenith = np.minimum(np.arctan2(across, float(camera.position[2])), VIEW_ZENITH_LIMIT)
+    out = ViewBands(zeniths, 0.0, 0.0).weights(zenith).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def _band_weights(camera: cam.Camera, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own view zeniths: the
+    same while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
+    out = ViewBands(zeniths, 0.0, 0.0).weights(_camera_views(camera)[1]).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def _sun_shape(brdf: BrdfConfig, camera: cam.Camera, sun_direction: tuple) -> np.ndarray:
+    """The shape s(V(x), L_sun) (n,) float32 at the camera's ground pixels' own views: made once
+    while neither the camera nor the sun moves. Read-only. [1]"""
+    out = shape(brdf, _camera_views(camera)[0], np.asarray(sun_direction)[None]).astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndarray:

@@ -61,7 +61,7 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap,
         x0, y0, x1, y1 = grid.extent
         if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
             return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
-        value = raster.reshape(-1, 3).mean(axis=0)
+        value = raster.reshape(-1, raster.shape[-1]).mean(axis=0)
     else:
         value = ground.unshadowed
     return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
@@ -131,7 +131,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     scene = plan.scenes[frame]
     sky = load_sky(config.sky, scene)
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
-                           parts=bool({"sun", "sky"} & set(passes)), coarse_sky=config.ground.brdf is not None)
+                           parts=bool({"sun", "sky"} & set(passes)) or config.ground.brdf is not None,
+                           coarse_sky=config.ground.brdf is not None)
     clock.lap("ground")
     view = plan.camera
     if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
@@ -266,21 +267,38 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     config, view = plan.config, plan.camera
     model = config.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
-    bands = reflect.choose_bands(model, raster, reflect.view_vectors(view))
-    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground)
+    bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
+    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
-    sky_only = GroundResult(ground.coarse_sky[0], plan.window, ground.coarse_sky[1], ground.exact)
+    if config.canopy.layout == "periodic":
+        # the bands' rasters as the channels of one raster, repeated by the tile: the camera
+        # filters its footprints once for all of them, the blend is made per pixel
+        stacked = GroundResult(np.concatenate([t.irradiance for t in terms], axis=-1), plan.window,
+                               np.concatenate([np.asarray(t.unshadowed, dtype=np.float64) for t in terms]),
+                               ground.exact)
+        sky_maps, open_light = irradiance_maps(plan, stacked), None
+    else:
+        # an isolated canopy: the blend made on the ground raster, relative to open ground (1
+        # beyond the window), so that the camera reads three channels
+        c = bands.colour
+        open_light = (np.asarray(terms[c].unshadowed, dtype=np.float64),
+                      np.array([float(np.sum(t.unshadowed)) for t in terms]))
+        relative = reflect.relative_sky(view, plan.window, bands, terms[c].irradiance,
+                                        np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
+                                                        else t.irradiance for k, t in enumerate(terms)], axis=-1),
+                                        *open_light)
+        sky_maps = (camera.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
     radiance = reflect.ground_radiance(
-        view, model, ground_albedo(config.ground), total=irradiance_maps(plan, ground),
-        sky_only=irradiance_maps(plan, sky_only), bands=bands,
-        band_maps=[irradiance_maps(plan, t) for t in terms], sun_direction=sun, raster=raster)
+        view, model, ground_albedo(config.ground), sun=irradiance_maps(plan, ground.sun_part()),
+        sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)
     return reflect.background(view, radiance, sky)
 
 
 def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
     cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
-    making a tiny sky raster and blend band. A render's command calls it while its workers make the cycle products
+    making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
+    lattice as ``brdf.sky_ratio`` does). A render's command calls it while its workers make the cycle products
     (``run.render_run``), so that after an install the workers of the frame phase load the
     loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
     kept; any error is left to the frames."""
@@ -299,6 +317,11 @@ def compile_loops(plan: RunPlan) -> None:
         coarse = replace(plan.window, shape=(2, 2))
         blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
                    np.zeros((2, 2, 3), dtype=np.float32), coarse)
+        if config.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
+            from . import _filter
+
+            _filter.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
+                                 np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
     except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
         pass
 

@@ -99,33 +99,39 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
 
 
 def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: int, views,
-                   ground: GroundResult) -> list:
+                   ground: GroundResult, *, colour: int | None = None) -> list:
     """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
-    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view; layers
+    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view: every
+    channel for the view ``colour`` (all of them when None), the channels' sum (one channel)
+    for the others (``brdf.banded_sky``); layers
     combined by the paper's product rule, each term with its own open-sky total. ``ground``:
     the frame's GroundResult with its ``coarse_sky`` (each layer's sky raster: an isolated
     layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
     folded)."""
     brdf = plan.config.ground.brdf
     cycle_frame = frame % plan.config.canopy.cycle
-    per_term = [[] for _ in range(len(views))]
-    totals = [None] * len(views)
+    grounds, total = [], None
     for index, lp in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
         coarse = lp.coarse
         periodic = isinstance(coarse, shadow.PeriodicPlan)
         raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
-        for t, v in enumerate(views):
-            raster = brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None)
-            if periodic:
-                g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
-            else:
-                g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
-            per_term[t].append(g)
-            if totals[t] is None:
-                totals[t] = raster.total
-    return [GroundResult(np.moveaxis(shadow.combine_layers(gs, totals[t]), 0, -1), plan.window, totals[t], True)
-            for t, gs in enumerate(per_term)]
+        # every view's weighted raster as channels of one: one correlation call for all
+        rasters = [brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
+                                               summed=colour is not None and t != colour)
+                   for t, v in enumerate(views)]
+        raster = sky_models.SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
+                                      np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
+        if periodic:
+            g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+        else:
+            g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+        grounds.append(g)
+        if total is None:
+            total, split = raster.total, np.cumsum([len(r.weighted) for r in rasters])[:-1]
+    combined = np.moveaxis(shadow.combine_layers(grounds, total), 0, -1)
+    return [GroundResult(g, plan.window, t, True)
+            for g, t in zip(np.split(combined, split, axis=-1), np.split(total, split))]
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:

@@ -104,9 +104,10 @@ def _sky():
 
 
 def _constant(value):
+    value = np.asarray(value, np.float32).reshape(-1)
+    value = np.broadcast_to(value, (3,)) if value.size == 1 else value
     grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-    return cam.mipmap(np.broadcast_to(np.asarray(value, np.float32), (2, 2, 3)).copy(), grid,
-                      outside="constant", value=np.asarray(value, np.float32))
+    return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
 
 def test_open_ground_equals_a_quadrature_for_five_view_directions():
@@ -121,10 +122,11 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     bands = R.choose_bands(b, raster, views)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
     e = raster.weighted.reshape(3, -1).astype(np.float64)
-    band_sky = [R.shape(b, v, dirs) @ e.T for v in bands.directions()]  # open ground: the raster's sums
-    radiance = R.ground_radiance(view, b, _constant(1.0), total=(_constant(raster.weighted.sum((1, 2)) + e_sun),),
-                                 sky_only=(_constant(raster.weighted.sum((1, 2))),), bands=bands,
-                                 band_maps=[(_constant(s),) for s in band_sky], sun_direction=sky.sun_direction,
+    band_sky = [R.shape(b, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))  # open ground: the raster's sums
+                for k, v in enumerate(bands.directions())]
+    radiance = R.ground_radiance(view, b, _constant(1.0), sun=(_constant(e_sun),),
+                                 sky_maps=(_constant(np.concatenate(np.atleast_1d(*band_sky))),),
+                                 bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
     rows, _ = cam._ground_rows(view)
     picks = [(rows[-1], 24), (rows[-1], 2), (rows[len(rows) // 2], 40), (rows[len(rows) // 4], 10), (rows[2], 30)]
@@ -155,10 +157,12 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     v = np.stack([camera_at[0] - gx, camera_at[1] - gy, np.full(gx.shape, camera_at[2])], -1)
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     bands = R.choose_bands(b, raster, v.reshape(-1, 3))
-    terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d), spectrum, plan) for d in bands.directions()]
-    weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2]))
-    banded = sum(w.reshape(20, 20)[None] * t for w, t in zip(weights, terms))
-    banded *= R.sky_ratio(b, raster, bands, v.reshape(-1, 3)).reshape(3, 20, 20)
+    colour = shadow.ground_isolated(R.weighted_raster(raster, b, bands.directions()[bands.colour]), spectrum, plan)
+    terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d, summed=True), spectrum, plan).reshape(-1)
+             for d in bands.directions()]
+    weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2])).astype(np.float32)
+    banded = R.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
+                          R.sky_ratio(b, raster, bands, v.reshape(-1, 3))).reshape(3, 20, 20)
     brute = np.empty_like(banded)
     for r in range(0, 20, 3):
         for c in range(0, 20, 3):
@@ -169,6 +173,20 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     lambert = shadow.ground_isolated(raster, spectrum, plan)
     assert np.max(np.abs(lambert[sel] / brute[sel] - 1)) > 0.05  # the brute force sees the BRDF
     assert 1 <= len(bands.zeniths) <= R.MAX_BANDS
+    # the frame's isolated-canopy path: the blend made on the ground raster relative to open
+    # ground, times the open term at the cell's own view (no camera filtering here)
+    directions = bands.directions()
+    colour_open = R.weighted_raster(raster, b, directions[bands.colour]).total
+    bands_open = [R.weighted_raster(raster, b, d, summed=True).total[0] for d in directions]
+    view = cam.Camera.look_at(tuple(camera_at), (0.0, 0.0, 0.0), vertical_fov=np.radians(60.0), width=8, height=6)
+    relative = R.relative_sky(view, window, bands, np.moveaxis(colour, 0, -1),
+                              np.stack(terms, axis=-1).reshape(20, 20, -1), colour_open, bands_open)
+    assert relative.shape == (20, 20, 3) and np.all(relative < 1.0)  # shaded everywhere under the leaves
+    cell_weights = R._cell_weights(view, window, bands.zeniths)
+    assert np.allclose(cell_weights, weights, atol=1e-5)  # the cells' own views, from the camera's position
+    opened = R.open_sky(bands, weights, colour_open, bands_open) * R.sky_ratio(b, raster, bands, v.reshape(-1, 3))
+    through = np.moveaxis(relative, -1, 0) * opened.reshape(3, 20, 20)
+    assert np.max(np.abs(through[sel] / brute[sel] - 1)) < 0.02
 
 
 def rossli_by_angles(th_l, th_v, phi, f_iso, f_vol, f_geo):
@@ -220,3 +238,18 @@ def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
     path = write_config(tmp_path, config)
     assert main(["frame", str(path), "--passes", "sun", "-o", str(tmp_path / "f.exr")]) == 2
     assert not (tmp_path / "f.exr").exists()
+
+
+def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
+    """sky_ratio's per-pixel bilinear read of its lattice: the compiled loop against numpy."""
+    from pipeline import _filter
+
+    rng = np.random.default_rng(5)
+    lattice = 6
+    flat = rng.random((3, lattice * lattice)).astype(np.float32)
+    zenith, azimuth = rng.uniform(0.2, 1.4, 50), rng.uniform(-3.0, 3.0, 50)
+    _, _, corner, taps = R._lattice_reads(zenith, azimuth, 0.3, lattice)
+    assert np.allclose(taps.sum(axis=0), 1.0, atol=1e-6) and corner.max() <= lattice * lattice - lattice - 2
+    out = np.empty((3, 50), dtype=np.float32)
+    _filter.lattice_read(flat, corner, taps, lattice, out)
+    assert np.array_equal(out, R._lattice_read_arrays(flat, corner, taps, lattice))
