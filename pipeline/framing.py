@@ -40,6 +40,32 @@ AUTO_VIEW_SAMPLES = 48
 """Rays per side of the image with which the ground the camera sees is found. [1]"""
 
 
+SHADOW_FLOOR = float(np.radians(2.0))
+"""Below this elevation the sun's light is taken as unshadowed by the canopy: the shadow of a
+canopy h high lies h cot(elevation) > 28 h away along the anti-solar azimuth, beyond any window
+the plan would make, and a fine mask reaching it would pass the limits (docs/method.md,
+"Twilight and a sun at the horizon"). [rad]"""
+
+
+def sun_lights(sun) -> bool:
+    """Whether a sun disc gives direct light: wholly above the horizon (as
+    ``sky.ProceduralSky.sun_irradiance`` and ``sky.sun_kernel`` need); a sun between the
+    horizon and -6 degrees lights the ground through the sky alone (docs/method.md)."""
+    return sun is not None and sun.elevation - sun.angular_radius > 1e-3
+
+
+def sun_shades(sun) -> bool:
+    """Whether a sun's light goes through the fine sun kernel and its canopy shadow: it lights
+    the ground and stands at least SHADOW_FLOOR high."""
+    return sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
+
+
+def shading_scenes(scenes) -> list:
+    """The scenes whose sun casts the canopy's shadow (``sun_shades``): those the windows, the
+    sun window and the fine masks are planned from."""
+    return [scene for scene in scenes if sun_shades(scene.sun)]
+
+
 @dataclass(frozen=True)
 class Framing:
     """The resolved ground windows [m] (x_min, y_min, x_max, y_max; sun_window None: the
@@ -320,19 +346,20 @@ def framing_warnings(plan: RunPlan) -> list[str]:
         warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
                         f"its frames will show no sun flecks (leave camera out to place it)")
     reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
-    low = [f for f, scene in enumerate(scenes) if scene.sun is not None and scene.sun.elevation < reach]
+    low = [f for f, scene in enumerate(scenes) if sun_shades(scene.sun) and scene.sun.elevation < reach]
     if low and plan.sun_window is not None:
         warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
                         f"degrees reaches down to {np.degrees(reach):g} degrees elevation) in "
                         f"{len(low)} of {len(scenes)} frames ({_ranges(low)}): beyond {key} its "
                         f"light is taken as unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
-        boxes = leaf_shadow_extents(config, scenes, plan.projection)
-        missed = [f for f, box in enumerate(boxes) if _intersect(box, fine.extent) is None]
+        shading = shading_scenes(scenes)
+        boxes = leaf_shadow_extents(config, shading, plan.projection)
+        missed = [f for f, box in zip((sc.frame for sc in shading), boxes) if _intersect(box, fine.extent) is None]
         if missed:
             elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
             warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "
-                            f"{len(boxes)} frames ({_ranges(missed)}; the sun at "
+                            f"{len(scenes)} frames ({_ranges(missed)}; the sun at "
                             f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
                             f"does not reach the window along the sun there")
     return warnings

@@ -304,3 +304,55 @@ def test_a_frames_auto_exposure_is_the_same_rendered_alone_or_in_a_run(tmp_path)
         [meter(plan, plan.scenes[f], light) for f in range(24)],
         reference=light.unshadowed, frame_time=1 / 24, time_constant=0.05, limits=(-4.0, 10.0))
     assert whole == pytest.approx(series, rel=1e-6)  # the untruncated lag
+
+
+# ---------------------------------------------------------------------------------------------
+# sunset and civil twilight
+# ---------------------------------------------------------------------------------------------
+
+
+def test_a_span_from_sunset_into_civil_twilight_renders_every_frame(tmp_path):
+    """Madrid, 2026-08-13 19:05-19:40 UTC (the day after the eclipse): the sun from 1.2 degrees (up, but under the shadow
+    floor: its light unshadowed) to 5 degrees below the horizon (the sky alone). Every frame
+    renders; the open ground's light, the ground raster's total, is the clear sky's global
+    horizontal illuminance of ``daylight.sky_daylight`` (diffuse + direct normal x sin(h), the
+    USNO curve below the horizon), and the ground's light falls monotonically with no NaN."""
+    from pipeline import daylight
+    from pipeline.ground import render_ground
+
+    config = site_config(40.42, -3.70, "2026-08-13T19:05:00Z")
+    config["sky"]["time"]["end"] = "2026-08-13T19:40:00Z"
+    config["canopy"]["trees"]["leaves_per_tree"] = 5000
+    config["ground"]["pixel"] = 0.1
+    config["camera"].update(resolution=[48, 27], exposure="auto")
+    config["animation"]["frames"] = 4
+    path = write(tmp_path, config)
+    for f in range(4):
+        assert main(["frame", str(path), "--frame", str(f), "-o", str(tmp_path / f"{f}.png"),
+                     "--cache", str(tmp_path / "cache")]) == 0
+    plan = plan_run(load(path))
+    elevations = [np.degrees(scene.sun.elevation) for scene in plan.scenes]
+    assert 0.5 < elevations[0] < 2.0 and -6.0 < elevations[-1] < -4.5 and plan.sun_window is None
+    store = Cache(tmp_path / "cache")
+    means = []
+    for f, scene in enumerate(plan.scenes):
+        ground = render_ground(plan, f, store=store)
+        light = ground.irradiance @ REC709_LUMINANCE
+        assert np.all(np.isfinite(light))
+        clear = daylight.sky_daylight(scene.sun.elevation, plan.config.sky.turbidity,
+                                      sun_radius=scene.sun.angular_radius)
+        expected = clear.diffuse_horizontal_illuminance + clear.direct_normal_illuminance * max(
+            np.sin(scene.sun.elevation), 0.0)
+        assert ground.unshadowed @ REC709_LUMINANCE == pytest.approx(expected, rel=0.03)
+        means.append(light.mean())
+    assert np.all(np.diff(means) < 0)
+    assert means[-1] < 1e-2 * means[0]  # 5 degrees down: under a hundredth of the light at 1.2 degrees
+
+
+def test_a_sun_below_civil_twilight_is_refused_naming_the_time_and_its_elevation(tmp_path, capsys):
+    config = site_config(40.42, -3.70, "2026-08-12T19:05:00Z")
+    config["sky"]["time"]["end"] = "2026-08-12T19:55:00Z"
+    assert main(["check", str(write(tmp_path, config))]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sky.time.end: the sun is 7." in err[0] and "degrees below the horizon at " \
+        "2026-08-12T19:55:00+00:00" in err[0] and "at most 6 degrees below" in err[0]
