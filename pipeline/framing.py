@@ -204,8 +204,9 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.window``: the canopy and its shadow over every frame, grown by WINDOW_MARGIN
       canopy heights (an isolated canopy); one tile (a periodic forest).
     - ``camera``: at eye height, looking CAMERA_PITCH (ECLIPSE_PITCH when the moon cuts the
-      sun above LOW_SUN) down at the middle frame's shadow of the leaves' centre (``crown_centre``), facing CAMERA_TURN round
-      from the sun's azimuth; a given position looks there, a given look_at is seen from there.
+      sun above LOW_SUN) down at the middle frame's dappled shade (``dappled_point``), seen
+      AIM_ROW down the image, facing CAMERA_TURN round from the sun's azimuth; a given
+      position looks there, a given look_at is seen from there.
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
       the window when a window is given but no sun window.
@@ -226,10 +227,11 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)
     deep = sun is not None and _eclipsed(scenes) and sun.elevation >= np.radians(LOW_SUN)
     target = dappled_point(config, s, ECLIPSE_TRANSMITTANCE if deep else DAPPLE_TRANSMITTANCE)
+    aim = AIM_ROW
     if ground.sun_window is not None and c.position is None and c.look_at is None:
-        sw = ground.sun_window
-        target = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2])
-    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH)
+        sw = ground.sun_window  # a given sun window: the camera looks at its middle
+        target, aim = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2]), 0.5
+    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH, aim)
     sun_window = ground.sun_window
     if sun_window is None and sun is not None:
         if ground.window is not None:
@@ -254,9 +256,10 @@ def _eclipsed(scenes) -> bool:
     return False
 
 
-def _place_camera(config: Config, target, s, auto, pitch_down: float) -> camera.Camera:
+def _place_camera(config: Config, target, s, auto, pitch_down: float, aim: float = 0.5) -> camera.Camera:
     """The config's camera with what it leaves out placed to look at ``target`` [m], by default
-    ``pitch_down`` [deg] below the horizon."""
+    ``pitch_down`` [deg] below the horizon, with the target ``aim`` [1] down the image (0 top,
+    1 bottom; AIM_ROW for a target of its own)."""
     c = config.camera
     width, rows = c.resolution
     if c.position is not None and (c.yaw is not None or c.look_at is not None):
@@ -273,12 +276,20 @@ def _place_camera(config: Config, target, s, auto, pitch_down: float) -> camera.
         sun_azimuth = float(np.arctan2(s[0], s[1])) if np.any(s) else np.pi
         yaw = (sun_azimuth - np.radians(CAMERA_TURN)) % (2 * np.pi)
     pitch = c.pitch if c.pitch is not None else -np.radians(pitch_down)
-    back = CAMERA_HEIGHT / np.tan(-pitch) if pitch < -np.radians(1.0) else 2.0 * max(
+    # the target at the middle of the image's bottom third, AIM_ROW down: the near ground
+    below = np.arctan((2.0 * aim - 1.0) * np.tan(c.fov / 2.0))
+    down = -pitch + below
+    back = CAMERA_HEIGHT / np.tan(min(down, np.pi / 2)) if pitch < -np.radians(1.0) else 2.0 * max(
         layer.height for layer in config.canopy.layers)
     position = (*(np.asarray(target) - back * np.array([np.sin(yaw), np.cos(yaw)])), CAMERA_HEIGHT)
     if c.look_at is not None:
         return camera.Camera.look_at(position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
     return camera.Camera(tuple(float(v) for v in position), float(yaw), float(pitch), c.fov, width, rows)
+
+
+AIM_ROW = 5.0 / 6.0
+"""A camera placed by default sees its target this far down the image (0 top, 1 bottom): the
+middle of the bottom third, the nearest ground, sharpest and least foreshortened. [1]"""
 
 
 def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
