@@ -312,27 +312,31 @@ def test_a_frames_auto_exposure_is_the_same_rendered_alone_or_in_a_run(tmp_path)
 
 
 def test_a_span_from_sunset_into_civil_twilight_renders_every_frame(tmp_path):
-    """Madrid, 2026-08-13 19:05-19:40 UTC (the day after the eclipse): the sun from 1.2 degrees (up, but under the shadow
-    floor: its light unshadowed) to 5 degrees below the horizon (the sky alone). Every frame
+    """Madrid, 2026-08-13 18:55-19:40 UTC (the day after the eclipse), 6 frames: the sun at 2.8
+    degrees (its shadow planned: a sun window), 1.2 (up, but under the shadow floor: its light
+    unshadowed), then set, down to 5.2 degrees below the horizon (the sky alone). Every frame
     renders; the open ground's light, the ground raster's total, is the clear sky's global
     horizontal illuminance of ``daylight.sky_daylight`` (diffuse + direct normal x sin(h), the
     USNO curve below the horizon), and the ground's light falls monotonically with no NaN."""
     from pipeline import daylight
     from pipeline.ground import render_ground
 
-    config = site_config(40.42, -3.70, "2026-08-13T19:05:00Z")
+    config = site_config(40.42, -3.70, "2026-08-13T18:55:00Z")
     config["sky"]["time"]["end"] = "2026-08-13T19:40:00Z"
-    config["canopy"]["trees"]["leaves_per_tree"] = 5000
-    config["ground"]["pixel"] = 0.1
+    config["canopy"]["height"] = 3.0  # a low shadow: 61 m long at 2.8 degrees, not 120
+    config["canopy"]["trees"].update(leaves_per_tree=2000, crown_radius=1.5)
+    config["ground"]["pixel"] = 0.2
+    config["render"] = {"sun_cells": 4}
     config["camera"].update(resolution=[48, 27], exposure="auto")
-    config["animation"]["frames"] = 4
+    config["animation"]["frames"] = 6
     path = write(tmp_path, config)
-    for f in range(4):
+    for f in range(6):
         assert main(["frame", str(path), "--frame", str(f), "-o", str(tmp_path / f"{f}.png"),
                      "--cache", str(tmp_path / "cache")]) == 0
     plan = plan_run(load(path))
     elevations = [np.degrees(scene.sun.elevation) for scene in plan.scenes]
-    assert 0.5 < elevations[0] < 2.0 and -6.0 < elevations[-1] < -4.5 and plan.sun_window is None
+    assert elevations[0] > 2.0 and 0.5 < elevations[1] < 2.0 and -6.0 < elevations[-1] < -4.5
+    assert plan.sun_window is not None
     store = Cache(tmp_path / "cache")
     means = []
     for f, scene in enumerate(plan.scenes):
@@ -346,7 +350,7 @@ def test_a_span_from_sunset_into_civil_twilight_renders_every_frame(tmp_path):
         assert ground.unshadowed @ REC709_LUMINANCE == pytest.approx(expected, rel=0.03)
         means.append(light.mean())
     assert np.all(np.diff(means) < 0)
-    assert means[-1] < 1e-2 * means[0]  # 5 degrees down: under a hundredth of the light at 1.2 degrees
+    assert means[-1] < 1e-2 * means[1]  # 5 degrees down: under a hundredth of the light at 1.2 degrees
 
 
 def test_a_sun_below_civil_twilight_is_refused_naming_the_time_and_its_elevation(tmp_path, capsys):
