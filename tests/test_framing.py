@@ -378,3 +378,17 @@ def test_the_nearest_ground_shows_the_dappled_shade_at_a_sun_of_30_degrees(tmp_p
     light = luminance(render_frame(plan, store=Cache(tmp_path / "cache")))
     p5, p95 = np.percentile(light[2 * light.shape[0] // 3:], [5, 95])
     assert p95 / p5 >= 2.0
+
+
+def test_a_sunset_is_not_marked_as_a_contact_in_the_light_curve():
+    """S falls to 0 at sunset as at second contact: the report's contacts leave the set frames
+    out, so a twilight run marks none, and an eclipse's are still found (hand-made tables)."""
+    from pipeline.report import contacts
+
+    def table(rows):
+        return [{"time_s": i / 24, "S": s, "sun_elevation_deg": h} for i, (s, h) in enumerate(rows)]
+
+    assert contacts(table([(1.0, 2.0), (1.0, 0.5), (0.0, -0.5), (0.0, -2.0)])) == []
+    eclipse = contacts(table([(1.0, 9.0), (0.4, 8.9), (0.0, 8.8), (0.0, 8.7), (0.3, 8.6), (1.0, 8.5)]))
+    assert [label for label, _ in eclipse] == ["C1", "C2", "C3", "C4"]
+    assert [when for _, when in eclipse] == pytest.approx([1 / 24, 2 / 24, 3 / 24, 5 / 24])
