@@ -40,6 +40,32 @@ AUTO_VIEW_SAMPLES = 48
 """Rays per side of the image with which the ground the camera sees is found. [1]"""
 
 
+SHADOW_FLOOR = float(np.radians(2.0))
+"""Below this elevation the sun's light is taken as unshadowed by the canopy: the shadow of a
+canopy h high lies h cot(elevation) > 28 h away along the anti-solar azimuth, beyond any window
+the plan would make, and a fine mask reaching it would pass the limits (docs/method.md,
+"Twilight and a sun at the horizon"). [rad]"""
+
+
+def sun_lights(sun) -> bool:
+    """Whether a sun disc gives direct light: wholly above the horizon (as
+    ``sky.ProceduralSky.sun_irradiance`` and ``sky.sun_kernel`` need); a sun between the
+    horizon and -6 degrees lights the ground through the sky alone (docs/method.md)."""
+    return sun is not None and sun.elevation - sun.angular_radius > 1e-3
+
+
+def sun_shades(sun) -> bool:
+    """Whether a sun's light goes through the fine sun kernel and its canopy shadow: it lights
+    the ground and stands at least SHADOW_FLOOR high."""
+    return sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
+
+
+def shading_scenes(scenes) -> list:
+    """The scenes whose sun casts the canopy's shadow (``sun_shades``): those the windows, the
+    sun window and the fine masks are planned from."""
+    return [scene for scene in scenes if sun_shades(scene.sun)]
+
+
 @dataclass(frozen=True)
 class Framing:
     """The resolved ground windows [m] (x_min, y_min, x_max, y_max; sun_window None: the
@@ -178,8 +204,9 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.window``: the canopy and its shadow over every frame, grown by WINDOW_MARGIN
       canopy heights (an isolated canopy); one tile (a periodic forest).
     - ``camera``: at eye height, looking CAMERA_PITCH (ECLIPSE_PITCH when the moon cuts the
-      sun above LOW_SUN) down at the middle frame's shadow of the leaves' centre (``crown_centre``), facing CAMERA_TURN round
-      from the sun's azimuth; a given position looks there, a given look_at is seen from there.
+      sun above LOW_SUN) down at the middle frame's dappled shade (``dappled_point``), seen
+      AIM_ROW down the image, facing CAMERA_TURN round from the sun's azimuth; a given
+      position looks there, a given look_at is seen from there.
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
       the window when a window is given but no sun window.
@@ -200,10 +227,11 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)
     deep = sun is not None and _eclipsed(scenes) and sun.elevation >= np.radians(LOW_SUN)
     target = dappled_point(config, s, ECLIPSE_TRANSMITTANCE if deep else DAPPLE_TRANSMITTANCE)
+    aim = AIM_ROW
     if ground.sun_window is not None and c.position is None and c.look_at is None:
-        sw = ground.sun_window
-        target = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2])
-    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH)
+        sw = ground.sun_window  # a given sun window: the camera looks at its middle
+        target, aim = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2]), 0.5
+    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH, aim)
     sun_window = ground.sun_window
     if sun_window is None and sun is not None:
         if ground.window is not None:
@@ -228,9 +256,10 @@ def _eclipsed(scenes) -> bool:
     return False
 
 
-def _place_camera(config: Config, target, s, auto, pitch_down: float) -> camera.Camera:
+def _place_camera(config: Config, target, s, auto, pitch_down: float, aim: float = 0.5) -> camera.Camera:
     """The config's camera with what it leaves out placed to look at ``target`` [m], by default
-    ``pitch_down`` [deg] below the horizon."""
+    ``pitch_down`` [deg] below the horizon, with the target ``aim`` [1] down the image (0 top,
+    1 bottom; AIM_ROW for a target of its own)."""
     c = config.camera
     width, rows = c.resolution
     if c.position is not None and (c.yaw is not None or c.look_at is not None):
@@ -247,12 +276,20 @@ def _place_camera(config: Config, target, s, auto, pitch_down: float) -> camera.
         sun_azimuth = float(np.arctan2(s[0], s[1])) if np.any(s) else np.pi
         yaw = (sun_azimuth - np.radians(CAMERA_TURN)) % (2 * np.pi)
     pitch = c.pitch if c.pitch is not None else -np.radians(pitch_down)
-    back = CAMERA_HEIGHT / np.tan(-pitch) if pitch < -np.radians(1.0) else 2.0 * max(
+    # the target at the middle of the image's bottom third, AIM_ROW down: the near ground
+    below = np.arctan((2.0 * aim - 1.0) * np.tan(c.fov / 2.0))
+    down = -pitch + below
+    back = CAMERA_HEIGHT / np.tan(min(down, np.pi / 2)) if pitch < -np.radians(1.0) else 2.0 * max(
         layer.height for layer in config.canopy.layers)
     position = (*(np.asarray(target) - back * np.array([np.sin(yaw), np.cos(yaw)])), CAMERA_HEIGHT)
     if c.look_at is not None:
         return camera.Camera.look_at(position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
     return camera.Camera(tuple(float(v) for v in position), float(yaw), float(pitch), c.fov, width, rows)
+
+
+AIM_ROW = 5.0 / 6.0
+"""A camera placed by default sees its target this far down the image (0 top, 1 bottom): the
+middle of the bottom third, the nearest ground, sharpest and least foreshortened. [1]"""
 
 
 def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
@@ -320,19 +357,20 @@ def framing_warnings(plan: RunPlan) -> list[str]:
         warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
                         f"its frames will show no sun flecks (leave camera out to place it)")
     reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
-    low = [f for f, scene in enumerate(scenes) if scene.sun is not None and scene.sun.elevation < reach]
+    low = [f for f, scene in enumerate(scenes) if sun_shades(scene.sun) and scene.sun.elevation < reach]
     if low and plan.sun_window is not None:
         warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
                         f"degrees reaches down to {np.degrees(reach):g} degrees elevation) in "
                         f"{len(low)} of {len(scenes)} frames ({_ranges(low)}): beyond {key} its "
                         f"light is taken as unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
-        boxes = leaf_shadow_extents(config, scenes, plan.projection)
-        missed = [f for f, box in enumerate(boxes) if _intersect(box, fine.extent) is None]
+        shading = shading_scenes(scenes)
+        boxes = leaf_shadow_extents(config, shading, plan.projection)
+        missed = [f for f, box in zip((sc.frame for sc in shading), boxes) if _intersect(box, fine.extent) is None]
         if missed:
             elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
             warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "
-                            f"{len(boxes)} frames ({_ranges(missed)}; the sun at "
+                            f"{len(scenes)} frames ({_ranges(missed)}; the sun at "
                             f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
                             f"does not reach the window along the sun there")
     return warnings

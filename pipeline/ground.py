@@ -17,7 +17,7 @@ from .cycle import cycle_item
 from .geometry import Grid, sky_grid, sky_offset
 from .inputs import load_sky
 from .cores import default_workers
-from .plan import LayerPlan, RunPlan
+from .plan import LayerPlan, RunPlan, sun_lights, sun_shades
 
 
 @dataclass(frozen=True)
@@ -164,7 +164,8 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
         keep.append((g, raster))
     g_outer = None
     sky_only = (g, total, g) if parts else None
-    if lp.sun is not None:
+    sun = getattr(sky, "sun", None)
+    if lp.sun is not None and sun_shades(sun):
         if outer:
             g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
         kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
@@ -173,7 +174,20 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
             sky_only = (g.copy(), total, sky_only[2])
         g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
-    return g, total, exact, g_outer, sky_only
+        return g, total, exact, g_outer, sky_only
+    # a sun under framing.SHADOW_FLOOR throws the canopy's shadow beyond the window: its light
+    # reaches the window unshadowed; set (twilight), it gives none: the sky alone lights it
+    if lp.sun is None and not sun_lights(sun):
+        return g, total, exact, g_outer, sky_only
+    light = np.asarray(sky.sun_irradiance(), dtype=np.float64) if sun_lights(sun) else np.zeros(3)
+    if outer:
+        g_outer = g + light.astype(g.dtype)[:, None, None]
+    if lp.sun is not None:
+        g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
+    if parts:
+        sky_only = (g.copy(), total, sky_only[2])
+    g = g + light.astype(g.dtype)[:, None, None]
+    return g, total + light, exact, g_outer, sky_only
 
 
 def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):

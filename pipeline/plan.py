@@ -9,7 +9,7 @@ the cycle, ground and frame stages take the plan, a frame's scene and the cache
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 
@@ -20,7 +20,7 @@ from . import sky as sky_models
 from .camera import Camera
 from .config import CanopyLayer, Config, size_text
 from .errors import ConfigError
-from .framing import AUTO_SUN_MASK, frame_scene
+from .framing import AUTO_SUN_MASK, frame_scene, shading_scenes, sun_lights, sun_shades  # noqa: F401
 from .geometry import Grid, sky_plane_from_direction, tangent_axes
 from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
 from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
@@ -40,6 +40,8 @@ class Scene:
     when: datetime | None
     sun: sky_models.SunDisc | None
     moon: sky_models.MoonDisc | None
+
+
 
 
 def scene_at(config: Config, frame: int) -> Scene:
@@ -151,25 +153,28 @@ def plan_run(config: Config) -> RunPlan:
     if config.sky.model in PROCEDURAL_MODELS and config.sky.turbidity is None:
         raise ValueError("plan_run needs a resolved config (resolve.resolve): turbidity: auto is not looked up")
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
-    has_sun = scenes[0].sun is not None
+    shading = shading_scenes(scenes)  # twilight and a sun under SHADOW_FLOOR: no shadow planned
+    has_sun = bool(shading)
     projection = (0.0, 0.0)
     if has_sun:
         middle = scenes[len(scenes) // 2].sun
+        if not sun_shades(middle):  # the middle frame's sun is set: the last one that shades
+            middle = shading[-1].sun if shading[-1].frame < len(scenes) // 2 else shading[0].sun
         projection = tuple(float(v) for v in sky_plane_from_direction(
             middle.azimuth, np.pi / 2 - middle.elevation))
     heights = [layer.height for layer in config.canopy.layers]
-    framing = frame_scene(config, scenes, projection)
+    framing = frame_scene(config, shading or [replace(scenes[0], sun=None)], projection)
     _check_auto_window(config, framing)
     window = Grid.from_window(framing.window, config.ground.pixel)
-    sun_window = (_sun_window(config, scenes, min(heights), framing.sun_window or framing.window)
+    sun_window = (_sun_window(config, shading, min(heights), framing.sun_window or framing.window)
                   if has_sun else None)
-    layers = _plan_layers(config, scenes, window, sun_window, projection)
+    layers = _plan_layers(config, shading, window, sun_window, projection)
     if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None:
         # the sun's path over the animation widens the fine mask: keep it within AUTO_SUN_MASK
         cells = max(np.prod(lp.sun.mask.shape) for lp in layers)
         if cells > AUTO_SUN_MASK:
             sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
-            layers = _plan_layers(config, scenes, window, sun_window, projection)
+            layers = _plan_layers(config, shading, window, sun_window, projection)
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    framing.shadow, config=config, scenes=tuple(scenes))
     _check_sizes(config, plan)

@@ -88,12 +88,19 @@ def write_csv(folder: Path, table) -> Path:
     return path
 
 
+SET_SUN = 0.3
+"""Below this elevation of its centre the sun's disc (0.27 degrees in radius) is not wholly up
+and gives no direct light (docs/method.md, "Twilight and a sun at the horizon"). [deg]"""
+
+
 def contacts(table) -> list[tuple[str, float]]:
     """An eclipse's contacts as seen in S, (label, time [s]): C1 the first frame with S below 1
     after one at 1, C2 the first with S at 0, C3 the last at 0, C4 the first back at 1; only
     those the frames show. Frames dimmed by clouds look the same to S: the caller marks
-    contacts only for a run with a moon."""
-    points = [(r["time_s"], r["S"]) for r in table if r["time_s"] is not None and r["S"] is not None]
+    contacts only for a run with a moon. Frames whose sun is below SET_SUN take no part: their S
+    is 0 because the sun has set (civil twilight), not because the moon covers it."""
+    points = [(r["time_s"], r["S"]) for r in table if r["time_s"] is not None and r["S"] is not None
+              and (r.get("sun_elevation_deg") is None or r["sun_elevation_deg"] > SET_SUN)]
     found, full, dark = [], 1.0 - 1e-6, 1e-6
     for (t0, s0), (t1, s1) in zip(points, points[1:]):
         if s0 >= full > s1:

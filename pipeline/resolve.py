@@ -24,8 +24,10 @@ MAX_SUN_PIXELS = 16_000_000
 """Most pixels of the sun's fine ground raster. [1]"""
 BYTES_PER_CELL = 52
 """Memory a raster cell takes while a frame is made, for the messages. [B]"""
-MIN_SUN_ELEVATION = math.radians(2.0)
-"""The procedural sky needs the sun at least this high. [rad]"""
+MIN_SUN_ELEVATION = math.radians(-6.0)
+"""The lowest sun a site's time span may reach: the end of civil twilight, the lowest the
+procedural sky models (``daylight.TWILIGHT_END``); below the horizon the sky alone lights the
+ground (docs/method.md, "Twilight and a sun at the horizon"). [rad]"""
 SUN_SPAN_SAMPLES = 20_000
 """Most moments at which the sun is checked over a site's time span."""
 
@@ -109,19 +111,20 @@ def _check_pixels(config: Config, key, window, pixel, most):
 
 
 def _check_sun(config: Config) -> None:
-    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high at time.start and
-    time.end and at every frame's moment between (at most SUN_SPAN_SAMPLES of them, evenly
-    spread, so a night is never missed): name the first moment it is not."""
+    """The procedural sky needs the sun at least MIN_SUN_ELEVATION high (at most 6 degrees below
+    the horizon) at time.start and time.end and at every frame's moment between (at most
+    SUN_SPAN_SAMPLES of them, evenly spread, so a night is never missed): name the first moment
+    it is not, with the sun's elevation."""
     from . import ephemeris
 
     site = config.sky.site
     place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
-    least = math.degrees(MIN_SUN_ELEVATION)
+    least = f"at most {-math.degrees(MIN_SUN_ELEVATION):g} degrees below the horizon (the end of civil twilight)"
     for key, when in (("start", site.start), ("end", site.end)):
         sun, _ = ephemeris.sun_and_moon(place, when)
         if sun.elevation < MIN_SUN_ELEVATION:
-            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {_height(sun.elevation)} then; "
-                              f"the procedural sky needs it at least {least:g} degrees high")
+            raise ConfigError(config.where(f"sky.time.{key}"), f"the sun is {_height(sun.elevation)} at "
+                              f"{when.isoformat()}; the procedural sky needs it {least}")
     count = min(config.animation.frames, SUN_SPAN_SAMPLES)
     for i in range(count):
         when = site.start + (site.end - site.start) * (i / (count - 1) if count > 1 else 0.0)
@@ -129,8 +132,7 @@ def _check_sun(config: Config) -> None:
         if sun.elevation < MIN_SUN_ELEVATION:
             raise ConfigError(config.where("sky.time"), f"the sun is {_height(sun.elevation)} at "
                               f"{when.isoformat()}, between time.start and time.end; the procedural sky "
-                              f"needs it at least {least:g} degrees high all through (a span that crosses "
-                              f"the night)")
+                              f"needs it {least} all through (a span that crosses the night)")
 
 
 def _height(elevation: float) -> str:

@@ -647,9 +647,13 @@ class ProceduralSky:
         """Horizontal irradiance of the sun after moon and clouds (3,): the sum of its kernel
         with 16 cells across the disc, which weights each part of a moon-cut disc by its own
         cos(theta) (its error is measured in docs/accuracy.md); zeros when the disc is not
-        wholly above the horizon (``daylight.sky_daylight`` gives it no light then). [klx]"""
+        wholly above the horizon (``daylight.sky_daylight`` gives it no light then). Below
+        KERNEL_FLOOR, where the kernel stretches past its limit: E_n cos(zenith) times the
+        moon's ``moon_visible`` and the clouds' transmittance (the centre's cos(theta)). [klx]"""
         if self.sun.elevation - self.sun.angular_radius <= 1e-3:
             return np.zeros(3)
+        if self.sun.elevation < KERNEL_FLOOR:
+            return self.total_sun_irradiance() * self.moon_visible * self.sun_cloud_transmittance
         return sun_kernel(self, self.sun.angular_radius / 8).weighted.sum(axis=(1, 2), dtype=np.float64)
 
     def _sun_samples(self, w, footprint):
@@ -1064,6 +1068,11 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
     weighted = out.reshape(3, *grid.shape).astype(np.float32)
     return SkyRaster(grid, weighted, np.zeros(3))
 
+
+KERNEL_FLOOR = float(np.radians(2.0))
+"""Below this sun elevation ``ProceduralSky.sun_irradiance`` does without the kernel: stretched
+1 / cos^2(theta) > 800 times on the sky plane, it would pass MAX_KERNEL_CELLS; the renderer
+takes such a sun's light as unshadowed (``framing.SHADOW_FLOOR``). [rad]"""
 
 KERNEL_CACHE_SAMPLES = 1 << 20
 """Most sub-samples of a sun kernel whose undimmed samples (``_kernel_samples``) are kept for the

@@ -96,7 +96,7 @@ CASES = [  # name, the config's bytes, the words of the message
                                                                           "pixel": 0.05}).encode(),
      "ground.sun_window: the sun's fine raster would be 3.6e+07 cells"),
     ("time across the night", with_sky(site(48.85, "2024-06-01T10:00:00Z", "2024-06-02T10:00:00Z")).encode(),
-     "sky.time: the sun is 0.3 degrees below the horizon at 2024-06-01T19:42"),
+     "sky.time: the sun is 7.8 degrees below the horizon at 2024-06-01T20:43"),
     ("latitude a hair above 90", with_sky(site(90.0000000001, "2024-06-21T10:00:00Z", "2024-06-21T11:00:00Z")).encode(),
      "sky.site.latitude: must lie in [-90, 90] degrees"),
     # issue 33: numbers and dates past what the code computes with, each refused with its range
