@@ -467,7 +467,9 @@ def _preview_line(full, quick) -> str:
 
 class _Progress:
     """A run's progress on a stream: on a terminal one line redrawn in place (stage, a bar,
-    count, time left), else a plain log line every 10 s and at the end of each stage."""
+    count, time left), else a plain log line every 10 s and at the end of each stage. The time
+    left is estimated from the rate since the stage's first item was done, once a second one
+    is (the first carries the workers' start and, after an install, the loops' compiling)."""
 
     LABELS = {"cycle": "cycle products", "frames": "frames", "video": "video"}
 
@@ -478,10 +480,14 @@ class _Progress:
     def __call__(self, stage: str, done: int, total: int) -> None:
         now = time.monotonic()
         if stage != self.stage:
-            self.stage, self.started, self.first, self.logged = stage, now, done, None
+            self.stage, self.first, self.logged, self.mark = stage, done, None, None
         if not total or (done == self.first and done == total):
             return
-        rate = (done - self.first) / max(now - self.started, 1e-9)
+        if self.mark is None and done > self.first:  # the stage's first item done: the rate counts
+            self.mark = (now, done)  # from here, without the workers' start and the loops' compiling
+        rate = 0.0
+        if self.mark is not None and done > self.mark[1]:
+            rate = (done - self.mark[1]) / max(now - self.mark[0], 1e-9)
         left = f", {_clock((total - done) / rate)} left" if 0 < done < total and rate > 0 else ""
         label = self.LABELS.get(stage, stage)
         if self.tty:

@@ -455,3 +455,18 @@ def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
     late = swap(config, sky=swap(config.sky, site=swap(site, start=site.start + timedelta(hours=2),
                                                           end=site.end + timedelta(hours=2))))
     assert "misses it altogether" in _eclipse_lines(late)[1]
+
+
+def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
+    """The first item of a stage carries the workers' start (and after an install the loops'
+    compiling): 20 s for it, then one a second, 8 to go, is 8 s left, not 80."""
+    import pipeline.cli as cli
+
+    clock = iter([0.0, 20.0, 21.0])
+    monkeypatch.setattr(cli.time, "monotonic", lambda: next(clock))
+    stream = _Stream(True)
+    progress = _Progress(stream)
+    for done in (0, 1, 2):
+        progress("cycle", done, 10)
+    lines = stream.getvalue().split("\r")
+    assert "left" not in lines[2] and lines[3].rstrip("\x1b[K").endswith("2/10, 0:08 left"), lines
