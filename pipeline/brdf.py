@@ -207,9 +207,25 @@ def _camera_views(camera: cam.Camera):
     return views, zenith, azimuth
 
 
-_COARSE = [None, None]
-"""The last raster ``_coarsened`` was asked for (held, so that its id is not reused) and its
-result: ``choose_bands`` and ``sky_ratio`` coarsen the same raster in one frame."""
+class _LastCall:
+    """The last call of a function and its result, kept in this process: a frame asks again
+    for what the frame (or the frame before, from the same camera) made. The key's objects are
+    held, so their ids are not reused, and matched by identity; numbers and strings by value."""
+
+    def __init__(self):
+        self.key, self.value = None, None
+
+    def get(self, key: tuple, make):
+        """The result for ``key``: the last one if ``key`` is the last call's, else ``make()``."""
+        same = self.key is not None and len(self.key) == len(key) and all(
+            a == b if isinstance(b, (int, float, str)) else a is b for a, b in zip(self.key, key))
+        if not same:
+            self.key, self.value = key, make()
+        return self.value
+
+
+_COARSE = _LastCall()
+"""``_coarsened``: ``choose_bands`` and ``sky_ratio`` coarsen the same raster in one frame."""
 
 SKY_CELLS = 2048
 """Most cells of the coarsened sky raster on which ``choose_bands`` and ``sky_ratio`` sum the
@@ -220,10 +236,12 @@ def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
     towards each block's light-weighted centre on the sky plane and weights (m,) (channels
     summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
-    held, kept = _COARSE
-    if held is not None and held[0] is raster and held[1] == most_cells:
-        dirs, per_channel = kept
-        return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+    dirs, per_channel = _COARSE.get((raster, most_cells), lambda: _coarsen(raster, most_cells))
+    return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+
+
+def _coarsen(raster, most_cells: int):
+    """``_coarsened``'s work: (directions (m, 3), light per block and channel (m, channels))."""
     light = raster.weighted
     count, rows, cols = light.shape
     step = max(1, int(np.ceil(np.sqrt(rows * cols / most_cells))))
@@ -239,9 +257,7 @@ def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     y = (cut.sum(axis=(0, 4), dtype=np.float64) * sy.reshape(-1, step_r)[..., None]).sum(axis=1) / safe
     w = np.stack([x, y, np.ones_like(x)], axis=-1)
     dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
-    per_channel = per_block.reshape(count, -1).T
-    _COARSE[:] = [(raster, most_cells), (dirs, per_channel)]
-    return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+    return dirs, per_block.reshape(count, -1).T
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
@@ -317,9 +333,8 @@ def _lattice_read_arrays(flat, corner, taps, lattice) -> np.ndarray:
     return out
 
 
-_READS = [None, None]
-"""The last arguments of ``_lattice_reads`` (the zenith array held, so that its id is not
-reused) and its result: a camera's views are the same every frame (``_camera_views``)."""
+_READS = _LastCall()
+"""``_lattice_reads``: a camera's views are the same every frame (``_camera_views``)."""
 
 
 def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
@@ -327,9 +342,12 @@ def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
     [rad]: the lattice's lowest zenith and turn from ``band_azimuth`` and their spans [rad],
     the flat index (n,) of each view's first lattice corner and the bilinear weights (4, n)
     float32 of its four corners (held at the lattice's edges)."""
-    held, kept = _READS
-    if held is not None and held[0] is zenith and held[1] is azimuth and held[2:] == (band_azimuth, lattice):
-        return kept
+    return _READS.get((zenith, azimuth, band_azimuth, lattice),
+                      lambda: _lattice_reads_made(zenith, azimuth, band_azimuth, lattice))
+
+
+def _lattice_reads_made(zenith, azimuth, band_azimuth: float, lattice: int):
+    """``_lattice_reads``' work."""
     turn = (azimuth - band_azimuth + np.pi) % (2.0 * np.pi) - np.pi
     lows = [float(zenith.min()), float(turn.min())]
     spans = [max(float(zenith.max()) - lows[0], 1e-9), max(float(turn.max()) - lows[1], 1e-9)]
@@ -338,9 +356,7 @@ def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
     i0, j0 = np.minimum(i.astype(np.intp), lattice - 2), np.minimum(j.astype(np.intp), lattice - 2)
     fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
     taps = np.stack([(1 - fi) * (1 - fj), (1 - fi) * fj, fi * (1 - fj), fi * fj])
-    kept = (lows, spans, i0 * lattice + j0, taps)
-    _READS[:] = [(zenith, azimuth, band_azimuth, lattice), kept]
-    return kept
+    return lows, spans, i0 * lattice + j0, taps
 
 
 def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
@@ -382,18 +398,18 @@ def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
     return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
 
 
-_SUM = [None, None]
-"""The last raster ``_channel_sum`` was asked for (held) and its channels' sum."""
+_SUM = _LastCall()
+"""``_channel_sum``: the bands of a frame sum the same raster."""
 
 
 def _channel_sum(raster) -> np.ndarray:
     """The sky raster's channels summed (1, rows, cols) float32, made once for the bands of a
     frame. Read-only. [radiance x sr]"""
-    if _SUM[0] is not raster:
+    def made():
         total = raster.weighted.sum(axis=0, keepdims=True)
         total.flags.writeable = False
-        _SUM[:] = [raster, total]
-    return _SUM[1]
+        return total
+    return _SUM.get((raster,), made)
 
 
 def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
