@@ -38,7 +38,8 @@ from pipeline import brdf as R  # noqa: E402
 from pipeline import shadow  # noqa: E402
 from pipeline.config import BrdfConfig  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
-from pipeline.sky import ProceduralSky, SunDisc  # noqa: E402
+from pipeline.sky import ProceduralSky  # noqa: E402
+from pipeline.sun_disc import SunDisc  # noqa: E402
 from pipeline.vocabulary import BRDF_PRESETS  # noqa: E402
 
 N, STEP = 40, 4
@@ -75,7 +76,7 @@ def open_ground() -> None:
 
     sky = ProceduralSky(turbidity=3.0, sun=SunDisc(np.radians(315.0), np.radians(30.0)))
     raster = sky.raster(Grid((-4.0, 4.0), 8.0 / 96, (96, 96)))
-    e_sun = np.asarray(sky.total_sun_irradiance(), dtype=np.float64)
+    e_sun = np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     view = cam.Camera.look_at((0.0, 0.0, 1.7), (6.0, -6.0, 0.0), vertical_fov=np.radians(70.0), width=48, height=32)
     views = R.view_vectors(view)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
@@ -140,7 +141,7 @@ def config_case(path: str, samples: int) -> None:
             banded = R.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
                                   weights[:, chosen], R.sky_ratio(brdf, raster, bands, views)[:, chosen])
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
-            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.total[1]:.3f}, banded {banded[1, worst]:.3f}")
+            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
             print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
 

@@ -41,7 +41,9 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 def table() -> None:
     from test_sky import hemisphere_irradiance, reference_daylight
 
-    from pipeline.sky import ProceduralSky, SunDisc
+    from pipeline.sky import ProceduralSky
+    from pipeline.sun_disc import SunDisc
+    from pipeline.sun_kernel import sun_irradiance
 
     elevations = (5.0, 15.0, 30.0, 60.0, 90.0)
     print("| turbidity | sun elevation | direct horizontal, ratio | diffuse horizontal, ratio | diffuse klx (ref) |")
@@ -51,7 +53,7 @@ def table() -> None:
         for elevation in elevations:
             sky = ProceduralSky(turbidity, SunDisc(np.radians(200.0), np.radians(elevation)))
             ref_direct, ref_diffuse = reference_daylight(elevation, turbidity, 0.0)
-            direct.append(sky.sun_irradiance() @ LUMA / ref_direct)
+            direct.append(sun_irradiance(sky) @ LUMA / ref_direct)
             got = hemisphere_irradiance(sky.radiance, 256, 512) @ LUMA
             diffuse.append(got / ref_diffuse)
             levels.append(f"{got:.1f} ({ref_diffuse:.1f})")

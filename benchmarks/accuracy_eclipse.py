@@ -37,7 +37,9 @@ from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import scene_at  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
-from pipeline.sky import EquirectSky, MoonDisc, SunDisc  # noqa: E402
+from pipeline.equirect import EquirectSky  # noqa: E402
+from pipeline.sun_disc import MoonDisc, SunDisc  # noqa: E402
+from pipeline.sun_kernel import sun_irradiance  # noqa: E402
 
 Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 TOTALITY = ROOT / "configs" / "eclipse-2024-dallas-totality.yaml"
@@ -54,7 +56,7 @@ PUBLISHED = """published (docs/method.md, "The eclipse sky"):
 def open_ground(config, frame: int):
     """(lux, S, b) of the open ground at ``frame``: sky (with the corona) plus the sun kernel."""
     sky = load_sky(config.sky, scene_at(config, frame))
-    sun = sky.sun_irradiance() if sky.sun_fraction() > 0 else np.zeros(3)
+    sun = sun_irradiance(sky) if sky.sun_fraction() > 0 else np.zeros(3)
     return 1e3 * float((sky.sky_irradiance + sun) @ Y), sky.sun_fraction(), sky._deep, sky
 
 
@@ -82,7 +84,7 @@ def totality_sky(width: int) -> None:
     height = image.shape[0]
     elevation = 90 - (np.arange(height) + 0.5) * 180 / height
     band, top = (elevation > 0) & (elevation < 10), elevation > 85
-    lux = 1e3 * EquirectSky(image.astype(np.float32)).total_irradiance() @ Y
+    lux = 1e3 * EquirectSky(image.astype(np.float32)).image_irradiance() @ Y
     zenith = 1e3 * (image[top] @ Y).mean()
     day_zenith = 1e3 * (day[top] @ Y).mean()
     ratio = (image[band] @ Y).mean() / (image[top] @ Y).mean()
@@ -106,7 +108,7 @@ def partial_phase(step: int) -> None:
         if b > 0:
             break
         clear = replace(sky, moon=None)
-        ratio = lux / (1e3 * float((clear.sky_irradiance + clear.sun_irradiance()) @ Y) * s)
+        ratio = lux / (1e3 * float((clear.sky_irradiance + sun_irradiance(clear)) @ Y) * s)
         worst = max(worst, abs(ratio - 1))
         print(f"  frame {frame:3d}  S {s:.4f}  ratio {ratio:.4f}")
     print(f"  largest deviation {100 * worst:.2f}%")
@@ -128,7 +130,7 @@ def calibration() -> None:
     c2, c3 = contacts["C2"], contacts["C3"]
     middle = sky_at(c2 + (c3 - c2) / 2)
     before = sky_at(c2 - timedelta(seconds=60))
-    minute = 1e3 * float((before.sky_irradiance + before.sun_fraction() * before.total_sun_irradiance()) @ Y)
+    minute = 1e3 * float((before.sky_irradiance + before.sun_fraction() * before.undimmed_sun_irradiance()) @ Y)
     day = replace(middle, moon=None).equirect(512).astype(np.float64)
     elevation = 90 - (np.arange(256) + 0.5) * 180 / 256
     band, top = (elevation > 0) & (elevation < 10), elevation > 85

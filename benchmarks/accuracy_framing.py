@@ -46,7 +46,7 @@ def main():
         ground = (result.radiance @ REC709_LUMINANCE)[ground_fraction >= 1.0]
         p95, p5 = np.percentile(ground, [95, 5])
         sky = load_sky(config.sky, result.scene)
-        open_ground = sky.sky_irradiance + result.sun_fraction * sky.total_sun_irradiance()
+        open_ground = sky.sky_irradiance + result.sun_fraction * sky.undimmed_sun_irradiance()
         possible = float(open_ground @ REC709_LUMINANCE) / float(sky.sky_irradiance @ REC709_LUMINANCE)
         print(f"{site}: sun {np.degrees(result.scene.sun.elevation):.1f} deg, S {result.sun_fraction:.3f}, "
               f"p95/p5 {p95 / p5:.2f}, open sun / open shade {possible:.2f}; camera "

@@ -21,7 +21,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from pipeline import canopy, io, shadow  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
-from pipeline.sky import EquirectSky, UniformSky  # noqa: E402
+from pipeline.equirect import EquirectSky  # noqa: E402
+from pipeline.sky import UniformSky  # noqa: E402
 from reference import image_transmittance, monte_carlo_irradiance  # noqa: E402
 
 

@@ -118,7 +118,7 @@ def main() -> None:
             sun = plan.scenes[f].sun
             sky = load_sky(plan.config.sky, result.scene)
             shade = float(sky.sky_irradiance @ REC709_LUMINANCE)
-            most = (shade + result.sun_fraction * float(sky.total_sun_irradiance() @ REC709_LUMINANCE)) / shade
+            most = (shade + result.sun_fraction * float(sky.undimmed_sun_irradiance() @ REC709_LUMINANCE)) / shade
             window = [round(v, 1) for v in plan.window.extent]
             fine = None if plan.sun_window is None else [round(v, 1) for v in plan.sun_window.extent]
             print(f" {name:16s}  {f:5d}  {np.degrees(sun.elevation):9.1f}  {np.degrees(sun.azimuth):8.1f}  "

@@ -39,7 +39,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from pipeline import cache, ephemeris, io  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc  # noqa: E402
+from pipeline.sky import ProceduralSky  # noqa: E402
+from pipeline.sun_disc import LIMB_DARKENING, SunDisc  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run, scene_at  # noqa: E402

@@ -26,14 +26,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline.colour import REC709_LUMINANCE, XYZ_TO_REC709  # noqa: E402
 from pipeline.daylight import clear_daylight, sky_daylight, usno_illuminance  # noqa: E402
-from pipeline.sky import ProceduralSky, SunDisc  # noqa: E402
+from pipeline.sky import ProceduralSky  # noqa: E402
+from pipeline.sun_disc import SunDisc  # noqa: E402
 
 TURBIDITIES = (2.0, 3.0, 4.5)
 
 
 def open_ground(h: float, turbidity: float) -> float:
     sky = ProceduralSky(turbidity, SunDisc(np.radians(250.0), np.radians(h)))
-    return 1000.0 * float((sky.sky_irradiance + sky.total_sun_irradiance()) @ REC709_LUMINANCE)
+    return 1000.0 * float((sky.sky_irradiance + sky.undimmed_sun_irradiance()) @ REC709_LUMINANCE)
 
 
 def ineichen_perez(h: float, turbidity: float) -> float:

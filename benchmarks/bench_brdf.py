@@ -94,7 +94,7 @@ def hot_spot(plan, frame: int, results) -> None:
     inside = (r >= 0) & (c >= 0) & (r <= ground.grid.shape[0] - 1) & (c <= ground.grid.shape[1] - 1)
     e = np.full(len(fp.x), np.nan)
     e[inside] = ground.irradiance[np.round(r[inside]).astype(int), np.round(c[inside]).astype(int), 1]
-    open_light = sky.total_sun_irradiance()[1] + raster.total[1]
+    open_light = sky.undimmed_sun_irradiance()[1] + raster.irradiance[1]
     sunlit = e >= 0.9 * open_light
     angle = np.degrees(np.arccos(np.clip(views @ sky.sun_direction, -1.0, 1.0)))
     near, away = sunlit & (angle <= 2.0), sunlit & (np.abs(angle - 40.0) <= 1.0)
@@ -103,7 +103,7 @@ def hot_spot(plan, frame: int, results) -> None:
         return
     dirs = reflect.cell_directions(raster.grid).reshape(-1, 3)
     e_cells = raster.weighted[1].reshape(-1).astype(np.float64)
-    e_sun = sky.total_sun_irradiance()[1]
+    e_sun = sky.undimmed_sun_irradiance()[1]
 
     def predicted(v):
         return (reflect.shape(model, v, sky.sun_direction) * e_sun + reflect.shape(model, v, dirs) @ e_cells) \

@@ -26,13 +26,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_cycle import CONFIG  # noqa: E402
 
 from pipeline import cache, shadow  # noqa: E402
-from pipeline import sky as sky_models  # noqa: E402
 from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run, scene_at  # noqa: E402
 from pipeline.config import parse_config  # noqa: E402
 from pipeline.resolve import resolve  # noqa: E402
+from pipeline.sun_kernel import sun_kernel  # noqa: E402
 
 
 def round_trip_seconds(shape, workers, repeats=3) -> float:
@@ -81,13 +81,13 @@ def main() -> None:
         q = plan.sun_window.pixel / layer.height
         items = [cycle_item(plan, 0, f, store) for f in range(args.frames)]
         skies = [load_sky(config.sky, scene_at(config, f)) for f in range(args.frames)]
-        kernels = [sky_models.sun_kernel(s, q) for s in skies]
+        kernels = [sun_kernel(s, q) for s in skies]
 
         def fine(i):
             shadow.ground_sun(kernels[i], items[i]["fine"], layer.sun, workers=args.threads)
 
         def kernel(i):
-            sky_models.sun_kernel(skies[i], q)
+            sun_kernel(skies[i], q)
 
         def whole(i):
             render_ground(plan, i, store=store, workers=args.threads)

@@ -21,7 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.composite import display_sky  # noqa: E402
-from pipeline.sky import ProceduralSky, SunDisc  # noqa: E402
+from pipeline.sky import ProceduralSky  # noqa: E402
+from pipeline.sun_disc import SunDisc  # noqa: E402
 
 ELEVATIONS = (10.0, 2.0, -2.0, -5.0)
 
@@ -34,7 +35,7 @@ def main() -> None:
         image = np.roll(image, 256, axis=1)  # azimuth 270 (a quarter of the width) to the centre: the sun
         picture = display_sky(image)[: image.shape[0] // 2]
         rows.append(np.clip(np.asarray(picture) * 255.0 + 0.5, 0, 255).astype(np.uint8))
-        lux = 1000.0 * float((sky.sky_irradiance + sky.total_sun_irradiance()) @ REC709_LUMINANCE)
+        lux = 1000.0 * float((sky.sky_irradiance + sky.undimmed_sun_irradiance()) @ REC709_LUMINANCE)
         print(f"sun {h:+5.1f} degrees: open ground {lux:9.1f} lx")
     Image.fromarray(np.concatenate(rows, axis=0)).save(sys.argv[1], quality=85)
 

@@ -19,7 +19,7 @@ import numpy as np
 from . import camera as cam
 from . import shadow
 from .geometry import Grid, fold, sky_grid, sky_offset
-from .sky import SkyRaster
+from .sky_raster import SkyRaster
 
 if TYPE_CHECKING:
     from .config import BrdfConfig  # model and parameters: any value with those two fields

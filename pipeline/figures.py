@@ -25,6 +25,7 @@ import yaml
 
 from . import cache, composite, ephemeris, io
 from . import sky as sky_models
+from .sun_kernel import sun_kernel
 from .colour import REC709_LUMINANCE
 from .config import Config, parse_config
 from .cycle import layer_masks
@@ -204,7 +205,7 @@ def sky_plane_image(sky: sky_models.ProceduralSky, *, alpha: float, size: int) -
     x, y = grid.ground_from_raster(np.arange(size)[:, None], np.arange(size)[None, :])
     s = np.stack(np.broadcast_arrays(x, y), axis=-1)
     image = np.asarray(sky.radiance(s, footprint=grid.pixel), dtype=np.float64)
-    kernel = sky_models.sun_kernel(sky, grid.pixel)
+    kernel = sun_kernel(sky, grid.pixel)
     weights = projected_solid_angle(kernel.grid)
     _add_at_offset(image, np.moveaxis(kernel.weighted, 0, -1) / weights[..., None], kernel.grid, grid)
     return image.astype(np.float32)
@@ -228,7 +229,7 @@ def weighted_sky_raster(sky: sky_models.ProceduralSky, grid: Grid) -> tuple[np.n
     float32 [klx]: a cell holds the integral of L cos^4(theta) dA over it."""
     e_sky = np.moveaxis(sky.raster(grid).weighted, 0, -1)
     e_sun = np.zeros_like(e_sky)
-    kernel = sky_models.sun_kernel(sky, grid.pixel)
+    kernel = sun_kernel(sky, grid.pixel)
     _add_at_offset(e_sun, np.moveaxis(kernel.weighted, 0, -1), kernel.grid, grid)
     return e_sky, e_sun
 

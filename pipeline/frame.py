@@ -106,7 +106,7 @@ def open_ground_light(sky, exposure: float, balance) -> dict:
     (pi / exposure [klx], a white ground at 1) as EV100; ``white_balance`` the display gains
     (3,) [1]. Sums by luminance (Rec.709) of the sky model's own irradiances (lighting.meter's
     reading)."""
-    sun = float(sky.sun_fraction()) * np.asarray(sky.total_sun_irradiance(), dtype=np.float64)
+    sun = float(sky.sun_fraction()) * np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     sun_lux = float(sun @ REC709_LUMINANCE) * LUX_PER_KLX
     sky_lux = float(np.asarray(sky.sky_irradiance, dtype=np.float64) @ REC709_LUMINANCE) * LUX_PER_KLX
     return {"sun_lux": sun_lux, "sky_lux": sky_lux, "ev100": ev100(sun_lux + sky_lux),
@@ -255,7 +255,7 @@ class _DarkSky:
     def sun_fraction(self) -> float:
         return 0.0
 
-    def total_sun_irradiance(self) -> np.ndarray:
+    def undimmed_sun_irradiance(self) -> np.ndarray:
         return np.zeros(3)
 
 

@@ -49,7 +49,7 @@ the plan would make, and a fine mask reaching it would pass the limits (docs/met
 
 def sun_lights(sun) -> bool:
     """Whether a sun disc gives direct light: wholly above the horizon (as
-    ``sky.ProceduralSky.sun_irradiance`` and ``sky.sun_kernel`` need); a sun between the
+    ``sun_kernel.sun_irradiance`` and ``sun_kernel.sun_kernel`` need); a sun between the
     horizon and -6 degrees lights the ground through the sky alone (docs/method.md)."""
     return sun is not None and sun.elevation - sun.angular_radius > 1e-3
 

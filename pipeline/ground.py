@@ -12,10 +12,11 @@ import numpy as np
 
 from . import brdf as brdf_models
 from . import cache, shadow
-from . import sky as sky_models
 from .cycle import cycle_item
 from .geometry import Grid, sky_grid, sky_offset
 from .inputs import load_sky
+from .sky_raster import SkyRaster
+from .sun_kernel import sun_irradiance, sun_kernel
 from .cores import default_workers
 from .plan import LayerPlan, RunPlan, sun_lights, sun_shades
 
@@ -92,7 +93,7 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
                                 grid, sky_total, exact, sky_around)
     kept = None
     if coarse_sky:  # (coarse sky-only ground, raster) per layer
-        sky_total = coarse_skies[0][1].total
+        sky_total = coarse_skies[0][1].irradiance
         kept = (np.moveaxis(shadow.combine_layers([g for g, _ in coarse_skies], sky_total), 0, -1), sky_total,
                 tuple(r for _, r in coarse_skies))
     return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, sky_part, kept)
@@ -120,7 +121,7 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
         rasters = [brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
                                                summed=colour is not None and t != colour)
                    for t, v in enumerate(views)]
-        raster = sky_models.SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
+        raster = SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
                                       np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
         if periodic:
             g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
@@ -128,7 +129,7 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
             g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
         grounds.append(g)
         if total is None:
-            total, split = raster.total, np.cumsum([len(r.weighted) for r in rasters])[:-1]
+            total, split = raster.irradiance, np.cumsum([len(r.weighted) for r in rasters])[:-1]
     combined = np.moveaxis(shadow.combine_layers(grounds, total), 0, -1)
     return [GroundResult(g, plan.window, t, True)
             for g, t in zip(np.split(combined, split, axis=-1), np.split(total, split))]
@@ -159,7 +160,7 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
         g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]),
                                    workers=workers)
         exact = True
-    total = raster.total
+    total = raster.irradiance
     if keep is not None:
         keep.append((g, raster))
     g_outer = None
@@ -168,7 +169,7 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
     if lp.sun is not None and sun_shades(sun):
         if outer:
             g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
-        kernel = sky_models.sun_kernel(sky, plan.sun_window.pixel / lp.height)
+        kernel = sun_kernel(sky, plan.sun_window.pixel / lp.height)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
         if parts:
             sky_only = (g.copy(), total, sky_only[2])
@@ -179,7 +180,7 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
     # reaches the window unshadowed; set (twilight), it gives none: the sky alone lights it
     if lp.sun is None and not sun_lights(sun):
         return g, total, exact, g_outer, sky_only
-    light = np.asarray(sky.sun_irradiance(), dtype=np.float64) if sun_lights(sun) else np.zeros(3)
+    light = np.asarray(sun_irradiance(sky), dtype=np.float64) if sun_lights(sun) else np.zeros(3)
     if outer:
         g_outer = g + light.astype(g.dtype)[:, None, None]
     if lp.sun is not None:
@@ -193,10 +194,10 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
 def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
     """The sun's light through one layer on the coarse window (channels, rows, cols): its
     kernel at the coarse sky cell, correlated like the sky. [klx]"""
-    kernel = sky_models.sun_kernel(sky, plan.window.pixel / lp.height)
+    kernel = sun_kernel(sky, plan.window.pixel / lp.height)
     coarse = lp.coarse
     if isinstance(coarse, shadow.PeriodicPlan):
-        return shadow.ground_periodic(sky_models.SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
+        return shadow.ground_periodic(SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
                                       item["coarse"], coarse, float(item["mean"][0]), workers=workers)
     weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
     if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
@@ -207,7 +208,7 @@ def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
         if r1 > r0 and c1 > c0:
             weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
     outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
-    raster = sky_models.SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel),
+    raster = SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel),
                                   weighted, outside)
     return shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
 

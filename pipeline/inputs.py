@@ -12,11 +12,13 @@ import numpy as np
 from . import albedo as albedos
 from . import camera, canopy, foreground, io
 from . import sky as sky_models
+from . import sun_disc
 from .clouds import CloudLayer
 from .eclipse import METER_TABLE
 from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
 from .geometry import Grid
-from .sky import EquirectSky, UniformSky
+from .equirect import EquirectSky, cut_sun
+from .sky import UniformSky
 from .vocabulary import PROCEDURAL_MODELS
 
 if TYPE_CHECKING:
@@ -41,7 +43,7 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = Fal
     return load_hdri(sky)
 
 
-def clear_sky(sky: SkyConfig, sun: sky_models.SunDisc, **state) -> sky_models.ProceduralSky:
+def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> sky_models.ProceduralSky:
     """The procedural sky of a config with ``sun``; ``state``: moon, clouds, time."""
     return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
                                     cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
@@ -60,7 +62,7 @@ def load_hdri(sky: SkyConfig) -> EquirectSky:
         raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
     if image.max() > MAX_RADIANCE:
         raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
-    return sky_models.cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
+    return cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:

@@ -59,9 +59,9 @@ def _reference_lighting(plan: RunPlan) -> Lighting:
     if sky.model == "hdri":
         hdri = load_hdri(sky)
         if hdri.sun is None:
-            return Lighting(None, np.zeros(3), hdri.total_irradiance())
+            return Lighting(None, np.zeros(3), hdri.image_irradiance())
         return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
-                        hdri.total_irradiance())
+                        hdri.image_irradiance())
     middle = plan.scenes[config.animation.frames // 2].sun
     clear = clear_sky(sky, middle)
     return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
@@ -114,4 +114,4 @@ def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
     sky = load_sky(plan.config.sky, scene, metering=True)
     if light.sun_direction is None:
         return light.unshadowed
-    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.total_sun_irradiance())
+    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.undimmed_sun_irradiance())

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import canopy, ephemeris, io, shadow
-from . import sky as sky_models
+from . import sun_disc
 from .camera import Camera
 from .config import CanopyLayer, Config, size_text
 from .errors import ConfigError
@@ -38,8 +38,8 @@ class Scene:
     frame: int
     time: float
     when: datetime | None
-    sun: sky_models.SunDisc | None
-    moon: sky_models.MoonDisc | None
+    sun: sun_disc.SunDisc | None
+    moon: sun_disc.MoonDisc | None
 
 
 
@@ -61,16 +61,16 @@ def scene_at(config: Config, frame: int) -> Scene:
         sun, moon = ephemeris.sun_and_moon(
             ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
         return Scene(frame, time, when,
-                     sky_models.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
-                     sky_models.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+                     sun_disc.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                     sun_disc.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
     s = sky.sun
-    sun = sky_models.SunDisc(s.azimuth, s.elevation, s.radius)
+    sun = sun_disc.SunDisc(s.azimuth, s.elevation, s.radius)
     moon = None
     if sky.moon is not None:
         m = sky.moon
         dx, dy = (a + (b - a) * fraction for a, b in zip(m.offset_start, m.offset_end))
         azimuth, elevation = offset_direction(s.azimuth, s.elevation, dx, dy)
-        moon = sky_models.MoonDisc(azimuth, elevation, m.radius)
+        moon = sun_disc.MoonDisc(azimuth, elevation, m.radius)
     return Scene(frame, time, None, sun, moon)
 
 

@@ -40,7 +40,7 @@ import scipy.sparse as sparse
 from .geometry import Grid, fold, lattice_offset, sky_grid, sky_offset, wrapped_spans
 
 if TYPE_CHECKING:
-    from .sky import SkyRaster
+    from .sky_raster import SkyRaster
 
 MAX_SKY_CELLS = 25_000_000
 
@@ -124,7 +124,7 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
     g = total - (e correlated with o): exact for the discrete sum, no periodic copies.
     [radiance x sr]
     """
-    total = sky.total.astype(np.float32)[:, None, None]
+    total = sky.irradiance.astype(np.float32)[:, None, None]
     if plan.sky is None:
         return np.broadcast_to(total, (len(total),) + plan.window_shape).copy()
     blocked = _correlate(sky.weighted, spectrum, plan.fft_shape, workers)

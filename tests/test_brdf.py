@@ -11,7 +11,8 @@ from pipeline import shadow
 from pipeline.config import BrdfConfig
 from pipeline.errors import ConfigError
 from pipeline.geometry import Grid
-from pipeline.sky import ProceduralSky, SunDisc
+from pipeline.sky import ProceduralSky
+from pipeline.sun_disc import SunDisc
 from pipeline.vocabulary import BRDF_PRESETS
 
 from tests.scenes import config_of, tiny_grove
@@ -116,7 +117,7 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     b, sky = PRESETS["grass"], _sky()
     grid = Grid((-4.0, 4.0), 8.0 / 96, (96, 96))  # the sky square to 76 degrees
     raster = sky.raster(grid)
-    e_sun = np.asarray(sky.total_sun_irradiance(), dtype=np.float64)
+    e_sun = np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     view = cam.Camera.look_at((0.0, 0.0, 1.7), (6.0, -6.0, 0.0), vertical_fov=np.radians(70.0), width=48, height=32)
     views = R.view_vectors(view)
     bands = R.choose_bands(b, raster, views)
@@ -176,8 +177,8 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     # the frame's isolated-canopy path: the blend made on the ground raster relative to open
     # ground, times the open term at the cell's own view (no camera filtering here)
     directions = bands.directions()
-    colour_open = R.weighted_raster(raster, b, directions[bands.colour]).total
-    bands_open = [R.weighted_raster(raster, b, d, summed=True).total[0] for d in directions]
+    colour_open = R.weighted_raster(raster, b, directions[bands.colour]).irradiance
+    bands_open = [R.weighted_raster(raster, b, d, summed=True).irradiance[0] for d in directions]
     view = cam.Camera.look_at(tuple(camera_at), (0.0, 0.0, 0.0), vertical_fov=np.radians(60.0), width=8, height=6)
     relative = R.relative_sky(view, window, bands, np.moveaxis(colour, 0, -1),
                               np.stack(terms, axis=-1).reshape(20, 20, -1), colour_open, bands_open)

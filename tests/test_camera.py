@@ -14,7 +14,9 @@ from pipeline.camera import (LOD_BIAS, MAX_TAPS, Camera, background, footprints,
                              image_rays, mipmap, pixel_rays, project_points, sample_footprint,
                              sample_footprints, sky_view)
 from pipeline.geometry import Grid
-from pipeline.sky import EquirectSky, ProceduralSky, SunDisc, UniformSky
+from pipeline.equirect import EquirectSky
+from pipeline.sky import ProceduralSky, UniformSky
+from pipeline.sun_disc import SunDisc
 
 ONE = Grid((0.0, 1.0), 1.0, (1, 1))
 

@@ -100,7 +100,8 @@ def _distance_to_segment(p, a, b):
 def test_overcast_and_intermediate_skies_are_d65_to_d75(cie_type):
     """The whole sky's light (its horizontal irradiance, sun left out) lies within 0.01 in xy of the
     segment from D65 to D75 of the CIE table; the clear type 12 stays bluer, Preetham's."""
-    from pipeline.sky import ProceduralSky, SunDisc
+    from pipeline.sky import ProceduralSky
+    from pipeline.sun_disc import SunDisc
 
     for elevation in (10.0, 40.0):
         sky = ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(elevation)), cie_type=cie_type)

@@ -118,10 +118,11 @@ def usno_table(h):
 
 def open_ground_lux(elevation_deg, turbidity):
     """Horizontal illuminance of the procedural sky and its sun on open ground. [lx]"""
-    from pipeline.sky import ProceduralSky, SunDisc
+    from pipeline.sky import ProceduralSky
+    from pipeline.sun_disc import SunDisc
 
     sky = ProceduralSky(turbidity, SunDisc(np.radians(250.0), np.radians(elevation_deg)))
-    return 1000.0 * float((sky.sky_irradiance + sky.total_sun_irradiance()) @ REC709_LUMINANCE)
+    return 1000.0 * float((sky.sky_irradiance + sky.undimmed_sun_irradiance()) @ REC709_LUMINANCE)
 
 
 def test_the_usno_curve_meets_the_ams_glossary_at_sunset_and_the_end_of_civil_twilight():
@@ -161,7 +162,8 @@ def test_twilight_light_has_no_step_over_10_percent_a_tenth_of_a_degree(turbidit
 
 def test_above_the_blend_the_sky_is_ineichen_perez_and_below_twilight_an_error():
     from pipeline.daylight import clear_daylight, sky_daylight
-    from pipeline.sky import ProceduralSky, SunDisc
+    from pipeline.sky import ProceduralSky
+    from pipeline.sun_disc import SunDisc
 
     assert sky_daylight(np.radians(10.0), 3.0) == clear_daylight(np.radians(80.0), 3.0)
     with pytest.raises(ValueError, match="-6.50 degrees"):
@@ -172,7 +174,9 @@ def test_low_sun_colours_warm_sun_and_horizon_blue_zenith():
     """At 2 degrees the sun (its air mass about 19) is redder than at 30, the horizon under the sun
     warmer than D65 and the zenith bluer; after sunset the sky under the sun stays the brightest."""
     from pipeline.colour import XYZ_TO_REC709
-    from pipeline.sky import ProceduralSky, SunDisc
+    from pipeline.sky import ProceduralSky
+    from pipeline.sun_disc import SunDisc
+    from pipeline.sun_kernel import sun_irradiance
 
     def xy(rgb):
         X, Y, Z = np.linalg.solve(XYZ_TO_REC709, np.asarray(rgb, dtype=np.float64))
@@ -187,4 +191,4 @@ def test_low_sun_colours_warm_sun_and_horizon_blue_zenith():
     around = [dusk.clear_radiance(50.0 * np.array([np.sin(a), np.cos(a)])) @ REC709_LUMINANCE
               for a in np.radians(np.arange(0.0, 360.0, 30.0) + 250.0)]
     assert np.argmax(around) == 0 and around[0] > 10 * (dusk.clear_radiance(np.zeros(2)) @ REC709_LUMINANCE)
-    assert dusk.sun_fraction() == 0.0 and not dusk.sun_irradiance().any()
+    assert dusk.sun_fraction() == 0.0 and not sun_irradiance(dusk).any()

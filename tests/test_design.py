@@ -11,7 +11,8 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
-PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "eclipse", "clouds", "ephemeris",
+PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "sky_nodes", "sky_raster", "sun_disc",
+           "sun_kernel", "equirect", "eclipse", "clouds", "ephemeris",
            "canopy", "_raster", "_filter", "shadow", "albedo", "brdf", "camera", "foreground", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 

@@ -12,7 +12,9 @@ from scipy import integrate
 from pipeline import eclipse, ephemeris
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.geometry import direction_vector
-from pipeline.sky import EquirectSky, MoonDisc, ProceduralSky, SunDisc
+from pipeline.equirect import EquirectSky
+from pipeline.sky import ProceduralSky
+from pipeline.sun_disc import MoonDisc, SunDisc
 
 DALLAS = ephemeris.Site.from_degrees(32.78, -96.80, 140.0)
 C2 = datetime(2024, 4, 8, 18, 40, 37, 848000, tzinfo=timezone.utc)  # contact_times at DALLAS
@@ -97,7 +99,7 @@ def test_the_corona_in_the_raster_and_the_equirect_keeps_its_light():
     image = np.zeros((256, 512, 3))
     sky._deposit(image, sky.corona_radiance, eclipse.CORONA_REACH * sky.sun.angular_radius,
                  sky.sun.angular_radius / 16)
-    assert EquirectSky(image.astype(np.float32)).total_irradiance() == pytest.approx(expected, rel=0.01)
+    assert EquirectSky(image.astype(np.float32)).image_irradiance() == pytest.approx(expected, rel=0.01)
 
 
 def test_dallas_totality_matches_the_published_sky():
@@ -105,7 +107,7 @@ def test_dallas_totality_matches_the_published_sky():
     sky = totality()
     image = sky.equirect(512).astype(np.float64)
     elevation = 90 - (np.arange(256) + 0.5) * 180 / 256
-    lux = 1e3 * EquirectSky(image.astype(np.float32)).total_irradiance() @ Y
+    lux = 1e3 * EquirectSky(image.astype(np.float32)).image_irradiance() @ Y
     luminance = image @ Y
     zenith = 1e3 * luminance[elevation > 85].mean()
     band = (elevation > 0) & (elevation < 10)
@@ -132,7 +134,7 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
         dx, dy = ephemeris.moon_offset_from_sun(sun, moon)
         azimuth, elevation = offset_direction(fixed.azimuth, fixed.elevation, dx, dy)
         sky = ProceduralSky(3.08, fixed, moon=MoonDisc(azimuth, elevation, moon.angular_radius), altitude=140.0)
-        return float(sky.sky_irradiance @ Y), float(sky.sun_fraction() * sky.total_sun_irradiance() @ Y)
+        return float(sky.sky_irradiance @ Y), float(sky.sun_fraction() * sky.undimmed_sun_irradiance() @ Y)
 
     sky_before, sun_before = np.array([light(C2 + timedelta(seconds=t)) for t in range(-60, 11, 5)]).T
     sky_after, sun_after = np.array([light(C3 + timedelta(seconds=t)) for t in range(-10, 61, 5)]).T
@@ -157,7 +159,7 @@ def test_the_totality_config_brings_totality_up_to_dusk_not_black():
     config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
     auto = config.camera.auto_exposure
     sky, day = totality(), dallas_sky(C2 + (C3 - C2) / 2, moon=False)
-    reference = day.sky_irradiance + day.total_sun_irradiance()
+    reference = day.sky_irradiance + day.undimmed_sun_irradiance()
     readings = np.geomspace(reference, sky.sky_irradiance, 60)  # four and a half decades down
     readings = np.concatenate([readings, np.repeat(readings[-1:], 40, axis=0)])
     exposure = composite.auto_exposure(readings, reference=reference, frame_time=1 / 24,
@@ -176,7 +178,7 @@ def test_the_crescents_are_reversed_after_third_contact():
     # side 20 s after C3 from where it was 20 s before C2 (131 degrees round at Dallas, off the
     # centre line: the moon's path misses the sun's centre): the pinhole images turn round
     from pipeline.geometry import sky_offset
-    from pipeline.sky import sun_kernel
+    from pipeline.sun_kernel import sun_kernel
 
     def sliver(when):
         sky = dallas_sky(when)

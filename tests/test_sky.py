@@ -13,8 +13,10 @@ from pipeline.colour import REC709_LUMINANCE
 from pipeline.constants import SUN_ANGULAR_RADIUS
 from pipeline.ephemeris import obscured_fraction
 from pipeline.geometry import I0, projected_solid_angle, sky_grid, sky_offset, sky_plane_from_direction
-from pipeline.sky import (EquirectSky, MoonDisc, ProceduralSky, Sky, SunDisc, UniformSky, cut_sun,
-                          sun_disc_radiance, sun_kernel)
+from pipeline.equirect import EquirectSky, cut_sun
+from pipeline.sky import ProceduralSky, Sky, UniformSky
+from pipeline.sun_disc import MoonDisc, SunDisc, sun_disc_radiance
+from pipeline.sun_kernel import sun_irradiance, sun_kernel, unshadowed
 
 from reference import equirect_patch, unit_vector
 
@@ -35,7 +37,7 @@ def test_uniform_sky_is_exact():
     half, q = 100, 0.02
     raster = UniformSky(np.array([1.0, 2.0, 0.5])).raster(square(half, q))
     assert raster.weighted.dtype == np.float32
-    assert raster.total == pytest.approx(np.pi * np.array([1.0, 2.0, 0.5]), rel=1e-12)
+    assert raster.irradiance == pytest.approx(np.pi * np.array([1.0, 2.0, 0.5]), rel=1e-12)
     inside = I0(np.arctan((half + 0.5) * q))
     assert raster.weighted[0].sum(dtype=np.float64) == pytest.approx(inside, rel=1e-6)
 
@@ -44,7 +46,7 @@ def test_uniform_equirect_equals_uniform_model():
     grid = square(300, 0.05 / 8)
     uniform = UniformSky(np.ones(3)).raster(grid)
     hdri = EquirectSky(np.ones((256, 512, 3), np.float32)).raster(grid)
-    assert hdri.total == pytest.approx(uniform.total, rel=1e-9)
+    assert hdri.irradiance == pytest.approx(uniform.irradiance, rel=1e-9)
     assert hdri.weighted.sum() == pytest.approx(uniform.weighted.sum(), rel=1e-4)
     # cell by cell the splat carries a fine moire; over 8 x 8 blocks it is gone
     ratio = hdri.weighted[0] / uniform.weighted[0]
@@ -57,7 +59,7 @@ def test_small_bright_sun_keeps_its_energy_and_direction():
     image, az, zen = equirect_patch(width, height, azimuth=(np.radians(119.0), np.radians(120.5)),
                                     zenith=(np.radians(40.0), np.radians(40.9)), radiance=1e5)
     sky = EquirectSky(image)
-    energy = sky.total_irradiance()[0]
+    energy = sky.image_irradiance()[0]
     # exact irradiance of the patch: L * integral of cos(theta) d_omega over it
     expected = 1e5 * (az[1] - az[0]) * 0.5 * (np.sin(zen[1]) ** 2 - np.sin(zen[0]) ** 2)
     assert energy == pytest.approx(expected, rel=1e-9)
@@ -80,7 +82,7 @@ def test_rotation_turns_the_sky_towards_the_east():
     tx, ty = centroid(turned.weighted, grid)
     assert ny > 0.5 and abs(nx) < 0.01  # centre column looks north
     assert tx > 0.5 and abs(ty) < 0.01  # turned by 90 degrees: now east
-    assert turned.total == pytest.approx(north.total)
+    assert turned.irradiance == pytest.approx(north.irradiance)
 
 
 def test_equirect_east_is_at_three_quarters_of_the_width():
@@ -95,7 +97,7 @@ def test_raster_off_the_sky_counts_as_outside():
     image = np.ones((128, 256, 3), np.float32)
     grid = sky_grid((40, 40), (20, 30), 0.01)  # a small window away from the zenith
     raster = EquirectSky(image).raster(grid)
-    assert raster.total == pytest.approx(np.full(3, np.pi), rel=1e-9)
+    assert raster.irradiance == pytest.approx(np.full(3, np.pi), rel=1e-9)
     assert raster.outside[0] > 3.0
 
 
@@ -187,7 +189,7 @@ def test_clear_sky_levels_match_ineichen_with_perez_efficacy(turbidity):
         for elevation in (10.0, 15.0, 30.0, 60.0, 90.0):
             sky = ProceduralSky(turbidity, SunDisc(np.radians(200.0), np.radians(elevation)), altitude=altitude)
             direct, diffuse = reference_daylight(elevation, turbidity, altitude)
-            assert sky.total_sun_irradiance() @ LUMA == pytest.approx(direct, rel=0.02), (elevation, altitude)
+            assert sky.undimmed_sun_irradiance() @ LUMA == pytest.approx(direct, rel=0.02), (elevation, altitude)
             assert hemisphere_irradiance(sky.radiance) @ LUMA == pytest.approx(diffuse, rel=0.02), (elevation, altitude)
     # the shade is lit by a blue sky, the flecks by a sun whiter at noon than at sunset
     high, low = (ProceduralSky(turbidity, SunDisc(0.0, np.radians(e))) for e in (60.0, 8.0))
@@ -200,13 +202,13 @@ def test_clear_day_diffuse_share_is_that_of_measured_clear_skies():
     # turbidity 3, sun at 60 degrees: diffuse over global 0.12 to 0.16 (clear skies measured by
     # Littlefair 1985; the Preetham zenith luminance taken as absolute gave 0.28)
     sky = sun_sky(60.0, turbidity=3.0)
-    direct, diffuse = sky.total_sun_irradiance() @ LUMA, sky.sky_irradiance @ LUMA
+    direct, diffuse = sky.undimmed_sun_irradiance() @ LUMA, sky.sky_irradiance @ LUMA
     assert 0.12 < diffuse / (direct + diffuse) < 0.16
-    assert sky.unshadowed() @ LUMA == pytest.approx(direct + diffuse, rel=5e-4)  # the kernel sum, to 2e-4
+    assert unshadowed(sky) @ LUMA == pytest.approx(direct + diffuse, rel=5e-4)  # the kernel sum, to 2e-4
     shares = []  # more haze: a smaller direct share
     for T in (2.0, 3.0, 5.0, 8.0):
         s = sun_sky(60.0, turbidity=T)
-        shares.append(s.total_sun_irradiance() @ LUMA / (s.unshadowed() @ LUMA))
+        shares.append(s.undimmed_sun_irradiance() @ LUMA / (unshadowed(s) @ LUMA))
     assert np.all(np.diff(shares) < 0)
 
 
@@ -232,7 +234,7 @@ def test_sun_kernel_keeps_the_disc_energy(limb):
             assert kernel.weighted.dtype == np.float32
             total = kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
             assert total == pytest.approx(disc_horizontal_irradiance(sky), rel=1e-3)
-            assert total == pytest.approx(sky.sun_irradiance(), rel=1e-3)
+            assert total == pytest.approx(sun_irradiance(sky), rel=1e-3)
 
 
 def test_sun_kernel_keeps_its_energy_when_the_disc_spans_few_cells():
@@ -293,7 +295,7 @@ def test_procedural_raster_total_outside_and_folding():
     for grid in (square(300, np.tan(np.radians(70.0)) / 300), sky_grid((40, -80), (50, 70), 0.01)):
         raster = sky.raster(grid)
         assert raster.weighted.dtype == np.float32 and raster.weighted.shape == (3,) + grid.shape
-        assert raster.total == pytest.approx(full, rel=1e-3)
+        assert raster.irradiance == pytest.approx(full, rel=1e-3)
         # outside, independently: a fine midpoint rule over the hemisphere, less the grid's rectangle
         theta = (np.arange(1500) + 0.5) * (np.pi / 2 / 1500)
         phi = (np.arange(3000) + 0.5) * (2 * np.pi / 3000)
@@ -307,7 +309,7 @@ def test_procedural_raster_total_outside_and_folding():
     grid = square(60, 0.02)
     folded = sky.raster(grid, fold_period=(32, 48))
     assert folded.weighted.shape == (3, 32, 48) and sky_offset(folded.grid) == (0, 0)
-    assert folded.total == pytest.approx(sky.raster(grid).total, rel=1e-6)
+    assert folded.irradiance == pytest.approx(sky.raster(grid).irradiance, rel=1e-6)
 
 
 def test_procedural_raster_cells_are_radiance_times_projected_solid_angle():
@@ -323,12 +325,12 @@ def test_procedural_raster_cells_are_radiance_times_projected_solid_angle():
         sky.raster(square(400, 0.005)).weighted.sum(axis=(1, 2), dtype=np.float64))
 
 
-def test_unshadowed_is_raster_total_plus_sun_kernel():
+def test_unshadowed_is_raster_irradiance_plus_sun_kernel():
     sky = sun_sky(55.0, 300.0, moon=moon_at(SunDisc(np.radians(300.0), np.radians(55.0)), 0.004))
     raster = sky.raster(square(200, 0.015))
     kernel = sun_kernel(sky, 4e-4)
-    total = raster.total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
-    assert total == pytest.approx(sky.unshadowed(), rel=1e-3)
+    total = raster.irradiance + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
+    assert total == pytest.approx(unshadowed(sky), rel=1e-3)
 
 
 class Overcast:
@@ -377,7 +379,7 @@ def test_clouds_compose_by_the_protocol():
     a, b = clear.raster(grid), cloudy.raster(grid)
 
     np.testing.assert_allclose(b.weighted, 0.5 * a.weighted + 2.0 * projected_solid_angle(grid)[None], rtol=1e-5)
-    assert b.total == pytest.approx(0.5 * a.total + 2.0 * np.pi, rel=1e-3)
+    assert b.irradiance == pytest.approx(0.5 * a.irradiance + 2.0 * np.pi, rel=1e-3)
     assert cloudy.sun_fraction() == pytest.approx(0.5)
     q = 5e-4
     np.testing.assert_allclose(sun_kernel(cloudy, q).weighted, 0.5 * sun_kernel(clear, q).weighted, rtol=1e-6)
@@ -394,13 +396,13 @@ def test_equirect_integral_and_orientation():
     image = sky.equirect(width)
     assert image.shape == (512, 1024, 3) and image.dtype == np.float32
     assert np.all(image[256:] == 0)  # below the horizon
-    total = EquirectSky(image).total_irradiance()
-    assert total == pytest.approx(sky.unshadowed(), rel=1e-2)
+    total = EquirectSky(image).image_irradiance()
+    assert total == pytest.approx(unshadowed(sky), rel=1e-2)
     row, col = np.unravel_index(np.argmax(image[..., 1]), image.shape[:2])
     assert col == int(0.75 * width) or col == int(0.75 * width) - 1
     assert (row + 0.5) / 512 * 180 == pytest.approx(60.0, abs=0.5)  # zenith angle 60 degrees
     eclipsed = sun_sky(30.0, 90.0, moon=moon_at(sky.sun, 0.0, radius=1.05 * sky.sun.angular_radius))
-    assert EquirectSky(eclipsed.equirect(width)).total_irradiance() == pytest.approx(eclipsed.unshadowed(), rel=1e-2)
+    assert EquirectSky(eclipsed.equirect(width)).image_irradiance() == pytest.approx(unshadowed(eclipsed), rel=1e-2)
     assert eclipsed.equirect(width).max() < 0.01 * image.max()
 
 
@@ -446,9 +448,9 @@ def test_cut_sun_finds_the_sun_of_an_hdri(azimuth, elevation, rotation):
     texel = np.pi / 512
     truth = unit_vector(sky.sun.azimuth + rotation, sky.sun.elevation)
     assert angle_between(cut.sun_direction, truth) < 0.25 * texel  # (180, 20): on the seam of the image
-    assert cut.sun_irradiance() == pytest.approx(sky.sun_irradiance(), rel=1e-3)
+    assert cut.sun_irradiance() == pytest.approx(sun_irradiance(sky), rel=1e-3)
     # exact bookkeeping: the image lost what the sun carries away
-    assert cut.total_irradiance() + cut.sun_irradiance() == pytest.approx(hdri.total_irradiance(), rel=1e-9)
+    assert cut.image_irradiance() + cut.sun_irradiance() == pytest.approx(hdri.image_irradiance(), rel=1e-9)
     assert cut_sun(cut) is cut
 
 
@@ -459,8 +461,8 @@ def test_cut_sun_kernel_and_coarse_sky_balance_the_original():
     kernel = sun_kernel(cut, minor / 16)
     e = kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
     assert e == pytest.approx(cut.sun_irradiance(), rel=1e-3)
-    assert cut.total_irradiance() + e == pytest.approx(hdri.total_irradiance(), rel=1e-3)  # measured 1e-4
-    assert cut.total_irradiance()[1] < 0.5 * hdri.total_irradiance()[1]  # the sun was most of the light
+    assert cut.image_irradiance() + e == pytest.approx(hdri.image_irradiance(), rel=1e-3)  # measured 1e-4
+    assert cut.image_irradiance()[1] < 0.5 * hdri.image_irradiance()[1]  # the sun was most of the light
     sx, sy = centroid(kernel.weighted, kernel.grid)
     tx, ty = cut.sun_direction[:2] / cut.sun_direction[2]
     assert sx == pytest.approx(tx, abs=0.05 * minor / 16) and sy == pytest.approx(ty, abs=0.05 * minor / 16)
@@ -506,7 +508,7 @@ def test_skylight_scales_the_blue_sky_and_leaves_the_sun():
     s = np.array([[0.3, -0.2], [1.5, 0.4]])
     assert not dark.radiance(s).any() and not dark.sky_irradiance.any()
     np.testing.assert_allclose(half.radiance(s), 0.5 * sky.radiance(s), rtol=1e-12)
-    np.testing.assert_allclose(dark.sun_irradiance(), sky.sun_irradiance(), rtol=1e-12)
+    np.testing.assert_allclose(sun_irradiance(dark), sun_irradiance(sky), rtol=1e-12)
     assert dark.sun_fraction() == sky.sun_fraction() == 1.0
 
 
@@ -524,7 +526,7 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
     path.write_text(yaml.safe_dump(config))
     assert main(["sky", str(path), "--width", "1024", "-o", str(tmp_path / "sky.exr")]) == 0
     assert main(["ground", str(path), "-o", str(tmp_path / "ground.exr")]) == 0
-    sky_total = EquirectSky(io.read_image(tmp_path / "sky.exr")).total_irradiance()
+    sky_total = EquirectSky(io.read_image(tmp_path / "sky.exr")).image_irradiance()
     ground = io.read_image(tmp_path / "ground.exr")  # the sun window, 20..22 m: 17 m (3 tan 80) from the leaves
     assert np.ptp(ground[..., 1]) < 1e-3 * ground[..., 1].mean()  # open ground: no shadow
     assert ground.reshape(-1, 3).mean(axis=0) == pytest.approx(sky_total, rel=1e-2)
@@ -549,15 +551,15 @@ def test_every_sky_model_implements_the_sky_protocol(name):
     assert isinstance(sky, Sky)
     grid = sky_grid((-2, -2), (5, 5), 0.1)
     raster = sky.raster(grid)
-    assert raster.weighted.shape == (3, 5, 5) and raster.total.shape == (3,)
+    assert raster.weighted.shape == (3, 5, 5) and raster.irradiance.shape == (3,)
     folded = sky.raster(grid, fold_period=(2, 3))
     assert folded.weighted.shape == (3, 2, 3)
-    assert folded.total == pytest.approx(raster.total, rel=1e-5)
+    assert folded.irradiance == pytest.approx(raster.irradiance, rel=1e-5)
     has_sun = sky.sun is not None
     assert has_sun == (name in ("hdri-sun", "procedural"))
     fraction = sky.sun_fraction()
     assert isinstance(fraction, float) and (0.0 < fraction <= 1.0 if has_sun else fraction == 0.0)
-    sun = np.asarray(sky.total_sun_irradiance())
+    sun = np.asarray(sky.undimmed_sun_irradiance())
     assert sun.shape == (3,) and (np.all(sun > 0) if has_sun else np.all(sun == 0))
     irradiance = np.asarray(sky.sky_irradiance)
     assert irradiance.shape == (3,) and np.all(irradiance > 0)
@@ -576,8 +578,8 @@ def test_sky_protocol_values_keep_each_models_meaning():
     assert np.array_equal(uniform.view_radiance(w, w[:, :2] / w[:, 2:]), np.float32([[1.0, 2.0, 0.5]] * 2))
     for name in ("hdri", "hdri-sun"):
         hdri = skies[name]
-        assert np.array_equal(hdri.sky_irradiance, hdri.total_irradiance())
-        assert np.array_equal(hdri.total_sun_irradiance(), hdri.sun_irradiance())
+        assert np.array_equal(hdri.sky_irradiance, hdri.image_irradiance())
+        assert np.array_equal(hdri.undimmed_sun_irradiance(), hdri.sun_irradiance())
     assert skies["hdri-sun"].sun_fraction() == 1.0
     procedural = skies["procedural"]
     s = w[:, :2] / w[:, 2:]

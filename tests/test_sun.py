@@ -19,7 +19,9 @@ from pipeline import cache, ephemeris, io
 from pipeline.ground import render_ground
 from pipeline.inputs import load_sky
 from pipeline.plan import plan_run, scene_at
-from pipeline.sky import LIMB_DARKENING, ProceduralSky, SunDisc
+from pipeline.sky import ProceduralSky
+from pipeline.sun_disc import LIMB_DARKENING, SunDisc
+from pipeline.sun_kernel import sun_irradiance
 
 from reference import (angle_between, disc_directions, image_transmittance, limb_darkened_profile,
                        monte_carlo_irradiance, monte_carlo_sun, offset_direction, pinhole_irradiance,
@@ -297,7 +299,7 @@ def test_sun_irradiance_under_an_eclipse_is_the_horizontal_integral(tmp_path):
     config = pinhole_config(tmp_path, "open.png", elevation=40.0, azimuth=75.0,
                             moon=((0.0, 0.15), (0.0, 0.15)))
     sky = load_sky(config.sky, scene_at(config, 0))
-    np.testing.assert_allclose(sky.sun_irradiance(), eclipsed_sun_irradiance(config, sky), rtol=5e-4)
+    np.testing.assert_allclose(sun_irradiance(sky), eclipsed_sun_irradiance(config, sky), rtol=5e-4)
 
 
 def test_opaque_canopy_stops_the_sun_and_its_edge_casts_the_penumbra(tmp_path, store):
@@ -343,7 +345,7 @@ def test_opaque_canopy_stops_the_sun_and_its_edge_casts_the_penumbra(tmp_path, s
                                sun_direction=centre, right=right, up=up, radius=sun.radius, n=128,
                                rng=rng)
     ours = result.irradiance[row, cols].astype(np.float64) - sky_part
-    full = sky.sun_irradiance()
+    full = sun_irradiance(sky)
     umbra, open_ = x < edge - 0.1, x > edge + 0.1
     assert umbra.sum() >= 5 and open_.sum() >= 5 and (~umbra & ~open_).sum() >= 5
     assert np.abs(ours[umbra]).max() < 0.005 * full.max()
@@ -376,7 +378,7 @@ def test_sun_kernel_at_5_degrees_is_the_pinhole_ellipse():
     uniform disc at 5 degrees: its chords through the ellipse's centre, from each cell's
     coverage (its value over L cos^4(theta) q^2), are the pinhole geometry's axes to 0.2%."""
     from pipeline.geometry import pinhole_image_axes
-    from pipeline.sky import ProceduralSky, SunDisc, sun_kernel
+    from pipeline.sun_kernel import sun_kernel
 
     h, r = np.radians(5.0), np.radians(0.2666)
     sky = ProceduralSky(3.0, SunDisc(0.0, h, r, (0.0, 0.0, 0.0)))
