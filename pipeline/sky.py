@@ -98,7 +98,20 @@ class UniformSky:
         return np.zeros(3)
 
     def view_radiance(self, w, s, footprint=None) -> np.ndarray:
-        """The radiance (..., 3) float32, the same along every unit vector w (..., 3). [radiance]"""
+        """The sky's radiance along view directions: the same along every one.
+
+        Parameters
+        ----------
+        w : numpy.ndarray
+            (..., 3) unit vectors [1].
+        s, footprint :
+            Unused (the ``Sky`` interface).
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., 3) float32 radiance [radiance].
+        """
         radiance = np.asarray(self.radiance, dtype=np.float32)
         return np.broadcast_to(radiance, np.shape(w)[:-1] + radiance.shape).copy()
 

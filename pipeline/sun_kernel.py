@@ -30,8 +30,8 @@ KERNEL_FLOOR = float(np.radians(2.0))
 takes such a sun's light as unshadowed (``framing.SHADOW_FLOOR``). [rad]"""
 
 KERNEL_CACHE_SAMPLES = 1 << 20
-"""Most sub-samples of a sun kernel whose undimmed samples (``_kernel_samples``) are kept for the
-next frame: 32 MB of them, to a kernel of 64 x 64 cells at 8 x 8 sub-samples. [count]"""
+"""Most sub-samples of a sun kernel whose samples before the clouds (``_kernel_samples``) are kept
+for the next frame: 32 MB of them, to a kernel of 64 x 64 cells at 8 x 8 sub-samples. [count]"""
 
 
 def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
@@ -136,11 +136,11 @@ def unshadowed(sky: ProceduralSky | EquirectSky) -> np.ndarray:
 
 
 def _kernel_samples(sky, q: float) -> tuple:
-    """(grid, sub-sample side h_sub [tan], ((cells, undimmed sun radiance (k, n, n, 3), cos^4(theta)
-    (k, n, n)), ...)) of ``sun_kernel``: its sub-samples by chunks of cells, before the clouds
-    dim the sun. Kept
-    (``_kept_kernel_samples``) for a procedural sky, whose sun changes far more slowly than its
-    clouds, where there are at most KERNEL_CACHE_SAMPLES of them. [kcd/m^2 for a procedural sky]"""
+    """(grid, sub-sample side h_sub [tan], ((cells, sun radiance cut by the moon (k, n, n, 3),
+    cos^4(theta) (k, n, n)), ...)) of ``sun_kernel``: its sub-samples by chunks of cells, before
+    the clouds dim the sun. Kept (``_kept_kernel_samples``) for a procedural sky, whose sun changes
+    far more slowly than its clouds, where there are at most KERNEL_CACHE_SAMPLES of them.
+    [kcd/m^2 for a procedural sky]"""
     if isinstance(sky, ProceduralSky):
         key = replace(sky, clouds=None, time=0.0)
         try:
