@@ -337,8 +337,9 @@ class ProceduralSky:
     def _relative_sky(self, s) -> np.ndarray:
         """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1. [1]"""
         w = _unit(s)
-        return clearsky.relative_sky(w[..., 2], _angle(w, self.sun_direction), sun_zenith=np.pi / 2 - self.sun.elevation,
-                                     turbidity=self.turbidity, shape=self.shape, cie_type=self.cie_type)
+        return clearsky.relative_sky(w[..., 2], _angle(w, self.sun_direction),
+                                     sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
+                                     shape=self.shape, cie_type=self.cie_type)
 
     @cached_property
     def _relative_irradiance(self) -> np.ndarray:

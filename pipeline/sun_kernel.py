@@ -35,7 +35,8 @@ for the next frame: 32 MB of them, to a kernel of 64 x 64 cells at 8 x 8 sub-sam
 
 
 def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
-    """The sun disc for the two-scale method (docs/method.md, "Two scales for the sun") on a fine sky-plane grid of cell q.
+    """The sun disc on a fine sky-plane grid of cell q, for the two-scale method (docs/method.md,
+    "Two scales for the sun").
 
     Limb-darkened, cut by the moon, dimmed by the clouds' transmittance towards the sun's centre,
     rasterized directly on the sky plane (a low sun is an ellipse stretched radially by about
