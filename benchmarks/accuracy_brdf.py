@@ -108,15 +108,14 @@ def config_case(path: str, samples: int) -> None:
     from pipeline import cache, camera
     from pipeline.cycle import cycle_item
     from pipeline.ground import render_ground, sky_view_terms
-    from pipeline.inputs import load_sky
     from pipeline.plan import plan_run
     from pipeline.resolve import load
 
     plan = plan_run(load(path))
-    brdf, view, layer = plan.config.ground.brdf, plan.camera, plan.layers[0]
+    brdf, view, layer = plan.ground.brdf, plan.camera, plan.layers[0]
     with tempfile.TemporaryDirectory() as folder:
         store = cache.Cache(Path(folder))
-        sky = load_sky(plan.config.sky, plan.scenes[0])
+        sky = plan.sky.at(plan.scenes[0])
         ground = render_ground(plan, 0, store=store, workers=2, sky=sky, coarse_sky=True)
         item = cycle_item(plan, 0, 0, store, workers=2)
         raster = ground.coarse_sky[2][0]

@@ -216,3 +216,25 @@ def pinhole_image_axes(height: float, elevation: float, angular_radius: float) -
     length = height * (1.0 / np.tan(lo) - 1.0 / np.tan(hi))
     width = 2.0 * height * np.sin(angular_radius) / np.sqrt(np.sin(lo) * np.sin(hi))
     return float(length), float(width)
+
+
+def offset_direction(azimuth, elevation, dx, dy):
+    """The direction at gnomonic offset (dx to the right, dy up) from (azimuth, elevation): the
+    inverse of ``ephemeris.moon_offset_from_sun``.
+
+    Parameters
+    ----------
+    azimuth, elevation : float
+        The centre direction [rad].
+    dx, dy : float
+        The offset on the tangent plane, to the right and up [tan].
+
+    Returns
+    -------
+    tuple of float
+        (azimuth in [0, 2 pi), elevation) [rad].
+    """
+    s, e_az, e_el = tangent_axes(azimuth, elevation)
+    w = s + dx * e_az + dy * e_el
+    w /= np.linalg.norm(w)
+    return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))

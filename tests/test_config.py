@@ -9,7 +9,6 @@ import pytest
 from pipeline import clearsky, sky
 from pipeline.config import load_config, parse_config
 from pipeline.errors import ConfigError
-from pipeline.inputs import load_sky
 from pipeline.plan import plan_run
 from pipeline.resolve import resolve
 from pipeline.vocabulary import CIE_TYPE_RANGE, SKY_MODELS
@@ -160,4 +159,4 @@ def test_the_names_a_config_gives_are_those_the_models_know(tmp_path):
     for model in SKY_MODELS:
         data = {**base_config(), "sky": {"model": model, **({"hdri": "sky.exr"} if model == "hdri" else {})}}
         plan = plan_run(resolve(parse_config(data, tmp_path)))
-        assert isinstance(load_sky(plan.config.sky, plan.scenes[0]), sky.Sky), model
+        assert isinstance(plan.sky.at(plan.scenes[0]), sky.Sky), model
