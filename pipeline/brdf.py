@@ -6,7 +6,11 @@ through them. ``lambert`` never comes here: its frames keep the camera's own pat
 Directions are unit vectors (..., 3) in world axes pointing away from the ground: ``v`` towards
 the viewer, ``l`` towards the light. Both conventions of relative azimuth in the literature
 are avoided by writing each model with vectors: the hot spot is v = l (the viewer has the light
-behind), where the phase angle g (cos g = v . l) is 0."""
+behind), where the phase angle g (cos g = v . l) is 0.
+
+Why one module: the models, their shape normalised to the albedo, the view bands and the ground
+seen through them are one approximation of Max's f_r(V, L), each tuned against the others
+(``choose_bands`` measures the bands' blend against the shape, ``sky_ratio`` corrects it)."""
 
 from __future__ import annotations
 

@@ -25,6 +25,9 @@ Two layouts, both exact for the discrete sum (docs/method.md, "The correlation")
   the sky outside the square is added times the mean transmittance of the tile.
 
 Spectra are complex64 (float32 rasters); ``workers`` is the FFT thread count.
+
+Why one module: the isolated, periodic and fine-sun correlations share the one orientation of
+offsets fixed above and its index bookkeeping; apart, each would restate the sign conventions.
 """
 
 from __future__ import annotations
