@@ -3,6 +3,10 @@ done, and the resume that finds nothing to do (docs/runs.md, "The run folder", "
 
 Nothing here imports numpy or a stage, so that a resume with nothing to do is decided in a
 fraction of a second (``nothing_to_do``); ``run`` renders what is left.
+
+Why one module: the folder's files (their names, index.json, run.json) and the checks of which
+frames are done are one format, written by a render and read by the resume; split, each part
+would import the others' names. Most of its length is its numpydoc docstrings.
 """
 
 from __future__ import annotations
