@@ -4,6 +4,9 @@ when asked for one, so that ``config`` reads them without importing a physics mo
 
 from .registry import Model, Registry
 
+__all__ = ["PROCEDURAL_MODELS", "SKY_MODELS", "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
+           "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "BRDF_PRESETS"]
+
 PROCEDURAL_MODELS = ("cie", "preetham")
 """The procedural sky's models (sky.model), named by the clear sky's angular shape."""
 
@@ -32,12 +35,12 @@ FOREGROUNDS = Registry(
 (``foregrounds.ForegroundModel``)."""
 
 CIE_TYPE_RANGE = (1, 15)
-"""The CIE standard general skies (ISO 15469:2004), numbered from first to last."""
+"""The CIE standard general skies (ISO 15469:2004), numbered from first to last. [1]"""
 
 DEFAULT_CIE_TYPE = 12
 """The clear sky drawn when a config names no type: CIE type 12, the standard clear sky of low
 illuminance turbidity (docs/accuracy.md, "Daylight: the clear sky in absolute units", says how it
-was chosen)."""
+was chosen). [1]"""
 
 TURBIDITY_RANGE = (1.5, 10.0)
 """Linke turbidity factors accepted: the climatology's values lie within (about 1.8 to 7), and
@@ -52,7 +55,7 @@ light (sun and sky), ``shade`` the sky's light alone (the shade under trees come
 the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
 
 SEED_MAX = 2**63 - 1
-"""Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer."""
+"""Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer. [1]"""
 
 NUMBER_RANGES = {
     "animation.fps": (0.01, 1000.0, "frames per second"),
