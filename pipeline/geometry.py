@@ -21,7 +21,7 @@ import numpy as np
 __all__ = [
     "Grid", "lattice_offset", "sky_grid", "sky_offset", "fold", "wrapped_spans", "direction_vector", "tangent_axes",
     "normalized", "sky_plane_from_direction", "direction_from_sky_plane", "cos4_antiderivative",
-    "projected_solid_angle", "sky_square_irradiance", "I0", "pinhole_image_axes",
+    "projected_solid_angle", "sky_square_irradiance", "I0", "pinhole_image_axes", "offset_direction",
 ]
 
 
