@@ -4,7 +4,8 @@ when asked for one, so that ``config`` reads them without importing a physics mo
 
 from .registry import Model, Registry
 
-__all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS", "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
+__all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS",
+           "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
            "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "BRDF_PRESETS"]
 
 PROCEDURAL_MODELS = ("cie", "preetham")
