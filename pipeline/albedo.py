@@ -104,8 +104,8 @@ class StochasticTiling:
     """A periodic albedo MipMap laid on the ground by Heitz & Neyret's stochastic tiling
     (built by ``stochastic_tiling``).
 
-    texture : camera.MipMap with outside "periodic" -- the tile. [1]
-    gaussian : camera.MipMap of the tile's Gaussian form (same levels). [1]
+    texture : texture.MipMap with outside "periodic" -- the tile. [1]
+    gaussian : texture.MipMap of the tile's Gaussian form (same levels). [1]
     center : (channels,) the tile's mean; basis (channels, channels): its principal axes
         (columns). [1]
     lookups : (levels, channels, LOOKUP_BINS) -- per level and component, the component's mean
@@ -163,7 +163,7 @@ class StochasticTiling:
         return np.stack([unit_hash(key) * px, unit_hash(key ^ SECOND_KEY) * py], -1)
 
     def sample(self, fp, *, lod_bias: float) -> np.ndarray:
-        """The tiled albedo averaged over ground footprints ``fp`` (camera.Footprints):
+        """The tiled albedo averaged over ground footprints ``fp`` (texture.Footprints):
         (channels, n) float32. [1]
 
         Compiled (``_filter``): the lattice weights and offsets of every footprint, its reads
@@ -171,7 +171,7 @@ class StochasticTiling:
         mean, 0; about 1.95 reads a pixel instead of 3), filtered with the footprint's tap
         count and levels, chosen once for its reads, then the blend and the inverse lookups.
         ``sample_arrays(fp, lod_bias=, skip=SKIP_WEIGHT)`` is the reference (numpy)."""
-        from . import _filter, camera
+        from . import _filter, texture
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
@@ -179,16 +179,16 @@ class StochasticTiling:
             return out
         if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
             return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
-        x, y, major, ex, ey = camera._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
+        x, y, major, ex, ey = texture._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
         weight = np.empty((3, n))
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
         m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
-        taps, level, blend = camera._filter_choice(self.gaussian, lod_bias, major, fp.minor)
+        taps, level, blend = texture._filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
-        _filter.filtered(*camera._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
+        _filter.filtered(*texture._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
         _filter.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
                               np.ascontiguousarray(self.lookups, dtype=np.float64),
@@ -199,7 +199,7 @@ class StochasticTiling:
     def sample_arrays(self, fp, *, lod_bias: float, skip: float = 0.0) -> np.ndarray:
         """``sample`` with whole arrays (numpy), reads of weight under ``skip`` left out: the
         reference of the compiled pass. (channels, n) float32. [1]"""
-        from . import camera
+        from . import texture
 
         vertices, w = self.weights(fp.x, fp.y)
         w = w**BLEND_SHARPNESS
@@ -207,11 +207,11 @@ class StochasticTiling:
         offset = self.offsets(vertices)
         g = np.zeros((self.channels, len(fp)), dtype=np.float64)
         for i in range(3):
-            moved = camera.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
-                                      fp.ex, fp.ey)
-            g += np.where(w[i] < skip, 0.0, w[i]) * camera._filtered_arrays(self.gaussian, moved, lod_bias)
+            moved = texture.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
+                                       fp.ex, fp.ey)
+            g += np.where(w[i] < skip, 0.0, w[i]) * texture._filtered_arrays(self.gaussian, moved, lod_bias)
         g /= np.sqrt(np.sum(w * w, axis=0))
-        _, level, blend = camera._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
+        _, level, blend = texture._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
         level = level.astype(np.intp)
         upper = np.minimum(level + 1, self.gaussian.count - 1)
         position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
@@ -252,9 +252,9 @@ def unit_hash(key: np.ndarray) -> np.ndarray:
 
 
 def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
-    """The Heitz & Neyret tiling of a periodic albedo MipMap (``camera.mipmap``, outside
+    """The Heitz & Neyret tiling of a periodic albedo MipMap (``texture.mipmap``, outside
     "periodic"), its triangles period / TILING_CELLS_PER_PERIOD a side (the longer period)."""
-    from . import camera
+    from .texture import mipmap
     from scipy.special import ndtri
 
     if texture.outside != "periodic":
@@ -274,8 +274,8 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
         gaussian[np.argsort(components[:, c].astype(np.float32)), c] = quantiles
     px, py = texture.period
     grid = Grid((0.0, py), px / cols, (rows, cols))
-    gauss_map = camera.mipmap(gaussian.reshape(rows, cols, channels), grid,
-                              outside="periodic", period=(px, py))
+    gauss_map = mipmap(gaussian.reshape(rows, cols, channels), grid,
+                       outside="periodic", period=(px, py))
     centres = -4.0 + 8.0 * (np.arange(LOOKUP_BINS) + 0.5) / LOOKUP_BINS
     lookups = np.empty((gauss_map.count, channels, LOOKUP_BINS))
     for k in range(gauss_map.count):
