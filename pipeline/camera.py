@@ -24,16 +24,26 @@ import numpy as np
 
 from . import texture
 
+__all__ = ["MIN_DOWNWARD", "MIN_UPWARD", "Camera", "background", "equirect_lookup", "ground_distance",
+           "ground_fraction_rows", "ground_hits", "ground_irradiance", "ground_view", "horizon_sky", "image_rays",
+           "pixel_rays", "project_points", "sky_view"]
 
 @dataclass(frozen=True)
 class Camera:
-    """A pinhole camera.
+    """A pinhole camera, level (no roll).
 
-    position : (x, y, z) of the pinhole. [m]
-    yaw : azimuth of the view direction, from north towards east. [rad]
-    pitch : elevation of the view direction, in [-pi/2, pi/2], negative looking down. [rad]
-    vertical_fov : full vertical field of view, in (0, pi). [rad]
-    width, height : image size. [pixel]
+    Parameters
+    ----------
+    position : (float, float, float)
+        (x, y, z) of the pinhole. [m]
+    yaw : float
+        Azimuth of the view direction, from north towards east. [rad]
+    pitch : float
+        Elevation of the view direction, in [-pi/2, pi/2], negative looking down. [rad]
+    vertical_fov : float
+        Full vertical field of view, in (0, pi). [rad]
+    width, height : int
+        Image size. [pixel]
     """
 
     position: tuple[float, float, float]
@@ -53,7 +63,22 @@ class Camera:
 
     @classmethod
     def look_at(cls, position, target, *, vertical_fov: float, width: int, height: int) -> "Camera":
-        """The camera at ``position`` [m] looking at ``target`` [m] (level, no roll)."""
+        """The camera at ``position`` looking at ``target`` (level, no roll).
+
+        Parameters
+        ----------
+        position, target : array_like
+            (x, y, z) of the pinhole and of the point seen at the image's centre; they differ. [m]
+        vertical_fov : float
+            Full vertical field of view, in (0, pi). [rad]
+        width, height : int
+            Image size. [pixel]
+
+        Returns
+        -------
+        Camera
+            Its yaw and pitch those of ``target - position``.
+        """
         d = np.asarray(target, dtype=np.float64) - np.asarray(position, dtype=np.float64)
         if not np.any(d):
             raise ValueError("target and position coincide")
@@ -78,8 +103,21 @@ class Camera:
 
 
 def image_rays(camera: Camera, u, v) -> np.ndarray:
-    """World directions (..., 3), not normalised, through image points (u, v) [pixel]: the
-    point on the image plane at distance 1 along ``forward``. [m per m of depth]"""
+    """World directions through image points.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+    u, v : array_like
+        Image coordinates, of one shape (...). [pixel]
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float64 directions, not normalised: the point on the image plane at distance 1
+        along ``forward``. [m per m of depth]
+    """
     right, up, forward = camera.basis
     x = (np.asarray(u, dtype=np.float64) - 0.5 * camera.width) / camera.focal
     y = (0.5 * camera.height - np.asarray(v, dtype=np.float64)) / camera.focal
@@ -87,7 +125,18 @@ def image_rays(camera: Camera, u, v) -> np.ndarray:
 
 
 def pixel_rays(camera: Camera) -> np.ndarray:
-    """Directions (height, width, 3) through every pixel centre, as ``image_rays``."""
+    """Directions through every pixel centre, as ``image_rays``.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) float64 directions, not normalised. [m per m of depth]
+    """
     right, up, forward = camera.basis
     x = (np.arange(camera.width, dtype=np.float64) + 0.5 - 0.5 * camera.width) / camera.focal
     y = (0.5 * camera.height - (np.arange(camera.height, dtype=np.float64) + 0.5)) / camera.focal
@@ -98,8 +147,23 @@ def pixel_rays(camera: Camera) -> np.ndarray:
 
 
 def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Image coordinates (u, v) [pixel] and depth along ``forward`` [m] of world points
-    (..., 3) [m]. Points at depth <= 0 are behind the pinhole; their (u, v) are meaningless."""
+    """Where world points land in the image.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+    points : array_like
+        (..., 3) world points. [m]
+
+    Returns
+    -------
+    u, v : numpy.ndarray
+        (...) float64 image coordinates. [pixel]
+    depth : numpy.ndarray
+        (...) float64 depth along ``forward``; points at depth <= 0 are behind the pinhole and
+        their (u, v) are meaningless. [m]
+    """
     right, up, forward = camera.basis
     d = np.asarray(points, dtype=np.float64) - np.asarray(camera.position)
     depth = d @ forward
@@ -127,8 +191,20 @@ MIN_UPWARD = 1e-3
 infinity at the horizon: |s| <= 1 / MIN_UPWARD. [1]"""
 
 def ground_fraction_rows(camera: Camera) -> np.ndarray:
-    """Fraction (height,) float64 of each image row's pixels that lies below the horizon. [1]
+    """The fraction of each image row's pixels that lies below the horizon.
 
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height,) float64 fraction, in [0, 1]. [1]
+
+    Notes
+    -----
     The camera has no roll, so the horizon (rays with wz = 0) is the image line
     v = height / 2 + focal tan(pitch), the same for every column, and a ray's wz falls linearly
     with v: the fraction is the analytic coverage clip(row + 1 - v_horizon, 0, 1).
@@ -146,19 +222,29 @@ def ground_fraction_rows(camera: Camera) -> np.ndarray:
 def ground_hits(camera: Camera):
     """Where each pixel's ground part meets the ground plane z = 0, and its footprint there.
 
-    camera : Camera above the ground (position z > 0). [m]
-    Returns
-        x, y : (height, width) float64 -- the ground point seen at the centre of the pixel's
-            ground part (the whole pixel, or the part below the horizon); NaN where no ground is
-            seen. [m]
-        jacobian : (height, width, 2, 2) float64 -- d(x, y)/d(u, v), the ground steps of one
-            image pixel along u (column 0) and along v (column 1, times the ground part's
-            height): the footprint parallelogram; NaN where no ground is seen. [m per pixel]
-        distance : (height, width) float64 -- from the pinhole to that point, along the ray;
-            inf where no ground is seen. [m]
-        ground_fraction : (height, width) float64 -- the fraction of the pixel below the horizon,
-            analytic (``ground_fraction_rows``). [1]
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground (position z > 0). [m]
 
+    Returns
+    -------
+    x, y : numpy.ndarray
+        (height, width) float64: the ground point seen at the centre of the pixel's ground part
+        (the whole pixel, or the part below the horizon); NaN where no ground is seen. [m]
+    jacobian : numpy.ndarray
+        (height, width, 2, 2) float64 d(x, y)/d(u, v): the ground steps of one image pixel along
+        u (column 0) and along v (column 1, times the ground part's height), the footprint
+        parallelogram; NaN where no ground is seen. [m per pixel]
+    distance : numpy.ndarray
+        (height, width) float64: from the pinhole to that point, along the ray; inf where no
+        ground is seen. [m]
+    ground_fraction : numpy.ndarray
+        (height, width) float64: the fraction of the pixel below the horizon, analytic
+        (``ground_fraction_rows``). [1]
+
+    Notes
+    -----
     The Jacobian is the analytic derivative of the ray-plane hit P = C + t w, t = -z_C / wz:
     dP/du = t (dw/du - w (dwz/du) / wz), and the same along v. Near the horizon the hit runs to
     infinity; wz is held at -MIN_DOWNWARD or below, so every number stays finite.
@@ -217,22 +303,33 @@ def _row_hits(camera: Camera, rows, part):
 def ground_view(camera: Camera, *, irradiance, albedo: texture.MipMap):
     """The Lambertian ground z = 0 in the camera's image: radiance = albedo E / pi.
 
-    camera : Camera above the ground (position z > 0). [m]
-    irradiance : MipMap of the ground irradiance E (channels 3, or 1 for grey), or a sequence
-        of them, finest first: each but the last holds NaN beyond its raster ("constant" with
-        value NaN), and a footprint that reaches NaN is read from the next. [radiance x sr]
-    albedo : MipMap of the ground's albedo (channels 3 or 1), or a laying of one with a
-        ``sample(footprints, lod_bias=)`` method (``albedo.StochasticTiling``). [1]
-    Returns
-        radiance : (height, width, 3) float32 -- albedo E / pi over the pixel's ground part, with
-            albedo and E each averaged over its ground footprint (``ground_hits``,
-            ``sample_footprint``); 0 where no ground is seen. [radiance]
-        ground_fraction : (height, width) float32 -- the fraction of the pixel below the horizon:
-            the anti-aliased horizon; read-only, made once per camera. [1]
-        distance : (height, width) float32 -- from the pinhole to the ground point seen, along
-            the ray (for aerial perspective); inf where no ground is seen; read-only, made
-            once per camera. [m]
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground (position z > 0). [m]
+    irradiance : texture.MipMap or sequence of texture.MipMap
+        The ground irradiance E (channels 3, or 1 for grey), or a sequence of maps, finest
+        first: each but the last holds NaN beyond its raster ("constant" with value NaN), and a
+        footprint that reaches NaN is read from the next. [radiance x sr]
+    albedo : texture.MipMap or albedo.StochasticTiling
+        The ground's albedo (channels 3 or 1), or a laying of one with a
+        ``sample(footprints, lod_bias=)`` method. [1]
 
+    Returns
+    -------
+    radiance : numpy.ndarray
+        (height, width, 3) float32: albedo E / pi over the pixel's ground part, with albedo and
+        E each averaged over its ground footprint (``ground_hits``,
+        ``texture.sample_footprint``); 0 where no ground is seen. [radiance]
+    ground_fraction : numpy.ndarray
+        (height, width) float32: the fraction of the pixel below the horizon, the anti-aliased
+        horizon; read-only, made once per camera. [1]
+    distance : numpy.ndarray
+        (height, width) float32: from the pinhole to the ground point seen, along the ray (for
+        aerial perspective); inf where no ground is seen; read-only, made once per camera. [m]
+
+    Notes
+    -----
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
@@ -247,9 +344,22 @@ def ground_view(camera: Camera, *, irradiance, albedo: texture.MipMap):
 
 
 def ground_irradiance(camera: Camera, *, irradiance) -> np.ndarray:
-    """The ground's horizontal irradiance E (height, width, 3) float32 that each pixel sees,
-    averaged over its ground footprint as ``ground_view`` averages it (the same filtered
-    chain), without the albedo; 0 where no ground is seen. [radiance x sr]"""
+    """The ground's horizontal irradiance E that each pixel sees, without the albedo.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground (position z > 0). [m]
+    irradiance : texture.MipMap or sequence of texture.MipMap
+        The ground irradiance, as ``ground_view`` takes it. [radiance x sr]
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) float32: E averaged over each pixel's ground footprint as
+        ``ground_view`` averages it (the same filtered chain); 0 where no ground is seen.
+        [radiance x sr]
+    """
     rows, e = _seen_irradiance(camera, irradiance)
     out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if len(rows):
@@ -282,9 +392,21 @@ def _ground_fractions(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=1)
 def ground_distance(camera: Camera) -> np.ndarray:
-    """(height, width) float32 distance from the pinhole to the ground point each pixel sees,
-    along the ray (``ground_view``'s), inf where no ground is seen: made once for the frames of
-    a run, whose camera stands still. Read-only. [m]"""
+    """The distance from the pinhole to the ground point each pixel sees, along the ray.
+
+    Made once for the frames of a run, whose camera stands still.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground (position z > 0). [m]
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width) float32, read-only: ``ground_view``'s distance; inf where no ground is
+        seen. [m]
+    """
     rows, _ = _ground_rows(camera)
     distance = np.full((camera.height, camera.width), np.inf, dtype=np.float32)
     if len(rows):
@@ -355,13 +477,22 @@ def _row_footprints_arrays(camera: Camera, rows, part):
 
 
 def sky_view(camera: Camera, sky) -> np.ndarray:
-    """The sky's radiance (height, width, 3) float32 in the camera's image, without the sun disc.
+    """The sky's radiance in the camera's image, without the sun disc.
 
-    sky : a ``sky.Sky``, asked for its ``view_radiance`` along each pixel's unit vector w, at
-        sky-plane points s = (wx / wz, wy / wz) [tan] with wz / |w| held at MIN_UPWARD or more,
-        with a pixel's width on the sky plane along the radius and across as the footprint.
-    Each pixel cut by the horizon is sampled at the centre of its sky part; pixels wholly below
-    the horizon are 0. [radiance]
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+    sky : sky.Sky
+        Asked for its ``view_radiance`` along each pixel's unit vector w, at sky-plane points
+        s = (wx / wz, wy / wz) [tan] with wz / |w| held at MIN_UPWARD or more, with a pixel's
+        width on the sky plane along the radius and across as the footprint.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) float32: each pixel cut by the horizon sampled at the centre of its
+        sky part; 0 for pixels wholly below the horizon. [radiance]
     """
     out = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     rows, w, s, footprint = _sky_rays(camera)
@@ -390,13 +521,24 @@ def _sky_rays(camera: Camera):
 
 
 def horizon_sky(camera: Camera, sky) -> np.ndarray:
-    """The sky's radiance (width, 3) float32 just above the horizon in each image column: the
-    radiance of an endless column of haze seen level (the sky model holds its haze), which
-    the ground tends to with distance (Koschmieder 1924, ``render.render_frame``).
+    """The sky's radiance just above the horizon in each image column.
 
-    Each column is sampled in its direction at the horizon, raised to wz / |w| = MIN_UPWARD,
-    with the footprint of ``sky_view`` there (the cloud pattern filtered to its mean so far
-    out). sky : as ``sky_view``. [radiance]
+    The radiance of an endless column of haze seen level (the sky model holds its haze), which
+    the ground tends to with distance (Koschmieder 1924, ``frame.render_frame``).
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera.
+    sky : sky.Sky
+        As ``sky_view`` takes it.
+
+    Returns
+    -------
+    numpy.ndarray
+        (width, 3) float32: each column sampled in its direction at the horizon, raised to
+        wz / |w| = MIN_UPWARD, with the footprint of ``sky_view`` there (the cloud pattern
+        filtered to its mean so far out). [radiance]
     """
     right, up, forward = camera.basis
     u = np.arange(camera.width, dtype=np.float64) + 0.5
@@ -413,14 +555,30 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
 
 
 def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
-    """Bilinear samples (..., 3) float32 of an equirectangular image (height, width, 3) in the
-    directions of unit vectors w (..., 3), in the convention of docs/method.md (top row at the zenith,
-    centre column north, east at three quarters of the width, texel centres at
-    ((col + 0.5) / width, (row + 0.5) / height)); ``rotation`` [rad] turns the image about the
-    zenith towards the east. Columns wrap round; rows are held at the poles. ``sky_only``: rows
-    are held to the upper half too, so that a direction just above the horizon never blends in
-    the image's ground below it (the ground plane stands for that: blended, it drew a dark band
-    over the horizon)."""
+    """Bilinear samples of an equirectangular image in given directions.
+
+    The image's convention is that of docs/method.md, "Conventions": top row at the zenith, centre
+    column north, east at three quarters of the width, texel centres at
+    ((col + 0.5) / width, (row + 0.5) / height). Columns wrap round; rows are held at the poles.
+
+    Parameters
+    ----------
+    image : array_like
+        (height, width, 3) equirectangular image. [radiance]
+    w : array_like
+        (..., 3) unit vectors. [1]
+    rotation : float, optional
+        Turns the image about the zenith towards the east. [rad]
+    sky_only : bool, optional
+        Rows are held to the upper half too, so that a direction just above the horizon never
+        blends in the image's ground below it (the ground plane stands for that: blended, it
+        drew a dark band over the horizon).
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float32 samples. [radiance]
+    """
     image = np.asarray(image)
     height, width = image.shape[:2]
     w = np.asarray(w, dtype=np.float64)
@@ -443,10 +601,27 @@ def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) 
 def background(camera: Camera, *, irradiance, albedo: texture.MipMap, sky, seen_sky=None):
     """The background B of the composite: ground and sky blended by the horizon's coverage.
 
-    Returns radiance (height, width, 3) float32 = f ground + (1 - f) sky [radiance], with f the
-    pixel's ground fraction, and distance (height, width) float32, the ground's (inf where
-    there is no ground) [m]; see ``ground_view`` and ``sky_view``. ``seen_sky``: the sky's
-    ``sky_view`` made before (not changed), so that a frame's light passes read the sky once.
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground (position z > 0). [m]
+    irradiance : texture.MipMap or sequence of texture.MipMap
+        The ground irradiance, as ``ground_view`` takes it. [radiance x sr]
+    albedo : texture.MipMap or albedo.StochasticTiling
+        The ground's albedo, as ``ground_view`` takes it. [1]
+    sky : sky.Sky
+        As ``sky_view`` takes it.
+    seen_sky : numpy.ndarray, optional
+        The sky's ``sky_view`` made before (not changed), so that a frame's light passes read
+        the sky once. [radiance]
+
+    Returns
+    -------
+    radiance : numpy.ndarray
+        (height, width, 3) float32: f ground + (1 - f) sky, with f the pixel's ground fraction
+        (``ground_view``, ``sky_view``). [radiance]
+    distance : numpy.ndarray
+        (height, width) float32: the ground's (inf where there is no ground). [m]
     """
     ground, fraction, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
     sky_radiance = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()

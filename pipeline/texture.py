@@ -50,17 +50,27 @@ class MipMap:
     the outside value, or area-averaged when periodic), down to a single texel; all levels are
     stored flat, one after another, in ``texels``.
 
-    texels : ndarray (texels, channels) float32 -- every level, rows first, each stored with a
-        border of one texel all round: ``value`` ("constant"), or the texels of the opposite
-        edge ("periodic"), so that a bilinear sample's four texels are always stored at the
-        same offsets from the first.
-    shapes : ((rows, cols), ...) -- each level's size, without the border.
-    offsets : (int, ...) -- index in ``texels`` of each level's first stored texel.
-    origins : ((x, y), ...) -- north-west corner of each level's texel [0, 0]. [m]
-    pixels : ((px, py), ...) -- each level's texel width (along x) and height (along y). [m]
-    outside : "constant" or "periodic".
-    value : ndarray (channels,) float32 or None -- the value beyond the raster ("constant").
-    period : (Px, Py) or None -- the tiling period ("periodic"). [m]
+    Parameters
+    ----------
+    texels : numpy.ndarray
+        (texels, channels) float32: every level, rows first, each stored with a border of one
+        texel all round: ``value`` ("constant"), or the texels of the opposite edge
+        ("periodic"), so that a bilinear sample's four texels are always stored at the same
+        offsets from the first. [units of the raster]
+    shapes : tuple of (int, int)
+        Each level's (rows, cols), without the border. [texel]
+    offsets : tuple of int
+        Index in ``texels`` of each level's first stored texel.
+    origins : tuple of (float, float)
+        North-west corner (x, y) of each level's texel [0, 0]. [m]
+    pixels : tuple of (float, float)
+        Each level's texel width (along x) and height (along y). [m]
+    outside : {"constant", "periodic"}
+        The rule for the plane beyond the raster.
+    value : numpy.ndarray or None
+        (channels,) float32: the value beyond the raster ("constant"). [units of the raster]
+    period : (float, float) or None
+        The tiling period (Px, Py) ("periodic"). [m]
     """
 
     texels: np.ndarray
@@ -74,6 +84,7 @@ class MipMap:
 
     @property
     def channels(self) -> int:
+        """Number of channels of the raster."""
         return self.texels.shape[1]
 
     @property
@@ -83,11 +94,23 @@ class MipMap:
 
     @property
     def mean(self) -> np.ndarray:
-        """The mean (channels,) of the raster: its coarsest level's, for a periodic map. [units of the raster]"""
+        """The raster's mean (channels,) float64: its coarsest level's, for a periodic map.
+        [units of the raster]"""
         return self.level(self.count - 1).reshape(-1, self.channels).mean(axis=0, dtype=np.float64)
 
     def level(self, k: int) -> np.ndarray:
-        """Level ``k`` (rows, cols, channels) float32 without its border (a read-only view)."""
+        """One level of the pyramid, without its border.
+
+        Parameters
+        ----------
+        k : int
+            The level, 0 (the raster) to ``count - 1`` (one texel).
+
+        Returns
+        -------
+        numpy.ndarray
+            (rows, cols, channels) float32, a read-only view. [units of the raster]
+        """
         rows, cols = self.shapes[k]
         stored = self.texels[self.offsets[k] : self.offsets[k] + (rows + 2) * (cols + 2)]
         view = stored.reshape(rows + 2, cols + 2, self.channels)[1 : rows + 1, 1 : cols + 1]
@@ -98,12 +121,17 @@ class MipMap:
 def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) -> MipMap:
     """The mip map of a north-up raster on the ground plane, and the rule for the plane beyond it.
 
-    raster : (rows, cols, channels) -- e.g. irradiance [radiance x sr] or albedo [1]; not changed.
-    grid : Grid of the raster (``grid.shape == (rows, cols)``). [m]
-    outside : "constant" -- beyond the raster the plane holds ``value`` (an isolated grove: the
-        ground beyond the shadow window gets the unshadowed irradiance); odd sizes are padded
-        with ``value`` before each 2 x 2 average, which is then exact for that infinite plane.
-        "periodic" -- the raster tiles the plane with period ``period``: a point is moved by
+    Parameters
+    ----------
+    raster : array_like
+        (rows, cols, channels): e.g. irradiance [radiance x sr] or albedo [1]; not changed.
+    grid : geometry.Grid
+        The raster's grid (``grid.shape == (rows, cols)``). [m]
+    outside : {"constant", "periodic"}
+        "constant": beyond the raster the plane holds ``value`` (an isolated grove: the ground
+        beyond the shadow window gets the unshadowed irradiance); odd sizes are padded with
+        ``value`` before each 2 x 2 average, which is then exact for that infinite plane.
+        "periodic": the raster tiles the plane with period ``period``: a point is moved by
         whole periods into the fundamental cell [x_min, x_min + Px) x [y_min, y_min + Py) (the
         raster's south-west corner), and only that cell of the raster is used, so a raster larger
         than one period must itself be periodic. When a period is a whole number of pixels
@@ -111,9 +139,15 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
         area averages of the texels taken as piecewise constant, onto ceil(P / pixel) texels a
         little narrower than the raster's (a blur of under one pixel). Odd sizes of the periodic
         levels are averaged the same way, so every level has exactly the raster's mean.
-    value : (channels,) or scalar -- the value beyond the raster ("constant" only).
-    period : (Px, Py) -- the tiling period, positive and at most the raster's extent
-        ("periodic" only). [m]
+    value : array_like or float, optional
+        (channels,) or a scalar: the value beyond the raster ("constant" only). [units of the raster]
+    period : (float, float), optional
+        The tiling period (Px, Py), positive and at most the raster's extent ("periodic" only). [m]
+
+    Returns
+    -------
+    MipMap
+        The levels, down to one texel, and the outside rule.
     """
     a = np.asarray(raster, dtype=np.float32)
     if a.ndim != 3:
@@ -263,9 +297,14 @@ class Footprints:
     """Ground footprints of image pixels, each replaced by its ellipse of inertia (``footprints``).
     They depend on the view only: one set serves every raster read through it.
 
-    x, y : (n,) float64 -- the centres. [m]
-    major, minor : (n,) float64 -- box widths along the ellipse's axes, major >= minor. [m]
-    ex, ey : (n,) float64 -- unit vector along the major axis. [1]
+    Parameters
+    ----------
+    x, y : numpy.ndarray
+        (n,) float64: the centres. [m]
+    major, minor : numpy.ndarray
+        (n,) float64: box widths along the ellipse's axes, major >= minor. [m]
+    ex, ey : numpy.ndarray
+        (n,) float64: unit vector along the major axis. [1]
     """
 
     x: np.ndarray
@@ -276,15 +315,25 @@ class Footprints:
     ey: np.ndarray
 
     def __len__(self) -> int:
+        """Number of footprints."""
         return len(self.x)
 
 
 def footprints(x, y, jacobian) -> Footprints:
     """The ellipses of the footprints of image pixels on the ground.
 
-    x, y : (n,) ground points, the footprints' centres. [m]
-    jacobian : (n, 2, 2) d(x, y)/d(u, v): column 0 is the ground step of one image pixel along
-        u, column 1 along v; the footprint is the parallelogram they span. [m per pixel]
+    Parameters
+    ----------
+    x, y : array_like
+        (n,) ground points, the footprints' centres. [m]
+    jacobian : array_like
+        (n, 2, 2) d(x, y)/d(u, v): column 0 is the ground step of one image pixel along u,
+        column 1 along v; the footprint is the parallelogram they span. [m per pixel]
+
+    Returns
+    -------
+    Footprints
+        Each footprint's ellipse of the same second moments (``sample_footprint``).
     """
     x = np.asarray(x, dtype=np.float64).ravel()
     y = np.asarray(y, dtype=np.float64).ravel()
@@ -298,12 +347,25 @@ def footprints(x, y, jacobian) -> Footprints:
 def sample_footprint(mip: MipMap, x, y, jacobian, *, lod_bias: float = LOD_BIAS) -> np.ndarray:
     """Averages of a mip-mapped raster over the ground footprints of image pixels.
 
-    mip : MipMap of the raster.
-    x, y : (n,) ground points, the footprints' centres. [m]
-    jacobian : (n, 2, 2) d(x, y)/d(u, v): column 0 is the ground step of one image pixel along
-        u, column 1 along v; the footprint is the parallelogram they span. [m per pixel]
-    Returns (n, channels) float32 in the raster's units.
+    Parameters
+    ----------
+    mip : MipMap
+        The raster's mip map.
+    x, y : array_like
+        (n,) ground points, the footprints' centres. [m]
+    jacobian : array_like
+        (n, 2, 2) d(x, y)/d(u, v): column 0 is the ground step of one image pixel along u,
+        column 1 along v; the footprint is the parallelogram they span. [m per pixel]
+    lod_bias : float, optional
+        Added to the mip level chosen from the footprint. [level]
 
+    Returns
+    -------
+    numpy.ndarray
+        (n, channels) float32: each footprint's average. [units of the raster]
+
+    Notes
+    -----
     Anisotropic filtering, as GPUs do it: the footprint is replaced by the ellipse of the same
     second moments (eigen-decomposition of J J^T; for a rectangle its axes are the sides), of
     box widths w_major >= w_minor. n_taps = min(ceil(w_major / max(w_minor, texel)), MAX_TAPS)
@@ -313,14 +375,27 @@ def sample_footprint(mip: MipMap, x, y, jacobian, *, lod_bias: float = LOD_BIAS)
     the default bias (LOD_BIAS) the filter's width is close to the footprint's; 0 is the GPU
     rule, blurrier. ``sample_footprints`` does the work; it reads several rasters through one
     set of ``footprints``.
-
-    lod_bias : added to the level. [level]
     """
     return sample_footprints(mip, footprints(x, y, jacobian), lod_bias=lod_bias)
 
 
 def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS) -> np.ndarray:
-    """``sample_footprint`` of footprints already reduced to ellipses: (n, channels) float32."""
+    """``sample_footprint`` of footprints already reduced to ellipses.
+
+    Parameters
+    ----------
+    mip : MipMap
+        The raster's mip map.
+    fp : Footprints
+        The footprints' ellipses (``footprints``).
+    lod_bias : float, optional
+        Added to the mip level chosen from the footprint. [level]
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, channels) float32: each footprint's average. [units of the raster]
+    """
     return np.ascontiguousarray(_filtered(mip, fp, lod_bias).T)
 
 
