@@ -28,6 +28,7 @@ __all__ = ["MIN_DOWNWARD", "MIN_UPWARD", "Camera", "background", "equirect_looku
            "ground_fraction_rows", "ground_hits", "ground_irradiance", "ground_view", "horizon_sky", "image_rays",
            "pixel_rays", "project_points", "sky_view"]
 
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole camera, level (no roll).
