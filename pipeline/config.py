@@ -1,11 +1,11 @@
-"""YAML configuration to frozen, validated values.
+"""A config, YAML or a mapping, parsed and validated into frozen values.
 
 Angles are degrees in the YAML and radians in the values; lengths are metres. Every error names
 the key path (and the YAML line where there is one) and is raised before any work starts.
-File paths are relative to the folder of the config file.
+File paths are relative to the folder of the config file. The YAML is read by ``yamlsafe``.
 
-Why one module: the whole schema, every section's values, defaults and checks, with the
-one safe YAML reader they are read through; it imports no physics (docs/design.md).
+Why one module: the whole schema, every section's values, defaults and checks; it
+imports no physics (docs/design.md).
 """
 
 from __future__ import annotations
@@ -18,22 +18,30 @@ from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
-import yaml
-
 from . import __version__, paths
 from .constants import SUN_RADIUS_DEG
 from .errors import ConfigError
 from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES,
-                         PASSES, PROCEDURAL_MODELS,
-                         SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
+                         PASSES, PROCEDURAL_MODELS, SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
+from .yamlsafe import _Context, _key_lines, load_yaml
+
+__all__ = ["AUTO_LIMITS", "AUTO_TIME_CONSTANT", "FOREGROUNDS", "FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES",
+           "MAX_IMAGE_PIXELS", "MAX_LEAVES", "MAX_RADIANCE", "MOON_RADIUS_DEG", "PREVIEW_CYCLE", "PREVIEW_SCALE",
+           "PREVIEW_SUN_CELLS", "VIDEOS", "AnimationConfig", "AutoExposureConfig", "BrdfConfig", "CameraConfig",
+           "CanopyConfig", "CanopyLayer", "CloudsConfig", "Config", "FlutterConfig", "ForegroundConfig",
+           "GroundConfig", "MoonConfig", "OutputConfig", "RenderConfig", "SiteConfig", "SkyConfig", "SunConfig",
+           "TreesConfig", "default_name", "load_config", "parse_config", "preview", "size_text"]
 
 LAYOUTS = ("isolated", "periodic")
+"""The canopy's layouts: one grove or image, or a tile repeated without end."""
 MAX_LEAVES = 1_000_000
-"""Mean angular radius of the sun (959.63 arcsec at 1 au). [deg]"""
+"""Most leaves of a procedural grove, all its trees together."""
 MOON_RADIUS_DEG = 0.2725
 """Angular radius of the moon for explicit-angle eclipses: a little larger than the sun. [deg]"""
 MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
+VIDEOS = ("mp4", "gif", "none")
+"""The video formats of ``output.video``."""
 
 
 @dataclass(frozen=True)
@@ -255,9 +263,6 @@ class AnimationConfig:
     fps: float
 
 
-VIDEOS = ("mp4", "gif", "none")
-
-
 @dataclass(frozen=True)
 class OutputConfig:
     """Where a run goes: frames ``name.0000.exr`` and ``.png`` and the video ``name.mp4`` in
@@ -377,19 +382,27 @@ def preview(config: Config) -> Config:
         output=replace(config.output, folder=config.output.folder / "preview"))
 
 
-MAX_CONFIG_BYTES = 1 << 20
-"""Largest config file read. [byte]"""
-MAX_YAML_VALUES = 100_000
-"""Most keys, values and list items a config may hold, its aliases expanded."""
-MAX_YAML_DEPTH = 32
-"""Deepest nesting of mappings and lists in a config."""
-_TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
-
-
 def load_config(path, *, named_frames: bool = True) -> Config:
-    """Read and validate a YAML config file; raise ConfigError naming the file and key.
-    ``named_frames=False`` (commands that write no named frames: ``frame``, ``ground``, ``sky``,
-    ``mask``): an ``output.name`` that is no valid name is replaced by the default one."""
+    """Read and validate a YAML config file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The config file; the file paths in it are relative to its folder.
+    named_frames : bool, default True
+        False for the commands that write no named frames (``frame``, ``ground``, ``sky``,
+        ``mask``): an ``output.name`` that is no valid name is replaced by the default one.
+
+    Returns
+    -------
+    Config
+        The config's values.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key path and its line.
+    """
     node, data = load_yaml(path)
     path = Path(path)
     lines: dict[str, int] = {}
@@ -399,112 +412,31 @@ def load_config(path, *, named_frames: bool = True) -> Config:
 
 
 def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames: bool = True) -> Config:
-    """Validate a config given as a mapping (what a YAML file would hold), its file paths
-    relative to ``base_dir``, as if read from ``base_dir/NAME.yaml``; raise ConfigError naming
-    the key."""
+    """Validate a config given as a mapping, as if read from ``base_dir/NAME.yaml``.
+
+    Parameters
+    ----------
+    mapping : dict
+        What a YAML file would hold.
+    base_dir : str or path-like
+        The folder its file paths are relative to.
+    name : str, default 'config'
+        The config file's name without ``.yaml`` (the default output name).
+    named_frames : bool, default True
+        As for ``load_config``.
+
+    Returns
+    -------
+    Config
+        The config's values.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key path.
+    """
     path = Path(base_dir) / f"{name}.yaml"
     return _parse(_Section(mapping, "", _Context(path, {})), path, named_frames)
-
-
-def load_yaml(path):
-    """The one place YAML is read: (node tree, values) of a UTF-8 file of at most
-    MAX_CONFIG_BYTES, at most MAX_YAML_DEPTH deep and MAX_YAML_VALUES values with its aliases
-    expanded. Raises ConfigError naming the file (and line) before anything big is built."""
-    if problem := paths.problem(path):
-        raise ConfigError(paths.shown(path), f"bad config path: {problem}")
-    path = Path(path)
-    try:
-        with open(path, "rb") as file:
-            raw = file.read(MAX_CONFIG_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(str(path), f"cannot read the config ({exc.strerror or exc})") from None
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError(str(path), f"the config is over {MAX_CONFIG_BYTES} bytes; the most is "
-                          f"{MAX_CONFIG_BYTES} (is it a config?)")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        raise ConfigError(f"{path}:{line}", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
-                          f"offset {exc.start}); save the config as UTF-8") from None
-    loader = yaml.SafeLoader(text)
-    try:
-        depth = 0
-        for event in yaml.parse(text, Loader=yaml.SafeLoader):  # flat: no recursion
-            depth += (isinstance(event, yaml.CollectionStartEvent)
-                      - isinstance(event, yaml.CollectionEndEvent))
-            if depth > MAX_YAML_DEPTH:
-                raise ConfigError(f"{path}:{event.start_mark.line + 1}", _TOO_DEEP)
-        node = loader.get_single_node()
-        if node is not None:
-            _expanded_size(node, 0, set(), {}, path)
-        data = loader.construct_document(node) if node is not None else None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ConfigError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
-    except ConfigError:
-        raise
-    except (ValueError, OverflowError, TypeError) as exc:  # a value YAML parsed but cannot build
-        raise ConfigError(str(path), f"not valid YAML ({exc})") from None
-    finally:
-        loader.dispose()
-    return node, data
-
-
-def _expanded_size(node, depth, holders, sizes, path) -> int:
-    """Values under ``node`` with every alias expanded (``sizes`` by node id, ``holders`` the
-    nodes above it). Raises ConfigError past MAX_YAML_DEPTH or MAX_YAML_VALUES, or for an alias
-    inside what it names."""
-    where = f"{path}:{node.start_mark.line + 1}"
-    if depth > MAX_YAML_DEPTH:
-        raise ConfigError(where, _TOO_DEEP)
-    if id(node) in holders:
-        raise ConfigError(where, "an alias refers to a mapping or list that holds it")
-    if id(node) not in sizes:
-        if isinstance(node, yaml.ScalarNode):
-            return 1
-        children = node.value if isinstance(node, yaml.SequenceNode) else \
-            [n for pair in node.value for n in pair]
-        holders.add(id(node))
-        total = 1
-        for child in children:
-            total += _expanded_size(child, depth + 1, holders, sizes, path)
-            if total > MAX_YAML_VALUES:
-                raise ConfigError(where, f"holds over {MAX_YAML_VALUES} values, its aliases "
-                                  f"expanded; the most is {MAX_YAML_VALUES}")
-        holders.discard(id(node))
-        sizes[id(node)] = total
-    return sizes[id(node)]
-
-
-@dataclass(frozen=True)
-class _Context:
-    path: Path
-    lines: dict
-
-    def where(self, key: str) -> str:
-        line = self.lines.get(key)
-        location = f"{self.path}:{line}" if line else str(self.path)
-        return f"{location}: {key}" if key else location
-
-
-def _key_lines(node, prefix, lines, path):
-    """Record the YAML line of every key path; reject duplicate keys."""
-    if isinstance(node, yaml.MappingNode):
-        seen = set()
-        for key_node, value_node in node.value:
-            key = f"{prefix}.{key_node.value}" if prefix else str(key_node.value)
-            if key in seen:
-                raise ConfigError(f"{path}:{key_node.start_mark.line + 1}: {key}", "duplicate key")
-            seen.add(key)
-            lines[key] = key_node.start_mark.line + 1
-            _key_lines(value_node, key, lines, path)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            key = f"{prefix}[{i}]"
-            lines[key] = item.start_mark.line + 1
-            _key_lines(item, key, lines, path)
 
 
 _MISSING = object()
@@ -745,7 +677,18 @@ def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConf
 
 
 def size_text(count: float) -> str:
-    """A byte count for a message: '3.2 GB'. [byte]"""
+    """A byte count for a message.
+
+    Parameters
+    ----------
+    count : float
+        Bytes. [B]
+
+    Returns
+    -------
+    str
+        Three significant digits and a decimal unit, e.g. '3.2 GB'.
+    """
     for unit in ("B", "kB", "MB", "GB", "TB"):
         if count < 1000 or unit == "TB":
             return f"{count:.3g} {unit}"
@@ -753,8 +696,19 @@ def size_text(count: float) -> str:
 
 
 def default_name(path: Path) -> str:
-    """The output name a config file gives by default: its file name without the suffix, every
-    run of characters other than letters, digits, - and _ (a dot, a space) made one _."""
+    """The output name a config file gives by default.
+
+    Parameters
+    ----------
+    path : Path
+        The config file.
+
+    Returns
+    -------
+    str
+        Its file name without the suffix, every run of characters other than letters, digits,
+        - and _ (a dot, a space) made one _; 'sunshade' if nothing is left.
+    """
     name = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem).strip("_")
     return name or "sunshade"
 
@@ -1063,7 +1017,9 @@ def _parse_site(s: _Section, t: _Section) -> SiteConfig:
 
 
 MAX_IMAGE_PIXELS = 64_000_000
+"""Most pixels of the camera's picture. [pixel]"""
 FOREGROUNDS = ("trees", "passes", "none")
+"""The foreground models: the canopy's grove rendered, imported passes, or none."""
 
 
 def _parse_camera(s: _Section) -> CameraConfig:

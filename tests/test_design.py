@@ -19,7 +19,8 @@ BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}
 """Modules every layer may use."""
 
 MAY_IMPORT = {
-    "config": {"constants"},
+    "yamlsafe": set(),
+    "config": {"constants", "yamlsafe"},
     "resolve": {"config"} | PHYSICS,
     "inputs": {"config"} | PHYSICS,
     "framing": {"config", "inputs", "plan"} | PHYSICS,
@@ -30,7 +31,8 @@ MAY_IMPORT = {
     "frame": {"config", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
     "runfolder": {"config"},
 }
-"""The stages and what each may import besides BASE (docs/design.md)."""
+"""The config layer (yamlsafe, config: no physics, no numpy), the
+stages, and what each may import besides BASE (docs/design.md)."""
 
 
 def imports(name: str, *, top_level_only: bool = False) -> set[str]:
