@@ -20,7 +20,8 @@ BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}
 
 MAY_IMPORT = {
     "yamlsafe": set(),
-    "config": {"constants", "yamlsafe"},
+    "sections": {"yamlsafe"},
+    "config": {"constants", "yamlsafe", "sections"},
     "resolve": {"config"} | PHYSICS,
     "inputs": {"config"} | PHYSICS,
     "framing": {"config", "inputs", "plan"} | PHYSICS,
@@ -31,7 +32,7 @@ MAY_IMPORT = {
     "frame": {"config", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
     "runfolder": {"config"},
 }
-"""The config layer (yamlsafe, config: no physics, no numpy), the
+"""The config layer (yamlsafe, sections, config: no physics, no numpy), the
 stages, and what each may import besides BASE (docs/design.md)."""
 
 
