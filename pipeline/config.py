@@ -3,35 +3,31 @@
 Angles are degrees in the YAML and radians in the values; lengths are metres. Every error names
 the key path (and the YAML line where there is one) and is raised before any work starts.
 File paths are relative to the folder of the config file. The YAML is read by ``yamlsafe``,
-its mappings key by key by ``sections._Section``.
+its mappings key by key by ``sections._Section``, into the values of ``settings``.
 
-Why one module: the whole schema, every section's values, defaults and checks; it
-imports no physics (docs/design.md).
+Why one module: the parsers, each section's checks and limits, and the preview rules;
+it imports no physics (docs/design.md).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import re
-from dataclasses import asdict, dataclass, field, replace
-from datetime import datetime
+from dataclasses import replace
 from pathlib import Path
 
-from . import __version__
 from .constants import SUN_RADIUS_DEG
 from .sections import _Section, _is_number, _kind
-from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, PASSES,
-                         PROCEDURAL_MODELS, SKY_MODELS, TURBIDITY_RANGE, WHITE_BALANCES)
+from .settings import (AUTO_LIMITS, AUTO_TIME_CONSTANT, AnimationConfig, AutoExposureConfig, BrdfConfig, CameraConfig,
+                       CanopyConfig, CanopyLayer, CloudsConfig, Config, FlutterConfig, ForegroundConfig, GroundConfig,
+                       MoonConfig, OutputConfig, RenderConfig, SiteConfig, SkyConfig, SunConfig, TreesConfig)
+from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DISPLAYS, PASSES, PROCEDURAL_MODELS,
+                         SKY_MODELS, TURBIDITY_RANGE, WHITE_BALANCES)
 from .yamlsafe import _Context, _key_lines, load_yaml
 
-__all__ = ["AUTO_LIMITS", "AUTO_TIME_CONSTANT", "FOREGROUNDS", "FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES",
-           "MAX_IMAGE_PIXELS", "MAX_LEAVES", "MAX_RADIANCE", "MOON_RADIUS_DEG", "PREVIEW_CYCLE", "PREVIEW_SCALE",
-           "PREVIEW_SUN_CELLS", "VIDEOS", "AnimationConfig", "AutoExposureConfig", "BrdfConfig", "CameraConfig",
-           "CanopyConfig", "CanopyLayer", "CloudsConfig", "Config", "FlutterConfig", "ForegroundConfig",
-           "GroundConfig", "MoonConfig", "OutputConfig", "RenderConfig", "SiteConfig", "SkyConfig", "SunConfig",
-           "TreesConfig", "default_name", "load_config", "parse_config", "preview", "size_text"]
+__all__ = ["FOREGROUNDS", "FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
+           "MAX_RADIANCE", "MOON_RADIUS_DEG", "PREVIEW_CYCLE", "PREVIEW_SCALE", "PREVIEW_SUN_CELLS", "VIDEOS",
+           "default_name", "load_config", "parse_config", "preview", "size_text"]
 
 LAYOUTS = ("isolated", "periodic")
 """The canopy's layouts: one grove or image, or a tile repeated without end."""
@@ -43,302 +39,6 @@ MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
 VIDEOS = ("mp4", "gif", "none")
 """The video formats of ``output.video``."""
-
-
-@dataclass(frozen=True)
-class CanopyLayer:
-    """One canopy plane.
-
-    mask : tuple of Path -- transparency images (1 = open sky), north-up: one, or the frames of
-        a numbered sequence (the flutter cycle); empty for a procedural grove.
-    size : (float, float) -- metres covered by the image, x then y (the tile of a periodic
-        layout). [m]
-    center : (float, float) -- world x, y of the image centre. [m]
-    height : float -- height of the plane above the ground. [m]
-    """
-
-    mask: tuple[Path, ...]
-    size: tuple[float, float]
-    center: tuple[float, float]
-    height: float
-
-
-@dataclass(frozen=True)
-class TreesConfig:
-    """A seeded procedural grove (canopy.GroveParams): ``count`` trees of ``leaves_per_tree``
-    leaves of mean length ``leaf_length`` [m] in crowns of ``crown_radius`` [m], bases within
-    ``spread`` [m] of the canopy centre (None: chosen from the crowns)."""
-
-    count: int
-    seed: int
-    crown_radius: float
-    leaves_per_tree: int
-    leaf_length: float
-    spread: float | None
-
-
-@dataclass(frozen=True)
-class FlutterConfig:
-    """cycle : frames per flutter cycle; swing, twist : leaf amplitudes. [rad]"""
-
-    cycle: int
-    swing: float
-    twist: float
-
-
-@dataclass(frozen=True)
-class CanopyConfig:
-    """layout : 'isolated' or 'periodic'; layers : the canopy planes; trees : the procedural
-    grove (None when the layers have mask images); flutter : its motion."""
-
-    layout: str
-    layers: tuple[CanopyLayer, ...]
-    trees: TreesConfig | None
-    flutter: FlutterConfig
-
-    @property
-    def cycle(self) -> int:
-        """Frames in the canopy's cycle: the flutter cycle, or the length of the mask sequence."""
-        if self.trees is not None:
-            return self.flutter.cycle
-        return len(self.layers[0].mask)
-
-
-@dataclass(frozen=True)
-class SunConfig:
-    """The sun by explicit angles: elevation, azimuth (from north towards east), angular
-    radius. [rad]"""
-
-    elevation: float
-    azimuth: float
-    radius: float
-
-
-@dataclass(frozen=True)
-class SiteConfig:
-    """A place and a span of time: the sun and moon follow the ephemeris from ``start`` over
-    the first frame to ``end`` over the last. latitude, longitude [rad]; elevation [m]."""
-
-    latitude: float
-    longitude: float
-    elevation: float
-    start: datetime
-    end: datetime
-
-
-@dataclass(frozen=True)
-class MoonConfig:
-    """The moon's centre relative to the sun's, moving linearly from ``offset_start`` over the
-    first frame to ``offset_end`` over the last: (to the right, up) as the observer faces the
-    sun; its angular radius. [rad]"""
-
-    offset_start: tuple[float, float]
-    offset_end: tuple[float, float]
-    radius: float
-
-
-@dataclass(frozen=True)
-class CloudsConfig:
-    """cover : fraction of sky covered; scale : feature size [m]; altitude [m]; wind : (east,
-    north) [m/s]; thickness : optical depth of a full cloud; seed."""
-
-    cover: float = 0.4
-    scale: float = 800.0
-    altitude: float = 2000.0
-    wind: tuple[float, float] = (8.0, 2.0)
-    thickness: float = 1.0
-    seed: int = 1
-
-
-@dataclass(frozen=True)
-class SkyConfig:
-    """model : a name in ``vocabulary.SKY_MODELS``; radiance : linear RGB of a uniform sky;
-    hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
-    Procedural (models 'cie' and 'preetham', ``vocabulary.PROCEDURAL_MODELS``): turbidity (the Linke
-    turbidity factor; with turbidity_auto None until ``resolve.resolve`` looks it up in the
-    climatology for the site and the middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
-    time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
-    sky, 0 for the sun alone). haze : extinction length of the air the camera looks through, 0
-    for none. [m]"""
-
-    model: str
-    radiance: tuple[float, float, float]
-    hdri: Path | None
-    rotation: float
-    alpha: float
-    turbidity: float = 3.0
-    sun: SunConfig | None = None
-    site: SiteConfig | None = None
-    moon: MoonConfig | None = None
-    clouds: CloudsConfig | None = None
-    haze: float = 3000.0
-    skylight: float = 1.0
-    cie_type: int = DEFAULT_CIE_TYPE
-    turbidity_auto: bool = False
-
-
-@dataclass(frozen=True)
-class GroundConfig:
-    """window : (x_min, y_min, x_max, y_max) [m], None to frame the canopy's shadow over the
-    animation (``plan.plan_run``); pixel : ground pixel [m]. The sun's fine raster:
-    sun_window (None: the ground the camera sees of the shadow, or the window when it is given)
-    and sun_pixel (None: chosen so the sun disc spans 16 cells, within MAX_SUN_PIXELS). [m]"""
-
-    window: tuple[float, float, float, float] | None
-    pixel: float
-    sun_window: tuple[float, float, float, float] | None = None
-    sun_pixel: float | None = None
-    albedo: str | Path = "grass"
-    albedo_size: float = 4.0
-    brdf: "BrdfConfig | None" = None
-
-
-@dataclass(frozen=True)
-class BrdfConfig:
-    """The ground's reflectance (``ground.brdf``): model, a name in
-    ``vocabulary.BRDF_PARAMETERS``; parameters ((name, value), ...) in that model's order
-    [1]; preset, the name it was given by (``vocabulary.BRDF_PRESETS``) or None. None in
-    GroundConfig is ``lambert``, the paper's constant, on the code path it always had."""
-
-    model: str
-    parameters: tuple[tuple[str, float], ...] = ()
-    preset: str | None = None
-
-
-AUTO_TIME_CONSTANT = 0.2
-"""Default time constant of ``camera.exposure: auto``: the exposure closes 63% of the gap to
-the metered light in this much film time. [s]"""
-AUTO_LIMITS = (-4.0, 10.0)
-"""Default limits of ``camera.exposure: auto``: the least and the most exposure, in stops over
-the fixed exposure of the run's clear sky. [stops]"""
-
-
-@dataclass(frozen=True)
-class AutoExposureConfig:
-    """``camera.exposure: auto``: the exposure follows the open ground's light (sun times S
-    plus sky) through a first-order lag of ``time_constant`` [s of film time], clamped to
-    ``limits`` (least, most) [stops] over the fixed exposure of the clear sky."""
-
-    time_constant: float = AUTO_TIME_CONSTANT
-    limits: tuple[float, float] = AUTO_LIMITS
-
-
-@dataclass(frozen=True)
-class CameraConfig:
-    """The pinhole camera: position (x, y, z) [m], None to stand it where it sees the canopy
-    and its shadows (``framing.frame_scene``); look_at (x, y, z) [m], or else yaw (azimuth of the
-    view, from north towards east) and pitch (negative looking down) [rad], None to look at the
-    canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
-    default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
-    light; display : a name in ``vocabulary.DISPLAYS``; white_balance : a name in
-    ``vocabulary.WHITE_BALANCES``."""
-
-    position: tuple[float, float, float] | None = None
-    look_at: tuple[float, float, float] | None = None
-    yaw: float | None = None
-    pitch: float | None = None
-    fov: float = math.radians(50.0)
-    resolution: tuple[int, int] = (1280, 720)
-    exposure: float = 0.0
-    display: str = "filmic"
-    auto_exposure: AutoExposureConfig | None = None
-    white_balance: str = "daylight"
-
-
-@dataclass(frozen=True)
-class ForegroundConfig:
-    """model : 'trees' (the canopy's grove, rendered), 'passes' (imported EXR sequences
-    ``sun``, ``sky``, ``alpha``, one file per cycle frame) or 'none'."""
-
-    model: str
-    sun: tuple[Path, ...] = ()
-    sky: tuple[Path, ...] = ()
-    alpha: tuple[Path, ...] = ()
-
-
-@dataclass(frozen=True)
-class AnimationConfig:
-    """frames : number of output frames; fps : frames per second of film time. [1/s]"""
-
-    frames: int
-    fps: float
-
-
-@dataclass(frozen=True)
-class OutputConfig:
-    """Where a run goes: frames ``name.0000.exr`` and ``.png`` and the video ``name.mp4`` in
-    ``folder`` (relative to the current folder; default ``renders/NAME``); video : a name in
-    VIDEOS; half : EXR frames in half floats (else float32); passes : the light passes each
-    EXR holds as layers beside the beauty, names in ``vocabulary.PASSES`` in their order there
-    (empty: none, and the EXR's bytes are as before passes existed); report : whether a render
-    that renders frames ends by writing the run's report (light.csv, light curve, contact
-    sheet; docs/runs.md, "The report")."""
-
-    name: str
-    folder: Path
-    video: str = "mp4"
-    half: bool = True
-    passes: tuple[str, ...] = ()
-    report: bool = True
-
-
-@dataclass(frozen=True)
-class RenderConfig:
-    """jobs : processes rendering at once (None: one per core); sun_cells : cells across the
-    sun disc's diameter on its fine grid, when ground.sun_pixel does not set it (16 shows
-    crescents)."""
-
-    jobs: int | None = None
-    sun_cells: int = 16
-
-
-_NOT_IN_DIGEST = {"output": ("name", "folder", "video", "report"), "render": ("jobs",)}
-"""Values that change where or how fast frames are made, not their bytes."""
-
-
-@dataclass(frozen=True)
-class Config:
-    path: Path
-    canopy: CanopyConfig
-    sky: SkyConfig
-    ground: GroundConfig
-    animation: AnimationConfig
-    camera: CameraConfig
-    foreground: ForegroundConfig
-    output: OutputConfig
-    render: RenderConfig = RenderConfig()
-    lines: dict = field(default_factory=dict, compare=False, repr=False)
-    """The YAML line of each key path, for messages."""
-
-    def where(self, key: str) -> str:
-        """'file:line: key' (or 'file: key') for a message about ``key``."""
-        return _Context(self.path, self.lines).where(key)
-
-    def digest(self) -> str:
-        """Hash of every value that shapes a frame's bytes and of every input file's bytes,
-        with the package version (16 hex)."""
-        values = asdict(self)
-        values.pop("path")
-        values.pop("lines")
-        for section, names in _NOT_IN_DIGEST.items():
-            for name in names:
-                values[section].pop(name)
-        if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
-            values["camera"].pop("auto_exposure")
-        if not values["output"]["passes"]:  # without passes a config hashes as it always did
-            values["output"].pop("passes")
-        if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did
-            values["ground"].pop("brdf")
-        files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
-                       | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
-                       | ({str(self.sky.hdri)} if self.sky.hdri else set())
-                       | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set()))
-        h = hashlib.sha256()
-        h.update(json.dumps(values, sort_keys=True, default=str).encode())
-        h.update(__version__.encode())
-        for name in files:
-            h.update(Path(name).read_bytes())
-        return h.hexdigest()[:16]
 
 
 PREVIEW_SCALE = 4

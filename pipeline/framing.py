@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import camera, canopy
-from .config import Config
+from .settings import Config
 from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
 

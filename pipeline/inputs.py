@@ -14,8 +14,9 @@ from . import camera, canopy, foreground, io
 from . import sky as sky_models
 from .clouds import CloudLayer
 from .eclipse import METER_TABLE
-from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
+from .config import MAX_RADIANCE
 from .geometry import Grid
+from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
 from .sky import EquirectSky, UniformSky
 from .vocabulary import PROCEDURAL_MODELS
 

@@ -18,12 +18,13 @@ import numpy as np
 from . import canopy, ephemeris, io, shadow
 from . import sky as sky_models
 from .camera import Camera
-from .config import CanopyLayer, Config, size_text
+from .config import size_text
 from .errors import ConfigError
 from .framing import AUTO_SUN_MASK, frame_scene, shading_scenes, sun_lights, sun_shades  # noqa: F401
 from .geometry import Grid, sky_plane_from_direction, tangent_axes
 from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
 from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
+from .settings import CanopyLayer, Config
 from .vocabulary import PROCEDURAL_MODELS
 
 

@@ -21,18 +21,19 @@ BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}
 MAY_IMPORT = {
     "yamlsafe": set(),
     "sections": {"yamlsafe"},
-    "config": {"constants", "yamlsafe", "sections"},
-    "resolve": {"config"} | PHYSICS,
-    "inputs": {"config"} | PHYSICS,
-    "framing": {"config", "inputs", "plan"} | PHYSICS,
-    "plan": {"config", "resolve", "framing", "inputs"} | PHYSICS,
-    "lighting": {"config", "plan", "inputs"} | PHYSICS,
-    "cycle": {"config", "plan", "inputs"} | PHYSICS,
-    "ground": {"config", "plan", "cycle", "inputs"} | PHYSICS,
-    "frame": {"config", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
-    "runfolder": {"config"},
+    "settings": {"yamlsafe"},
+    "config": {"constants", "yamlsafe", "sections", "settings"},
+    "resolve": {"config", "settings"} | PHYSICS,
+    "inputs": {"config", "settings"} | PHYSICS,
+    "framing": {"config", "settings", "inputs", "plan"} | PHYSICS,
+    "plan": {"config", "settings", "resolve", "framing", "inputs"} | PHYSICS,
+    "lighting": {"config", "settings", "plan", "inputs"} | PHYSICS,
+    "cycle": {"config", "settings", "plan", "inputs"} | PHYSICS,
+    "ground": {"config", "settings", "plan", "cycle", "inputs"} | PHYSICS,
+    "frame": {"config", "settings", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
+    "runfolder": {"config", "settings"},
 }
-"""The config layer (yamlsafe, sections, config: no physics, no numpy), the
+"""The config layer (yamlsafe, sections, settings, config: no physics, no numpy), the
 stages, and what each may import besides BASE (docs/design.md)."""
 
 
