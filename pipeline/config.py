@@ -3,17 +3,15 @@
 Angles are degrees in the YAML and radians in the values; lengths are metres. Every error names
 the key path (and the YAML line where there is one) and is raised before any work starts.
 File paths are relative to the folder of the config file. The YAML is read by ``yamlsafe``,
-its mappings key by key by ``sections._Section``, into the values of ``settings``.
-
-Why one module: the parsers, each section's checks and limits, and the preview rules;
-it imports no physics (docs/design.md).
+its mappings key by key by ``sections._Section``, into the values of ``settings``; this module
+holds the parsers, each section's checks and the limits they enforce. It imports no physics
+(docs/design.md, "What each stage may import").
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import replace
 from pathlib import Path
 
 from .constants import SUN_RADIUS_DEG
@@ -26,8 +24,7 @@ from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DISPLAYS
 from .yamlsafe import _Context, _key_lines, load_yaml
 
 __all__ = ["FOREGROUNDS", "FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
-           "MAX_RADIANCE", "MOON_RADIUS_DEG", "PREVIEW_CYCLE", "PREVIEW_SCALE", "PREVIEW_SUN_CELLS", "VIDEOS",
-           "default_name", "load_config", "parse_config", "preview", "size_text"]
+           "MAX_RADIANCE", "MOON_RADIUS_DEG", "VIDEOS", "default_name", "load_config", "parse_config", "size_text"]
 
 LAYOUTS = ("isolated", "periodic")
 """The canopy's layouts: one grove or image, or a tile repeated without end."""
@@ -39,48 +36,6 @@ MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
 VIDEOS = ("mp4", "gif", "none")
 """The video formats of ``output.video``."""
-
-
-PREVIEW_SCALE = 4
-"""A preview's camera has this many times fewer pixels across, its ground pixels are this many
-times larger."""
-PREVIEW_SUN_CELLS = 6
-PREVIEW_CYCLE = 8
-"""A preview's procedural leaves flutter through at most this many cycle frames (faster than in
-the full render): the cycle phase, a mask and its spectra per cycle frame, shrinks with it."""
-
-
-def preview(config: Config) -> Config:
-    """The config made small and fast for a first look: a quarter of the camera's resolution,
-    ground pixels four times larger (less where a periodic tile must stay a whole number of
-    them), the sun disc 6 cells across (imported foreground passes keep the camera's
-    resolution), a flutter cycle of at most 8 frames for procedural trees (not with imported
-    passes, one per cycle frame), the run in the ``preview`` folder inside the output folder.
-    Everything else, every leaf and the sky included, is kept, so the crescents and flecks
-    of the full render show (docs/accuracy.md, "Speed: preview and cycle phase")."""
-    ground = config.ground
-    factor = PREVIEW_SCALE
-    if config.canopy.layout == "periodic":
-        sides = [side / ground.pixel for layer in config.canopy.layers for side in layer.size]
-        factor = next(f for f in range(PREVIEW_SCALE, 0, -1)
-                      if all(abs(n / f - round(n / f)) < 1e-6 * n for n in sides))
-    pixel = ground.pixel * factor
-    sun_pixel = None
-    if ground.sun_pixel is not None:
-        sun_pixel = min(ground.sun_pixel * 16 / PREVIEW_SUN_CELLS, pixel)
-    width, height = config.camera.resolution
-    if config.foreground.model != "passes":  # imported passes keep their size
-        width, height = max(2, width // PREVIEW_SCALE), max(2, height // PREVIEW_SCALE)
-    canopy = config.canopy
-    if canopy.trees is not None and config.foreground.model != "passes":
-        canopy = replace(canopy, flutter=replace(canopy.flutter, cycle=min(canopy.flutter.cycle, PREVIEW_CYCLE)))
-    return replace(
-        config,
-        canopy=canopy,
-        ground=replace(ground, pixel=pixel, sun_pixel=sun_pixel),
-        camera=replace(config.camera, resolution=(width, height)),
-        render=replace(config.render, sun_cells=PREVIEW_SUN_CELLS),
-        output=replace(config.output, folder=config.output.folder / "preview"))
 
 
 def load_config(path, *, named_frames: bool = True) -> Config:

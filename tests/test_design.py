@@ -22,6 +22,7 @@ MAY_IMPORT = {
     "yamlsafe": set(),
     "sections": {"yamlsafe"},
     "settings": {"yamlsafe"},
+    "preview": {"settings"},
     "config": {"constants", "yamlsafe", "sections", "settings"},
     "resolve": {"config", "settings"} | PHYSICS,
     "inputs": {"config", "settings"} | PHYSICS,
@@ -33,7 +34,7 @@ MAY_IMPORT = {
     "frame": {"config", "settings", "plan", "lighting", "cycle", "ground", "inputs"} | PHYSICS,
     "runfolder": {"config", "settings"},
 }
-"""The config layer (yamlsafe, sections, settings, config: no physics, no numpy), the
+"""The config layer (yamlsafe, sections, settings, preview, config: no physics, no numpy), the
 stages, and what each may import besides BASE (docs/design.md)."""
 
 
@@ -67,7 +68,7 @@ def test_the_physics_knows_no_config_and_no_stage(name):
 def test_a_resume_with_nothing_to_do_imports_no_numpy():
     """The command, the config and the run folder's checks (docs/design.md): a resume that
     finds every frame done is decided without numpy, a stage or a physics module."""
-    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runfolder; "
+    code = ("import sys, pipeline.cli, pipeline.config, pipeline.preview, pipeline.resolve, pipeline.runfolder; "
             "print(sorted(m for m in sys.modules if m == 'numpy' or m.startswith('pipeline.')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=PACKAGE.parent).stdout
