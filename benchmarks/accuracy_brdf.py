@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import brdf as R  # noqa: E402
 from pipeline import shadow  # noqa: E402
-from pipeline.config import BrdfConfig  # noqa: E402
+from pipeline.settings import BrdfConfig  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
 from pipeline.sky import ProceduralSky, SunDisc  # noqa: E402
 from pipeline.vocabulary import BRDF_PRESETS  # noqa: E402

@@ -10,8 +10,8 @@ import numpy as np
 
 from . import albedo as albedos
 from . import camera, canopy, foreground, io, texture
-from .config import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 from .geometry import Grid
+from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:

@@ -9,7 +9,7 @@ from pipeline import brdf as R
 from pipeline import camera as cam
 from pipeline import shadow
 from pipeline import texture
-from pipeline.config import BrdfConfig
+from pipeline.settings import BrdfConfig
 from pipeline.errors import ConfigError
 from pipeline.geometry import Grid
 from pipeline.sky import ProceduralSky, SunDisc

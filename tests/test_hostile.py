@@ -14,7 +14,8 @@ import yaml
 
 from pipeline import io, paths
 from pipeline.cli import main
-from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
+from pipeline.config import MAX_FRAMES
+from pipeline.yamlsafe import MAX_CONFIG_BYTES, MAX_YAML_DEPTH
 
 from scenes import ROOT, base_config, write_config
 
