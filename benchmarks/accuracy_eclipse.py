@@ -34,8 +34,8 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline import eclipse, ephemeris, io  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import scene_at  # noqa: E402
+from pipeline.scene import load_sky  # noqa: E402
+from pipeline.scene import scene_at  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
 from pipeline.equirect import EquirectSky  # noqa: E402
 from pipeline.sun_disc import MoonDisc, SunDisc  # noqa: E402

@@ -26,7 +26,7 @@ from pipeline import camera, composite  # noqa: E402
 from pipeline.cache import Cache  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
+from pipeline.scene import load_sky  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
 

@@ -40,7 +40,6 @@ from pipeline import io  # noqa: E402
 from pipeline.cache import Cache  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
 
@@ -116,7 +115,7 @@ def main() -> None:
                 io.write_png(args.images / f"{path.stem}-{f}.png",
                              composite.display(result.radiance, exposure=result.exposure))
             sun = plan.scenes[f].sun
-            sky = load_sky(plan.config.sky, result.scene)
+            sky = plan.sky.at(result.scene)
             shade = float(sky.sky_irradiance @ REC709_LUMINANCE)
             most = (shade + result.sun_fraction * float(sky.undimmed_sun_irradiance() @ REC709_LUMINANCE)) / shade
             window = [round(v, 1) for v in plan.window.extent]

@@ -42,8 +42,9 @@ from pipeline.colour import REC709_LUMINANCE  # noqa: E402
 from pipeline.sky import ProceduralSky  # noqa: E402
 from pipeline.sun_disc import LIMB_DARKENING, SunDisc  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import plan_run, scene_at  # noqa: E402
+from pipeline.scene import load_sky  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.scene import scene_at  # noqa: E402
 from pipeline.config import parse_config  # noqa: E402
 from pipeline.resolve import resolve  # noqa: E402
 from reference import (  # noqa: E402

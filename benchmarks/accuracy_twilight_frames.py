@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline import daylight, io  # noqa: E402
 from pipeline.cache import Cache  # noqa: E402
 from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.framing import sun_lights, sun_shades  # noqa: E402
+from pipeline.scene import sun_lights, sun_shades  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
@@ -66,7 +66,7 @@ def main() -> None:
             band = "shadow" if sun_shades(sun) else "unshadowed" if sun_lights(sun) else "set"
             ground = render_ground(plan, f, store=store)
             light = 1000.0 * (ground.irradiance @ REC709_LUMINANCE)
-            clear = daylight.sky_daylight(sun.elevation, plan.config.sky.turbidity, sun_radius=sun.angular_radius)
+            clear = daylight.sky_daylight(sun.elevation, plan.sky.config.turbidity, sun_radius=sun.angular_radius)
             reference = 1000.0 * (clear.diffuse_horizontal_illuminance + clear.direct_normal_illuminance
                                   * max(np.sin(sun.elevation), 0.0))
             open_ground = 1000.0 * float(ground.unshadowed @ REC709_LUMINANCE)

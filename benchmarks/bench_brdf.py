@@ -31,7 +31,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline import brdf as reflect  # noqa: E402
 from pipeline import cache, camera  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.resolve import load  # noqa: E402
 
@@ -76,9 +75,9 @@ def main() -> None:
 
 def hot_spot(plan, frame: int, results) -> None:
     """Print the bands and the hot spot's measured and predicted ratios."""
-    config, view = plan.config, plan.camera
-    model = config.ground.brdf
-    sky = load_sky(config.sky, plan.scenes[frame])
+    view = plan.camera
+    model = plan.ground.brdf
+    sky = plan.sky.at(plan.scenes[frame])
     chooser = plan.layers[0].coarse.sky
     raster = sky.raster(chooser)
     views = reflect.view_vectors(view)

@@ -32,9 +32,9 @@ from bench_sun import median_seconds, round_trip_seconds  # noqa: E402
 
 from pipeline import cache, camera, canopy, composite, foreground, io  # noqa: E402
 from pipeline.cycle import cycle_phase  # noqa: E402
-from pipeline.frame import foreground_passes, irradiance_maps, render_frame  # noqa: E402
+from pipeline.frame import foreground_layer, irradiance_maps, render_frame  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
-from pipeline.inputs import grove_of, ground_albedo, load_sky  # noqa: E402
+from pipeline.inputs import grove_of, ground_albedo  # noqa: E402
 from pipeline.lighting import reference_lighting  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.config import parse_config  # noqa: E402
@@ -78,7 +78,7 @@ def main() -> None:
         print(f"camera {view.width} x {view.height}; ground raster {plan.sun_window.shape} at "
               f"{plan.sun_window.pixel} m, coarse {plan.window.shape} at {plan.window.pixel} m")
 
-        skies = [load_sky(config.sky, plan.scenes[f]) for f in range(args.frames)]
+        skies = [plan.sky.at(plan.scenes[f]) for f in range(args.frames)]
         grounds = [render_ground(plan, f, store=store, workers=args.threads, sky=skies[f], outer=True)
                    for f in range(args.frames)]
         albedo = ground_albedo(config.ground)  # as render_frame reads it
@@ -97,11 +97,12 @@ def main() -> None:
             t, sky_haze, atmosphere = composite.aerial_perspective(
                 distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
                 sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
-            passes = foreground_passes(plan, i, store, light)
-            if passes is None:  # no trees in front (as render_frame)
+            fg = foreground_layer(plan, i, store, light)
+            if fg is None:  # no trees in front (as render_frame)
                 empty = np.zeros_like(background)
-                passes = (empty, empty, empty[..., 0], (slice(None), slice(None)))
-            sun, sky, alpha, region = passes
+                sun, sky, alpha, region = empty, empty, empty[..., 0], (slice(None), slice(None))
+            else:
+                sun, sky, alpha, region = fg.sun, fg.sky, fg.alpha, fg.region
             behind = t[..., None] * background + sky_haze
             frames[i] = behind + np.float32(0.0)
             frames[i][region] = composite.composite_frame(behind[region], sun_pass=sun, sky_pass=sky, alpha=alpha,

@@ -105,7 +105,7 @@ def frame_digests(config, frames, repeat) -> None:
     for _ in range(repeat):
         for frame in frames:
             start = time.perf_counter()
-            _, timings, entry, _ = _frame_task(plan, frame, root, config.digest(), default_workers())
+            _, timings, entry, _ = _frame_task(config, plan, frame, root, config.digest(), default_workers())
             totals.append(time.perf_counter() - start)
             paths = [folder / entry["files"][k]["name"] for k in ("exr", "png")]
             digests.append(seconds(lambda: [file_digest(p) for p in paths]))

@@ -28,8 +28,9 @@ from bench_cycle import CONFIG  # noqa: E402
 from pipeline import cache, shadow  # noqa: E402
 from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
-from pipeline.inputs import load_sky  # noqa: E402
-from pipeline.plan import plan_run, scene_at  # noqa: E402
+from pipeline.scene import load_sky  # noqa: E402
+from pipeline.plan import plan_run  # noqa: E402
+from pipeline.scene import scene_at  # noqa: E402
 from pipeline.config import parse_config  # noqa: E402
 from pipeline.resolve import resolve  # noqa: E402
 from pipeline.sun_kernel import sun_kernel  # noqa: E402

@@ -25,6 +25,9 @@ import math
 import numpy as np
 from numba import njit
 
+__all__ = ["filtered", "tiling_reads", "tiling_lookup", "footprint_axes", "row_footprints", "filter_choice",
+           "halve_level", "resample_separable", "haze_over", "sky_rows", "cloud_field", "lattice_read"]
+
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _first_texel(channels, offset, rows, cols, periodic, col, row):
@@ -94,13 +97,49 @@ def _coords(x0, y0, px, py, sx, sy, dx, dy):
 @njit(cache=True, nogil=True, error_model="numpy")
 def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
              level, blend, out):
-    """``camera._filtered``: each read's mean into ``out`` (channels, m) float32.
+    """``camera._filtered``: each read's mean into ``out``.
 
-    Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint
-    j = footprint[r] (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples (``camera._tap_mean``, the same float32 arithmetic
-    in the same order), in level level[j] blended by blend[j] towards the next when > 0. The
-    body is written out in full for three channels (a helper function that returns the three
-    means, even inlined, ran three times slower) and channel by channel otherwise."""
+    Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint j = footprint[r]
+    (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples
+    (``camera._tap_mean``, the same float32 arithmetic in the same order), in level level[j]
+    blended by blend[j] towards the next when > 0. The body is written out in full for three
+    channels (a helper function that returns the three means, even inlined, ran three times
+    slower) and channel by channel otherwise.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (texels x channels,) float32, every level of the mip map flat (``camera.MipMap.texels``),
+        each level stored with its border of one texel (``camera._level_tables``).
+    channels : int
+        Channels per texel.
+    offsets : numpy.ndarray
+        (levels,) int64, each level's first stored texel in ``flat`` [texel].
+    shapes : numpy.ndarray
+        (levels, 2) int64, each level's (rows, cols) without the border.
+    origins : numpy.ndarray
+        (levels, 2) float64, the north-west corner (x, y) of each level's texel [0, 0] [m].
+    pixels : numpy.ndarray
+        (levels, 2) float64, each level's texel width (along x) and height (along y) [m].
+    periodic : bool
+        The raster tiles the plane (else the border holds the outside value).
+    x, y : numpy.ndarray
+        (m,) float64, the reads' centres on the raster's plane [m].
+    footprint : numpy.ndarray
+        (m,) int, the footprint of each read.
+    major : numpy.ndarray
+        (n,) float64, each footprint's ellipse's box width along its major axis [m].
+    ex, ey : numpy.ndarray
+        (n,) float64, the unit vector of each footprint's major axis [1].
+    taps : numpy.ndarray
+        (n,) int8, samples along the major axis (``filter_choice``).
+    level : numpy.ndarray
+        (n,) int16, the mip level read.
+    blend : numpy.ndarray
+        (n,) float32, the blend towards level + 1, in [0, 1) [1].
+    out : numpy.ndarray
+        (channels, m) float32, written: the reads' means, in the raster's units.
+    """
     for r in range(x.shape[0]):
         j = footprint[r]
         lv, t, n = int(level[j]), blend[j], int(taps[j])
@@ -188,7 +227,7 @@ def _seed_key(seed):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _vertex_key(va, vb, seed_key):
     """``albedo.vertex_keys`` of one lattice vertex (va, vb), ``seed_key`` from ``_seed_key``."""
-    return ((np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))) ^ seed_key
+    return ((np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))) ^ seed_key  # noqa: E501
 
 
 _SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
@@ -212,13 +251,39 @@ def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, read_y, read_pixel, read_weight):
-    """The reads of ``albedo.StochasticTiling.sample``: per footprint j the lattice triangle's
-    three vertices and weights (``weights``) raised to the fourth power (BLEND_SHARPNESS, as
-    two squarings) and renormalised, into ``weight`` (3, n) float64, and each read of weight
-    ``skip`` or more, footprint by footprint in vertex order: its point, (x, y) moved by the
-    vertex's offset (``offsets``), into ``read_x``, ``read_y``, its footprint into
-    ``read_pixel`` and its weight into ``read_weight`` (each (3 n,), filled from the start).
-    Returns the count of reads."""
+    """The reads of ``albedo.StochasticTiling.sample``, footprint by footprint in vertex order.
+
+    Per footprint j the lattice triangle's three vertices and weights (``weights``) raised to the
+    fourth power (BLEND_SHARPNESS, as two squarings) and renormalised go into ``weight``; each read
+    of weight ``skip`` or more gets its point, (x, y) moved by the vertex's offset (``offsets``),
+    its footprint and its weight.
+
+    Parameters
+    ----------
+    x, y : numpy.ndarray
+        (n,) float64, the footprints' centres on the ground [m].
+    cell : float
+        The triangle lattice's cell [m].
+    seed : int
+        The tiling's seed.
+    skip : float
+        Reads of a lower weight are left out (``albedo.SKIP_WEIGHT``) [1].
+    period_x, period_y : float
+        The exemplar's period along x and y: a vertex's offset is uniform in [0, period) [m].
+    weight : numpy.ndarray
+        (3, n) float64, written: each footprint's three vertex weights [1].
+    read_x, read_y : numpy.ndarray
+        (3 n,) float64, written from the start: the reads' points [m].
+    read_pixel : numpy.ndarray
+        (3 n,) int, written from the start: each read's footprint.
+    read_weight : numpy.ndarray
+        (3 n,) float64, written from the start: each read's weight [1].
+
+    Returns
+    -------
+    int
+        The count of reads written.
+    """
     root3 = np.sqrt(3.0)
     seed_key = _seed_key(seed)
     count = 0
@@ -299,12 +364,36 @@ def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, looku
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
-    """The rest of ``albedo.StochasticTiling.sample``: the reads' means ``values`` (channels, m)
-    float32, footprint by footprint (``tiling_reads``' order), summed by weight into the
-    footprint's Gaussian g, divided by the root of the sum of its squared weights ``weight``
-    (3, n), mapped back through the inverse lookups of its level and the next, blended by
-    ``blend``, and out of the principal axes: the albedo into ``out`` (channels, n) float32,
-    held at 0 or more."""
+    """The rest of ``albedo.StochasticTiling.sample``: the reads' means blended into the albedo.
+
+    The reads' means, footprint by footprint (``tiling_reads``' order), are summed by weight into
+    the footprint's Gaussian g, divided by the root of the sum of its squared weights, mapped back
+    through the inverse lookups of its level and the next, blended by ``blend``, and out of the
+    principal axes, held at 0 or more.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        (channels, m) float32, the reads' means (``filtered``) in the Gaussian space [1].
+    read_pixel : numpy.ndarray
+        (m,) int, each read's footprint (``tiling_reads``).
+    read_weight : numpy.ndarray
+        (m,) float64, each read's weight [1].
+    weight : numpy.ndarray
+        (3, n) float64, each footprint's vertex weights [1].
+    level : numpy.ndarray
+        (n,) int16, each footprint's mip level.
+    blend : numpy.ndarray
+        (n,) float32, its blend towards the next level [1].
+    lookups : numpy.ndarray
+        (levels, channels, bins) float64, the inverse lookup tables per level and component [1].
+    center : numpy.ndarray
+        (channels,) float64, the exemplar's mean albedo [1].
+    basis : numpy.ndarray
+        (channels, channels) float64, the principal axes [1].
+    out : numpy.ndarray
+        (channels, n) float32, written: the albedo [1].
+    """
     channels, n = out.shape
     bins, last = lookups.shape[2], lookups.shape[0] - 1
     reads = values.shape[1]
@@ -387,7 +476,20 @@ def _axes(dxdu, dxdv, dydu, dydv):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def footprint_axes(dxdu, dxdv, dydu, dydv):
-    """``_axes`` of every Jacobian (each (n,) float64): (major, minor, ex, ey), each (n,)."""
+    """``_axes`` (``camera._footprint_axes``) of every Jacobian.
+
+    Parameters
+    ----------
+    dxdu, dxdv, dydu, dydv : numpy.ndarray
+        (n,) float64, the Jacobian's entries [m per pixel].
+
+    Returns
+    -------
+    major, minor : numpy.ndarray
+        (n,) float64, the ellipse's box widths along its axes [m].
+    ex, ey : numpy.ndarray
+        (n,) float64, the unit vector of its major axis [1].
+    """
     n = dxdu.shape[0]
     out = np.empty((4, n))
     for i in range(n):
@@ -398,8 +500,35 @@ def footprint_axes(dxdu, dxdv, dydu, dydv):
 @njit(cache=True, nogil=True, error_model="numpy")
 def row_footprints(rows, part, width, height, focal, position, right, up, forward, min_downward,
                    x, y, major, minor, ex, ey, distance):
-    """``camera._row_footprints`` (``_row_hits`` and ``_footprint_axes``) pixel by pixel, the
-    same float64 operations in the same order, into (r width,) arrays; ``distance`` float32."""
+    """``camera._row_footprints`` (``_row_hits`` and ``_footprint_axes``) pixel by pixel.
+
+    The same float64 operations in the same order as the array version.
+
+    Parameters
+    ----------
+    rows : numpy.ndarray
+        (r,) float64, image rows that see ground.
+    part : numpy.ndarray
+        (r,) float64, the fraction of each row below the horizon [1].
+    width, height : int
+        The image's size [pixel].
+    focal : float
+        The focal length [pixel].
+    position : numpy.ndarray
+        (3,) float64, the camera's position [m].
+    right, up, forward : numpy.ndarray
+        (3,) float64, the camera's unit axes [1].
+    min_downward : float
+        The least downward slope of a ray (``camera.MIN_DOWNWARD``) [1].
+    x, y : numpy.ndarray
+        (r width,) float64, written: the ground points seen [m].
+    major, minor : numpy.ndarray
+        (r width,) float64, written: the footprints' box widths [m].
+    ex, ey : numpy.ndarray
+        (r width,) float64, written: the unit vectors of their major axes [1].
+    distance : numpy.ndarray
+        (r width,) float32, written: the distance to the ground point [m].
+    """
     height_m = position[2]
     fx0, fx1 = right[0] / focal, right[1] / focal
     fz0 = right[2] / focal
@@ -432,9 +561,27 @@ def row_footprints(rows, part, width, height, focal, position, right, up, forwar
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, blend):
-    """``camera._filter_choice`` footprint by footprint, the same float64 operations: the tap
-    count into ``taps`` (int8), the level into ``level`` (int16) and the blend towards the next
-    into ``blend`` (float32)."""
+    """``camera._filter_choice`` footprint by footprint, the same float64 operations.
+
+    Parameters
+    ----------
+    texel : float
+        The mip map's finest texel, sqrt(px py) [m].
+    lod_bias : float
+        Added to the level of detail, log2 of the footprint's width over ``texel`` [1].
+    count : int
+        The mip map's levels.
+    max_taps : int
+        The most taps a footprint takes (``camera.MAX_TAPS``).
+    major, minor : numpy.ndarray
+        (n,) float64, the footprints' box widths [m].
+    taps : numpy.ndarray
+        (n,) int8, written: the tap count.
+    level : numpy.ndarray
+        (n,) int16, written: the level.
+    blend : numpy.ndarray
+        (n,) float32, written: the blend towards the next level, in [0, 1) [1].
+    """
     big = np.finfo(np.float64).max
     top = float(count - 1)
     for j in range(major.shape[0]):
@@ -475,11 +622,23 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def halve_level(texels, source, rows, cols, target):
-    """``camera._constant_levels``'s step, into a mip map's ``texels`` (n, channels): the level
-    stored at ``source`` (rows, cols, with its border of the outside value) averaged 2 x 2 into
-    the level at ``target`` (ceil(rows / 2), ceil(cols / 2)), pairs of rows first, then pairs of
-    columns, each sum halved in float32. An odd size's missing row or column is the border's
-    value, as the padding of the array version."""
+    """``camera._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
+
+    Pairs of rows first, then pairs of columns, each sum halved in float32. An odd size's missing row
+    or column is the border's value, as the padding of the array version.
+
+    Parameters
+    ----------
+    texels : numpy.ndarray
+        (texels, channels) float32, a mip map's texels (``camera.MipMap.texels``); the level at
+        ``target`` is written.
+    source : int
+        The stored level's first texel (with its border of the outside value) [texel].
+    rows, cols : int
+        The stored level's size, without the border.
+    target : int
+        The next level's first texel; it is (ceil(rows / 2), ceil(cols / 2)) [texel].
+    """
     channels = texels.shape[1]
     step, out_rows, out_cols = cols + 2, (rows + 1) // 2, (cols + 1) // 2
     half = np.float32(0.5)
@@ -497,10 +656,27 @@ def halve_level(texels, source, rows, cols, target):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
-    """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel, R and C given by the
-    columns they read and their weights, k per row (n, k): each output value the float32 sum,
-    from 0 and in that order, of weights times values, as scipy's sparse products; rows first,
-    then columns. raster (channels, rows, cols) float32, out (channels, R rows, C rows) float32."""
+    """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel.
+
+    R and C are given by the columns they read and their weights, k per row: each output value is
+    the float32 sum, from 0 and in that order, of weights times values, as scipy's sparse products;
+    rows first, then columns.
+
+    Parameters
+    ----------
+    raster : numpy.ndarray
+        (channels, rows, cols) float32, the coarse raster (irradiance [klx]).
+    row_at : numpy.ndarray
+        (R rows, k) int64, the raster rows each output row reads.
+    row_weight : numpy.ndarray
+        (R rows, k) float32, their weights [1].
+    col_at : numpy.ndarray
+        (C rows, k) int64, the raster columns each output column reads.
+    col_weight : numpy.ndarray
+        (C rows, k) float32, their weights [1].
+    out : numpy.ndarray
+        (channels, R rows, C rows) float32, written: the resampled raster, in ``raster``'s units.
+    """
     along = np.empty(raster.shape[2], dtype=np.float32)
     for ch in range(raster.shape[0]):
         for i in range(out.shape[1]):
@@ -523,10 +699,22 @@ def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def haze_over(background, transmittance, veil, horizon):
-    """``frame.render_frame``'s haze, in place: background (rows, cols, 3) float32 becomes
-    ``T B + (1 - T) L_horizon + 0`` with T ``transmittance`` and 1 - T ``veil`` (rows, cols, 1),
-    L_horizon ``horizon`` (cols, 3), in the float32 operations and order of the array version
-    (``B *= T; B += veil * L; B + 0``, the last turning -0 into +0)."""
+    """``frame.render_frame``'s haze, in place: the background becomes ``T B + (1 - T) L_horizon + 0``.
+
+    In the float32 operations and order of the array version (``B *= T; B += veil * L; B + 0``, the
+    last turning -0 into +0).
+
+    Parameters
+    ----------
+    background : numpy.ndarray
+        (rows, cols, 3) float32 radiance B, overwritten [kcd/m^2].
+    transmittance : numpy.ndarray
+        (rows, cols, 1) float32, T [1].
+    veil : numpy.ndarray
+        (rows, cols, 1) float32, 1 - T [1].
+    horizon : numpy.ndarray
+        (cols, 3) float32, the sky's radiance at the horizon L_horizon per column [kcd/m^2].
+    """
     zero = np.float32(0.0)
     for i in range(background.shape[0]):
         for j in range(background.shape[1]):
@@ -537,12 +725,33 @@ def haze_over(background, transmittance, veil, horizon):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow, weights, out):
-    """Rows ``first`` to ``first + count`` of ``sky.ProceduralSky.raster``'s weighted raster
-    ``out`` (3, rows, cols) float32: the clear sky ``along`` (3, nodes, cols) float32
-    interpolated between node rows ``row_at`` and ``row_at + 1`` by ``row_frac`` (float32),
-    where ``clouded`` times the clouds' transmittance (n, cols) float64 clipped to [0, 1] and
-    plus their ``glow`` (n, cols, 3) float32, times the cells' solid angles ``weights`` (rows,
-    cols) float32: the float32 operations of the array version, in its order."""
+    """Rows ``first`` to ``first + count`` of ``sky.ProceduralSky.raster``'s weighted raster.
+
+    The clear sky interpolated between node rows ``row_at`` and ``row_at + 1`` by ``row_frac``,
+    where ``clouded`` times the clouds' transmittance clipped to [0, 1] and plus their ``glow``,
+    times the cells' solid angles: the float32 operations of the array version, in its order.
+
+    Parameters
+    ----------
+    along : numpy.ndarray
+        (3, nodes, cols) float32, the clear sky's radiance at the node rows [kcd/m^2].
+    row_at : numpy.ndarray
+        (rows,) int, each raster row's node row.
+    row_frac : numpy.ndarray
+        (rows,) float32, its fraction towards the next node row [1].
+    first, count : int
+        The raster rows written.
+    clouded : bool
+        Whether there are clouds (else ``transmittance`` and ``glow`` are not read).
+    transmittance : numpy.ndarray
+        (count, cols) float64, the clouds' transmittance [1].
+    glow : numpy.ndarray
+        (count, cols, 3) float32, the clouds' scattered light [kcd/m^2].
+    weights : numpy.ndarray
+        (rows, cols) float32, the cells' solid angles [sr].
+    out : numpy.ndarray
+        (3, rows, cols) float32, written: the weighted raster [klx].
+    """
     one = np.float32(1.0)
     for r in range(count):
         row = first + r
@@ -561,16 +770,7 @@ def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow
 @njit(cache=True, nogil=True, error_model="numpy")
 def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
                 tile_blend, seed, base_row, base_col):
-    """The reads of ``clouds.CloudLayer.field`` in one loop over samples and taps; ``out`` (m,)
-    gets the field. [dimensionless]
-
-    rows, cols : (m,) lattice coordinates of the samples [texel of level 0].
-    direct : True reads level 0 at (rows, cols) alone (no footprint; the other arrays unused);
-        else sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i] [texel],
-        each read at level k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
-    tile_blend : ``clouds.TILE_BLEND``. seed, base_row, base_col : the layer's seed, and the
-        index of the copy of the tile whose centre is at lattice coordinates (0, 0)
-        (``CloudLayer._drifted_copies``).
+    """The reads of ``clouds.CloudLayer.field`` in one loop over samples and taps.
 
     The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols),
     uniform in [0, side) texels of level 0, as the ground albedo's stochastic tiling shifts its
@@ -584,6 +784,45 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
     scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
     value x row weight x column weight.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        Every level of the noise in one flat float64 array (``clouds._packed``) [1].
+    offsets : numpy.ndarray
+        (levels,) intp, each level's first value in ``flat``.
+    sides : numpy.ndarray
+        (levels,) intp, each (square) level's side [texel].
+    rows, cols : numpy.ndarray
+        (m,) lattice coordinates of the samples [texel of level 0].
+    direct : bool
+        True reads level 0 at (rows, cols) alone (no footprint; the arrays below unused); else
+        sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i], each read at level
+        k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    taps : numpy.ndarray
+        (m,) int, taps per sample.
+    k0 : numpy.ndarray
+        (m,) int, each sample's level.
+    blend : numpy.ndarray
+        (m,) float, its blend towards the next level [1].
+    major : numpy.ndarray
+        (m,) float64, the footprint's length along its major axis [texel of level 0].
+    ex, ey : numpy.ndarray
+        (m,) float64, the unit vector of the major axis [1].
+    out : numpy.ndarray
+        (m,) float64, written: the field [1].
+    tile_blend : float
+        ``clouds.TILE_BLEND``, the blend band's width over the side [1].
+    seed : int
+        The layer's seed.
+    base_row, base_col : int
+        The index of the copy of the tile whose centre is at lattice coordinates (0, 0)
+        (``CloudLayer._drifted_copies``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``out``.
     """
     n_levels = sides.shape[0]
     side0 = sides[0]
@@ -697,10 +936,24 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def lattice_read(flat, corner, taps, lattice, out):
-    """``brdf.sky_ratio``'s bilinear read of a lattice (channels, lattice * lattice) float32 at
-    n points, into ``out`` (channels, n) float32: point p takes the four values from flat
-    index corner[p] (its first corner), + 1, + lattice, + lattice + 1 with weights taps[:, p],
-    summed in that order in float32 (``brdf._lattice_read_arrays``)."""
+    """``brdf.sky_ratio``'s bilinear read of a lattice at n points (``brdf._lattice_read_arrays``).
+
+    Point p takes the four values from flat index corner[p] (its first corner), + 1, + lattice,
+    + lattice + 1 with weights taps[:, p], summed in that order in float32.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (channels, lattice * lattice) float32, the lattice's values [1].
+    corner : numpy.ndarray
+        (n,) intp, each point's first corner.
+    taps : numpy.ndarray
+        (4, n) float32, the bilinear weights of the four corners [1].
+    lattice : int
+        The lattice's side [count].
+    out : numpy.ndarray
+        (channels, n) float32, written: the values read [1].
+    """
     for p in range(corner.shape[0]):
         k = corner[p]
         for c in range(flat.shape[0]):

@@ -5,6 +5,9 @@ is the mean over k x k sub-samples of the exact area fraction of the sub-sample'
 lies inside the shape's local strip. These loops compute it shape by shape straight into the
 transmittance-depth raster, with the same float32 arithmetic as the array version they replace, so
 that no per-pixel fragment arrays are built. Imported lazily: numba costs 0.3 s to import.
+
+Why one module: every numba kernel of the canopy and foreground passes sits behind that one lazy
+import and one on-disk compile cache.
 """
 
 from __future__ import annotations
@@ -14,11 +17,32 @@ import math
 import numpy as np
 from numba import njit
 
+__all__ = [
+    "box_pixels", "in_order", "ellipses", "capsules", "flutter", "onto", "ellipse_params", "leaf_fragments",
+    "scatter_light", "leaf_heights",
+]
+
 
 @njit(cache=True, nogil=True)
 def box_pixels(center, half, index, rows, cols):
-    """How many pixels the boxes (centre ``center`` (m, 2), half-size half[index]) [pixel] hold
-    within the raster."""
+    """How many pixels the boxes hold within the raster.
+
+    Parameters
+    ----------
+    center : numpy.ndarray
+        (m, 2) centres of the boxes [pixel].
+    half : numpy.ndarray
+        (n, 2) half-sizes, read as half[index] [pixel].
+    index : numpy.ndarray
+        (m,) the half-size of each box.
+    rows, cols : int
+        The raster's size [pixel].
+
+    Returns
+    -------
+    int
+        The pixels [count].
+    """
     total = 0
     for ii in range(index.shape[0]):
         i = index[ii]
@@ -33,8 +57,29 @@ def box_pixels(center, half, index, rows, cols):
 
 @njit(cache=True, nogil=True)
 def in_order(order, center, half, prm, feature, thickness, owner):
-    """The shapes' arrays taken in the order ``order`` (prm as float32): the kernels then read
-    them one after another, not at random (docs/accuracy.md, "The leaf rasteriser")."""
+    """The shapes' arrays taken in the order ``order`` (prm as float32).
+
+    The kernels then read them one after another, not at random (docs/accuracy.md, "The leaf
+    rasteriser").
+
+    Parameters
+    ----------
+    order : numpy.ndarray
+        (n,) indices.
+    center, half : numpy.ndarray
+        (n, 2) [pixel].
+    prm : numpy.ndarray
+        (n, k) shape parameters.
+    feature, thickness : numpy.ndarray
+        (n,) [pixel].
+    owner : numpy.ndarray
+        (n,) shape numbers.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (center, half, prm, feature, thickness, owner) reordered; ``prm`` float32.
+    """
     n = order.shape[0]
     center_out, half_out, prm_out = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, prm.shape[1]), np.float32)
     feature_out, thickness_out, owner_out = np.empty(n), np.empty(n), np.empty(n, owner.dtype)
@@ -191,16 +236,45 @@ def _next_box(ii, center, half, index, feature, thickness, most, transmittance, 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
-    """Every ellipse's coverage c of every pixel of its box: ``transmittance`` (rows, cols)
-    float64 multiplied by 1 - c, or, if the arrays ``fragments`` (flat pixel int64, coverage
-    float32, shape int64) are not empty, fragments appended from ``count`` (returns the count;
-    ``transmittance`` then only gives the raster's shape).
+    """Every ellipse's coverage c of every pixel of its box, into the transmittance or as fragments.
 
-    center (m, 2) float64: the boxes' centres (u, v) [pixel], in the order drawn (translates of
-    a periodic canopy included); index (m,): the ellipse of each, into half (n, 2) (box
-    half-sizes), prm (n, 4) float32 (major unit vector, semi-axes A, B), feature (n,) (B),
-    thickness (n,) (2 B) [pixel] and owner (n,) (the shape number a fragment carries); most:
-    the most sub-samples of one box before k is lowered."""
+    ``transmittance`` (rows, cols) is multiplied by 1 - c, or, if the arrays ``fragments`` are not
+    empty, fragments are appended from ``count`` (``transmittance`` then only gives the raster's
+    shape).
+
+    Parameters
+    ----------
+    center : numpy.ndarray
+        (m, 2) float64: the boxes' centres (u, v), in the order drawn (translates of a periodic
+        canopy included) [pixel].
+    half : numpy.ndarray
+        (n, 2) box half-sizes of the shapes [pixel].
+    index : numpy.ndarray
+        (m,) the shape of each box, into the per-shape arrays.
+    prm : numpy.ndarray
+        (n, 4) float32 shape parameters: major unit vector, semi-axes A, B.
+    feature : numpy.ndarray
+        (n,) feature size (B) [pixel].
+    thickness : numpy.ndarray
+        (n,) thickness (2 B) [pixel].
+    most : int
+        The most sub-samples of one box before k is lowered [count].
+    transmittance : numpy.ndarray
+        (rows, cols) float64, multiplied by 1 - c in place; only its shape is read when
+        ``fragments`` has room [1].
+    fragments : tuple of numpy.ndarray
+        (flat pixel int64, coverage float32, shape int64), each (size,); empty for the
+        transmittance.
+    owner : numpy.ndarray
+        (n,) the shape number a fragment carries.
+    count : int
+        Fragments already written [count].
+
+    Returns
+    -------
+    int
+        The new count of fragments [count].
+    """
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
     for ii in range(index.shape[0]):
         i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
@@ -232,9 +306,43 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def capsules(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
-    """As ``ellipses`` for capsule pieces; prm (n, 8) float32: axis start relative to the
-    piece's centre (x0, y0), axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi)
-    of the axis whose pixels (judged at their centres) the piece draws."""
+    """As ``ellipses`` for capsule pieces.
+
+    Parameters
+    ----------
+    center : numpy.ndarray
+        (m, 2) float64: the boxes' centres (u, v), in the order drawn (translates of a periodic
+        canopy included) [pixel].
+    half : numpy.ndarray
+        (n, 2) box half-sizes of the shapes [pixel].
+    index : numpy.ndarray
+        (m,) the shape of each box, into the per-shape arrays.
+    prm : numpy.ndarray
+        (n, 8) float32 shape parameters: axis start relative to the piece's centre (x0, y0),
+        axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi) of the axis whose pixels
+        (judged at their centres) the piece draws.
+    feature : numpy.ndarray
+        (n,) feature size (the radius) [pixel].
+    thickness : numpy.ndarray
+        (n,) thickness (2 radius) [pixel].
+    most : int
+        The most sub-samples of one box before k is lowered [count].
+    transmittance : numpy.ndarray
+        (rows, cols) float64, multiplied by 1 - c in place; only its shape is read when
+        ``fragments`` has room [1].
+    fragments : tuple of numpy.ndarray
+        (flat pixel int64, coverage float32, shape int64), each (size,); empty for the
+        transmittance.
+    owner : numpy.ndarray
+        (n,) the shape number a fragment carries.
+    count : int
+        Fragments already written [count].
+
+    Returns
+    -------
+    int
+        The new count of fragments [count].
+    """
     samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
     for ii in range(index.shape[0]):
         i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
@@ -280,7 +388,28 @@ def _turn(v, k, c, s, out):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase, omega, swing, twist):
-    """canopy.leaves_at in one pass over the leaves: (center, axis_u, axis_v) (n, 3) [m]."""
+    """canopy.leaves_at in one pass over the leaves.
+
+    Parameters
+    ----------
+    center, axis_u, axis_v : numpy.ndarray
+        (n, 3) float64 rest pose of the leaves [m].
+    pivot : numpy.ndarray
+        (n, 3) stem ends [m].
+    swing_axis : numpy.ndarray
+        (n, 3) horizontal unit vectors [1].
+    swing_phase, twist_phase : numpy.ndarray
+        (n,) [rad].
+    omega : float
+        2 pi frame / cycle, the frame reduced modulo the cycle [rad].
+    swing, twist : float
+        Amplitudes [rad].
+
+    Returns
+    -------
+    center, axis_u, axis_v : numpy.ndarray
+        (n, 3) float64 [m].
+    """
     n = center.shape[0]
     c_out, u_out, v_out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     length, turned, rel = np.empty(3), np.empty(3), np.empty(3)
@@ -304,8 +433,24 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def onto(points, sx, sy, offset):
-    """canopy.project's map of ``points`` (n, 3) [m] along the sun's sky-plane point (sx, sy)
-    [tan] onto the plane z = offset [m]: (n, 2) [m], in one pass (numpy's operations, in order)."""
+    """canopy.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
+
+    numpy's operations, in order.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (n, 3) float64 [m].
+    sx, sy : float
+        The sun's sky-plane point [tan].
+    offset : float
+        Height of the plane [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 2) float64 [m].
+    """
     out = np.empty((points.shape[0], 2))
     for i in range(points.shape[0]):
         z = points[i, 2] - offset
@@ -316,10 +461,25 @@ def onto(points, sx, sy, offset):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
-    """canopy._ellipses in one pass: ellipses of centre ``center`` and conjugate semi-axes
-    ``axis_a``, ``axis_b`` (n, 2) [m] in the pixel units of a grid of ``origin`` and ``pixel``
-    [m]: (centre (n, 2), box half-size (n, 2), (major unit vector, A, max(B, 1e-4)) (n, 4), B
-    (n,), 2 B (n,)) [pixel]."""
+    """canopy._ellipses in one pass: ellipses in the pixel units of a grid.
+
+    Parameters
+    ----------
+    center : numpy.ndarray
+        (n, 2) centres [m].
+    axis_a, axis_b : numpy.ndarray
+        (n, 2) conjugate semi-axes [m].
+    origin_x, origin_y : float
+        The grid's north-west corner [m].
+    pixel : float
+        The grid's pixel [m].
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (centre (n, 2), box half-size (n, 2), (major unit vector, A, max(B, 1e-4)) (n, 4), B (n,),
+        2 B (n,)) [pixel].
+    """
     n = center.shape[0]
     c_px, half, prm = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 4))
     minor_out, thick = np.empty(n), np.empty(n)
@@ -342,13 +502,37 @@ def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
 @njit(cache=True, nogil=True)
 def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n_up, n_rel, nearest, farthest,
                    leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky):
-    """``foreground.tree_passes``'s leaf fragments (those whose ``shape`` is under ``leaves``),
-    fragment by fragment with the float64 operations of its array version in their order: the
-    depth where the pixel's ray meets the leaf's plane, ``n_rel / (n . ray)`` with n . ray kept
-    from 0 (1e-12), clamped to [nearest, farthest] of the leaf; the leaf's sun and sky light.
-    flat : pixel index (row cols + col); n_* : the leaf normal's components along the camera's
-    forward, right and up, and along the leaf from the pinhole; outputs frag_depth (n,),
-    frag_sun and frag_sky (n, 3)."""
+    """``foreground.tree_passes``'s leaf fragments (those whose ``shape`` is under ``leaves``).
+
+    Fragment by fragment with the float64 operations of its array version in their order: the depth
+    where the pixel's ray meets the leaf's plane, ``n_rel / (n . ray)`` with n . ray kept from 0
+    (1e-12), clamped to [nearest, farthest] of the leaf; the leaf's sun and sky light.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (n,) pixel index (row cols + col).
+    shape : numpy.ndarray
+        (n,) shape number of each fragment.
+    leaves : int
+        Shapes under this are leaves [count].
+    cols, rows : int
+        The image's size [pixel].
+    focal : float
+        Focal length [pixel].
+    n_forward, n_right, n_up : numpy.ndarray
+        Per shape, the leaf normal's components along the camera's forward, right and up [1].
+    n_rel : numpy.ndarray
+        Per shape, the leaf normal's component along the leaf from the pinhole [m].
+    nearest, farthest : numpy.ndarray
+        Per shape, the depth range of the leaf [m].
+    leaf_sky, leaf_sun : numpy.ndarray
+        Per shape, (shapes, 3) the leaf's sky and sun light.
+    frag_depth : numpy.ndarray
+        (n,) output depth [m].
+    frag_sun, frag_sky : numpy.ndarray
+        (n, 3) output light (sun: sky plus sun), in the units of ``leaf_sky``.
+    """
     half_cols, half_rows = 0.5 * cols, 0.5 * rows
     for f in range(flat.shape[0]):
         s = shape[f]
@@ -369,10 +553,27 @@ def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n
 
 @njit(cache=True, nogil=True)
 def scatter_light(flat, weight, frag_sun, frag_sky, pixels):
-    """``foreground.tree_passes``'s sun and sky images (pixels, 3) float64: each fragment's
-    light (n, 3) times its ``weight`` (n,) added to its pixel ``flat`` (n,), fragment after
-    fragment from 0 — the sums, in the order, of ``np.bincount(flat, weights=weight *
-    light[:, c])`` per channel."""
+    """``foreground.tree_passes``'s sun and sky images: each fragment's light times its weight added to its pixel.
+
+    Fragment after fragment from 0: the sums, in the order, of
+    ``np.bincount(flat, weights=weight * light[:, c])`` per channel.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (n,) pixel of each fragment.
+    weight : numpy.ndarray
+        (n,) weights [1].
+    frag_sun, frag_sky : numpy.ndarray
+        (n, 3) light of each fragment.
+    pixels : int
+        Pixels of the image [count].
+
+    Returns
+    -------
+    sun, sky : numpy.ndarray
+        (pixels, 3) float64, in the units of the fragments' light.
+    """
     sun = np.zeros((pixels, 3))
     sky = np.zeros((pixels, 3))
     for f in range(flat.shape[0]):
@@ -385,10 +586,31 @@ def scatter_light(flat, weight, frag_sun, frag_sky, pixels):
 
 @njit(cache=True, nogil=True)
 def leaf_heights(shape, leaves, px, py, cx, cy, slope_x, slope_y, h_center, reach, height):
-    """``foreground._visibility``'s leaf fragments (those whose ``shape`` is under ``leaves``):
-    the height towards the light of the leaf's plane over the fragment's point (px, py) [m],
-    its rise from the centre (cx, cy) along the plane's slopes clamped to [-reach, reach] of
-    the leaf, with the float64 operations of the array version in their order, into ``height``."""
+    """``foreground._visibility``'s leaf fragments (those whose ``shape`` is under ``leaves``).
+
+    The height towards the light of the leaf's plane over the fragment's point, its rise from the
+    centre along the plane's slopes clamped to [-reach, reach] of the leaf, with the float64
+    operations of the array version in their order, into ``height``.
+
+    Parameters
+    ----------
+    shape : numpy.ndarray
+        (n,) shape number of each fragment.
+    leaves : int
+        Shapes under this are leaves [count].
+    px, py : numpy.ndarray
+        (n,) the fragments' points [m].
+    cx, cy : numpy.ndarray
+        Per shape, the leaf's centre [m].
+    slope_x, slope_y : numpy.ndarray
+        Per shape, the slopes of the leaf's plane [1].
+    h_center : numpy.ndarray
+        Per shape, the height at the centre [m].
+    reach : numpy.ndarray
+        Per shape, the largest rise [m].
+    height : numpy.ndarray
+        (n,) output [m].
+    """
     for f in range(shape.shape[0]):
         s = shape[f]
         if s >= leaves:

@@ -15,6 +15,12 @@ import scipy.fft as sfft
 
 from .geometry import Grid
 
+__all__ = [
+    "GRASS_DARK", "GRASS_LIGHT", "SOIL", "periodic_noise", "grass_albedo", "TILING_CELLS_PER_PERIOD",
+    "BLEND_SHARPNESS", "SKIP_WEIGHT", "LOOKUP_BINS", "StochasticTiling", "vertex_keys", "SECOND_KEY", "unit_hash",
+    "stochastic_tiling",
+]
+
 GRASS_DARK = (0.08, 0.16, 0.05)
 GRASS_LIGHT = (0.15, 0.25, 0.08)
 SOIL = (0.20, 0.15, 0.10)
@@ -22,8 +28,24 @@ SOIL = (0.20, 0.15, 0.10)
 
 
 def periodic_noise(rng: np.random.Generator, size_px: int, *, period: float, wavelength: float) -> np.ndarray:
-    """Zero-mean, unit-variance noise (size_px, size_px) float64 that tiles with ``period`` [m],
-    its features about ``wavelength`` [m] across (Gaussian low-pass of white noise)."""
+    """Zero-mean, unit-variance noise that tiles with ``period`` (Gaussian low-pass of white noise).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the white noise.
+    size_px : int
+        Texels a side [pixel].
+    period : float
+        Side of the square it tiles with [m].
+    wavelength : float
+        Features about this wide [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (size_px, size_px) float64 [1].
+    """
     white = rng.standard_normal((size_px, size_px))
     fy = sfft.fftfreq(size_px, d=period / size_px)[:, None]  # [cycles / m]
     fx = sfft.rfftfreq(size_px, d=period / size_px)[None, :]
@@ -36,13 +58,29 @@ def periodic_noise(rng: np.random.Generator, size_px: int, *, period: float, wav
 def grass_albedo(*, size_px: int = 1024, period: float = 4.0, seed: int = 0):
     """A tileable grass-and-soil albedo texture.
 
-    size_px : texels a side. [pixel]
-    period : side of the square texture; it tiles the plane with this period. [m]
-    seed : seed of ``numpy.random.default_rng``.
-    Returns (image (size_px, size_px, 3) float32 albedo in (0, 1) [1], Grid of the texture with
-    its north-west corner at (0, period) [m]). Patches of soil (about a fifth of the area, some
-    tens of centimetres across) in grass whose shade varies in tufts and blades; the mean
-    albedo is about 0.15.
+    Patches of soil (about a fifth of the area, some tens of centimetres across) in grass whose shade
+    varies in tufts and blades; the mean albedo is about 0.15.
+
+    Parameters
+    ----------
+    size_px : int, optional
+        Texels a side, at least 8 [pixel].
+    period : float, optional
+        Side of the square texture; it tiles the plane with this period [m].
+    seed : int, optional
+        Seed of ``numpy.random.default_rng``.
+
+    Returns
+    -------
+    image : numpy.ndarray
+        (size_px, size_px, 3) float32 albedo in (0, 1) [1].
+    grid : Grid
+        The texture's grid, its north-west corner at (0, period) [m].
+
+    Raises
+    ------
+    ValueError
+        If ``size_px`` is under 8 or ``period`` not positive.
     """
     if size_px < 8:
         raise ValueError(f"size_px must be at least 8, got {size_px}")
@@ -101,18 +139,28 @@ LOOKUP_BINS = 256
 
 @dataclass(frozen=True, eq=False)
 class StochasticTiling:
-    """A periodic albedo MipMap laid on the ground by Heitz & Neyret's stochastic tiling
-    (built by ``stochastic_tiling``).
+    """A periodic albedo MipMap laid on the ground by Heitz & Neyret's stochastic tiling.
 
-    texture : camera.MipMap with outside "periodic" -- the tile. [1]
-    gaussian : camera.MipMap of the tile's Gaussian form (same levels). [1]
-    center : (channels,) the tile's mean; basis (channels, channels): its principal axes
-        (columns). [1]
-    lookups : (levels, channels, LOOKUP_BINS) -- per level and component, the component's mean
-        value at the bins' centres of the Gaussian form. [1]
-    cell : side of the lattice's triangles. [m]
-    seed : seed of the vertices' offsets (a hash of the vertex and the seed: the same on every
-        worker and in every frame).
+    Built by ``stochastic_tiling``.
+
+    Attributes
+    ----------
+    texture : texture.MipMap
+        The tile, with outside "periodic" [1].
+    gaussian : texture.MipMap
+        The tile's Gaussian form (same levels) [1].
+    center : numpy.ndarray
+        (channels,) the tile's mean [1].
+    basis : numpy.ndarray
+        (channels, channels): its principal axes (columns) [1].
+    lookups : numpy.ndarray
+        (levels, channels, LOOKUP_BINS): per level and component, the component's mean value at the
+        bins' centres of the Gaussian form [1].
+    cell : float
+        Side of the lattice's triangles [m].
+    seed : int
+        Seed of the vertices' offsets (a hash of the vertex and the seed: the same on every worker
+        and in every frame).
     """
 
     texture: object
@@ -125,20 +173,56 @@ class StochasticTiling:
 
     @property
     def mean(self) -> np.ndarray:
-        """The tile's mean (channels,), which the tiling keeps. [1]"""
+        """The tile's mean, which the tiling keeps.
+
+        Returns
+        -------
+        numpy.ndarray
+            (channels,) [1].
+        """
         return self.texture.mean
 
     @property
     def channels(self) -> int:
+        """The tile's number of channels.
+
+        Returns
+        -------
+        int
+            [count].
+        """
         return self.texture.channels
 
     def level(self, k: int) -> np.ndarray:
-        """Level ``k`` of the tile (``MipMap.level``)."""
+        """Level ``k`` of the tile (``MipMap.level``).
+
+        Parameters
+        ----------
+        k : int
+            The mip level.
+
+        Returns
+        -------
+        numpy.ndarray
+            (rows, cols, channels) albedo [1].
+        """
         return self.texture.level(k)
 
     def weights(self, x, y):
-        """The triangles' vertices and barycentric weights at ground points x, y (n,) [m]:
-        vertex ids (3, n, 2) int64 on the skewed lattice and weights (3, n) float64 summing to 1."""
+        """The triangles' vertices and barycentric weights at ground points.
+
+        Parameters
+        ----------
+        x, y : numpy.ndarray
+            (n,) ground points [m].
+
+        Returns
+        -------
+        vertices : numpy.ndarray
+            (3, n, 2) int64 vertex ids on the skewed lattice.
+        weights : numpy.ndarray
+            (3, n) float64, summing to 1 [1].
+        """
         # skew the plane so that the triangles become half squares (the paper's TriangleGrid)
         a = np.asarray(x, dtype=np.float64) / self.cell
         b = np.asarray(y, dtype=np.float64) / self.cell
@@ -156,22 +240,45 @@ class StochasticTiling:
         return vertices, weights
 
     def offsets(self, vertices) -> np.ndarray:
-        """Each lattice vertex's offset (..., 2) into the tile, uniform in [0, period). [m]"""
+        """Each lattice vertex's offset into the tile, uniform in [0, period).
+
+        Parameters
+        ----------
+        vertices : numpy.ndarray
+            (..., 2) int64 vertex ids (``weights``).
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., 2) float64 offsets [m].
+        """
         v = np.asarray(vertices, dtype=np.int64)
         key = vertex_keys(v[..., 0], v[..., 1], self.seed)
         px, py = self.texture.period
         return np.stack([unit_hash(key) * px, unit_hash(key ^ SECOND_KEY) * py], -1)
 
     def sample(self, fp, *, lod_bias: float) -> np.ndarray:
-        """The tiled albedo averaged over ground footprints ``fp`` (camera.Footprints):
-        (channels, n) float32. [1]
+        """The tiled albedo averaged over ground footprints.
 
         Compiled (``_filter``): the lattice weights and offsets of every footprint, its reads
         of weight SKIP_WEIGHT or more (the others left out: their Gaussian term taken as its
         mean, 0; about 1.95 reads a pixel instead of 3), filtered with the footprint's tap
         count and levels, chosen once for its reads, then the blend and the inverse lookups.
-        ``sample_arrays(fp, lod_bias=, skip=SKIP_WEIGHT)`` is the reference (numpy)."""
-        from . import _filter, camera
+        ``sample_arrays(fp, lod_bias=, skip=SKIP_WEIGHT)`` is the reference (numpy).
+
+        Parameters
+        ----------
+        fp : texture.Footprints
+            n ground footprints [m].
+        lod_bias : float
+            Bias of the mip level [1].
+
+        Returns
+        -------
+        numpy.ndarray
+            (channels, n) float32 albedo [1].
+        """
+        from . import _filter, texture
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
@@ -179,16 +286,16 @@ class StochasticTiling:
             return out
         if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
             return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
-        x, y, major, ex, ey = camera._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
+        x, y, major, ex, ey = texture._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
         weight = np.empty((3, n))
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
         m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
-        taps, level, blend = camera._filter_choice(self.gaussian, lod_bias, major, fp.minor)
+        taps, level, blend = texture._filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
-        _filter.filtered(*camera._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
+        _filter.filtered(*texture._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
         _filter.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
                               np.ascontiguousarray(self.lookups, dtype=np.float64),
@@ -197,9 +304,23 @@ class StochasticTiling:
         return out
 
     def sample_arrays(self, fp, *, lod_bias: float, skip: float = 0.0) -> np.ndarray:
-        """``sample`` with whole arrays (numpy), reads of weight under ``skip`` left out: the
-        reference of the compiled pass. (channels, n) float32. [1]"""
-        from . import camera
+        """``sample`` with whole arrays (numpy): the reference of the compiled pass.
+
+        Parameters
+        ----------
+        fp : texture.Footprints
+            n ground footprints [m].
+        lod_bias : float
+            Bias of the mip level [1].
+        skip : float, optional
+            Reads of sharpened weight under this are left out [1].
+
+        Returns
+        -------
+        numpy.ndarray
+            (channels, n) float32 albedo [1].
+        """
+        from . import texture
 
         vertices, w = self.weights(fp.x, fp.y)
         w = w**BLEND_SHARPNESS
@@ -207,11 +328,11 @@ class StochasticTiling:
         offset = self.offsets(vertices)
         g = np.zeros((self.channels, len(fp)), dtype=np.float64)
         for i in range(3):
-            moved = camera.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
-                                      fp.ex, fp.ey)
-            g += np.where(w[i] < skip, 0.0, w[i]) * camera._filtered_arrays(self.gaussian, moved, lod_bias)
+            moved = texture.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
+                                       fp.ex, fp.ey)
+            g += np.where(w[i] < skip, 0.0, w[i]) * texture._filtered_arrays(self.gaussian, moved, lod_bias)
         g /= np.sqrt(np.sum(w * w, axis=0))
-        _, level, blend = camera._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
+        _, level, blend = texture._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
         level = level.astype(np.intp)
         upper = np.minimum(level + 1, self.gaussian.count - 1)
         position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
@@ -228,9 +349,23 @@ class StochasticTiling:
 
 
 def vertex_keys(va, vb, seed: int) -> np.ndarray:
-    """uint64 hash keys of lattice vertices (va, vb) (int64 arrays) under ``seed``: a vertex's
-    offsets are ``unit_hash(key)`` and ``unit_hash(key ^ SECOND_KEY)`` times the period (the
-    stochastic tiling's, and the cloud tile's copies, ``_filter.cloud_field``)."""
+    """uint64 hash keys of lattice vertices under ``seed``.
+
+    A vertex's offsets are ``unit_hash(key)`` and ``unit_hash(key ^ SECOND_KEY)`` times the period
+    (the stochastic tiling's, and the cloud tile's copies, ``_filter.cloud_field``).
+
+    Parameters
+    ----------
+    va, vb : numpy.ndarray
+        int64 vertex ids, broadcastable.
+    seed : int
+        The seed.
+
+    Returns
+    -------
+    numpy.ndarray
+        uint64 keys of the broadcast shape.
+    """
     va = np.asarray(va, dtype=np.int64).astype(np.uint64)
     vb = np.asarray(vb, dtype=np.int64).astype(np.uint64)
     key = va * np.uint64(0x9E3779B97F4A7C15) ^ vb * np.uint64(0xC2B2AE3D27D4EB4F)
@@ -243,7 +378,18 @@ SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
 
 
 def unit_hash(key: np.ndarray) -> np.ndarray:
-    """splitmix64's finaliser (Steele, Lea & Flood 2014) of uint64 keys, as floats in [0, 1)."""
+    """splitmix64's finaliser (Steele, Lea & Flood 2014) of uint64 keys, as floats in [0, 1).
+
+    Parameters
+    ----------
+    key : numpy.ndarray
+        uint64 keys.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of the shape of ``key`` [1].
+    """
     z = key + np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
@@ -252,9 +398,28 @@ def unit_hash(key: np.ndarray) -> np.ndarray:
 
 
 def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
-    """The Heitz & Neyret tiling of a periodic albedo MipMap (``camera.mipmap``, outside
-    "periodic"), its triangles period / TILING_CELLS_PER_PERIOD a side (the longer period)."""
-    from . import camera
+    """The Heitz & Neyret tiling of a periodic albedo MipMap.
+
+    Its triangles are period / TILING_CELLS_PER_PERIOD a side (the longer period).
+
+    Parameters
+    ----------
+    texture : texture.MipMap
+        From ``texture.mipmap``, outside "periodic" [1].
+    seed : int, optional
+        Seed of the vertices' offsets.
+
+    Returns
+    -------
+    StochasticTiling
+        The tiling.
+
+    Raises
+    ------
+    ValueError
+        If the texture is not periodic.
+    """
+    from .texture import mipmap
     from scipy.special import ndtri
 
     if texture.outside != "periodic":
@@ -274,8 +439,8 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
         gaussian[np.argsort(components[:, c].astype(np.float32)), c] = quantiles
     px, py = texture.period
     grid = Grid((0.0, py), px / cols, (rows, cols))
-    gauss_map = camera.mipmap(gaussian.reshape(rows, cols, channels), grid,
-                              outside="periodic", period=(px, py))
+    gauss_map = mipmap(gaussian.reshape(rows, cols, channels), grid,
+                       outside="periodic", period=(px, py))
     centres = -4.0 + 8.0 * (np.arange(LOOKUP_BINS) + 0.5) / LOOKUP_BINS
     lookups = np.empty((gauss_map.count, channels, LOOKUP_BINS))
     for k in range(gauss_map.count):

@@ -6,7 +6,11 @@ through them. ``lambert`` never comes here: its frames keep the camera's own pat
 Directions are unit vectors (..., 3) in world axes pointing away from the ground: ``v`` towards
 the viewer, ``l`` towards the light. Both conventions of relative azimuth in the literature
 are avoided by writing each model with vectors: the hot spot is v = l (the viewer has the light
-behind), where the phase angle g (cos g = v . l) is 0."""
+behind), where the phase angle g (cos g = v . l) is 0.
+
+Why one module: the models, their shape normalised to the albedo, the view bands and the ground
+seen through them are one approximation of Max's f_r(V, L), each tuned against the others
+(``choose_bands`` measures the bands' blend against the shape, ``sky_ratio`` corrects it)."""
 
 from __future__ import annotations
 
@@ -21,8 +25,15 @@ from . import shadow
 from .geometry import Grid, fold, sky_grid, sky_offset
 from .sky_raster import SkyRaster
 
+__all__ = [
+    "VIEW_ZENITH_LIMIT", "QUADRATURE", "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "reflectance_factor",
+    "directional_reflectance", "white_sky_albedo", "shape", "clamp_view", "cell_directions", "ViewBands",
+    "view_vectors", "choose_bands", "sky_ratio", "banded_sky", "shape_on_grid", "weighted_raster", "ground_radiance",
+    "open_sky", "relative_sky", "background",
+]
+
 if TYPE_CHECKING:
-    from .config import BrdfConfig  # model and parameters: any value with those two fields
+    from .settings import BrdfConfig  # model and parameters: any value with those two fields
 
 VIEW_ZENITH_LIMIT = np.radians(85.0)
 """The view zenith angle the models are read at, at most: a bowl-shaped RPV (k < 1) grows
@@ -41,8 +52,27 @@ MAX_BANDS = 8
 
 
 def reflectance_factor(brdf: BrdfConfig, v, l) -> np.ndarray:
-    """The bidirectional reflectance factor pi f_r(v, l) (...,) float64 of the model [1]; v, l
-    (..., 3) unit vectors above the ground."""
+    """The bidirectional reflectance factor pi f_r(v, l) of the model.
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    v : numpy.ndarray
+        (..., 3) unit vectors towards the viewer, above the ground [1].
+    l : numpy.ndarray
+        (..., 3) unit vectors towards the light, above the ground, broadcastable with ``v`` [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 [1].
+
+    Raises
+    ------
+    ValueError
+        For an unknown model.
+    """
     p = dict(brdf.parameters)
     v, l = np.asarray(v, dtype=np.float64), np.asarray(l, dtype=np.float64)
     if brdf.model == "rpv":
@@ -106,8 +136,22 @@ def _hemisphere():
 
 
 def directional_reflectance(brdf: BrdfConfig, l) -> np.ndarray:
-    """The directional-hemispherical reflectance (black-sky albedo) (...,) of light from unit
-    vector(s) l (..., 3): (1 / pi) integral of pi f_r cos(theta_v) d_omega_v. [1]"""
+    """The directional-hemispherical reflectance (black-sky albedo) of light from ``l``.
+
+    (1 / pi) integral of pi f_r cos(theta_v) d_omega_v.
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    l : numpy.ndarray
+        (..., 3) unit vector(s) towards the light [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 [1].
+    """
     dirs, w = _hemisphere()
     l = np.asarray(l, dtype=np.float64)
     brf = reflectance_factor(brdf, dirs[(None,) * (l.ndim - 1)], l[..., None, :])
@@ -116,21 +160,61 @@ def directional_reflectance(brdf: BrdfConfig, l) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def white_sky_albedo(brdf: BrdfConfig) -> float:
-    """The bihemispherical reflectance under a uniform sky: (1 / pi) integral of the
-    directional reflectance times cos(theta_l) d_omega_l. [1]"""
+    """The bihemispherical reflectance under a uniform sky.
+
+    (1 / pi) integral of the directional reflectance times cos(theta_l) d_omega_l.
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+
+    Returns
+    -------
+    float
+        The albedo [1].
+    """
     dirs, w = _hemisphere()
     return float(directional_reflectance(brdf, dirs[:: QUADRATURE[1]]) @ w[:: QUADRATURE[1]] * QUADRATURE[1] / np.pi)
 
 
 def shape(brdf: BrdfConfig, v, l) -> np.ndarray:
-    """The model's shape pi f_r(v, l) / A (...,) float64, A its white-sky albedo: the factor on
-    the albedo texture's rho / pi, so that under a uniform sky the ground reflects the texture's
-    rho (docs/method.md). v is read at VIEW_ZENITH_LIMIT or nearer the zenith. [1]"""
+    """The model's shape pi f_r(v, l) / A, A its white-sky albedo.
+
+    The factor on the albedo texture's rho / pi, so that under a uniform sky the ground reflects the
+    texture's rho (docs/method.md, "The ground's reflectance"). v is read at VIEW_ZENITH_LIMIT or
+    nearer the zenith.
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    v : numpy.ndarray
+        (..., 3) unit vectors towards the viewer [1].
+    l : numpy.ndarray
+        (..., 3) unit vectors towards the light, broadcastable with ``v`` [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 [1].
+    """
     return reflectance_factor(brdf, clamp_view(v), l) / white_sky_albedo(brdf)
 
 
 def clamp_view(v) -> np.ndarray:
-    """Unit vectors v (..., 3) with their zenith angle held to VIEW_ZENITH_LIMIT at most. [1]"""
+    """Unit vectors with their zenith angle held to VIEW_ZENITH_LIMIT at most.
+
+    Parameters
+    ----------
+    v : numpy.ndarray
+        (..., 3) unit vectors [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float64, a new array [1].
+    """
     v = np.array(v, dtype=np.float64)
     low = v[..., 2] < np.cos(VIEW_ZENITH_LIMIT)
     if np.any(low):
@@ -141,7 +225,18 @@ def clamp_view(v) -> np.ndarray:
 
 
 def cell_directions(grid) -> np.ndarray:
-    """Unit vectors (rows, cols, 3) towards the centres of a sky-plane grid's cells. [1]"""
+    """Unit vectors towards the centres of a sky-plane grid's cells.
+
+    Parameters
+    ----------
+    grid : Grid
+        A sky-plane grid [tan].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float64 [1].
+    """
     rows, cols = grid.shape
     sx, sy = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
     w = np.stack(np.broadcast_arrays(sx, sy, np.ones_like(sx)), axis=-1)
@@ -155,10 +250,18 @@ def cell_directions(grid) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ViewBands:
-    """zeniths : (B,) the bands' view zenith angles, near to far [rad]; azimuth : the azimuth of
-    their view direction (from the ground towards the camera) [rad]; error : the largest
-    relative error of the open sky's term over the sampled pixels that ``choose_bands``
-    measured [1]."""
+    """View bands: the sky's term with the view V held per band (Max: f_r independent of V over a patch).
+
+    Attributes
+    ----------
+    zeniths : tuple of float
+        (B,) the bands' view zenith angles, near to far [rad].
+    azimuth : float
+        The azimuth of their view direction (from the ground towards the camera) [rad].
+    error : float
+        The largest relative error of the open sky's term over the sampled pixels that
+        ``choose_bands`` measured [1].
+    """
 
     zeniths: tuple[float, ...]
     azimuth: float
@@ -166,19 +269,44 @@ class ViewBands:
 
     @property
     def colour(self) -> int:
-        """The band whose term is correlated in every channel (the middle one): it gives the
-        sky light's colour under the canopy; the others are correlated on the channels' sum
-        and give only how the reflectance modulates it (``banded_sky``). [index]"""
+        """The band whose term is correlated in every channel (the middle one).
+
+        It gives the sky light's colour under the canopy; the others are correlated on the channels' sum
+        and give only how the reflectance modulates it (``banded_sky``).
+
+        Returns
+        -------
+        int
+            Its index [index].
+        """
         return len(self.zeniths) // 2
 
     def directions(self) -> np.ndarray:
-        """(B, 3) unit view vectors of the bands. [1]"""
+        """Unit view vectors of the bands.
+
+        Returns
+        -------
+        numpy.ndarray
+            (B, 3) float64 [1].
+        """
         z = np.asarray(self.zeniths)
         return np.stack([np.sin(z) * np.sin(self.azimuth), np.sin(z) * np.cos(self.azimuth), np.cos(z)], axis=-1)
 
     def weights(self, zenith) -> np.ndarray:
-        """(B, n) weights of each band at view zenith angles (n,): linear between neighbouring
-        bands' zeniths (hat functions), held beyond the ends; they sum to 1. [1]"""
+        """Weights of each band at view zenith angles; they sum to 1.
+
+        Linear between neighbouring bands' zeniths (hat functions), held beyond the ends.
+
+        Parameters
+        ----------
+        zenith : numpy.ndarray
+            (n,) view zenith angles [rad].
+
+        Returns
+        -------
+        numpy.ndarray
+            (B, n) float64 [1].
+        """
         z = np.asarray(self.zeniths)
         eye = np.eye(len(z))
         return np.stack([np.interp(zenith, z, eye[b]) for b in range(len(z))]) if len(z) > 1 \
@@ -186,8 +314,20 @@ class ViewBands:
 
 
 def view_vectors(camera: cam.Camera):
-    """Unit vectors (n, 3) from the ground point each ground pixel sees towards the pinhole,
-    for the pixels of ``camera._view_footprints`` (rows first). [1]"""
+    """Unit vectors from the ground point each ground pixel sees towards the pinhole.
+
+    For the pixels of ``camera._view_footprints`` (rows first).
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 3) float64 [1].
+    """
     fp, _ = cam._view_footprints(camera)
     d = np.stack([camera.position[0] - fp.x, camera.position[1] - fp.y,
                   np.full(fp.x.shape, float(camera.position[2]))], axis=-1)
@@ -262,12 +402,34 @@ def _coarsen(raster, most_cells: int):
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
                  most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
-    """View bands, 1 to ``most``, added one at a time where the blend is worst (first the
-    middle, then both ends, then the sampled view zenith of the largest error), until the blend gives the open sky's term sum_i e_i
-    s(V, L_i) within ``tolerance`` (relative) at every sampled pixel's own view zenith, against
-    that sum per pixel (brute force over the raster's cells, coarsened to SKY_CELLS) at the bands'
-    azimuth. views : (n, 3) the pixels' view vectors; azimuth of the bands: that of the views'
-    mean (the change with azimuth across the image is ``sky_ratio``'s)."""
+    """View bands, 1 to ``most``, added one at a time where the blend is worst.
+
+    First the middle, then both ends, then the sampled view zenith of the largest error, until the
+    blend gives the open sky's term sum_i e_i s(V, L_i) within ``tolerance`` (relative) at every
+    sampled pixel's own view zenith, against that sum per pixel (brute force over the raster's cells,
+    coarsened to SKY_CELLS) at the bands' azimuth. Azimuth of the bands: that of the views' mean (the
+    change with azimuth across the image is ``sky_ratio``'s).
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    raster : sky.SkyRaster
+        The sky raster [radiance x sr].
+    views : numpy.ndarray
+        (n, 3) the pixels' view vectors [1].
+    tolerance : float, optional
+        Largest relative error accepted [1].
+    most : int, optional
+        Most bands [count].
+    samples : int, optional
+        About how many of the views are sampled [count].
+
+    Returns
+    -------
+    ViewBands
+        The bands, with the error they reached.
+    """
     views = clamp_view(views)
     pick = views[:: max(1, len(views) // samples)]
     dirs, e = _coarsened(raster, SKY_CELLS)
@@ -292,15 +454,36 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
 
 
 def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
-    """Per channel and pixel (channels, n) float32: the open sky's term at the pixel's own
-    view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives on open ground, the colour band's
-    term sum_i e_i s(V_c, L_i) times the blended modulation sum_b w_b S_b / S_c (S_b = sum_i
-    e'_i s(V_b, L_i), e' the channels' sum), all over the raster coarsened to SKY_CELLS cells:
-    the factor that makes the banded sky term exact on open ground and carries the change
-    across the image (view azimuth) that the bands do not hold. Read on a lattice of
-    ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held
-    at its edges). views : (n, 3) unit vectors; ``angles``, if given, their zenith angles and
-    azimuths after ``clamp_view`` ((n,) each, ``_camera_views``) [rad]. [1]"""
+    """The factor that makes the banded sky term exact on open ground, per channel and pixel.
+
+    The open sky's term at the pixel's own view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives
+    on open ground, the colour band's term sum_i e_i s(V_c, L_i) times the blended modulation
+    sum_b w_b S_b / S_c (S_b = sum_i e'_i s(V_b, L_i), e' the channels' sum), all over the raster
+    coarsened to SKY_CELLS cells: it carries the change across the image (view azimuth) that the bands
+    do not hold. Read on a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the
+    views' range, bilinearly (held at its edges).
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    raster : sky.SkyRaster
+        The sky raster [radiance x sr].
+    bands : ViewBands
+        The view bands.
+    views : numpy.ndarray
+        (n, 3) unit view vectors [1].
+    lattice : int, optional
+        Side of the lattice of views [count].
+    angles : tuple of numpy.ndarray, optional
+        If given, the views' zenith angles and azimuths after ``clamp_view`` ((n,) each,
+        ``_camera_views``) [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, n) float32 [1].
+    """
     dirs, e = _coarsened(raster, SKY_CELLS, channels=True)
     if angles is None:
         views = clamp_view(views)
@@ -360,13 +543,30 @@ def _lattice_reads_made(zenith, azimuth, band_azimuth: float, lattice: int):
 
 
 def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
-    """The sky's term with the reflectance (channels, n) float32 [radiance x sr]:
-    r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch: E_c (channels, n) the colour band's term (the sky
-    raster weighted at its view, every channel, correlated), G_b (B, n) each band's term on
-    the channels' sum (``weighted_raster(summed=True)``; the colour band's is the sum of E_c's
-    channels), w_b (B, n) the bands' weights, r_c (channels, n) ``sky_ratio``: the bands give
-    how the reflectance modulates the sky's light at the point with the view, the colour band
-    its colour, the ratio the open sky's term at the pixel's own view (docs/method.md)."""
+    """The sky's term with the reflectance: r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch.
+
+    The bands give how the reflectance modulates the sky's light at the point with the view, the
+    colour band its colour, the ratio the open sky's term at the pixel's own view (docs/method.md,
+    "The ground's reflectance").
+
+    Parameters
+    ----------
+    colour : numpy.ndarray
+        E_c (channels, n): the colour band's term (the sky raster weighted at its view, every
+        channel, correlated) [radiance x sr].
+    bands_light : numpy.ndarray
+        G_b (B, n): each band's term on the channels' sum (``weighted_raster(summed=True)``; the
+        colour band's is the sum of E_c's channels) [radiance x sr].
+    weights : numpy.ndarray
+        w_b (B, n): the bands' weights [1].
+    ratio : numpy.ndarray or float
+        r_c (channels, n): ``sky_ratio`` [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, n) float32 [radiance x sr].
+    """
     blend = bands_light[0] * weights[0]
     for b in range(1, len(weights)):
         blend += bands_light[b] * weights[b]
@@ -384,9 +584,25 @@ raster's cells: the shape changes over degrees (its sharpest feature, the hot sp
 
 
 def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
-    """The shape s(view, L) (rows, cols) float32 at the cells of a sky-plane grid: exact on a
-    lattice of spacing at most SHAPE_STEP over the grid, bilinear between (the grid's own
-    cells when they are coarser). [1]"""
+    """The shape s(view, L) at the cells of a sky-plane grid.
+
+    Exact on a lattice of spacing at most SHAPE_STEP over the grid, bilinear between (the grid's own
+    cells when they are coarser).
+
+    Parameters
+    ----------
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    view : numpy.ndarray
+        (3,) unit view vector [1].
+    grid : Grid
+        A sky-plane grid [tan].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols) float32 [1].
+    """
     step = max(1, int(round(SHAPE_STEP / grid.pixel)))
     if step == 1 or min(grid.shape) < 4 * step:
         return shape(brdf, np.asarray(view)[None, None, :], cell_directions(grid)).astype(np.float32)
@@ -413,11 +629,30 @@ def _channel_sum(raster) -> np.ndarray:
 
 
 def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
-    """The sky raster with each cell's light times the shape s(view, L_cell) (Max's f_r(V, L)
-    on the sky raster, before the correlation; ``shape_on_grid``), folded after the weighting
-    when ``fold_period`` is given; the light outside the raster times the mean shape over the
-    raster's outermost ring of cells (the nearest directions to it). ``summed``: one channel,
-    the channels' sum weighted (the view bands'). [radiance x sr]"""
+    """The sky raster with each cell's light times the shape s(view, L_cell).
+
+    Max's f_r(V, L) on the sky raster, before the correlation (``shape_on_grid``), folded after the
+    weighting when ``fold_period`` is given; the light outside the raster times the mean shape over
+    the raster's outermost ring of cells (the nearest directions to it).
+
+    Parameters
+    ----------
+    raster : sky.SkyRaster
+        The sky raster [radiance x sr].
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    view : numpy.ndarray
+        (3,) unit view vector [1].
+    fold_period : tuple of (int, int), optional
+        The tile period to fold onto [cell].
+    summed : bool, optional
+        One channel, the channels' sum weighted (the view bands').
+
+    Returns
+    -------
+    sky.SkyRaster
+        The weighted raster, float32 [radiance x sr].
+    """
     s = shape_on_grid(brdf, view, raster.grid)
     light = _channel_sum(raster) if summed else raster.weighted
     outside = np.asarray(raster.outside, dtype=np.float64)
@@ -436,21 +671,46 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
 
 def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_maps, bands: ViewBands,
                     sun_direction, raster, open_light=None) -> np.ndarray:
-    """The ground's radiance (height, width, 3) float32 with the reflectance ``brdf`` [radiance]:
-    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ],
-    rho the albedo texture, E_sun the ground's light from the sun alone (MipMap chain ``sun``,
-    ``GroundResult.sun_part``), and the bands' terms in ``sky_maps``: one MipMap chain whose
-    channels are each band's, three for the colour band (``ViewBands.colour``, E_c), one (the
-    channels' sum, G_b) for the others, so that the camera's footprints are filtered once for
-    all of them; the sky's term is ``banded_sky``: w_b the bands' weights at the pixel's view
-    zenith, r(x) ``sky_ratio`` over ``raster`` (the sky raster), V(x) each pixel's own view
-    vector; sun_direction (3,) or None. With ``open_light`` (the colour band's open-sky light
-    (3,) and every band's on the channels' sum (B,)), ``sky_maps`` is instead the one
-    3-channel raster of ``relative_sky`` (1 beyond it), and the sky's term is that read times
-    the same term on open ground at the pixel's view (``open_sky``): the same formula with the
-    per-point part done on the ground raster before the camera reads it. The sun's term is
-    exact per pixel; the sky's is blended (docs/method.md, "The ground's reflectance"). 0
-    where no ground is seen."""
+    """The ground's radiance with the reflectance ``brdf``.
+
+    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ], rho
+    the albedo texture, E_sun the ground's light from the sun alone, the sky's term ``banded_sky``:
+    w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster``, V(x) each
+    pixel's own view vector. The sun's term is exact per pixel; the sky's is blended (docs/method.md,
+    "The ground's reflectance"). 0 where no ground is seen.
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    albedo : object
+        The albedo texture rho [1].
+    sun : object
+        MipMap chain of E_sun (``GroundResult.sun_part``) [radiance x sr].
+    sky_maps : object
+        The bands' terms: one MipMap chain whose channels are each band's, three for the colour
+        band (``ViewBands.colour``, E_c), one (the channels' sum, G_b) for the others, so that the
+        camera's footprints are filtered once for all of them [radiance x sr]. With
+        ``open_light``, instead the one 3-channel raster of ``relative_sky`` (1 beyond it) [1].
+    bands : ViewBands
+        The view bands.
+    sun_direction : numpy.ndarray or None
+        (3,) unit vector towards the sun [1].
+    raster : sky.SkyRaster
+        The sky raster [radiance x sr].
+    open_light : tuple, optional
+        The colour band's open-sky light (3,) and every band's on the channels' sum (B,)
+        [radiance x sr]: the sky's term is then the read of ``sky_maps`` times the same term on
+        open ground at the pixel's view (``open_sky``): the same formula with the per-point part
+        done on the ground raster before the camera reads it.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) float32 [radiance].
+    """
     rows, _ = cam._ground_rows(camera)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
     if not len(rows):
@@ -486,9 +746,26 @@ def _stacked_sky(stack, bands: ViewBands, weights, ratio) -> np.ndarray:
 
 
 def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
-    """``banded_sky``'s blend on open ground, before ``sky_ratio`` (3, n) float32: the colour
-    band's open light (3,) times sum_b w_b G_b,open / G_c,open, G_b,open (B,) each band's open
-    light on the channels' sum, w_b (B, n) the weights. [radiance x sr]"""
+    """``banded_sky``'s blend on open ground, before ``sky_ratio``.
+
+    The colour band's open light times sum_b w_b G_b,open / G_c,open.
+
+    Parameters
+    ----------
+    bands : ViewBands
+        The view bands.
+    weights : numpy.ndarray
+        w_b (B, n) the weights [1].
+    colour_open : numpy.ndarray
+        (3,) the colour band's open light [radiance x sr].
+    bands_open : numpy.ndarray
+        G_b,open (B,) each band's open light on the channels' sum [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, n) float32 [radiance x sr].
+    """
     bands_open = np.asarray(bands_open, dtype=np.float64)
     scale = bands_open / max(float(bands_open[bands.colour]), 1e-30)
     blend = np.tensordot(scale.astype(np.float32), weights, axes=1)
@@ -496,13 +773,34 @@ def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
 
 
 def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light, colour_open, bands_open):
-    """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a
-    ground raster (rows, cols, 3) float32 [1]: r-free and 1 on open ground, so the camera can
-    read it like any ground raster (1 beyond it) and ``ground_radiance`` multiply by the open
-    term at each pixel's own view. colour (rows, cols, 3): the colour band's term; bands_light
-    (rows, cols, B): every band's on the channels' sum; the views are each cell's own, from
-    its centre to the camera's pinhole (``_cell_weights``); colour_open (3,), bands_open (B,):
-    the same on open ground. [radiance x sr] in, [1] out"""
+    """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a ground raster.
+
+    r-free and 1 on open ground, so the camera can read it like any ground raster (1 beyond it) and
+    ``ground_radiance`` multiply by the open term at each pixel's own view. The views are each cell's
+    own, from its centre to the camera's pinhole (``_cell_weights``).
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    grid : Grid
+        The ground raster's grid [m].
+    bands : ViewBands
+        The view bands.
+    colour : numpy.ndarray
+        (rows, cols, 3): the colour band's term [radiance x sr].
+    bands_light : numpy.ndarray
+        (rows, cols, B): every band's on the channels' sum [radiance x sr].
+    colour_open : numpy.ndarray
+        (3,) the same on open ground [radiance x sr].
+    bands_open : numpy.ndarray
+        (B,) the same on open ground [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 [1].
+    """
     weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
     flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
     colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
@@ -542,7 +840,22 @@ def _sun_shape(brdf: BrdfConfig, camera: cam.Camera, sun_direction: tuple) -> np
 
 
 def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndarray:
-    """``camera.background`` with the ground's radiance given: f ground + (1 - f) sky."""
+    """``camera.background`` with the ground's radiance given: f ground + (1 - f) sky.
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    ground_radiance_ : numpy.ndarray
+        (height, width, 3) the ground's radiance [radiance].
+    sky : object
+        The sky, as ``camera.sky_view`` takes it.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) radiance [radiance].
+    """
     fraction, rest = cam._ground_fractions(camera)
     out = ground_radiance_ * fraction[..., None]
     out += cam.sky_view(camera, sky) * rest

@@ -36,6 +36,9 @@ from filelock import FileLock, Timeout
 if TYPE_CHECKING:
     import numpy as np
 
+__all__ = ["CODE_VERSION", "FORMAT", "ENV_VAR", "BUDGET_ENV_VAR", "DEFAULT_BUDGET", "RUNS", "MAX_PARAM_ARRAY_SIZE",
+           "CacheWarning", "forget_verified", "cache_dir", "cache_budget", "parse_size", "key_of", "CacheItem", "Cache"]
+
 #: Mixed into every key. Change it whenever the code that computes any cached product changes
 #: its result, so that old items are never read for new code (they age out through ``prune``).
 CODE_VERSION = "sunshade-cycle-2"
@@ -61,8 +64,11 @@ RUNS = ".runs"
 #: by the parameters that made them instead.
 MAX_PARAM_ARRAY_SIZE = 1024
 
+#: An item folder's description: its arrays, their checksums and the parameters they were made from.
 META = "meta.json"
+#: Folder in the root of the keys' lock files.
 LOCKS = "locks"
+#: Folder in the root of the records of items found damaged (``Cache.recheck``).
 DAMAGED = "damaged"
 _TMP = ".tmp-"
 _DEL = ".del-"
@@ -87,10 +93,19 @@ def forget_verified() -> None:
 
 
 def cache_dir(explicit: str | os.PathLike[str] | None = None) -> Path:
-    """The cache root: ``explicit`` if given, else ``$SUNSHADE_CACHE`` if set and not empty,
-    else ``./cache``; returned absolute (workers may run in another folder), ``~`` expanded.
+    """The cache root: ``explicit`` if given, else ``$SUNSHADE_CACHE`` if set and not empty, else ``./cache``.
 
     The folder is not created here; ``Cache`` creates what it writes.
+
+    Parameters
+    ----------
+    explicit : str or os.PathLike, optional
+        The folder asked for (--cache); None or empty: not given.
+
+    Returns
+    -------
+    pathlib.Path
+        The root, absolute (workers may run in another folder), ``~`` expanded.
     """
     if explicit is not None and str(explicit) != "":
         path = Path(explicit)
@@ -102,21 +117,50 @@ def cache_dir(explicit: str | os.PathLike[str] | None = None) -> Path:
 
 
 def cache_budget(explicit: str | None = None) -> int:
-    """The cache's budget [B]: ``explicit`` (--cache-size) if given, else ``$SUNSHADE_CACHE_SIZE``
-    if set and not empty, else DEFAULT_BUDGET. Raises ValueError naming the text (``parse_size``)."""
+    """The cache's budget: ``explicit`` (--cache-size), else ``$SUNSHADE_CACHE_SIZE``, else DEFAULT_BUDGET.
+
+    ``$SUNSHADE_CACHE_SIZE`` counts when it is set and not empty.
+
+    Parameters
+    ----------
+    explicit : str, optional
+        The size asked for, as ``parse_size`` reads it.
+
+    Returns
+    -------
+    int
+        The budget [B].
+
+    Raises
+    ------
+    ValueError
+        Naming the text (``parse_size``).
+    """
     text = explicit if explicit is not None else os.environ.get(BUDGET_ENV_VAR) or None
     return DEFAULT_BUDGET if text is None else parse_size(text)
 
 
 def parse_size(text: str | int) -> int:
-    """Bytes in a size such as ``"2G"``, ``"512M"``, ``"1.5GiB"`` or ``"1000"``. [B]
+    """Bytes in a size such as ``"2G"``, ``"512M"``, ``"1.5GiB"`` or ``"1000"``.
 
     Units are binary, powers of 1024, whatever their spelling: K, M, G, T, optionally followed
     by ``iB`` or ``B`` (so ``"2GB"`` is also 2 * 1024**3, as in ``du -h``), case-insensitive;
-    no unit or ``B`` means bytes. Fractions are rounded down to whole bytes. A non-negative
-    int is returned as it is.
+    no unit or ``B`` means bytes. Fractions are rounded down to whole bytes.
 
-    Raises ValueError naming the text if it is not a non-negative size.
+    Parameters
+    ----------
+    text : str or int
+        The size; a non-negative int is returned as it is.
+
+    Returns
+    -------
+    int
+        The size [B].
+
+    Raises
+    ------
+    ValueError
+        Naming the text if it is not a non-negative size.
     """
     import numpy as np  # not at the top: see the module docstring
     if isinstance(text, (int, np.integer)) and not isinstance(text, bool):
@@ -187,16 +231,31 @@ def _check_name(text: str, what: str) -> None:
 
 
 def key_of(kind: str, params: Mapping[str, Any]) -> str:
-    """The cache key of an item: SHA-256 (64 hex digits) of its kind, params and CODE_VERSION.
-
-    kind : the product's name, also its folder: letters, digits, ``_ - .``; not ``locks``.
-    params : everything the product depends on, as str-keyed mappings, lists or tuples (the
-        same key), str, bool, int, float (exact: 0.1 and the next float differ, and so do 1
-        and 1.0), None, numpy scalars (as their Python values), Paths, enums, dataclasses
-        (such as ``geometry.Grid``) and numpy arrays of at most ``MAX_PARAM_ARRAY_SIZE``
-        numbers. Anything else raises TypeError naming its place in ``params``.
+    """The cache key of an item: SHA-256 of its kind, params and CODE_VERSION.
 
     The same inputs give the same key in any process and on any machine.
+
+    Parameters
+    ----------
+    kind : str
+        The product's name, also its folder: letters, digits, ``_ - .``; not ``locks``.
+    params : Mapping
+        Everything the product depends on, as str-keyed mappings, lists or tuples (the same key),
+        str, bool, int, float (exact: 0.1 and the next float differ, and so do 1 and 1.0), None,
+        numpy scalars (as their Python values), Paths, enums, dataclasses (such as
+        ``geometry.Grid``) and numpy arrays of at most ``MAX_PARAM_ARRAY_SIZE`` numbers.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+
+    Raises
+    ------
+    TypeError
+        For a value of another type, naming its place in ``params``.
+    ValueError
+        For a bad or reserved kind.
     """
     _check_name(kind, "cache kind")
     if kind in (LOCKS, DAMAGED):
@@ -249,14 +308,22 @@ def _meta_crc32(meta: Mapping) -> int:
 class CacheItem:
     """One item folder as found on disk.
 
-    kind : str -- the product kind (first folder level).
-    key : str -- 64 hex digits.
-    path : Path -- the item folder.
-    bytes : int -- total size of its files. [B]
-    created : float | None -- when it was written, from meta.json; None if unreadable.
-        [s since epoch]
-    last_used : float -- modification time of meta.json (of the folder if none). [s since epoch]
-    params : dict | None -- the canonical parameters it was computed from (None if unreadable).
+    Attributes
+    ----------
+    kind : str
+        The product kind (first folder level).
+    key : str
+        64 hex digits.
+    path : pathlib.Path
+        The item folder.
+    bytes : int
+        Total size of its files [B].
+    created : float or None
+        When it was written, from meta.json; None if unreadable [s since epoch].
+    last_used : float
+        Modification time of meta.json (of the folder if none) [s since epoch].
+    params : dict or None
+        The canonical parameters it was computed from (None if unreadable).
     """
 
     kind: str
@@ -275,12 +342,20 @@ class _Broken(Exception):
 class Cache:
     """The store under one root folder. Cheap to create and to pickle (joblib workers).
 
-    root : the cache folder, usually ``cache_dir(...)``; created on first write.
+    Parameters
+    ----------
+    root : str or os.PathLike
+        The cache folder, usually ``cache_dir(...)``; created on first write.
 
-    ``hits``, ``misses`` and ``repaired`` count, in this process, the items read, computed
-    (absent or broken) and of those the broken ones that were removed and recomputed.
-    ``served`` maps ``"kind/key"`` to the stamp of each item this store returned (see
-    ``recheck``).
+    Attributes
+    ----------
+    root : pathlib.Path
+        The cache folder.
+    hits, misses, repaired : int
+        Count, in this process, the items read, computed (absent or broken) and of those the broken
+        ones that were removed and recomputed.
+    served : dict
+        ``"kind/key"`` to the stamp of each item this store returned (see ``recheck``).
     """
 
     def __init__(self, root: str | os.PathLike[str]):
@@ -294,9 +369,17 @@ class Cache:
         return f"Cache({str(self.root)!r})"
 
     def writing_problem(self) -> str | None:
-        """Why items cannot be written under the root, in words, or None: a folder is made and
-        removed in the root (or, where the root does not exist yet, in the nearest folder above
-        it), so that a read-only file system or a folder of no rights is found before any work."""
+        """Why items cannot be written under the root, in words, or None.
+
+        A folder is made and removed in the root (or, where the root does not exist yet, in the nearest
+        folder above it), so that a read-only file system or a folder of no rights is found before any
+        work.
+
+        Returns
+        -------
+        str or None
+            The problem, or None when items can be written.
+        """
         folder = self.root
         while not folder.exists() and folder.parent != folder:
             folder = folder.parent
@@ -311,7 +394,20 @@ class Cache:
     # -- paths -------------------------------------------------------------------------
 
     def item_path(self, kind: str, key: str) -> Path:
-        """The folder of item ``key`` of ``kind`` (it may not exist)."""
+        """The folder of item ``key`` of ``kind`` (it may not exist).
+
+        Parameters
+        ----------
+        kind : str
+            The product kind.
+        key : str
+            Its key (``key_of``).
+
+        Returns
+        -------
+        pathlib.Path
+            ``root / kind / key[:2] / key``.
+        """
         return self.root / kind / key[:2] / key
 
     def _lock(self, key: str) -> FileLock:
@@ -457,7 +553,21 @@ class Cache:
         """The item's arrays, memory-mapped read-only, or None if it is absent or broken.
 
         Computes nothing; a broken item is removed (with a CacheWarning), so that the next
-        ``get_or_compute`` computes it. ``verify=False`` checks sizes and headers only.
+        ``get_or_compute`` computes it.
+
+        Parameters
+        ----------
+        kind : str
+            As for ``key_of``.
+        params : Mapping
+            As for ``key_of``.
+        verify : bool, optional
+            Check the checksums (as ``get_or_compute``); False checks sizes and headers only.
+
+        Returns
+        -------
+        dict of str to numpy.memmap or None
+            The arrays, or None.
         """
         key = key_of(kind, params)
         path = self.item_path(kind, key)
@@ -473,20 +583,30 @@ class Cache:
                        verify: bool = True) -> dict[str, np.ndarray]:
         """The item ``(kind, params)``: read back if stored and sound, else computed and stored.
 
-        kind, params : as for ``key_of``; ``params`` must name everything ``compute`` depends on.
-        compute : called with no arguments on a miss; returns ``{name: array}`` with names as
-            for ``kind`` and numeric or bool arrays (stored C-contiguous).
-        verify : check the CRC-32 of every file on the first read in this process (about
-            4 ms per 16 MiB), and again whenever the files changed since; ``False`` checks
-            sizes and headers only.
+        A broken item (truncated, corrupted, without meta) is removed with a one-line CacheWarning and
+        recomputed. On a miss the key's file lock is held while computing, so concurrent processes
+        compute each key once; the others wait and then read it. If the store cannot be written (disk
+        full, read-only), a warning is issued and the computed arrays are returned as they are.
+        Exceptions of ``compute`` propagate; nothing is stored.
 
-        Returns ``{name: numpy.memmap}`` opened read-only (``mmap_mode='r'``), in the order
-        ``compute`` returned them. A broken item (truncated, corrupted, without meta) is
-        removed with a one-line CacheWarning and recomputed. On a miss the key's file lock is
-        held while computing, so concurrent processes compute each key once; the others wait
-        and then read it. If the store cannot be written (disk full, read-only), a warning is
-        issued and the computed arrays are returned as they are. Exceptions of ``compute``
-        propagate; nothing is stored.
+        Parameters
+        ----------
+        kind : str
+            As for ``key_of``.
+        params : Mapping
+            As for ``key_of``; it must name everything ``compute`` depends on.
+        compute : callable
+            Called with no arguments on a miss; returns ``{name: array}`` with names as for ``kind``
+            and numeric or bool arrays (stored C-contiguous).
+        verify : bool, optional
+            Check the CRC-32 of every file on the first read in this process (about 4 ms per 16 MiB),
+            and again whenever the files changed since; False checks sizes and headers only.
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            ``{name: numpy.memmap}`` opened read-only (``mmap_mode='r'``), in the order ``compute``
+            returned them (the computed arrays themselves when they could not be stored).
         """
         key = key_of(kind, params)
         path = self.item_path(kind, key)
@@ -530,14 +650,27 @@ class Cache:
                 repair: bool = True) -> str | None:
         """Whether item ``"kind/key"`` is still the one ``stamp`` (from ``served``) describes.
 
-        None when its files have the same sizes, inodes and times (nothing is read), when they
-        changed but hold the same checksums (the item was computed again), or when the item is
-        absent (pruned: nothing says it was wrong). Otherwise the problem in words: the very
-        copy read then (the same inodes) was found damaged and removed since, by any process;
-        the item is damaged now (with ``repair`` it is removed, with a CacheWarning); or it
-        holds other bytes.
-        ``fresh``: read and check the files whatever their sizes and times. A sound item read
-        here is recorded in ``served`` with its current stamp.
+        A sound item read here is recorded in ``served`` with its current stamp.
+
+        Parameters
+        ----------
+        item : str
+            ``"kind/key"``.
+        stamp : Mapping
+            ``{file: [crc32, size, inode, mtime_ns, ctime_ns, created]}``, as ``served`` records it.
+        fresh : bool, optional
+            Read and check the files whatever their sizes and times.
+        repair : bool, optional
+            Remove an item found damaged now, with a CacheWarning.
+
+        Returns
+        -------
+        str or None
+            None when its files have the same sizes, inodes and times (nothing is read), when they
+            changed but hold the same checksums (the item was computed again), or when the item is
+            absent (pruned: nothing says it was wrong). Otherwise the problem in words: the very copy
+            read then (the same inodes) was found damaged and removed since, by any process; the item
+            is damaged now; or it holds other bytes.
         """
         kind, _, key = item.partition("/")
         if not _NAME_RE.fullmatch(kind) or not _KEY_RE.fullmatch(key):
@@ -661,14 +794,29 @@ class Cache:
         return CacheItem(kind, key, path, size, created, last_used, params)
 
     def list(self) -> list[CacheItem]:
-        """Every item folder, complete or not, by kind then key; temporary folders are left out."""
+        """Every item folder, complete or not, by kind then key; temporary folders are left out.
+
+        Returns
+        -------
+        list of CacheItem
+            The items.
+        """
         return [self._info(kind, key, path) for what, kind, key, path in self._walk()
                 if what == "item"]
 
     def strays(self, *, remove: bool = False) -> list[tuple[Path, str]]:
-        """Every entry inside a kind's folder that is not an item, nor a temporary folder, with
-        what it is in words: a file where an item's folder should be, say. ``remove=True`` also
-        removes them (nothing but the cache writes in its kinds' folders)."""
+        """Every entry inside a kind's folder that is not an item, nor a temporary folder.
+
+        Parameters
+        ----------
+        remove : bool, optional
+            Also remove them (nothing but the cache writes in its kinds' folders).
+
+        Returns
+        -------
+        list of tuple of (pathlib.Path, str)
+            Each entry with what it is in words: a file where an item's folder should be, say.
+        """
         found = []
         for what, _kind, _key, path in list(self._walk()):
             if what == "stray":
@@ -681,10 +829,20 @@ class Cache:
         return found
 
     def verify(self, *, remove: bool = False) -> list[tuple[CacheItem, str]]:
-        """Check every item fully (sizes, headers, CRC-32 of all files and of meta.json): the
-        broken ones, each with its problem in words. ``remove=True`` also removes them (they
-        would be recomputed when next needed anyway). Reads the whole cache; ``strays`` lists
-        what is not an item."""
+        """Check every item fully (sizes, headers, CRC-32 of all files and of meta.json).
+
+        Reads the whole cache; ``strays`` lists what is not an item.
+
+        Parameters
+        ----------
+        remove : bool, optional
+            Also remove the broken ones (they would be recomputed when next needed anyway).
+
+        Returns
+        -------
+        list of tuple of (CacheItem, str)
+            The broken items, each with its problem in words.
+        """
         problems = []
         for item in self.list():
             try:
@@ -730,8 +888,15 @@ class Cache:
                 _rmdir_if_empty(kind_dir)
 
     def clear(self) -> list[CacheItem]:
-        """Remove every item, leftover temporary folder and free lock file; returns the items
-        removed. Files in the root that are not the cache's (e.g. FFTW wisdom) are kept."""
+        """Remove every item, leftover temporary folder and free lock file.
+
+        Files in the root that are not the cache's (e.g. FFTW wisdom) are kept.
+
+        Returns
+        -------
+        list of CacheItem
+            The items removed.
+        """
         self._remove_stale()
         removed = [item for item in self.list() if _remove(item.path)]
         locks = self.root / LOCKS
@@ -751,9 +916,27 @@ class Cache:
         return removed
 
     def prune(self, max_bytes: int, *, keep=frozenset()) -> list[CacheItem]:
-        """Remove leftover temporary folders, then the least recently used items until the
-        items total at most ``max_bytes`` [B], never an item whose key is in ``keep`` or in use
-        by a live run (``in_use``); returns the items removed, oldest first."""
+        """Remove leftover temporary folders, then the least recently used items down to a budget.
+
+        Never an item whose key is in ``keep`` or in use by a live run (``in_use``).
+
+        Parameters
+        ----------
+        max_bytes : int
+            The items total at most this afterwards, but for those kept [B].
+        keep : collection of str, optional
+            Keys not to remove.
+
+        Returns
+        -------
+        list of CacheItem
+            The items removed, oldest first.
+
+        Raises
+        ------
+        ValueError
+            When ``max_bytes`` is negative.
+        """
         if max_bytes < 0:
             raise ValueError(f"max_bytes must not be negative, got {max_bytes}")
         self._remove_stale()
@@ -774,10 +957,22 @@ class Cache:
 
     @contextlib.contextmanager
     def in_use(self, keys):
-        """For the block, name ``keys`` as in use by this process: a list in ``RUNS`` and a
-        lock held beside it, which ``keys_in_use`` of any other process reads, so that no
-        prune removes them while the block runs (a killed process's lock is freed by the
-        system, and its list counts no more)."""
+        """For the block, name ``keys`` as in use by this process.
+
+        A list in ``RUNS`` and a lock held beside it, which ``keys_in_use`` of any other process reads,
+        so that no prune removes them while the block runs (a killed process's lock is freed by the
+        system, and its list counts no more).
+
+        Parameters
+        ----------
+        keys : iterable of str
+            The items' keys.
+
+        Yields
+        ------
+        None
+            While the block runs.
+        """
         folder = self.root / RUNS
         folder.mkdir(parents=True, exist_ok=True)
         name = f"{os.getpid()}-{secrets.token_hex(4)}"
@@ -797,8 +992,15 @@ class Cache:
             Path(lock.lock_file).unlink(missing_ok=True)
 
     def keys_in_use(self) -> set[str]:
-        """The keys that live runs name as in use (``in_use``); the lists of runs that ended
-        without removing them (killed) are removed."""
+        """The keys that live runs name as in use (``in_use``).
+
+        The lists of runs that ended without removing them (killed) are removed.
+
+        Returns
+        -------
+        set of str
+            The keys.
+        """
         folder = self.root / RUNS
         keys: set[str] = set()
         if not folder.is_dir():

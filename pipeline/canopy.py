@@ -23,13 +23,33 @@ import scipy.sparse as sparse
 from .colour import REC709_LUMINANCE
 from .geometry import Grid, normalized
 
+__all__ = [
+    "transmittance_from_image", "lattice_grid", "transmittance_on_grid", "occlusion_on_lattice", "tile_on_lattice",
+    "GroveParams", "FlutterParams", "Leaves", "Wood", "Grove", "Shapes", "grow_grove", "leaves_at", "project",
+    "layer_index", "shapes_bounds", "grove_bounds", "rasterize_transmittance", "coverage_fragments", "grove_mask",
+]
+
 
 def transmittance_from_image(image: np.ndarray) -> np.ndarray:
-    """Transmittance (rows, cols) float32 in [0, 1] from an image (rows, cols, channels).
+    """Transmittance from a mask image.
 
     One or two channels: the first (grey, or grey and alpha). Three or more: the Rec.709
-    luminance of the first three (alpha ignored). Raises ValueError for values outside [0, 1]
-    or not finite.
+    luminance of the first three (alpha ignored).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (rows, cols, channels) or (rows, cols) linear transparency, 1 = open sky [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols) float32 transmittance in [0, 1] [1].
+
+    Raises
+    ------
+    ValueError
+        For values outside [0, 1] or not finite.
     """
     image = np.asarray(image, dtype=np.float32)
     if image.ndim == 2:
@@ -49,9 +69,27 @@ def transmittance_from_image(image: np.ndarray) -> np.ndarray:
 
 
 def lattice_grid(center, size, lattice: Grid, *, periodic: bool = False) -> Grid:
-    """The grid of ``lattice``'s pixels for a canopy area ``size`` [m] around ``center`` [m]:
-    the whole cells it touches (isolated), or one period of whole cells starting at the cell
-    of its north-west corner (periodic; ``size`` must be whole pixels)."""
+    """The grid of ``lattice``'s pixels for a canopy area ``size`` around ``center``.
+
+    The whole cells it touches (isolated), or one period of whole cells starting at the cell of its
+    north-west corner (periodic; ``size`` must be whole pixels).
+
+    Parameters
+    ----------
+    center : tuple of (float, float)
+        (x, y) of the centre of the mask's area [m].
+    size : tuple of (float, float)
+        (x, y) extent of the mask's area [m].
+    lattice : Grid
+        The pixel lattice [m].
+    periodic : bool, optional
+        Whether the area is one period of a periodic canopy.
+
+    Returns
+    -------
+    Grid
+        The cells, on ``lattice`` [m].
+    """
     p = lattice.pixel
     x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
     if periodic:
@@ -66,9 +104,29 @@ def lattice_grid(center, size, lattice: Grid, *, periodic: bool = False) -> Grid
 
 
 def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: bool = False):
-    """A mask image area-averaged onto every pixel of ``grid`` (any pixel, any position):
-    exact overlap areas of its texels, open sky (1) beyond an isolated image, the image
-    repeating with period ``size`` [m] for a periodic one. Returns float32 grid.shape."""
+    """A mask image area-averaged onto every pixel of ``grid`` (any pixel, any position).
+
+    Exact overlap areas of its texels, open sky (1) beyond an isolated image, the image repeating
+    with period ``size`` for a periodic one.
+
+    Parameters
+    ----------
+    transmittance : numpy.ndarray
+        (rows, cols) mask in [0, 1], north-up [1].
+    center : tuple of (float, float)
+        (x, y) of the centre of the mask's area [m].
+    size : tuple of (float, float)
+        (x, y) extent of the mask's area [m].
+    grid : Grid
+        The target pixels [m].
+    periodic : bool, optional
+        Whether the image repeats with period ``size``.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 of ``grid.shape`` [1].
+    """
     x0, y1 = center[0] - size[0] / 2, center[1] + size[1] / 2
     occlusion = 1.0 - np.asarray(transmittance, dtype=np.float64)
     rows = _overlap(y1 - grid.origin[1], grid.shape[0], grid.pixel, occlusion.shape[0], size[1],
@@ -79,11 +137,25 @@ def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: 
 
 
 def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
-    """Occlusion ``1 - m`` of an isolated canopy, area-averaged onto the cells of ``lattice``'s
-    pixel lattice that the mask touches.
+    """Occlusion ``1 - m`` of an isolated canopy, area-averaged onto the cells of ``lattice`` that the mask touches.
 
-    transmittance : (rows, cols) in [0, 1]. center, size : (x, y) of the mask's area. [m]
-    Returns (occlusion float32 (rows, cols), its Grid on the lattice).
+    Parameters
+    ----------
+    transmittance : numpy.ndarray
+        (rows, cols) in [0, 1] [1].
+    center : tuple of (float, float)
+        (x, y) of the centre of the mask's area [m].
+    size : tuple of (float, float)
+        (x, y) extent of the mask's area [m].
+    lattice : Grid
+        The pixel lattice [m].
+
+    Returns
+    -------
+    occlusion : numpy.ndarray
+        float32 (rows, cols) of the cells [1].
+    grid : Grid
+        The cells' grid on the lattice [m].
     """
     grid = lattice_grid(center, size, lattice)
     return 1.0 - transmittance_on_grid(transmittance, center=center, size=size, grid=grid), grid
@@ -92,8 +164,23 @@ def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
 def tile_on_lattice(transmittance, *, center, size, lattice: Grid):
     """Transmittance of one period of a periodic canopy, area-averaged onto ``lattice``'s pixels.
 
-    The period ``size`` [m] must be a whole number of lattice pixels on both axes.
-    Returns (transmittance float32 (rows, cols), the tile's Grid on the lattice).
+    Parameters
+    ----------
+    transmittance : numpy.ndarray
+        (rows, cols) in [0, 1] [1].
+    center : tuple of (float, float)
+        (x, y) of the centre of the tile [m].
+    size : tuple of (float, float)
+        The period; a whole number of lattice pixels on both axes [m].
+    lattice : Grid
+        The pixel lattice [m].
+
+    Returns
+    -------
+    transmittance : numpy.ndarray
+        float32 (rows, cols) of the tile [1].
+    grid : Grid
+        The tile's grid on the lattice [m].
     """
     grid = lattice_grid(center, size, lattice, periodic=True)
     return transmittance_on_grid(transmittance, center=center, size=size, grid=grid, periodic=True), grid
@@ -147,19 +234,33 @@ def _apply(rows, cols, image):
 class GroveParams:
     """A seeded procedural grove.
 
-    count : number of trees. seed : random seed (every tree draws from default_rng([seed, 1, i])).
-    crown_radius : horizontal half-axis of each crown ellipsoid. [m]
-    leaves_per_tree : leaves of each tree.
-    leaf_length : mean leaf length; lengths vary by +-30 %, width/length 0.4 to 0.7. [m]
-    leaves_per_cluster : mean leaves per cluster (Gaussian, sigma 0.06 crown_radius); 1 scatters
-        the leaves evenly over the crown's shell.
-    height : height of the crowns' centres, the canopy plane. [m]
-    layout : "isolated" (a clump around ``center``) or "periodic" (trees in a square ``tile``,
-        every shape wrapped into it).
-    tile : period of the periodic layout, required for it. [m]
-    center : (x, y) of the clump or of the tile's centre. [m]
-    spread : radius of the disc the trunks stand in; default 0.8 crown_radius sqrt(count - 1),
-        which makes neighbouring crowns overlap a little. [m]
+    Attributes
+    ----------
+    count : int
+        Number of trees.
+    seed : int
+        Random seed (every tree draws from default_rng([seed, 1, i])).
+    crown_radius : float
+        Horizontal half-axis of each crown ellipsoid [m].
+    leaves_per_tree : int
+        Leaves of each tree.
+    leaf_length : float
+        Mean leaf length; lengths vary by +-30 %, width/length 0.4 to 0.7 [m].
+    leaves_per_cluster : int
+        Mean leaves per cluster (Gaussian, sigma 0.06 crown_radius); 1 scatters the leaves evenly
+        over the crown's shell.
+    height : float
+        Height of the crowns' centres, the canopy plane [m].
+    layout : str
+        "isolated" (a clump around ``center``) or "periodic" (trees in a square ``tile``, every
+        shape wrapped into it).
+    tile : float or None
+        Period of the periodic layout, required for it [m].
+    center : tuple of (float, float)
+        (x, y) of the clump or of the tile's centre [m].
+    spread : float or None
+        Radius of the disc the trunks stand in; default 0.8 crown_radius sqrt(count - 1), which
+        makes neighbouring crowns overlap a little [m].
     """
 
     count: int = 3
@@ -177,11 +278,18 @@ class GroveParams:
 
 @dataclass(frozen=True)
 class FlutterParams:
-    """Leaf flutter: every leaf swings about a horizontal axis through its stem and twists about
-    its own length axis, each by amplitude sin(2 pi frame / cycle + its own phase).
+    """Leaf flutter: every leaf swings and twists, each by amplitude sin(2 pi frame / cycle + its own phase).
 
-    cycle : frames of one exactly periodic cycle. [frames]
-    swing, twist : amplitudes. [rad]
+    The swing is about a horizontal axis through its stem, the twist about its own length axis.
+
+    Attributes
+    ----------
+    cycle : int
+        Frames of one exactly periodic cycle [frames].
+    swing : float
+        Amplitude of the swing [rad].
+    twist : float
+        Amplitude of the twist [rad].
     """
 
     cycle: int = 48
@@ -191,8 +299,17 @@ class FlutterParams:
 
 @dataclass(frozen=True)
 class Leaves:
-    """Flat elliptical leaves: centre (N, 3), semi-axis along the length ``axis_u`` (N, 3) and
-    across ``axis_v`` (N, 3), perpendicular. [m]"""
+    """Flat elliptical leaves.
+
+    Attributes
+    ----------
+    center : numpy.ndarray
+        (N, 3) centres [m].
+    axis_u : numpy.ndarray
+        (N, 3) semi-axis along the length [m].
+    axis_v : numpy.ndarray
+        (N, 3) semi-axis across, perpendicular to ``axis_u`` [m].
+    """
 
     center: np.ndarray
     axis_u: np.ndarray
@@ -201,7 +318,15 @@ class Leaves:
 
 @dataclass(frozen=True)
 class Wood:
-    """Trunks and branches as capsules: segment ends ``start``, ``end`` (M, 3) and ``radius`` (M,). [m]"""
+    """Trunks and branches as capsules.
+
+    Attributes
+    ----------
+    start, end : numpy.ndarray
+        (M, 3) segment ends [m].
+    radius : numpy.ndarray
+        (M,) radii [m].
+    """
 
     start: np.ndarray
     end: np.ndarray
@@ -210,9 +335,25 @@ class Wood:
 
 @dataclass(frozen=True)
 class Grove:
-    """A grove at rest. ``leaves`` rest pose; ``pivot`` (N, 3) the stem end of each leaf [m];
-    ``swing_axis`` (N, 3) horizontal unit vectors; ``swing_phase``, ``twist_phase`` (N,) [rad];
-    ``wood``; ``bases`` (count, 3) trunk feet [m]; ``params`` the GroveParams it grew from."""
+    """A grove at rest.
+
+    Attributes
+    ----------
+    leaves : Leaves
+        Rest pose [m].
+    pivot : numpy.ndarray
+        (N, 3) the stem end of each leaf [m].
+    swing_axis : numpy.ndarray
+        (N, 3) horizontal unit vectors [1].
+    swing_phase, twist_phase : numpy.ndarray
+        (N,) [rad].
+    wood : Wood
+        Trunks and branches [m].
+    bases : numpy.ndarray
+        (count, 3) trunk feet [m].
+    params : GroveParams
+        The parameters it grew from.
+    """
 
     leaves: Leaves
     pivot: np.ndarray
@@ -226,8 +367,19 @@ class Grove:
 
 @dataclass(frozen=True)
 class Shapes:
-    """Opaque shapes on the canopy plane: ellipses (centre (N, 2), conjugate semi-axes
-    ``axis_a``, ``axis_b`` (N, 2)) and capsules (``start``, ``end`` (M, 2), ``radius`` (M,)). [m]"""
+    """Opaque shapes on the canopy plane: ellipses and capsules.
+
+    Attributes
+    ----------
+    center : numpy.ndarray
+        (N, 2) centres of the ellipses [m].
+    axis_a, axis_b : numpy.ndarray
+        (N, 2) conjugate semi-axes of the ellipses [m].
+    start, end : numpy.ndarray
+        (M, 2) segment ends of the capsules [m].
+    radius : numpy.ndarray
+        (M,) radii of the capsules [m].
+    """
 
     center: np.ndarray
     axis_a: np.ndarray
@@ -237,9 +389,23 @@ class Shapes:
     radius: np.ndarray
 
     def subset(self, leaves=slice(None), wood=slice(None)) -> "Shapes":
-        """The ellipses selected by ``leaves`` and capsules selected by ``wood`` (boolean masks,
-        index arrays or slices). A boolean mask that selects everything keeps the arrays
-        themselves (a single canopy plane's layer selects every shape)."""
+        """The ellipses selected by ``leaves`` and capsules selected by ``wood``.
+
+        A boolean mask that selects everything keeps the arrays themselves (a single canopy plane's layer
+        selects every shape).
+
+        Parameters
+        ----------
+        leaves : numpy.ndarray or slice, optional
+            Boolean mask (N,), index array or slice of the ellipses.
+        wood : numpy.ndarray or slice, optional
+            Boolean mask (M,), index array or slice of the capsules.
+
+        Returns
+        -------
+        Shapes
+            The selected shapes [m].
+        """
         leaves, wood = _every(leaves, len(self.center)), _every(wood, len(self.radius))
         return Shapes(self.center[leaves], self.axis_a[leaves], self.axis_b[leaves],
                       self.start[wood], self.end[wood], self.radius[wood])
@@ -258,7 +424,21 @@ def grow_grove(params: GroveParams = GroveParams()) -> Grove:
     Each tree: a tapering trunk (radius 0.15 to 0.25 m) from the ground up to its crown centre,
     seven two-segment branches out into the crown, and leaf clusters in a flattened crown
     ellipsoid (half-axes about crown_radius, crown_radius, 0.35 crown_radius around ``height``).
-    Lengths in [m].
+
+    Parameters
+    ----------
+    params : GroveParams, optional
+        The grove's parameters.
+
+    Returns
+    -------
+    Grove
+        The grove at rest; lengths in [m].
+
+    Raises
+    ------
+    ValueError
+        For an unknown layout, or a periodic one without a tile.
     """
     p = params
     if p.layout not in ("isolated", "periodic"):
@@ -354,10 +534,26 @@ def _wrap(points, p: GroveParams):
 
 
 def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
-    """The leaves at ``frame`` (any int): each twists about its length axis by
-    twist sin(2 pi frame / cycle + twist_phase) [rad], then swings about its horizontal axis
-    through its stem by swing sin(2 pi frame / cycle + swing_phase) [rad]. Exactly periodic:
-    the frame is reduced modulo ``cycle`` first. (Compiled: pipeline/_raster.py, ``flutter``.)"""
+    """The leaves at ``frame`` (any int), exactly periodic.
+
+    Each twists about its length axis by twist sin(2 pi frame / cycle + twist_phase), then swings about
+    its horizontal axis through its stem by swing sin(2 pi frame / cycle + swing_phase). The frame is
+    reduced modulo ``cycle`` first. (Compiled: pipeline/_raster.py, ``flutter``.)
+
+    Parameters
+    ----------
+    grove : Grove
+        The grove at rest.
+    flutter : FlutterParams
+        Cycle [frames] and amplitudes [rad].
+    frame : int
+        The frame [frames].
+
+    Returns
+    -------
+    Leaves
+        The leaves at ``frame`` [m].
+    """
     from . import _raster
 
     omega = 2 * np.pi * np.mod(frame, flutter.cycle) / flutter.cycle
@@ -369,13 +565,28 @@ def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
 
 
 def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: float) -> Shapes:
-    """Leaves and wood projected along the sun onto the canopy plane z = plane_height [m].
+    """Leaves and wood projected along the sun onto the canopy plane z = plane_height.
 
-    sun : the sun's sky-plane point s = (wx / wz, wy / wz). [tan]
     A point P lands at P_xy - (P_z - plane_height) s. Leaves stay exact ellipses. A wood capsule
     projects to a capsule whose radius is the half-width of the cylinder's shadow,
     r / |n_xy| with n the unit normal to both the sun and the segment (r for an upright trunk,
-    r / cos(theta) for a branch across the sun); its end caps are approximated as round. [m]
+    r / cos(theta) for a branch across the sun); its end caps are approximated as round.
+
+    Parameters
+    ----------
+    leaves : Leaves
+        The leaves [m].
+    wood : Wood or None, optional
+        The wood; None for none [m].
+    sun : numpy.ndarray
+        (2,) the sun's sky-plane point s = (wx / wz, wy / wz) [tan].
+    plane_height : float
+        Height of the canopy plane [m].
+
+    Returns
+    -------
+    Shapes
+        The shapes on the canopy plane [m].
     """
     from . import _raster
 
@@ -394,8 +605,22 @@ def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: floa
 
 
 def layer_index(grove: Grove, heights) -> tuple[np.ndarray, np.ndarray]:
-    """Index of the nearest of the canopy planes ``heights`` [m] for every leaf (by its rest
-    centre) and every wood segment (by its midpoint): (leaf_layer (N,), wood_layer (M,)) int."""
+    """Index of the nearest canopy plane for every leaf (by its rest centre) and wood segment (by its midpoint).
+
+    Parameters
+    ----------
+    grove : Grove
+        The grove.
+    heights : sequence of float
+        Heights of the canopy planes [m].
+
+    Returns
+    -------
+    leaf_layer : numpy.ndarray
+        (N,) int.
+    wood_layer : numpy.ndarray
+        (M,) int.
+    """
     heights = np.asarray(heights, dtype=np.float64)
     nearest = lambda z: np.argmin(np.abs(z[:, None] - heights[None, :]), axis=1)  # noqa: E731
     wood_z = 0.5 * (grove.wood.start[:, 2] + grove.wood.end[:, 2])
@@ -403,7 +628,18 @@ def layer_index(grove: Grove, heights) -> tuple[np.ndarray, np.ndarray]:
 
 
 def shapes_bounds(shapes: Shapes) -> tuple[float, float, float, float]:
-    """(x_min, y_min, x_max, y_max) [m] enclosing every shape; NaNs when there are none."""
+    """The rectangle enclosing every shape.
+
+    Parameters
+    ----------
+    shapes : Shapes
+        The shapes [m].
+
+    Returns
+    -------
+    tuple of 4 float
+        (x_min, y_min, x_max, y_max); NaNs when there are none [m].
+    """
     half = np.sqrt(shapes.axis_a**2 + shapes.axis_b**2)
     low = np.concatenate([shapes.center - half, np.minimum(shapes.start, shapes.end) - shapes.radius[:, None]])
     high = np.concatenate([shapes.center + half, np.maximum(shapes.start, shapes.end) + shapes.radius[:, None]])
@@ -413,10 +649,26 @@ def shapes_bounds(shapes: Shapes) -> tuple[float, float, float, float]:
 
 
 def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun, plane_height: float):
-    """(x_min, y_min, x_max, y_max) [m] of the projected grove for every flutter frame.
+    """The rectangle of the projected grove for every flutter frame.
 
     A leaf's points stay within |U| + sqrt(|U|^2 + |V|^2) of its stem however it turns, and a
     displacement d projects to length at most |d| sqrt(1 + |s|^2); ``flutter`` is not needed.
+
+    Parameters
+    ----------
+    grove : Grove
+        The grove.
+    flutter : FlutterParams or None, optional
+        Unused.
+    sun : numpy.ndarray
+        (2,) the sun's sky-plane point [tan].
+    plane_height : float
+        Height of the canopy plane [m].
+
+    Returns
+    -------
+    tuple of 4 float
+        (x_min, y_min, x_max, y_max) [m].
     """
     s = np.asarray(sun, dtype=np.float64)
     leaves = grove.leaves
@@ -441,7 +693,7 @@ _CHUNK = 1 << 17  # a box of more than 16 _CHUNK samples gets fewer per pixel [c
 
 
 def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.ndarray:
-    """Transmittance (rows, cols) float32 of opaque ``shapes`` [m] on ``grid``: 1 = open sky.
+    """Transmittance of opaque ``shapes`` on ``grid``: 1 = open sky.
 
     Each shape covers a fraction c_i of a pixel's area (box filter; see the comment above for the
     method). Shapes combine as independent occluders: the pixel's transmittance is the product of
@@ -449,11 +701,23 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
     and two disjoint shapes each covering half a pixel give 0.25, not 0 (a pixel-scale
     statistical choice: overlaps of shapes are not resolved below a pixel).
 
-    period : (Px, Py) [m] or None; if given the shapes repeat with these periods and every
-        translate that touches the grid is drawn (one tile or any window of a periodic forest).
-
     The loops over shapes and their pixels are compiled (``pipeline/_raster.py``, numba), with
     the coverages of ``coverage_fragments`` to float32 rounding (docs/accuracy.md).
+
+    Parameters
+    ----------
+    shapes : Shapes
+        The shapes [m].
+    grid : Grid
+        The raster [m].
+    period : tuple of (float, float) or None, optional
+        (Px, Py); if given the shapes repeat with these periods and every translate that touches the
+        grid is drawn (one tile or any window of a periodic forest) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols) float32 transmittance [1].
     """
     return _compiled(shapes, grid, period, emit=False)
 
@@ -495,21 +759,57 @@ def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
 
     The coverages are those that ``rasterize_transmittance`` multiplies: for each fragment the
     fraction c in [0, 1) of the pixel's area that the shape covers (clipped just below 1).
-    Returns (pixel (n,) int64, the flat index ``row * cols + col``; coverage (n,) float32 in
-    (0, 1); shape (n,) int64: ellipse i is shape i, capsule j is shape ``len(shapes.center) + j``).
     Fragments are grouped by shape, not sorted; pixels outside the grid and zero coverages are
-    dropped. period : as for ``rasterize_transmittance`` (every translate keeps its shape index).
+    dropped.
+
+    Parameters
+    ----------
+    shapes : Shapes
+        The shapes [m].
+    grid : Grid
+        The raster [m].
+    period : tuple of (float, float) or None, optional
+        As for ``rasterize_transmittance`` (every translate keeps its shape index) [m].
+
+    Returns
+    -------
+    pixel : numpy.ndarray
+        (n,) int64, the flat index ``row * cols + col``.
+    coverage : numpy.ndarray
+        (n,) float32 in (0, 1) [1].
+    shape : numpy.ndarray
+        (n,) int64: ellipse i is shape i, capsule j is shape ``len(shapes.center) + j``.
     """
     return _compiled(shapes, grid, period, emit=True)
 
 
 def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_height: float, grid: Grid,
                period=None, select=None) -> np.ndarray:
-    """Transmittance mask float32 (rows, cols) of the grove at ``frame`` on the canopy plane z =
-    ``plane_height`` [m] under the sun at sky-plane point ``sun`` [tan].
+    """Transmittance mask of the grove at ``frame`` on the canopy plane z = ``plane_height``.
 
-    period : (Px, Py) [m]; None uses the grove's own tile for a periodic layout.
-    select : None or (leaf selector, wood selector) for ``Shapes.subset``, e.g. from ``layer_index``.
+    Parameters
+    ----------
+    grove : Grove
+        The grove.
+    flutter : FlutterParams
+        The flutter.
+    frame : int
+        The frame [frames].
+    sun : numpy.ndarray
+        (2,) the sun's sky-plane point [tan].
+    plane_height : float
+        Height of the canopy plane [m].
+    grid : Grid
+        The raster [m].
+    period : tuple of (float, float) or None, optional
+        (Px, Py); None uses the grove's own tile for a periodic layout [m].
+    select : tuple or None, optional
+        None or (leaf selector, wood selector) for ``Shapes.subset``, e.g. from ``layer_index``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols) float32 transmittance [1].
     """
     if period is None and grove.params.layout == "periodic":
         period = (grove.params.tile, grove.params.tile)

@@ -15,6 +15,11 @@ import numpy as np
 from .colour import XYZ_TO_REC709
 from .vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS
 
+__all__ = [
+    "CIE_TYPES", "DAYLIGHT_CCT", "daylight_chromaticity", "cie_relative_luminance", "perez_coefficients",
+    "zenith_chromaticity", "preetham_relative", "rgb_from_xyY", "relative_sky",
+]
+
 _GRADATION = {1: (4.0, -0.70), 2: (1.1, -0.8), 3: (0.0, -1.0), 4: (-1.0, -0.55), 5: (-1.0, -0.32),
               6: (-1.0, -0.15)}
 _INDICATRIX = {1: (0.0, -1.0, 0.0), 2: (2.0, -1.5, 0.15), 3: (5.0, -2.5, 0.30), 4: (10.0, -3.0, 0.45),
@@ -35,11 +40,26 @@ sky"). The clear types (11-15) keep Preetham's blue sky. [K]"""
 
 
 def daylight_chromaticity(cct: float) -> tuple[float, float]:
-    """CIE xy of the D-series daylight of correlated colour temperature ``cct`` (CIE 15:2004,
-    eqs. 3.3-3.4: x_D a cubic in 1/T on 4000-7000 K and on 7000-25000 K, y_D = -3 x_D^2 +
-    2.870 x_D - 0.275). The CIE's D65 is 6504 K (6500 K before the 1968 change of c2).
+    """CIE xy of the D-series daylight of a correlated colour temperature.
 
-    cct : in [4000, 25000]. [K]   Returns (x, y). [1]
+    CIE 15:2004, eqs. 3.3-3.4: x_D a cubic in 1/T on 4000-7000 K and on 7000-25000 K,
+    y_D = -3 x_D^2 + 2.870 x_D - 0.275. The CIE's D65 is 6504 K (6500 K before the 1968 change
+    of c2).
+
+    Parameters
+    ----------
+    cct : float
+        Correlated colour temperature, in [4000, 25000] [K].
+
+    Returns
+    -------
+    x, y : float
+        The chromaticity [1].
+
+    Raises
+    ------
+    ValueError
+        If ``cct`` is outside [4000, 25000] K.
     """
     t = float(cct)
     if not 4000.0 <= t <= 25000.0:
@@ -72,13 +92,26 @@ _ZENITH_Y = np.array(
 
 
 def cie_relative_luminance(cos_zenith, gamma, *, sun_zenith: float, cie_type: int) -> np.ndarray:
-    """Luminance over zenith luminance of a CIE standard general sky (ISO 15469:2004, eqs. 1-4):
+    """Luminance over zenith luminance of a CIE standard general sky (ISO 15469:2004, eqs. 1-4).
+
     L / Lz = f(gamma) phi(Z) / (f(Zs) phi(0)), gradation phi(Z) = 1 + a exp(b / cos Z) (1 at the
     horizon), indicatrix f(chi) = 1 + c (exp(d chi) - exp(d pi/2)) + e cos^2 chi.
 
-    cos_zenith : cos Z of the directions, in [0, 1]. [1]   gamma : angle from the sun. [rad]
-    sun_zenith : Zs. [rad]   cie_type : 1..15 (CIE_TYPES).
-    Returns (...) float64. [1]
+    Parameters
+    ----------
+    cos_zenith : float or numpy.ndarray
+        cos Z of the directions, in [0, 1] [1].
+    gamma : float or numpy.ndarray
+        Angle of the directions from the sun, broadcastable with ``cos_zenith`` [rad].
+    sun_zenith : float
+        Zs [rad].
+    cie_type : int
+        1..15 (CIE_TYPES).
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64, of the broadcast shape of ``cos_zenith`` and ``gamma`` [1].
     """
     a, b, c, d, e = CIE_TYPES[cie_type]
     gamma = np.asarray(gamma, dtype=np.float64)
@@ -96,16 +129,33 @@ def cie_relative_luminance(cos_zenith, gamma, *, sun_zenith: float, cie_type: in
 def perez_coefficients(turbidity: float) -> np.ndarray:
     """Perez distribution coefficients A..E for Y, x and y (Preetham et al. 1999, appendix A.2).
 
-    turbidity : atmospheric turbidity T. [1]
-    Returns (3, 5): rows Y, x, y; columns A, B, C, D, E. [1]
+    Parameters
+    ----------
+    turbidity : float
+        Atmospheric turbidity T [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, 5): rows Y, x, y; columns A, B, C, D, E [1].
     """
     return _PEREZ_SLOPE * float(turbidity) + _PEREZ_INTERCEPT
 
 
 def zenith_chromaticity(turbidity: float, sun_zenith: float) -> tuple[float, float]:
-    """CIE xy chromaticity of the zenith (Preetham et al. 1999, appendix A.2). [1]
+    """CIE xy chromaticity of the zenith (Preetham et al. 1999, appendix A.2).
 
-    turbidity : T. [1]   sun_zenith : theta_s. [rad]
+    Parameters
+    ----------
+    turbidity : float
+        T [1].
+    sun_zenith : float
+        theta_s [rad].
+
+    Returns
+    -------
+    x, y : float
+        The zenith's chromaticity [1].
     """
     t = np.array([turbidity**2, turbidity, 1.0])
     a = np.array([sun_zenith**3, sun_zenith**2, sun_zenith, 1.0])
@@ -119,12 +169,25 @@ def _perez(c, inv_cos, gamma, cos_gamma):
 
 
 def preetham_relative(cos_zenith, gamma, *, turbidity: float, sun_zenith: float) -> np.ndarray:
-    """Preetham et al. (1999) eq. 3 for Y, x and y: the zenith values x_z, y_z (and 1 for Y) times
-    F(theta, gamma) / F(0, theta_s).
+    """Preetham et al. (1999) eq. 3 for Y, x and y: the zenith values times F(theta, gamma) / F(0, theta_s).
 
-    cos_zenith : in [0, 1]. [1]   gamma : angle from the sun. [rad]   turbidity : T. [1]
-    sun_zenith : theta_s. [rad]
-    Returns (3, ...) float64: luminance over the zenith's, and the chromaticity x, y. [1]
+    The zenith values are x_z, y_z (``zenith_chromaticity``) and 1 for Y.
+
+    Parameters
+    ----------
+    cos_zenith : float or numpy.ndarray
+        cos theta of the directions, in [0, 1] [1].
+    gamma : float or numpy.ndarray
+        Angle from the sun, broadcastable with ``cos_zenith`` [rad].
+    turbidity : float
+        T [1].
+    sun_zenith : float
+        theta_s [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, ...) float64: luminance over the zenith's, and the chromaticity x, y [1].
     """
     gamma = np.asarray(gamma, dtype=np.float64)
     cos_gamma = np.cos(gamma)
@@ -138,7 +201,20 @@ def preetham_relative(cos_zenith, gamma, *, turbidity: float, sun_zenith: float)
 
 
 def rgb_from_xyY(x, y, Y) -> np.ndarray:
-    """Linear Rec.709 (..., 3) from CIE xyY; its Rec.709 luminance is Y."""
+    """Linear Rec.709 from CIE xyY; its Rec.709 luminance is Y.
+
+    Parameters
+    ----------
+    x, y : float or numpy.ndarray
+        Chromaticity, broadcastable [1].
+    Y : float or numpy.ndarray
+        Luminance, in any unit.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) linear Rec.709, in the unit of ``Y``.
+    """
     X = x / y * Y
     Z = (1.0 - x - y) / y * Y
     M = XYZ_TO_REC709
@@ -147,15 +223,37 @@ def rgb_from_xyY(x, y, Y) -> np.ndarray:
 
 def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shape: str = "cie",
                  cie_type: int = DEFAULT_CIE_TYPE) -> np.ndarray:
-    """The sky's colour and relative luminance: luminance 1 at the zenith, shaped by the CIE
-    type or by Preetham's model (``shape``), coloured by Preetham's chromaticity at ``turbidity``,
-    or, for the overcast and intermediate CIE types (``DAYLIGHT_CCT``), by CIE daylight's.
+    """The sky's colour and relative luminance: luminance 1 at the zenith.
 
-    cos_zenith : in [0, 1]. [1]   gamma : angle from the sun. [rad]
-    sun_zenith : [rad]; beyond pi/2 (the sun set, to 96 degrees) the CIE shape follows it and
-        Preetham's colour (and shape) are those at pi/2.
-    turbidity : T of the colour (and of the Preetham shape). [1]
-    Returns (..., 3) float64 linear Rec.709, zenith luminance 1. [1]
+    Shaped by the CIE type or by Preetham's model (``shape``), coloured by Preetham's chromaticity at
+    ``turbidity``, or, for the overcast and intermediate CIE types (``DAYLIGHT_CCT``), by CIE
+    daylight's.
+
+    Parameters
+    ----------
+    cos_zenith : float or numpy.ndarray
+        cos of the directions' zenith angle, in [0, 1] [1].
+    gamma : float or numpy.ndarray
+        Angle from the sun, broadcastable with ``cos_zenith`` [rad].
+    sun_zenith : float
+        Beyond pi/2 (the sun set, to 96 degrees) the CIE shape follows it and Preetham's colour
+        (and shape) are those at pi/2 [rad].
+    turbidity : float
+        T of the colour (and of the Preetham shape) [1].
+    shape : str, optional
+        "cie" or "preetham" (vocabulary.PROCEDURAL_MODELS).
+    cie_type : int, optional
+        1..15 (CIE_TYPES), for ``shape`` "cie".
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float64 linear Rec.709, zenith luminance 1 [1].
+
+    Raises
+    ------
+    ValueError
+        If ``shape`` is unknown.
     """
     # Preetham's model stops at the horizon: below it (twilight) the colours of sunset are kept
     Y, x, y = preetham_relative(cos_zenith, gamma, turbidity=turbidity, sun_zenith=min(sun_zenith, np.pi / 2))

@@ -299,7 +299,7 @@ def _run_check(args) -> int:
           + (f"within the cache's budget of {_size(budget)}" if cycle <= budget else
              f"over the cache's budget of {_size(budget)}: a run keeps its own items, and removes "
              "every other one; raise it with --cache-size or $SUNSHADE_CACHE_SIZE"))
-    _warn(plan)
+    _warn(config, plan)
     return 0
 
 
@@ -356,10 +356,10 @@ def _framing_lines(plan) -> list[str]:
     return lines
 
 
-def _warn(plan) -> None:
+def _warn(config, plan) -> None:
     from .framing import framing_warnings
 
-    for line in framing_warnings(plan):
+    for line in framing_warnings(config, plan):
         print(f"sunshade: warning: {line}", file=sys.stderr)
 
 
@@ -373,8 +373,8 @@ def _run_render(args) -> int:
     """
     from dataclasses import replace
 
-    from .config import preview
     from .cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
+    from .preview import preview
     from .resolve import resolve, source_digest
     from .runfolder import check_outputs, nothing_to_do, parse_frames
 
@@ -676,8 +676,7 @@ def _run_sky(args) -> int:
 
     from . import io
     from .composite import display_sky
-    from .inputs import load_sky
-    from .plan import scene_at
+    from .scene import load_sky, scene_at
 
     output = _checked_output(args.output)
     exr = output if output.suffix.lower() == ".exr" else None

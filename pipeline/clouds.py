@@ -18,13 +18,9 @@ from scipy import ndimage, special
 from .composite import henyey_greenstein
 
 __all__ = [
-    "CloudLayer",
-    "single_scattering_transmission",
-    "single_scattering_flux_transmittance",
-    "delta_eddington_transmittance",
-    "two_stream_diffuse_transmittance",
-    "diffuse_direct_transmittance",
-    "fractal_noise",
+    "CloudLayer", "single_scattering_transmission", "single_scattering_flux_transmittance",
+    "delta_eddington_transmittance", "two_stream_diffuse_transmittance", "diffuse_direct_transmittance",
+    "fractal_noise", "MAX_TAPS", "TILE_BLEND",
 ]
 
 _TAU_NODES = 48  # optical-depth nodes of the per-call multiple-scattering table
@@ -59,13 +55,25 @@ def single_scattering_transmission(optical_depth, view_cosine, sun_cosine, phase
     ``w p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)``, which is exact and
     stable at ``mu = mu0``.
 
-    optical_depth : tau, vertical optical depth of the slab, >= 0. [dimensionless]
-    view_cosine : mu, cosine of the zenith angle of the viewing direction, in (0, 1].
-        [dimensionless]
-    sun_cosine : mu0, cosine of the sun's zenith angle, in (0, 1]. [dimensionless]
-    phase : p, phase function at the scattering angle, normalised to 1 over the sphere. [1/sr]
-    albedo : w, single-scattering albedo in [0, 1]. [dimensionless]
-    Returns L / F. [1/sr]
+    Parameters
+    ----------
+    optical_depth : float or numpy.ndarray
+        tau, vertical optical depth of the slab, >= 0 [1].
+    view_cosine : float or numpy.ndarray
+        mu, cosine of the zenith angle of the viewing direction, in (0, 1] [1].
+    sun_cosine : float or numpy.ndarray
+        mu0, cosine of the sun's zenith angle, in (0, 1] [1].
+    phase : float or numpy.ndarray
+        p, phase function at the scattering angle, normalised to 1 over the sphere [1/sr].
+    albedo : float
+        w, single-scattering albedo in [0, 1] [1].
+
+    Arrays broadcast.
+
+    Returns
+    -------
+    numpy.ndarray
+        L / F, float64 of the broadcast shape [1/sr].
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     inv_mu = 1.0 / np.asarray(view_cosine, dtype=np.float64)
@@ -93,11 +101,23 @@ def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry
     hemisphere, by Gauss-Legendre quadrature in zenith (``nodes``) and azimuth (``nodes``);
     the azimuth integral of the Henyey-Greenstein phase is done once for all depths.
 
-    optical_depth : tau, array of vertical optical depths >= 0. [dimensionless]
-    sun_cosine : mu0 in (0, 1]. [dimensionless]
-    asymmetry : g of the Henyey-Greenstein phase. [dimensionless]
-    albedo : single-scattering albedo. [dimensionless]
-    Returns S1 with the shape of ``optical_depth``, in [0, albedo]. [dimensionless]
+    Parameters
+    ----------
+    optical_depth : numpy.ndarray
+        tau, vertical optical depths >= 0, any shape [1].
+    sun_cosine : float
+        mu0 in (0, 1] [1].
+    asymmetry : float
+        g of the Henyey-Greenstein phase [1].
+    albedo : float
+        Single-scattering albedo [1].
+    nodes : int, optional
+        Gauss-Legendre nodes per angle.
+
+    Returns
+    -------
+    numpy.ndarray
+        S1, float64 with the shape of ``optical_depth``, in [0, albedo] [1].
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     mu0 = float(sun_cosine)
@@ -129,10 +149,19 @@ def delta_eddington_transmittance(optical_depth, sun_cosine, *, asymmetry):
     ``R = (gamma1 tau' + (gamma3 - gamma1 mu0)(1 - exp(-tau'/mu0))) / (1 + gamma1 tau')``,
     ``T = 1 - R``.
 
-    optical_depth : tau, vertical optical depth >= 0. [dimensionless]
-    sun_cosine : mu0 in (0, 1]. [dimensionless]
-    asymmetry : g in [0, 1). [dimensionless]
-    Returns T, the transmitted flux over the incident ``F mu0``. [dimensionless]
+    Parameters
+    ----------
+    optical_depth : float or numpy.ndarray
+        tau, vertical optical depth >= 0 [1].
+    sun_cosine : float or numpy.ndarray
+        mu0 in (0, 1], broadcastable with ``optical_depth`` [1].
+    asymmetry : float
+        g in [0, 1) [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        T, the transmitted flux over the incident ``F mu0``, float64 of the broadcast shape [1].
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     mu0 = np.asarray(sun_cosine, dtype=np.float64)
@@ -155,10 +184,19 @@ def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
     stay finite as ``k -> 0`` (conservative limit ``T = 1 / (1 + (1 - g) tau)``, Bohren 1987,
     Am. J. Phys. 55, 524).
 
-    optical_depth : tau >= 0. [dimensionless]
-    albedo : w in [0, 1]. [dimensionless]
-    asymmetry : g in (-1, 1). [dimensionless]
-    Returns T, direct and diffuse together. [dimensionless]
+    Parameters
+    ----------
+    optical_depth : float or numpy.ndarray
+        tau >= 0 [1].
+    albedo : float
+        w in [0, 1] [1].
+    asymmetry : float
+        g in (-1, 1) [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        T, direct and diffuse together, float64 of the shape of ``optical_depth`` [1].
     """
     tau = np.asarray(optical_depth, dtype=np.float64)
     g1 = 2.0 - albedo * (1.0 + asymmetry)
@@ -170,9 +208,17 @@ def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
 
 
 def diffuse_direct_transmittance(optical_depth):
-    """Unscattered fraction of uniform diffuse light through a slab: 2 E3(tau). [dimensionless]
+    """Unscattered fraction of uniform diffuse light through a slab: 2 E3(tau).
 
-    optical_depth : tau >= 0. [dimensionless]
+    Parameters
+    ----------
+    optical_depth : float or numpy.ndarray
+        tau >= 0 [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of the shape of ``optical_depth`` [1].
     """
     return 2.0 * special.expn(3, np.asarray(optical_depth, dtype=np.float64))
 
@@ -202,12 +248,23 @@ def _noise(seed: int, texels: int, period: float, spectral_slope: float):
 def fractal_noise(seed, texels=1024, *, period=16.0, spectral_slope=5.0 / 3.0):
     """The periodic fractal noise lattice of a cloud layer (zero mean, unit variance).
 
-    seed : seed of ``numpy.random.default_rng`` for the white noise. [int]
-    texels : lattice side; one tile is ``texels x texels``. [count]
-    period : tile side in units of the feature size ``scale``. [dimensionless]
-    spectral_slope : beta, slope of the 1-D transect power spectrum ``k^-beta``. [dimensionless]
-    Returns a read-only float64 array (texels, texels), indexed [row, col] with col along +x and
-    row along -y. Cached: the same arguments return the same array.
+    Cached: the same arguments return the same array.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of ``numpy.random.default_rng`` for the white noise.
+    texels : int, optional
+        Lattice side; one tile is ``texels x texels`` [count].
+    period : float, optional
+        Tile side in units of the feature size ``scale`` [1].
+    spectral_slope : float, optional
+        beta, slope of the 1-D transect power spectrum ``k^-beta`` [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        Read-only float64 (texels, texels), indexed [row, col] with col along +x and row along -y [1].
     """
     return _noise(int(seed), int(texels), float(period), float(spectral_slope))[0]
 
@@ -358,23 +415,40 @@ def _knots(seed, texels, period, spectral_slope, cover, softness):
 class CloudLayer:
     """A horizontal layer of drifting fractal cloud (see the module docstring for the model).
 
-    cover : fraction of the sky plane covered, in [0, 1]. [dimensionless]
-    scale : feature size of the pattern: clouds and gaps are about this wide. [m]
-    altitude : height of the layer above the observer, > 0. [m]
-    wind : (2,) velocity of the pattern, x east, y north: the density at x at time t is that at
-        ``x - wind t`` at time 0. [m/s]
-    thickness : vertical optical depth of a full cloud, >= 0. [dimensionless]
-    seed : seed of the noise. [int]
-    albedo : single-scattering albedo; water droplets absorb almost nothing in the visible.
-        [dimensionless]
-    asymmetry : g of the Henyey-Greenstein phase; 0.85 for water clouds in the visible
-        (Hansen & Travis 1974, Space Sci. Rev. 16, 527). [dimensionless]
-    softness : width of the soft edge, as a fraction of the smaller of cover and 1 - cover, in
-        [0, 1]; 0 gives hard edges. [dimensionless]
-    spectral_slope : slope of the 1-D power spectrum of a transect (5/3: Cahalan & Snider
-        1989). [dimensionless]
-    period : side of the noise tile (laid as shifted copies) in units of ``scale``. [dimensionless]
-    texels : lattice side of the noise tile. [count]
+    Attributes
+    ----------
+    cover : float
+        Fraction of the sky plane covered, in [0, 1] [1].
+    scale : float
+        Feature size of the pattern: clouds and gaps are about this wide [m].
+    altitude : float
+        Height of the layer above the observer, > 0 [m].
+    wind : tuple of (float, float)
+        (2,) velocity of the pattern, x east, y north: the density at x at time t is that at
+        ``x - wind t`` at time 0 [m/s].
+    thickness : float
+        Vertical optical depth of a full cloud, >= 0 [1].
+    seed : int
+        Seed of the noise.
+    albedo : float, optional
+        Single-scattering albedo; water droplets absorb almost nothing in the visible [1].
+    asymmetry : float, optional
+        g of the Henyey-Greenstein phase; 0.85 for water clouds in the visible
+        (Hansen & Travis 1974, Space Sci. Rev. 16, 527) [1].
+    softness : float, optional
+        Width of the soft edge, as a fraction of the smaller of cover and 1 - cover, in
+        [0, 1]; 0 gives hard edges [1].
+    spectral_slope : float, optional
+        Slope of the 1-D power spectrum of a transect (5/3: Cahalan & Snider 1989) [1].
+    period : float, optional
+        Side of the noise tile (laid as shifted copies) in units of ``scale`` [1].
+    texels : int, optional
+        Lattice side of the noise tile [count].
+
+    Raises
+    ------
+    ValueError
+        If a field is out of its range.
     """
 
     cover: float
@@ -417,15 +491,20 @@ class CloudLayer:
 
     @property
     def texel(self) -> float:
-        """Lattice spacing of the noise on the layer. [m]"""
+        """Lattice spacing of the noise on the layer.
+
+        Returns
+        -------
+        float
+            period x scale / texels [m].
+        """
         return self.period * self.scale / self.texels
 
     def _noise_key(self):
         return (self.seed, self.texels, self.period, self.spectral_slope)
 
     def field(self, s, time, footprint=None) -> np.ndarray:
-        """The noise (zero mean, unit variance on the lattice) where directions ``s`` (..., 2)
-        [tan] meet the layer at ``time`` [s]. [dimensionless]
+        """The noise where directions ``s`` meet the layer at ``time`` (zero mean, unit variance on the lattice).
 
         The lattice is read by cubic B-spline interpolation (Unser, Aldroubi & Eden, "Fast
         B-spline transforms for continuous image representation and interpolation", IEEE PAMI
@@ -434,14 +513,26 @@ class CloudLayer:
         however much a camera magnifies it; bilinear reading left a kink at every texel, the
         blocky, camouflage-like edges.
 
-        footprint : None, or the width each sample stands for on the sky plane [tan]: a
-            scalar or (...) (a round footprint), or (..., 2) (the same shape as ``s``): its
-            width along the radius s / |s| and across it. The noise is then filtered over it
-            on the layer, as GPUs filter textures anisotropically: the mip level is chosen
-            from the narrower width and up to MAX_TAPS trilinear taps are spread along the
-            wider one (a camera's pixel near the horizon is 1 / cos(theta) times longer along
-            the radius than across it on the sky plane: filtered round, the far cloud deck was
-            smeared sideways into stepped bands)."""
+        Parameters
+        ----------
+        s : numpy.ndarray
+            (..., 2) sky-plane points of the directions [tan].
+        time : float
+            [s].
+        footprint : None, float or numpy.ndarray, optional
+            The width each sample stands for on the sky plane [tan]: a scalar or (...) (a round
+            footprint), or (..., 2) (the same shape as ``s``): its width along the radius s / |s| and
+            across it. The noise is then filtered over it on the layer, as GPUs filter textures
+            anisotropically: the mip level is chosen from the narrower width and up to MAX_TAPS
+            trilinear taps are spread along the wider one (a camera's pixel near the horizon is
+            1 / cos(theta) times longer along the radius than across it on the sky plane: filtered
+            round, the far cloud deck was smeared sideways into stepped bands).
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) float64 noise [1].
+        """
         shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
         out = np.empty(coords.shape[1])
@@ -512,14 +603,29 @@ class CloudLayer:
         return along, across
 
     def coverage(self, s, time, footprint=None) -> np.ndarray:
-        """Cloud coverage c in [0, 1] at directions ``s`` (..., 2) [tan] at ``time`` [s]:
-        1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane.
-        ``footprint`` as in ``field``: the coverage is then the footprint's mean coverage, not
-        the coverage of its mean field (which cuts a hard edge through the pixel, the stair
-        steps of an aliased edge): the field within the footprint is taken as Gaussian about
-        its filtered value with the variance that the filter took out (``_lost_variance``),
-        and c averaged over it by Gauss-Hermite quadrature, as Heitz & Neyret (2018, section
-        4.3) prefilter a lookup applied to a filtered Gaussian texture. [dimensionless]"""
+        """Cloud coverage c in [0, 1] at directions ``s`` at ``time``.
+
+        1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane. With a
+        ``footprint`` the coverage is the footprint's mean coverage, not the coverage of its mean field
+        (which cuts a hard edge through the pixel, the stair steps of an aliased edge): the field within
+        the footprint is taken as Gaussian about its filtered value with the variance that the filter
+        took out (``_lost_variance``), and c averaged over it by Gauss-Hermite quadrature, as Heitz &
+        Neyret (2018, section 4.3) prefilter a lookup applied to a filtered Gaussian texture.
+
+        Parameters
+        ----------
+        s : numpy.ndarray
+            (..., 2) sky-plane points of the directions [tan].
+        time : float
+            [s].
+        footprint : None, float or numpy.ndarray, optional
+            As in ``field`` [tan].
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) float64 coverage [1].
+        """
         s = np.asarray(s, dtype=np.float64)
         if self.cover <= 0.0:
             return np.zeros(s.shape[:-1])
@@ -538,14 +644,43 @@ class CloudLayer:
         return out
 
     def optical_depth(self, s, time, footprint=None) -> np.ndarray:
-        """Vertical optical depth tau = thickness x coverage where ``s`` (..., 2) [tan] meets the
-        layer at ``time`` [s]; ``footprint`` as in ``field``. [dimensionless]"""
+        """Vertical optical depth tau = thickness x coverage where ``s`` meets the layer at ``time``.
+
+        Parameters
+        ----------
+        s : numpy.ndarray
+            (..., 2) sky-plane points of the directions [tan].
+        time : float
+            [s].
+        footprint : None, float or numpy.ndarray, optional
+            As in ``field`` [tan].
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) float64 tau [1].
+        """
         return self.thickness * self.coverage(s, time, footprint)
 
     def transmittance(self, s, time, footprint=None) -> np.ndarray:
-        """Direct transmittance exp(-tau / cos(theta)) along directions ``s`` (..., 2) [tan] at
-        ``time`` [s], with cos(theta) = 1 / sqrt(1 + |s|^2); ``footprint`` as in ``field``.
-        [dimensionless]"""
+        """Direct transmittance exp(-tau / cos(theta)) along directions ``s`` at ``time``.
+
+        cos(theta) = 1 / sqrt(1 + |s|^2).
+
+        Parameters
+        ----------
+        s : numpy.ndarray
+            (..., 2) sky-plane points of the directions [tan].
+        time : float
+            [s].
+        footprint : None, float or numpy.ndarray, optional
+            As in ``field`` [tan].
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) float64 transmittance [1].
+        """
         s = np.asarray(s, dtype=np.float64)
         tau = self.optical_depth(s, time, footprint)
         return np.exp(-tau * np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2))
@@ -578,17 +713,32 @@ class CloudLayer:
 
     def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance,
                  multiple_scattering=True, tau=None, footprint=None) -> np.ndarray:
-        """Light the layer scatters towards the observer along directions ``s`` (..., 2) [tan].
+        """Light the layer scatters towards the observer along directions ``s``.
 
-        time : [s]
-        sun_s : (2,) sky-plane point of the sun (above the horizon). [tan]
-        sun_irradiance : (3,) RGB normal irradiance of the sun above the cloud. [klx]
-        sky_irradiance : (3,) RGB horizontal irradiance of the clear sky. [klx]
-        multiple_scattering : False keeps Blinn's single scattering alone.
-        tau : optional (...) optical depth already sampled at ``s`` and ``time`` (as by
-            ``optical_depth``), to save sampling the pattern twice. [dimensionless]
-        footprint : the pattern's filter width, as in ``field`` (when ``tau`` is not given). [tan]
-        Returns (..., 3) float32 RGB radiance, 0 where there is no cloud. [kcd/m^2]
+        Parameters
+        ----------
+        s : numpy.ndarray
+            (..., 2) sky-plane points of the directions [tan].
+        time : float
+            [s].
+        sun_s : numpy.ndarray
+            (2,) sky-plane point of the sun (above the horizon) [tan].
+        sun_irradiance : numpy.ndarray
+            (3,) RGB normal irradiance of the sun above the cloud [klx].
+        sky_irradiance : numpy.ndarray
+            (3,) RGB horizontal irradiance of the clear sky [klx].
+        multiple_scattering : bool, optional
+            False keeps Blinn's single scattering alone.
+        tau : numpy.ndarray, optional
+            (...) optical depth already sampled at ``s`` and ``time`` (as by ``optical_depth``), to
+            save sampling the pattern twice [1].
+        footprint : None, float or numpy.ndarray, optional
+            The pattern's filter width, as in ``field`` (when ``tau`` is not given) [tan].
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., 3) float32 RGB radiance, 0 where there is no cloud [kcd/m^2].
         """
         s = np.asarray(s, dtype=np.float64)
         sun_s = np.asarray(sun_s, dtype=np.float64).reshape(2)
@@ -634,11 +784,21 @@ class CloudLayer:
 
     def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True,
               footprint=None):
-        """``(transmittance(s, time, footprint), radiance(s, time, ..., footprint=footprint))``
-        sampling the pattern once.
+        """The transmittance and the radiance along ``s``, sampling the pattern once.
 
-        Same arguments and units as ``radiance``; returns ((...), (..., 3)).
-        [dimensionless], [kcd/m^2]
+        ``(transmittance(s, time, footprint), radiance(s, time, ..., footprint=footprint))``.
+
+        Parameters
+        ----------
+        s, time, sun_s, sun_irradiance, sky_irradiance, multiple_scattering, footprint
+            As in ``radiance``.
+
+        Returns
+        -------
+        transmittance : numpy.ndarray
+            (...) float64 [1].
+        radiance : numpy.ndarray
+            (..., 3) float32 RGB [kcd/m^2].
         """
         s = np.asarray(s, dtype=np.float64)
         tau = self.optical_depth(s, time, footprint)

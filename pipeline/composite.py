@@ -8,9 +8,23 @@ import numpy as np
 from .colour import REC709_LUMINANCE
 from .vocabulary import DISPLAYS, WHITE_BALANCES
 
+__all__ = ["srgb_encode", "display_ground", "display_sky", "white_balance", "composite_frame", "henyey_greenstein",
+           "haze_transmittance", "aerial_perspective", "aces_filmic", "display", "exposure_for", "auto_exposure"]
+
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function (IEC 61966-2-1) of linear values, clipped to [0, 1]."""
+    """The sRGB transfer function (IEC 61966-2-1) of linear values, clipped to [0, 1].
+
+    Parameters
+    ----------
+    linear : array_like
+        Display-linear values, any shape [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 sRGB code values in [0, 1], of ``linear``'s shape [1].
+    """
     shape = np.shape(linear)
     x = np.clip(np.array(linear, dtype=np.float32, ndmin=1), 0.0, 1.0)
     # in place, in float32: the same bits as np.where(x <= 0.0031308, 12.92 x, 1.055 x^(1/2.4)
@@ -25,10 +39,24 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 
 def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25) -> np.ndarray:
-    """Display-referred sRGB picture of a ground irradiance raster (rows, cols, 3).
+    """Display-referred sRGB picture of a ground irradiance raster.
 
     The open-sky irradiance maps to ``1 / white`` of full scale, grey-balanced by its luminance,
-    so sunlit ground is a light grey and shade keeps its depth. [dimensionless]
+    so sunlit ground is a light grey and shade keeps its depth.
+
+    Parameters
+    ----------
+    irradiance : numpy.ndarray
+        (rows, cols, 3) horizontal irradiance of the ground [klx].
+    unshadowed : array_like
+        (3,) the open sky's and sun's horizontal irradiance [klx].
+    white : float, optional
+        The open-sky irradiance over full scale [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 sRGB code values in [0, 1] [1].
     """
     unshadowed = np.asarray(unshadowed, dtype=np.float64)
     luminance = float(unshadowed @ REC709_LUMINANCE)
@@ -37,10 +65,21 @@ def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25
 
 
 def display_sky(radiance: np.ndarray) -> np.ndarray:
-    """Display-referred sRGB picture of an equirectangular sky (rows, cols, 3).
+    """Display-referred sRGB picture of an equirectangular sky.
 
     Exposure puts the median luminance of the upper hemisphere at 0.4, then ``x / (1 + x)``
-    compresses the sun and the glow around it instead of clipping them flat. [dimensionless]
+    compresses the sun and the glow around it instead of clipping them flat.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (rows, cols, 3) equirectangular sky radiance, the upper hemisphere in the top half of the rows
+        [kcd/m^2].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 sRGB code values in [0, 1] [1].
     """
     radiance = np.asarray(radiance, dtype=np.float32)
     upper = radiance[: radiance.shape[0] // 2] @ REC709_LUMINANCE
@@ -50,9 +89,30 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
 
 
 def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray:
-    """Per-channel gains (3,) of a von Kries white balance: the chosen light (``WHITE_BALANCES``)
-    comes out grey, its luminance kept. sun_irradiance, sky_irradiance : (3,) horizontal
-    irradiance of the run's clear sun and sky. [1]"""
+    """Per-channel gains of a von Kries white balance.
+
+    The chosen light comes out grey, its luminance kept; a light with a channel not above 0 gets
+    gains of 1.
+
+    Parameters
+    ----------
+    setting : str
+        One of ``WHITE_BALANCES``: ``daylight`` (sun and sky), ``shade`` (sky alone), ``none``.
+    sun_irradiance : array_like
+        (3,) horizontal irradiance of the run's clear sun [klx].
+    sky_irradiance : array_like
+        (3,) horizontal irradiance of the run's clear sky [klx].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3,) float64 gains [1].
+
+    Raises
+    ------
+    ValueError
+        For a setting not in ``WHITE_BALANCES``.
+    """
     if setting not in WHITE_BALANCES:
         raise ValueError(f"unknown white balance {setting!r}; valid: {', '.join(WHITE_BALANCES)}")
     light = {"daylight": np.asarray(sun_irradiance, dtype=np.float64) + np.asarray(sky_irradiance, dtype=np.float64),
@@ -65,16 +125,35 @@ def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray
 def composite_frame(background: np.ndarray, *, sun_pass: np.ndarray, sky_pass: np.ndarray,
                     alpha: np.ndarray, sun_fraction: float, sky_scale: float = 1.0,
                     atmosphere: np.ndarray | None = None) -> np.ndarray:
-    """The finished frame (Max 1991, implementation section):
+    """The finished frame (Max 1991, implementation section).
 
         frame = k F_sky + S (F_sun - F_sky) + (1 - A) (B + S atmosphere)
 
-    background B (rows, cols, 3) and the premultiplied foreground passes F_sun, F_sky
-    (rows, cols, 3) are radiances [kcd/m^2]; alpha A (rows, cols); sun_fraction S [1];
-    sky_scale k [1]: the skylight now over the skylight the passes were lit by (1 in the
-    paper; below 1 when clouds or the moon dim the sky too); atmosphere (rows, cols, 3): the
-    sun-lit haze in front of the background [kcd/m^2], behind the trees (they are near; the
-    paper adds it over everything). Returns float32 radiance.
+    The sun-lit haze (atmosphere) is behind the trees (they are near; the paper adds it over
+    everything).
+
+    Parameters
+    ----------
+    background : numpy.ndarray
+        (rows, cols, 3) radiance B of the ground and sky seen [kcd/m^2].
+    sun_pass : numpy.ndarray
+        (rows, cols, 3) premultiplied foreground F_sun, lit by sun and sky [kcd/m^2].
+    sky_pass : numpy.ndarray
+        (rows, cols, 3) premultiplied foreground F_sky, lit by the sky alone [kcd/m^2].
+    alpha : numpy.ndarray
+        (rows, cols) coverage A of the foreground [1].
+    sun_fraction : float
+        S, the visible fraction of the sun [1].
+    sky_scale : float, optional
+        k, the skylight now over the skylight the passes were lit by (1 in the paper; below 1 when
+        clouds or the moon dim the sky too) [1].
+    atmosphere : numpy.ndarray, optional
+        (rows, cols, 3) the sun-lit haze in front of the background [kcd/m^2].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 radiance [kcd/m^2].
     """
     sun_pass = np.asarray(sun_pass, dtype=np.float32)
     sky_pass = np.asarray(sky_pass, dtype=np.float32)
@@ -93,10 +172,18 @@ def henyey_greenstein(cos_scattering_angle, asymmetry):
     p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos(Theta))^(3/2))  (Henyey & Greenstein 1941,
     "Diffuse radiation in the galaxy", ApJ 93, 70-83; used for clouds by Blinn 1982).
 
-    cos_scattering_angle : cosine of the angle between the incident propagation direction and
-        the scattered one; 1 is straight on (forward). [dimensionless]
-    asymmetry : g, the mean cosine of the scattering angle, in (-1, 1). [dimensionless]
-    Returns p. [1/sr]
+    Parameters
+    ----------
+    cos_scattering_angle : array_like
+        Cosine of the angle between the incident propagation direction and the scattered one; 1 is
+        straight on (forward), any shape [1]. float32 stays float32, anything else is float64.
+    asymmetry : float
+        g, the mean cosine of the scattering angle, in (-1, 1) [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        p, of ``cos_scattering_angle``'s shape [1/sr].
     """
     c = np.asarray(cos_scattering_angle)
     if c.dtype != np.float32:
@@ -109,9 +196,22 @@ def henyey_greenstein(cos_scattering_angle, asymmetry):
 
 
 def haze_transmittance(distance: np.ndarray, length: float) -> np.ndarray:
-    """exp(-d / length) (rows, cols) float32 of a homogeneous haze of extinction length
-    ``length`` [m] over the distances ``d`` [m] (inf where the sky is seen: 1, the sky model
-    holds its own haze). [1]"""
+    """exp(-d / length) of a homogeneous haze over the distances d.
+
+    Where the sky is seen (d inf) it is 1: the sky model holds its own haze.
+
+    Parameters
+    ----------
+    distance : numpy.ndarray
+        (rows, cols) distance d to the ground seen, inf where the sky is seen [m].
+    length : float
+        Extinction length of the haze; 0 or less: no haze [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols) float32 transmittance [1].
+    """
     return _transmittance(distance, length).astype(np.float32)
 
 
@@ -127,17 +227,38 @@ def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float,
                        sun_irradiance, sky_irradiance, albedo: float = 0.9, g: float = 0.6):
     """A homogeneous haze between the camera and the ground (single scattering, no shadows).
 
-    distance (rows, cols) [m] to the ground (inf where the sky is seen: the sky model already
-    holds its haze); view (rows, cols, 3) unit directions from the camera; length: extinction
-    length, so a thing at distance d keeps exp(-d / length) of its radiance [m]; sun_direction
-    (3,) unit, towards the sun; sun_irradiance (3,) normal irradiance of the clear sun [klx];
-    sky_irradiance (3,) horizontal irradiance of the clear sky [klx]; albedo: single-scattering
-    albedo of the haze [1]; g: its Henyey-Greenstein asymmetry [1].
+    The ground seen through it is T B + sky haze, and the sun-lit haze is the paper's atmosphere,
+    added times S (``composite_frame``). Sky light is taken as scattered evenly: radiance
+    albedo E_sky / (2 pi) per unit of optical depth.
 
-    Returns (transmittance (rows, cols) [1], sky-lit haze (rows, cols, 3), sun-lit haze
-    (rows, cols, 3) [kcd/m^2]): the ground seen through it is T B + sky haze, and the sun-lit
-    haze is the paper's atmosphere, added times S. Sky light is taken as scattered evenly:
-    radiance albedo E_sky / (2 pi) per unit of optical depth.
+    Parameters
+    ----------
+    distance : numpy.ndarray
+        (rows, cols) distance to the ground, inf where the sky is seen (the sky model already holds
+        its haze) [m].
+    view : numpy.ndarray
+        (rows, cols, 3) unit directions from the camera [1].
+    length : float
+        Extinction length, so a thing at distance d keeps exp(-d / length) of its radiance [m].
+    sun_direction : array_like
+        (3,) unit vector towards the sun [1].
+    sun_irradiance : array_like
+        (3,) normal irradiance of the clear sun [klx].
+    sky_irradiance : array_like
+        (3,) horizontal irradiance of the clear sky [klx].
+    albedo : float, optional
+        Single-scattering albedo of the haze [1].
+    g : float, optional
+        Its Henyey-Greenstein asymmetry [1].
+
+    Returns
+    -------
+    transmittance : numpy.ndarray
+        (rows, cols) float32 T [1].
+    sky_haze : numpy.ndarray
+        (rows, cols, 3) float32 sky-lit haze [kcd/m^2].
+    sun_haze : numpy.ndarray
+        (rows, cols, 3) float32 sun-lit haze [kcd/m^2].
     """
     transmittance = _transmittance(distance, length)
     veil = (1.0 - transmittance)[..., None]
@@ -148,9 +269,21 @@ def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float,
 
 
 def aces_filmic(x: np.ndarray) -> np.ndarray:
-    """The ACES filmic tone curve as fitted by Narkowicz (2015): scene-linear [0, inf) to
-    display-linear [0, 1), a toe that keeps shadows rich and a shoulder that rolls the sun
-    and bright cloud off instead of clipping them. [1]"""
+    """The ACES filmic tone curve as fitted by Narkowicz (2015).
+
+    Scene-linear [0, inf) to display-linear [0, 1), a toe that keeps shadows rich and a shoulder
+    that rolls the sun and bright cloud off instead of clipping them.
+
+    Parameters
+    ----------
+    x : array_like
+        Exposed scene-linear values, any shape [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 display-linear values in [0, 1), of ``x``'s shape [1].
+    """
     shape = np.shape(x)
     x = np.maximum(np.array(x, dtype=np.float32, ndmin=1), np.float32(0.0))
     numerator = x * np.float32(2.51)  # x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), in place
@@ -166,9 +299,29 @@ def aces_filmic(x: np.ndarray) -> np.ndarray:
 
 def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
             balance=None) -> np.ndarray:
-    """sRGB display values in [0, 1] of scene-linear ``radiance`` [kcd/m^2] times ``exposure``
-    [m^2/kcd] and the white balance's gains ``balance`` (3,) (None: 1): ``srgb`` clips at 1,
-    ``filmic`` rolls off with ``aces_filmic`` first."""
+    """sRGB display values in [0, 1] of scene-linear radiance, exposed and white-balanced.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (rows, cols, 3) scene-linear radiance [kcd/m^2].
+    exposure : float
+        Exposure [m^2/kcd] (``exposure_for``, ``auto_exposure``).
+    transform : str, optional
+        One of ``DISPLAYS``: ``srgb`` clips at 1, ``filmic`` rolls off with ``aces_filmic`` first.
+    balance : array_like, optional
+        (3,) the white balance's gains (``white_balance``) [1]; None: 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 sRGB code values in [0, 1] [1].
+
+    Raises
+    ------
+    ValueError
+        For a transform not in ``DISPLAYS``.
+    """
     if transform not in DISPLAYS:
         raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
     gain = np.float32(exposure) if balance is None else (np.asarray(balance) * exposure).astype(np.float32)
@@ -179,23 +332,57 @@ def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
 
 
 def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
-    """The exposure [m^2/kcd] at which a white Lambertian ground under the open clear sky and
-    sun (horizontal irradiance ``unshadowed`` (3,) [klx]) is 1, times 2^stops: fixed for a
-    whole run, so an eclipse or a cloud darkens the picture as it darkens the day."""
+    """The exposure at which a white Lambertian ground under the open clear sky and sun is 1, times 2^stops.
+
+    Fixed for a whole run, so an eclipse or a cloud darkens the picture as it darkens the day.
+
+    Parameters
+    ----------
+    unshadowed : array_like
+        (3,) horizontal irradiance of the open clear sky and sun [klx].
+    stops : float, optional
+        Exposure compensation [stops].
+
+    Returns
+    -------
+    float
+        The exposure [m^2/kcd].
+    """
     luminance = float(np.asarray(unshadowed, dtype=np.float64) @ REC709_LUMINANCE)
     return float(2.0**stops * np.pi / luminance) if luminance > 0 else float(2.0**stops)
 
 
 def auto_exposure(readings, *, reference, frame_time: float, time_constant: float,
                   limits, stops: float = 0.0) -> np.ndarray:
-    """Exposure per frame [m^2/kcd] that follows the scene's light like a camera's auto
-    exposure: each frame's meter reading (``readings`` (frames, 3), the open ground's horizontal
-    irradiance [klx]) is followed in log (stops) through a first-order lag, the first frame
-    metered at once: ``m_k = m_(k-1) + (1 - exp(-frame_time / time_constant)) (log2 E_k -
-    m_(k-1))`` (frame_time, time_constant [s]; 0 follows each frame at once). The exposure puts
-    a white Lambertian ground under the metered light at 1, times 2^stops, clamped to
-    ``limits`` (least, most) [stops] over ``exposure_for(reference)`` (the clear sky's):
-    under the least light it goes no brighter than 2^most times that, so totality darkens."""
+    """Exposure per frame that follows the scene's light like a camera's auto exposure.
+
+    Each frame's meter reading is followed in log (stops) through a first-order lag, the first
+    frame metered at once:
+    ``m_k = m_(k-1) + (1 - exp(-frame_time / time_constant)) (log2 E_k - m_(k-1))``.
+    The exposure puts a white Lambertian ground under the metered light at 1, times 2^stops,
+    clamped to ``limits`` over ``exposure_for(reference)`` (the clear sky's): under the least light
+    it goes no brighter than 2^most times that, so totality darkens.
+
+    Parameters
+    ----------
+    readings : array_like
+        (frames, 3) the meter's reading per frame: the open ground's horizontal irradiance [klx].
+    reference : array_like
+        (3,) the clear sky's and sun's horizontal irradiance [klx].
+    frame_time : float
+        Time between frames [s].
+    time_constant : float
+        The lag's time constant; 0 follows each frame at once [s].
+    limits : tuple of (float, float)
+        (least, most) over ``exposure_for(reference)`` [stops].
+    stops : float, optional
+        Exposure compensation [stops].
+
+    Returns
+    -------
+    numpy.ndarray
+        (frames,) float64 exposure [m^2/kcd].
+    """
     luminance = np.asarray(readings, dtype=np.float64) @ REC709_LUMINANCE.astype(np.float64)
     base = exposure_for(reference)
     floor = np.log2(np.pi / base) - limits[1]  # the dimmest light the exposure follows [log2 klx]

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+__all__ = ["SUN_RADIUS_ARCSEC", "SUN_ANGULAR_RADIUS", "SUN_RADIUS_DEG"]
+
 SUN_RADIUS_ARCSEC = 959.63
 """Mean angular radius of the sun at 1 au, the eclipse-prediction value (Espenak & Meeus 2006,
 *Five Millennium Canon of Solar Eclipses*, NASA/TP-2006-214141, section 1.2). [arcsec]"""

@@ -7,6 +7,9 @@ import os
 import threading
 import time
 
+__all__ = ["MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
+           "default_workers", "jobs_and_threads", "end_if_orphaned"]
+
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
 frame's rasters."""
@@ -20,9 +23,18 @@ SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
 
 
 def scheduler_address(text: str) -> tuple[str, int] | str:
-    """(host, port) of a dask.distributed scheduler address, ``tcp://HOST:PORT`` or
-    ``HOST:PORT`` (tls://, ws:// and wss:// too), checked without connecting; else what is
-    wrong with it, in words."""
+    """(host, port) of a dask.distributed scheduler address, checked without connecting.
+
+    Parameters
+    ----------
+    text : str
+        ``tcp://HOST:PORT`` or ``HOST:PORT`` (tls://, ws:// and wss:// too: SCHEDULER_SCHEMES).
+
+    Returns
+    -------
+    tuple of (str, int) or str
+        (host, port) when the address is good; else what is wrong with it, in words.
+    """
     from urllib.parse import urlsplit
 
     address = urlsplit(text if "://" in text else f"tcp://{text}")
@@ -40,7 +52,14 @@ def scheduler_address(text: str) -> tuple[str, int] | str:
 
 
 def default_workers() -> int:
-    """FFT threads: the cores this process may use."""
+    """FFT threads: the cores this process may use.
+
+    Returns
+    -------
+    int
+        The cores in this process's affinity mask (the machine's cores where there is none), at
+        least 1 [count].
+    """
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:
@@ -48,19 +67,38 @@ def default_workers() -> int:
 
 
 def jobs_and_threads(jobs: int | None, scheduler: str | None) -> tuple[int, int]:
-    """(processes at once, FFT threads each): ``jobs`` (default one per core), each with an
-    equal share of the cores, or one thread each on a cluster (``scheduler``)."""
+    """(processes at once, FFT threads each) of a run.
+
+    Parameters
+    ----------
+    jobs : int or None
+        Frames rendered at once (--jobs, render.jobs); None: one per core.
+    scheduler : str or None
+        The Dask scheduler's address on a cluster, None for a local run.
+
+    Returns
+    -------
+    tuple of (int, int)
+        ``jobs`` and the FFT threads of each: an equal share of the cores, or one thread each on
+        a cluster [count].
+    """
     jobs = jobs or default_workers()
     return jobs, 1 if scheduler else max(1, default_workers() // jobs)
 
 
 def end_if_orphaned(command: int | None) -> None:
-    """End this process (exit code 1) when it is a worker process of ``command`` (a process ID)
-    and that command is gone, killed even by SIGKILL: the worker's parent is then another
-    process, and nothing would record what it renders. Called as each task starts; the first
-    call also leaves a thread that looks once a second (ORPHAN_CHECK), for a worker that waits
-    for tasks that will not come. Nothing happens in the command's own process (``--jobs 1``)
-    or on a cluster (``command`` None)."""
+    """End this process (exit code 1) when it is a worker process of a command that is gone.
+
+    The command may be gone killed even by SIGKILL: the worker's parent is then another process,
+    and nothing would record what it renders. Called as each task starts; the first call also
+    leaves a thread that looks once a second (ORPHAN_CHECK), for a worker that waits for tasks that
+    will not come. Nothing happens in the command's own process (``--jobs 1``) or on a cluster.
+
+    Parameters
+    ----------
+    command : int or None
+        The process ID of the ``sunshade`` command that started the workers; None on a cluster.
+    """
     global _watched
     if command is None or os.getpid() == command:
         return

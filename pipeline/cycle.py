@@ -14,7 +14,7 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, canopy, foreground, shadow
+from . import cache, canopy, foreground, foregrounds, shadow
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
@@ -24,17 +24,17 @@ from .plan import RunPlan
 
 def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
     """Transmittance masks (coarse, fine or None) of one canopy plane at one cycle frame."""
-    config = plan.config
-    layer, lp = config.canopy.layers[layer_index], plan.layers[layer_index]
-    periodic = config.canopy.layout == "periodic"
+    c = plan.canopy
+    layer, lp = c.layers[layer_index], plan.layers[layer_index]
+    periodic = c.layout == "periodic"
     grids = [lp.canopy] + ([lp.sun.mask] if lp.sun else [])
-    if config.canopy.trees is None:
+    if c.trees is None:
         image = load_mask(layer, cycle_frame)
         masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
                                               grid=g, periodic=periodic) for g in grids]
     else:
-        grove, flutter = grove_of(config.canopy)
-        heights = tuple(l.height for l in config.canopy.layers)
+        grove, flutter = grove_of(c)
+        heights = tuple(l.height for l in c.layers)
         leaf_layer, wood_layer = canopy.layer_index(grove, heights)
         shapes = canopy.project(
             canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
@@ -47,8 +47,7 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
 
 def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
     """Everything a layer's cycle products at ``cycle_frame`` depend on (docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache")."""
-    config = plan.config
-    c = config.canopy
+    c = plan.canopy
     lp = plan.layers[layer_index]
     if c.trees is None:
         source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
@@ -101,10 +100,9 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
     ``progress(done, total)`` is called as items finish; ``command``: the PID whose worker
     processes end when it is gone (``cores.end_if_orphaned``). Returns the number of items
     computed."""
-    config = plan.config
-    frames = range(config.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
-    tasks = [(layer, frame) for frame in frames for layer in range(len(config.canopy.layers))]
-    if config.foreground.model == "trees":
+    frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
+    tasks = [(layer, frame) for frame in frames for layer in range(len(plan.layers))]
+    if plan.foreground.cached:
         tasks += [(None, frame) for frame in frames]
     missing = [(layer, frame) for layer, frame in tasks if store.get(*_product_key(plan, layer, frame)) is None]
     done = len(tasks) - len(missing)
@@ -136,10 +134,9 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
     most the cycle products take: per layer and cycle frame the coarse spectrum (complex64 half
     spectrum of its FFT, or of one tile) and the fine one at their exact sizes, per cycle frame
     the built-in trees' passes (sun, sky: 3 float32, alpha and haze: 1) over the whole frame
-    (they are stored cut to the pixels the trees touch: ``cut_to_trees``)."""
-    config = plan.config
-    width, height = config.camera.resolution
-    frames = config.animation.frames * width * height * FRAME_BYTES_PER_PIXEL[config.output.half]
+    (they are stored cut to the pixels the trees touch: ``foregrounds.cut_to_trees``)."""
+    width, height = plan.camera.width, plan.camera.height
+    frames = plan.frames * width * height * FRAME_BYTES_PER_PIXEL[plan.output.half]
     per_frame = 0
     for lp in plan.layers:
         rows, cols = getattr(lp.coarse, "fft_shape", None) or lp.coarse.tile_shape
@@ -147,9 +144,9 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
         if lp.sun is not None:
             rows, cols = lp.sun.fft_shape
             per_frame += rows * (cols // 2 + 1) * 8
-    if config.foreground.model == "trees":
+    if plan.foreground.cached:
         per_frame += 8 * 4 * width * height  # float32 sun and sky (3 each), alpha, haze depth
-    return float(frames), float(per_frame * config.canopy.cycle)
+    return float(frames), float(per_frame * plan.canopy.cycle)
 
 
 CONFIG_INDEX = ".configs"
@@ -159,10 +156,9 @@ products (``record_config_items``), so that ``sunshade cache list`` can name the
 
 def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     """Every cycle product a config's run needs: cache key -> (kind, cycle frame)."""
-    config = plan.config
     keys = {}
-    for frame in range(config.canopy.cycle):
-        for layer in [*range(len(config.canopy.layers)), *([None] if config.foreground.model == "trees" else [])]:
+    for frame in range(plan.canopy.cycle):
+        for layer in [*range(len(plan.layers)), *([None] if plan.foreground.cached else [])]:
             kind, params = _product_key(plan, layer, frame)
             keys[cache.key_of(kind, params)] = (kind, frame)
     return keys
@@ -172,10 +168,9 @@ def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
     """Record in the cache which items are this config's (``CONFIG_INDEX``/<hash of its path>
     .json: its name, path and keys, those of earlier versions of it (a preview's among them)
     kept, and the longest cycle among them), written atomically."""
-    config = plan.config
     folder = store.root / CONFIG_INDEX
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{hashlib.sha256(str(config.path).encode()).hexdigest()[:16]}.json"
+    path = folder / f"{hashlib.sha256(str(plan.source).encode()).hexdigest()[:16]}.json"
     try:
         earlier = json.loads(path.read_text())
         keys, cycle = set(earlier.get("keys", [])), int(earlier.get("cycle", 0))
@@ -183,8 +178,8 @@ def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
         keys, cycle = set(), 0
     keys |= set(config_item_keys(plan))
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    temporary.write_text(json.dumps({"name": config.output.name, "config": str(config.path),
-                                     "cycle": max(cycle, config.canopy.cycle), "keys": sorted(keys)}))
+    temporary.write_text(json.dumps({"name": plan.output.name, "config": str(plan.source),
+                                     "cycle": max(cycle, plan.canopy.cycle), "keys": sorted(keys)}))
     temporary.replace(path)
 
 
@@ -216,14 +211,13 @@ def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
 def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
     """Everything the built-in trees' passes at ``cycle_frame`` depend on: not the light's
     strength or colour, since they are stored per unit irradiance."""
-    config = plan.config
-    c = config.canopy
+    c = plan.canopy
     return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
             "heights": [layer.height for layer in c.layers], "layout": c.layout,
             "center": c.layers[0].center, "size": c.layers[0].size,
             "camera": asdict(plan.camera),
             "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
-            "haze": config.sky.haze,
+            "haze": plan.haze,
             "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
                      "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
@@ -237,13 +231,13 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
     """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance:
     ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
     a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols), ``haze`` (rows,
-    cols), all cut to the box of the pixels the trees touch (``cut_to_trees``; ``box``). The
+    cols), all cut to the box of the pixels the trees touch (``foregrounds.cut_to_trees``; ``box``). The
     shading is linear in each channel's light, so a frame scales them by the run's Lighting.
     Memory-mapped, read-only."""
-    config = plan.config
+    c = plan.canopy
 
     def compute():
-        grove, flutter = grove_of(config.canopy)
+        grove, flutter = grove_of(c)
         leaves = canopy.leaves_at(grove, flutter, cycle_frame)
         wood, owner = foreground.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
@@ -252,11 +246,11 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         if has_sun:
             leaf_visibility, wood_visibility = foreground.stem_visibility(leaves, wood, sun_point=sun_point)
         view = plan.camera
-        if config.canopy.layout == "periodic":  # the tile's trees on every tile in view
-            layer = config.canopy.layers[0]
+        if c.layout == "periodic":  # the tile's trees on every tile in view
+            layer = c.layers[0]
             leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
-                leaves, wood, view, period=layer.size[0], center=layer.center, haze=config.sky.haze,
-                seed=config.canopy.trees.seed, coarse_wood=grove.wood)
+                leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
+                seed=c.trees.seed, coarse_wood=grove.wood)
             if has_sun:  # a straight capsule gets the mean visibility of its pieces
                 pieces = np.bincount(owner, minlength=len(grove.wood.radius))
                 capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
@@ -266,30 +260,10 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         passes = foreground.tree_passes(
             leaves, wood, view, sun_direction=direction,
             sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
-            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=config.sky.haze)
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=plan.haze)
         item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
         if passes.haze is not None:
             item["haze"] = passes.haze
-        return cut_to_trees(item)
+        return foregrounds.cut_to_trees(item)
 
     return store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute)
-
-
-def cut_to_trees(passes: dict) -> dict:
-    """Full-frame passes (rows, cols[, 3]) cut to the box of the pixels where any of them is
-    not 0, with ``box`` (row_start, row_stop, col_start, col_stop) [pixel]: outside it a frame is
-    its background, so nothing is lost, and a grove that fills a tenth of the picture is stored
-    in about a tenth of the bytes."""
-    touched = np.zeros(passes["alpha"].shape, dtype=bool)
-    for values in passes.values():
-        touched |= values.reshape(*touched.shape, -1).any(axis=-1)
-    rows, cols = np.flatnonzero(touched.any(axis=1)), np.flatnonzero(touched.any(axis=0))
-    box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1) if len(rows) else (0, 0, 0, 0)
-    cut = {name: np.ascontiguousarray(values[box[0]:box[1], box[2]:box[3]]) for name, values in passes.items()}
-    return {**cut, "box": np.array(box, dtype=np.int64)}
-
-
-def tree_box(item: dict) -> tuple[slice, slice]:
-    """The (rows, cols) slices of the frame that ``foreground_item``'s passes cover."""
-    r0, r1, c0, c1 = (int(v) for v in item["box"])
-    return slice(r0, r1), slice(c0, c1)

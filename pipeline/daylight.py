@@ -16,6 +16,11 @@ from datetime import datetime
 
 import numpy as np
 
+__all__ = [
+    "SOLAR_CONSTANT", "PRECIPITABLE_WATER", "CLEARNESS_BINS", "TWILIGHT_END", "TWILIGHT_BLEND", "Efficacy",
+    "perez_efficacy", "ClearDaylight", "clear_daylight", "linke_turbidity", "usno_illuminance", "sky_daylight",
+]
+
 SOLAR_CONSTANT = 1366.1
 """Extraterrestrial normal irradiance of the sun at 1 au (ASTM E-490; pvlib's default in
 ``pvlib.irradiance.get_extra_radiation``). [W/m^2]"""
@@ -46,9 +51,21 @@ _DIFFUSE = np.array([
 
 @dataclass(frozen=True)
 class Efficacy:
-    """Luminous efficacies of daylight (Perez et al. 1990): global horizontal, direct normal and
-    diffuse horizontal, with the sky's clearness epsilon and brightness Delta they were read at.
-    [lm/W], [1]"""
+    """Luminous efficacies of daylight (Perez et al. 1990), with the sky they were read at.
+
+    Attributes
+    ----------
+    global_horizontal : numpy.ndarray
+        Efficacy of the global horizontal light, of the broadcast shape of the inputs [lm/W].
+    direct_normal : numpy.ndarray
+        Efficacy of the direct normal light [lm/W].
+    diffuse_horizontal : numpy.ndarray
+        Efficacy of the diffuse horizontal light [lm/W].
+    clearness : numpy.ndarray
+        The sky's clearness epsilon [1].
+    brightness : numpy.ndarray
+        The sky's brightness Delta [1].
+    """
 
     global_horizontal: np.ndarray
     direct_normal: np.ndarray
@@ -59,19 +76,40 @@ class Efficacy:
 
 def perez_efficacy(sun_zenith, direct_normal, diffuse_horizontal, *, relative_airmass,
                    extraterrestrial=SOLAR_CONSTANT, precipitable_water=PRECIPITABLE_WATER) -> Efficacy:
-    """Luminous efficacies of the global, direct and diffuse light of a sky (Perez, Ineichen,
-    Seals, Michalsky & Stewart 1990, "Modeling daylight availability and irradiance components
-    from direct and global irradiance", Solar Energy 44(5), 271-289: eqs. 6-8, Tables 1 and 4).
+    """Luminous efficacies of the global, direct and diffuse light of a sky.
 
-    Clearness epsilon = ((D + I) / D + 1.041 Z^3) / (1 + 1.041 Z^3) picks a bin; brightness
+    Perez, Ineichen, Seals, Michalsky & Stewart 1990, "Modeling daylight availability and irradiance
+    components from direct and global irradiance", Solar Energy 44(5), 271-289: eqs. 6-8, Tables 1
+    and 4. Clearness epsilon = ((D + I) / D + 1.041 Z^3) / (1 + 1.041 Z^3) picks a bin; brightness
     Delta = D m / I0. Global and diffuse: a + b W + c cos Z + d ln(Delta); direct:
     max(0, a + b W + c exp(5.73 Z - 5) + d Delta).
 
-    sun_zenith : Z. [rad]   direct_normal : I. [W/m^2]   diffuse_horizontal : D, above 0. [W/m^2]
-    relative_airmass : m (the paper uses Kasten 1966). [1]
-    extraterrestrial : I0, normal irradiance above the atmosphere. [W/m^2]
-    precipitable_water : W. [cm]
-    Arrays broadcast. Returns an Efficacy. [lm/W]
+    Parameters
+    ----------
+    sun_zenith : float or numpy.ndarray
+        Z [rad].
+    direct_normal : float or numpy.ndarray
+        I [W/m^2].
+    diffuse_horizontal : float or numpy.ndarray
+        D, above 0 [W/m^2].
+    relative_airmass : float or numpy.ndarray
+        m (the paper uses Kasten 1966) [1].
+    extraterrestrial : float, optional
+        I0, normal irradiance above the atmosphere [W/m^2].
+    precipitable_water : float, optional
+        W [cm].
+
+    Arrays broadcast.
+
+    Returns
+    -------
+    Efficacy
+        The efficacies [lm/W], clearness and brightness [1], of the broadcast shape.
+
+    Raises
+    ------
+    ValueError
+        If a ``diffuse_horizontal`` is not above 0.
     """
     z = np.asarray(sun_zenith, dtype=np.float64)
     direct = np.asarray(direct_normal, dtype=np.float64)
@@ -98,8 +136,21 @@ def perez_efficacy(sun_zenith, direct_normal, diffuse_horizontal, *, relative_ai
 
 @dataclass(frozen=True)
 class ClearDaylight:
-    """The light of a clear sky: direct normal and diffuse horizontal, as irradiance [W/m^2]
-    (Ineichen & Perez 2002) and illuminance [klx] (Perez et al. 1990 efficacies)."""
+    """The light of a clear sky: direct normal and diffuse horizontal.
+
+    As irradiance (Ineichen & Perez 2002) and illuminance (Perez et al. 1990 efficacies).
+
+    Attributes
+    ----------
+    direct_normal_irradiance : float
+        [W/m^2].
+    diffuse_horizontal_irradiance : float
+        [W/m^2].
+    direct_normal_illuminance : float
+        [klx].
+    diffuse_horizontal_illuminance : float
+        [klx].
+    """
 
     direct_normal_irradiance: float
     diffuse_horizontal_irradiance: float
@@ -110,16 +161,29 @@ class ClearDaylight:
 def clear_daylight(sun_zenith: float, linke_turbidity: float, *, altitude: float = 0.0,
                    distance_factor: float = 1.0,
                    precipitable_water: float = PRECIPITABLE_WATER) -> ClearDaylight:
-    """Direct and diffuse light of the clear sky (Ineichen & Perez 2002, "A new airmass
-    independent formulation for the Linke turbidity coefficient", Solar Energy 73(3), 151-157,
-    as ``pvlib.clearsky.ineichen``), in illuminance through ``perez_efficacy``.
+    """Direct and diffuse light of the clear sky, in irradiance and illuminance.
 
-    sun_zenith : geometric zenith angle of the sun's centre, below pi/2. [rad]
-    linke_turbidity : Linke turbidity factor TL (air mass 2), in vocabulary.TURBIDITY_RANGE. [1]
-    altitude : of the site above sea level: thinner air, less scattering. [m]
-    distance_factor : (1 au / sun's distance)^2, on the extraterrestrial irradiance. [1]
-    precipitable_water : W of the efficacy model. [cm]
-    Returns a ClearDaylight ([W/m^2] and [klx]).
+    Ineichen & Perez 2002, "A new airmass independent formulation for the Linke turbidity
+    coefficient", Solar Energy 73(3), 151-157, as ``pvlib.clearsky.ineichen``; in illuminance
+    through ``perez_efficacy``.
+
+    Parameters
+    ----------
+    sun_zenith : float
+        Geometric zenith angle of the sun's centre, below pi/2 [rad].
+    linke_turbidity : float
+        Linke turbidity factor TL (air mass 2), in vocabulary.TURBIDITY_RANGE [1].
+    altitude : float, optional
+        Of the site above sea level: thinner air, less scattering [m].
+    distance_factor : float, optional
+        (1 au / sun's distance)^2, on the extraterrestrial irradiance [1].
+    precipitable_water : float, optional
+        W of the efficacy model [cm].
+
+    Returns
+    -------
+    ClearDaylight
+        Irradiances [W/m^2] and illuminances [klx].
     """
     from pvlib import atmosphere, clearsky
 
@@ -140,11 +204,24 @@ def clear_daylight(sun_zenith: float, linke_turbidity: float, *, altitude: float
 
 
 def linke_turbidity(when: datetime, latitude: float, longitude: float) -> float:
-    """The Linke turbidity factor of a place and month from the climatology of Remund et al.
-    (2003) shipped with pvlib (``pvlib.clearsky.lookup_linke_turbidity``, interpolated between
-    months; no network).
+    """The Linke turbidity factor of a place and month.
 
-    when : UTC time. latitude, longitude : [rad]. Returns TL. [1]
+    From the climatology of Remund et al. (2003) shipped with pvlib
+    (``pvlib.clearsky.lookup_linke_turbidity``, interpolated between months; no network).
+
+    Parameters
+    ----------
+    when : datetime.datetime
+        UTC time.
+    latitude : float
+        [rad].
+    longitude : float
+        [rad].
+
+    Returns
+    -------
+    float
+        TL [1].
     """
     import warnings
 
@@ -179,11 +256,20 @@ _USNO_SUN = ((20.0, (3.74, 3.97, -4.07, 1.47)), (5.0, (3.05, 13.28, -45.98, 64.3
 
 
 def usno_illuminance(elevation_deg) -> np.ndarray:
-    """Horizontal illuminance of the sun and the clear sky at the mean sun distance (Janiczek &
-    DeYoung 1987, USNO Circular 171: the curve of its illuminance program, altitude bands of
-    ``_USNO_SUN``); 0 below -18 degrees.
+    """Horizontal illuminance of the sun and the clear sky at the mean sun distance.
 
-    elevation_deg : the sun's (true) altitude. [deg]   Returns float64 like it. [lx]
+    Janiczek & DeYoung 1987, USNO Circular 171: the curve of its illuminance program, altitude bands
+    of ``_USNO_SUN``; 0 below -18 degrees.
+
+    Parameters
+    ----------
+    elevation_deg : float or numpy.ndarray
+        The sun's (true) altitude [deg].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of the shape of ``elevation_deg`` [lx].
     """
     h = np.asarray(elevation_deg, dtype=np.float64)
     x = h / 90.0
@@ -201,17 +287,38 @@ def _smoothstep(t):
 def sky_daylight(sun_elevation: float, linke_turbidity: float, *, altitude: float = 0.0,
                  distance_factor: float = 1.0, precipitable_water: float = PRECIPITABLE_WATER,
                  sun_radius: float = float(np.radians(0.2666))) -> ClearDaylight:
-    """The clear sky's direct and diffuse light at any sun from the zenith to the end of civil
-    twilight: ``clear_daylight`` at and above TWILIGHT_BLEND[1]; below, the global horizontal
-    illuminance E of the USNO curve (``usno_illuminance``, times ``distance_factor``) blended
-    into Ineichen & Perez's by a smoothstep in log E over TWILIGHT_BLEND. The sun keeps
-    Ineichen & Perez's direct normal light while its whole disc is up (0 below), and the sky
-    takes the rest: diffuse = E - direct x sin(elevation), at least 5% of E.
+    """The clear sky's direct and diffuse light at any sun from the zenith to the end of civil twilight.
 
-    sun_elevation : of the sun's centre, in [TWILIGHT_END, pi/2]. [rad]
-    linke_turbidity, altitude, distance_factor, precipitable_water : as ``clear_daylight``.
-    sun_radius : the disc's angular radius: no direct light below it. [rad]
-    Returns a ClearDaylight ([W/m^2] and [klx]; the irradiances are Ineichen & Perez's).
+    ``clear_daylight`` at and above TWILIGHT_BLEND[1]; below, the global horizontal illuminance E of
+    the USNO curve (``usno_illuminance``, times ``distance_factor``) blended into Ineichen & Perez's
+    by a smoothstep in log E over TWILIGHT_BLEND. The sun keeps Ineichen & Perez's direct normal light
+    while its whole disc is up (0 below), and the sky takes the rest: diffuse = E - direct x
+    sin(elevation), at least 5% of E.
+
+    Parameters
+    ----------
+    sun_elevation : float
+        Of the sun's centre, in [TWILIGHT_END, pi/2] [rad].
+    linke_turbidity : float
+        As ``clear_daylight`` [1].
+    altitude : float, optional
+        As ``clear_daylight`` [m].
+    distance_factor : float, optional
+        As ``clear_daylight`` [1].
+    precipitable_water : float, optional
+        As ``clear_daylight`` [cm].
+    sun_radius : float, optional
+        The disc's angular radius: no direct light below it [rad].
+
+    Returns
+    -------
+    ClearDaylight
+        Irradiances [W/m^2] (Ineichen & Perez's) and illuminances [klx].
+
+    Raises
+    ------
+    ValueError
+        If the sun is below TWILIGHT_END.
     """
     h = float(np.degrees(sun_elevation))
     if not sun_elevation >= TWILIGHT_END - 1e-12:

@@ -40,6 +40,14 @@ import numpy as np
 
 from .ephemeris import MOON_RADIUS, obscured_fraction
 
+__all__ = [
+    "SHARP_LIMIT", "MULTIPLE_SCATTERING", "EARTH_RADIUS", "RAYLEIGH_SCALE_HEIGHT", "AEROSOL_SCALE_HEIGHT",
+    "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS", "METER_TABLE",
+    "DIFFUSION_LENGTH", "FLOOR_HEIGHT", "MAP_CELLS", "MAP_EXTENT", "CORONA_REACH", "RGB_WAVELENGTHS", "deep_weight",
+    "vertical_optical_depths", "point_sun_fraction", "diffused_fraction", "line_of_sight", "EclipseField",
+    "floor_colour", "corona_profile", "corona_beyond", "corona_drawn", "corona_drawn_beyond",
+]
+
 SHARP_LIMIT = 0.002
 """S (luminance-weighted uneclipsed fraction) below which the deep-eclipse sky is blended in:
 99.8% obscuration, the depth to which Sharp, Silverman & Lloyd (1971) found the sky to behave as
@@ -107,24 +115,67 @@ RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
 
 
 def deep_weight(sun_fraction: float) -> float:
-    """b: the weight of the deep-eclipse sky, 0 for S >= SHARP_LIMIT, 1 at S = 0. [1]"""
+    """b: the weight of the deep-eclipse sky, 0 for S >= SHARP_LIMIT, 1 at S = 0.
+
+    Parameters
+    ----------
+    sun_fraction : float
+        S, the uneclipsed fraction of the sun [1].
+
+    Returns
+    -------
+    float
+        b = clip(1 - S / SHARP_LIMIT, 0, 1) [1].
+    """
     return float(np.clip(1.0 - sun_fraction / SHARP_LIMIT, 0.0, 1.0))
 
 
 def vertical_optical_depths(turbidity: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Rayleigh, aerosol) vertical optical depths (3,) at RGB_WAVELENGTHS: 0.008735 lambda^-4.08
-    and beta lambda^-1.3 with beta = 0.04608 T - 0.04586 (Preetham et al. 1999, appendix A.1, as
-    ``sky.sun_colour``). [1]"""
+    """Rayleigh and aerosol vertical optical depths at RGB_WAVELENGTHS.
+
+    0.008735 lambda^-4.08 and beta lambda^-1.3 with beta = 0.04608 T - 0.04586 (Preetham et al. 1999,
+    appendix A.1, as ``sky.sun_colour``).
+
+    Parameters
+    ----------
+    turbidity : float
+        T [1].
+
+    Returns
+    -------
+    rayleigh, aerosol : numpy.ndarray
+        Each (3,) per R, G, B [1].
+    """
     lam = RGB_WAVELENGTHS
     beta = max(0.04608 * turbidity - 0.04586, 0.0)
     return 0.008735 * lam**-4.08, beta * lam**-1.3
 
 
 def point_sun_fraction(points, *, sun_direction, moon_direction, sun_radius, moon_radius):
-    """Uneclipsed area fraction of the sun seen from points (..., 3) [m] (observer at the origin,
-    x east, y north, z up): the moon's centre, at distance D = R_moon / sin(moon_radius) along
-    ``moon_direction`` from the observer, seen from P is D m - P; its angular radius there is
-    asin(R_moon / |D m - P|); the sun's direction and radius [rad] do not change. [1]"""
+    """Uneclipsed area fraction of the sun seen from points around the observer.
+
+    The moon's centre, at distance D = R_moon / sin(moon_radius) along ``moon_direction`` from the
+    observer, seen from P is D m - P; its angular radius there is asin(R_moon / |D m - P|); the sun's
+    direction and radius do not change.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (..., 3) points, observer at the origin, x east, y north, z up [m].
+    sun_direction : numpy.ndarray
+        (3,) unit vector of the sun seen by the observer [1].
+    moon_direction : numpy.ndarray
+        (3,) unit vector of the moon seen by the observer [1].
+    sun_radius : float
+        Angular radius of the sun seen by the observer [rad].
+    moon_radius : float
+        Angular radius of the moon seen by the observer [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 fraction [1].
+    """
     distance = MOON_RADIUS / np.sin(moon_radius)
     moon = distance * np.asarray(moon_direction, dtype=np.float64) - np.asarray(points, dtype=np.float64)
     reach = np.linalg.norm(moon, axis=-1)
@@ -142,10 +193,30 @@ def _line_nodes(nodes: int = PATH_NODES):
 
 
 def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius):
-    """(W, extent): the uneclipsed fraction S on the ground plane around the observer, averaged
-    with the kernel exp(-rho / DIFFUSION_LENGTH) / (2 pi DIFFUSION_LENGTH^2) (the light that
-    diffuses sideways into the umbra, multiple scattering), on a MAP_CELLS x MAP_CELLS map of
-    half-width ``extent`` [m] centred on the observer, rows north-up. [1]"""
+    """The uneclipsed fraction S on the ground around the observer, diffused sideways.
+
+    S on the ground plane, averaged with the kernel exp(-rho / DIFFUSION_LENGTH) /
+    (2 pi DIFFUSION_LENGTH^2) (the light that diffuses sideways into the umbra, multiple scattering),
+    on a MAP_CELLS x MAP_CELLS map centred on the observer, rows north-up.
+
+    Parameters
+    ----------
+    sun_direction : numpy.ndarray
+        (3,) unit vector of the sun seen by the observer [1].
+    moon_direction : numpy.ndarray
+        (3,) unit vector of the moon seen by the observer [1].
+    sun_radius : float
+        Angular radius of the sun seen by the observer [rad].
+    moon_radius : float
+        Angular radius of the moon seen by the observer [rad].
+
+    Returns
+    -------
+    W : numpy.ndarray
+        (MAP_CELLS, MAP_CELLS) float64 map [1].
+    extent : float
+        Half-width of the map, MAP_EXTENT [m].
+    """
     from scipy import fft
 
     n, extent = MAP_CELLS, MAP_EXTENT
@@ -180,7 +251,7 @@ def _map_lookup(field, extent, x, y):
 
 def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon_radius,
                   turbidity: float, nodes: int = PATH_NODES) -> tuple[np.ndarray, np.ndarray]:
-    """(F, M), each (n, 3) per R, G, B channel, for unit vectors ``directions`` (n, 3), wz >= 0:
+    """F and M, per R, G, B channel, along lines of sight.
 
     F(w) = integral beta T S dl / integral beta T dl: the clear-sky-weighted uneclipsed fraction
     of the sun at the points where the line of sight scatters (single scattering; module
@@ -191,8 +262,27 @@ def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon
     P0 of each point along the moon's shadow (the umbra is a cone along the moon's direction);
     M -> 1 - exp(-tau) when nothing is eclipsed.
 
-    sun_direction, moon_direction : (3,) unit vectors; sun_radius, moon_radius : angular radii
-    seen by the observer [rad]; turbidity [1]; nodes : along each line of sight [count].
+    Parameters
+    ----------
+    directions : numpy.ndarray
+        (n, 3) unit vectors, wz >= 0 [1].
+    sun_direction : numpy.ndarray
+        (3,) unit vector of the sun seen by the observer [1].
+    moon_direction : numpy.ndarray
+        (3,) unit vector of the moon seen by the observer [1].
+    sun_radius : float
+        Angular radius of the sun seen by the observer [rad].
+    moon_radius : float
+        Angular radius of the moon seen by the observer [rad].
+    turbidity : float
+        T [1].
+    nodes : int, optional
+        Along each line of sight [count].
+
+    Returns
+    -------
+    F, M : numpy.ndarray
+        Each (n, 3) float64 [1].
     """
     w = np.asarray(directions, dtype=np.float64)
     l, dl = _line_nodes(nodes)
@@ -230,17 +320,33 @@ def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon
 class EclipseField:
     """F and M of ``line_of_sight`` tabulated over the upper hemisphere, interpolated bilinearly.
 
-    table : (TABLE_ELEVATIONS, TABLE_AZIMUTHS + 1, 6) F and M (R, G, B each) at elevations
-    (pi/2) u^2 (u uniform in [0, 1]) and azimuths 0..2 pi (the last column repeats the
-    first). [1]
+    Attributes
+    ----------
+    table : numpy.ndarray
+        (TABLE_ELEVATIONS, TABLE_AZIMUTHS + 1, 6) F and M (R, G, B each) at elevations
+        (pi/2) u^2 (u uniform in [0, 1]) and azimuths 0..2 pi (the last column repeats the
+        first) [1].
     """
 
     table: np.ndarray
 
     @classmethod
     def compute(cls, *, table=(TABLE_ELEVATIONS, TABLE_AZIMUTHS, PATH_NODES), **geometry) -> "EclipseField":
-        """The table of ``line_of_sight(..., **geometry)``; ``table``: its (elevations,
-        azimuths, path nodes) [count] (METER_TABLE: the meter's coarser one)."""
+        """The table of ``line_of_sight(..., **geometry)``.
+
+        Parameters
+        ----------
+        table : tuple of (int, int, int), optional
+            Its (elevations, azimuths, path nodes) [count] (METER_TABLE: the meter's coarser one).
+        **geometry
+            ``sun_direction``, ``moon_direction``, ``sun_radius``, ``moon_radius`` and ``turbidity``
+            of ``line_of_sight``.
+
+        Returns
+        -------
+        EclipseField
+            The field.
+        """
         elevations, azimuths, nodes = table
         u = np.linspace(0.0, 1.0, elevations)
         el = 0.5 * np.pi * u * u
@@ -252,7 +358,18 @@ class EclipseField:
         return cls(np.concatenate([f, f[:, :1]], axis=1))
 
     def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
-        """(F, M), each (..., 3), at unit vectors w (..., 3) (wz below 0 taken as the horizon). [1]"""
+        """F and M at unit vectors w (wz below 0 taken as the horizon).
+
+        Parameters
+        ----------
+        w : numpy.ndarray
+            (..., 3) unit vectors [1].
+
+        Returns
+        -------
+        F, M : numpy.ndarray
+            Each (..., 3) float64 [1].
+        """
         w = np.asarray(w, dtype=np.float64)
         elevations, azimuths = self.table.shape[0], self.table.shape[1] - 1
         el = np.arcsin(np.clip(w[..., 2], 0.0, 1.0))
@@ -268,8 +385,21 @@ class EclipseField:
 
 
 def floor_colour(turbidity: float) -> np.ndarray:
-    """c (3,): the colour of the multiply scattered light, exp(-(tau_c - tau_G)) of a horizontal
-    path DIFFUSION_LENGTH long at FLOOR_HEIGHT (the sideways way into the umbra), green 1. [1]"""
+    """c: the colour of the multiply scattered light, green 1.
+
+    exp(-(tau_c - tau_G)) of a horizontal path DIFFUSION_LENGTH long at FLOOR_HEIGHT (the sideways
+    way into the umbra).
+
+    Parameters
+    ----------
+    turbidity : float
+        T [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3,) float64 per R, G, B [1].
+    """
     tau_r, tau_a = vertical_optical_depths(turbidity)
     per_metre = (tau_r / RAYLEIGH_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / RAYLEIGH_SCALE_HEIGHT)
                  + tau_a / AEROSOL_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / AEROSOL_SCALE_HEIGHT))
@@ -278,9 +408,20 @@ def floor_colour(turbidity: float) -> np.ndarray:
 
 
 def corona_profile(r) -> np.ndarray:
-    """Baumbach's K+F corona, B(r) / B_sun = 1e-6 (0.0532 r^-2.5 + 1.425 r^-7 + 2.565 r^-17),
-    r [solar radii] >= 1 (0 inside the limb), B_sun the mean radiance of the disc (Allen's
-    Astrophysical Quantities, Cox 2000, sec. 14.8). [1]"""
+    """Baumbach's K+F corona, B(r) / B_sun = 1e-6 (0.0532 r^-2.5 + 1.425 r^-7 + 2.565 r^-17).
+
+    B_sun the mean radiance of the disc (Allen's Astrophysical Quantities, Cox 2000, sec. 14.8).
+
+    Parameters
+    ----------
+    r : float or numpy.ndarray
+        Distance from the sun's centre, >= 1 (0 inside the limb) [solar radii].
+
+    Returns
+    -------
+    numpy.ndarray
+        B(r) / B_sun, float64 of the shape of ``r`` [1].
+    """
     r = np.asarray(r, dtype=np.float64)
     safe = np.maximum(r, 1.0)
     b = 1e-6 * (0.0532 * safe**-2.5 + 1.425 * safe**-7 + 2.565 * safe**-17)
@@ -288,22 +429,57 @@ def corona_profile(r) -> np.ndarray:
 
 
 def corona_beyond(r0: float) -> float:
-    """The corona's flux outside r0 >= 1 solar radii over the sun's: 2 integral_{r0}^inf r B/B_sun dr
-    in closed form (1.12e-6 for r0 = 1). [1]"""
+    """The corona's flux outside r0 over the sun's: 2 integral_{r0}^inf r B/B_sun dr in closed form.
+
+    1.12e-6 for r0 = 1.
+
+    Parameters
+    ----------
+    r0 : float
+        >= 1 [solar radii].
+
+    Returns
+    -------
+    float
+        The flux ratio [1].
+    """
     r0 = max(float(r0), 1.0)
     return 2e-6 * (0.0532 * r0**-0.5 / 0.5 + 1.425 * r0**-5 / 5.0 + 2.565 * r0**-15 / 15.0)
 
 
 def corona_drawn(r) -> np.ndarray:
-    """The corona as drawn, B(r) - B(CORONA_REACH) out to CORONA_REACH and 0 beyond, over
-    B_sun (``corona_profile``; r [solar radii]): continuous where it ends. [1]"""
+    """The corona as drawn, B(r) - B(CORONA_REACH) out to CORONA_REACH and 0 beyond, over B_sun.
+
+    ``corona_profile``, made continuous where it ends.
+
+    Parameters
+    ----------
+    r : float or numpy.ndarray
+        Distance from the sun's centre [solar radii].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of the shape of ``r`` [1].
+    """
     r = np.asarray(r, dtype=np.float64)
     edge = float(corona_profile(CORONA_REACH))
     return np.where(r <= CORONA_REACH, corona_profile(r) - edge, 0.0) * (r >= 1.0)
 
 
 def corona_drawn_beyond(r0: float) -> float:
-    """The flux of ``corona_drawn`` outside r0 >= 1 solar radii over the sun's, in closed form. [1]"""
+    """The flux of ``corona_drawn`` outside r0 over the sun's, in closed form.
+
+    Parameters
+    ----------
+    r0 : float
+        >= 1 [solar radii].
+
+    Returns
+    -------
+    float
+        The flux ratio [1].
+    """
     r0 = min(max(float(r0), 1.0), CORONA_REACH)
     edge = float(corona_profile(CORONA_REACH))
     return corona_beyond(r0) - corona_beyond(CORONA_REACH) - edge * (CORONA_REACH**2 - r0 * r0)

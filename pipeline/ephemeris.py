@@ -32,6 +32,11 @@ import numpy as np
 from .constants import SUN_ANGULAR_RADIUS
 from .geometry import direction_vector, tangent_axes
 
+__all__ = [
+    "AU", "SUN_RADIUS", "EARTH_EQUATORIAL_RADIUS", "MOON_RADIUS", "Site", "BodyPosition", "sun_and_moon",
+    "separation", "obscured_fraction", "moon_offset_from_sun", "contact_times", "Circumstances", "circumstances",
+]
+
 AU = 149_597_870_700.0
 """Astronomical unit (IAU 2012 resolution B2). [m]"""
 
@@ -54,9 +59,19 @@ _CONTACTS = ("C1", "C2", "C3", "C4")
 class Site:
     """A place on the Earth.
 
-    latitude : geodetic latitude, north positive, in [-pi/2, pi/2]. [rad]
-    longitude : longitude, east positive (Dallas is about -1.689). [rad]
-    elevation : height above mean sea level. [m]
+    Attributes
+    ----------
+    latitude : float
+        Geodetic latitude, north positive, in [-pi/2, pi/2] [rad].
+    longitude : float
+        Longitude, east positive (Dallas is about -1.689) [rad].
+    elevation : float, optional
+        Height above mean sea level [m].
+
+    Raises
+    ------
+    ValueError
+        If a field is not finite or the latitude is out of [-pi/2, pi/2].
     """
 
     latitude: float
@@ -76,8 +91,22 @@ class Site:
 
     @classmethod
     def from_degrees(cls, latitude: float, longitude: float, elevation: float = 0.0) -> "Site":
-        """The site at ``latitude`` [deg] (north positive), ``longitude`` [deg] (east positive)
-        and ``elevation`` [m] above sea level; the config boundary, where degrees are allowed."""
+        """The site at a latitude and longitude in degrees; the config boundary, where degrees are allowed.
+
+        Parameters
+        ----------
+        latitude : float
+            North positive [deg].
+        longitude : float
+            East positive [deg].
+        elevation : float, optional
+            Above sea level [m].
+
+        Returns
+        -------
+        Site
+            The site, in radians [rad] and metres [m].
+        """
         return cls(float(np.deg2rad(latitude)), float(np.deg2rad(longitude)), float(elevation))
 
 
@@ -85,9 +114,14 @@ class Site:
 class BodyPosition:
     """Where a body's disc is on the observer's sky.
 
-    azimuth : direction of the centre, from north towards east, in [0, 2 pi). [rad]
-    elevation : topocentric elevation of the centre above the horizon, without refraction. [rad]
-    angular_radius : topocentric angular radius of the disc, arcsin(R / distance). [rad]
+    Attributes
+    ----------
+    azimuth : float
+        Direction of the centre, from north towards east, in [0, 2 pi) [rad].
+    elevation : float
+        Topocentric elevation of the centre above the horizon, without refraction [rad].
+    angular_radius : float
+        Topocentric angular radius of the disc, arcsin(R / distance) [rad].
     """
 
     azimuth: float
@@ -148,22 +182,40 @@ class _Sky:
 
 
 def sun_and_moon(site: Site, when: datetime) -> tuple[BodyPosition, BodyPosition]:
-    """Topocentric (sun, moon) seen from ``site`` at ``when``.
+    """Topocentric sun and moon seen from ``site`` at ``when``.
 
-    site : Site -- latitude, longitude [rad] and elevation [m] of the observer.
-    when : datetime -- an aware datetime (any time zone; converted to UTC). A naive datetime
-        raises ValueError rather than being guessed as UTC or local time.
-    Returns two BodyPosition: azimuth, elevation (no refraction) and angular radius. [rad]
+    Parameters
+    ----------
+    site : Site
+        Latitude, longitude [rad] and elevation [m] of the observer.
+    when : datetime.datetime
+        An aware datetime (any time zone; converted to UTC). A naive datetime raises ValueError
+        rather than being guessed as UTC or local time.
+
+    Returns
+    -------
+    sun, moon : BodyPosition
+        Azimuth, elevation (no refraction) and angular radius [rad].
     """
     return _Sky(site).at(_ephem_date(_utc(when)))
 
 
 def separation(sun: BodyPosition, moon: BodyPosition) -> float:
-    """Great-circle angle between the centres of two bodies. [rad]
+    """Great-circle angle between the centres of two bodies.
 
     Vincenty's form atan2(|u x v|, u . v) of the unit vectors, accurate at all angles
     (arccos of the dot product loses half the digits near 0, i.e. near mid-eclipse).
     Works on arrays of azimuths and elevations too; exactly symmetric in its arguments.
+
+    Parameters
+    ----------
+    sun, moon : BodyPosition
+        The two bodies (their azimuth and elevation may be arrays that broadcast) [rad].
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The angle; a float for scalar positions [rad].
     """
     u = direction_vector(sun.azimuth, sun.elevation)
     v = direction_vector(moon.azimuth, moon.elevation)
@@ -175,18 +227,37 @@ def separation(sun: BodyPosition, moon: BodyPosition) -> float:
 def obscured_fraction(separation, sun_radius, moon_radius):
     """Fraction of the sun's disc area covered by the moon's disc, in [0, 1].
 
-    separation : angle between the centres, >= 0. [rad]
-    sun_radius, moon_radius : angular radii, > 0. [rad]
-    Arrays broadcast; a float comes back for scalar inputs.
-
     Exact area of the lens where two circles of radii r (sun) and R (moon) with centres d apart
-    intersect, over pi r^2:
+    intersect, over pi r^2::
+
         A = r^2 acos((d^2 + r^2 - R^2) / (2 d r)) + R^2 acos((d^2 + R^2 - r^2) / (2 d R))
             - 1/2 sqrt((-d + r + R)(d + r - R)(d - r + R)(d + r + R)),
+
     with the cases d >= r + R (no overlap: 0), d <= R - r (total: 1) and d <= r - R (annular,
     moon inside the sun: R^2 / r^2). The discs are treated as flat circles of radius equal to
     their angular radii (error of order radius^2, about 2e-5 relative). No limb darkening: this is
     an area fraction, and the uneclipsed sun fraction is S = 1 - obscured_fraction.
+
+    Parameters
+    ----------
+    separation : float or numpy.ndarray
+        Angle between the centres, >= 0 [rad].
+    sun_radius : float or numpy.ndarray
+        Angular radius of the sun, > 0 [rad].
+    moon_radius : float or numpy.ndarray
+        Angular radius of the moon, > 0 [rad].
+
+    Arrays broadcast.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The fraction, of the broadcast shape; a float for scalar inputs [1].
+
+    Raises
+    ------
+    ValueError
+        If a radius is not positive or the separation negative.
     """
     d = np.asarray(separation, dtype=np.float64)
     r = np.asarray(sun_radius, dtype=np.float64)
@@ -219,18 +290,33 @@ def obscured_fraction(separation, sun_radius, moon_radius):
 
 
 def moon_offset_from_sun(sun: BodyPosition, moon: BodyPosition) -> tuple[float, float]:
-    """The moon's centre relative to the sun's, on the plane tangent to the sky at the sun. [rad]
+    """The moon's centre relative to the sun's, on the plane tangent to the sky at the sun.
 
     Gnomonic projection centred on the sun: with s the sun's unit vector (world x east,
     y north, z up), e_az = (cos a, -sin a, 0) the direction of increasing azimuth and
     e_el = (-sin h sin a, -sin h cos a, cos h) that of increasing elevation at the sun
     (azimuth a, elevation h), and m the moon's unit vector,
-        dx = (m . e_az) / (m . s),    dy = (m . e_el) / (m . s).
+    ``dx = (m . e_az) / (m . s)``, ``dy = (m . e_el) / (m . s)``.
     dx grows towards increasing azimuth along the horizon direction (to the observer's right
     when facing the sun), dy towards the zenith. Within a degree of the sun these are angles on
     the sky to better than 1e-4 relative, so a moon disc of angular radius R is drawn as a
     circle of radius R at (dx, dy) on a tangent-plane grid centred on the sun. The frame is
     tied to the sun's azimuth, so it is undefined with the sun exactly at the zenith.
+
+    Parameters
+    ----------
+    sun, moon : BodyPosition
+        The two bodies [rad].
+
+    Returns
+    -------
+    dx, dy : float
+        The offset on the tangent plane [rad].
+
+    Raises
+    ------
+    ValueError
+        If the moon is 90 degrees or more from the sun.
     """
     s, e_az, e_el = tangent_axes(sun.azimuth, sun.elevation)
     m = direction_vector(moon.azimuth, moon.elevation)
@@ -250,21 +336,39 @@ def contact_times(
 ) -> dict[str, datetime | None]:
     """Local contact times of the solar eclipse seen from ``site`` between ``start`` and ``end``.
 
-    site : Site -- the observer.
-    start, end : aware datetimes bounding the search, start < end.
-    step : spacing of the coarse scan. [s]
-    tolerance : accuracy of the returned times. [s]
-    Returns {'C1', 'C2', 'C3', 'C4'} -> aware UTC datetime, or None when that contact is not in
-    the window (no eclipse, a partial eclipse has no C2/C3, an eclipse under way at ``start``
-    has no C1). C1 and C4 are the roots of d - (r_sun + r_moon) (external contacts), C2 and C3
-    those of d - |r_moon - r_sun| (internal contacts: totality for a larger moon, the annulus
-    for a smaller one), d being ``separation`` and r the angular radii of ``sun_and_moon``.
+    C1 and C4 are the roots of d - (r_sun + r_moon) (external contacts), C2 and C3 those of
+    d - |r_moon - r_sun| (internal contacts: totality for a larger moon, the annulus for a smaller
+    one), d being ``separation`` and r the angular radii of ``sun_and_moon``.
 
     Each function is sampled every ``step``, its minimum refined with a bounded Brent search
     (so a totality shorter than ``step`` is still found) and the roots on either side bracketed
     from the samples and solved with Brent's method (scipy.optimize.brentq). Only the eclipse of
     closest approach in the window is reported. Contacts are geometric: they are returned even
     when the sun is below the horizon; check ``sun_and_moon(...)[0].elevation``.
+
+    Parameters
+    ----------
+    site : Site
+        The observer.
+    start, end : datetime.datetime
+        Aware datetimes bounding the search, start < end.
+    step : float, optional
+        Spacing of the coarse scan [s].
+    tolerance : float, optional
+        Accuracy of the returned times [s].
+
+    Returns
+    -------
+    dict of str to datetime.datetime or None
+        {'C1', 'C2', 'C3', 'C4'} -> aware UTC datetime, or None when that contact is not in
+        the window (no eclipse, a partial eclipse has no C2/C3, an eclipse under way at ``start``
+        has no C1).
+
+    Raises
+    ------
+    ValueError
+        If ``end`` is not after ``start``, ``step`` or ``tolerance`` is not positive, or a datetime
+        is naive.
     """
     from scipy.optimize import brentq, minimize_scalar  # 0.3 s to import: only when asked
 
@@ -323,10 +427,21 @@ def contact_times(
 
 @dataclass(frozen=True)
 class Circumstances:
-    """A solar eclipse as seen from a site: ``contacts`` (C1..C4 -> aware UTC datetime or None),
-    ``maximum`` (time of greatest obscuration), ``obscuration`` (the greatest obscured area
-    fraction [1]), ``kind`` ('total', 'annular', 'partial' or None without an eclipse) and
-    ``central`` (C3 - C2: the duration of totality or annularity [s], None if partial)."""
+    """A solar eclipse as seen from a site.
+
+    Attributes
+    ----------
+    contacts : dict
+        C1..C4 -> aware UTC datetime or None.
+    maximum : datetime.datetime or None
+        Time of greatest obscuration.
+    obscuration : float
+        The greatest obscured area fraction [1].
+    kind : str or None
+        'total', 'annular', 'partial' or None without an eclipse.
+    central : float or None
+        C3 - C2: the duration of totality or annularity, None if partial [s].
+    """
 
     contacts: dict
     maximum: datetime | None
@@ -337,10 +452,28 @@ class Circumstances:
 
 def circumstances(site: Site, start: datetime, end: datetime, *, margin: float = 4 * 3600.0,
                   step: float = 10.0) -> Circumstances:
-    """The eclipse nearest the span ``start``..``end`` seen from ``site``: ``contact_times`` over
-    the span widened by ``margin`` [s] on each side (a whole eclipse lasts at most about 3.5 h),
-    the greatest obscuration sampled every ``step`` [s] between the contacts (and refined around
-    C2..C3, where it is 1 for a total eclipse)."""
+    """The eclipse nearest the span ``start``..``end`` seen from ``site``.
+
+    ``contact_times`` over the span widened by ``margin`` on each side (a whole eclipse lasts at most
+    about 3.5 h), the greatest obscuration sampled every ``step`` between the contacts (and refined
+    around C2..C3, where it is 1 for a total eclipse).
+
+    Parameters
+    ----------
+    site : Site
+        The observer.
+    start, end : datetime.datetime
+        Aware datetimes of the span.
+    margin : float, optional
+        Widening of the span on each side [s].
+    step : float, optional
+        Sampling of the obscuration [s].
+
+    Returns
+    -------
+    Circumstances
+        The eclipse's contacts, maximum, obscuration [1], kind and central duration [s].
+    """
     start_utc, end_utc = _utc(start, "start"), _utc(end, "end")
     lo, hi = start_utc - timedelta(seconds=margin), end_utc + timedelta(seconds=margin)
     contacts = contact_times(site, lo, hi)

@@ -16,12 +16,19 @@ from pathlib import Path
 
 from .paths import SHOWN_MAX, shown
 
+__all__ = ["LINE_MAX", "SunshadeError", "ConfigError", "ImageError", "RunError", "BadInput", "WorkerError",
+           "one_line", "one_line_warnings", "portable"]
+
 LINE_MAX = 1000
 """Longest line an error or warning shows; past it the line is cut in the middle. [character]"""
 
 
 class SunshadeError(Exception):
-    """Bad input, or a run that cannot go on: ``str(error)`` is the one line to show."""
+    """Bad input, or a run that cannot go on: ``str(error)`` is the one line to show.
+
+    It pickles and unpickles as it was, its attributes included, so that a worker process can send
+    it back to the run (docs/runs.md).
+    """
 
     def __reduce__(self):
         return _rebuild, (type(self), self.args, dict(self.__dict__))
@@ -35,7 +42,15 @@ def _rebuild(cls, args, state):
 
 
 class ConfigError(SunshadeError, ValueError):
-    """A bad configuration: ``where`` is 'file:line: key.path' or 'file: key.path'."""
+    """A bad configuration.
+
+    Parameters
+    ----------
+    where : str
+        Where in the config: 'file:line: key.path' or 'file: key.path'; kept as ``where``.
+    message : str
+        What is wrong, in words; the error's line is ``f"{where}: {message}"``.
+    """
 
     def __init__(self, where: str, message: str):
         super().__init__(f"{where}: {message}")
@@ -43,7 +58,15 @@ class ConfigError(SunshadeError, ValueError):
 
 
 class ImageError(SunshadeError, ValueError):
-    """An image that cannot be read or written; ``path`` names the file."""
+    """An image that cannot be read or written.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; kept as ``path`` (a ``pathlib.Path``).
+    message : str
+        What is wrong with it; the error's line is ``f"{path}: {message}"``.
+    """
 
     def __init__(self, path, message: str):
         super().__init__(f"{path}: {message}")
@@ -60,8 +83,15 @@ class BadInput(SunshadeError):
 
 
 class WorkerError(Exception):
-    """An unexpected failure in a worker process whose exception could not be sent back as it
-    was: ``str`` is its type and message, ``details`` the worker's traceback as text."""
+    """An unexpected failure in a worker process whose exception could not be sent back as it was.
+
+    Parameters
+    ----------
+    message : str
+        Its type and message, ``"TypeName: message"``: ``str(error)``.
+    details : str, optional
+        The worker's traceback as text; kept as ``details``.
+    """
 
     def __init__(self, message: str, details: str = ""):
         super().__init__(message, details)
@@ -72,16 +102,31 @@ class WorkerError(Exception):
 
 
 def one_line(text: str) -> str:
-    """``text`` as one line for the user: white space folded, every word (a path, a name) over
-    SHOWN_MAX characters and the whole line over LINE_MAX cut in the middle with its length
-    (``paths.shown``), so that no input can make a message long."""
+    """``text`` as one line for the user.
+
+    White space is folded, every word (a path, a name) over SHOWN_MAX characters and the whole line
+    over LINE_MAX cut in the middle with its length (``paths.shown``), so that no input can make a
+    message long.
+
+    Parameters
+    ----------
+    text : object
+        The message (anything ``str`` takes).
+
+    Returns
+    -------
+    str
+        One line of at most about LINE_MAX characters.
+    """
     words = [shown(word) if len(word) > SHOWN_MAX else word for word in str(text).split()]
     return shown(" ".join(words), LINE_MAX)
 
 
 def one_line_warnings() -> None:
-    """Show warnings in this process as one line each, ``sunshade: warning: ...``, without
-    the source line Python adds, on standard error (also where a caller records warnings)."""
+    """Show warnings in this process as one line each, ``sunshade: warning: ...``.
+
+    Without the source line Python adds, on standard error (also where a caller records warnings).
+    """
     warnings.formatwarning = lambda message, *_, **__: f"sunshade: warning: {one_line(message)}\n"
     warnings.showwarning = _show_warning
 
@@ -91,9 +136,22 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def portable(task):
-    """``task`` made safe to run in another process: an exception that does not survive
-    pickling is raised as a WorkerError (its type, message and traceback as text) instead, so
-    the run reports it as it would have in one process."""
+    """``task`` made safe to run in another process.
+
+    An exception that does not survive pickling is raised as a WorkerError (its type, message and
+    traceback as text) instead, so the run reports it as it would have in one process. The wrapper
+    also makes the worker show warnings in one line (``one_line_warnings``).
+
+    Parameters
+    ----------
+    task : callable
+        The function a worker process runs.
+
+    Returns
+    -------
+    callable
+        ``task`` wrapped, with its name and docstring (``functools.wraps``).
+    """
 
     @functools.wraps(task)
     def run(*args, **kwargs):

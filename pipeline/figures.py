@@ -27,13 +27,14 @@ from . import cache, composite, ephemeris, io
 from . import sky as sky_models
 from .sun_kernel import sun_kernel
 from .colour import REC709_LUMINANCE
-from .config import Config, parse_config
+from .config import parse_config
 from .cycle import layer_masks
 from .frame import FrameResult, render_frame
-from .inputs import load_sky
-from .plan import RunPlan, plan_run, scene_at
+from .plan import RunPlan, plan_run
+from .scene import load_sky, scene_at
 from .resolve import resolve
 from .geometry import Grid, I0, projected_solid_angle
+from .settings import Config
 
 FIGURES = (
     ("fig04-mask.png",
@@ -387,7 +388,7 @@ class _Scenes:
 
     @cached_property
     def grove_sky(self):
-        return load_sky(self.config("grove").sky, self.grove_plan.scenes[0])
+        return self.grove_plan.sky.at(self.grove_plan.scenes[0])
 
     @cached_property
     def grove_frame(self) -> FrameResult:

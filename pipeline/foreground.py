@@ -18,12 +18,17 @@ from .canopy import Leaves, Shapes, Wood, coverage_fragments
 from .geometry import Grid, normalized
 from .io import ImageError, read_image
 
+__all__ = ["LEAF_REFLECTANCE", "LEAF_TRANSMITTANCE", "BARK_REFLECTANCE", "ForegroundPasses", "check_passes_size",
+           "read_passes", "sun_visibility", "leaf_sun_visibility", "sky_exposure", "tree_passes", "BARK_FURROWS",
+           "BARK_CONTRAST", "bark_pattern", "TIP_TAPER", "TAPER_PIECE", "taper_wood", "STEM_PROBE", "stem_visibility",
+           "LEAF_PIXELS", "HAZE_REACH", "MAX_FOREST_REACH", "STEM_DETAIL_PIXELS", "periodic_copies"]
+
 LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
-"""Default hemispherical reflectance of a green leaf, linear Rec.709 RGB. [dimensionless]"""
+"""Default hemispherical reflectance of a green leaf, linear Rec.709 RGB. [1]"""
 LEAF_TRANSMITTANCE = (0.04, 0.12, 0.02)
-"""Default hemispherical transmittance of a green leaf, linear Rec.709 RGB. [dimensionless]"""
+"""Default hemispherical transmittance of a green leaf, linear Rec.709 RGB. [1]"""
 BARK_REFLECTANCE = (0.25, 0.20, 0.15)
-"""Default reflectance of bark, linear Rec.709 RGB. [dimensionless]"""
+"""Default reflectance of bark, linear Rec.709 RGB. [1]"""
 
 _DEPTH_RATIO = 1.05  # most ratio of the depths of a wood piece's ends in the camera pass
 _MAX_PIECES = 256  # most pieces one capsule is cut into
@@ -33,13 +38,24 @@ _MAX_PIECES = 256  # most pieces one capsule is cut into
 class ForegroundPasses:
     """The trees of one cycle frame, premultiplied scene-linear.
 
-    sun : (rows, cols, 3) float32 -- lit by the clear sun and the sky. [radiance]
-    sky : (rows, cols, 3) float32 -- lit by the sky alone. [radiance]
-    alpha : (rows, cols) float32 -- coverage in [0, 1]. [dimensionless]
-    haze : (rows, cols) float32 or None -- the share of the pixel that the haze in front of the
-        trees veils, sum over fragments of weight (1 - T): a frame adds it times the sky at the
-        horizon (Koschmieder, as the ground); the sun and sky passes hold T times the trees'
-        light. None: no haze. [dimensionless]
+    Attributes
+    ----------
+    sun : numpy.ndarray
+        (rows, cols, 3) float32, lit by the clear sun and the sky [kcd/m^2].
+    sky : numpy.ndarray
+        (rows, cols, 3) float32, lit by the sky alone [kcd/m^2].
+    alpha : numpy.ndarray
+        (rows, cols) float32 coverage in [0, 1] [1].
+    haze : numpy.ndarray or None
+        (rows, cols) float32, the share of the pixel that the haze in front of the trees veils, sum
+        over fragments of weight (1 - T): a frame adds it times the sky at the horizon
+        (Koschmieder, as the ground); the sun and sky passes hold T times the trees' light. None: no
+        haze [1].
+
+    Raises
+    ------
+    ValueError
+        When alpha is not (rows, cols) or a pass is not (rows, cols, 3).
     """
 
     sun: np.ndarray
@@ -63,7 +79,15 @@ class ForegroundPasses:
 
 
 def check_passes_size(passes: ForegroundPasses, camera: Camera) -> None:
-    """Raise ValueError unless the passes are the camera's image size."""
+    """Raise ValueError unless the passes are the camera's image size.
+
+    Parameters
+    ----------
+    passes : ForegroundPasses
+        The passes.
+    camera : camera.Camera
+        The camera whose image they go in: (height, width) [pixel].
+    """
     rows, cols = passes.shape
     if (rows, cols) != (camera.height, camera.width):
         raise ValueError(f"the foreground passes are {cols} x {rows} pixels but the camera's image "
@@ -73,11 +97,24 @@ def check_passes_size(passes: ForegroundPasses, camera: Camera) -> None:
 def read_passes(sun_path, sky_path, alpha_path) -> ForegroundPasses:
     """Foreground passes from image files (EXR, premultiplied, scene-linear).
 
-    sun_path, sky_path : RGB images (channels past the third are ignored; one or two channels
-        are taken as grey from the first). [radiance]
-    alpha_path : the A channel of a 4-channel image, else its first channel. [dimensionless]
-    Raises io.ImageError naming the file: unreadable, non-finite values, alpha outside [0, 1]
-    (beyond 1e-3) or a size that differs from the sun pass's.
+    Parameters
+    ----------
+    sun_path, sky_path : str or os.PathLike
+        RGB images [kcd/m^2] (channels past the third are ignored; one or two channels are taken as
+        grey from the first).
+    alpha_path : str or os.PathLike
+        The coverage [1]: the A channel of a 4-channel image, else its first channel.
+
+    Returns
+    -------
+    ForegroundPasses
+        The passes, alpha clipped to [0, 1].
+
+    Raises
+    ------
+    io.ImageError
+        Naming the file: unreadable, non-finite values, alpha outside [0, 1] (beyond 1e-3) or a size
+        that differs from the sun pass's.
     """
     images = []
     for path in (sun_path, sky_path, alpha_path):
@@ -106,16 +143,31 @@ def read_passes(sun_path, sky_path, alpha_path) -> ForegroundPasses:
 
 
 def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel: float | None = None):
-    """Fraction of each leaf's and each capsule's area that the shapes nearer the sun let the
-    sun reach (penumbra ignored: the sun as a point). [dimensionless]
+    """Fraction of each leaf's and each capsule's area that the shapes nearer the sun let the sun reach.
 
-    sun_point : (sx, sy) the sun's sky-plane point (wx / wz, wy / wz). [tan]
-    pixel : raster pixel across the sun's beam; default a quarter of the median leaf length
-        (half the median semi-axis |U|). [m]
-    Returns (leaf visibility (N,), wood visibility (M,)) float64 in [0, 1]; a shape that covers
-    no pixel (a leaf edge-on to the sun) gets 1. Partial pixels are treated as independent
+    The sun is taken as a point (penumbra ignored). Partial pixels are treated as independent
     occluders; the error per leaf against exact rays (tests/test_foreground.py) is measured in
     docs/accuracy.md. The cost grows about as 1 / pixel^2 once pixels are below leaf size.
+
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The leaves: centres and semi-axes (N, 3) [m].
+    wood : canopy.Wood, optional
+        The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
+    sun_point : tuple of (float, float)
+        (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
+    pixel : float, optional
+        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
+        median semi-axis |U|) [m].
+
+    Returns
+    -------
+    leaf : numpy.ndarray
+        (N,) float64 visibility in [0, 1] [1]; a shape that covers no pixel (a leaf edge-on to the
+        sun) gets 1.
+    wood : numpy.ndarray
+        (M,) float64 visibility in [0, 1] [1].
     """
     s = np.array([sun_point[0], sun_point[1], 1.0], dtype=np.float64)
     return _visibility(leaves, _no_wood() if wood is None else wood, s / np.linalg.norm(s), pixel)
@@ -123,19 +175,62 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
 
 def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
                         pixel: float | None = None) -> np.ndarray:
-    """The leaves' part of ``sun_visibility``: (N,) in [0, 1]. [dimensionless]"""
+    """The leaves' part of ``sun_visibility``.
+
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The leaves: centres and semi-axes (N, 3) [m].
+    wood : canopy.Wood, optional
+        The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
+    sun_point : tuple of (float, float)
+        (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
+    pixel : float, optional
+        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
+        median semi-axis |U|) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (N,) float64 visibility in [0, 1] [1].
+    """
     return sun_visibility(leaves, wood, sun_point=sun_point, pixel=pixel)[0]
 
 
 def sky_exposure(leaves: Leaves, wood: Wood | None = None, *, pixel: float | None = None, rings: int = 2,
                  per_ring: int = 6):
-    """Fraction of the open sky's horizontal irradiance that reaches each leaf and capsule past
-    the others: the visibility of ``sun_visibility`` averaged over sky directions with weight
-    cos(theta) (a uniform sky), by the midpoint rule in cos^2(theta): ``rings`` rings of equal
-    irradiance, each of ``per_ring`` azimuths, every other ring turned half a step. The leaf's
-    orientation is left to the shading. [dimensionless]
+    """Fraction of the open sky's horizontal irradiance that reaches each leaf and capsule past the others.
 
-    Costs ``rings * per_ring`` visibility passes. Returns (leaf (N,), wood (M,)) float64.
+    The visibility of ``sun_visibility`` averaged over sky directions with weight cos(theta) (a
+    uniform sky), by the midpoint rule in cos^2(theta): ``rings`` rings of equal irradiance, each of
+    ``per_ring`` azimuths, every other ring turned half a step. The leaf's orientation is left to
+    the shading. Costs ``rings * per_ring`` visibility passes.
+
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The leaves: centres and semi-axes (N, 3) [m].
+    wood : canopy.Wood, optional
+        The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
+    pixel : float, optional
+        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
+        median semi-axis |U|) [m].
+    rings : int, optional
+        Rings of equal irradiance [count].
+    per_ring : int, optional
+        Azimuths per ring [count].
+
+    Returns
+    -------
+    leaf : numpy.ndarray
+        (N,) float64 in [0, 1] [1].
+    wood : numpy.ndarray
+        (M,) float64 in [0, 1] [1].
+
+    Raises
+    ------
+    ValueError
+        When ``rings`` or ``per_ring`` is below 1.
     """
     if rings < 1 or per_ring < 1:
         raise ValueError(f"rings and per_ring must be at least 1, got {rings} and {per_ring}")
@@ -253,24 +348,49 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
                 ground_height: float | None = 0.0, haze: float = 0.0) -> ForegroundPasses:
     """The foreground passes of leaves and wood seen by ``camera`` (see the module docstring).
 
-    leaves, wood : the grove at one cycle frame (``canopy.leaves_at``, ``grove.wood``). [m]
-    sun_direction : (3,) unit vector towards the sun; at or below the horizon (z <= 0), or with
-        a zero ``sun_irradiance``, there is no sun term (nor visibility pass) and F_sun = F_sky.
-        [dimensionless]
-    sun_irradiance : (3,) normal irradiance of the clear, uneclipsed sun. [klx]
-    sky_irradiance : (3,) horizontal irradiance of the clear sky (sun excluded). [klx]
-    leaf_sun_visibility, wood_sun_visibility : (N,), (M,) in [0, 1], or None to compute them
-        with ``sun_visibility`` at its default pixel. Pass ones for no shadows. [dimensionless]
-    leaf_sky_exposure, wood_sky_exposure : scalar or (N,), (M,): the share of the open sky that
-        reaches each shape (``sky_exposure`` computes them). [dimensionless]
-    leaf_reflectance, leaf_transmittance, bark_reflectance : (3,) linear RGB. [dimensionless]
-    near : shapes nearer the pinhole than this are clipped (wood) or dropped (leaves). [m]
-    ground_height : the ground plane z, which hides what lies below it (the trunks' round feet),
-        judged at pixel centres; None keeps everything. The camera must be above it. [m]
-    haze : extinction length of the air between the camera and the trees, or 0 for none: each
-        fragment keeps T = exp(-distance / haze) of its light, and the ``haze`` pass gets the
-        rest of its weight. [m]
-    Returns ForegroundPasses in radiance units, irradiance / sr [klx / sr = kcd/m^2].
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The grove's leaves at one cycle frame (``canopy.leaves_at``) [m].
+    wood : canopy.Wood or None
+        Its wood (``grove.wood``) [m]; None: no wood.
+    camera : camera.Camera
+        The pinhole camera.
+    sun_direction : array_like
+        (3,) unit vector towards the sun [1]; at or below the horizon (z <= 0), or with a zero
+        ``sun_irradiance``, there is no sun term (nor visibility pass) and F_sun = F_sky.
+    sun_irradiance : array_like
+        (3,) normal irradiance of the clear, uneclipsed sun [klx].
+    sky_irradiance : array_like
+        (3,) horizontal irradiance of the clear sky (sun excluded) [klx].
+    leaf_sun_visibility, wood_sun_visibility : numpy.ndarray, optional
+        (N,), (M,) in [0, 1] [1], or None to compute them with ``sun_visibility`` at its default
+        pixel. Pass ones for no shadows.
+    leaf_sky_exposure, wood_sky_exposure : float or numpy.ndarray, optional
+        Scalar or (N,), (M,): the share of the open sky that reaches each shape (``sky_exposure``
+        computes them) [1].
+    leaf_reflectance, leaf_transmittance, bark_reflectance : array_like, optional
+        (3,) linear RGB [1].
+    near : float, optional
+        Shapes nearer the pinhole than this are clipped (wood) or dropped (leaves) [m].
+    ground_height : float or None, optional
+        The ground plane z, which hides what lies below it (the trunks' round feet), judged at pixel
+        centres; None keeps everything. The camera must be above it [m].
+    haze : float, optional
+        Extinction length of the air between the camera and the trees, or 0 for none: each fragment
+        keeps T = exp(-distance / haze) of its light, and the ``haze`` pass gets the rest of its
+        weight [m].
+
+    Returns
+    -------
+    ForegroundPasses
+        In radiance units, irradiance / sr [klx / sr = kcd/m^2].
+
+    Raises
+    ------
+    ValueError
+        For a sun direction that is not a unit vector, ``near`` not above 0, a camera not above the
+        ground, or a reflectance, irradiance, visibility or exposure of the wrong shape or range.
     """
     wood = _no_wood() if wood is None else wood
     n_leaves, n_wood = len(leaves.center), len(wood.radius)
@@ -416,7 +536,7 @@ def _leaf_fragments_arrays(flat, shape, leaves, cols, rows, focal, n_forward, n_
 
 BARK_FURROWS = (14, 23)
 """Furrows round a trunk or branch in ``bark_pattern``: two families, so that the ridges are
-uneven, not a corduroy. [1]"""
+uneven, not a corduroy. [count]"""
 
 BARK_CONTRAST = 0.25
 """Bark reflectance runs from (1 - BARK_CONTRAST) to (1 + BARK_CONTRAST) times its mean
@@ -424,14 +544,27 @@ between the furrows' floors and ridges. [1]"""
 
 
 def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
-    """Factor (n,) on the bark's reflectance at wood fragments: vertical furrows round the
-    stem that wander a little with height, mean 1 (so the stem's mean reflectance stays
-    BARK_REFLECTANCE), faded out where a furrow would be under 4 pixels wide (no moire on a far
-    or thin stem). [1]
+    """Factor on the bark's reflectance at wood fragments: vertical furrows round the stem.
 
-    normal : (n, 3) the stem's outward unit normal at the fragment; axis : (n, 3) the stem's
-    direction; height : (n,) the height of the fragment's axis point [m]; radius_px : (n,) the
-    stem's radius in the image [pixel].
+    The furrows wander a little with height, mean 1 (so the stem's mean reflectance stays
+    BARK_REFLECTANCE), and fade out where a furrow would be under 4 pixels wide (no moire on a far
+    or thin stem).
+
+    Parameters
+    ----------
+    normal : numpy.ndarray
+        (n, 3) the stem's outward unit normal at the fragment [1].
+    axis : numpy.ndarray
+        (n, 3) the stem's direction (any length) [m].
+    height : numpy.ndarray
+        (n,) the height of the fragment's axis point [m].
+    radius_px : numpy.ndarray
+        (n,) the stem's radius in the image [pixel].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) float64 factor [1].
     """
     axis = normalized(np.asarray(axis, dtype=np.float64))
     reference = normalized(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
@@ -466,7 +599,17 @@ def taper_wood(wood: Wood) -> tuple[Wood, np.ndarray]:
     also gets its own sun visibility (``stem_visibility``), so the light on a trunk fades where
     the crown's shade begins.
 
-    Returns (Wood of the pieces, owner (k,) int64: the capsule each piece comes from). [m]
+    Parameters
+    ----------
+    wood : canopy.Wood
+        The capsules: ends (M, 3) and radii (M,) [m].
+
+    Returns
+    -------
+    pieces : canopy.Wood
+        The pieces: ends (k, 3) and radii (k,) [m].
+    owner : numpy.ndarray
+        (k,) int64, the capsule each piece comes from.
     """
     start, end = np.asarray(wood.start, dtype=np.float64), np.asarray(wood.end, dtype=np.float64)
     radius = np.asarray(wood.radius, dtype=np.float64)
@@ -513,13 +656,33 @@ STEM_PROBE = 1e-3
 
 
 def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | None = None):
-    """``sun_visibility`` of the leaves and of the pieces ``stems`` of the wood (``taper_wood``),
-    in one pass in which each piece is probed along its axis by a line STEM_PROBE of its radius
-    thick: so the pieces of a stem, whose round ends overlap, do not shade one another (a
-    stem's own shading is its normal's, max(n . s, 0)), and a stem is shaded by the leaves
-    where the crown's shade begins along it. The stems cast no shadow in this pass: on the
-    leaves, a few dozen branches against thousands of leaves, that is left out.
-    Returns (leaf (N,), stem piece (K,)) in [0, 1]. [1]"""
+    """``sun_visibility`` of the leaves and of the pieces of the wood (``taper_wood``), in one pass.
+
+    Each piece is probed along its axis by a line STEM_PROBE of its radius thick: so the pieces of
+    a stem, whose round ends overlap, do not shade one another (a stem's own shading is its
+    normal's, max(n . s, 0)), and a stem is shaded by the leaves where the crown's shade begins
+    along it. The stems cast no shadow in this pass: on the leaves, a few dozen branches against
+    thousands of leaves, that is left out.
+
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The leaves: centres and semi-axes (N, 3) [m].
+    stems : canopy.Wood
+        The wood's pieces (``taper_wood``): ends (K, 3) and radii (K,) [m].
+    sun_point : tuple of (float, float)
+        (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
+    pixel : float, optional
+        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
+        median semi-axis |U|) [m].
+
+    Returns
+    -------
+    leaf : numpy.ndarray
+        (N,) float64 visibility in [0, 1] [1].
+    stem : numpy.ndarray
+        (K,) float64 visibility of each piece in [0, 1] [1].
+    """
     probes = Wood(stems.start, stems.end, STEM_PROBE * np.asarray(stems.radius))
     return sun_visibility(leaves, probes, sun_point=sun_point, pixel=pixel)
 
@@ -622,27 +785,52 @@ width is then under half a pixel, and 40 pieces a trunk would cost more than the
 
 def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
                     seed: int = 0, coarse_wood: Wood | None = None):
-    """The shapes of one tile of a periodic forest (every shape wrapped into the tile, as
-    ``canopy.grow_grove`` makes them) copied over every tile the camera sees: those whose
-    bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
+    """The shapes of one tile of a periodic forest copied over every tile the camera sees.
+
+    Every shape is wrapped into the tile, as ``canopy.grow_grove`` makes them; the copies are those
+    whose bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
     MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
 
-    leaves, wood : the tile's shapes. [m]
-    period : the tile's side; center : (x, y) of the tile's centre. [m]
-    haze : extinction length of the air (0: none, MAX_FOREST_REACH). [m]
-    seed : seed of the leaves' choice (default_rng([seed, 3])).
-    coarse_wood : the stems as fewer, straight capsules, drawn instead of ``wood`` in the copies
-        that STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere). [m]
-    Returns (Leaves, Wood, leaf_index (N',) int64, wood_index (M',) int64): the copies, and the
-    shape of the tile that each is a copy of (for its per-shape values: sun visibility), stems
-    of ``coarse_wood`` numbered after those of ``wood``.
+    Parameters
+    ----------
+    leaves : canopy.Leaves
+        The tile's leaves [m].
+    wood : canopy.Wood
+        The tile's wood [m].
+    camera : camera.Camera
+        The pinhole camera.
+    period : float
+        The tile's side [m].
+    center : array_like
+        (x, y) of the tile's centre [m].
+    haze : float
+        Extinction length of the air (0: none, MAX_FOREST_REACH) [m].
+    seed : int, optional
+        Seed of the leaves' choice (default_rng([seed, 3])).
+    coarse_wood : canopy.Wood, optional
+        The stems as fewer, straight capsules, drawn instead of ``wood`` in the copies that
+        STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere) [m].
+
+    Returns
+    -------
+    leaves : canopy.Leaves
+        The copied leaves [m].
+    wood : canopy.Wood
+        The copied stems [m].
+    leaf_index : numpy.ndarray
+        (N',) int64, the leaf of the tile that each is a copy of (for its per-shape values: sun
+        visibility).
+    wood_index : numpy.ndarray
+        (M',) int64, the same for the stems, those of ``coarse_wood`` numbered after those of
+        ``wood``.
     """
     period = float(period)
     reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
     position = np.asarray(camera.position, dtype=np.float64)
     everything = np.concatenate([leaves.center, wood.start, wood.end])
     low, high = everything.min(axis=0), everything.max(axis=0)
-    margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))  # half-width of the tile's shapes
+    # half-width of the tile's shapes
+    margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))
     radius = np.sqrt(2.0) * margin + float(np.max(wood.radius, initial=0.0))
     right, up, forward = camera.basis
     half_diagonal = np.arctan(0.5 * np.hypot(camera.width, camera.height) / camera.focal)
@@ -695,7 +883,8 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
     coarse = fine if coarse_wood is None else len(wood.radius) + np.arange(len(coarse_wood.radius))
     thin = camera.focal * float(np.max(wood.radius, initial=0.0)) / nearest < STEM_DETAIL_PIXELS
     wood_index = np.concatenate([coarse if far else fine for far in thin] or [np.zeros(0, np.int64)])
-    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]), [len(coarse) if far else len(fine) for far in thin], axis=0)
+    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]),
+                      [len(coarse) if far else len(fine) for far in thin], axis=0)
     copies = Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index])
     return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
             np.concatenate(leaf_index), wood_index)

@@ -12,41 +12,49 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import brdf as reflect
-from . import cache, camera, composite
+from . import cache, camera, composite, texture
 from .colour import REC709_LUMINANCE
-from .cycle import foreground_item, tree_box
-from .ground import GroundResult, blend_band, render_ground, sky_view_terms
-from .inputs import albedo_mipmap, ground_albedo, imported_passes, load_sky
-from .lighting import Lighting, auto_exposures, reference_lighting
 from .cores import default_workers
-from .plan import RunPlan, Scene
+from .cycle import foreground_item
+from .foregrounds import ForegroundLayer
+from .ground import GroundResult, blend_band, render_ground, sky_view_terms
+from .inputs import albedo_mipmap, ground_albedo
+from .lighting import Lighting, auto_exposures, reference_lighting
+from .plan import RunPlan
+from .scene import Scene
 
 
-def foreground_passes(plan: RunPlan, cycle_frame: int, store: cache.Cache,
-                      light: Lighting | None = None):
-    """(F_sun, F_sky, alpha, region) of the config's foreground at ``cycle_frame`` [kcd/m^2]:
-    the built-in trees lit by ``light`` (default: the run's reference Lighting) over the
-    (rows, cols) slices ``region`` of the frame they touch, or imported passes over the whole
-    frame; None without a foreground."""
-    config = plan.config
-    fg = config.foreground
-    if fg.model == "trees":
-        light = light or reference_lighting(plan)
-        item = foreground_item(plan, cycle_frame, store)
-        # light bounced off the ground reaches the trees' undersides as more diffuse light: half
-        # the ground's radiosity, its sun part following S with the sun pass
-        bounce = 0.5 * albedo_mipmap(config.ground).mean
-        sun_down = light.sun_irradiance * (light.sun_direction[2] if light.sun_direction is not None else 0.0)
-        sky = item["sky"] * (light.sky_irradiance * (1.0 + bounce)).astype(np.float32)
-        sun = item["sun"] * light.sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
-        return sky + sun, sky, item["alpha"], tree_box(item)
-    if fg.model == "passes":
-        passes = imported_passes(fg, plan.camera, cycle_frame)
-        return passes.sun, passes.sky, passes.alpha, (slice(None), slice(None))
-    return None
+def foreground_layer(plan: RunPlan, cycle_frame: int, store: cache.Cache,
+                     light: Lighting | None = None) -> ForegroundLayer | None:
+    """The foreground of ``cycle_frame`` (``foregrounds.ForegroundLayer``), its cycle product
+    fetched once when the model has one: the built-in trees lit by ``light`` (default: the run's
+    reference Lighting), or imported passes; None without a foreground.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    cycle_frame : int
+        The cycle frame.
+    store : cache.Cache
+        Where the cycle products are (computed on a miss).
+    light : Lighting or None
+        The light of the trees [klx].
+
+    Returns
+    -------
+    ForegroundLayer or None
+        Its passes [kcd/m^2], coverage [1], region and haze share [1].
+    """
+    light = light or reference_lighting(plan)
+    item = foreground_item(plan, cycle_frame, store) if plan.foreground.cached else None
+    sun_down = light.sun_irradiance * (light.sun_direction[2] if light.sun_direction is not None else 0.0)
+    return plan.foreground.layer(cycle_frame, view=plan.camera, item=item, sun_irradiance=light.sun_irradiance,
+                                 sky_irradiance=light.sky_irradiance, sun_down=sun_down,
+                                 bounce=0.5 * albedo_mipmap(plan.ground).mean)
 
 
-def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap, ...]:
+def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[texture.MipMap, ...]:
     """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
     coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
     (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
@@ -54,17 +62,17 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap,
     rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
     if ground.outer:
         rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
-    maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
+    maps = [texture.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
     raster, grid = rasters[-1]
-    if plan.config.canopy.layout == "periodic":
-        period = plan.config.canopy.layers[0].size
+    if plan.canopy.layout == "periodic":
+        period = plan.canopy.layers[0].size
         x0, y0, x1, y1 = grid.extent
         if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
-            return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
+            return (*maps, texture.mipmap(raster, grid, outside="periodic", period=period))
         value = raster.reshape(-1, raster.shape[-1]).mean(axis=0)
     else:
         value = ground.unshadowed
-    return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+    return (*maps, texture.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
 
 
 @dataclass(frozen=True)
@@ -123,23 +131,23 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``,
     and ``passes`` when light passes are made. ``passes``: the light passes to make
     (``vocabulary.PASSES``; None: the config's ``output.passes``), in ``FrameResult.layers``."""
-    config = plan.config
-    passes = config.output.passes if passes is None else tuple(passes)
+    passes = plan.output.passes if passes is None else tuple(passes)
+    brdf = plan.ground.brdf
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     clock = _Stopwatch(timings)
     scene = plan.scenes[frame]
-    sky = load_sky(config.sky, scene)
+    sky = plan.sky.at(scene)
     ground = render_ground(plan, frame, store=store, workers=workers, sky=sky, outer=True,
-                           parts=bool({"sun", "sky"} & set(passes)) or config.ground.brdf is not None,
-                           coarse_sky=config.ground.brdf is not None)
+                           parts=bool({"sun", "sky"} & set(passes)) or brdf is not None,
+                           coarse_sky=brdf is not None)
     clock.lap("ground")
     view = plan.camera
-    if config.ground.brdf is None:  # lambert: the camera's own path, bytes unchanged
+    if brdf is None:  # lambert: the camera's own path, bytes unchanged
         seen_sky = camera.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
         maps = irradiance_maps(plan, ground)
         background, distance = camera.background(
-            view, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky, seen_sky=seen_sky)
+            view, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky, seen_sky=seen_sky)
     elif passes:
         raise ValueError("the light passes split a Lambertian ground's light; ground.brdf has none yet")
     else:
@@ -148,41 +156,39 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
     sky_scale = _sky_scale(sky, light)
-    if config.sky.haze > 0:
+    if plan.haze > 0:
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
-        _apply_haze(background, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, sky))
+        _apply_haze(background, *_haze_of_view(view, plan.haze), camera.horizon_sky(view, sky))
     else:
         background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0
-    passes_fg = foreground_passes(plan, frame % config.canopy.cycle, store, light)
-    if passes_fg is not None and config.foreground.model == "trees" and sky_scale > 0:
-        veiled = foreground_item(plan, frame % config.canopy.cycle, store).get("haze")
-        if veiled is not None:  # the haze in front of the trees, as in front of the ground
-            horizon = camera.horizon_sky(view, sky)[None, passes_fg[3][1]]
-            veil = veiled[..., None] * (horizon / np.float32(sky_scale))
-            passes_fg = (passes_fg[0] + veil, passes_fg[1] + veil, *passes_fg[2:])
+    fg = foreground_layer(plan, frame % plan.canopy.cycle, store, light)
+    if fg is not None and fg.haze is not None and sky_scale > 0:
+        # the haze in front of the trees, as in front of the ground
+        horizon = camera.horizon_sky(view, sky)[None, fg.region[1]]
+        veil = fg.haze[..., None] * (horizon / np.float32(sky_scale))
+        fg = replace(fg, sun=fg.sun + veil, sky=fg.sky + veil)
     # outside the passes' region, and everywhere without a foreground, the trees add nothing:
     # B + 0 (above), the same bits composite_frame gives with passes of 0
     radiance = background
-    if passes_fg is not None:
-        region = passes_fg[3]
-        radiance[region] = composite.composite_frame(
-            background[region], sun_pass=passes_fg[0], sky_pass=passes_fg[1], alpha=passes_fg[2],
+    if fg is not None:
+        radiance[fg.region] = composite.composite_frame(
+            background[fg.region], sun_pass=fg.sun, sky_pass=fg.sky, alpha=fg.alpha,
             sun_fraction=sun_fraction, sky_scale=sky_scale)
     if plan.exposures is not None and plan.exposures[frame] is not None:
         exposure = plan.exposures[frame]
-    elif config.camera.auto_exposure is not None:
+    elif plan.exposure.auto is not None:
         exposure = auto_exposures(plan, [frame])[frame]
     else:
-        exposure = composite.exposure_for(light.unshadowed, stops=config.camera.exposure)
+        exposure = composite.exposure_for(light.unshadowed, stops=plan.exposure.stops)
     balance = composite.white_balance(
-        config.camera.white_balance, sky_irradiance=light.sky_irradiance,
+        plan.exposure.white_balance, sky_irradiance=light.sky_irradiance,
         sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
     clock.lap("composite")
     layers = {}
     if passes:
-        layers = light_layers(plan, passes, ground=ground, sky=sky, foreground=passes_fg,
+        layers = light_layers(plan, passes, ground=ground, sky=sky, foreground=fg,
                               sun_fraction=sun_fraction, sky_scale=sky_scale, distance=distance,
                               seen_sky=seen_sky, maps=maps)
         clock.lap("passes")
@@ -206,32 +212,32 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
     x 1000; 0 where the pixel sees no ground). ``depth`` (1): the distance to the ground seen,
     inf at the sky [m]. ``seen_sky``: the sky's ``camera.sky_view``, and ``maps`` the ground's
     ``irradiance_maps``, if made already."""
-    config, view = plan.config, plan.camera
+    view = plan.camera
     layers = {}
-    region = foreground[3] if foreground is not None else None
     alpha = np.zeros((view.height, view.width), dtype=np.float32)
-    if region is not None:
-        alpha[region] = foreground[2]
+    if foreground is not None:
+        region = foreground.region
+        alpha[region] = foreground.alpha
     if "sun" in passes or "sky" in passes:
-        albedo = ground_albedo(config.ground)
+        albedo = ground_albedo(plan.ground)
         dark = _DarkSky()
         for name, part, light_of in (("sky", ground.sky_part, sky), ("sun", ground.sun_part(), dark)):
             if name not in passes:
                 continue
             behind, _ = camera.background(view, irradiance=irradiance_maps(plan, part), albedo=albedo, sky=light_of,
                                           seen_sky=seen_sky if name == "sky" else None)
-            if config.sky.haze > 0:
-                _apply_haze(behind, *_haze_of_view(view, config.sky.haze), camera.horizon_sky(view, light_of))
+            if plan.haze > 0:
+                _apply_haze(behind, *_haze_of_view(view, plan.haze), camera.horizon_sky(view, light_of))
             if foreground is not None:
-                f_sun, f_sky = foreground[0], foreground[1]
+                f_sun, f_sky = foreground.sun, foreground.sky
                 if name == "sky":
                     behind[region] = composite.composite_frame(
-                        behind[region], sun_pass=f_sky, sky_pass=f_sky, alpha=foreground[2],
+                        behind[region], sun_pass=f_sky, sky_pass=f_sky, alpha=foreground.alpha,
                         sun_fraction=sun_fraction, sky_scale=sky_scale)
                 else:
                     behind[region] = composite.composite_frame(
                         behind[region], sun_pass=f_sun - f_sky, sky_pass=np.zeros_like(f_sky),
-                        alpha=foreground[2], sun_fraction=sun_fraction, sky_scale=0.0)
+                        alpha=foreground.alpha, sun_fraction=sun_fraction, sky_scale=0.0)
             layers[name] = behind
     if "alpha" in passes:
         layers["alpha"] = alpha[..., None]
@@ -264,13 +270,13 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     """The background B (height, width, 3) float32 [kcd/m^2] with the ground's reflectance
     ``ground.brdf`` (docs/method.md, "The ground's reflectance"): the sun's term at each
     pixel's own view, the sky's through view bands chosen by ``brdf.choose_bands``."""
-    config, view = plan.config, plan.camera
-    model = config.ground.brdf
+    view = plan.camera
+    model = plan.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
     bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
-    if config.canopy.layout == "periodic":
+    if plan.canopy.layout == "periodic":
         # the bands' rasters as the channels of one raster, repeated by the tile: the camera
         # filters its footprints once for all of them, the blend is made per pixel
         stacked = GroundResult(np.concatenate([t.irradiance for t in terms], axis=-1), plan.window,
@@ -287,9 +293,9 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
                                         np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
                                                         else t.irradiance for k, t in enumerate(terms)], axis=-1),
                                         *open_light)
-        sky_maps = (camera.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
+        sky_maps = (texture.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
     radiance = reflect.ground_radiance(
-        view, model, ground_albedo(config.ground), sun=irradiance_maps(plan, ground.sun_part()),
+        view, model, ground_albedo(plan.ground), sun=irradiance_maps(plan, ground.sun_part()),
         sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)
     return reflect.background(view, radiance, sky)
 
@@ -303,13 +309,13 @@ def compile_loops(plan: RunPlan) -> None:
     loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
     kept; any error is left to the frames."""
     try:
-        config, view = plan.config, plan.camera
+        view = plan.camera
         tiny = camera.Camera(view.position, view.yaw, view.pitch, view.vertical_fov, width=8, height=6)
         empty = np.zeros((*plan.window.shape, 3), dtype=np.float32)
-        maps = (camera.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
-                camera.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
-        sky = load_sky(config.sky, plan.scenes[0])
-        background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(config.ground), sky=sky)
+        maps = (texture.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
+                texture.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
+        sky = plan.sky.at(plan.scenes[0])
+        background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky)
         share = np.ones((tiny.height, tiny.width, 1), dtype=np.float32)
         share.flags.writeable = False  # as _haze_of_view's
         _apply_haze(background, share, share, camera.horizon_sky(tiny, sky))
@@ -317,7 +323,7 @@ def compile_loops(plan: RunPlan) -> None:
         coarse = replace(plan.window, shape=(2, 2))
         blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
                    np.zeros((2, 2, 3), dtype=np.float32), coarse)
-        if config.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
+        if plan.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
             from . import _filter
 
             _filter.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),

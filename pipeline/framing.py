@@ -5,17 +5,13 @@ plan stage."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from . import camera, canopy
-from .config import Config
+from .settings import Config
 from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
-
-if TYPE_CHECKING:
-    from .plan import RunPlan
+from .scene import shading_scenes, sun_shades
 
 CAMERA_HEIGHT = 1.7
 """Eye height of a camera placed by default. [m]"""
@@ -38,32 +34,6 @@ AUTO_SUN_MASK = 6_000_000
 path over the animation): past it the fine pixel grows. [1]"""
 AUTO_VIEW_SAMPLES = 48
 """Rays per side of the image with which the ground the camera sees is found. [1]"""
-
-
-SHADOW_FLOOR = float(np.radians(2.0))
-"""Below this elevation the sun's light is taken as unshadowed by the canopy: the shadow of a
-canopy h high lies h cot(elevation) > 28 h away along the anti-solar azimuth, beyond any window
-the plan would make, and a fine mask reaching it would pass the limits (docs/method.md,
-"Twilight and a sun at the horizon"). [rad]"""
-
-
-def sun_lights(sun) -> bool:
-    """Whether a sun disc gives direct light: wholly above the horizon (as
-    ``sun_kernel.sun_irradiance`` and ``sun_kernel.sun_kernel`` need); a sun between the
-    horizon and -6 degrees lights the ground through the sky alone (docs/method.md)."""
-    return sun is not None and sun.elevation - sun.angular_radius > 1e-3
-
-
-def sun_shades(sun) -> bool:
-    """Whether a sun's light goes through the fine sun kernel and its canopy shadow: it lights
-    the ground and stands at least SHADOW_FLOOR high."""
-    return sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
-
-
-def shading_scenes(scenes) -> list:
-    """The scenes whose sun casts the canopy's shadow (``sun_shades``): those the windows, the
-    sun window and the fine masks are planned from."""
-    return [scene for scene in scenes if sun_shades(scene.sun)]
 
 
 @dataclass(frozen=True)
@@ -341,12 +311,12 @@ def _pixels(box, pixel) -> float:
     return (box[2] - box[0]) * (box[3] - box[1]) / pixel**2
 
 
-def framing_warnings(plan: RunPlan) -> list[str]:
+def framing_warnings(config: Config, plan) -> list[str]:
     """One-line warnings of a plan whose picture would show no dappled shadow, or a false one:
     the camera sees none of the sun window; the sun is below the canopy's reach, the sky square
     (``sky.alpha``), in some frames, so that beyond the sun window nothing shades it; the
     leaves' shadow falls outside the sun window in some frames."""
-    config, scenes = plan.config, list(plan.scenes)
+    scenes = list(plan.scenes)
     warnings = []
     fine = plan.sun_window or plan.window
     x0, y0, x1, y1 = fine.extent

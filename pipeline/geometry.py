@@ -18,15 +18,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = [
+    "Grid", "lattice_offset", "sky_grid", "sky_offset", "fold", "wrapped_spans", "direction_vector", "tangent_axes",
+    "normalized", "sky_plane_from_direction", "direction_from_sky_plane", "cos4_antiderivative",
+    "projected_solid_angle", "sky_square_irradiance", "I0", "pinhole_image_axes", "offset_direction",
+]
+
 
 @dataclass(frozen=True)
 class Grid:
     """A north-up raster on a plane: ground, canopy or sky plane.
 
-    origin : (float, float) -- x and y of the north-west corner of pixel [0, 0].
-        [m] on the ground and canopy planes, [tan] (dimensionless) on the sky plane.
-    pixel : float -- side of a square pixel, in the units of ``origin``.
-    shape : (int, int) -- (rows, cols).
+    Pixel centres are at ``origin + (col + 0.5, -(row + 0.5)) * pixel`` (docs/method.md, "Conventions").
+
+    Attributes
+    ----------
+    origin : tuple of (float, float)
+        x and y of the north-west corner of pixel [0, 0]: [m] on the ground and canopy planes,
+        [tan] (dimensionless) on the sky plane.
+    pixel : float
+        Side of a square pixel, in the units of ``origin`` [m] or [tan].
+    shape : tuple of (int, int)
+        (rows, cols) [1].
     """
 
     origin: tuple[float, float]
@@ -35,8 +48,22 @@ class Grid:
 
     @classmethod
     def from_window(cls, window, pixel: float) -> "Grid":
-        """The grid of pixel ``pixel`` [m] whose north-west corner is that of ``window``
-        ``(x_min, y_min, x_max, y_max)`` [m]; its size is the window's rounded to whole pixels."""
+        """The grid of pixel ``pixel`` whose north-west corner is that of ``window``.
+
+        Its size is the window's rounded to whole pixels (at least one pixel each way).
+
+        Parameters
+        ----------
+        window : sequence of 4 float
+            (x_min, y_min, x_max, y_max) [m].
+        pixel : float
+            Side of a pixel [m].
+
+        Returns
+        -------
+        Grid
+            The grid with origin (x_min, y_max) [m].
+        """
         x_min, y_min, x_max, y_max = (float(v) for v in window)
         cols = max(1, int(round((x_max - x_min) / pixel)))
         rows = max(1, int(round((y_max - y_min) / pixel)))
@@ -44,28 +71,72 @@ class Grid:
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
-        """(x_min, y_min, x_max, y_max) covered by the raster, in the units of ``origin``."""
+        """The rectangle covered by the raster.
+
+        Returns
+        -------
+        tuple of 4 float
+            (x_min, y_min, x_max, y_max), in the units of ``origin`` [m] or [tan].
+        """
         x0, y0 = self.origin
         rows, cols = self.shape
         return (x0, y0 - rows * self.pixel, x0 + cols * self.pixel, y0)
 
     def ground_from_raster(self, row, col):
-        """Plane coordinates (x, y) of fractional raster indices; integers give pixel centres."""
+        """Plane coordinates of fractional raster indices; integers give pixel centres.
+
+        Parameters
+        ----------
+        row, col : float or numpy.ndarray
+            Fractional raster indices, broadcastable [pixel].
+
+        Returns
+        -------
+        x, y : numpy.ndarray
+            float64 plane coordinates, of the broadcast shape of ``row`` and ``col``, in the units of
+            ``origin`` [m] or [tan].
+        """
         x = self.origin[0] + (np.asarray(col, dtype=np.float64) + 0.5) * self.pixel
         y = self.origin[1] - (np.asarray(row, dtype=np.float64) + 0.5) * self.pixel
         return x, y
 
     def raster_from_ground(self, x, y):
-        """Fractional raster indices (row, col) of plane coordinates; inverse of ``ground_from_raster``."""
+        """Fractional raster indices of plane coordinates; inverse of ``ground_from_raster``.
+
+        Parameters
+        ----------
+        x, y : float or numpy.ndarray
+            Plane coordinates, broadcastable, in the units of ``origin`` [m] or [tan].
+
+        Returns
+        -------
+        row, col : numpy.ndarray
+            float64 fractional raster indices, of the broadcast shape of ``x`` and ``y`` [pixel].
+        """
         col = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.pixel - 0.5
         row = (self.origin[1] - np.asarray(y, dtype=np.float64)) / self.pixel - 0.5
         return row, col
 
 
 def lattice_offset(grid: Grid, lattice: Grid) -> tuple[int, int]:
-    """Whole-pixel position (row, col) of ``grid``'s pixel [0, 0] in ``lattice``'s indices.
+    """Whole-pixel position of ``grid``'s pixel [0, 0] in ``lattice``'s indices.
 
-    Raises ValueError if the two grids do not share pixel size and pixel edges.
+    Parameters
+    ----------
+    grid : Grid
+        The grid to place.
+    lattice : Grid
+        The grid whose indices are wanted; same pixel size and pixel edges as ``grid``.
+
+    Returns
+    -------
+    tuple of (int, int)
+        (row, col) of ``grid``'s pixel [0, 0] in ``lattice`` [pixel].
+
+    Raises
+    ------
+    ValueError
+        If the two grids do not share pixel size and pixel edges.
     """
     if not np.isclose(grid.pixel, lattice.pixel, rtol=1e-9):
         raise ValueError(f"pixel sizes differ: {grid.pixel} and {lattice.pixel}")
@@ -77,12 +148,38 @@ def lattice_offset(grid: Grid, lattice: Grid) -> tuple[int, int]:
 
 
 def sky_grid(start: tuple[int, int], shape: tuple[int, int], q: float) -> Grid:
-    """Sky-plane grid [tan] whose cell [0, 0] is the offset ``start`` = (dr, dc); cell q [tan]."""
+    """Sky-plane grid whose cell [0, 0] is the whole-cell offset ``start``.
+
+    Parameters
+    ----------
+    start : tuple of (int, int)
+        (dr, dc) offset of cell [0, 0] from the cell at the zenith [cell].
+    shape : tuple of (int, int)
+        (rows, cols) [1].
+    q : float
+        Side of a cell on the sky plane [tan].
+
+    Returns
+    -------
+    Grid
+        The sky-plane grid [tan].
+    """
     return Grid(((start[1] - 0.5) * q, (0.5 - start[0]) * q), q, shape)
 
 
 def sky_offset(grid: Grid) -> tuple[int, int]:
-    """Sky offset (dr, dc) of cell [0, 0] of a sky-plane grid made by ``sky_grid``."""
+    """Sky offset of cell [0, 0] of a sky-plane grid made by ``sky_grid``; inverse of it.
+
+    Parameters
+    ----------
+    grid : Grid
+        A sky-plane grid [tan] made by ``sky_grid``.
+
+    Returns
+    -------
+    tuple of (int, int)
+        (dr, dc) offset of cell [0, 0] [cell].
+    """
     q = grid.pixel
     return int(round(0.5 - grid.origin[1] / q)), int(round(grid.origin[0] / q + 0.5))
 
@@ -90,8 +187,20 @@ def sky_offset(grid: Grid) -> tuple[int, int]:
 def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) -> np.ndarray:
     """Fold a sky raster modulo the tile period: ``e_f[i mod N] += e[i]``.
 
-    weighted : (channels, rows, cols) with cell [0, 0] at offset ``start``.
-    Returns (channels, period rows, period cols), cell [0, 0] at offset 0.
+    Parameters
+    ----------
+    weighted : numpy.ndarray
+        (channels, rows, cols) sky raster with cell [0, 0] at offset ``start`` (any leading axes).
+    start : tuple of (int, int)
+        (dr, dc) offset of cell [0, 0] [cell].
+    period : tuple of (int, int)
+        (rows, cols) of the tile period [cell].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, period rows, period cols), cell [0, 0] at offset 0, dtype of ``weighted``;
+        ``weighted`` itself when it is already folded.
     """
     weighted = np.asarray(weighted)
     if tuple(start) == (0, 0) and weighted.shape[-2:] == tuple(period):
@@ -104,8 +213,24 @@ def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) 
 
 
 def wrapped_spans(start: int, length: int, period: int):
-    """Runs of ``u -> (start + u) mod period`` for u in [0, length), as pairs of slices
-    (u-slice, wrapped slice): the pieces a wrapped copy or fold moves in one go."""
+    """Runs of ``u -> (start + u) mod period`` for u in [0, length).
+
+    They are the pieces a wrapped copy or fold moves in one go.
+
+    Parameters
+    ----------
+    start : int
+        Index of u = 0 before wrapping [cell].
+    length : int
+        Number of u [cell].
+    period : int
+        Period of the wrapping [cell].
+
+    Returns
+    -------
+    list of tuple of (slice, slice)
+        Pairs (u-slice, wrapped slice).
+    """
     spans, u = [], 0
     while u < length:
         d = (start + u) % period
@@ -116,8 +241,20 @@ def wrapped_spans(start: int, length: int, period: int):
 
 
 def direction_vector(azimuth, elevation) -> np.ndarray:
-    """Unit vector(s) (..., 3) in world axes x east, y north, z up of the direction(s) at
-    ``azimuth`` (from north towards east) and ``elevation`` (above the horizon) [rad]. [1]"""
+    """Unit vector(s) of the direction(s) at an azimuth and an elevation.
+
+    Parameters
+    ----------
+    azimuth : float or numpy.ndarray
+        From north towards east [rad].
+    elevation : float or numpy.ndarray
+        Above the horizon [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float64 unit vector(s) in world axes x east, y north, z up [1].
+    """
     azimuth = np.asarray(azimuth, dtype=np.float64)
     elevation = np.asarray(elevation, dtype=np.float64)
     ce = np.cos(elevation)
@@ -125,11 +262,25 @@ def direction_vector(azimuth, elevation) -> np.ndarray:
 
 
 def tangent_axes(azimuth: float, elevation: float):
-    """The frame of the sky at a direction (azimuth a, elevation h) [rad]: (s, e_az, e_el), each
-    (3,) float64 in world axes, with s = ``direction_vector(a, h)``, e_az = (cos a, -sin a, 0)
-    the direction of increasing azimuth and e_el = (-sin h sin a, -sin h cos a, cos h) that of
-    increasing elevation. A point at gnomonic offset (dx to the right, dy up) is along
-    s + dx e_az + dy e_el. Undefined at the zenith. [1]"""
+    """The frame of the sky at a direction (azimuth a, elevation h).
+
+    s = ``direction_vector(a, h)``; e_az = (cos a, -sin a, 0) is the direction of increasing
+    azimuth and e_el = (-sin h sin a, -sin h cos a, cos h) that of increasing elevation. A point
+    at gnomonic offset (dx to the right, dy up) is along s + dx e_az + dy e_el. Undefined at the
+    zenith.
+
+    Parameters
+    ----------
+    azimuth : float
+        a, from north towards east [rad].
+    elevation : float
+        h, above the horizon [rad].
+
+    Returns
+    -------
+    s, e_az, e_el : numpy.ndarray
+        Each (3,) float64 in world axes [1].
+    """
     a, h = azimuth, elevation
     e_az = np.array([np.cos(a), -np.sin(a), 0.0])
     e_el = np.array([-np.sin(h) * np.sin(a), -np.sin(h) * np.cos(a), np.cos(h)])
@@ -137,23 +288,55 @@ def tangent_axes(azimuth: float, elevation: float):
 
 
 def normalized(v) -> np.ndarray:
-    """Vectors v (..., n) scaled to unit length along the last axis (a zero vector stays 0). [1]"""
+    """Vectors scaled to unit length along the last axis (a zero vector stays 0).
+
+    Parameters
+    ----------
+    v : numpy.ndarray
+        (..., n) vectors.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., n) unit vectors [1].
+    """
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
 
 
 def sky_plane_from_direction(azimuth, zenith):
-    """Sky-plane point s = tan(zenith) * (sin(azimuth), cos(azimuth)) of a direction.
+    """Sky-plane point s = tan(zenith) * (sin(azimuth), cos(azimuth)) of a direction (Max 1991, Fig. 2).
 
-    azimuth : angle from north towards east. [rad]
-    zenith : angle from the zenith, below pi/2. [rad]
-    Returns (sx, sy). [tan]
+    Parameters
+    ----------
+    azimuth : float or numpy.ndarray
+        Angle from north towards east [rad].
+    zenith : float or numpy.ndarray
+        Angle from the zenith, below pi/2 [rad].
+
+    Returns
+    -------
+    sx, sy : float or numpy.ndarray
+        The point (x east, y north) on the plane z = 1 [tan].
     """
     t = np.tan(zenith)
     return t * np.sin(azimuth), t * np.cos(azimuth)
 
 
 def direction_from_sky_plane(sx, sy):
-    """(azimuth, zenith) [rad] of the direction through sky-plane point (sx, sy) [tan]."""
+    """The direction through a sky-plane point; inverse of ``sky_plane_from_direction``.
+
+    Parameters
+    ----------
+    sx, sy : float or numpy.ndarray
+        The point (x east, y north) on the plane z = 1 [tan].
+
+    Returns
+    -------
+    azimuth : float or numpy.ndarray
+        From north towards east, in [0, 2 pi) [rad].
+    zenith : float or numpy.ndarray
+        Angle from the zenith [rad].
+    """
     azimuth = np.mod(np.arctan2(sx, sy), 2.0 * np.pi)
     zenith = np.arctan(np.hypot(sx, sy))
     return azimuth, zenith
@@ -163,7 +346,17 @@ def cos4_antiderivative(x, y):
     """F(x, y) with d2F/dx dy = 1 / (1 + x^2 + y^2)^2 = cos^4(theta), F(0, y) = F(x, 0) = 0.
 
     The integral of cos^4(theta) dA over a sky-plane rectangle is the projected solid angle
-    (integral of cos(theta) d_omega) of that patch of sky. [sr]
+    (integral of cos(theta) d_omega) of that patch of sky.
+
+    Parameters
+    ----------
+    x, y : float or numpy.ndarray
+        Sky-plane coordinates, broadcastable [tan].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 F(x, y), of the broadcast shape [sr].
     """
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
@@ -173,10 +366,20 @@ def cos4_antiderivative(x, y):
 
 
 def projected_solid_angle(grid: Grid) -> np.ndarray:
-    """Exact projected solid angle of every cell of a sky-plane grid (float64, grid.shape). [sr]
+    """Exact projected solid angle of every cell of a sky-plane grid.
 
     Cell (r, c) weight is the integral of cos^4(theta) over the cell (Max 1991, eq. 1), so a sky
     of uniform radiance L contributes exactly L times this to the unshadowed irradiance.
+
+    Parameters
+    ----------
+    grid : Grid
+        A sky-plane grid [tan].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of ``grid.shape``, the weight of every cell [sr].
     """
     rows, cols = grid.shape
     x0, y0 = grid.origin
@@ -189,9 +392,18 @@ def projected_solid_angle(grid: Grid) -> np.ndarray:
 def sky_square_irradiance(alpha) -> np.ndarray:
     """I0(alpha) = 4 sin(alpha) atan(sin(alpha)): projected solid angle of the sky square.
 
-    alpha : half-angle of the square on the sky plane, |s|_inf <= tan(alpha). [rad]
-    Returns the irradiance under a sky of radiance 1 restricted to the square (Max 1991,
-    section "Error analysis", Fig. 16); pi at alpha = pi/2. [sr]
+    The irradiance under a sky of radiance 1 restricted to the square (Max 1991, section
+    "Error analysis", Fig. 16); pi at alpha = pi/2. Also named ``I0``.
+
+    Parameters
+    ----------
+    alpha : float or numpy.ndarray
+        Half-angle of the square on the sky plane, |s|_inf <= tan(alpha) [rad].
+
+    Returns
+    -------
+    float or numpy.ndarray
+        I0(alpha), of the shape of ``alpha`` [sr].
     """
     sa = np.sin(alpha)
     return 4.0 * sa * np.arctan(sa)
@@ -201,14 +413,32 @@ I0 = sky_square_irradiance
 
 
 def pinhole_image_axes(height: float, elevation: float, angular_radius: float) -> tuple[float, float]:
-    """Full axes (length along the sun's azimuth, width across it) of the sun's image cast on the
-    ground by a pinhole ``height`` above it: the cone of the disc's rays meets the ground in an
-    ellipse. Length H (cot(h - r) - cot(h + r)) from the rays at elevations h -/+ r; width
-    2 H sin r / sqrt(sin(h - r) sin(h + r)) (the conic's minor axis). Their ratio is about
-    1 / sin h: 5.8 at 10 degrees, 11.5 at 5, 29 at 2.
+    """Full axes of the sun's image cast on the ground by a pinhole ``height`` above it.
 
-    height : H. [m]   elevation : h of the disc's centre, above r. [rad]   angular_radius : r. [rad]
-    Returns (length, width). [m]
+    The cone of the disc's rays meets the ground in an ellipse. Length H (cot(h - r) - cot(h + r))
+    from the rays at elevations h -/+ r; width 2 H sin r / sqrt(sin(h - r) sin(h + r)) (the conic's
+    minor axis). Their ratio is about 1 / sin h: 5.8 at 10 degrees, 11.5 at 5, 29 at 2.
+
+    Parameters
+    ----------
+    height : float
+        H, of the pinhole above the ground [m].
+    elevation : float
+        h, of the disc's centre, above ``angular_radius`` [rad].
+    angular_radius : float
+        r, of the sun's disc [rad].
+
+    Returns
+    -------
+    length : float
+        Axis along the sun's azimuth [m].
+    width : float
+        Axis across it [m].
+
+    Raises
+    ------
+    ValueError
+        If the whole sun disc is not above the horizon.
     """
     lo, hi = elevation - angular_radius, elevation + angular_radius
     if not lo > 0.0:
@@ -216,3 +446,25 @@ def pinhole_image_axes(height: float, elevation: float, angular_radius: float) -
     length = height * (1.0 / np.tan(lo) - 1.0 / np.tan(hi))
     width = 2.0 * height * np.sin(angular_radius) / np.sqrt(np.sin(lo) * np.sin(hi))
     return float(length), float(width)
+
+
+def offset_direction(azimuth, elevation, dx, dy):
+    """The direction at gnomonic offset (dx to the right, dy up) from (azimuth, elevation): the
+    inverse of ``ephemeris.moon_offset_from_sun``.
+
+    Parameters
+    ----------
+    azimuth, elevation : float
+        The centre direction [rad].
+    dx, dy : float
+        The offset on the tangent plane, to the right and up [tan].
+
+    Returns
+    -------
+    tuple of float
+        (azimuth in [0, 2 pi), elevation) [rad].
+    """
+    s, e_az, e_el = tangent_axes(azimuth, elevation)
+    w = s + dx * e_az + dy * e_el
+    w /= np.linalg.norm(w)
+    return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))

@@ -14,11 +14,11 @@ from . import brdf as brdf_models
 from . import cache, shadow
 from .cycle import cycle_item
 from .geometry import Grid, sky_grid, sky_offset
-from .inputs import load_sky
 from .sky_raster import SkyRaster
 from .sun_kernel import sun_irradiance, sun_kernel
 from .cores import default_workers
-from .plan import LayerPlan, RunPlan, sun_lights, sun_shades
+from .plan import LayerPlan, RunPlan
+from .scene import sun_lights, sun_shades
 
 
 @dataclass(frozen=True)
@@ -65,8 +65,8 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
     also keep the sky's own share on the coarse window (GroundResult.coarse_sky)."""
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
-    sky = sky or load_sky(plan.config.sky, plan.scenes[frame])
-    cycle_frame = frame % plan.config.canopy.cycle
+    sky = sky or plan.sky.at(plan.scenes[frame])
+    cycle_frame = frame % plan.canopy.cycle
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
     grounds, outers, totals, exact, skies, coarse_skies = [], [], [], True, [], []
     for index, layer_plan in enumerate(plan.layers):
@@ -109,8 +109,8 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
     the frame's GroundResult with its ``coarse_sky`` (each layer's sky raster: an isolated
     layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
     folded)."""
-    brdf = plan.config.ground.brdf
-    cycle_frame = frame % plan.config.canopy.cycle
+    brdf = plan.ground.brdf
+    cycle_frame = frame % plan.canopy.cycle
     grounds, total = [], None
     for index, lp in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)

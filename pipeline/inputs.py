@@ -1,68 +1,17 @@
-"""The config's inputs as the stages use them: sky models, mask images, the grove of built-in
-trees, the ground's albedo and imported foreground passes, each read and checked once per
-process (docs/design.md, "Stages")."""
+"""The config's inputs as the stages use them: mask images, the grove of built-in trees, the
+ground's albedo and imported foreground passes, each read and checked once per process
+(docs/design.md, "Stages")."""
 
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground, io
-from . import sky as sky_models
-from . import sun_disc
-from .clouds import CloudLayer
-from .eclipse import METER_TABLE
-from .config import MAX_RADIANCE, CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig, SkyConfig
+from . import camera, canopy, foreground, io, texture
 from .geometry import Grid
-from .equirect import EquirectSky, cut_sun
-from .sky import UniformSky
-from .vocabulary import PROCEDURAL_MODELS
-
-if TYPE_CHECKING:
-    from .plan import Scene
-
-
-def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = False):
-    """The sky model of a config at a scene (procedural skies), its image read and checked
-    (negative radiance is taken as 0). ``metering``: for an exposure meter, which reads the
-    light of the whole sky only: a deep eclipse's line-of-sight table is the coarser
-    ``eclipse.METER_TABLE``. Raises io.ImageError."""
-    if sky.model == "uniform":
-        return UniformSky(np.asarray(sky.radiance, dtype=np.float64))
-    if sky.model in PROCEDURAL_MODELS:
-        clouds = None
-        if sky.clouds is not None:
-            c = sky.clouds
-            clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
-                                wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
-        detail = {"eclipse_table": METER_TABLE} if metering else {}
-        return clear_sky(sky, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
-    return load_hdri(sky)
-
-
-def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> sky_models.ProceduralSky:
-    """The procedural sky of a config with ``sun``; ``state``: moon, clouds, time."""
-    return sky_models.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
-                                    cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
-                                    **state)
-
-
-@functools.lru_cache(maxsize=4)
-def load_hdri(sky: SkyConfig) -> EquirectSky:
-    """An HDRI sky read, checked and its sun cut out once per process (the plan needs its sun,
-    every frame its image)."""
-    image = io.read_image(sky.hdri)
-    if image.shape[2] < 3:
-        image = np.repeat(image[..., :1], 3, axis=2)
-    image = image[..., :3]
-    if not np.all(np.isfinite(image)):
-        raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
-    if image.max() > MAX_RADIANCE:
-        raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
-    return cut_sun(EquirectSky(np.maximum(image, 0.0), sky.rotation))
+from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
@@ -92,7 +41,7 @@ def grove_of(canopy_config: CanopyConfig):
 
 
 @functools.lru_cache(maxsize=4)
-def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
+def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
     """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image
     covering ``albedo_size`` metres a side."""
     if ground.albedo == "grass":
@@ -102,7 +51,8 @@ def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
         image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
         rows, cols = image.shape[:2]
         grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
-    return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
+    return texture.mipmap(image, grid, outside="periodic",
+                          period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
 
 
 @functools.lru_cache(maxsize=4)

@@ -17,6 +17,8 @@ import OpenImageIO as oiio
 
 from .errors import ImageError
 
+__all__ = ["MAX_IMAGE_VALUES", "PNG_FILTER_SUB", "VIDEO_FORMATS", "read_image", "read_codes", "read_layers",
+           "read_attributes", "write_exr", "write_png", "write_video"]
 
 MAX_IMAGE_VALUES = 2**29
 """Most values (width x height x channels) an image read may hold: its header is read first, and
@@ -25,18 +27,49 @@ A 16384 x 8192 RGB HDRI holds 4.0e8. [1]"""
 
 
 def read_image(path) -> np.ndarray:
-    """Pixels of an image file as float32 (rows, cols, channels), values as stored.
+    """Pixels of an image file as float32, values as stored.
 
     Integer formats are scaled to [0, 1] (8- and 16-bit PNG); no colour conversion is done and
-    colour is not multiplied by alpha, so a mask is read as the linear numbers it holds.
-    Raises ImageError naming the file.
+    colour is not multiplied by alpha, so a mask is read as the linear numbers it holds. An image of
+    more than MAX_IMAGE_VALUES values is refused before any pixel is decoded.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, channels) float32, in the file's units (radiance [kcd/m^2] for a sky, [1] for
+        a mask or an 8-bit picture).
+
+    Raises
+    ------
+    ImageError
+        Naming the file.
     """
     return _read(path, "float").astype(np.float32, copy=False)
 
 
 def read_codes(path) -> np.ndarray:
-    """The 8-bit codes of an 8-bit image file (a frame's PNG) as uint8 (rows, cols, channels),
-    without a float round trip. Raises ImageError naming the file."""
+    """The 8-bit codes of an 8-bit image file (a frame's PNG), without a float round trip.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, channels) uint8 codes.
+
+    Raises
+    ------
+    ImageError
+        Naming the file.
+    """
     return _read(path, "uint8")
 
 
@@ -56,7 +89,8 @@ def _read(path, kind: str) -> np.ndarray:
             values = spec.width * spec.height * spec.nchannels
             if spec.width < 1 or spec.height < 1 or values > MAX_IMAGE_VALUES:
                 raise ImageError(path, f"is {spec.width} x {spec.height} pixels of {spec.nchannels} channel"
-                                 f"{'' if spec.nchannels == 1 else 's'} ({values:.3g} values); the most is {MAX_IMAGE_VALUES:.3g} "
+                                 f"{'' if spec.nchannels == 1 else 's'} ({values:.3g} values); "
+                                 f"the most is {MAX_IMAGE_VALUES:.3g} "
                                  f"({MAX_IMAGE_VALUES * 4 / 2**30:g} GiB as floats)")
             pixels = inp.read_image(0, 0, 0, spec.nchannels, kind)
             error = inp.geterror()
@@ -71,8 +105,23 @@ def _read(path, kind: str) -> np.ndarray:
 
 
 def read_layers(path) -> dict[str, np.ndarray]:
-    """The channels of an image file by name (``"R"``, ``"sun.R"``, ``"illuminance.Y"``), each
-    (rows, cols) float32 as stored. Raises ImageError naming the file."""
+    """The channels of an image file by name (``"R"``, ``"sun.R"``, ``"illuminance.Y"``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        {channel name: (rows, cols) float32 as stored}.
+
+    Raises
+    ------
+    ImageError
+        Naming the file.
+    """
     pixels = read_image(path)
     with _quiet_stderr():
         inp = oiio.ImageInput.open(str(path))
@@ -86,7 +135,25 @@ def read_layers(path) -> dict[str, np.ndarray]:
 
 
 def read_attributes(path, names) -> dict:
-    """The named metadata attributes of an image file (missing ones are None)."""
+    """The named metadata attributes of an image file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+    names : iterable of str
+        The attributes' names.
+
+    Returns
+    -------
+    dict
+        {name: value}; missing ones are None.
+
+    Raises
+    ------
+    ImageError
+        Naming the file, when it cannot be opened.
+    """
     with _quiet_stderr():
         inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -116,22 +183,38 @@ def _quiet_stderr():
 
 def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False,
               layers: dict | None = None) -> None:
-    """Write (rows, cols, channels) scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless),
-    with ``attributes`` (str, int, float, or a tuple of floats) in its header. No time stamp
-    is written unless ``attributes`` gives ``DateTime`` (OpenEXR's capDate), so the same pixels
-    and attributes always give the same bytes.
+    """Write scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless), atomically.
 
-    layers : {channel names: (pixels (rows, cols, len(names)), "half" or "float")} written
-        beside ``pixels`` (channels R, G, B), named in the multi-layer convention
-        (``("sun.R", "sun.G", "sun.B")``, ``("illuminance.Y",)``), each in its own format: a
-        channel whose values pass half's 65504 (lux) is kept in float. None: the file is as
-        without this argument, byte for byte."""
+    No time stamp is written unless ``attributes`` gives ``DateTime`` (OpenEXR's capDate), so the
+    same pixels and attributes always give the same bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    pixels : numpy.ndarray
+        (rows, cols, channels) scene-linear values, channels R, G, B (A) [kcd/m^2].
+    attributes : dict, optional
+        {name: str, int, float, or a tuple of floats} for its header.
+    half : bool, optional
+        Write the pixels as half floats.
+    layers : dict, optional
+        {channel names: (pixels (rows, cols, len(names)), "half" or "float")} written beside
+        ``pixels``, named in the multi-layer convention (``("sun.R", "sun.G", "sun.B")``,
+        ``("illuminance.Y",)``), each in its own format: a channel whose values pass half's 65504
+        (lux) is kept in float. None: the file is as without this argument, byte for byte.
+
+    Raises
+    ------
+    ImageError
+        Naming the file, when it cannot be written.
+    """
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     rows, cols, channels = pixels.shape
     spec = oiio.ImageSpec(cols, rows, channels, "half" if half else "float")
     if layers:
         names, formats = list("RGBA"[:channels]), [spec.format] * channels
-        for layer_names, (layer, kind) in layers.items():
+        for layer_names, (layer, kind) in layers.items():  # noqa: B007 -- the pixels are joined below
             names += list(layer_names)
             formats += [oiio.TypeDesc(kind)] * len(layer_names)
         pixels = np.concatenate([pixels, *(np.asarray(p, dtype=np.float32).reshape(rows, cols, -1)
@@ -150,12 +233,29 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
 
 
 def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
-    """Write display-referred pixels in [0, 1] (rows, cols, channels) as an 8-bit PNG, with
-    ``attributes`` (str or int) as text chunks. Returns the codes written (rows, cols,
-    channels) uint8: what ``read_codes`` reads back.
+    """Write display-referred pixels as an 8-bit PNG, atomically.
 
     A fixed-seed dither of one code value breaks the banding of smooth gradients; the same
     pixels always give the same bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    pixels : numpy.ndarray
+        (rows, cols, channels) display values in [0, 1] [1].
+    attributes : dict, optional
+        {name: str or int}, written as text chunks.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, channels) uint8: the codes written, what ``read_codes`` reads back.
+
+    Raises
+    ------
+    ImageError
+        Naming the file, when it cannot be written.
     """
     pixels = np.asarray(pixels, dtype=np.float32)
     codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
@@ -195,11 +295,11 @@ def _half_dither(shape) -> np.ndarray:
 
 
 VIDEO_FORMATS = (".mp4", ".gif")
+"""The video files ``write_video`` writes, by suffix."""
 
 
 def write_video(path, frames, *, fps: float) -> int:
-    """Write display-referred frames (each (rows, cols, 3), floats in [0, 1] or uint8) as a
-    video, atomically; returns the number of frames.
+    """Write display-referred frames as a video, atomically.
 
     ``.mp4``: H.264 in yuv420p, which browsers play; frames of odd width or height are padded
     by repeating their last column or row (yuv420p needs even sizes). One encoder thread and
@@ -207,6 +307,25 @@ def write_video(path, frames, *, fps: float) -> int:
     preset: at CRF 18 it encoded the eclipse frames in 22 ms each instead of 58 ("medium"), in
     files of the same size, 0.3 dB PSNR lower (39.1 dB).
     ``.gif``: through Pillow, an adaptive palette per frame, looping.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its suffix (one of VIDEO_FORMATS) picks the format.
+    frames : iterable of numpy.ndarray
+        Each (rows, cols, 3), floats in [0, 1] or uint8 codes; read once, in order.
+    fps : float
+        Frames per second [1/s].
+
+    Returns
+    -------
+    int
+        The number of frames written.
+
+    Raises
+    ------
+    ImageError
+        Naming the file: an unknown format, or no frames.
     """
     path = Path(path)
     if path.suffix.lower() not in VIDEO_FORMATS:

@@ -10,8 +10,11 @@ from dataclasses import astuple, dataclass, replace
 import numpy as np
 
 from . import composite
-from .inputs import clear_sky, load_hdri, load_sky
-from .plan import RunPlan, Scene
+from .plan import RunPlan
+from .scene import Scene
+
+__all__ = ["Lighting", "reference_lighting", "EXPOSURE_MEMORY", "exposure_frames", "auto_exposures",
+           "with_exposures", "meter"]
 
 
 @dataclass(frozen=True)
@@ -50,21 +53,12 @@ def _read_only(values) -> np.ndarray:
 
 
 def _reference_lighting(plan: RunPlan) -> Lighting:
-    config = plan.config
     s = np.append(plan.projection, 1.0)
-    direction = s / np.linalg.norm(s)
-    sky = config.sky
-    if sky.model == "uniform":
-        return Lighting(None, np.zeros(3), np.pi * np.asarray(sky.radiance, dtype=np.float64))
-    if sky.model == "hdri":
-        hdri = load_hdri(sky)
-        if hdri.sun is None:
-            return Lighting(None, np.zeros(3), hdri.image_irradiance())
-        return Lighting(direction, np.asarray(hdri.sun_normal_irradiance, dtype=np.float64),
-                        hdri.image_irradiance())
-    middle = plan.scenes[config.animation.frames // 2].sun
-    clear = clear_sky(sky, middle)
-    return Lighting(direction, clear.sun_normal_irradiance, clear.clear_sky_irradiance)
+    middle = plan.scenes[plan.frames // 2].sun
+    sun, sky = plan.sky.clear_light(middle)
+    if sun is None:
+        return Lighting(None, np.zeros(3), sky)
+    return Lighting(s / np.linalg.norm(s), sun, sky)
 
 
 EXPOSURE_MEMORY = 14.0
@@ -74,9 +68,7 @@ weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]""
 
 def exposure_frames(plan: RunPlan, frame: int) -> range:
     """The frames whose light the auto exposure of ``frame`` remembers."""
-    config = plan.config
-    a = config.camera.auto_exposure
-    memory = int(np.ceil(EXPOSURE_MEMORY * a.time_constant * config.animation.fps))
+    memory = int(np.ceil(EXPOSURE_MEMORY * plan.exposure.auto.time_constant * plan.exposure.fps))
     return range(max(0, frame - memory), frame + 1)
 
 
@@ -85,33 +77,32 @@ def auto_exposures(plan: RunPlan, frames=None) -> dict[int, float]:
     frame's meter reading is the open ground's light (``meter``), followed through
     ``composite.auto_exposure``'s first-order lag and limits from the first frame it remembers
     (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered."""
-    config = plan.config
     light = reference_lighting(plan)
-    frames = range(config.animation.frames) if frames is None else frames
+    frames = range(plan.frames) if frames is None else frames
     windows = {frame: exposure_frames(plan, frame) for frame in frames}
     readings = {f: meter(plan, plan.scenes[f], light) for f in sorted(set().union(*windows.values()))}
-    a = config.camera.auto_exposure
+    e = plan.exposure
     return {frame: float(composite.auto_exposure(
                 [readings[f] for f in window], reference=light.unshadowed,
-                frame_time=1.0 / config.animation.fps, time_constant=a.time_constant,
-                limits=a.limits, stops=config.camera.exposure)[-1])
+                frame_time=1.0 / e.fps, time_constant=e.auto.time_constant,
+                limits=e.auto.limits, stops=e.stops)[-1])
             for frame, window in windows.items()}
 
 
 def with_exposures(plan: RunPlan, frames=None) -> RunPlan:
     """The plan with the auto exposure of ``frames`` (default: all; the others None), metered
     once for a whole run."""
-    if plan.config.camera.auto_exposure is None:
+    if plan.exposure.auto is None:
         return plan
     exposures = auto_exposures(plan, frames)
-    return replace(plan, exposures=tuple(exposures.get(f) for f in range(plan.config.animation.frames)))
+    return replace(plan, exposures=tuple(exposures.get(f) for f in range(plan.frames)))
 
 
 def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
     """What an incident-light meter on the open ground reads at a frame (3,): the sky's
     horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
     [klx]"""
-    sky = load_sky(plan.config.sky, scene, metering=True)
+    sky = plan.sky.at(scene, metering=True)
     if light.sun_direction is None:
         return light.unshadowed
     return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.undimmed_sun_irradiance())

@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+__all__ = ["NAME_MAX", "PATH_MAX", "SHOWN_MAX", "problem", "shown"]
+
 NAME_MAX = 255
 """Longest file or folder name, in bytes (Linux, macOS and Windows file systems). [byte]"""
 PATH_MAX = 4095
@@ -24,7 +26,20 @@ def problem(text) -> str | None:
 
     The whole path is checked as it will be used (made absolute against the working folder):
     a folder name of bytes that are not UTF-8 (from an old archive, say) is refused here,
-    since the image library takes only UTF-8 names."""
+    since the image library takes only UTF-8 names. A ``~user`` that names no user, a NUL byte,
+    a name over NAME_MAX or a path over PATH_MAX bytes are refused too.
+
+    Parameters
+    ----------
+    text : object
+        The path as given (a str or os.PathLike is expected; anything else is itself the problem).
+
+    Returns
+    -------
+    str or None
+        The problem, to follow the key or flag in a one-line message (docs/runs.md, "Errors"), or
+        None when the path is usable.
+    """
     if not isinstance(text, (str, os.PathLike)):
         return f"must be a path, not {type(text).__name__}"
     text = os.fspath(text)
@@ -56,9 +71,23 @@ def problem(text) -> str | None:
 
 
 def shown(text, most: int = SHOWN_MAX) -> str:
-    """``text`` (a path, a name, bytes) as a message shows it: bytes that are not UTF-8 as
-    ``\\xe9``, a NUL as ``\\0``, and past ``most`` characters cut in the middle with its length:
-    ``/a/very/lo...ng/name (4000 characters)``."""
+    """``text`` (a path, a name, bytes) as a message shows it.
+
+    Bytes that are not UTF-8 come out as ``\\xe9``, a NUL as ``\\0``, and past ``most`` characters
+    the text is cut in the middle with its length: ``/a/very/lo...ng/name (4000 characters)``.
+
+    Parameters
+    ----------
+    text : str, bytes or os.PathLike
+        What to show.
+    most : int, optional
+        Longest text shown whole [character]; SHOWN_MAX by default.
+
+    Returns
+    -------
+    str
+        The text to put in a message.
+    """
     if isinstance(text, os.PathLike):
         text = os.fspath(text)
     if isinstance(text, str):

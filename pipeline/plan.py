@@ -10,77 +10,28 @@ the cycle, ground and frame stages take the plan, a frame's scene and the cache
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import canopy, ephemeris, io, shadow
-from . import sun_disc
+from . import canopy, io, shadow
 from .camera import Camera
-from .config import CanopyLayer, Config, size_text
+from .config import size_text
 from .errors import ConfigError
-from .framing import AUTO_SUN_MASK, frame_scene, shading_scenes, sun_lights, sun_shades  # noqa: F401
-from .geometry import Grid, sky_plane_from_direction, tangent_axes
-from .inputs import albedo_mipmap, grove_of, imported_passes, load_hdri, load_mask
+from .framing import AUTO_SUN_MASK, frame_scene
+from .geometry import Grid, sky_plane_from_direction
+from .inputs import albedo_mipmap, grove_of, load_mask
 from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
-from .vocabulary import PROCEDURAL_MODELS
+from .scene import Scene, scene_at, shading_scenes, sky_model, sun_shades
+from .settings import AutoExposureConfig, CanopyConfig, CanopyLayer, Config, GroundConfig, OutputConfig
+from .vocabulary import FOREGROUNDS, PROCEDURAL_MODELS
 
+if TYPE_CHECKING:
+    from .foregrounds import ForegroundModel
+    from .skies import SkyModel
 
-@dataclass(frozen=True)
-class Scene:
-    """The sky's state at one output frame.
-
-    frame : output frame index; time : film time frame / fps [s]; when : UTC time (site and
-    time configs) or None; sun, moon : their discs (procedural skies) or None.
-    """
-
-    frame: int
-    time: float
-    when: datetime | None
-    sun: sun_disc.SunDisc | None
-    moon: sun_disc.MoonDisc | None
-
-
-
-
-def scene_at(config: Config, frame: int) -> Scene:
-    """Where the sun and moon are at output ``frame``: from the ephemeris for a site and time
-    span (spread evenly over the frames), or from the explicit angles, the moon sliding from
-    ``offset_start`` to ``offset_end``."""
-    sky, frames = config.sky, config.animation.frames
-    fraction = frame / (frames - 1) if frames > 1 else 0.0
-    time = frame / config.animation.fps
-    if sky.model == "hdri":
-        return Scene(frame, time, None, load_hdri(sky).sun, None)
-    if sky.model not in PROCEDURAL_MODELS:
-        return Scene(frame, time, None, None, None)
-    if sky.site is not None:
-        site = sky.site
-        when = site.start + (site.end - site.start) * fraction
-        sun, moon = ephemeris.sun_and_moon(
-            ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
-        return Scene(frame, time, when,
-                     sun_disc.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
-                     sun_disc.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
-    s = sky.sun
-    sun = sun_disc.SunDisc(s.azimuth, s.elevation, s.radius)
-    moon = None
-    if sky.moon is not None:
-        m = sky.moon
-        dx, dy = (a + (b - a) * fraction for a, b in zip(m.offset_start, m.offset_end))
-        azimuth, elevation = offset_direction(s.azimuth, s.elevation, dx, dy)
-        moon = sun_disc.MoonDisc(azimuth, elevation, m.radius)
-    return Scene(frame, time, None, sun, moon)
-
-
-def offset_direction(azimuth, elevation, dx, dy):
-    """The direction at gnomonic offset (dx to the right, dy up) [rad] from (azimuth,
-    elevation) [rad]: the inverse of ``ephemeris.moon_offset_from_sun``."""
-    s, e_az, e_el = tangent_axes(azimuth, elevation)
-    w = s + dx * e_az + dy * e_el
-    w /= np.linalg.norm(w)
-    return float(np.arctan2(w[0], w[1]) % (2 * np.pi)), float(np.arcsin(np.clip(w[2], -1, 1)))
+__all__ = ["LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
 
 
 @dataclass(frozen=True)
@@ -98,31 +49,99 @@ class LayerPlan:
 
 
 @dataclass(frozen=True)
-class RunPlan:
-    """Everything about the rasters that does not change from frame to frame.
+class ExposurePlan:
+    """How a run's frames are exposed and shown.
 
-    window : the coarse ground Grid (sky light) [m]; sun_window : the fine ground Grid of the
-    sun, or None without a sun kernel [m]; projection : the sky-plane point of the sun the
-    leaves are projected along (Max 1991, Fig. 1) [tan]; layers : per canopy plane;
-    camera : the resolved camera; auto : the config keys the plan placed itself (of
-    ``ground.window``, ``ground.sun_window``, ``camera``); shadow : (x_min, y_min, x_max, y_max)
-    of where the canopy's shadow falls over the animation [m], None for a periodic forest;
-    exposures : per frame, its exposure with ``camera.exposure: auto`` (``with_exposures``), or
-    None: a frame then meters the frames its exposure remembers [m^2/kcd]; config : the
-    resolved config (``resolve``), the source of every input and parameter; scenes : the sky's
-    state at every output frame.
+    Attributes
+    ----------
+    stops : float
+        ``camera.exposure``: stops over the default exposure (a white ground under the clear sky
+        at 1), or with ``auto`` over the metered light [stops].
+    auto : AutoExposureConfig or None
+        The auto exposure's time constant [s] and limits [EV], or None for a fixed exposure.
+    fps : float
+        Frames per second of the animation [1/s].
+    white_balance : str
+        What the picture shows as white (``vocabulary.WHITE_BALANCES``).
+    display : str
+        The display transform (``vocabulary.DISPLAYS``).
+    """
+
+    stops: float
+    auto: AutoExposureConfig | None
+    fps: float
+    white_balance: str
+    display: str
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """Everything a run's later stages need, resolved from the config once: they read these
+    fields and never the config (docs/design.md, "Stages").
+
+    Attributes
+    ----------
+    window : Grid
+        The coarse ground grid (sky light) [m].
+    sun_window : Grid or None
+        The fine ground grid of the sun, or None without a sun kernel [m].
+    projection : tuple of float
+        The sky-plane point of the sun the leaves are projected along (Max 1991, Fig. 1) [tan].
+    layers : tuple of LayerPlan
+        Per canopy plane, its grids and correlation plans.
+    camera : Camera
+        The resolved camera.
+    auto : tuple of str
+        The config keys the plan placed itself (of ``ground.window``, ``ground.sun_window``,
+        ``camera``).
+    shadow : tuple of float or None
+        (x_min, y_min, x_max, y_max) of where the canopy's shadow falls over the animation [m];
+        None for a periodic forest.
+    exposures : tuple or None
+        Per frame, its exposure with ``camera.exposure: auto`` (``lighting.with_exposures``), or
+        None: a frame then meters the frames its exposure remembers [m^2/kcd].
+    scenes : tuple of Scene
+        The sky's state at every output frame.
+    sky : skies.SkyModel
+        The sky model (made by ``vocabulary.SKIES``).
+    haze : float
+        The haze's visibility distance, 0 for none (``sky.haze``) [m].
+    canopy : CanopyConfig
+        The canopy: its planes' masks or the built-in trees, the layout, the flutter cycle.
+    ground : GroundConfig
+        The ground's albedo and reflectance.
+    foreground : foregrounds.ForegroundModel
+        The foreground model (made by ``vocabulary.FOREGROUNDS``).
+    exposure : ExposurePlan
+        How the frames are exposed and shown.
+    output : OutputConfig
+        What a run writes (its folder, the passes, half floats, the video, the report).
+    source : Path
+        The config file (the cache records which items are whose by it).
     """
 
     window: Grid
     sun_window: Grid | None
     projection: tuple[float, float]
     layers: tuple[LayerPlan, ...]
-    camera: Camera | None = None
-    auto: tuple[str, ...] = ()
-    shadow: tuple[float, float, float, float] | None = None
-    exposures: tuple[float | None, ...] | None = None
-    config: Config | None = None
-    scenes: tuple[Scene, ...] = ()
+    camera: Camera
+    auto: tuple[str, ...]
+    shadow: tuple[float, float, float, float] | None
+    exposures: tuple[float | None, ...] | None
+    scenes: tuple[Scene, ...]
+    sky: SkyModel
+    haze: float
+    canopy: CanopyConfig
+    ground: GroundConfig
+    foreground: ForegroundModel
+    exposure: ExposurePlan
+    output: OutputConfig
+    source: Path
+
+    @property
+    def frames(self) -> int:
+        """The number of output frames of the animation."""
+        return len(self.scenes)
 
 
 def check_inputs(config: Config) -> RunPlan:
@@ -132,16 +151,13 @@ def check_inputs(config: Config) -> RunPlan:
     for layer in config.canopy.layers:
         for frame in range(len(layer.mask)):
             load_mask(layer, frame)
-    if config.sky.model == "hdri":
-        load_hdri(config.sky)
+    sky_model(config.sky).check()
     if isinstance(config.ground.albedo, Path):
         image = albedo_mipmap(config.ground).level(0)
         if not np.all(np.isfinite(image)) or image.min() < 0:
             raise io.ImageError(config.ground.albedo, "albedo must be finite and not negative")
     plan = plan_run(config)
-    if config.foreground.model == "passes":
-        for cycle_frame in range(config.canopy.cycle):
-            imported_passes(config.foreground, plan.camera, cycle_frame)
+    plan.foreground.check(plan.camera, config.canopy.cycle)
     return plan
 
 
@@ -175,8 +191,12 @@ def plan_run(config: Config) -> RunPlan:
         if cells > AUTO_SUN_MASK:
             sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
             layers = _plan_layers(config, shading, window, sun_window, projection)
-    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
-                   framing.shadow, config=config, scenes=tuple(scenes))
+    c = config.camera
+    exposure = ExposurePlan(c.exposure, c.auto_exposure, config.animation.fps, c.white_balance, c.display)
+    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto, framing.shadow,
+                   None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
+                   FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
+                   config.path)
     _check_sizes(config, plan)
     return plan
 

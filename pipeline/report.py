@@ -15,11 +15,14 @@ from pathlib import Path
 from .errors import RunError
 from .runfolder import INDEX_FILE, RUN_FILE
 
+__all__ = ["CSV_FILE", "CURVE_FILE", "SHEET_FILE", "SHEET_FRAMES", "COLUMNS", "SET_SUN", "frame_records", "rows",
+           "write_csv", "contacts", "write_light_curve", "write_contact_sheet", "write_report"]
+
 CSV_FILE = "light.csv"
 CURVE_FILE = "light-curve.png"
 SHEET_FILE = "contact-sheet.png"
 SHEET_FRAMES = 12
-"""The contact sheet shows at most this many frames, evenly spread over the done ones."""
+"""The contact sheet shows at most this many frames, evenly spread over the done ones. [count]"""
 
 COLUMNS = ("frame", "time_s", "time_utc", "sun_elevation_deg", "sun_azimuth_deg", "S", "sun_lux", "sky_lux",
            "open_ground_lux", "ev100", "camera_ev100", "exposure_m2_per_kcd", "wb_r", "wb_g", "wb_b")
@@ -30,10 +33,27 @@ meter reads of it and the light the camera's exposure is set for [EV100]; that e
 
 
 def frame_records(folder: Path) -> list[dict]:
-    """The done frames' records of a run folder, by frame: run.json's when it was written after
-    index.json (a render ended there: the same records, in a file half the size), else
-    those of index.json whose config hash is the one most of its frames have (a run going, or
-    killed), else run.json's. Raises RunError when the folder holds neither."""
+    """The done frames' records of a run folder, by frame.
+
+    run.json's when it was written after index.json (a render ended there: the same records, in a
+    file half the size), else those of index.json whose config hash is the one most of its frames
+    have (a run going, or killed), else run.json's.
+
+    Parameters
+    ----------
+    folder : pathlib.Path or str
+        The run folder.
+
+    Returns
+    -------
+    list of dict
+        The frames' records (each with its ``frame``), in frame order.
+
+    Raises
+    ------
+    RunError
+        When the folder holds neither index.json nor run.json.
+    """
     folder = Path(folder)
     entries = []
     try:
@@ -60,8 +80,22 @@ def frame_records(folder: Path) -> list[dict]:
 
 
 def rows(records) -> list[dict]:
-    """light.csv's rows (``COLUMNS``) of frame records; a value a record lacks is empty (frames
-    rendered before the light was recorded)."""
+    """light.csv's rows (``COLUMNS``) of frame records.
+
+    A value a record lacks is empty (frames rendered before the light was recorded).
+
+    Parameters
+    ----------
+    records : iterable of dict
+        Frame records (``frame_records``).
+
+    Returns
+    -------
+    list of dict
+        One row per record, keyed by COLUMNS; a missing value is None. Units as COLUMNS says:
+        time_s [s], sun angles [deg], S [1], illuminances [lx], EV100, exposure [m^2/kcd], white
+        balance gains [1].
+    """
     out = []
     for record in records:
         light = record.get("light") or {}
@@ -76,7 +110,20 @@ def rows(records) -> list[dict]:
 
 
 def write_csv(folder: Path, table) -> Path:
-    """light.csv in ``folder`` (comma-separated, a header row; written atomically)."""
+    """light.csv in ``folder`` (comma-separated, a header row; written atomically).
+
+    Parameters
+    ----------
+    folder : pathlib.Path or str
+        The run folder.
+    table : iterable of dict
+        Rows keyed by COLUMNS (``rows``); None is written empty.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
     path = Path(folder) / CSV_FILE
     temporary = path.with_name(f".{CSV_FILE}.tmp")
     with open(temporary, "w", newline="") as f:
@@ -94,11 +141,23 @@ and gives no direct light (docs/method.md, "Twilight and a sun at the horizon").
 
 
 def contacts(table) -> list[tuple[str, float]]:
-    """An eclipse's contacts as seen in S, (label, time [s]): C1 the first frame with S below 1
-    after one at 1, C2 the first with S at 0, C3 the last at 0, C4 the first back at 1; only
-    those the frames show. Frames dimmed by clouds look the same to S: the caller marks
+    """An eclipse's contacts as seen in S: only those the frames show.
+
+    C1 is the first frame with S below 1 after one at 1, C2 the first with S at 0, C3 the last at
+    0, C4 the first back at 1. Frames dimmed by clouds look the same to S: the caller marks
     contacts only for a run with a moon. Frames whose sun is below SET_SUN take no part: their S
-    is 0 because the sun has set (civil twilight), not because the moon covers it."""
+    is 0 because the sun has set (civil twilight), not because the moon covers it.
+
+    Parameters
+    ----------
+    table : iterable of dict
+        light.csv's rows (``rows``), in frame order: time_s [s], S [1], sun_elevation_deg [deg].
+
+    Returns
+    -------
+    list of tuple of (str, float)
+        (label, film time [s]) of each contact found, in the order found.
+    """
     points = [(r["time_s"], r["S"]) for r in table if r["time_s"] is not None and r["S"] is not None
               and (r.get("sun_elevation_deg") is None or r["sun_elevation_deg"] > SET_SUN)]
     found, full, dark = [], 1.0 - 1e-6, 1e-6
@@ -115,10 +174,28 @@ def contacts(table) -> list[tuple[str, float]]:
 
 
 def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = None) -> Path | None:
-    """light-curve.png: the open ground's illuminance from the sun, the sky and both on a log
-    axis [lx] with the light the camera's exposure is set for, S on a second axis, against film
-    time [s]; an eclipse's contacts marked; titled with the run's ``name`` (default: the
-    folder's). None when no frame has its light recorded."""
+    """light-curve.png: the open ground's illuminance and S against film time.
+
+    The illuminance from the sun, the sky and both on a log axis [lx] with the light the camera's
+    exposure is set for, S on a second axis, the incident meter's and the camera's EV100 below,
+    against film time [s]; an eclipse's contacts marked (``contacts``).
+
+    Parameters
+    ----------
+    folder : pathlib.Path or str
+        The run folder, where the file is written (atomically).
+    table : list of dict
+        light.csv's rows (``rows``).
+    eclipse : bool
+        Whether to mark the contacts (a run with a moon).
+    name : str, optional
+        The run's name for the title; default the folder's.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The file written; None when no frame has its light recorded.
+    """
     table = [r for r in table if r["time_s"] is not None]
     if not table:
         return None
@@ -172,8 +249,26 @@ def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = 
 
 
 def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, width: int = 240) -> Path | None:
-    """contact-sheet.png: at most ``count`` of the done frames' PNGs, evenly spread, each
-    ``width`` px wide [px] with its number and S, in rows of four. None without a frame's PNG."""
+    """contact-sheet.png: the done frames' PNGs, evenly spread, in rows of four.
+
+    Each thumbnail is labelled with its frame number and S.
+
+    Parameters
+    ----------
+    folder : pathlib.Path or str
+        The run folder, where the frames' PNGs are read and the sheet written (atomically).
+    records : iterable of dict
+        Frame records (``frame_records``), each with its ``file`` stem.
+    count : int, optional
+        Most frames shown [count].
+    width : int, optional
+        Width of each thumbnail [px].
+
+    Returns
+    -------
+    pathlib.Path or None
+        The file written; None without a frame's PNG.
+    """
     from PIL import Image, ImageDraw
 
     found = [(r, Path(folder) / f"{r['file']}.png") for r in records if "file" in r]
@@ -209,8 +304,25 @@ def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, wid
 
 
 def write_report(folder: Path) -> list[Path]:
-    """light.csv, light-curve.png and contact-sheet.png of the run in ``folder`` from its done
-    frames (``frame_records``); returns the files written. Raises RunError without a run."""
+    """light.csv, light-curve.png and contact-sheet.png of the run in ``folder`` (docs/runs.md, "The report").
+
+    Made from its done frames (``frame_records``).
+
+    Parameters
+    ----------
+    folder : pathlib.Path or str
+        The run folder.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+
+    Raises
+    ------
+    RunError
+        When the folder holds no run.
+    """
     folder = Path(folder)
     records = frame_records(folder)
     table = rows(records)

@@ -12,9 +12,13 @@ import hashlib
 import math
 from dataclasses import replace
 
-from .config import Config, load_config, size_text
+from .config import load_config, size_text
 from .errors import ConfigError
+from .settings import Config
 from .vocabulary import TURBIDITY_RANGE
+
+__all__ = ["MAX_GROUND_PIXELS", "MAX_FFT_CELLS", "MAX_SUN_PIXELS", "BYTES_PER_CELL", "MIN_SUN_ELEVATION",
+           "SUN_SPAN_SAMPLES", "load", "source_digest", "resolve"]
 
 MAX_GROUND_PIXELS = 64_000_000
 """Most pixels of the coarse ground raster, and of a canopy plane's mask. [1]"""
@@ -29,20 +33,47 @@ MIN_SUN_ELEVATION = math.radians(-6.0)
 procedural sky models (``daylight.TWILIGHT_END``); below the horizon the sky alone lights the
 ground (docs/method.md, "Twilight and a sun at the horizon"). [rad]"""
 SUN_SPAN_SAMPLES = 20_000
-"""Most moments at which the sun is checked over a site's time span."""
+"""Most moments at which the sun is checked over a site's time span. [count]"""
 
 
 def load(path) -> Config:
     """A config file read, validated and resolved (``resolve``): what every command runs.
-    Raises ConfigError naming the file and key."""
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The config's YAML file.
+
+    Returns
+    -------
+    config.Config
+        The resolved config.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and key.
+    """
     return resolve(load_config(path))
 
 
 def source_digest(config: Config) -> str:
-    """Hash of what ``resolve`` makes of a config (16 hex): the config as written and, with
-    ``turbidity: auto``, the version of pvlib whose climatology is looked up. A run records it
-    beside the resolved config's hash, so that a resume with nothing to do knows that hash
-    without resolving (docs/runs.md, "Resume")."""
+    """Hash of what ``resolve`` makes of a config.
+
+    The config as written and, with ``turbidity: auto``, the version of pvlib whose climatology is
+    looked up. A run records it beside the resolved config's hash, so that a resume with nothing
+    to do knows that hash without resolving (docs/runs.md, "Resume").
+
+    Parameters
+    ----------
+    config : config.Config
+        The config as read, before ``resolve``.
+
+    Returns
+    -------
+    str
+        16 hex digits of a SHA-256.
+    """
     parts = [config.digest()]
     if config.sky.site is not None and config.sky.turbidity is None:
         from importlib import metadata
@@ -52,9 +83,27 @@ def source_digest(config: Config) -> str:
 
 
 def resolve(config: Config) -> Config:
-    """The config checked against the compute limits and the sun's path, with ``turbidity:
-    auto`` looked up (the Linke climatology at the site and the middle of the time span,
-    within TURBIDITY_RANGE). Raises ConfigError naming the key."""
+    """The config checked against the compute limits and the sun's path, ``turbidity: auto`` looked up.
+
+    The limits are MAX_GROUND_PIXELS, MAX_SUN_PIXELS and MAX_FFT_CELLS; a site's sun must stay above
+    MIN_SUN_ELEVATION over the time span; an automatic turbidity is the Linke climatology's at the
+    site and the middle of the time span, within TURBIDITY_RANGE.
+
+    Parameters
+    ----------
+    config : config.Config
+        The config as read (``config.load_config``, ``config.parse_config``).
+
+    Returns
+    -------
+    config.Config
+        The same config, with the turbidity filled in when it was ``auto``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key.
+    """
     _check_limits(config)
     sky = config.sky
     if sky.site is not None:

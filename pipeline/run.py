@@ -33,7 +33,7 @@ import numpy as np
 
 from . import __version__, cache, io
 from .composite import display
-from .config import Config
+from .settings import Config
 from .errors import RunError, SunshadeError, portable
 from .cycle import config_item_keys, cycle_phase, record_config_items
 from .frame import compile_loops, render_frame
@@ -163,7 +163,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     timings = {}
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
-    for line in framing_warnings(plan) if warn else ():
+    for line in framing_warnings(config, plan) if warn else ():
         warn(line)
     digest = config.digest()
     frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
@@ -217,7 +217,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                                             in_process=jobs == 1 and not scheduler)
                 try:
                     for frame, seconds, entry, caught, codes in _frame_phase(
-                            plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
+                            config, plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
                             progress=progress, codes=stream is not None):
                         for category, text in caught:  # raised in a worker: said here, once
                             warnings.warn(text, category, stacklevel=2)
@@ -258,16 +258,16 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                       video_file(config) if video else None, timings, pruned)
 
 
-def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):
+def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):
     """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
     frame is written. With one job the frames render here, one after another, and each frame's
     files are written by a thread while the next frame renders (``_frames_here``)."""
     if progress:
         progress("frames", 0, len(todo))
     if jobs == 1 and command is not None:
-        results = _frames_here(plan, store, todo, digest, threads, codes)
+        results = _frames_here(config, plan, store, todo, digest, threads, codes)
     else:
-        tasks = (joblib.delayed(_frame_task)(plan, frame, str(store.root), digest, threads, command, codes)
+        tasks = (joblib.delayed(_frame_task)(config, plan, frame, str(store.root), digest, threads, command, codes)
                  for frame in todo)
         results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
@@ -276,7 +276,7 @@ def _frame_phase(plan, store, todo, digest, *, jobs, threads, progress, command=
             progress("frames", done, len(todo))
 
 
-def _frames_here(plan, store, todo, digest, threads, codes):
+def _frames_here(config, plan, store, todo, digest, threads, codes):
     """``_frame_task`` over ``todo`` in this process, its writing overlapped with the next
     frame's rendering: a thread writes frame k's EXR and PNG while frame k + 1 renders, so the
     writing costs no wall time where a core is free (docs/runs.md, "Writing"). Yields each
@@ -294,20 +294,20 @@ def _frames_here(plan, store, todo, digest, threads, codes):
                 raise
             if writing is not None:
                 yield writing.result()
-            writing = writer.submit(_write_task, plan.config, rendered, digest, codes)
+            writing = writer.submit(_write_task, config, rendered, digest, codes)
         if writing is not None:
             yield writing.result()
 
 
 @portable
-def _frame_task(plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None,
+def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None,
                 codes: bool = False):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text), the PNG's 8-bit
     codes if ``codes`` else None): a worker's warnings are said by the process that runs the
     command, and the codes go to the video it encodes meanwhile (``_VideoStream``)."""
     end_if_orphaned(command)
-    return _write_task(plan.config, _render_task(plan, frame, root, threads), digest, codes)
+    return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
 
 
 def _render_task(plan: RunPlan, frame: int, root: str, threads: int):

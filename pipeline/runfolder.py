@@ -3,6 +3,10 @@ done, and the resume that finds nothing to do (docs/runs.md, "The run folder", "
 
 Nothing here imports numpy or a stage, so that a resume with nothing to do is decided in a
 fraction of a second (``nothing_to_do``); ``run`` renders what is left.
+
+Why one module: the folder's files (their names, index.json, run.json) and the checks of which
+frames are done are one format, written by a render and read by the resume; split, each part
+would import the others' names. Most of its length is its numpydoc docstrings.
 """
 
 from __future__ import annotations
@@ -23,18 +27,29 @@ import filelock
 
 from . import __version__, paths
 from .cache import Cache
-from .config import Config
+from .settings import Config
 from .cores import jobs_and_threads
 from .errors import RunError
 
+__all__ = ["RUN_FILE", "MAX_RUNS", "INDEX_FILE", "INDEX_FORMAT", "LOCK_FILE", "VERSIONED", "FrameWarning",
+           "parse_frames", "frame_files", "video_file", "current_video", "file_digest", "file_stamp", "file_problem",
+           "FrameCheck", "check_frames", "verify_run", "make_folder", "check_folder", "missing_folders",
+           "remove_if_empty", "check_outputs", "remove_temporaries", "read_index", "write_index", "read_run_file",
+           "resolved_config", "write_run_file", "RunSummary", "nothing_to_do"]
+
 RUN_FILE = "run.json"
+"""The run's record in its folder (docs/runs.md, "The run folder")."""
 MAX_RUNS = 100
-"""run.json keeps the record of this many latest renders of a config."""
+"""run.json keeps the record of this many latest renders of a config. [count]"""
 INDEX_FILE = "index.json"
+"""The done frames' record, written as each frame is done."""
 INDEX_FORMAT = 1
+"""index.json's format; an index of another is not read (its frames are rendered again)."""
 LOCK_FILE = ".sunshade.lock"
+"""The lock a run holds on its folder."""
 VERSIONED = ("numpy", "scipy", "OpenImageIO", "joblib", "imageio", "imageio-ffmpeg", "PyYAML",
              "ephem", "filelock", "dask", "distributed")
+"""The packages whose versions run.json records."""
 
 
 class FrameWarning(UserWarning):
@@ -42,8 +57,25 @@ class FrameWarning(UserWarning):
 
 
 def parse_frames(text: str, count: int) -> tuple[int, ...]:
-    """Frame indices from a list like ``0-47,100`` (ranges inclusive), sorted and unique; every
-    one must lie in 0..count-1. Raises RunError naming the bad part."""
+    """Frame indices from a list like ``0-47,100`` (ranges inclusive), sorted and unique.
+
+    Parameters
+    ----------
+    text : str
+        The list (--frames).
+    count : int
+        Frames in the animation; every index must lie in 0..count-1.
+
+    Returns
+    -------
+    tuple of int
+        The frames, sorted, each once.
+
+    Raises
+    ------
+    RunError
+        Naming the bad part.
+    """
     frames = set()
     for part in text.split(","):
         part = part.strip()
@@ -63,23 +95,64 @@ def parse_frames(text: str, count: int) -> tuple[int, ...]:
 
 
 def frame_files(config: Config, frame: int) -> tuple[Path, Path]:
-    """(EXR, PNG) paths of output ``frame``: ``NAME.0007.exr``, the number zero-padded to four
-    digits or to the width of the last frame's number."""
+    """(EXR, PNG) paths of an output frame: ``NAME.0007.exr``.
+
+    The number is zero-padded to four digits or to the width of the last frame's number.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    frame : int
+        The frame's index.
+
+    Returns
+    -------
+    tuple of (pathlib.Path, pathlib.Path)
+        The EXR's and the PNG's paths in ``output.folder``.
+    """
     width = max(4, len(str(config.animation.frames - 1)))
     stem = f"{config.output.name}.{frame:0{width}d}"
     return config.output.folder / f"{stem}.exr", config.output.folder / f"{stem}.png"
 
 
 def video_file(config: Config) -> Path | None:
-    """The run's video file, or None when ``output.video`` is none."""
+    """The run's video file.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+
+    Returns
+    -------
+    pathlib.Path or None
+        ``NAME.VIDEO`` (``output.video`` the suffix) in ``output.folder``, or None when ``output.video`` is none.
+    """
     if config.output.video == "none":
         return None
     return config.output.folder / f"{config.output.name}.{config.output.video}"
 
 
 def current_video(config: Config, digest: str, previous: dict, *, force: bool = False) -> dict | None:
-    """The ``previous`` run.json's video entry if the video on disk is of this config, all its
-    frames (and not ``force``), else None (also when the config makes no video)."""
+    """The previous run.json's video entry if the video on disk is of this config and all its frames.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    digest : str
+        The resolved config's hash (``Config.digest``).
+    previous : dict
+        The previous run.json (empty when there is none).
+    force : bool, optional
+        Take no video as current (it is made again).
+
+    Returns
+    -------
+    dict or None
+        The entry, or None when the video must be made (also when the config makes no video).
+    """
     path, made = video_file(config), previous.get("video") or {}
     if (path is not None and not force and made.get("config_hash") == digest
             and made.get("frames") == config.animation.frames
@@ -89,14 +162,38 @@ def current_video(config: Config, digest: str, previous: dict, *, force: bool = 
 
 
 def file_digest(path) -> str:
-    """BLAKE2b (16 bytes, hex) of a file's bytes."""
+    """BLAKE2b (16 bytes, hex) of a file's bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    str
+        32 hex digits.
+    """
     with open(path, "rb") as f:
         return hashlib.file_digest(f, lambda: hashlib.blake2b(digest_size=16)).hexdigest()
 
 
 def file_stamp(path: Path) -> dict:
-    """What index.json records of a frame file just written: name, size [B], digest, and its
-    inode and modification and change times [ns] (unchanged, the file is taken as it was)."""
+    """What index.json records of a frame file just written.
+
+    Unchanged inode and times, the file is taken as it was (``file_problem``).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+
+    Returns
+    -------
+    dict
+        ``name``, ``bytes`` (its size [B]), ``blake2b`` (``file_digest``) and ``stat``: its inode and
+        modification and change times [ns].
+    """
     digest = file_digest(path)
     st = os.stat(path)
     return {"name": path.name, "bytes": st.st_size, "blake2b": digest,
@@ -104,9 +201,26 @@ def file_stamp(path: Path) -> dict:
 
 
 def file_problem(path: Path, stamp: dict, *, full: bool) -> tuple[str | None, dict | None]:
-    """(problem in words or None, the stamp with the file's current inode and times when its
-    bytes were read and found as recorded). The digest is computed only when the size,
-    inode or times differ from ``stamp``, or with ``full``."""
+    """What is wrong with a frame file against its stamp, and its fresh stamp.
+
+    The digest is computed only when the size, inode or times differ from ``stamp``, or with
+    ``full``.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+    stamp : dict
+        Its entry in index.json (``file_stamp``).
+    full : bool
+        Compare the digest whatever the stamp says.
+
+    Returns
+    -------
+    tuple of (str or None, dict or None)
+        The problem in words or None; and the stamp with the file's current inode and times when
+        its bytes were read and found as recorded under another inode or times, else None.
+    """
     try:
         st = os.stat(path)
     except FileNotFoundError:
@@ -129,13 +243,18 @@ def file_problem(path: Path, stamp: dict, *, full: bool) -> tuple[str | None, di
 
 @dataclass(frozen=True)
 class FrameCheck:
-    """The frames of a run folder for one config.
+    """The frames of a run folder for one config (``check_frames``). Other frames have no files yet.
 
-    done : {frame: its index.json entry} -- files as written, by this config, from sound
-        cache items. damaged : {frame: problem} -- files not as written (truncated, corrupted,
-        replaced, missing, unreadable), or made from a cache item found damaged since.
-    foreign : {frame: why} -- files there but not recorded for this config (made by another
-        config, or not in index.json). Other frames have no files yet.
+    Attributes
+    ----------
+    done : dict
+        {frame: its index.json entry}: files as written, by this config, from sound cache items.
+    damaged : dict
+        {frame: problem}: files not as written (truncated, corrupted, replaced, missing,
+        unreadable), or made from a cache item found damaged since.
+    foreign : dict
+        {frame: why}: files there but not recorded for this config (made by another config, or
+        not in index.json).
     """
 
     done: dict
@@ -145,13 +264,32 @@ class FrameCheck:
 
 def check_frames(config: Config, digest: str, store: Cache, index: dict, *,
                  full: bool = False, repair: bool = True) -> FrameCheck:
-    """Check every frame of the animation against ``index`` (the frames of index.json).
+    """Check every frame of the animation against the frames of index.json.
 
     A file whose size, inode and times are as recorded is taken as written (nothing is read);
     otherwise, or with ``full``, its BLAKE2b digest is compared. Each cache item a done frame
     was made from is looked at the same way (``cache.Cache.recheck``; fully with ``full``).
-    ``repair``: remove cache items found damaged, so that they are computed again. Entries
-    whose files or items were read and found as recorded get their new stamps in ``index``.
+    Entries whose files or items were read and found as recorded get their new stamps in ``index``.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    digest : str
+        The resolved config's hash (``Config.digest``).
+    store : cache.Cache
+        The cache the frames were made from.
+    index : dict
+        {frame as text: entry} of index.json (``read_index``); updated in place.
+    full : bool, optional
+        Compare every digest, of files and cache items.
+    repair : bool, optional
+        Remove cache items found damaged, so that they are computed again.
+
+    Returns
+    -------
+    FrameCheck
+        The done, damaged and foreign frames.
     """
     done, damaged, foreign = {}, {}, {}
     items = {}  # (item, stamp as JSON) -> problem or None, each looked at once
@@ -192,14 +330,44 @@ def check_frames(config: Config, digest: str, store: Cache, index: dict, *,
 
 
 def verify_run(config: Config, *, store: Cache) -> FrameCheck:
-    """Check a run folder without writing anything: every frame file's digest and every
-    cache item the frames were made from, fully."""
+    """Check a run folder without writing anything.
+
+    Every frame file's digest and every cache item the frames were made from, fully.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    store : cache.Cache
+        The cache the frames were made from.
+
+    Returns
+    -------
+    FrameCheck
+        The done, damaged and foreign frames.
+    """
     index = read_index(config.output.folder)
     return check_frames(config, config.digest(), store, index, full=True, repair=False)
 
 
 def make_folder(folder: Path) -> Path:
-    """Create the output folder (and its parents). Raises RunError if it cannot be written."""
+    """Create the output folder (and its parents).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The output folder.
+
+    Returns
+    -------
+    pathlib.Path
+        ``folder``.
+
+    Raises
+    ------
+    RunError
+        If it cannot be written.
+    """
     try:
         folder.mkdir(parents=True, exist_ok=True)
         probe = folder / f".probe-{id(folder)}"
@@ -211,8 +379,15 @@ def make_folder(folder: Path) -> Path:
 
 
 def check_folder(folder: Path) -> None:
-    """Raise RunError unless ``folder`` could be created and written, touching nothing: the
-    nearest folder that exists must be a writable folder."""
+    """Raise RunError unless ``folder`` could be created and written, touching nothing.
+
+    The nearest folder that exists must be a writable folder.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The output folder.
+    """
     existing = folder
     while not existing.exists():
         existing = existing.parent
@@ -224,7 +399,18 @@ def check_folder(folder: Path) -> None:
 
 
 def missing_folders(folder: Path) -> list[Path]:
-    """``folder`` and those of its parents that do not exist yet, innermost first."""
+    """``folder`` and those of its parents that do not exist yet, innermost first.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The output folder.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The folders a run would create.
+    """
     missing = []
     while not folder.exists() and folder != folder.parent:
         missing.append(folder)
@@ -233,8 +419,15 @@ def missing_folders(folder: Path) -> list[Path]:
 
 
 def remove_if_empty(folders: list[Path]) -> None:
-    """Remove the ``folders`` (innermost first) that a failed run made and left empty but for
-    its lock file, so that a failing run leaves nothing new behind."""
+    """Remove the folders that a failed run made and left empty but for its lock file.
+
+    So that a failing run leaves nothing new behind.
+
+    Parameters
+    ----------
+    folders : list of pathlib.Path
+        The folders the run made, innermost first (``missing_folders``).
+    """
     for folder in folders:
         with contextlib.suppress(OSError):
             (folder / LOCK_FILE).unlink(missing_ok=True)
@@ -242,9 +435,16 @@ def remove_if_empty(folders: list[Path]) -> None:
 
 
 def check_outputs(config: Config) -> None:
-    """Raise RunError unless the run's files could be written, touching nothing: the folder
-    (``check_folder``), every name within the system's limits (``paths.problem``), and no
-    frame, video, lock or run.json name taken by a folder."""
+    """Raise RunError unless the run's files could be written, touching nothing.
+
+    The folder (``check_folder``), every name within the system's limits (``paths.problem``), and no
+    frame, video, lock or run.json name taken by a folder.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    """
     folder = config.output.folder
     if problem := paths.problem(folder):
         raise RunError(f"{folder}: {problem}")
@@ -261,14 +461,31 @@ def check_outputs(config: Config) -> None:
 
 
 def remove_temporaries(folder: Path) -> None:
-    """Remove the half-written files a killed run left (we hold the folder's lock)."""
+    """Remove the half-written files a killed run left (we hold the folder's lock).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The run folder.
+    """
     for path in folder.glob(".*.tmp-*"):
         path.unlink(missing_ok=True)
 
 
 def read_index(folder: Path) -> dict:
-    """The frames recorded in the folder's index.json ({frame as text: entry}); empty, with a
-    FrameWarning, if it is unreadable (its frames are then rendered again)."""
+    """The frames recorded in the folder's index.json.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The run folder.
+
+    Returns
+    -------
+    dict
+        {frame as text: entry}; empty when there is no index, or, with a FrameWarning, when it is
+        unreadable or of another format (its frames are then rendered again).
+    """
     path = folder / INDEX_FILE
     try:
         document = json.loads(path.read_bytes())
@@ -285,8 +502,20 @@ def read_index(folder: Path) -> dict:
 
 
 def write_index(folder: Path, index: dict) -> None:
-    """index.json, written atomically (a temporary name, then renamed). Raises RunError naming
-    the file if it cannot be written."""
+    """index.json, written atomically (a temporary name, then renamed).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The run folder.
+    index : dict
+        {frame as text: entry}.
+
+    Raises
+    ------
+    RunError
+        Naming the file if it cannot be written.
+    """
     path = folder / INDEX_FILE
     temporary = path.with_name(f".{INDEX_FILE}.tmp-{os.getpid()}")
     try:
@@ -299,6 +528,18 @@ def write_index(folder: Path, index: dict) -> None:
 
 
 def read_run_file(folder: Path) -> dict:
+    """The folder's run.json.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The run folder.
+
+    Returns
+    -------
+    dict
+        Its document; empty when it is missing or unreadable.
+    """
     try:
         return json.loads((folder / RUN_FILE).read_text())
     except (OSError, ValueError):
@@ -306,8 +547,23 @@ def read_run_file(folder: Path) -> dict:
 
 
 def resolved_config(config: Config, plan) -> dict:
-    """The config as run: with the ground windows and the camera the plan placed where the
-    config left them out, so that run.json says what was rendered."""
+    """The config as run, so that run.json says what was rendered.
+
+    With the ground windows and the camera the plan placed where the config left them out.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    plan : plan.RunPlan
+        The run's plan (its windows, camera and ``auto``).
+
+    Returns
+    -------
+    dict
+        The config's values as JSON-ready dicts (``dataclasses.asdict``), windows [m] and camera
+        (position [m], yaw and pitch) as placed, and ``placed``: what the plan placed.
+    """
     values = asdict(config)
     values.pop("lines")
     values["ground"]["window"] = list(plan.window.extent)
@@ -323,12 +579,40 @@ def resolved_config(config: Config, plan) -> dict:
 
 def write_run_file(config, resolved: dict, digest, records, video, timings, *, jobs, threads, scheduler,
                    rendered, source_hash=None):
-    """run.json: the resolved config (windows and camera as placed: ``resolved_config``) and its
-    hash, the hash of the config as written (``resolve.source_digest``; None: not known), versions,
-    the command's settings, timings, per done frame S and the sun and moon (degrees), and
-    ``runs``: one entry (time, frames rendered, settings, timings) per render that did work, the
-    earlier ones kept, so that a re-run that finds every frame done leaves the record of the
-    runs that made them. Written atomically."""
+    """run.json, written atomically.
+
+    It holds the resolved config (windows and camera as placed: ``resolved_config``) and its hash,
+    the hash of the config as written (``resolve.source_digest``; None: not known), versions, the
+    command's settings, timings, per done frame S and the sun and moon (degrees), and ``runs``: one
+    entry (time, frames rendered, settings, timings) per render that did work, the earlier ones
+    kept (MAX_RUNS), so that a re-run that finds every frame done leaves the record of the runs
+    that made them.
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config.
+    resolved : dict
+        The config as run (``resolved_config``).
+    digest : str
+        The resolved config's hash.
+    records : dict
+        {frame: its record, or None when not done}.
+    video : dict or None
+        The video's entry, None when none was made.
+    timings : dict
+        {phase: seconds [s]}.
+    jobs : int
+        Processes at once.
+    threads : int
+        FFT threads each.
+    scheduler : str or None
+        The Dask scheduler's address, None for a local run.
+    rendered : sequence of int
+        The frames this render made.
+    source_hash : str, optional
+        ``resolve.source_digest`` of the config as written.
+    """
     versions = {"python": platform.python_version(), "sunshade": __version__}
     for name in VERSIONED:
         with contextlib.suppress(metadata.PackageNotFoundError):
@@ -363,8 +647,21 @@ def write_run_file(config, resolved: dict, digest, records, video, timings, *, j
 
 @dataclass(frozen=True)
 class RunSummary:
-    """What a run did: frames rendered and skipped, the video (None: not made), timings [s],
-    the cache items its budget removed."""
+    """What a run did.
+
+    Attributes
+    ----------
+    rendered : tuple of int
+        Frames rendered.
+    skipped : tuple of int
+        Frames found done.
+    video : pathlib.Path or None
+        The video, None when not made.
+    timings : dict
+        {phase: seconds [s]}.
+    pruned : tuple
+        The cache items the cache's budget removed at the end of the run (``Cache.prune``).
+    """
 
     rendered: tuple[int, ...]
     skipped: tuple[int, ...]
@@ -376,16 +673,37 @@ class RunSummary:
 
 def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, scheduler=None,
                   source_hash: str | None = None) -> RunSummary | None:
-    """A resume with nothing to do, decided from the files' stamps alone (no numpy, no plan):
-    when every frame of ``frames`` (default: all) is done for this config (``check_frames``,
-    nothing found damaged) and the video is made or not due yet, the run is recorded in
-    run.json as ``run.render_run`` records a render that found everything done, and its
-    RunSummary returned. None when there is anything else to do or to say (work, damage, a
-    busy folder, no run.json of this config yet): ``run.render_run`` then does it.
+    """A resume with nothing to do, decided from the files' stamps alone (no numpy, no plan).
+
+    When every frame of ``frames`` is done for this config (``check_frames``, nothing found damaged)
+    and the video is made or not due yet, the run is recorded in run.json as ``run.render_run``
+    records a render that found everything done, and its RunSummary returned.
 
     ``config`` may be the config as written, not resolved, with its ``source_hash``
     (``resolve.source_digest``): when run.json records that same hash, the resolved config's
-    hash is the one it records beside it, and nothing is resolved (no ephemeris, no pvlib)."""
+    hash is the one it records beside it, and nothing is resolved (no ephemeris, no pvlib).
+
+    Parameters
+    ----------
+    config : config.Config
+        The run's config, resolved or as written (with ``source_hash``).
+    store : cache.Cache
+        The cache the frames were made from.
+    frames : iterable of int, optional
+        The frames asked for; default all.
+    jobs : int, optional
+        Processes at once, recorded in run.json (default ``render.jobs``, else one per core).
+    scheduler : str, optional
+        The Dask scheduler's address, recorded in run.json.
+    source_hash : str, optional
+        ``resolve.source_digest`` of the config as written.
+
+    Returns
+    -------
+    RunSummary or None
+        What the run did; None when there is anything else to do or to say (work, damage, a busy
+        folder, no run.json of this config yet): ``run.render_run`` then does it.
+    """
     started = time.perf_counter()
     folder = config.output.folder
     previous = read_run_file(folder)

@@ -25,6 +25,9 @@ Two layouts, both exact for the discrete sum (docs/method.md, "The correlation")
   the sky outside the square is added times the mean transmittance of the tile.
 
 Spectra are complex64 (float32 rasters); ``workers`` is the FFT thread count.
+
+Why one module: the isolated, periodic and fine-sun correlations share the one orientation of
+offsets fixed above and its index bookkeeping; apart, each would restate the sign conventions.
 """
 
 from __future__ import annotations
@@ -39,18 +42,34 @@ import scipy.sparse as sparse
 
 from .geometry import Grid, fold, lattice_offset, sky_grid, sky_offset, wrapped_spans
 
+__all__ = [
+    "MAX_SKY_CELLS", "sky_half_cells", "IsolatedPlan", "plan_isolated", "occlusion_spectrum", "ground_isolated",
+    "PeriodicPlan", "plan_periodic", "transmittance_spectrum", "ground_periodic", "SunPlan", "sun_offset_range",
+    "plan_sun", "fine_mask_spectrum", "ground_sun", "resample_bilinear", "interpolation_matrices", "combine_layers",
+]
+
 if TYPE_CHECKING:
     from .sky_raster import SkyRaster
 
-MAX_SKY_CELLS = 25_000_000
+MAX_SKY_CELLS = 25_000_000  # most cells of the sky square of a periodic plan (plan_periodic) [count]
 
 
 def sky_half_cells(height: float, pixel: float, alpha: float) -> int:
     """Half-width A, in cells, of the sky square |s|_inf <= tan(alpha): offsets -A..A.
 
-    height : canopy height above the ground. [m]
-    pixel : ground pixel. [m]
-    alpha : half-angle of the sky square. [rad]
+    Parameters
+    ----------
+    height : float
+        Canopy height above the ground [m].
+    pixel : float
+        Ground pixel [m].
+    alpha : float
+        Half-angle of the sky square [rad].
+
+    Returns
+    -------
+    int
+        A = round(tan(alpha) height / pixel) [cell].
     """
     return int(round(np.tan(alpha) * height / pixel))
 
@@ -59,12 +78,22 @@ def sky_half_cells(height: float, pixel: float, alpha: float) -> int:
 class IsolatedPlan:
     """Index bookkeeping of one isolated canopy layer under one ground window.
 
-    window_shape : (rows, cols) of the ground window, which is the lattice origin.
-    canopy_start, canopy_shape : lattice position and size of the occlusion raster.
-    sky : Grid -- the sky offsets that can reach the canopy, within the sky square.
-    fft_shape : (rows, cols) of the zero-padded transforms.
-    start : (rows, cols) index of ground pixel [0, 0] in the circular correlation.
-    exact : bool -- every ray from the window that meets the canopy lies inside the square.
+    Attributes
+    ----------
+    window_shape : tuple of (int, int)
+        (rows, cols) of the ground window, which is the lattice origin [pixel].
+    canopy_start : tuple of (int, int)
+        Lattice position of the occlusion raster [pixel].
+    canopy_shape : tuple of (int, int)
+        Size of the occlusion raster [pixel].
+    sky : Grid or None
+        The sky offsets that can reach the canopy, within the sky square; None if none does [tan].
+    fft_shape : tuple of (int, int)
+        (rows, cols) of the zero-padded transforms.
+    start : tuple of (int, int)
+        (rows, cols) index of ground pixel [0, 0] in the circular correlation.
+    exact : bool
+        Every ray from the window that meets the canopy lies inside the square.
     """
 
     window_shape: tuple[int, int]
@@ -79,8 +108,21 @@ class IsolatedPlan:
 def plan_isolated(window: Grid, canopy: Grid, *, height: float, alpha: float) -> IsolatedPlan:
     """Plan the exact linear correlation of an isolated canopy raster with the sky.
 
-    window : ground grid [m]; canopy : occlusion grid on the same lattice [m].
-    height : canopy height. [m]   alpha : half-angle of the sky square. [rad]
+    Parameters
+    ----------
+    window : Grid
+        Ground grid [m].
+    canopy : Grid
+        Occlusion grid on the same lattice [m].
+    height : float
+        Canopy height [m].
+    alpha : float
+        Half-angle of the sky square [rad].
+
+    Returns
+    -------
+    IsolatedPlan
+        The plan.
     """
     q = window.pixel / height
     half = sky_half_cells(height, window.pixel, alpha)
@@ -108,21 +150,51 @@ def plan_isolated(window: Grid, canopy: Grid, *, height: float, alpha: float) ->
 
 
 def occlusion_spectrum(occlusion: np.ndarray, plan: IsolatedPlan, *, workers: int = 1):
-    """rfft2 of the occlusion raster ``o = 1 - m`` (rows, cols), zero-padded to the plan (complex64).
+    """rfft2 of the occlusion raster ``o = 1 - m``, zero-padded to the plan.
 
     As two passes, the rows' rfft then the columns' FFT, so that the rows of padding (about
     half of them) are not transformed: the same sums as ``rfft2(o, s=plan.fft_shape)``. This is
-    done per frame, from the stored occlusion (docs/accuracy.md, "The cache")."""
+    done per frame, from the stored occlusion (docs/accuracy.md, "The cache").
+
+    Parameters
+    ----------
+    occlusion : numpy.ndarray
+        (rows, cols) occlusion [1].
+    plan : IsolatedPlan
+        The plan.
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64 (plan.fft_shape[0], plan.fft_shape[1] // 2 + 1).
+    """
     o = np.asarray(occlusion, dtype=np.float32)
     rows = sfft.rfft(o, n=plan.fft_shape[1], axis=-1, workers=workers)
     return sfft.fft(rows, n=plan.fft_shape[0], axis=-2, workers=workers, overwrite_x=True)
 
 
 def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: int = 1):
-    """Ground irradiance (channels, rows, cols) float32 under an isolated canopy layer.
+    """Ground irradiance under an isolated canopy layer.
 
     g = total - (e correlated with o): exact for the discrete sum, no periodic copies.
-    [radiance x sr]
+
+    Parameters
+    ----------
+    sky : sky.SkyRaster
+        The weighted sky raster on ``plan.sky`` [radiance x sr].
+    spectrum : numpy.ndarray
+        ``occlusion_spectrum`` of the layer.
+    plan : IsolatedPlan
+        The plan.
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, rows, cols) float32 [radiance x sr].
     """
     total = sky.irradiance.astype(np.float32)[:, None, None]
     if plan.sky is None:
@@ -136,9 +208,16 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
 class PeriodicPlan:
     """Index bookkeeping of one periodic canopy tile under one ground window.
 
-    window_shape : (rows, cols) of the ground window, the lattice origin.
-    tile_start, tile_shape : lattice position of tile pixel [0, 0], and the period in pixels.
-    sky : Grid -- the whole sky square, offsets -A..A.
+    Attributes
+    ----------
+    window_shape : tuple of (int, int)
+        (rows, cols) of the ground window, the lattice origin [pixel].
+    tile_start : tuple of (int, int)
+        Lattice position of tile pixel [0, 0] [pixel].
+    tile_shape : tuple of (int, int)
+        The period [pixel].
+    sky : Grid
+        The whole sky square, offsets -A..A [tan].
     """
 
     window_shape: tuple[int, int]
@@ -148,7 +227,29 @@ class PeriodicPlan:
 
 
 def plan_periodic(window: Grid, tile: Grid, *, height: float, alpha: float) -> PeriodicPlan:
-    """Plan the circular correlation of a periodic canopy tile (on ``window``'s lattice) with the sky."""
+    """Plan the circular correlation of a periodic canopy tile (on ``window``'s lattice) with the sky.
+
+    Parameters
+    ----------
+    window : Grid
+        Ground grid [m].
+    tile : Grid
+        One period of the canopy, on the same lattice [m].
+    height : float
+        Canopy height [m].
+    alpha : float
+        Half-angle of the sky square [rad].
+
+    Returns
+    -------
+    PeriodicPlan
+        The plan.
+
+    Raises
+    ------
+    ValueError
+        If the sky square would have more than MAX_SKY_CELLS cells.
+    """
     half = sky_half_cells(height, window.pixel, alpha)
     n = 2 * half + 1
     if n * n > MAX_SKY_CELLS:
@@ -160,7 +261,20 @@ def plan_periodic(window: Grid, tile: Grid, *, height: float, alpha: float) -> P
 
 
 def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1):
-    """rfft2 of a periodic tile's transmittance ``m`` (rows, cols) (complex64)."""
+    """rfft2 of a periodic tile's transmittance ``m``.
+
+    Parameters
+    ----------
+    transmittance : numpy.ndarray
+        (rows, cols) transmittance [1].
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64 (rows, cols // 2 + 1).
+    """
     m = np.asarray(transmittance, dtype=np.float32)
     return sfft.rfft2(m, axes=(-2, -1), workers=workers)
 
@@ -168,12 +282,30 @@ def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1):
 def ground_periodic(
     sky: SkyRaster, spectrum, plan: PeriodicPlan, mean_transmittance: float, *, workers: int = 1
 ):
-    """Ground irradiance (channels, rows, cols) float32 under a periodic canopy tile.
+    """Ground irradiance under a periodic canopy tile.
 
     The sky square is folded onto one tile (unless the raster comes folded already, made with
     ``raster(plan.sky, fold_period=plan.tile_shape)``) and correlated circularly (exact for the discrete
     sum over the square); the sky outside the square reaches the ground times the tile's mean
-    transmittance. [radiance x sr]
+    transmittance.
+
+    Parameters
+    ----------
+    sky : sky.SkyRaster
+        The weighted sky raster on ``plan.sky`` [radiance x sr].
+    spectrum : numpy.ndarray
+        ``transmittance_spectrum`` of the tile.
+    plan : PeriodicPlan
+        The plan.
+    mean_transmittance : float
+        Mean transmittance of the tile [1].
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, rows, cols) float32 [radiance x sr].
     """
     sky_start = sky_offset(sky.grid)
     folded = fold(sky.weighted, sky_start, plan.tile_shape)
@@ -186,15 +318,22 @@ def ground_periodic(
 
 @dataclass(frozen=True)
 class SunPlan:
-    """Index bookkeeping of the fine sun correlation over one ground window (docs/method.md,
-    "Two scales for the sun"): the sun disc as a small kernel of fine sky cells ``q = p / h``,
-    correlated with a fine transmittance mask of the canopy plane.
+    """Index bookkeeping of the fine sun correlation over one ground window.
 
-    window_shape : (rows, cols) of the fine ground window, the lattice origin.
-    offset_lo, offset_hi : the fine sky offsets (dr, dc) the kernel may occupy, both inclusive.
-    mask : Grid -- the fine canopy mask this needs: the window moved by ``offset_lo`` and
-        grown by the range, so no ray from the window through the kernel leaves it. [m]
-    fft_shape : (rows, cols) of the transforms; the correlation never wraps.
+    docs/method.md, "Two scales for the sun": the sun disc as a small kernel of fine sky cells
+    ``q = p / h``, correlated with a fine transmittance mask of the canopy plane.
+
+    Attributes
+    ----------
+    window_shape : tuple of (int, int)
+        (rows, cols) of the fine ground window, the lattice origin [pixel].
+    offset_lo, offset_hi : tuple of (int, int)
+        The fine sky offsets (dr, dc) the kernel may occupy, both inclusive [cell].
+    mask : Grid
+        The fine canopy mask this needs: the window moved by ``offset_lo`` and grown by the range,
+        so no ray from the window through the kernel leaves it [m].
+    fft_shape : tuple of (int, int)
+        (rows, cols) of the transforms; the correlation never wraps.
     """
 
     window_shape: tuple[int, int]
@@ -205,9 +344,22 @@ class SunPlan:
 
 
 def sun_offset_range(centres, *, reach: float, q: float):
-    """The fine sky offsets (lo, hi), inclusive, that cover a sun disc centred at each of
-    ``centres`` (n, 2) [tan] on the sky plane and reaching ``reach`` [tan] from its centre,
-    with two cells to spare."""
+    """The fine sky offsets that cover a sun disc at each of several centres, with two cells to spare.
+
+    Parameters
+    ----------
+    centres : numpy.ndarray
+        (n, 2) or (2,) sky-plane points of the disc's centre [tan].
+    reach : float
+        How far the disc reaches from its centre [tan].
+    q : float
+        Fine sky cell [tan].
+
+    Returns
+    -------
+    lo, hi : tuple of (int, int)
+        The offsets (dr, dc), inclusive [cell].
+    """
     centres = np.atleast_2d(np.asarray(centres, dtype=np.float64))
     rows = -centres[:, 1] / q
     cols = centres[:, 0] / q
@@ -218,8 +370,20 @@ def sun_offset_range(centres, *, reach: float, q: float):
 
 
 def plan_sun(window: Grid, *, offset_lo, offset_hi) -> SunPlan:
-    """Plan the fine sun correlation of ``window`` (fine ground grid [m]) for kernels inside the
-    offsets ``offset_lo``..``offset_hi`` (inclusive, fine sky cells)."""
+    """Plan the fine sun correlation of ``window`` for kernels inside the offsets ``offset_lo``..``offset_hi``.
+
+    Parameters
+    ----------
+    window : Grid
+        Fine ground grid [m].
+    offset_lo, offset_hi : tuple of (int, int)
+        The fine sky offsets (dr, dc), inclusive [cell].
+
+    Returns
+    -------
+    SunPlan
+        The plan.
+    """
     p = window.pixel
     extra = tuple(hi - lo for lo, hi in zip(offset_lo, offset_hi))
     shape = tuple(n + e for n, e in zip(window.shape, extra))
@@ -229,8 +393,27 @@ def plan_sun(window: Grid, *, offset_lo, offset_hi) -> SunPlan:
 
 
 def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int = 1):
-    """rfft2 of the fine mask ``m`` on ``plan.mask``, zero-padded to the plan (complex64);
-    the padding is never read."""
+    """rfft2 of the fine mask ``m`` on ``plan.mask``, zero-padded to the plan; the padding is never read.
+
+    Parameters
+    ----------
+    transmittance : numpy.ndarray
+        ``plan.mask.shape`` transmittance [1].
+    plan : SunPlan
+        The plan.
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64 (plan.fft_shape[0], plan.fft_shape[1] // 2 + 1).
+
+    Raises
+    ------
+    ValueError
+        If the mask is not of ``plan.mask.shape``.
+    """
     m = np.asarray(transmittance, dtype=np.float32)
     if m.shape != plan.mask.shape:
         raise ValueError(f"the fine mask is {m.shape}; the plan needs {plan.mask.shape}")
@@ -238,11 +421,31 @@ def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int
 
 
 def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
-    """Ground irradiance (channels, rows, cols) float32 of the sun kernel through the fine mask.
+    """Ground irradiance of the sun kernel through the fine mask.
 
-    kernel : the sun disc on a fine sky grid (``sky_grid(start, shape, q)``, q = fine pixel /
-    height); it must lie inside the plan's offsets. Exact for the discrete sum: every ray from
-    the window through the kernel meets the fine mask. [radiance x sr]
+    Exact for the discrete sum: every ray from the window through the kernel meets the fine mask.
+
+    Parameters
+    ----------
+    kernel : sky.SkyRaster
+        The sun disc on a fine sky grid (``sky_grid(start, shape, q)``, q = fine pixel / height);
+        it must lie inside the plan's offsets [radiance x sr].
+    spectrum : numpy.ndarray
+        ``fine_mask_spectrum`` of the mask.
+    plan : SunPlan
+        The plan.
+    workers : int, optional
+        FFT thread count.
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, rows, cols) float32 [radiance x sr].
+
+    Raises
+    ------
+    ValueError
+        If the kernel lies outside the planned offsets.
     """
     start = sky_offset(kernel.grid)
     u0 = tuple(s - lo for s, lo in zip(start, plan.offset_lo))
@@ -260,11 +463,26 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
 
 
 def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarray:
-    """``raster`` (channels, rows, cols) on ``grid`` sampled bilinearly at the pixel centres of
-    ``target`` (same units, axes aligned), edges held: the coarse sky light under the fine sun
-    window. Separable: a sparse interpolation matrix per axis, ``R @ raster @ C.T``, applied by
-    a compiled loop (``_filter.resample_separable``) with the float32 arithmetic of scipy's
-    sparse products, which tests/test_shadow.py holds it to."""
+    """``raster`` on ``grid`` sampled bilinearly at the pixel centres of ``target``, edges held.
+
+    The coarse sky light under the fine sun window. Separable: a sparse interpolation matrix per
+    axis, ``R @ raster @ C.T``, applied by a compiled loop (``_filter.resample_separable``) with the
+    float32 arithmetic of scipy's sparse products, which tests/test_shadow.py holds it to.
+
+    Parameters
+    ----------
+    raster : numpy.ndarray
+        (channels, rows, cols) on ``grid``.
+    grid : Grid
+        The raster's grid [m].
+    target : Grid
+        The grid sampled (same units, axes aligned) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, target rows, target cols) float32, in the units of ``raster``.
+    """
     from . import _filter
 
     out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
@@ -290,7 +508,20 @@ def _interpolations(grid: Grid, target: Grid) -> tuple:
 
 
 def interpolation_matrices(grid: Grid, target: Grid):
-    """``resample_bilinear``'s sparse matrices R and C (scipy CSR) along rows and columns."""
+    """``resample_bilinear``'s sparse matrices R and C along rows and columns.
+
+    Parameters
+    ----------
+    grid : Grid
+        The raster's grid [m].
+    target : Grid
+        The grid sampled [m].
+
+    Returns
+    -------
+    R, C : scipy.sparse.csr_matrix
+        (target rows, grid rows) and (target cols, grid cols) float32 weights [1].
+    """
     x, _ = target.ground_from_raster(0.0, np.arange(target.shape[1]))
     _, y = target.ground_from_raster(np.arange(target.shape[0]), 0.0)
     r, _ = grid.raster_from_ground(0.0, y)
@@ -311,11 +542,21 @@ def _interpolation(u, n: int):
 
 
 def combine_layers(grounds, unshadowed):
-    """Several canopy layers, assumed uncorrelated (Max 1991, "Extensions to multiple shadow
-    casting planes"): the product of the layers' ground rasters over ``I0^(n - 1)``.
+    """Several canopy layers, assumed uncorrelated: the product of the layers' ground rasters over ``I0^(n - 1)``.
 
-    grounds : sequence of (channels, rows, cols) rasters. [radiance x sr]
-    unshadowed : (channels,) irradiance of the open sky. [radiance x sr]
+    Max 1991, "Extensions to multiple shadow casting planes".
+
+    Parameters
+    ----------
+    grounds : sequence of numpy.ndarray
+        (channels, rows, cols) rasters [radiance x sr].
+    unshadowed : numpy.ndarray
+        (channels,) irradiance of the open sky [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, rows, cols) [radiance x sr].
     """
     grounds = list(grounds)
     i0 = np.asarray(unshadowed, dtype=np.float32)[:, None, None]

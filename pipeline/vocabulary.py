@@ -1,20 +1,47 @@
 """The names and ranges a config may give: one home for the parser (``config``) and for the
-models that act on them. Plain values and no imports, so that ``config`` reads them without
-importing a physics module."""
+models that act on them. Plain values and the model registries, which import their models only
+when asked for one, so that ``config`` reads them without importing a physics module."""
+
+from .registry import Model, Registry
+
+__all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS",
+           "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
+           "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "BRDF_PRESETS"]
 
 PROCEDURAL_MODELS = ("cie", "preetham")
 """The procedural sky's models (sky.model), named by the clear sky's angular shape."""
 
-SKY_MODELS = (*PROCEDURAL_MODELS, "uniform", "hdri")
-"""Every sky model a config may name (sky.model); 'procedural' is read as 'cie'."""
+_PROCEDURAL_KEYS = ("turbidity", "sun", "site", "time", "moon", "clouds", "skylight")
+
+SKIES = Registry(
+    "sky.model",
+    Model("cie", "skies:ProceduralModel", ("cie_type", *_PROCEDURAL_KEYS)),
+    Model("preetham", "skies:ProceduralModel", _PROCEDURAL_KEYS),
+    Model("uniform", "skies:UniformModel", ("radiance",)),
+    Model("hdri", "skies:HdriModel", ("hdri", "rotation")),
+    Model("overcast", "sky_overcast:OvercastModel", numbers={"luminance": (1.0, 0.0, 1e30, "kcd/m^2")}),
+)
+"""Every sky model a config may name (sky.model; 'procedural' is read as 'cie'), the keys of
+``sky`` that only it takes and its class (``skies.SkyModel``; docs/design.md, "Models plug in")."""
+
+SKY_MODELS = SKIES.names
+
+FOREGROUNDS = Registry(
+    "foreground.model",
+    Model("trees", "foregrounds:TreesForeground"),
+    Model("passes", "foregrounds:ImportedForeground", ("sun", "sky", "alpha")),
+    Model("none", "foregrounds:NoForeground"),
+)
+"""The foreground models (foreground.model): the built-in trees, passes read from files, none
+(``foregrounds.ForegroundModel``)."""
 
 CIE_TYPE_RANGE = (1, 15)
-"""The CIE standard general skies (ISO 15469:2004), numbered from first to last."""
+"""The CIE standard general skies (ISO 15469:2004), numbered from first to last. [1]"""
 
 DEFAULT_CIE_TYPE = 12
 """The clear sky drawn when a config names no type: CIE type 12, the standard clear sky of low
 illuminance turbidity (docs/accuracy.md, "Daylight: the clear sky in absolute units", says how it
-was chosen)."""
+was chosen). [1]"""
 
 TURBIDITY_RANGE = (1.5, 10.0)
 """Linke turbidity factors accepted: the climatology's values lie within (about 1.8 to 7), and
@@ -29,7 +56,7 @@ light (sun and sky), ``shade`` the sky's light alone (the shade under trees come
 the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
 
 SEED_MAX = 2**63 - 1
-"""Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer."""
+"""Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer. [1]"""
 
 NUMBER_RANGES = {
     "animation.fps": (0.01, 1000.0, "frames per second"),

@@ -10,7 +10,8 @@ import yaml
 
 from pipeline import cache, camera as cameras, canopy, foreground, io
 from pipeline.colour import REC709_LUMINANCE
-from pipeline.cycle import foreground_item, tree_box
+from pipeline.cycle import foreground_item
+from pipeline.foregrounds import tree_box
 from pipeline.frame import render_frame
 from pipeline.inputs import grove_of
 from pipeline.plan import plan_run

@@ -7,8 +7,8 @@ import numpy as np
 import yaml
 
 from pipeline import cache, io
-from pipeline.cycle import (config_item_keys, cut_to_trees, cycle_phase, record_config_items, recorded_configs,
-                            tree_box)
+from pipeline.cycle import config_item_keys, cycle_phase, record_config_items, recorded_configs
+from pipeline.foregrounds import cut_to_trees, tree_box
 from pipeline.ground import render_ground
 
 from scenes import plan_of, tiny_grove

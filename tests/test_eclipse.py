@@ -125,7 +125,7 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
     # open ground (sun times S plus the sky) every 5 s through second and third contact; the
     # moon placed about the mid-totality sun at its true offset from the sun of the moment, so
     # that the clear sky's shape is computed once (the sun moves 0.03 degrees in 2 minutes)
-    from pipeline.plan import offset_direction
+    from pipeline.geometry import offset_direction
 
     fixed = totality().sun
 

@@ -15,7 +15,8 @@ from pipeline.frame import render_frame
 from pipeline.framing import framing_warnings, seen_ground
 from pipeline.geometry import sky_plane_from_direction
 from pipeline.lighting import auto_exposures, meter, reference_lighting, with_exposures
-from pipeline.plan import plan_run, scene_at
+from pipeline.plan import plan_run
+from pipeline.scene import scene_at
 from pipeline.resolve import load
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,7 +78,7 @@ def test_any_place_and_time_frames_the_dappled_shadow(tmp_path, site):
     assert ground.size > 0.9 * ground_fraction.size
     p95, p5 = np.percentile(ground, [95, 5])
     assert p95 / p5 >= 2.0, p95 / p5
-    assert framing_warnings(plan) == []
+    assert framing_warnings(config, plan) == []
 
 
 def crescent_shift(tmp_path):
@@ -343,7 +344,7 @@ def test_a_span_from_sunset_into_civil_twilight_renders_every_frame(tmp_path):
         ground = render_ground(plan, f, store=store)
         light = ground.irradiance @ REC709_LUMINANCE
         assert np.all(np.isfinite(light))
-        clear = daylight.sky_daylight(scene.sun.elevation, plan.config.sky.turbidity,
+        clear = daylight.sky_daylight(scene.sun.elevation, plan.sky.config.turbidity,
                                       sun_radius=scene.sun.angular_radius)
         expected = clear.diffuse_horizontal_illuminance + clear.direct_normal_illuminance * max(
             np.sin(scene.sun.elevation), 0.0)

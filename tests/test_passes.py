@@ -13,7 +13,6 @@ from pipeline import cache, camera, io
 from pipeline.cli import main
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.frame import render_frame
-from pipeline.inputs import load_sky
 from pipeline.sun_kernel import sun_irradiance
 from scenes import assert_refused, config_of, plan_of, tiny_grove, write_config
 
@@ -69,7 +68,7 @@ def test_the_lux_layer_on_open_ground_is_the_sky_model_s_illuminance(tmp_path):
     lux, depth = result.layers["illuminance"][..., 0], result.layers["depth"][..., 0]
     far = np.isfinite(depth) & (depth > 25.0)  # beyond the 6 m window, well clear of the shadow
     assert far.sum() > 20
-    sky = load_sky(plan.config.sky, plan.scenes[0])
+    sky = plan.sky.at(plan.scenes[0])
     expected = 1000.0 * float((sky.sky_irradiance + sun_irradiance(sky)) @ REC709_LUMINANCE)
     assert np.abs(lux[far] / expected - 1.0).max() < 0.005
     assert np.all(lux[~np.isfinite(depth)] == 0)

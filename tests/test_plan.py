@@ -2,7 +2,9 @@ import numpy as np
 import pytest
 
 from pipeline import ephemeris
-from pipeline.plan import offset_direction, scene_at
+from pipeline.scene import scene_at
+
+from pipeline.geometry import offset_direction
 
 from scenes import config_of, tiny_grove
 

@@ -17,8 +17,9 @@ import pytest
 
 from pipeline import cache, ephemeris, io
 from pipeline.ground import render_ground
-from pipeline.inputs import load_sky
-from pipeline.plan import plan_run, scene_at
+from pipeline.scene import load_sky
+from pipeline.plan import plan_run
+from pipeline.scene import scene_at
 from pipeline.sky import ProceduralSky
 from pipeline.sun_disc import LIMB_DARKENING, SunDisc
 from pipeline.sun_kernel import sun_irradiance
