@@ -33,6 +33,10 @@ MAY_IMPORT = {
 }
 """The stages and what each may import besides BASE (docs/design.md)."""
 
+COMMAND = {"cli", "cli_runs", "cli_pictures", "cli_flags"}
+"""The ``sunshade`` command's modules: at their top they import one another, BASE, ``config``, ``resolve`` and
+``runfolder``, and each command's stages inside it (docs/design.md)."""
+
 
 def imports(name: str, *, top_level_only: bool = False) -> set[str]:
     """The package's modules that ``pipeline/NAME.py`` imports (at module level only, or
@@ -69,6 +73,12 @@ def test_a_resume_with_nothing_to_do_imports_no_numpy():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=PACKAGE.parent).stdout
     assert "numpy" not in out and "pipeline.plan" not in out, out
+
+
+@pytest.mark.parametrize("name", sorted(COMMAND))
+def test_the_command_imports_the_stages_only_inside_each_command(name):
+    allowed = COMMAND | BASE | {"config", "resolve", "runfolder"}
+    assert imports(name, top_level_only=True) <= allowed, imports(name, top_level_only=True) - allowed
 
 
 @pytest.mark.parametrize("name", sorted(MAY_IMPORT))

@@ -4,9 +4,8 @@ import threading
 import pytest
 
 from pipeline import errors
-from pipeline.cli import BadInput
 from pipeline.config import ConfigError
-from pipeline.errors import RunError
+from pipeline.errors import BadInput, RunError
 from pipeline.io import ImageError
 
 EXAMPLES = [
