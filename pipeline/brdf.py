@@ -499,16 +499,16 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     modulation = summed / max(float(summed[bands.colour]), 1e-30)
     blended = np.maximum(at_bands[bands.colour][None, :] * (modulation @ bands.weights(axes[0]))[:, None], 1e-30)
     ratio = np.moveaxis(own / blended[:, None, :], -1, 0).astype(np.float32)
-    from . import _filter
+    from . import _array_loops
 
     flat = np.ascontiguousarray(ratio.reshape(len(ratio), -1))
     out = np.empty((len(ratio), len(corner)), dtype=np.float32)
-    _filter.lattice_read(flat, corner, taps, lattice, out)
+    _array_loops.lattice_read(flat, corner, taps, lattice, out)
     return out
 
 
 def _lattice_read_arrays(flat, corner, taps, lattice) -> np.ndarray:
-    """``_filter.lattice_read`` with whole arrays (numpy): its reference. (channels, n) float32"""
+    """``_array_loops.lattice_read`` with whole arrays (numpy): its reference. (channels, n) float32"""
     out = flat[:, corner] * taps[0]
     out += flat[:, corner + 1] * taps[1]
     out += flat[:, corner + lattice] * taps[2]

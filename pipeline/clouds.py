@@ -321,7 +321,7 @@ def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.
 
 @lru_cache(maxsize=8)
 def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
-    """What ``_filter.cloud_field`` reads: (every level in one flat float64 array, each level's offset
+    """What ``_tiling.cloud_field`` reads: (every level in one flat float64 array, each level's offset
     in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
     (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
     levels = (_spline(seed, texels, period, spectral_slope),) + _noise_levels(seed, texels, period, spectral_slope)[1:]
@@ -334,7 +334,7 @@ def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tup
 
 TILE_BLEND = 0.125
 """Width of the band about each edge of a copy of the tile, as a fraction of the tile's side, over
-which the copies on both sides blend (``_filter.cloud_field``). [1]"""
+which the copies on both sides blend (``_tiling.cloud_field``). [1]"""
 
 
 def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
@@ -536,7 +536,7 @@ class CloudLayer:
         shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
         out = np.empty(coords.shape[1])
-        from ._filter import cloud_field  # numba, imported on first use
+        from ._tiling import cloud_field  # numba, imported on first use
 
         copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
         if taps is None:
@@ -553,13 +553,13 @@ class CloudLayer:
 
     def _drifted_copies(self, time) -> tuple[int, int]:
         """The copy of the tile (row, col) that ``_taps``'s lattice coordinates (0, 0) are the
-        centre of at ``time`` [s]: the drift's whole tiles, negated (``_filter.cloud_field``)."""
+        centre of at ``time`` [s]: the drift's whole tiles, negated (``_tiling.cloud_field``)."""
         return tuple(-int(math.floor(drift / self.texels)) for drift in self._drift(time))
 
     def _taps(self, s, time, footprint=None) -> tuple:
         """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
         axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
-        None without a footprint, else the taps as ``_filter.cloud_field`` takes them: (count (m,), finer
+        None without a footprint, else the taps as ``_tiling.cloud_field`` takes them: (count (m,), finer
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
         s = np.asarray(s, dtype=np.float64)

@@ -324,10 +324,10 @@ def compile_loops(plan: RunPlan) -> None:
         blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
                    np.zeros((2, 2, 3), dtype=np.float32), coarse)
         if plan.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
-            from . import _filter
+            from . import _array_loops
 
-            _filter.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
-                                 np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
+            _array_loops.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
+                                      np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
     except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
         pass
 
@@ -335,11 +335,11 @@ def compile_loops(plan: RunPlan) -> None:
 def _apply_haze(background, transmittance, veil, horizon) -> None:
     """``background`` (rows, cols, 3) float32, in place: T B + (1 - T) L_horizon + 0, T the haze's
     transmittance (rows, cols, 1), L_horizon (cols, 3) the sky at the horizon; compiled
-    (``_filter.haze_over``), the float32 operations, in order, of ``B *= T; B += (1 - T) L;
+    (``_array_loops.haze_over``), the float32 operations, in order, of ``B *= T; B += (1 - T) L;
     B + 0`` on arrays (tests/test_frame.py holds it to them)."""
-    from . import _filter
+    from . import _array_loops
 
-    _filter.haze_over(background, transmittance, veil, np.ascontiguousarray(horizon, dtype=np.float32))
+    _array_loops.haze_over(background, transmittance, veil, np.ascontiguousarray(horizon, dtype=np.float32))
 
 
 @functools.lru_cache(maxsize=2)

@@ -243,7 +243,7 @@ def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
 
 def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     """sky_ratio's per-pixel bilinear read of its lattice: the compiled loop against numpy."""
-    from pipeline import _filter
+    from pipeline import _array_loops
 
     rng = np.random.default_rng(5)
     lattice = 6
@@ -252,5 +252,5 @@ def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     _, _, corner, taps = R._lattice_reads(zenith, azimuth, 0.3, lattice)
     assert np.allclose(taps.sum(axis=0), 1.0, atol=1e-6) and corner.max() <= lattice * lattice - lattice - 2
     out = np.empty((3, 50), dtype=np.float32)
-    _filter.lattice_read(flat, corner, taps, lattice, out)
+    _array_loops.lattice_read(flat, corner, taps, lattice, out)
     assert np.array_equal(out, R._lattice_read_arrays(flat, corner, taps, lattice))

@@ -94,6 +94,14 @@ def test_every_import_is_one_the_design_table_allows():
     assert violations() == []
 
 
+def test_every_module_has_its_row_in_the_modules_table():
+    """docs/design.md, "Modules", says what each module of pipeline/ owns."""
+    section = DESIGN.read_text().split("## Modules", 1)[1].split("\n## ", 1)[0]
+    listed = {name for line in section.splitlines() if line.startswith("| ")
+              for name in re.findall(r"`(\w+)\.py`", line.split("|")[1])}
+    assert set(MODULES) - {"__init__"} - listed == set()
+
+
 def test_the_table_check_fails_on_a_low_module_importing_a_high_one(tmp_path):
     """A copy of the package where geometry.py imports cli (docs/design.md's example) fails."""
     copy = tmp_path / "pipeline"
