@@ -858,7 +858,7 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
 def _prune_items(store: Cache, mine, limit):
     """Remove a config's items, least recently used first, until they total at most ``limit``
     bytes (None: all of them)."""
-    from .cache import _remove
+    from .cache_store import _remove
 
     own = sorted((item for item in store.list() if item.key in mine), key=lambda i: (i.last_used, i.key))
     total, removed = sum(item.bytes for item in own), []
