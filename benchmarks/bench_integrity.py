@@ -38,7 +38,8 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline import cache, cache_store  # noqa: E402
 from pipeline.run import _frame_task  # noqa: E402
-from pipeline.runfolder import file_digest, parse_frames  # noqa: E402
+from pipeline.frameindex import file_digest  # noqa: E402
+from pipeline.runfolder import parse_frames  # noqa: E402
 from pipeline.cycle import cycle_phase  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.cores import default_workers  # noqa: E402

@@ -376,7 +376,8 @@ def _run_render(args) -> int:
     from .config import preview
     from .cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
     from .resolve import resolve, source_digest
-    from .runfolder import check_outputs, nothing_to_do, parse_frames
+    from .runfolder import check_outputs, parse_frames
+    from .runrecord import nothing_to_do
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
@@ -442,7 +443,8 @@ def _render_run(config, store, frames, args, source_hash, budget):
 
 
 def _verify_run(config, store) -> int:
-    from .runfolder import frame_files, verify_run
+    from .frameindex import verify_run
+    from .runfolder import frame_files
 
     checked = verify_run(config, store=store)
     for what, frames in (("damaged", checked.damaged), ("foreign", checked.foreign)):
