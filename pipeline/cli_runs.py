@@ -147,7 +147,8 @@ def run_render(args) -> int:
     from .cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
     from .preview import preview
     from .resolve import resolve, source_digest
-    from .runfolder import check_outputs, nothing_to_do, parse_frames
+    from .runfolder import check_outputs, parse_frames
+    from .runrecord import nothing_to_do
 
     if args.jobs is not None and args.jobs < 1:
         raise BadInput(f"--jobs must be at least 1 (got {args.jobs})")
@@ -213,7 +214,8 @@ def _render_run(config, store, frames, args, source_hash, budget):
 
 
 def _verify_run(config, store) -> int:
-    from .runfolder import frame_files, verify_run
+    from .frameindex import verify_run
+    from .runfolder import frame_files
 
     checked = verify_run(config, store=store)
     for what, frames in (("damaged", checked.damaged), ("foreign", checked.foreign)):
@@ -446,7 +448,7 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
 def _prune_items(store: Cache, mine, limit):
     """Remove a config's items, least recently used first, until they total at most ``limit``
     bytes (None: all of them)."""
-    from .cache import _remove
+    from .cache_store import _remove
 
     own = sorted((item for item in store.list() if item.key in mine), key=lambda i: (i.last_used, i.key))
     total, removed = sum(item.bytes for item in own), []

@@ -14,7 +14,7 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, canopy, foreground, foregrounds, shadow
+from . import cache, cache_keys, canopy, foreground, foregrounds, shadow
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
@@ -160,7 +160,7 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     for frame in range(plan.canopy.cycle):
         for layer in [*range(len(plan.layers)), *([None] if plan.foreground.cached else [])]:
             kind, params = _product_key(plan, layer, frame)
-            keys[cache.key_of(kind, params)] = (kind, frame)
+            keys[cache_keys.key_of(kind, params)] = (kind, frame)
     return keys
 
 

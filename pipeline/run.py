@@ -41,10 +41,9 @@ from .framing import framing_warnings
 from .lighting import with_exposures
 from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
 from .plan import RunPlan, check_inputs
-from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, current_video, file_stamp,
-                        frame_files, make_folder,
-                        read_index, read_run_file, remove_temporaries, resolved_config, video_file,
-                        write_index, write_run_file)
+from .frameindex import FrameWarning, check_frames, file_stamp, read_index, write_index
+from .runfolder import INDEX_FILE, LOCK_FILE, frame_files, make_folder, remove_temporaries, video_file
+from .runrecord import RunSummary, current_video, read_run_file, resolved_config, write_run_file
 
 _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
            "sunshade:sun_fraction": "sun_fraction", "sunshade:sun_azimuth_elevation": "sun",
@@ -150,7 +149,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         address (``tcp://host:8786``) to run the tasks on instead. cluster_timeout : how long
         a lost cluster is waited for (default CLUSTER_TIMEOUT). [s] source_hash : the hash of
         the config as written (``resolve.source_digest``), recorded in run.json for the next
-        resume (``runfolder.nothing_to_do``). budget : the cache's budget [B]: at the end the
+        resume (``runrecord.nothing_to_do``). budget : the cache's budget [B]: at the end the
         least recently used items that neither this run nor another live one uses are removed
         until the items total at most this (None: none removed; docs/runs.md, "The cache's
         budget").

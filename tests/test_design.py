@@ -113,7 +113,7 @@ def test_the_table_check_fails_on_a_low_module_importing_a_high_one(tmp_path):
 def test_a_resume_with_nothing_to_do_imports_no_numpy():
     """The command, the config and the run folder's checks (docs/design.md): a resume that
     finds every frame done is decided without numpy, a stage or a physics module."""
-    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runfolder; "
+    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runrecord; "
             "print(sorted(m for m in sys.modules if m == 'numpy' or m.startswith('pipeline.')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=PACKAGE.parent).stdout

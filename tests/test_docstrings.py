@@ -11,8 +11,9 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
-MODULES_WITH_ALL = ["_array_loops", "_filter", "_tiling", "cache", "colour", "composite", "constants", "cores",
-                    "errors", "foreground", "io", "paths", "report", "resolve", "runfolder", "vocabulary"]
+MODULES_WITH_ALL = ["_array_loops", "_filter", "_tiling", "cache", "cache_keys", "cache_store", "colour", "composite",
+                    "constants", "cores", "errors", "foreground", "frameindex", "io", "paths", "report", "resolve",
+                    "runfolder", "runrecord", "vocabulary"]
 """The modules converted so far; the list grows until it is every module of pipeline/."""
 
 SELF = {"self", "cls"}

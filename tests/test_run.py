@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from pipeline import io
-from pipeline.cache import CacheWarning
+from pipeline.cache_store import CacheWarning
 from pipeline.cli import main
 from pipeline.errors import RunError
 from pipeline.plan import plan_run
