@@ -296,7 +296,7 @@ def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, 
 # any place and time frames the canopy's dappled shadow (docs/method.md, "Framing").
 
 def _check_sizes(config: Config, plan: RunPlan) -> None:
-    """Refuse a plan whose rasters would pass the stated limits (config.MAX_SUN_PIXELS and
+    """Refuse a plan whose rasters would pass the stated limits (resolve.MAX_SUN_PIXELS and
     MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
     def refuse(key, what, cells, most, advice):
         raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "

@@ -243,7 +243,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
 
     Raises
     ------
-    RunError, config.ConfigError, io.ImageError
+    RunError, errors.ConfigError, io.ImageError
         Before any work.
     """
     started = time.perf_counter()
