@@ -319,8 +319,8 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
         Skylight now over the reference skylight [1].
     distance : ndarray, shape (rows, cols)
         The distance to the ground each pixel sees, inf at the sky [m].
-    seen_sky : ndarray or None
-        The sky's ``camera.sky_view``, if made already.
+    seen_sky : ndarray, shape (rows, cols, 3), float32, or None
+        The sky's ``camera.sky_view`` [kcd/m^2], if made already.
     maps : tuple of texture.MipMap or None
         The ground's ``irradiance_maps``, if made already.
 

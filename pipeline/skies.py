@@ -139,7 +139,7 @@ class ProceduralModel:
 
         Parameters
         ----------
-        scene : scene.Scene or None
+        scene : scene.Scene
             The frame's scene.
         metering : bool
             For an exposure meter: the eclipse's line-of-sight table is then ``eclipse.METER_TABLE``.
