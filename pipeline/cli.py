@@ -22,6 +22,8 @@ from .cores import CLUSTER_TIMEOUT
 from .errors import SunshadeError, WorkerError, one_line, one_line_warnings
 from .vocabulary import PASSES
 
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "main"]
+
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
 

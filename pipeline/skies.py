@@ -30,21 +30,64 @@ class SkyModel(Protocol):
     config: SkyConfig
 
     def discs(self, fraction: float) -> tuple[datetime | None, skylib.SunDisc | None, skylib.MoonDisc | None]:
-        """The UTC time (or None), sun and moon (or None) of the frame at ``fraction`` [1] of the
-        animation (0 the first frame, 1 the last)."""
+        """The UTC time, sun and moon of the frame at ``fraction`` of the animation.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 the first frame, 1 the last [1].
+
+        Returns
+        -------
+        when : datetime or None
+            The UTC time, or None (no site and time).
+        sun : sky.SunDisc or None
+            The sun's disc (azimuth, elevation, angular radius [rad]), or None for a sky without a sun.
+        moon : sky.MoonDisc or None
+            The moon's disc [rad], or None.
+        """
 
     def at(self, scene, *, metering: bool = False) -> skylib.Sky:
-        """The sky at a frame's ``scene`` (``scene.Scene``; None for a sky without a sun);
-        ``metering``: for an exposure meter, which reads the
-        whole sky's light only (a model may make it coarser)."""
+        """The sky at a frame's scene.
+
+        Parameters
+        ----------
+        scene : scene.Scene or None
+            The frame's scene; None for a sky without a sun.
+        metering : bool
+            For an exposure meter, which reads the whole sky's light only (a model may make it coarser).
+
+        Returns
+        -------
+        sky.Sky
+            The sky's radiance [kcd/m^2] by direction and its sun.
+        """
 
     def clear_light(self, sun: skylib.SunDisc | None) -> tuple[np.ndarray | None, np.ndarray]:
-        """(the sun's normal irradiance (3,) or None without a sun, the sky's horizontal
-        irradiance (3,)) [klx] of the clear, uneclipsed sky with ``sun``: the run's reference
-        light (``lighting.reference_lighting``)."""
+        """The light of the clear, uneclipsed sky with ``sun``: the run's reference light
+        (``lighting.reference_lighting``).
+
+        Parameters
+        ----------
+        sun : sky.SunDisc or None
+            The sun, or None without a sun.
+
+        Returns
+        -------
+        sun_irradiance : ndarray, shape (3,), or None
+            The sun's normal irradiance, or None without a sun [klx].
+        sky_irradiance : ndarray, shape (3,)
+            The sky's horizontal irradiance [klx].
+        """
 
     def check(self) -> None:
-        """Read and check the files the model needs. Raises io.ImageError naming the file."""
+        """Read and check the files the model needs.
+
+        Raises
+        ------
+        io.ImageError
+            Naming the file.
+        """
 
 
 @dataclass(frozen=True)
@@ -62,6 +105,19 @@ class ProceduralModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
+        """See ``SkyModel.discs``.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 to 1 [1].
+
+        Returns
+        -------
+        tuple
+            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
+            the ephemeris's at the site's time, or the config's angles.
+        """
         sky = self.config
         if sky.site is not None:
             site = sky.site
@@ -79,6 +135,20 @@ class ProceduralModel:
         return None, skylib.SunDisc(s.azimuth, s.elevation, s.radius), moon
 
     def at(self, scene, *, metering: bool = False):
+        """See ``SkyModel.at``.
+
+        Parameters
+        ----------
+        scene : scene.Scene
+            The frame's scene.
+        metering : bool
+            For an exposure meter: the eclipse's line-of-sight table is then ``eclipse.METER_TABLE``.
+
+        Returns
+        -------
+        sky.ProceduralSky
+            The clear sky with the scene's sun, moon, clouds and eclipse.
+        """
         clouds = None
         if self.config.clouds is not None:
             c = self.config.clouds
@@ -88,10 +158,23 @@ class ProceduralModel:
         return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
 
     def clear_light(self, sun):
+        """See ``SkyModel.clear_light``.
+
+        Parameters
+        ----------
+        sun : sky.SunDisc or None
+            The sun.
+
+        Returns
+        -------
+        tuple
+            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx] of the clear sky.
+        """
         clear = clear_sky(self.config, sun)
         return clear.sun_normal_irradiance, clear.clear_sky_irradiance
 
     def check(self) -> None:
+        """See ``SkyModel.check``: nothing to read."""
         pass
 
 
@@ -108,15 +191,56 @@ class UniformModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
+        """See ``SkyModel.discs``.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 to 1 [1].
+
+        Returns
+        -------
+        tuple
+            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
+            no time, no sun, no moon.
+        """
         return None, None, None
 
     def at(self, scene, *, metering: bool = False):
+        """See ``SkyModel.at``.
+
+        Parameters
+        ----------
+        scene : scene.Scene or None
+            The frame's scene (not used).
+        metering : bool
+            For an exposure meter (not used).
+
+        Returns
+        -------
+        sky.UniformSky
+            ``sky.radiance`` [kcd/m^2] in every direction.
+        """
         return skylib.UniformSky(np.asarray(self.config.radiance, dtype=np.float64))
 
     def clear_light(self, sun):
+        """See ``SkyModel.clear_light``.
+
+        Parameters
+        ----------
+        sun : sky.SunDisc or None
+            The sun (not used).
+
+        Returns
+        -------
+        tuple
+            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx]:
+            None and pi times the radiance.
+        """
         return None, np.pi * np.asarray(self.config.radiance, dtype=np.float64)
 
     def check(self) -> None:
+        """See ``SkyModel.check``: nothing to read."""
         pass
 
 
@@ -133,18 +257,59 @@ class HdriModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
+        """See ``SkyModel.discs``.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 to 1 [1].
+
+        Returns
+        -------
+        tuple
+            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
+            no time, the image's sun, no moon.
+        """
         return None, load_hdri(self.config).sun, None
 
     def at(self, scene, *, metering: bool = False):
+        """See ``SkyModel.at``.
+
+        Parameters
+        ----------
+        scene : scene.Scene or None
+            The frame's scene (not used).
+        metering : bool
+            For an exposure meter (not used).
+
+        Returns
+        -------
+        sky.EquirectSky
+            The image (``load_hdri``).
+        """
         return load_hdri(self.config)
 
     def clear_light(self, sun):
+        """See ``SkyModel.clear_light``.
+
+        Parameters
+        ----------
+        sun : sky.SunDisc or None
+            The sun (not used: the image's own).
+
+        Returns
+        -------
+        tuple
+            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx]
+            of the image, its cut-out sun.
+        """
         hdri = load_hdri(self.config)
         if hdri.sun is None:
             return None, hdri.total_irradiance()
         return np.asarray(hdri.sun_normal_irradiance, dtype=np.float64), hdri.total_irradiance()
 
     def check(self) -> None:
+        """See ``SkyModel.check``: the image read (``load_hdri``)."""
         load_hdri(self.config)
 
 
@@ -163,6 +328,7 @@ def clear_sky(sky: SkyConfig, sun: skylib.SunDisc, **state) -> skylib.Procedural
     Returns
     -------
     sky.ProceduralSky
+        Radiance [kcd/m^2] by direction, the sun's and sky's light [klx].
     """
     return skylib.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
                                 cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
