@@ -29,6 +29,19 @@ EXIT_FAILURE = 1
 
 
 def main(argv=None) -> int:
+    """The ``sunshade`` command: parse the arguments and run the command they name.
+
+    Parameters
+    ----------
+    argv : list of str or None
+        The arguments; None for ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit code: 0 done, ``EXIT_FAILURE`` a failure, ``EXIT_BAD_INPUT`` bad input (one line
+        naming the key, flag or file, nothing written).
+    """
     one_line_warnings()
     parser = _parser()
     try:
