@@ -16,11 +16,11 @@ from . import ephemeris, io
 from . import sky as skylib
 from .clouds import CloudLayer
 from .config import MAX_RADIANCE
-from .settings import SkyConfig
 from .eclipse import METER_TABLE
 from .geometry import offset_direction
+from .settings import SkyConfig
 
-__all__ = ["SkyModel", "ProceduralModel", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
+__all__ = ["SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
 
 
 class SkyModel(Protocol):
@@ -94,7 +94,7 @@ class SkyModel(Protocol):
 class ProceduralModel:
     """The procedural sky (``cie``, ``preetham``): absolute clear-sky daylight in the CIE or
     Preetham shape, the sun and moon from the ephemeris or the config's angles, clouds, the
-    eclipse (docs/method.md, "The procedural sky").
+    eclipse (docs/method.md, "The procedural sky"). Its methods are ``SkyModel``'s.
 
     Parameters
     ----------
@@ -105,19 +105,8 @@ class ProceduralModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
-        """See ``SkyModel.discs``.
-
-        Parameters
-        ----------
-        fraction : float
-            The frame's place in the animation, 0 to 1 [1].
-
-        Returns
-        -------
-        tuple
-            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
-            the ephemeris's at the site's time, or the config's angles.
-        """
+        """The sun and moon from the ephemeris at the time ``fraction`` through ``sky.time``, or
+        the config's sun with the moon slid from ``offset_start`` to ``offset_end``."""
         sky = self.config
         if sky.site is not None:
             site = sky.site
@@ -135,20 +124,8 @@ class ProceduralModel:
         return None, skylib.SunDisc(s.azimuth, s.elevation, s.radius), moon
 
     def at(self, scene, *, metering: bool = False):
-        """See ``SkyModel.at``.
-
-        Parameters
-        ----------
-        scene : scene.Scene
-            The frame's scene.
-        metering : bool
-            For an exposure meter: the eclipse's line-of-sight table is then ``eclipse.METER_TABLE``.
-
-        Returns
-        -------
-        sky.ProceduralSky
-            The clear sky with the scene's sun, moon, clouds and eclipse.
-        """
+        """The clear sky with the scene's sun, moon, clouds and eclipse; ``metering``: a deep
+        eclipse's line-of-sight table is the coarser ``eclipse.METER_TABLE``."""
         clouds = None
         if self.config.clouds is not None:
             c = self.config.clouds
@@ -158,29 +135,44 @@ class ProceduralModel:
         return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
 
     def clear_light(self, sun):
-        """See ``SkyModel.clear_light``.
-
-        Parameters
-        ----------
-        sun : sky.SunDisc or None
-            The sun.
-
-        Returns
-        -------
-        tuple
-            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx] of the clear sky.
-        """
+        """The clear sky's (no clouds, no moon) with ``sun``."""
         clear = clear_sky(self.config, sun)
         return clear.sun_normal_irradiance, clear.clear_sky_irradiance
 
     def check(self) -> None:
-        """See ``SkyModel.check``: nothing to read."""
-        pass
+        """Nothing to read."""
+
+
+class ConstantSky:
+    """A sky of one radiance in every direction and no sun, its radiance (3,) [kcd/m^2] given by
+    a subclass. Its methods are ``SkyModel``'s."""
+
+    config: SkyConfig
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """The sky's radiance (3,) in each linear Rec.709 channel [kcd/m^2]."""
+        raise NotImplementedError
+
+    def discs(self, fraction: float):
+        """No time, no sun, no moon."""
+        return None, None, None
+
+    def at(self, scene, *, metering: bool = False):
+        """The radiance in every direction."""
+        return skylib.UniformSky(self.radiance)
+
+    def clear_light(self, sun):
+        """No sun; the sky's horizontal irradiance pi L."""
+        return None, np.pi * self.radiance
+
+    def check(self) -> None:
+        """Nothing to read."""
 
 
 @dataclass(frozen=True)
-class UniformModel:
-    """A sky of one radiance in every direction, no sun (``sky.radiance`` [kcd/m^2]).
+class UniformModel(ConstantSky):
+    """The uniform sky: ``sky.radiance`` [kcd/m^2] in every direction, no sun.
 
     Parameters
     ----------
@@ -190,63 +182,16 @@ class UniformModel:
 
     config: SkyConfig
 
-    def discs(self, fraction: float):
-        """See ``SkyModel.discs``.
-
-        Parameters
-        ----------
-        fraction : float
-            The frame's place in the animation, 0 to 1 [1].
-
-        Returns
-        -------
-        tuple
-            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
-            no time, no sun, no moon.
-        """
-        return None, None, None
-
-    def at(self, scene, *, metering: bool = False):
-        """See ``SkyModel.at``.
-
-        Parameters
-        ----------
-        scene : scene.Scene or None
-            The frame's scene (not used).
-        metering : bool
-            For an exposure meter (not used).
-
-        Returns
-        -------
-        sky.UniformSky
-            ``sky.radiance`` [kcd/m^2] in every direction.
-        """
-        return skylib.UniformSky(np.asarray(self.config.radiance, dtype=np.float64))
-
-    def clear_light(self, sun):
-        """See ``SkyModel.clear_light``.
-
-        Parameters
-        ----------
-        sun : sky.SunDisc or None
-            The sun (not used).
-
-        Returns
-        -------
-        tuple
-            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx]:
-            None and pi times the radiance.
-        """
-        return None, np.pi * np.asarray(self.config.radiance, dtype=np.float64)
-
-    def check(self) -> None:
-        """See ``SkyModel.check``: nothing to read."""
-        pass
+    @property
+    def radiance(self) -> np.ndarray:
+        """``sky.radiance`` (3,) [kcd/m^2]."""
+        return np.asarray(self.config.radiance, dtype=np.float64)
 
 
 @dataclass(frozen=True)
 class HdriModel:
-    """An equirectangular image of the sky (``sky.hdri``), its sun cut out into a disc.
+    """An equirectangular image of the sky (``sky.hdri``), its sun cut out into a disc. Its
+    methods are ``SkyModel``'s.
 
     Parameters
     ----------
@@ -257,59 +202,22 @@ class HdriModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
-        """See ``SkyModel.discs``.
-
-        Parameters
-        ----------
-        fraction : float
-            The frame's place in the animation, 0 to 1 [1].
-
-        Returns
-        -------
-        tuple
-            (UTC time or None, sky.SunDisc or None, sky.MoonDisc or None):
-            no time, the image's sun, no moon.
-        """
+        """No time; the image's sun; no moon."""
         return None, load_hdri(self.config).sun, None
 
     def at(self, scene, *, metering: bool = False):
-        """See ``SkyModel.at``.
-
-        Parameters
-        ----------
-        scene : scene.Scene or None
-            The frame's scene (not used).
-        metering : bool
-            For an exposure meter (not used).
-
-        Returns
-        -------
-        sky.EquirectSky
-            The image (``load_hdri``).
-        """
+        """The image (``load_hdri``)."""
         return load_hdri(self.config)
 
     def clear_light(self, sun):
-        """See ``SkyModel.clear_light``.
-
-        Parameters
-        ----------
-        sun : sky.SunDisc or None
-            The sun (not used: the image's own).
-
-        Returns
-        -------
-        tuple
-            (the sun's normal irradiance (3,) or None, the sky's horizontal irradiance (3,)) [klx]
-            of the image, its cut-out sun.
-        """
+        """The image's sun (None without one) and its sky's horizontal irradiance."""
         hdri = load_hdri(self.config)
         if hdri.sun is None:
             return None, hdri.total_irradiance()
         return np.asarray(hdri.sun_normal_irradiance, dtype=np.float64), hdri.total_irradiance()
 
     def check(self) -> None:
-        """See ``SkyModel.check``: the image read (``load_hdri``)."""
+        """Read and check the image (``load_hdri``)."""
         load_hdri(self.config)
 
 
