@@ -125,11 +125,13 @@ def config_case(path: str, samples: int) -> None:
         inside = np.flatnonzero((r >= 0) & (c >= 0) & (r <= plan.window.shape[0] - 1) & (c <= plan.window.shape[1] - 1))
         chosen = inside[np.linspace(0, len(inside) - 1, samples).astype(int)]
         cells = np.round(r[chosen]).astype(int), np.round(c[chosen]).astype(int)
-        brute = np.stack([shadow.ground_isolated(R.weighted_raster(raster, brdf, views[k]), item["coarse"], layer.coarse,
-                                                 workers=2)[:, i, j] for k, i, j in zip(chosen, *cells)], axis=1)
+        brute = np.stack([shadow.ground_isolated(R.weighted_raster(raster, brdf, views[k]), item["coarse"],
+                                                 layer.coarse, workers=2)[:, i, j]
+                          for k, i, j in zip(chosen, *cells)], axis=1)
         lambert = ground.coarse_sky[0][cells].T
         print(f"{path}: {samples} ground cells, view zeniths "
-              f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
+              f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-"
+              f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
         for tolerance in TOLERANCES:
             bands = R.choose_bands(brdf, raster, views, tolerance=tolerance)
@@ -139,8 +141,10 @@ def config_case(path: str, samples: int) -> None:
             banded = R.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
                                   weights[:, chosen], R.sky_ratio(brdf, raster, bands, views)[:, chosen])
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
-            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.total[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
+                  f"sky term {brute[1, worst]:.3f} of open {raster.total[1]:.3f}, banded {banded[1, worst]:.3f}")
+            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, "
+                  f"largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
 
 
@@ -171,7 +175,8 @@ def window_cases() -> None:
             cells = []
             for tolerance in TOLERANCES:
                 bands = R.choose_bands(brdf, raster, flat, tolerance=tolerance)
-                terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d, summed=True), spectrum, plan).reshape(-1)
+                terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d, summed=True), spectrum,
+                                                plan).reshape(-1)
                          for d in bands.directions()]
                 colour = shadow.ground_isolated(R.weighted_raster(raster, brdf, bands.directions()[bands.colour]),
                                                 spectrum, plan)

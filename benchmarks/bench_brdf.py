@@ -5,8 +5,9 @@ measured in the frame.
     python benchmarks/bench_brdf.py [--config configs/lawn-hotspot.yaml] [--frame 0] [--repeats 3]
 
 Times: ``render_frame``'s stages (ground, camera, composite) and the process's CPU time
-(``cpu``, both workers'), each frame rendered ``repeats`` times per reflectance, alternately, after one warm-up of each (cycle products in a temporary
-cache); medians, and the load average. Hot spot: the rendered radiance with the BRDF over the
+(``cpu``, both workers'), each frame rendered ``repeats`` times per reflectance, alternately,
+after one warm-up of each (cycle products in a temporary cache); medians, and the load average.
+Hot spot: the rendered radiance with the BRDF over the
 Lambertian radiance at the same pixel (the albedo texture, haze and foreground cancel nearly),
 at sunlit ground pixels (ground irradiance at least 0.9 of the open ground's) whose view
 vector lies within 2 degrees of the sun's direction (the antisolar point) and at those 39-41

@@ -111,7 +111,8 @@ def main() -> None:
         result = render_frame(plan, 0, store=store, workers=args.threads)
 
         def write(i):
-            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()), half=True)
+            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()),
+                         half=True)
             io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
 
         def write_raw(i):

@@ -135,7 +135,8 @@ def compare_opencv(config, plan) -> None:
     grid = Grid((0.0, 3.0), 0.1, (30, 30))
     worst = [np.abs(opencv_mask(one, grid) - canopy.rasterize_transmittance(one, grid)).max()
              for one in (leaves.subset(leaves=[i], wood=[]) for i in range(200))]
-    print(f"fillPoly LINE_AA: mask {lp.sun.mask.shape if lp.sun else lp.canopy.shape} {cpus['opencv']:.3f} s CPU against "
+    print(f"fillPoly LINE_AA: mask {lp.sun.mask.shape if lp.sun else lp.canopy.shape} "
+          f"{cpus['opencv']:.3f} s CPU against "
           f"{cpus['compiled']:.3f} s compiled; 200 single leaves: largest coverage difference per leaf, "
           f"median {np.median(worst):.2f}, max {np.max(worst):.2f} of a pixel's area")
 

@@ -236,7 +236,8 @@ class StochasticTiling:
         corners_high = np.stack([np.stack([ia + one, ib + one], -1), np.stack([ia + one, ib], -1),
                                  np.stack([ia, ib + one], -1)])
         vertices = np.where(lower[None, :, None], corners_low, corners_high)
-        weights = np.where(lower[None], np.stack([1.0 - fa - fb, fb, fa]), np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
+        weights = np.where(lower[None], np.stack([1.0 - fa - fb, fb, fa]),
+                           np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
         return vertices, weights
 
     def offsets(self, vertices) -> np.ndarray:

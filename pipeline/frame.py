@@ -272,7 +272,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         exposure = composite.exposure_for(light.unshadowed, stops=plan.exposure.stops)
     balance = composite.white_balance(
         plan.exposure.white_balance, sky_irradiance=light.sky_irradiance,
-        sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
+        sun_irradiance=(light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None
+                        else np.zeros(3)))
     clock.lap("composite")
     layers = {}
     if passes:

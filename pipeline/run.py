@@ -386,8 +386,8 @@ def _frames_here(config, plan, store, todo, digest, threads, codes):
 
 
 @portable
-def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None,
-                codes: bool = False):
+def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int,
+                command: int | None = None, codes: bool = False):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text), the PNG's 8-bit
     codes if ``codes`` else None): a worker's warnings are said by the process that runs the

@@ -29,7 +29,7 @@ def import_table(text: str) -> dict[str, set[str]]:
     section = text.split("### What each stage may import", 1)[1].split("\n#", 1)[0]
     rows = [line.split("|")[1:3] for line in section.splitlines() if line.startswith("| ") and "`" in line]
     groups = {}
-    for left, right in rows:
+    for left, _right in rows:
         for word in ("the physics", "the shared"):
             if left.strip().startswith(word):
                 groups[word] = set(re.findall(r"`(\w+)`", left))

@@ -48,7 +48,8 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
         "before = {f.__name__: len(f.signatures) for f in loops}\n"
         "assert sum(before.values()) > 0, before\n"
         "render_frame(plan, 0, store=cache.Cache(folder / 'cache'))\n"
-        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops if len(f.signatures) > before[f.__name__]})\n")
+        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops"
+        " if len(f.signatures) > before[f.__name__]})\n")
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout
     assert out.strip() == "{}", out
