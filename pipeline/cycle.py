@@ -14,7 +14,7 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, canopy, foreground, foregrounds, shadow
+from . import cache, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
@@ -35,13 +35,13 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
     else:
         grove, flutter = grove_of(c)
         heights = tuple(l.height for l in c.layers)
-        leaf_layer, wood_layer = canopy.layer_index(grove, heights)
-        shapes = canopy.project(
-            canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
+        leaf_layer, wood_layer = grove_geometry.layer_index(grove, heights)
+        shapes = grove_geometry.project(
+            grove_geometry.leaves_at(grove, flutter, cycle_frame), grove.wood,
             sun=np.array(plan.projection), plane_height=layer.height,
         ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
         period = layer.size if periodic else None
-        masks = [canopy.rasterize_transmittance(shapes, g, period=period) for g in grids]
+        masks = [rasteriser.rasterize_transmittance(shapes, g, period=period) for g in grids]
     return masks[0], (masks[1] if lp.sun else None)
 
 
@@ -238,7 +238,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
 
     def compute():
         grove, flutter = grove_of(c)
-        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
+        leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
         wood, owner = foreground.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import Camera, project_points
-from .canopy import Leaves, Shapes, Wood, coverage_fragments
 from .geometry import Grid, normalized
+from .grove_geometry import Leaves, Shapes, Wood
 from .io import ImageError, read_image
+from .rasteriser import coverage_fragments
 
 __all__ = ["LEAF_REFLECTANCE", "LEAF_TRANSMITTANCE", "BARK_REFLECTANCE", "ForegroundPasses", "check_passes_size",
            "read_passes", "sun_visibility", "leaf_sun_visibility", "sky_exposure", "tree_passes", "BARK_FURROWS",
@@ -151,9 +152,9 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -179,9 +180,9 @@ def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -208,9 +209,9 @@ def sky_exposure(leaves: Leaves, wood: Wood | None = None, *, pixel: float | Non
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     pixel : float, optional
         Raster pixel across the light's beam; default a quarter of the median leaf length (half the
@@ -350,9 +351,9 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
 
     Parameters
     ----------
-    leaves : canopy.Leaves
-        The grove's leaves at one cycle frame (``canopy.leaves_at``) [m].
-    wood : canopy.Wood or None
+    leaves : grove_geometry.Leaves
+        The grove's leaves at one cycle frame (``grove_geometry.leaves_at``) [m].
+    wood : grove_geometry.Wood or None
         Its wood (``grove.wood``) [m]; None: no wood.
     camera : camera.Camera
         The pinhole camera.
@@ -601,12 +602,12 @@ def taper_wood(wood: Wood) -> tuple[Wood, np.ndarray]:
 
     Parameters
     ----------
-    wood : canopy.Wood
+    wood : grove_geometry.Wood
         The capsules: ends (M, 3) and radii (M,) [m].
 
     Returns
     -------
-    pieces : canopy.Wood
+    pieces : grove_geometry.Wood
         The pieces: ends (k, 3) and radii (k,) [m].
     owner : numpy.ndarray
         (k,) int64, the capsule each piece comes from.
@@ -666,9 +667,9 @@ def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | No
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    stems : canopy.Wood
+    stems : grove_geometry.Wood
         The wood's pieces (``taper_wood``): ends (K, 3) and radii (K,) [m].
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -787,15 +788,15 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
                     seed: int = 0, coarse_wood: Wood | None = None):
     """The shapes of one tile of a periodic forest copied over every tile the camera sees.
 
-    Every shape is wrapped into the tile, as ``canopy.grow_grove`` makes them; the copies are those
+    Every shape is wrapped into the tile, as ``grove_geometry.grow_grove`` makes them; the copies are those
     whose bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
     MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The tile's leaves [m].
-    wood : canopy.Wood
+    wood : grove_geometry.Wood
         The tile's wood [m].
     camera : camera.Camera
         The pinhole camera.
@@ -807,15 +808,15 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
         Extinction length of the air (0: none, MAX_FOREST_REACH) [m].
     seed : int, optional
         Seed of the leaves' choice (default_rng([seed, 3])).
-    coarse_wood : canopy.Wood, optional
+    coarse_wood : grove_geometry.Wood, optional
         The stems as fewer, straight capsules, drawn instead of ``wood`` in the copies that
         STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere) [m].
 
     Returns
     -------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The copied leaves [m].
-    wood : canopy.Wood
+    wood : grove_geometry.Wood
         The copied stems [m].
     leaf_index : numpy.ndarray
         (N',) int64, the leaf of the tile that each is a copy of (for its per-shape values: sun

@@ -9,7 +9,7 @@ import functools
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground, io
+from . import camera, canopy, foreground, grove_geometry, io
 from .config import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 from .geometry import Grid
 
@@ -29,7 +29,7 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
 def grove_of(canopy_config: CanopyConfig):
     """The grove of a canopy config and its flutter, grown once per process."""
     trees, layer0 = canopy_config.trees, canopy_config.layers[0]
-    params = canopy.GroveParams(
+    params = grove_geometry.GroveParams(
         count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
         leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
         height=max(layer.height for layer in canopy_config.layers),
@@ -37,7 +37,7 @@ def grove_of(canopy_config: CanopyConfig):
         tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
         center=layer0.center, spread=trees.spread)
     f = canopy_config.flutter
-    return canopy.grow_grove(params), canopy.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+    return grove_geometry.grow_grove(params), grove_geometry.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
 
 
 @functools.lru_cache(maxsize=4)

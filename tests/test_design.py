@@ -12,7 +12,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
 PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "eclipse", "clouds", "ephemeris",
-           "canopy", "_raster", "_filter", "shadow", "albedo", "brdf", "camera", "foreground", "composite"}
+           "canopy", "grove_geometry", "rasteriser", "_raster", "_filter", "shadow", "albedo", "brdf", "camera",
+           "foreground", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 
 BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}
