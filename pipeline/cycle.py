@@ -14,7 +14,7 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow
+from . import cache, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow, tree_detail
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
@@ -218,13 +218,13 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
             "camera": asdict(plan.camera),
             "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
             "haze": plan.haze,
-            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
-                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+            "wood": {"tip": tree_detail.TIP_TAPER, "piece": tree_detail.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": tree_detail.BARK_FURROWS, "contrast": tree_detail.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
             "stored": "cut to the trees",  # cut_to_trees
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
-                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
-                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
+                "detail": tree_detail.LEAF_PIXELS, "reach": tree_detail.HAZE_REACH,
+                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
 
 
 def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
@@ -239,7 +239,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
     def compute():
         grove, flutter = grove_of(c)
         leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
-        wood, owner = foreground.taper_wood(grove.wood)
+        wood, owner = tree_detail.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
@@ -248,7 +248,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         view = plan.camera
         if c.layout == "periodic":  # the tile's trees on every tile in view
             layer = c.layers[0]
-            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+            leaves, wood, leaf_index, wood_index = tree_detail.periodic_copies(
                 leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
                 seed=c.trees.seed, coarse_wood=grove.wood)
             if has_sun:  # a straight capsule gets the mean visibility of its pieces

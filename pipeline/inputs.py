@@ -9,7 +9,7 @@ import functools
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground, grove_geometry, io
+from . import camera, canopy, foreground_passes, grove_geometry, io
 from .config import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 from .geometry import Grid
 
@@ -62,12 +62,12 @@ def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
     return albedos.stochastic_tiling(albedo_mipmap(ground))
 
 
-def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground.ForegroundPasses:
+def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground_passes.ForegroundPasses:
     """The imported passes of ``cycle_frame``, read and checked against the size of the camera
     ``view``. Raises io.ImageError naming the file."""
-    passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+    passes = foreground_passes.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
     try:
-        foreground.check_passes_size(passes, view)
+        foreground_passes.check_passes_size(passes, view)
     except ValueError as exc:
         raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
     return passes

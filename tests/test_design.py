@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
 PHYSICS = {"geometry", "constants", "colour", "daylight", "clearsky", "sky", "eclipse", "clouds", "ephemeris",
            "canopy", "grove_geometry", "rasteriser", "_raster", "_filter", "shadow", "albedo", "brdf", "camera",
-           "foreground", "composite"}
+           "foreground", "foreground_passes", "tree_detail", "composite"}
 """Modules of the method's mathematics: they know no config and no stage."""
 
 BASE = {"errors", "paths", "io", "cache", "vocabulary", "cores", "__init__"}

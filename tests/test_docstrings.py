@@ -11,8 +11,8 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
-MODULES_WITH_ALL = ["_filter", "cache", "colour", "composite", "constants", "cores", "errors", "foreground", "io",
-                    "paths", "report", "resolve", "runfolder", "vocabulary"]
+MODULES_WITH_ALL = ["_filter", "cache", "colour", "composite", "constants", "cores", "errors", "foreground",
+                    "foreground_passes", "io", "paths", "report", "resolve", "runfolder", "tree_detail", "vocabulary"]
 """The modules converted so far; the list grows until it is every module of pipeline/."""
 
 SELF = {"self", "cls"}

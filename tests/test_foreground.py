@@ -3,10 +3,11 @@ import pytest
 
 from pipeline import _raster, foreground, grove_geometry
 from pipeline.camera import Camera, project_points
-from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, TIP_TAPER, ForegroundPasses,
-                                 check_passes_size, leaf_sun_visibility, read_passes, sky_exposure,
-                                 stem_visibility, sun_visibility, taper_wood, tree_passes)
+from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, leaf_sun_visibility, sky_exposure,
+                                 stem_visibility, sun_visibility, tree_passes)
+from pipeline.foreground_passes import ForegroundPasses, check_passes_size, read_passes
 from pipeline.grove_geometry import Leaves, Wood
+from pipeline.tree_detail import TIP_TAPER, taper_wood
 from pipeline.io import ImageError, write_exr
 
 E_SUN = np.array([90.0, 85.0, 80.0])  # [klx]
