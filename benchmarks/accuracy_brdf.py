@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import brdf as R  # noqa: E402
 from pipeline import shadow  # noqa: E402
-from pipeline.config import BrdfConfig  # noqa: E402
+from pipeline.settings import BrdfConfig  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
 from pipeline.sky import ProceduralSky, SunDisc  # noqa: E402
 from pipeline.vocabulary import BRDF_PRESETS  # noqa: E402
@@ -65,13 +65,13 @@ def main() -> None:
 
 def open_ground() -> None:
     """Open ground: rendered radiance against the quadrature at five pixels (see the module's text)."""
-    from pipeline import camera as cam
+    from pipeline import camera as cam, texture
 
     def constant(value):
         value = np.asarray(value, np.float32).reshape(-1)
         value = np.broadcast_to(value, (3,)) if value.size == 1 else value
         grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-        return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
+        return texture.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
     sky = ProceduralSky(turbidity=3.0, sun=SunDisc(np.radians(315.0), np.radians(30.0)))
     raster = sky.raster(Grid((-4.0, 4.0), 8.0 / 96, (96, 96)))

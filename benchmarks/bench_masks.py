@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from pipeline import grove_geometry, rasteriser, shadow  # noqa: E402
-from pipeline.config import preview  # noqa: E402
+from pipeline.preview import preview  # noqa: E402
 from pipeline.cycle import layer_masks  # noqa: E402
 from pipeline.inputs import grove_of  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402

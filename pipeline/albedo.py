@@ -145,9 +145,9 @@ class StochasticTiling:
 
     Attributes
     ----------
-    texture : camera.MipMap
+    texture : texture.MipMap
         The tile, with outside "periodic" [1].
-    gaussian : camera.MipMap
+    gaussian : texture.MipMap
         The tile's Gaussian form (same levels) [1].
     center : numpy.ndarray
         (channels,) the tile's mean [1].
@@ -268,7 +268,7 @@ class StochasticTiling:
 
         Parameters
         ----------
-        fp : camera.Footprints
+        fp : texture.Footprints
             n ground footprints [m].
         lod_bias : float
             Bias of the mip level [1].
@@ -278,7 +278,7 @@ class StochasticTiling:
         numpy.ndarray
             (channels, n) float32 albedo [1].
         """
-        from . import _filter, camera
+        from . import _filter, texture
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
@@ -286,16 +286,16 @@ class StochasticTiling:
             return out
         if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
             return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
-        x, y, major, ex, ey = camera._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
+        x, y, major, ex, ey = texture._float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
         weight = np.empty((3, n))
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
         m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
-        taps, level, blend = camera._filter_choice(self.gaussian, lod_bias, major, fp.minor)
+        taps, level, blend = texture._filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
-        _filter.filtered(*camera._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
+        _filter.filtered(*texture._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
         _filter.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
                               np.ascontiguousarray(self.lookups, dtype=np.float64),
@@ -308,7 +308,7 @@ class StochasticTiling:
 
         Parameters
         ----------
-        fp : camera.Footprints
+        fp : texture.Footprints
             n ground footprints [m].
         lod_bias : float
             Bias of the mip level [1].
@@ -320,7 +320,7 @@ class StochasticTiling:
         numpy.ndarray
             (channels, n) float32 albedo [1].
         """
-        from . import camera
+        from . import texture
 
         vertices, w = self.weights(fp.x, fp.y)
         w = w**BLEND_SHARPNESS
@@ -328,11 +328,11 @@ class StochasticTiling:
         offset = self.offsets(vertices)
         g = np.zeros((self.channels, len(fp)), dtype=np.float64)
         for i in range(3):
-            moved = camera.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
-                                      fp.ex, fp.ey)
-            g += np.where(w[i] < skip, 0.0, w[i]) * camera._filtered_arrays(self.gaussian, moved, lod_bias)
+            moved = texture.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
+                                       fp.ex, fp.ey)
+            g += np.where(w[i] < skip, 0.0, w[i]) * texture._filtered_arrays(self.gaussian, moved, lod_bias)
         g /= np.sqrt(np.sum(w * w, axis=0))
-        _, level, blend = camera._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
+        _, level, blend = texture._filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
         level = level.astype(np.intp)
         upper = np.minimum(level + 1, self.gaussian.count - 1)
         position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
@@ -404,8 +404,8 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
 
     Parameters
     ----------
-    texture : camera.MipMap
-        From ``camera.mipmap``, outside "periodic" [1].
+    texture : texture.MipMap
+        From ``texture.mipmap``, outside "periodic" [1].
     seed : int, optional
         Seed of the vertices' offsets.
 
@@ -419,7 +419,7 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
     ValueError
         If the texture is not periodic.
     """
-    from . import camera
+    from .texture import mipmap
     from scipy.special import ndtri
 
     if texture.outside != "periodic":
@@ -439,8 +439,8 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
         gaussian[np.argsort(components[:, c].astype(np.float32)), c] = quantiles
     px, py = texture.period
     grid = Grid((0.0, py), px / cols, (rows, cols))
-    gauss_map = camera.mipmap(gaussian.reshape(rows, cols, channels), grid,
-                              outside="periodic", period=(px, py))
+    gauss_map = mipmap(gaussian.reshape(rows, cols, channels), grid,
+                       outside="periodic", period=(px, py))
     centres = -4.0 + 8.0 * (np.arange(LOOKUP_BINS) + 0.5) / LOOKUP_BINS
     lookups = np.empty((gauss_map.count, channels, LOOKUP_BINS))
     for k in range(gauss_map.count):

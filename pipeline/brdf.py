@@ -33,7 +33,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from .config import BrdfConfig  # model and parameters: any value with those two fields
+    from .settings import BrdfConfig  # model and parameters: any value with those two fields
 
 VIEW_ZENITH_LIMIT = np.radians(85.0)
 """The view zenith angle the models are read at, at most: a bowl-shaped RPV (k < 1) grows

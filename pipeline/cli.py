@@ -373,8 +373,8 @@ def _run_render(args) -> int:
     """
     from dataclasses import replace
 
-    from .config import preview
     from .cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
+    from .preview import preview
     from .resolve import resolve, source_digest
     from .runfolder import check_outputs, nothing_to_do, parse_frames
 

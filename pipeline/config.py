@@ -1,395 +1,64 @@
-"""YAML configuration to frozen, validated values.
+"""A config, YAML or a mapping, parsed and validated into frozen values.
 
 Angles are degrees in the YAML and radians in the values; lengths are metres. Every error names
 the key path (and the YAML line where there is one) and is raised before any work starts.
-File paths are relative to the folder of the config file.
-
-Why one module: the whole schema, every section's values, defaults and checks, with the
-one safe YAML reader they are read through; it imports no physics (docs/design.md).
+File paths are relative to the folder of the config file. The YAML is read by ``yamlsafe``,
+its mappings key by key by ``sections._Section``, into the values of ``settings``; this module
+holds the parsers, each section's checks and the limits they enforce. It imports no physics
+(docs/design.md, "What each stage may import").
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import re
-from dataclasses import asdict, dataclass, field, replace
-from datetime import datetime, timezone
 from pathlib import Path
 
-import yaml
-
-from . import __version__, paths
 from .constants import SUN_RADIUS_DEG
-from .errors import ConfigError
-from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DEFAULT_CIE_TYPE, DISPLAYS, NUMBER_RANGES,
-                         PASSES, PROCEDURAL_MODELS,
-                         SKY_MODELS, TIME_RANGE, TURBIDITY_RANGE, WHITE_BALANCES)
+from .sections import _Section, _is_number, _kind
+from .settings import (AUTO_LIMITS, AUTO_TIME_CONSTANT, AnimationConfig, AutoExposureConfig, BrdfConfig, CameraConfig,
+                       CanopyConfig, CanopyLayer, CloudsConfig, Config, FlutterConfig, ForegroundConfig, GroundConfig,
+                       MoonConfig, OutputConfig, RenderConfig, SiteConfig, SkyConfig, SunConfig, TreesConfig)
+from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DISPLAYS, FOREGROUNDS, PASSES,
+                         PROCEDURAL_MODELS, SKIES, TURBIDITY_RANGE, WHITE_BALANCES)
+from .yamlsafe import _Context, _key_lines, load_yaml
+
+__all__ = ["FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
+           "MAX_RADIANCE", "MOON_RADIUS_DEG", "VIDEOS", "default_name", "load_config", "parse_config", "size_text"]
 
 LAYOUTS = ("isolated", "periodic")
+"""The canopy's layouts: one grove or image, or a tile repeated without end."""
 MAX_LEAVES = 1_000_000
-"""Mean angular radius of the sun (959.63 arcsec at 1 au). [deg]"""
+"""Most leaves of a procedural grove, all its trees together."""
 MOON_RADIUS_DEG = 0.2725
 """Angular radius of the moon for explicit-angle eclipses: a little larger than the sun. [deg]"""
 MAX_RADIANCE = 1e30
 """Largest radiance accepted: float32 sums of many cells must stay finite. [radiance]"""
-
-
-@dataclass(frozen=True)
-class CanopyLayer:
-    """One canopy plane.
-
-    mask : tuple of Path -- transparency images (1 = open sky), north-up: one, or the frames of
-        a numbered sequence (the flutter cycle); empty for a procedural grove.
-    size : (float, float) -- metres covered by the image, x then y (the tile of a periodic
-        layout). [m]
-    center : (float, float) -- world x, y of the image centre. [m]
-    height : float -- height of the plane above the ground. [m]
-    """
-
-    mask: tuple[Path, ...]
-    size: tuple[float, float]
-    center: tuple[float, float]
-    height: float
-
-
-@dataclass(frozen=True)
-class TreesConfig:
-    """A seeded procedural grove (canopy.GroveParams): ``count`` trees of ``leaves_per_tree``
-    leaves of mean length ``leaf_length`` [m] in crowns of ``crown_radius`` [m], bases within
-    ``spread`` [m] of the canopy centre (None: chosen from the crowns)."""
-
-    count: int
-    seed: int
-    crown_radius: float
-    leaves_per_tree: int
-    leaf_length: float
-    spread: float | None
-
-
-@dataclass(frozen=True)
-class FlutterConfig:
-    """cycle : frames per flutter cycle; swing, twist : leaf amplitudes. [rad]"""
-
-    cycle: int
-    swing: float
-    twist: float
-
-
-@dataclass(frozen=True)
-class CanopyConfig:
-    """layout : 'isolated' or 'periodic'; layers : the canopy planes; trees : the procedural
-    grove (None when the layers have mask images); flutter : its motion."""
-
-    layout: str
-    layers: tuple[CanopyLayer, ...]
-    trees: TreesConfig | None
-    flutter: FlutterConfig
-
-    @property
-    def cycle(self) -> int:
-        """Frames in the canopy's cycle: the flutter cycle, or the length of the mask sequence."""
-        if self.trees is not None:
-            return self.flutter.cycle
-        return len(self.layers[0].mask)
-
-
-@dataclass(frozen=True)
-class SunConfig:
-    """The sun by explicit angles: elevation, azimuth (from north towards east), angular
-    radius. [rad]"""
-
-    elevation: float
-    azimuth: float
-    radius: float
-
-
-@dataclass(frozen=True)
-class SiteConfig:
-    """A place and a span of time: the sun and moon follow the ephemeris from ``start`` over
-    the first frame to ``end`` over the last. latitude, longitude [rad]; elevation [m]."""
-
-    latitude: float
-    longitude: float
-    elevation: float
-    start: datetime
-    end: datetime
-
-
-@dataclass(frozen=True)
-class MoonConfig:
-    """The moon's centre relative to the sun's, moving linearly from ``offset_start`` over the
-    first frame to ``offset_end`` over the last: (to the right, up) as the observer faces the
-    sun; its angular radius. [rad]"""
-
-    offset_start: tuple[float, float]
-    offset_end: tuple[float, float]
-    radius: float
-
-
-@dataclass(frozen=True)
-class CloudsConfig:
-    """cover : fraction of sky covered; scale : feature size [m]; altitude [m]; wind : (east,
-    north) [m/s]; thickness : optical depth of a full cloud; seed."""
-
-    cover: float = 0.4
-    scale: float = 800.0
-    altitude: float = 2000.0
-    wind: tuple[float, float] = (8.0, 2.0)
-    thickness: float = 1.0
-    seed: int = 1
-
-
-@dataclass(frozen=True)
-class SkyConfig:
-    """model : a name in ``vocabulary.SKY_MODELS``; radiance : linear RGB of a uniform sky;
-    hdri : equirectangular image; rotation [rad]; alpha : half-angle of the sky square [rad].
-    Procedural (models 'cie' and 'preetham', ``vocabulary.PROCEDURAL_MODELS``): turbidity (the Linke
-    turbidity factor; with turbidity_auto None until ``resolve.resolve`` looks it up in the
-    climatology for the site and the middle of the time span); cie_type (1..15, model 'cie'); the sun by angles or by site and
-    time; moon (with angles; implied by site and time); clouds; skylight (factor on the clear
-    sky, 0 for the sun alone). haze : extinction length of the air the camera looks through, 0
-    for none. [m]"""
-
-    model: str
-    radiance: tuple[float, float, float]
-    hdri: Path | None
-    rotation: float
-    alpha: float
-    turbidity: float = 3.0
-    sun: SunConfig | None = None
-    site: SiteConfig | None = None
-    moon: MoonConfig | None = None
-    clouds: CloudsConfig | None = None
-    haze: float = 3000.0
-    skylight: float = 1.0
-    cie_type: int = DEFAULT_CIE_TYPE
-    turbidity_auto: bool = False
-
-
-@dataclass(frozen=True)
-class GroundConfig:
-    """window : (x_min, y_min, x_max, y_max) [m], None to frame the canopy's shadow over the
-    animation (``plan.plan_run``); pixel : ground pixel [m]. The sun's fine raster:
-    sun_window (None: the ground the camera sees of the shadow, or the window when it is given)
-    and sun_pixel (None: chosen so the sun disc spans 16 cells, within MAX_SUN_PIXELS). [m]"""
-
-    window: tuple[float, float, float, float] | None
-    pixel: float
-    sun_window: tuple[float, float, float, float] | None = None
-    sun_pixel: float | None = None
-    albedo: str | Path = "grass"
-    albedo_size: float = 4.0
-    brdf: "BrdfConfig | None" = None
-
-
-@dataclass(frozen=True)
-class BrdfConfig:
-    """The ground's reflectance (``ground.brdf``): model, a name in
-    ``vocabulary.BRDF_PARAMETERS``; parameters ((name, value), ...) in that model's order
-    [1]; preset, the name it was given by (``vocabulary.BRDF_PRESETS``) or None. None in
-    GroundConfig is ``lambert``, the paper's constant, on the code path it always had."""
-
-    model: str
-    parameters: tuple[tuple[str, float], ...] = ()
-    preset: str | None = None
-
-
-AUTO_TIME_CONSTANT = 0.2
-"""Default time constant of ``camera.exposure: auto``: the exposure closes 63% of the gap to
-the metered light in this much film time. [s]"""
-AUTO_LIMITS = (-4.0, 10.0)
-"""Default limits of ``camera.exposure: auto``: the least and the most exposure, in stops over
-the fixed exposure of the run's clear sky. [stops]"""
-
-
-@dataclass(frozen=True)
-class AutoExposureConfig:
-    """``camera.exposure: auto``: the exposure follows the open ground's light (sun times S
-    plus sky) through a first-order lag of ``time_constant`` [s of film time], clamped to
-    ``limits`` (least, most) [stops] over the fixed exposure of the clear sky."""
-
-    time_constant: float = AUTO_TIME_CONSTANT
-    limits: tuple[float, float] = AUTO_LIMITS
-
-
-@dataclass(frozen=True)
-class CameraConfig:
-    """The pinhole camera: position (x, y, z) [m], None to stand it where it sees the canopy
-    and its shadows (``framing.frame_scene``); look_at (x, y, z) [m], or else yaw (azimuth of the
-    view, from north towards east) and pitch (negative looking down) [rad], None to look at the
-    canopy; vertical fov [rad]; resolution (width, height) [pixel]; exposure [stops] over the
-    default (white ground under the clear sky at 1), or with ``auto_exposure`` over the metered
-    light; display : a name in ``vocabulary.DISPLAYS``; white_balance : a name in
-    ``vocabulary.WHITE_BALANCES``."""
-
-    position: tuple[float, float, float] | None = None
-    look_at: tuple[float, float, float] | None = None
-    yaw: float | None = None
-    pitch: float | None = None
-    fov: float = math.radians(50.0)
-    resolution: tuple[int, int] = (1280, 720)
-    exposure: float = 0.0
-    display: str = "filmic"
-    auto_exposure: AutoExposureConfig | None = None
-    white_balance: str = "daylight"
-
-
-@dataclass(frozen=True)
-class ForegroundConfig:
-    """model : 'trees' (the canopy's grove, rendered), 'passes' (imported EXR sequences
-    ``sun``, ``sky``, ``alpha``, one file per cycle frame) or 'none'."""
-
-    model: str
-    sun: tuple[Path, ...] = ()
-    sky: tuple[Path, ...] = ()
-    alpha: tuple[Path, ...] = ()
-
-
-@dataclass(frozen=True)
-class AnimationConfig:
-    """frames : number of output frames; fps : frames per second of film time. [1/s]"""
-
-    frames: int
-    fps: float
-
-
 VIDEOS = ("mp4", "gif", "none")
-
-
-@dataclass(frozen=True)
-class OutputConfig:
-    """Where a run goes: frames ``name.0000.exr`` and ``.png`` and the video ``name.mp4`` in
-    ``folder`` (relative to the current folder; default ``renders/NAME``); video : a name in
-    VIDEOS; half : EXR frames in half floats (else float32); passes : the light passes each
-    EXR holds as layers beside the beauty, names in ``vocabulary.PASSES`` in their order there
-    (empty: none, and the EXR's bytes are as before passes existed); report : whether a render
-    that renders frames ends by writing the run's report (light.csv, light curve, contact
-    sheet; docs/runs.md, "The report")."""
-
-    name: str
-    folder: Path
-    video: str = "mp4"
-    half: bool = True
-    passes: tuple[str, ...] = ()
-    report: bool = True
-
-
-@dataclass(frozen=True)
-class RenderConfig:
-    """jobs : processes rendering at once (None: one per core); sun_cells : cells across the
-    sun disc's diameter on its fine grid, when ground.sun_pixel does not set it (16 shows
-    crescents)."""
-
-    jobs: int | None = None
-    sun_cells: int = 16
-
-
-_NOT_IN_DIGEST = {"output": ("name", "folder", "video", "report"), "render": ("jobs",)}
-"""Values that change where or how fast frames are made, not their bytes."""
-
-
-@dataclass(frozen=True)
-class Config:
-    path: Path
-    canopy: CanopyConfig
-    sky: SkyConfig
-    ground: GroundConfig
-    animation: AnimationConfig
-    camera: CameraConfig
-    foreground: ForegroundConfig
-    output: OutputConfig
-    render: RenderConfig = RenderConfig()
-    lines: dict = field(default_factory=dict, compare=False, repr=False)
-    """The YAML line of each key path, for messages."""
-
-    def where(self, key: str) -> str:
-        """'file:line: key' (or 'file: key') for a message about ``key``."""
-        return _Context(self.path, self.lines).where(key)
-
-    def digest(self) -> str:
-        """Hash of every value that shapes a frame's bytes and of every input file's bytes,
-        with the package version (16 hex)."""
-        values = asdict(self)
-        values.pop("path")
-        values.pop("lines")
-        for section, names in _NOT_IN_DIGEST.items():
-            for name in names:
-                values[section].pop(name)
-        if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
-            values["camera"].pop("auto_exposure")
-        if not values["output"]["passes"]:  # without passes a config hashes as it always did
-            values["output"].pop("passes")
-        if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did
-            values["ground"].pop("brdf")
-        files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
-                       | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
-                       | ({str(self.sky.hdri)} if self.sky.hdri else set())
-                       | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set()))
-        h = hashlib.sha256()
-        h.update(json.dumps(values, sort_keys=True, default=str).encode())
-        h.update(__version__.encode())
-        for name in files:
-            h.update(Path(name).read_bytes())
-        return h.hexdigest()[:16]
-
-
-PREVIEW_SCALE = 4
-"""A preview's camera has this many times fewer pixels across, its ground pixels are this many
-times larger."""
-PREVIEW_SUN_CELLS = 6
-PREVIEW_CYCLE = 8
-"""A preview's procedural leaves flutter through at most this many cycle frames (faster than in
-the full render): the cycle phase, a mask and its spectra per cycle frame, shrinks with it."""
-
-
-def preview(config: Config) -> Config:
-    """The config made small and fast for a first look: a quarter of the camera's resolution,
-    ground pixels four times larger (less where a periodic tile must stay a whole number of
-    them), the sun disc 6 cells across (imported foreground passes keep the camera's
-    resolution), a flutter cycle of at most 8 frames for procedural trees (not with imported
-    passes, one per cycle frame), the run in the ``preview`` folder inside the output folder.
-    Everything else, every leaf and the sky included, is kept, so the crescents and flecks
-    of the full render show (docs/accuracy.md, "Speed: preview and cycle phase")."""
-    ground = config.ground
-    factor = PREVIEW_SCALE
-    if config.canopy.layout == "periodic":
-        sides = [side / ground.pixel for layer in config.canopy.layers for side in layer.size]
-        factor = next(f for f in range(PREVIEW_SCALE, 0, -1)
-                      if all(abs(n / f - round(n / f)) < 1e-6 * n for n in sides))
-    pixel = ground.pixel * factor
-    sun_pixel = None
-    if ground.sun_pixel is not None:
-        sun_pixel = min(ground.sun_pixel * 16 / PREVIEW_SUN_CELLS, pixel)
-    width, height = config.camera.resolution
-    if config.foreground.model != "passes":  # imported passes keep their size
-        width, height = max(2, width // PREVIEW_SCALE), max(2, height // PREVIEW_SCALE)
-    canopy = config.canopy
-    if canopy.trees is not None and config.foreground.model != "passes":
-        canopy = replace(canopy, flutter=replace(canopy.flutter, cycle=min(canopy.flutter.cycle, PREVIEW_CYCLE)))
-    return replace(
-        config,
-        canopy=canopy,
-        ground=replace(ground, pixel=pixel, sun_pixel=sun_pixel),
-        camera=replace(config.camera, resolution=(width, height)),
-        render=replace(config.render, sun_cells=PREVIEW_SUN_CELLS),
-        output=replace(config.output, folder=config.output.folder / "preview"))
-
-
-MAX_CONFIG_BYTES = 1 << 20
-"""Largest config file read. [byte]"""
-MAX_YAML_VALUES = 100_000
-"""Most keys, values and list items a config may hold, its aliases expanded."""
-MAX_YAML_DEPTH = 32
-"""Deepest nesting of mappings and lists in a config."""
-_TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
+"""The video formats of ``output.video``."""
 
 
 def load_config(path, *, named_frames: bool = True) -> Config:
-    """Read and validate a YAML config file; raise ConfigError naming the file and key.
-    ``named_frames=False`` (commands that write no named frames: ``frame``, ``ground``, ``sky``,
-    ``mask``): an ``output.name`` that is no valid name is replaced by the default one."""
+    """Read and validate a YAML config file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The config file; the file paths in it are relative to its folder.
+    named_frames : bool, default True
+        False for the commands that write no named frames (``frame``, ``ground``, ``sky``,
+        ``mask``): an ``output.name`` that is no valid name is replaced by the default one.
+
+    Returns
+    -------
+    Config
+        The config's values.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key path and its line.
+    """
     node, data = load_yaml(path)
     path = Path(path)
     lines: dict[str, int] = {}
@@ -399,314 +68,31 @@ def load_config(path, *, named_frames: bool = True) -> Config:
 
 
 def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames: bool = True) -> Config:
-    """Validate a config given as a mapping (what a YAML file would hold), its file paths
-    relative to ``base_dir``, as if read from ``base_dir/NAME.yaml``; raise ConfigError naming
-    the key."""
+    """Validate a config given as a mapping, as if read from ``base_dir/NAME.yaml``.
+
+    Parameters
+    ----------
+    mapping : dict
+        What a YAML file would hold.
+    base_dir : str or path-like
+        The folder its file paths are relative to.
+    name : str, default 'config'
+        The config file's name without ``.yaml`` (the default output name).
+    named_frames : bool, default True
+        As for ``load_config``.
+
+    Returns
+    -------
+    Config
+        The config's values.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key path.
+    """
     path = Path(base_dir) / f"{name}.yaml"
     return _parse(_Section(mapping, "", _Context(path, {})), path, named_frames)
-
-
-def load_yaml(path):
-    """The one place YAML is read: (node tree, values) of a UTF-8 file of at most
-    MAX_CONFIG_BYTES, at most MAX_YAML_DEPTH deep and MAX_YAML_VALUES values with its aliases
-    expanded. Raises ConfigError naming the file (and line) before anything big is built."""
-    if problem := paths.problem(path):
-        raise ConfigError(paths.shown(path), f"bad config path: {problem}")
-    path = Path(path)
-    try:
-        with open(path, "rb") as file:
-            raw = file.read(MAX_CONFIG_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(str(path), f"cannot read the config ({exc.strerror or exc})") from None
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError(str(path), f"the config is over {MAX_CONFIG_BYTES} bytes; the most is "
-                          f"{MAX_CONFIG_BYTES} (is it a config?)")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        raise ConfigError(f"{path}:{line}", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
-                          f"offset {exc.start}); save the config as UTF-8") from None
-    loader = yaml.SafeLoader(text)
-    try:
-        depth = 0
-        for event in yaml.parse(text, Loader=yaml.SafeLoader):  # flat: no recursion
-            depth += (isinstance(event, yaml.CollectionStartEvent)
-                      - isinstance(event, yaml.CollectionEndEvent))
-            if depth > MAX_YAML_DEPTH:
-                raise ConfigError(f"{path}:{event.start_mark.line + 1}", _TOO_DEEP)
-        node = loader.get_single_node()
-        if node is not None:
-            _expanded_size(node, 0, set(), {}, path)
-        data = loader.construct_document(node) if node is not None else None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ConfigError(where, f"not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
-    except ConfigError:
-        raise
-    except (ValueError, OverflowError, TypeError) as exc:  # a value YAML parsed but cannot build
-        raise ConfigError(str(path), f"not valid YAML ({exc})") from None
-    finally:
-        loader.dispose()
-    return node, data
-
-
-def _expanded_size(node, depth, holders, sizes, path) -> int:
-    """Values under ``node`` with every alias expanded (``sizes`` by node id, ``holders`` the
-    nodes above it). Raises ConfigError past MAX_YAML_DEPTH or MAX_YAML_VALUES, or for an alias
-    inside what it names."""
-    where = f"{path}:{node.start_mark.line + 1}"
-    if depth > MAX_YAML_DEPTH:
-        raise ConfigError(where, _TOO_DEEP)
-    if id(node) in holders:
-        raise ConfigError(where, "an alias refers to a mapping or list that holds it")
-    if id(node) not in sizes:
-        if isinstance(node, yaml.ScalarNode):
-            return 1
-        children = node.value if isinstance(node, yaml.SequenceNode) else \
-            [n for pair in node.value for n in pair]
-        holders.add(id(node))
-        total = 1
-        for child in children:
-            total += _expanded_size(child, depth + 1, holders, sizes, path)
-            if total > MAX_YAML_VALUES:
-                raise ConfigError(where, f"holds over {MAX_YAML_VALUES} values, its aliases "
-                                  f"expanded; the most is {MAX_YAML_VALUES}")
-        holders.discard(id(node))
-        sizes[id(node)] = total
-    return sizes[id(node)]
-
-
-@dataclass(frozen=True)
-class _Context:
-    path: Path
-    lines: dict
-
-    def where(self, key: str) -> str:
-        line = self.lines.get(key)
-        location = f"{self.path}:{line}" if line else str(self.path)
-        return f"{location}: {key}" if key else location
-
-
-def _key_lines(node, prefix, lines, path):
-    """Record the YAML line of every key path; reject duplicate keys."""
-    if isinstance(node, yaml.MappingNode):
-        seen = set()
-        for key_node, value_node in node.value:
-            key = f"{prefix}.{key_node.value}" if prefix else str(key_node.value)
-            if key in seen:
-                raise ConfigError(f"{path}:{key_node.start_mark.line + 1}: {key}", "duplicate key")
-            seen.add(key)
-            lines[key] = key_node.start_mark.line + 1
-            _key_lines(value_node, key, lines, path)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            key = f"{prefix}[{i}]"
-            lines[key] = item.start_mark.line + 1
-            _key_lines(item, key, lines, path)
-
-
-_MISSING = object()
-
-
-class _Section:
-    """A mapping being read: takes keys one by one, then reports the keys nobody took."""
-
-    def __init__(self, data, path: str, ctx: _Context):
-        if not isinstance(data, dict):
-            raise ConfigError(ctx.where(path), f"must be a mapping of keys, not {_kind(data)}")
-        self.data, self.path, self.ctx, self.taken = data, path, ctx, set()
-
-    def key(self, name):
-        return f"{self.path}.{name}" if self.path else name
-
-    def fail(self, name, message):
-        raise ConfigError(self.ctx.where(self.key(name)), message)
-
-    def has(self, name):
-        return name in self.data
-
-    def raw(self, name, default=_MISSING):
-        self.taken.add(name)
-        if name not in self.data:
-            if default is _MISSING:
-                raise ConfigError(self.ctx.where(self.path or ""), f"missing key '{self.key(name)}'")
-            return default
-        return self.data[name]
-
-    def section(self, name, default=_MISSING):
-        value = self.raw(name, {} if default is _MISSING else default)
-        return _Section(value, self.key(name), self.ctx)
-
-    def number(self, name, default=_MISSING, *, above=None, at_least=None, below=None):
-        value = self.raw(name, default)
-        if not _is_number(value):
-            self.fail(name, f"must be a number, not {_kind(value)}")
-        value = float(value)
-        if not math.isfinite(value):
-            self.fail(name, f"must be a finite number (got {value})")
-        if above is not None and not value > above:
-            self.fail(name, f"must be above {above:g} (got {value:g})")
-        if at_least is not None and not value >= at_least:
-            self.fail(name, f"must be at least {at_least:g} (got {value:g})")
-        if below is not None and not value < below:
-            self.fail(name, f"must be below {below:g} (got {value:g})")
-        self.in_range(name, value)
-        return value
-
-    def in_range(self, name, value):
-        """Fail naming the key and its range if ``value`` lies outside NUMBER_RANGES."""
-        limits = NUMBER_RANGES.get(re.sub(r"\[\d+\]", "[]", self.key(name)))
-        if limits is not None and not limits[0] <= value <= limits[1]:
-            least, most, got = (str(v) if isinstance(v, int) else f"{v:g}" if isinstance(v, float) else v
-                                 for v in (*limits[:2], value))
-            self.fail(name, f"must lie in [{least}, {most}]{' ' + limits[2] if limits[2] else ''} (got {got})")
-
-    def numbers(self, name, count, default=_MISSING):
-        value = self.raw(name, default)
-        if not (isinstance(value, (list, tuple)) and len(value) == count):
-            self.fail(name, f"must be a list of {count} numbers, not {_kind(value)}")
-        for item in value:
-            if not _is_number(item) or not math.isfinite(float(item)):
-                self.fail(name, f"must be a list of {count} finite numbers (got {value})")
-            self.in_range(name, float(item))
-        return tuple(float(v) for v in value)
-
-    def integer(self, name, default=_MISSING, *, at_least=None):
-        value = self.raw(name, default)
-        if not (_is_number(value) and float(value).is_integer()):
-            self.fail(name, f"must be a whole number, not {_kind(value)}")
-        if at_least is not None and value < at_least:
-            self.fail(name, f"must be at least {at_least} (got {int(value)})")
-        self.in_range(name, value)
-        return int(value)
-
-    def utc(self, name):
-        value = self.raw(name)
-        if isinstance(value, str):
-            try:
-                value = datetime.fromisoformat(value.replace("Z", "+00:00"))
-            except ValueError:
-                self.fail(name, f"must be a time like \"2024-04-08T18:20:00Z\" (got {value!r})")
-        if not isinstance(value, datetime):
-            self.fail(name, f"must be a time like \"2024-04-08T18:20:00Z\", not {_kind(value)}")
-        if value.tzinfo is None:
-            self.fail(name, "must say its time zone, e.g. end in Z for UTC")
-        first, last = (datetime.fromisoformat(t) for t in TIME_RANGE)
-        try:
-            utc = value.astimezone(timezone.utc)
-        except OverflowError:
-            utc = None
-        if utc is None or not first <= utc <= last:
-            self.fail(name, f"must lie from {TIME_RANGE[0][:19]}Z to {TIME_RANGE[1][:19]}Z in UTC, its "
-                      f"offset applied (got {value.isoformat()})")
-        return utc
-
-    def mask_files(self, name):
-        """One image, or a numbered sequence ``leaves.%04d.png`` from frame 0 (or 1) on."""
-        value = self.raw(name)
-        if not isinstance(value, str) or "%" not in value:
-            return (self.file(name),)
-        self.check_path(name, value)
-        pattern = self.resolved(name, value)
-        widths = re.findall(r"%[-#0 +]*(\d*)(?:\.(\d*))?", value)
-        if any(int(n or 0) > paths.NAME_MAX for field in widths for n in field):
-            self.fail(name, f"a number field of width {max(int(n or 0) for f in widths for n in f)} "
-                      f"makes names longer than the most, {paths.NAME_MAX} bytes")
-        try:
-            names = [Path(str(pattern) % i) for i in range(2)]
-        except (TypeError, ValueError):
-            self.fail(name, f"a sequence needs one number field like %04d (got {paths.shown(value)!r})")
-        first = next((i for i, n in enumerate(names) if n.is_file()), None)
-        if first is None:
-            self.fail(name, f"no such files: {paths.shown(names[0])} or {paths.shown(names[1])}")
-        frames = []
-        while Path(str(pattern) % (first + len(frames))).is_file():
-            frames.append(Path(str(pattern) % (first + len(frames))))
-        return tuple(frames)
-
-    def choice(self, name, choices, default=_MISSING):
-        value = self.raw(name, default)
-        if value not in choices:
-            self.fail(name, f"unknown value {value!r}; valid: {', '.join(choices)}")
-        return value
-
-    def file(self, name):
-        value = self.raw(name)
-        if not isinstance(value, str) or not value:
-            self.fail(name, f"must be a file name, not {_kind(value)}")
-        self.check_path(name, value)
-        path = self.resolved(name, value)
-        if not path.is_file():
-            self.fail(name, f"no such file: {path}")
-        try:
-            with open(path, "rb"):
-                pass
-        except OSError as exc:
-            self.fail(name, f"cannot read {path} ({exc.strerror})")
-        return path
-
-    def check_path(self, name, value):
-        """Fail naming the key if ``value`` cannot be a path (see ``paths.problem``)."""
-        if problem := paths.problem(value):
-            self.fail(name, problem)
-
-    def resolved(self, name, value) -> Path:
-        """``value`` relative to the config's folder, made absolute, the whole path checked
-        (the folder too may hold bytes that are not UTF-8)."""
-        path = (self.ctx.path.parent / value).resolve()
-        self.check_path(name, path)
-        return path
-
-    def done(self):
-        unknown = [k for k in self.data if k not in self.taken]
-        if unknown:
-            pattern = re.sub(r"\[\d+\]", "[]", self.path)
-            valid = ", ".join(sorted(self.taken | set(_VALID_KEYS.get(pattern, ()))))
-            self.fail(str(unknown[0]), f"unknown key (valid here: {valid})")
-
-
-_VALID_KEYS = {
-    "": ("animation", "ground", "canopy", "sky", "camera", "foreground", "output", "render"),
-    "canopy": ("layout", "trees", "flutter", "mask", "size", "center", "height", "layers"),
-    "canopy.layers[]": ("mask", "size", "center", "height"),
-    "canopy.trees": ("count", "seed", "crown_radius", "leaves_per_tree", "leaf_length", "spread"),
-    "canopy.flutter": ("cycle", "swing", "twist"),
-    "sky": ("model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
-            "time", "moon", "clouds", "skylight", "haze"),
-    "sky.sun": ("elevation", "azimuth", "radius"),
-    "sky.moon": ("offset_start", "offset_end", "radius"),
-    "sky.clouds": ("cover", "scale", "altitude", "wind", "thickness", "seed"),
-    "sky.site": ("latitude", "longitude", "elevation"),
-    "sky.time": ("start", "end"),
-    "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"),
-    "ground.brdf": ("model", "rho0", "k", "theta", "rho_c", "f_iso", "f_vol", "f_geo"),
-    "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
-               "white_balance"),
-    "camera.exposure": ("mode", "stops", "time_constant", "limits"),
-    "foreground": ("model", "sun", "sky", "alpha"),
-    "animation": ("frames", "fps"),
-    "output": ("name", "folder", "video", "half", "passes", "report"),
-    "render": ("jobs", "sun_cells"),
-}
-"""Every key each section accepts (a layer's index written []), whichever the parser reads:
-what an unknown-key error lists."""
-
-
-def _is_number(value) -> bool:
-    """An int or float (not a bool); an int too big for a float is not one."""
-    return isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)
-                                        and abs(value) < 10**300)
-
-
-def _kind(value) -> str:
-    if value is None:
-        return "nothing"
-    text = {dict: "a mapping", list: "a list", str: f"the text {value!r}", bool: f"{value}"}.get(
-        type(value), repr(value)
-    )
-    return text if len(text) <= 80 else f"{text[:60]}... ({len(text)} characters)"
 
 
 def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
@@ -745,7 +131,18 @@ def _check_frames(root: _Section, animation: AnimationConfig, camera: CameraConf
 
 
 def size_text(count: float) -> str:
-    """A byte count for a message: '3.2 GB'. [byte]"""
+    """A byte count for a message.
+
+    Parameters
+    ----------
+    count : float
+        Bytes. [B]
+
+    Returns
+    -------
+    str
+        Three significant digits and a decimal unit, e.g. '3.2 GB'.
+    """
     for unit in ("B", "kB", "MB", "GB", "TB"):
         if count < 1000 or unit == "TB":
             return f"{count:.3g} {unit}"
@@ -753,8 +150,19 @@ def size_text(count: float) -> str:
 
 
 def default_name(path: Path) -> str:
-    """The output name a config file gives by default: its file name without the suffix, every
-    run of characters other than letters, digits, - and _ (a dot, a space) made one _."""
+    """The output name a config file gives by default.
+
+    Parameters
+    ----------
+    path : Path
+        The config file.
+
+    Returns
+    -------
+    str
+        Its file name without the suffix, every run of characters other than letters, digits,
+        - and _ (a dot, a space) made one _; 'sunshade' if nothing is left.
+    """
     name = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem).strip("_")
     return name or "sunshade"
 
@@ -964,13 +372,11 @@ def _parse_layer(s: _Section, base: dict, ground: GroundConfig, layout: str, *, 
 def _parse_sky(s: _Section) -> SkyConfig:
     if s.raw("model", "cie") == "procedural":  # the former name of the CIE clear sky
         s.data = {**s.data, "model": "cie"}
-    model = s.choice("model", SKY_MODELS, "cie")
-    procedural = " or ".join(PROCEDURAL_MODELS)
-    owners = {"radiance": "uniform", "hdri": "hdri", "rotation": "hdri", "cie_type": "cie",
-              **dict.fromkeys(("turbidity", "sun", "site", "time", "moon", "clouds", "skylight"), procedural)}
-    for key, owner in owners.items():
-        if s.has(key) and model not in owner.split(" or "):
-            s.fail(key, f"only used with model: {owner} (model is {model})")
+    model = s.choice("model", SKIES.names, "cie")
+    for key in SKIES.owned_keys():
+        owners = SKIES.owners(key)
+        if s.has(key) and model not in owners:
+            s.fail(key, f"only used with model: {' or '.join(owners)} (model is {model})")
     radiance = (1.0, 1.0, 1.0)
     hdri = None
     if model == "uniform":
@@ -989,8 +395,20 @@ def _parse_sky(s: _Section) -> SkyConfig:
     if model in PROCEDURAL_MODELS:
         extra = _parse_procedural(s, model)
     extra["haze"] = s.number("haze", SkyConfig.haze, at_least=0.0)
+    extra["params"] = _parse_numbers(s, SKIES[model].numbers)
     s.done()
     return SkyConfig(model, radiance, hdri, rotation, alpha, **extra)
+
+
+def _parse_numbers(s: _Section, numbers: dict) -> tuple[tuple[str, float], ...]:
+    """The number keys of a registered model (``registry.Model.numbers``), each inside its range."""
+    values = []
+    for key, (default, least, most, unit) in numbers.items():
+        value = s.number(key, default)
+        if not least <= value <= most:
+            s.fail(key, f"must lie in [{least:g}, {most:g}] {unit} (got {value:g})")
+        values.append((key, value))
+    return tuple(values)
 
 
 def _parse_procedural(s: _Section, model: str) -> dict:
@@ -1063,7 +481,7 @@ def _parse_site(s: _Section, t: _Section) -> SiteConfig:
 
 
 MAX_IMAGE_PIXELS = 64_000_000
-FOREGROUNDS = ("trees", "passes", "none")
+"""Most pixels of the camera's picture. [pixel]"""
 
 
 def _parse_camera(s: _Section) -> CameraConfig:
@@ -1118,7 +536,7 @@ def _parse_exposure(s: _Section):
 
 
 def _parse_foreground(s: _Section, canopy: CanopyConfig) -> ForegroundConfig:
-    model = s.choice("model", FOREGROUNDS, "trees" if canopy.trees else "none")
+    model = s.choice("model", FOREGROUNDS.names, "trees" if canopy.trees else "none")
     if model == "trees" and canopy.trees is None:
         s.fail("model", "'trees' renders the canopy's procedural grove; this canopy has mask images")
     files = {}
@@ -1128,6 +546,6 @@ def _parse_foreground(s: _Section, canopy: CanopyConfig) -> ForegroundConfig:
             if len(files[name]) != canopy.cycle:
                 s.fail(name, f"needs one file per cycle frame: {canopy.cycle}, found {len(files[name])}")
         elif s.has(name):
-            s.fail(name, f"only used with model: passes (model is {model})")
+            s.fail(name, f"only used with model: {' or '.join(FOREGROUNDS.owners(name))} (model is {model})")
     s.done()
     return ForegroundConfig(model, **files)

@@ -26,13 +26,14 @@ import yaml
 from . import cache, composite, ephemeris, io
 from . import sky as sky_models
 from .colour import REC709_LUMINANCE
-from .config import Config, parse_config
+from .config import parse_config
 from .cycle import layer_masks
 from .frame import FrameResult, render_frame
 from .plan import RunPlan, plan_run
 from .scene import load_sky, scene_at
 from .resolve import resolve
 from .geometry import Grid, I0, projected_solid_angle
+from .settings import Config
 
 FIGURES = (
     ("fig04-mask.png",

@@ -10,7 +10,7 @@ from typing import Protocol
 import numpy as np
 
 from .camera import Camera
-from .config import ForegroundConfig
+from .settings import ForegroundConfig
 from .inputs import imported_passes
 
 __all__ = ["ForegroundLayer", "ForegroundModel", "TreesForeground", "ImportedForeground", "NoForeground",

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import brdf as reflect
-from . import cache, camera, composite
+from . import cache, camera, composite, texture
 from .colour import REC709_LUMINANCE
 from .cores import default_workers
 from .cycle import foreground_item
@@ -54,7 +54,7 @@ def foreground_layer(plan: RunPlan, cycle_frame: int, store: cache.Cache,
                                  bounce=0.5 * albedo_mipmap(plan.ground).mean)
 
 
-def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap, ...]:
+def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[texture.MipMap, ...]:
     """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
     coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
     (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
@@ -62,17 +62,17 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[camera.MipMap,
     rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
     if ground.outer:
         rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
-    maps = [camera.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
+    maps = [texture.mipmap(r, g, outside="constant", value=np.full(3, np.nan)) for r, g in rasters[:-1]]
     raster, grid = rasters[-1]
     if plan.canopy.layout == "periodic":
         period = plan.canopy.layers[0].size
         x0, y0, x1, y1 = grid.extent
         if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
-            return (*maps, camera.mipmap(raster, grid, outside="periodic", period=period))
+            return (*maps, texture.mipmap(raster, grid, outside="periodic", period=period))
         value = raster.reshape(-1, raster.shape[-1]).mean(axis=0)
     else:
         value = ground.unshadowed
-    return (*maps, camera.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
+    return (*maps, texture.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
 
 
 @dataclass(frozen=True)
@@ -293,7 +293,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
                                         np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
                                                         else t.irradiance for k, t in enumerate(terms)], axis=-1),
                                         *open_light)
-        sky_maps = (camera.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
+        sky_maps = (texture.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(plan.ground), sun=irradiance_maps(plan, ground.sun_part()),
         sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)
@@ -312,8 +312,8 @@ def compile_loops(plan: RunPlan) -> None:
         view = plan.camera
         tiny = camera.Camera(view.position, view.yaw, view.pitch, view.vertical_fov, width=8, height=6)
         empty = np.zeros((*plan.window.shape, 3), dtype=np.float32)
-        maps = (camera.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
-                camera.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
+        maps = (texture.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
+                texture.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
         sky = plan.sky.at(plan.scenes[0])
         background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky)
         share = np.ones((tiny.height, tiny.width, 1), dtype=np.float32)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import camera, grove_geometry
-from .config import Config
+from .settings import Config
 from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
 from .scene import shading_scenes, sun_shades

@@ -9,9 +9,9 @@ import functools
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground_passes, grove_geometry, io
-from .config import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
+from . import camera, canopy, foreground_passes, grove_geometry, io, texture
 from .geometry import Grid
+from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
@@ -41,7 +41,7 @@ def grove_of(canopy_config: CanopyConfig):
 
 
 @functools.lru_cache(maxsize=4)
-def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
+def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
     """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image
     covering ``albedo_size`` metres a side."""
     if ground.albedo == "grass":
@@ -51,7 +51,8 @@ def albedo_mipmap(ground: GroundConfig) -> camera.MipMap:
         image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
         rows, cols = image.shape[:2]
         grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
-    return camera.mipmap(image, grid, outside="periodic", period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
+    return texture.mipmap(image, grid, outside="periodic",
+                          period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
 
 
 @functools.lru_cache(maxsize=4)

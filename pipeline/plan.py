@@ -17,13 +17,14 @@ import numpy as np
 
 from . import canopy, grove_geometry, io, shadow
 from .camera import Camera
-from .config import AutoExposureConfig, CanopyConfig, CanopyLayer, Config, GroundConfig, OutputConfig, size_text
+from .config import size_text
 from .errors import ConfigError
 from .framing import AUTO_SUN_MASK, frame_scene
 from .geometry import Grid, sky_plane_from_direction
 from .inputs import albedo_mipmap, grove_of, load_mask
 from .resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
 from .scene import Scene, scene_at, shading_scenes, sky_model, sun_shades
+from .settings import AutoExposureConfig, CanopyConfig, CanopyLayer, Config, GroundConfig, OutputConfig
 from .vocabulary import FOREGROUNDS, PROCEDURAL_MODELS
 
 if TYPE_CHECKING:

@@ -12,8 +12,9 @@ import hashlib
 import math
 from dataclasses import replace
 
-from .config import Config, load_config, size_text
+from .config import load_config, size_text
 from .errors import ConfigError
+from .settings import Config
 from .vocabulary import TURBIDITY_RANGE
 
 __all__ = ["MAX_GROUND_PIXELS", "MAX_FFT_CELLS", "MAX_SUN_PIXELS", "BYTES_PER_CELL", "MIN_SUN_ELEVATION",

@@ -33,7 +33,7 @@ import numpy as np
 
 from . import __version__, cache, io
 from .composite import display
-from .config import Config
+from .settings import Config
 from .errors import RunError, SunshadeError, portable
 from .cycle import config_item_keys, cycle_phase, record_config_items
 from .frame import compile_loops, render_frame

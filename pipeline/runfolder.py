@@ -27,7 +27,7 @@ import filelock
 
 from . import __version__, paths
 from .cache import Cache
-from .config import Config
+from .settings import Config
 from .cores import jobs_and_threads
 from .errors import RunError
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config import Config, SkyConfig
+from .settings import Config, SkyConfig
 from .sky import MoonDisc, Sky, SunDisc
 from .vocabulary import SKIES
 

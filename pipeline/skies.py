@@ -15,7 +15,8 @@ import numpy as np
 from . import ephemeris, io
 from . import sky as skylib
 from .clouds import CloudLayer
-from .config import MAX_RADIANCE, SkyConfig
+from .config import MAX_RADIANCE
+from .settings import SkyConfig
 from .eclipse import METER_TABLE
 from .geometry import offset_direction
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import sky as skylib
-from .config import SkyConfig
+from .settings import SkyConfig
 
 __all__ = ["OvercastModel"]
 

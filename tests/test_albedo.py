@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pipeline import albedo, camera
+from pipeline import albedo, camera, texture
 from pipeline.albedo import grass_albedo, stochastic_tiling
 
 
@@ -44,13 +44,13 @@ def test_grass_albedo_is_deterministic_by_seed():
 
 def _tiled(size_px=256, period=4.0):
     image, grid = grass_albedo(size_px=size_px, period=period, seed=2)
-    mip = camera.mipmap(image, grid, outside="periodic", period=(period, period))
+    mip = texture.mipmap(image, grid, outside="periodic", period=(period, period))
     return mip, stochastic_tiling(mip, seed=5)
 
 
 def _points(x, y, width):
     n = x.size
-    return camera.Footprints(x.ravel(), y.ravel(), np.full(n, width), np.full(n, width), np.ones(n), np.zeros(n))
+    return texture.Footprints(x.ravel(), y.ravel(), np.full(n, width), np.full(n, width), np.ones(n), np.zeros(n))
 
 
 def test_stochastic_tiling_breaks_the_tile_period():
@@ -61,11 +61,11 @@ def test_stochastic_tiling_breaks_the_tile_period():
     rng = np.random.default_rng(1)
     x, y = rng.uniform(-200.0, 200.0, (2, 40000))
     luminance = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    here = luminance @ tiling.sample(_points(x, y, 0.016), lod_bias=camera.LOD_BIAS)
-    plain = luminance @ camera.sample_footprints(mip, _points(x, y, 0.016)).T
+    here = luminance @ tiling.sample(_points(x, y, 0.016), lod_bias=texture.LOD_BIAS)
+    plain = luminance @ texture.sample_footprints(mip, _points(x, y, 0.016)).T
     for dx, dy in ((period, 0.0), (0.0, period), (period, period)):
-        there = luminance @ tiling.sample(_points(x + dx, y + dy, 0.016), lod_bias=camera.LOD_BIAS)
-        plain_there = luminance @ camera.sample_footprints(mip, _points(x + dx, y + dy, 0.016)).T
+        there = luminance @ tiling.sample(_points(x + dx, y + dy, 0.016), lod_bias=texture.LOD_BIAS)
+        plain_there = luminance @ texture.sample_footprints(mip, _points(x + dx, y + dy, 0.016)).T
         assert np.corrcoef(plain, plain_there)[0, 1] > 0.999
         assert abs(np.corrcoef(here, there)[0, 1]) < 0.15
 
@@ -76,15 +76,15 @@ def test_stochastic_tiling_keeps_the_tiles_histogram_and_mean_at_every_scale():
     mip, tiling = _tiled()
     rng = np.random.default_rng(3)
     x, y = rng.uniform(-100.0, 100.0, (2, 60000))
-    tile = camera.sample_footprints(mip, _points(x, y, 0.01))  # the same bilinear reads, untiled
-    laid = tiling.sample(_points(x, y, 0.01), lod_bias=camera.LOD_BIAS).T
+    tile = texture.sample_footprints(mip, _points(x, y, 0.01))  # the same bilinear reads, untiled
+    laid = tiling.sample(_points(x, y, 0.01), lod_bias=texture.LOD_BIAS).T
     np.testing.assert_allclose(laid.mean(axis=0), tile.mean(axis=0), rtol=0.02)
     np.testing.assert_allclose(laid.std(axis=0), tile.std(axis=0), rtol=0.08)
     for q in (5, 50, 95):
         np.testing.assert_allclose(np.percentile(laid, q, axis=0), np.percentile(tile, q, axis=0), rtol=0.06)
     for width in (0.5, 8.0):
-        plain = camera.sample_footprints(mip, _points(x[:5000], y[:5000], width))
-        laid = tiling.sample(_points(x[:5000], y[:5000], width), lod_bias=camera.LOD_BIAS).T
+        plain = texture.sample_footprints(mip, _points(x[:5000], y[:5000], width))
+        laid = tiling.sample(_points(x[:5000], y[:5000], width), lod_bias=texture.LOD_BIAS).T
         np.testing.assert_allclose(laid.mean(axis=0), plain.mean(axis=0), rtol=0.02)
         np.testing.assert_allclose(laid.std(axis=0), plain.std(axis=0), rtol=0.25, atol=1e-4)
 
@@ -96,7 +96,7 @@ def _view_footprints(width=320, height=180):
                                  width=width, height=height)
     rows, part = camera._ground_rows(view)
     *ellipses, _ = camera._row_footprints(view, rows, part)
-    return camera.Footprints(*ellipses)
+    return texture.Footprints(*ellipses)
 
 
 def test_compiled_tiling_matches_the_array_version(monkeypatch):
@@ -107,8 +107,8 @@ def test_compiled_tiling_matches_the_array_version(monkeypatch):
     fp = _view_footprints()
     for skip in (0.0, albedo.SKIP_WEIGHT):
         monkeypatch.setattr(albedo, "SKIP_WEIGHT", skip)
-        got = tiling.sample(fp, lod_bias=camera.LOD_BIAS)
-        want = tiling.sample_arrays(fp, lod_bias=camera.LOD_BIAS, skip=skip)
+        got = tiling.sample(fp, lod_bias=texture.LOD_BIAS)
+        want = tiling.sample_arrays(fp, lod_bias=texture.LOD_BIAS, skip=skip)
         assert got.dtype == np.float32 and got.shape == want.shape == (3, len(fp))
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
 
@@ -123,8 +123,8 @@ def test_skipping_light_reads_changes_the_albedo_by_little():
     w = w**albedo.BLEND_SHARPNESS
     w /= w.sum(axis=0)
     assert 1.8 < np.mean(np.sum(w >= albedo.SKIP_WEIGHT, axis=0)) < 2.2
-    every = tiling.sample_arrays(fp, lod_bias=camera.LOD_BIAS, skip=0.0)
-    skipped = tiling.sample(fp, lod_bias=camera.LOD_BIAS)
+    every = tiling.sample_arrays(fp, lod_bias=texture.LOD_BIAS, skip=0.0)
+    skipped = tiling.sample(fp, lod_bias=texture.LOD_BIAS)
     difference = np.abs(skipped.astype(np.float64) - every)
     assert difference.max() < 0.04 * every.mean()
     assert np.sqrt(np.mean(difference**2)) < 1e-3 * every.mean()

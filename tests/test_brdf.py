@@ -8,7 +8,8 @@ import pytest
 from pipeline import brdf as R
 from pipeline import camera as cam
 from pipeline import shadow
-from pipeline.config import BrdfConfig
+from pipeline import texture
+from pipeline.settings import BrdfConfig
 from pipeline.errors import ConfigError
 from pipeline.geometry import Grid
 from pipeline.sky import ProceduralSky, SunDisc
@@ -107,7 +108,7 @@ def _constant(value):
     value = np.asarray(value, np.float32).reshape(-1)
     value = np.broadcast_to(value, (3,)) if value.size == 1 else value
     grid = Grid((-1.0, 1.0), 1.0, (2, 2))
-    return cam.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
+    return texture.mipmap(np.broadcast_to(value, (2, 2, value.size)).copy(), grid, outside="constant", value=value)
 
 
 def test_open_ground_equals_a_quadrature_for_five_view_directions():

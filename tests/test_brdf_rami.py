@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.brdf import reflectance_factor
-from pipeline.config import BrdfConfig
+from pipeline.settings import BrdfConfig
 
 VIEW_ZENITHS = (0, 15, 30, 45, 60, 75)  # degrees
 RELATIVE_AZIMUTHS = (0, 30, 60, 90, 120, 150, 180)  # degrees, 180 on the sun's side

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from pipeline import camera
-from pipeline.camera import (LOD_BIAS, MAX_TAPS, Camera, background, footprints, ground_hits, ground_view,
-                             image_rays, mipmap, pixel_rays, project_points, sample_footprint,
-                             sample_footprints, sky_view)
+from pipeline import camera, texture
+from pipeline.camera import (Camera, background, ground_hits, ground_view, image_rays, pixel_rays, project_points,
+                             sky_view)
+from pipeline.texture import LOD_BIAS, MAX_TAPS, footprints, mipmap, sample_footprint, sample_footprints
 from pipeline.geometry import Grid
 from pipeline.sky import EquirectSky, ProceduralSky, SunDisc, UniformSky
 
@@ -84,7 +84,7 @@ def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
     raster = np.random.default_rng(3).random(shape + (3,)).astype(np.float32) * 7.0
     value = np.full(3, value, dtype=np.float32)
     mip = mipmap(raster, Grid((0.0, 0.0), 0.5, shape), outside="constant", value=value)
-    levels = camera._constant_levels(raster, value)
+    levels = texture._constant_levels(raster, value)
     assert mip.shapes == tuple(level.shape[:2] for level in levels)
     for k, level in enumerate(levels):
         assert mip.level(k).tobytes() == level.tobytes()
@@ -275,7 +275,7 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
     ("periodic", (27, 45), 1), ("periodic", (30, 40), 4),
 ])
 def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels):
-    """camera._filtered (numba, footprint by footprint) against camera._filtered_arrays (numpy,
+    """texture._filtered (numba, footprint by footprint) against texture._filtered_arrays (numpy,
     grouped by level), the reference it replaces: the same float32 arithmetic in the same order
     gives the same bits, for every level, blend and tap count, far points, degenerate
     footprints and a NaN outside value (the finer rasters of a chain)."""
@@ -299,11 +299,11 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     jac[300:310] = 0.0
     fp = footprints(x, y, jac)
     for bias in (LOD_BIAS, 0.0, 1.3):
-        got = camera._filtered(mip, fp, bias)
-        want = camera._filtered_arrays(mip, fp, bias)
+        got = texture._filtered(mip, fp, bias)
+        want = texture._filtered_arrays(mip, fp, bias)
         assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
         np.testing.assert_array_equal(got, want)
-    assert np.isnan(camera._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
+    assert np.isnan(texture._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
 
 
 @pytest.mark.parametrize("view", [
@@ -335,7 +335,7 @@ def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
 
 
 def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
-    """camera._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
+    """texture._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
     replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
     long, and zero, NaN and infinite widths."""
     rng = np.random.default_rng(5)
@@ -346,8 +346,8 @@ def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
     major[:100], minor[100:200], minor[200:300] = 0.0, 0.0, np.inf
     major[300:400], minor[400:500], major[500:600] = np.nan, np.nan, np.inf
     for bias in (LOD_BIAS, 0.0, 0.7):
-        got = camera._filter_choice(mip, bias, major, minor)
-        want = camera._filter_choice_arrays(mip, bias, major.copy(), minor.copy())
+        got = texture._filter_choice(mip, bias, major, minor)
+        want = texture._filter_choice_arrays(mip, bias, major.copy(), minor.copy())
         for g, w in zip(got, want):
             assert g.dtype == w.dtype
             np.testing.assert_array_equal(g, w)
@@ -367,7 +367,7 @@ def test_ground_view_reads_the_albedo_once_per_view():
 
         def sample(self, fp, *, lod_bias):
             Counting.calls += 1
-            return camera._filtered(tile, fp, lod_bias)
+            return texture._filtered(tile, fp, lod_bias)
 
     albedo = Counting()
     view = Camera.look_at((0.0, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
@@ -581,7 +581,7 @@ def test_procedural_sky_matches_its_model():
 
 
 def reference_footprint_axes(dxdu, dxdv, dydu, dydv):
-    """The numpy arithmetic that camera._footprint_axes compiles (its former body)."""
+    """The numpy arithmetic that texture._footprint_axes compiles (its former body)."""
     a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
     b = dxdu * dydu + dxdv * dydv
     c = dydu * dydu + dydv * dydv
@@ -626,7 +626,7 @@ def test_footprint_axes_are_the_numpy_arithmetic_bit_for_bit():
     entries[:, :100] = 0.0  # a point
     entries[:, 100:200] = [[1.0], [0.0], [0.0], [1.0]]  # round
     entries[:, 200:300] *= 1e160  # moments overflow
-    got = camera._footprint_axes(*entries)
+    got = texture._footprint_axes(*entries)
     with np.errstate(all="ignore"):
         want = reference_footprint_axes(*(e.copy() for e in entries))
     for g, w in zip(got, want):

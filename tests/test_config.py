@@ -115,7 +115,7 @@ def test_layer_errors_name_the_layer_key(tmp_path):
 
 @pytest.mark.parametrize("section,keys", [
     ("sky", {"model", "radiance", "hdri", "rotation", "alpha", "turbidity", "cie_type", "sun", "site",
-             "time", "moon", "clouds", "skylight", "haze"}),
+             "time", "moon", "clouds", "skylight", "haze", "luminance"}),
     ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"}),
     ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
                 "white_balance"}),
@@ -160,3 +160,27 @@ def test_the_names_a_config_gives_are_those_the_models_know(tmp_path):
         data = {**base_config(), "sky": {"model": model, **({"hdri": "sky.exr"} if model == "hdri" else {})}}
         plan = plan_run(resolve(parse_config(data, tmp_path)))
         assert isinstance(plan.sky.at(plan.scenes[0]), sky.Sky), model
+
+
+def test_a_sky_model_is_one_module_and_one_registry_line(tmp_path):
+    """The overcast sky (pipeline/sky_overcast.py and its line in vocabulary.SKIES; docs/design.md,
+    "Models plug in"): its key is read and checked by the registry's entry, another model's key
+    is refused naming its owners, and its frame is the uniform sky's of the same radiance, to
+    the bit."""
+    from pipeline.cache import Cache
+    from pipeline.frame import render_frame
+
+    write_inputs(tmp_path)
+    sky_of = {"camera": {"resolution": [32, 18]}}
+    overcast = parse_config({**base_config(), **sky_of, "sky": {"model": "overcast", "luminance": 2.5}}, tmp_path)
+    assert overcast.sky.params == (("luminance", 2.5),)
+    assert "sky.luminance: must lie in [0, 1e+30] kcd/m^2 (got -1)" in refusal(
+        {**base_config(), "sky": {"model": "overcast", "luminance": -1}}, tmp_path)
+    assert "sky.radiance: only used with model: uniform (model is overcast)" in refusal(
+        {**base_config(), "sky": {"model": "overcast", "radiance": 1}}, tmp_path)
+    assert "sky.luminance: only used with model: overcast (model is cie)" in refusal(
+        {**base_config(), "sky": {"luminance": 1}}, tmp_path)
+    assert "unknown value 'overcst'" in refusal({**base_config(), "sky": {"model": "overcst"}}, tmp_path)
+    uniform = parse_config({**base_config(), **sky_of, "sky": {"model": "uniform", "radiance": 2.5}}, tmp_path)
+    frames = [render_frame(plan_run(resolve(c)), store=Cache(tmp_path / "cache")).radiance for c in (overcast, uniform)]
+    assert frames[0].tobytes() == frames[1].tobytes() and frames[0].max() > 0

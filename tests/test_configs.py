@@ -7,7 +7,8 @@ import pytest
 
 from pipeline import io
 from pipeline.cli import main
-from pipeline.config import PREVIEW_CYCLE, load_config, preview
+from pipeline.config import load_config
+from pipeline.preview import PREVIEW_CYCLE, preview
 
 CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
 

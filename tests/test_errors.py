@@ -5,8 +5,7 @@ import pytest
 
 from pipeline import errors
 from pipeline.cli import BadInput
-from pipeline.config import ConfigError
-from pipeline.errors import RunError
+from pipeline.errors import ConfigError, RunError
 from pipeline.io import ImageError
 
 EXAMPLES = [

@@ -14,7 +14,8 @@ import yaml
 
 from pipeline import io, paths
 from pipeline.cli import main
-from pipeline.config import MAX_CONFIG_BYTES, MAX_FRAMES, MAX_YAML_DEPTH
+from pipeline.config import MAX_FRAMES
+from pipeline.yamlsafe import MAX_CONFIG_BYTES, MAX_YAML_DEPTH
 
 from scenes import ROOT, base_config, write_config
 
@@ -342,12 +343,12 @@ def test_degenerate_images_work_as_albedo_mask_and_sky(inputs, capfd, shape):
 
 
 def test_stochastic_tiling_of_one_texel_is_that_texel():
-    from pipeline import albedo, camera
+    from pipeline import albedo, texture
     from pipeline.geometry import Grid
 
     texel = np.array([[[0.2, 0.3, 0.4]]], np.float32)
-    tiling = albedo.stochastic_tiling(camera.mipmap(texel, Grid((0.0, 1.0), 1.0, (1, 1)), outside="periodic",
-                                                    period=(1.0, 1.0)))
+    tiling = albedo.stochastic_tiling(texture.mipmap(texel, Grid((0.0, 1.0), 1.0, (1, 1)), outside="periodic",
+                                                     period=(1.0, 1.0)))
     assert np.allclose(tiling.mean, texel[0, 0])
     assert np.all(np.isfinite(tiling.lookups)) and np.allclose(tiling.basis, np.eye(3))
 
