@@ -14,7 +14,7 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, cache_keys, canopy, foreground, foregrounds, shadow
+from . import cache, cache_keys, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow, tree_detail
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
@@ -55,13 +55,13 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
     else:
         grove, flutter = grove_of(c)
         heights = tuple(l.height for l in c.layers)
-        leaf_layer, wood_layer = canopy.layer_index(grove, heights)
-        shapes = canopy.project(
-            canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
+        leaf_layer, wood_layer = grove_geometry.layer_index(grove, heights)
+        shapes = grove_geometry.project(
+            grove_geometry.leaves_at(grove, flutter, cycle_frame), grove.wood,
             sun=np.array(plan.projection), plane_height=layer.height,
         ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
         period = layer.size if periodic else None
-        masks = [canopy.rasterize_transmittance(shapes, g, period=period) for g in grids]
+        masks = [rasteriser.rasterize_transmittance(shapes, g, period=period) for g in grids]
     return masks[0], (masks[1] if lp.sun else None)
 
 
@@ -355,13 +355,13 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
             "camera": asdict(plan.camera),
             "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
             "haze": plan.haze,
-            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
-                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+            "wood": {"tip": tree_detail.TIP_TAPER, "piece": tree_detail.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": tree_detail.BARK_FURROWS, "contrast": tree_detail.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
             "stored": "cut to the trees",  # cut_to_trees
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
-                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
-                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
+                "detail": tree_detail.LEAF_PIXELS, "reach": tree_detail.HAZE_REACH,
+                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
 
 
 def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
@@ -390,8 +390,8 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
 
     def compute():
         grove, flutter = grove_of(c)
-        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
-        wood, owner = foreground.taper_wood(grove.wood)
+        leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = tree_detail.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
@@ -400,7 +400,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         view = plan.camera
         if c.layout == "periodic":  # the tile's trees on every tile in view
             layer = c.layers[0]
-            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+            leaves, wood, leaf_index, wood_index = tree_detail.periodic_copies(
                 leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
                 seed=c.trees.seed, coarse_wood=grove.wood)
             if has_sun:  # a straight capsule gets the mean visibility of its pieces

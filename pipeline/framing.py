@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from . import camera, canopy
+from . import camera, grove_geometry
 from .settings import Config
 from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
@@ -92,7 +92,7 @@ def canopy_extent(config: Config, projection) -> tuple[float, float, float, floa
             boxes.append((cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2))
         else:
             grove, flutter = grove_of(config.canopy)
-            boxes.append(tuple(float(v) for v in canopy.grove_bounds(
+            boxes.append(tuple(float(v) for v in grove_geometry.grove_bounds(
                 grove, flutter, sun=np.array(projection), plane_height=layer.height)))
     return _union(boxes)
 

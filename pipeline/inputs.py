@@ -9,7 +9,7 @@ import functools
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground, io, texture
+from . import camera, canopy, foreground_passes, grove_geometry, io, texture
 from .geometry import Grid
 from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 
@@ -61,7 +61,7 @@ def grove_of(canopy_config: CanopyConfig):
         Its flutter: the cycle [frames], swing and twist.
     """
     trees, layer0 = canopy_config.trees, canopy_config.layers[0]
-    params = canopy.GroveParams(
+    params = grove_geometry.GroveParams(
         count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
         leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
         height=max(layer.height for layer in canopy_config.layers),
@@ -69,7 +69,7 @@ def grove_of(canopy_config: CanopyConfig):
         tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
         center=layer0.center, spread=trees.spread)
     f = canopy_config.flutter
-    return canopy.grow_grove(params), canopy.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+    return grove_geometry.grow_grove(params), grove_geometry.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
 
 
 @functools.lru_cache(maxsize=4)
@@ -117,7 +117,7 @@ def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
     return albedos.stochastic_tiling(albedo_mipmap(ground))
 
 
-def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground.ForegroundPasses:
+def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground_passes.ForegroundPasses:
     """The imported passes of a cycle frame, read and checked against the camera's size.
 
     Parameters
@@ -131,7 +131,7 @@ def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int)
 
     Returns
     -------
-    foreground.ForegroundPasses
+    foreground_passes.ForegroundPasses
         The sun and sky passes [kcd/m^2] and alpha [1].
 
     Raises
@@ -139,9 +139,9 @@ def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int)
     io.ImageError
         Naming the file.
     """
-    passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+    passes = foreground_passes.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
     try:
-        foreground.check_passes_size(passes, view)
+        foreground_passes.check_passes_size(passes, view)
     except ValueError as exc:
         raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
     return passes

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import canopy, io, shadow
+from . import canopy, grove_geometry, io, shadow
 from .camera import Camera
 from .config import size_text
 from .errors import ConfigError
@@ -342,7 +342,7 @@ def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -
     if config.canopy.trees is None or periodic:
         return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
     grove, flutter = grove_of(config.canopy)
-    bounds = canopy.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
+    bounds = grove_geometry.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
     size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
     center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
     return canopy.lattice_grid(center, size, window, periodic=False)

@@ -50,7 +50,7 @@ class CanopyLayer:
 
 @dataclass(frozen=True)
 class TreesConfig:
-    """A seeded procedural grove (``canopy.GroveParams``).
+    """A seeded procedural grove (``grove_geometry.GroveParams``).
 
     Attributes
     ----------
