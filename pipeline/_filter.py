@@ -788,7 +788,7 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     Parameters
     ----------
     flat : numpy.ndarray
-        Every level of the noise in one flat float64 array (``clouds._packed``) [1].
+        Every level of the noise in one flat float64 array (``cloud_noise._packed``) [1].
     offsets : numpy.ndarray
         (levels,) intp, each level's first value in ``flat``.
     sides : numpy.ndarray
@@ -936,7 +936,7 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def lattice_read(flat, corner, taps, lattice, out):
-    """``brdf.sky_ratio``'s bilinear read of a lattice at n points (``brdf._lattice_read_arrays``).
+    """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (``brdf_bands._lattice_read_arrays``).
 
     Point p takes the four values from flat index corner[p] (its first corner), + 1, + lattice,
     + lattice + 1 with weights taps[:, p], summed in that order in float32.
