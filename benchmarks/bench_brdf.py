@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import brdf as reflect  # noqa: E402
+from pipeline import brdf_bands, brdf_camera  # noqa: E402
 from pipeline import cache, camera  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
@@ -81,8 +82,8 @@ def hot_spot(plan, frame: int, results) -> None:
     sky = plan.sky.at(plan.scenes[frame])
     chooser = plan.layers[0].coarse.sky
     raster = sky.raster(chooser)
-    views = reflect.view_vectors(view)
-    bands = reflect.choose_bands(model, raster, views)
+    views = brdf_camera.view_vectors(view)
+    bands = brdf_bands.choose_bands(model, raster, views)
     print(f"  view bands: {len(bands.zeniths)} at view zenith "
           + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
           + f" deg; open-sky blend error over sampled pixels {bands.error:.4f}")

@@ -1,7 +1,7 @@
 """Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
 pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
 over the view (``frame._apply_haze``), the procedural sky raster's rows (``sky.ProceduralSky.raster``) and the
-ground reflectance's lattice read (``brdf.sky_ratio``). Each does what its array version does, float32 operation
+ground reflectance's lattice read (``brdf_bands.sky_ratio``). Each does what its array version does, float32 operation
 for float32 operation in the same order, so that no temporary arrays are built, and the tests hold it to that
 version's bits. Imported lazily: numba costs 0.3 s to import.
 """
@@ -129,7 +129,7 @@ def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def lattice_read(flat, corner, taps, lattice, out):
-    """``brdf.sky_ratio``'s bilinear read of a lattice at n points (``brdf._lattice_read_arrays``).
+    """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (``brdf_bands._lattice_read_arrays``).
 
     Point p takes the four values from flat index corner[p] (its first corner), + 1, + lattice,
     + lattice + 1 with weights taps[:, p], summed in that order in float32.

@@ -258,7 +258,7 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     Parameters
     ----------
     flat : numpy.ndarray
-        Every level of the noise in one flat float64 array (``clouds._packed``) [1].
+        Every level of the noise in one flat float64 array (``cloud_noise._packed``) [1].
     offsets : numpy.ndarray
         (levels,) intp, each level's first value in ``flat``.
     sides : numpy.ndarray

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import brdf as reflect
+from . import brdf_bands
+from . import brdf_camera as reflect
 from . import cache, camera, composite, texture
 from .colour import REC709_LUMINANCE
 from .cores import default_workers
@@ -388,7 +389,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     """The background B with the ground's reflectance ``ground.brdf``.
 
     The sun's term at each pixel's own view, the sky's through view bands chosen by
-    ``brdf.choose_bands`` (docs/method.md, "The ground's reflectance").
+    ``brdf_bands.choose_bands`` (docs/method.md, "The ground's reflectance").
 
     Parameters
     ----------
@@ -413,7 +414,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     view = plan.camera
     model = plan.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
-    bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
+    bands = brdf_bands.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
     if plan.canopy.layout == "periodic":
@@ -444,7 +445,7 @@ def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
     cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
     making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
-    lattice as ``brdf.sky_ratio`` does). A render's command calls it while its workers make the cycle
+    lattice as ``brdf_bands.sky_ratio`` does). A render's command calls it while its workers make the cycle
     products (``run.render_run``), so that after an install the workers of the frame phase load the
     loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
     kept; any error is left to the frames.

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import brdf as brdf_models
+from . import brdf_bands
 from . import cache, shadow
 from . import sky as sky_models
 from .cycle import cycle_item
@@ -154,7 +154,7 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
     """The sky's ground rasters under the canopy, one per view, the sky weighted by the BRDF's shape.
 
     Every channel for the view ``colour`` (all of them when None), the channels' sum (one channel)
-    for the others (``brdf.banded_sky``); layers combined by the paper's product rule, each term
+    for the others (``brdf_bands.banded_sky``); layers combined by the paper's product rule, each term
     with its own open-sky total.
 
     Parameters
@@ -191,8 +191,8 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
         periodic = isinstance(coarse, shadow.PeriodicPlan)
         raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
         # every view's weighted raster as channels of one: one correlation call for all
-        rasters = [brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
-                                               summed=colour is not None and t != colour)
+        rasters = [brdf_bands.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
+                                              summed=colour is not None and t != colour)
                    for t, v in enumerate(views)]
         raster = sky_models.SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
                                       np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
