@@ -12,12 +12,15 @@ behind), where the phase angle g (cos g = v . l) is 0."""
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from .vocabulary import REFLECTANCES
+
 __all__ = [
-    "VIEW_ZENITH_LIMIT", "QUADRATURE", "reflectance_factor", "directional_reflectance", "white_sky_albedo", "shape",
+    "VIEW_ZENITH_LIMIT", "QUADRATURE", "reflectance_factor", "Reflectance", "Lambert", "Rpv", "RossLi",
+    "directional_reflectance", "white_sky_albedo", "shape",
     "clamp_view", "cell_directions",
 ]
 
@@ -55,13 +58,10 @@ def reflectance_factor(brdf: BrdfConfig, v, l) -> np.ndarray:
     ValueError
         For an unknown model.
     """
-    p = dict(brdf.parameters)
+    if brdf.model not in REFLECTANCES:
+        raise ValueError(f"no such reflectance model: {brdf.model!r}")
     v, l = np.asarray(v, dtype=np.float64), np.asarray(l, dtype=np.float64)
-    if brdf.model == "rpv":
-        return _rpv(v, l, p["rho0"], p["k"], p["theta"], p["rho_c"])
-    if brdf.model == "rossli":
-        return _rossli(v, l, p["f_iso"], p["f_vol"], p["f_geo"])
-    raise ValueError(f"no such reflectance model: {brdf.model!r}")
+    return REFLECTANCES.load(brdf.model).factor(v, l, **dict(brdf.parameters))
 
 
 def _slopes(v, l):
@@ -101,6 +101,50 @@ def _rossli(v, l, f_iso, f_vol, f_geo):
     overlap = (t - np.sin(t) * cos_t) * sec / np.pi
     k_geo = overlap - sec + 0.5 * (1.0 + cos_xi) / (mv * ml)
     return f_iso + f_vol * k_vol + f_geo * k_geo
+
+
+class Reflectance(Protocol):
+    """A ground reflectance model: a class of this shape, and one line in
+    ``vocabulary.REFLECTANCES`` naming it and its parameters (their ranges in
+    ``vocabulary.BRDF_PARAMETERS``), add a model (docs/design.md, "Models plug in")."""
+
+    @staticmethod
+    def factor(v: np.ndarray, l: np.ndarray, **parameters: float) -> np.ndarray:
+        """The bidirectional reflectance factor pi f_r(v, l).
+
+        Parameters
+        ----------
+        v, l : numpy.ndarray
+            (..., 3) float64 unit vectors towards the viewer and the light, above the ground [1].
+        **parameters : float
+            The model's parameters, by name [1].
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) float64 [1].
+        """
+
+
+class Lambert:
+    """The paper's constant reflectance: pi f_r = 1 (its frames take the camera's own path)."""
+
+    @staticmethod
+    def factor(v, l):
+        """1 for every pair of directions."""
+        return np.ones(np.broadcast_shapes(np.shape(v), np.shape(l))[:-1])
+
+
+class Rpv:
+    """Rahman, Pinty and Verstraete (1993): rho0, k, theta, rho_c (``_rpv``)."""
+
+    factor = staticmethod(_rpv)
+
+
+class RossLi:
+    """The MODIS RossThick-LiSparse-Reciprocal kernels: f_iso, f_vol, f_geo (``_rossli``)."""
+
+    factor = staticmethod(_rossli)
 
 
 @functools.lru_cache(maxsize=1)
