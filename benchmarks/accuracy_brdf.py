@@ -5,7 +5,7 @@ force, under a leafy canopy, for several views, suns and band tolerances.
 
 First, open ground (no canopy) as tests/test_brdf.py has it: a 48 x 32 camera 1.7 m up with a
 70-degree field looking down the sun's rays, the CIE clear sky (sun at 30 degrees) on a 96 x 96
-raster to 76 degrees; the rendered radiance (``brdf.ground_radiance`` over constant rasters)
+raster to 76 degrees; the rendered radiance (``brdf_camera.ground_radiance`` over constant rasters)
 against sum_i f_r(V, L_i) e_i + f_r(V, L_sun) E_sun at five pixels' own views.
 
 A 24 x 24 random leaf mask (60% leaves, 0.25 m pixels, 4 m up) over a 40 x 40 ground window
@@ -13,9 +13,9 @@ A 24 x 24 random leaf mask (60% leaves, 0.25 m pixels, 4 m up) over a 40 x 40 gr
 corner, at an edge or over the middle of the window, so that its views span view zeniths of
 6-83 degrees and 90, 180 or 360 degrees of azimuth. Brute force: at every 4th pixel in each
 direction, the sky raster weighted by the shape at that pixel's own view and correlated for it
-alone (``brdf.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf.choose_bands``
+alone (``brdf_bands.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf_bands.choose_bands``
 at each tolerance, the bands' correlations (the middle band's in every channel, the
-others' of the sky's channels' sum) blended by ``brdf.banded_sky`` with ``brdf.sky_ratio``.
+others' of the sky's channels' sum) blended by ``brdf_bands.banded_sky`` with ``brdf_bands.sky_ratio``.
 Printed: the largest relative error over the sampled pixels and channels, and Lambert's.
 
 With ``--config``: the same on a shipped config's own sky raster, canopy spectrum and camera,
@@ -35,6 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import brdf as R  # noqa: E402
+from pipeline import brdf_bands, brdf_camera  # noqa: E402
 from pipeline import shadow  # noqa: E402
 from pipeline.settings import BrdfConfig  # noqa: E402
 from pipeline.geometry import Grid  # noqa: E402
@@ -78,17 +79,17 @@ def open_ground() -> None:
     raster = sky.raster(Grid((-4.0, 4.0), 8.0 / 96, (96, 96)))
     e_sun = np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     view = cam.Camera.look_at((0.0, 0.0, 1.7), (6.0, -6.0, 0.0), vertical_fov=np.radians(70.0), width=48, height=32)
-    views = R.view_vectors(view)
+    views = brdf_camera.view_vectors(view)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
     e = raster.weighted.reshape(3, -1).astype(np.float64)
     rows, _ = cam._ground_rows(view)
     picks = [(rows[-1], 24), (rows[-1], 2), (rows[len(rows) // 2], 40), (rows[len(rows) // 4], 10), (rows[2], 30)]
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)
-        bands = R.choose_bands(brdf, raster, views)
+        bands = brdf_bands.choose_bands(brdf, raster, views)
         band_sky = [R.shape(brdf, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))
                     for k, v in enumerate(bands.directions())]
-        radiance = R.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
+        radiance = brdf_camera.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
                                      sky_maps=(constant(np.concatenate(np.atleast_1d(*band_sky))),),
                                      bands=bands, sun_direction=sky.sun_direction,
                                      raster=raster)
@@ -120,28 +121,32 @@ def config_case(path: str, samples: int) -> None:
         ground = render_ground(plan, 0, store=store, workers=2, sky=sky, coarse_sky=True)
         item = cycle_item(plan, 0, 0, store, workers=2)
         raster = ground.coarse_sky[2][0]
-        views = R.view_vectors(view)
+        views = brdf_camera.view_vectors(view)
         fp, _ = camera._view_footprints(view)
         r, c = plan.window.raster_from_ground(fp.x, fp.y)
         inside = np.flatnonzero((r >= 0) & (c >= 0) & (r <= plan.window.shape[0] - 1) & (c <= plan.window.shape[1] - 1))
         chosen = inside[np.linspace(0, len(inside) - 1, samples).astype(int)]
         cells = np.round(r[chosen]).astype(int), np.round(c[chosen]).astype(int)
-        brute = np.stack([shadow.ground_isolated(R.weighted_raster(raster, brdf, views[k]), item["coarse"], layer.coarse,
-                                                 workers=2)[:, i, j] for k, i, j in zip(chosen, *cells)], axis=1)
+        brute = np.stack([shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, views[k]), item["coarse"],
+                                                 layer.coarse, workers=2)[:, i, j]
+                          for k, i, j in zip(chosen, *cells)], axis=1)
         lambert = ground.coarse_sky[0][cells].T
         print(f"{path}: {samples} ground cells, view zeniths "
-              f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
+              f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-"
+              f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
         for tolerance in TOLERANCES:
-            bands = R.choose_bands(brdf, raster, views, tolerance=tolerance)
+            bands = brdf_bands.choose_bands(brdf, raster, views, tolerance=tolerance)
             terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
             weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2])).astype(np.float32)
             colour = terms[bands.colour].irradiance[cells].T
-            banded = R.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
-                                  weights[:, chosen], R.sky_ratio(brdf, raster, bands, views)[:, chosen])
+            banded = brdf_bands.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
+                                  weights[:, chosen], brdf_bands.sky_ratio(brdf, raster, bands, views)[:, chosen])
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
-            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+            print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
+                  f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
+            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, "
+                  f"largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
 
 
@@ -165,20 +170,21 @@ def window_cases() -> None:
             brute = np.empty((3, N, N))
             for r in range(1, N, STEP):
                 for col in range(1, N, STEP):
-                    brute[:, r, col] = shadow.ground_isolated(R.weighted_raster(raster, brdf, v[r, col]),
+                    brute[:, r, col] = shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, v[r, col]),
                                                               spectrum, plan)[:, r, col]
             sky_only = shadow.ground_isolated(raster, spectrum, plan)
             lambert = np.max(np.abs(sky_only[sel] / brute[sel] - 1))
             cells = []
             for tolerance in TOLERANCES:
-                bands = R.choose_bands(brdf, raster, flat, tolerance=tolerance)
-                terms = [shadow.ground_isolated(R.weighted_raster(raster, brdf, d, summed=True), spectrum, plan).reshape(-1)
+                bands = brdf_bands.choose_bands(brdf, raster, flat, tolerance=tolerance)
+                terms = [shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, d, summed=True), spectrum,
+                                                plan).reshape(-1)
                          for d in bands.directions()]
-                colour = shadow.ground_isolated(R.weighted_raster(raster, brdf, bands.directions()[bands.colour]),
-                                                spectrum, plan)
+                colour = shadow.ground_isolated(
+                    brdf_bands.weighted_raster(raster, brdf, bands.directions()[bands.colour]), spectrum, plan)
                 weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2])).astype(np.float32)
-                banded = R.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
-                                      R.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
+                banded = brdf_bands.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
+                                      brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
                 cells.append(f"{len(bands.zeniths)}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "

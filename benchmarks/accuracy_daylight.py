@@ -91,7 +91,8 @@ def cie_types() -> None:
             zs = np.radians(90.0 - elevation)
             light = clear_daylight(zs, turbidity)
             eff = perez_efficacy(zs, light.direct_normal_irradiance, light.diffuse_horizontal_irradiance,
-                                 relative_airmass=float(atmosphere.get_relative_airmass(90.0 - elevation, "kasten1966")))
+                                 relative_airmass=float(atmosphere.get_relative_airmass(90.0 - elevation,
+                                                                                        "kasten1966")))
             clearness, brightness = float(eff.clearness), float(eff.brightness)
             bin_ = 8 if clearness >= 6.2 else 7 if clearness >= 4.5 else 6
             a, b, c, d, e = (x1 + x2 * zs + brightness * (x3 + x4 * zs) for x1, x2, x3, x4 in PEREZ_1993[bin_])

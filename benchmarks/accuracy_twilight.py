@@ -78,7 +78,8 @@ def main() -> None:
               f"{np.expm1(np.max(np.abs(steps - curve))):.4f}")
     print("\nwhole-sky chromaticity, sun 30 degrees, TL 3 (CIE 15: D65 0.3127 0.3290, D75 0.2990 0.3149):")
     for cie_type in range(1, 16):
-        x, y = xy(ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(30.0)), cie_type=cie_type).clear_sky_irradiance)
+        x, y = xy(ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(30.0)),
+                                cie_type=cie_type).clear_sky_irradiance)
         print(f"  type {cie_type:2d}: x {x:.4f} y {y:.4f}")
 
 

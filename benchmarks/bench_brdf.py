@@ -5,8 +5,9 @@ measured in the frame.
     python benchmarks/bench_brdf.py [--config configs/lawn-hotspot.yaml] [--frame 0] [--repeats 3]
 
 Times: ``render_frame``'s stages (ground, camera, composite) and the process's CPU time
-(``cpu``, both workers'), each frame rendered ``repeats`` times per reflectance, alternately, after one warm-up of each (cycle products in a temporary
-cache); medians, and the load average. Hot spot: the rendered radiance with the BRDF over the
+(``cpu``, both workers'), each frame rendered ``repeats`` times per reflectance, alternately,
+after one warm-up of each (cycle products in a temporary cache); medians, and the load average.
+Hot spot: the rendered radiance with the BRDF over the
 Lambertian radiance at the same pixel (the albedo texture, haze and foreground cancel nearly),
 at sunlit ground pixels (ground irradiance at least 0.9 of the open ground's) whose view
 vector lies within 2 degrees of the sun's direction (the antisolar point) and at those 39-41
@@ -29,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline import brdf as reflect  # noqa: E402
+from pipeline import brdf_bands, brdf_camera  # noqa: E402
 from pipeline import cache, camera  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
@@ -80,8 +82,8 @@ def hot_spot(plan, frame: int, results) -> None:
     sky = plan.sky.at(plan.scenes[frame])
     chooser = plan.layers[0].coarse.sky
     raster = sky.raster(chooser)
-    views = reflect.view_vectors(view)
-    bands = reflect.choose_bands(model, raster, views)
+    views = brdf_camera.view_vectors(view)
+    bands = brdf_bands.choose_bands(model, raster, views)
     print(f"  view bands: {len(bands.zeniths)} at view zenith "
           + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
           + f" deg; open-sky blend error over sampled pixels {bands.error:.4f}")

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_cycle import CONFIG  # noqa: E402
 from bench_sun import median_seconds, round_trip_seconds  # noqa: E402
 
-from pipeline import cache, camera, canopy, composite, foreground, io  # noqa: E402
+from pipeline import cache, camera, composite, foreground, grove_geometry, io  # noqa: E402
 from pipeline.cycle import cycle_phase  # noqa: E402
 from pipeline.frame import foreground_layer, irradiance_maps, render_frame  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
@@ -111,7 +111,8 @@ def main() -> None:
         result = render_frame(plan, 0, store=store, workers=args.threads)
 
         def write(i):
-            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()), half=True)
+            io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()),
+                         half=True)
             io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
 
         def write_raw(i):
@@ -126,7 +127,7 @@ def main() -> None:
         grove, flutter = grove_of(config.canopy)
 
         def passes(i):
-            leaves = canopy.leaves_at(grove, flutter, i)
+            leaves = grove_geometry.leaves_at(grove, flutter, i)
             leaf_v, wood_v = foreground.sun_visibility(leaves, grove.wood, sun_point=np.array(plan.projection))
             foreground.tree_passes(leaves, grove.wood, view, sun_direction=light.sun_direction,
                                    sun_irradiance=np.ones(3), sky_irradiance=np.ones(3),

@@ -7,7 +7,7 @@ digest of each frame written, and a resume that checks the frames it skips.
 1. Cache checks (issue 16). In one process, with the cycle products of the frames in a fresh
    cache: each frame rendered (``frame.render_frame``) with its cache items already checked
    in this process (the baseline: sizes, headers and a stat, what every later read costs) and
-   with ``cache.forget_verified()`` before it (every item's CRC-32 computed again: the worst
+   with ``cache_store.forget_verified()`` before it (every item's CRC-32 computed again: the worst
    case; a run checks each item once per worker process, so once per ``cycle`` frames), the
    two alternated ``--repeat`` times, in turn first; beside them the checksums alone of the
    items a frame reads. Medians over frames and repeats.
@@ -36,9 +36,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import cache  # noqa: E402
+from pipeline import cache, cache_store  # noqa: E402
 from pipeline.run import _frame_task  # noqa: E402
-from pipeline.runfolder import file_digest, parse_frames  # noqa: E402
+from pipeline.frameindex import file_digest  # noqa: E402
+from pipeline.runfolder import parse_frames  # noqa: E402
 from pipeline.cycle import cycle_phase  # noqa: E402
 from pipeline.frame import render_frame  # noqa: E402
 from pipeline.cores import default_workers  # noqa: E402
@@ -74,7 +75,7 @@ def cache_checks(config, frames, repeat) -> None:
             reader = cache.Cache(store.root)
             for forget in ((False, True) if turn % 2 == 0 else (True, False)):  # both orders
                 if forget:
-                    cache.forget_verified()
+                    cache_store.forget_verified()
                 (checked if forget else trusted).append(seconds(
                     lambda: render_frame(plan, frame, store=reader, workers=workers)))
             sums.append(seconds(lambda: [reader.recheck(item, stamp, fresh=True, repair=False)

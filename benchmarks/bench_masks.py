@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import canopy, shadow  # noqa: E402
+from pipeline import grove_geometry, rasteriser, shadow  # noqa: E402
 from pipeline.preview import preview  # noqa: E402
 from pipeline.cycle import layer_masks  # noqa: E402
 from pipeline.inputs import grove_of  # noqa: E402
@@ -52,7 +52,7 @@ def cycle_frame(config, plan, frame):
 
 def timed(config, plan, frames, rasterize):
     """(median wall s, median CPU s, masks of every frame) with ``rasterize`` in place."""
-    canopy.rasterize_transmittance, saved = rasterize, canopy.rasterize_transmittance
+    rasteriser.rasterize_transmittance, saved = rasterize, rasteriser.rasterize_transmittance
     try:
         walls, cpus, masks = [], [], []
         for frame in frames:
@@ -61,7 +61,7 @@ def timed(config, plan, frames, rasterize):
             walls.append(time.perf_counter() - wall)
             cpus.append(time.process_time() - cpu)
     finally:
-        canopy.rasterize_transmittance = saved
+        rasteriser.rasterize_transmittance = saved
     return float(np.median(walls)), float(np.median(cpus)), masks
 
 
@@ -84,7 +84,7 @@ def main() -> None:
         cycle_frame(config, plan, config.canopy.cycle - 1)
         first = time.perf_counter() - t
         frames = range(min(args.frames, config.canopy.cycle))
-        new_wall, new_cpu, new = timed(config, plan, frames, canopy.rasterize_transmittance)
+        new_wall, new_cpu, new = timed(config, plan, frames, rasteriser.rasterize_transmittance)
         old_wall, old_cpu, old = timed(config, plan, frames, reference_rasterize)
         diff = max(float(np.abs(a - b).max()) for m, n in zip(new, old) for a, b in zip(m, n))
         leaves = config.canopy.trees.count * config.canopy.trees.leaves_per_tree
@@ -119,11 +119,11 @@ def compare_opencv(config, plan) -> None:
 
     grove, flutter = grove_of(config.canopy)
     lp = plan.layers[0]
-    shapes = canopy.project(canopy.leaves_at(grove, flutter, 0), sun=np.array(plan.projection),
+    shapes = grove_geometry.project(grove_geometry.leaves_at(grove, flutter, 0), sun=np.array(plan.projection),
                             plane_height=config.canopy.layers[0].height)
     grid = lp.sun.mask if lp.sun else lp.canopy
     cpus = {}
-    for name, draw in (("opencv", opencv_mask), ("compiled", canopy.rasterize_transmittance)):
+    for name, draw in (("opencv", opencv_mask), ("compiled", rasteriser.rasterize_transmittance)):
         draw(shapes, grid)
         times = []
         for _ in range(3):
@@ -133,9 +133,10 @@ def compare_opencv(config, plan) -> None:
         cpus[name] = float(np.median(times))
     leaves = random_leaves(np.random.default_rng(0), 200, low=0.3, high=2.7, pixel=0.1)
     grid = Grid((0.0, 3.0), 0.1, (30, 30))
-    worst = [np.abs(opencv_mask(one, grid) - canopy.rasterize_transmittance(one, grid)).max()
+    worst = [np.abs(opencv_mask(one, grid) - rasteriser.rasterize_transmittance(one, grid)).max()
              for one in (leaves.subset(leaves=[i], wood=[]) for i in range(200))]
-    print(f"fillPoly LINE_AA: mask {lp.sun.mask.shape if lp.sun else lp.canopy.shape} {cpus['opencv']:.3f} s CPU against "
+    print(f"fillPoly LINE_AA: mask {lp.sun.mask.shape if lp.sun else lp.canopy.shape} "
+          f"{cpus['opencv']:.3f} s CPU against "
           f"{cpus['compiled']:.3f} s compiled; 200 single leaves: largest coverage difference per leaf, "
           f"median {np.median(worst):.2f}, max {np.max(worst):.2f} of a pixel's area")
 

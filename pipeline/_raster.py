@@ -1,6 +1,6 @@
-"""Compiled loops of the anti-aliased rasteriser (``canopy.rasterize_transmittance``).
+"""Compiled loops of the anti-aliased rasteriser (``rasteriser.rasterize_transmittance``).
 
-The method is the one documented in ``canopy.py`` (and docs/method.md): the coverage of a pixel
+The method is the one documented in ``rasteriser.py`` (and docs/method.md): the coverage of a pixel
 is the mean over k x k sub-samples of the exact area fraction of the sub-sample's square that
 lies inside the shape's local strip. These loops compute it shape by shape straight into the
 transmittance-depth raster, with the same float32 arithmetic as the array version they replace, so
@@ -104,7 +104,7 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 @njit(cache=True, nogil=True, error_model="numpy")
 def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid (canopy._square_cdf, branch-free). One division:
+    b = min(|nx|, |ny|): the CDF of a trapezoid (rasteriser._square_cdf, branch-free). One division:
     the branch's denominator, a or 2 a b + 1e-12, is chosen first (the same bits as 1 / a and
     1 / (2 a b + 1e-12) computed apart)."""
     s = abs(t)
@@ -200,7 +200,7 @@ def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
     """The box of a shape centred at (cx, cy) with half-size (hx, hy) [pixel], clipped to the
-    raster, as canopy._boxes chooses it: (col, row, width, height, k sub-samples per axis,
+    raster, as rasteriser._boxes chooses it: (col, row, width, height, k sub-samples per axis,
     thin, thickness in sub-samples or -1 when not thin); width 0 when it misses the raster."""
     x0 = min(max(math.floor(cx - hx), 0.0), float(cols))
     y0 = min(max(math.floor(cy - hy), 0.0), float(rows))
@@ -388,7 +388,7 @@ def _turn(v, k, c, s, out):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase, omega, swing, twist):
-    """canopy.leaves_at in one pass over the leaves.
+    """grove_geometry.leaves_at in one pass over the leaves.
 
     Parameters
     ----------
@@ -433,7 +433,7 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def onto(points, sx, sy, offset):
-    """canopy.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
+    """grove_geometry.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
 
     numpy's operations, in order.
 
@@ -461,7 +461,7 @@ def onto(points, sx, sy, offset):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
-    """canopy._ellipses in one pass: ellipses in the pixel units of a grid.
+    """rasteriser._ellipses in one pass: ellipses in the pixel units of a grid.
 
     Parameters
     ----------

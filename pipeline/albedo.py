@@ -236,7 +236,8 @@ class StochasticTiling:
         corners_high = np.stack([np.stack([ia + one, ib + one], -1), np.stack([ia + one, ib], -1),
                                  np.stack([ia, ib + one], -1)])
         vertices = np.where(lower[None, :, None], corners_low, corners_high)
-        weights = np.where(lower[None], np.stack([1.0 - fa - fb, fb, fa]), np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
+        weights = np.where(lower[None], np.stack([1.0 - fa - fb, fb, fa]),
+                           np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
         return vertices, weights
 
     def offsets(self, vertices) -> np.ndarray:
@@ -260,7 +261,7 @@ class StochasticTiling:
     def sample(self, fp, *, lod_bias: float) -> np.ndarray:
         """The tiled albedo averaged over ground footprints.
 
-        Compiled (``_filter``): the lattice weights and offsets of every footprint, its reads
+        Compiled (``_tiling``, ``_filter``): the lattice weights and offsets of every footprint, its reads
         of weight SKIP_WEIGHT or more (the others left out: their Gaussian term taken as its
         mean, 0; about 1.95 reads a pixel instead of 3), filtered with the footprint's tap
         count and levels, chosen once for its reads, then the blend and the inverse lookups.
@@ -278,7 +279,7 @@ class StochasticTiling:
         numpy.ndarray
             (channels, n) float32 albedo [1].
         """
-        from . import _filter, texture
+        from . import _filter, _tiling, texture
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
@@ -291,13 +292,13 @@ class StochasticTiling:
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
         px, py = self.gaussian.period
-        m = _filter.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
+        m = _tiling.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
         taps, level, blend = texture._filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
         _filter.filtered(*texture._level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
-        _filter.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
+        _tiling.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
                               np.ascontiguousarray(self.lookups, dtype=np.float64),
                               np.ascontiguousarray(self.center, dtype=np.float64),
                               np.ascontiguousarray(self.basis, dtype=np.float64), out)
@@ -352,7 +353,7 @@ def vertex_keys(va, vb, seed: int) -> np.ndarray:
     """uint64 hash keys of lattice vertices under ``seed``.
 
     A vertex's offsets are ``unit_hash(key)`` and ``unit_hash(key ^ SECOND_KEY)`` times the period
-    (the stochastic tiling's, and the cloud tile's copies, ``_filter.cloud_field``).
+    (the stochastic tiling's, and the cloud tile's copies, ``_tiling.cloud_field``).
 
     Parameters
     ----------

@@ -1,10 +1,6 @@
 """Drifting layers of fractal cloud: their transmittance and the light they scatter
 (docs/method.md, "The cloud layer": the pattern, the single- and multiple-scattering model and
-its energy bounds).
-
-Why one module: the noise texture, the cover, the transmittance and the scattered light are one
-physical model of a layer, each part tuned against the others.
-"""
+its energy bounds). The pattern is ``cloud_noise``'s, the slab's fluxes ``cloud_transfer``'s."""
 
 from __future__ import annotations
 
@@ -13,328 +9,28 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import ndimage, special
 
+from .cloud_noise import _knots, _lost_variance, _packed
+from .cloud_transfer import (_slab_path, delta_eddington_transmittance, diffuse_direct_transmittance,
+                             single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 from .composite import henyey_greenstein
 
-__all__ = [
-    "CloudLayer", "single_scattering_transmission", "single_scattering_flux_transmittance",
-    "delta_eddington_transmittance", "two_stream_diffuse_transmittance", "diffuse_direct_transmittance",
-    "fractal_noise", "MAX_TAPS", "TILE_BLEND",
-]
+__all__ = ["CloudLayer", "MAX_TAPS", "TILE_BLEND"]
 
 _TAU_NODES = 48  # optical-depth nodes of the per-call multiple-scattering table
-_QUAD_NODES = 192  # Gauss-Legendre nodes per angle in the single-scattering flux quadrature
 
-
-# --------------------------------------------------------------------------- physics functions
-
-
-# numpy's Gauss-Legendre and Gauss-Hermite nodes and weights, cached: numpy finds them as the
-# eigenvalues of a matrix at each call (50 ms for 192 nodes on a busy machine, several times a
-# frame). Callers must not write to them.
-_leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
+# numpy's Gauss-Hermite nodes and weights, cached: numpy finds them as the eigenvalues of a
+# matrix at each call. Callers must not write to them.
 _hermegauss = lru_cache(maxsize=4)(np.polynomial.hermite_e.hermegauss)
-
-
-def _phi(x):
-    """(1 - exp(-x)) / x for x >= 0, with phi(0) = 1. [dimensionless]"""
-    x = np.asarray(x)
-    if x.dtype != np.float32:
-        x = x.astype(np.float64)
-    x = np.maximum(x, np.finfo(x.dtype).tiny)  # expm1 is exact there: phi = 1
-    return -np.expm1(-x) / x
-
-
-def single_scattering_transmission(optical_depth, view_cosine, sun_cosine, phase, *, albedo):
-    """Singly scattered radiance below a slab lit from above, per unit sun normal irradiance.
-
-    Blinn 1982 ("Light reflection functions for simulation of clouds and dusty surfaces",
-    SIGGRAPH 82), transmitted light of a low-albedo layer:
-    ``L / F = w p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``, evaluated in the form
-    ``w p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)``, which is exact and
-    stable at ``mu = mu0``.
-
-    Parameters
-    ----------
-    optical_depth : float or numpy.ndarray
-        tau, vertical optical depth of the slab, >= 0 [1].
-    view_cosine : float or numpy.ndarray
-        mu, cosine of the zenith angle of the viewing direction, in (0, 1] [1].
-    sun_cosine : float or numpy.ndarray
-        mu0, cosine of the sun's zenith angle, in (0, 1] [1].
-    phase : float or numpy.ndarray
-        p, phase function at the scattering angle, normalised to 1 over the sphere [1/sr].
-    albedo : float
-        w, single-scattering albedo in [0, 1] [1].
-
-    Arrays broadcast.
-
-    Returns
-    -------
-    numpy.ndarray
-        L / F, float64 of the broadcast shape [1/sr].
-    """
-    tau = np.asarray(optical_depth, dtype=np.float64)
-    inv_mu = 1.0 / np.asarray(view_cosine, dtype=np.float64)
-    inv_mu0 = 1.0 / np.asarray(sun_cosine, dtype=np.float64)
-    return albedo * np.asarray(phase, dtype=np.float64) * inv_mu * _slab_path(tau, inv_mu, inv_mu0)
-
-
-def _slab_path(tau, inv_mu, inv_mu0):
-    """tau exp(-tau m) phi(tau d), m = min(1/mu, 1/mu0), d = |1/mu0 - 1/mu|: the integral over
-    the depth t in [0, tau] of exp(-t / mu0 - (tau - t) / mu). [dimensionless]"""
-    near = np.minimum(inv_mu, inv_mu0)
-    x = np.abs(inv_mu0 - inv_mu)
-    x = x * tau
-    result = np.exp(-tau * near)
-    result *= tau
-    result *= _phi(x)
-    return result
-
-
-def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry, albedo,
-                                         nodes=_QUAD_NODES):
-    """S1: the singly scattered flux leaving the base of a slab over the sun's flux F mu0.
-
-    The hemispheric integral of ``single_scattering_transmission`` times ``mu`` over the lower
-    hemisphere, by Gauss-Legendre quadrature in zenith (``nodes``) and azimuth (``nodes``);
-    the azimuth integral of the Henyey-Greenstein phase is done once for all depths.
-
-    Parameters
-    ----------
-    optical_depth : numpy.ndarray
-        tau, vertical optical depths >= 0, any shape [1].
-    sun_cosine : float
-        mu0 in (0, 1] [1].
-    asymmetry : float
-        g of the Henyey-Greenstein phase [1].
-    albedo : float
-        Single-scattering albedo [1].
-    nodes : int, optional
-        Gauss-Legendre nodes per angle.
-
-    Returns
-    -------
-    numpy.ndarray
-        S1, float64 with the shape of ``optical_depth``, in [0, albedo] [1].
-    """
-    tau = np.asarray(optical_depth, dtype=np.float64)
-    mu0 = float(sun_cosine)
-    x, w = _leggauss(int(nodes))
-    theta = 0.25 * np.pi * (x + 1.0)  # zenith of the view, (0, pi/2)
-    w_theta = 0.25 * np.pi * w
-    phi = 0.5 * np.pi * (x + 1.0)  # azimuth from the sun, (0, pi); the integrand is even
-    w_phi = np.pi * w  # twice 0.5 pi w: both halves of the circle
-    sin0 = np.sqrt(max(0.0, 1.0 - mu0 * mu0))
-    cos_scatter = (np.cos(theta)[:, None] * mu0
-                   + np.sin(theta)[:, None] * sin0 * np.cos(phi)[None, :])
-    phase_ring = henyey_greenstein(cos_scatter, asymmetry) @ w_phi  # (nodes,) [1/sr x rad]
-    mu = np.cos(theta)
-    inv_mu, inv_mu0 = 1.0 / mu, 1.0 / mu0
-    t = tau.reshape(-1, 1)
-    path = _slab_path(t, inv_mu[None, :], inv_mu0)
-    # integral of L mu d_omega = F w  int p path sin(theta) d_theta d_phi
-    s1 = albedo * (path @ (w_theta * np.sin(theta) * phase_ring)) / mu0
-    return s1.reshape(tau.shape)
-
-
-def delta_eddington_transmittance(optical_depth, sun_cosine, *, asymmetry):
-    """Total (direct + diffuse) flux transmittance of a non-absorbing slab under a collimated sun.
-
-    Delta-Eddington (Joseph, Wiscombe & Weinman 1976, J. Atmos. Sci. 33, 2452-2459): the forward
-    peak ``f = g^2`` is folded into the direct beam, ``tau' = (1 - g^2) tau``, ``g' = g / (1 + g)``;
-    then the conservative Eddington two-stream solution (Meador & Weaver 1980, J. Atmos. Sci. 37,
-    630-643; ``gamma1 = 3 (1 - g') / 4``, ``gamma3 = (2 - 3 g' mu0) / 4``):
-    ``R = (gamma1 tau' + (gamma3 - gamma1 mu0)(1 - exp(-tau'/mu0))) / (1 + gamma1 tau')``,
-    ``T = 1 - R``.
-
-    Parameters
-    ----------
-    optical_depth : float or numpy.ndarray
-        tau, vertical optical depth >= 0 [1].
-    sun_cosine : float or numpy.ndarray
-        mu0 in (0, 1], broadcastable with ``optical_depth`` [1].
-    asymmetry : float
-        g in [0, 1) [1].
-
-    Returns
-    -------
-    numpy.ndarray
-        T, the transmitted flux over the incident ``F mu0``, float64 of the broadcast shape [1].
-    """
-    tau = np.asarray(optical_depth, dtype=np.float64)
-    mu0 = np.asarray(sun_cosine, dtype=np.float64)
-    g = float(asymmetry)
-    tau_s = (1.0 - g * g) * tau
-    g_s = g / (1.0 + g)
-    gamma1 = 0.75 * (1.0 - g_s)
-    gamma3 = 0.25 * (2.0 - 3.0 * g_s * mu0)
-    reflectance = ((gamma1 * tau_s + (gamma3 - gamma1 * mu0) * -np.expm1(-tau_s / mu0))
-                   / (1.0 + gamma1 * tau_s))
-    return 1.0 - reflectance
-
-
-def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
-    """Flux transmittance of a slab under uniform diffuse light, two-stream (hemispheric mean).
-
-    ``dF+/dtau = g1 F+ - g2 F-``, ``dF-/dtau = g2 F+ - g1 F-``, ``g1 = 2 - w (1 + g)``,
-    ``g2 = w (1 - g)`` (Meador & Weaver 1980, Table 1); with ``k = sqrt(g1^2 - g2^2)`` and
-    ``r = g2 / (g1 + k)``, ``T = (1 - r^2) exp(-k tau) / (1 - r^2 exp(-2 k tau))``, written to
-    stay finite as ``k -> 0`` (conservative limit ``T = 1 / (1 + (1 - g) tau)``, Bohren 1987,
-    Am. J. Phys. 55, 524).
-
-    Parameters
-    ----------
-    optical_depth : float or numpy.ndarray
-        tau >= 0 [1].
-    albedo : float
-        w in [0, 1] [1].
-    asymmetry : float
-        g in (-1, 1) [1].
-
-    Returns
-    -------
-    numpy.ndarray
-        T, direct and diffuse together, float64 of the shape of ``optical_depth`` [1].
-    """
-    tau = np.asarray(optical_depth, dtype=np.float64)
-    g1 = 2.0 - albedo * (1.0 + asymmetry)
-    g2 = albedo * (1.0 - asymmetry)
-    k = np.sqrt(max(0.0, g1 * g1 - g2 * g2))
-    r = g2 / (g1 + k)
-    # (1 - r^2) = 2k / (g1 + k); divide numerator and denominator by 2k.
-    return np.exp(-k * tau) / (1.0 + (g1 + k) * r * r * tau * _phi(2.0 * k * tau))
-
-
-def diffuse_direct_transmittance(optical_depth):
-    """Unscattered fraction of uniform diffuse light through a slab: 2 E3(tau).
-
-    Parameters
-    ----------
-    optical_depth : float or numpy.ndarray
-        tau >= 0 [1].
-
-    Returns
-    -------
-    numpy.ndarray
-        float64 of the shape of ``optical_depth`` [1].
-    """
-    return 2.0 * special.expn(3, np.asarray(optical_depth, dtype=np.float64))
-
-
-# --------------------------------------------------------------------------- noise texture
-
-
-@lru_cache(maxsize=16)
-def _noise(seed: int, texels: int, period: float, spectral_slope: float):
-    """(texture, sorted values), both read-only float64 (texels, texels); see ``fractal_noise``."""
-    n = int(texels)
-    white = np.random.default_rng(seed).standard_normal((n, n))
-    ky = np.fft.fftfreq(n, d=1.0 / n)[:, None]  # cycles per tile
-    kx = np.fft.rfftfreq(n, d=1.0 / n)[None, :]
-    k0 = 0.5 * float(period)  # 1 / (2 scale) in cycles per tile of period * scale
-    amplitude = (kx * kx + ky * ky + k0 * k0) ** (-(spectral_slope + 1.0) / 4.0)
-    amplitude[0, 0] = 0.0
-    field = np.fft.irfft2(np.fft.rfft2(white) * amplitude, s=(n, n))
-    field -= field.mean()
-    field /= field.std()
-    ordered = np.sort(field, axis=None)
-    field.setflags(write=False)
-    ordered.setflags(write=False)
-    return field, ordered
-
-
-def fractal_noise(seed, texels=1024, *, period=16.0, spectral_slope=5.0 / 3.0):
-    """The periodic fractal noise lattice of a cloud layer (zero mean, unit variance).
-
-    Cached: the same arguments return the same array.
-
-    Parameters
-    ----------
-    seed : int
-        Seed of ``numpy.random.default_rng`` for the white noise.
-    texels : int, optional
-        Lattice side; one tile is ``texels x texels`` [count].
-    period : float, optional
-        Tile side in units of the feature size ``scale`` [1].
-    spectral_slope : float, optional
-        beta, slope of the 1-D transect power spectrum ``k^-beta`` [1].
-
-    Returns
-    -------
-    numpy.ndarray
-        Read-only float64 (texels, texels), indexed [row, col] with col along +x and row along -y [1].
-    """
-    return _noise(int(seed), int(texels), float(period), float(spectral_slope))[0]
-
-
-@lru_cache(maxsize=8)
-def _noise_levels(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
-    """The noise lattice and its 2 x 2 box-filtered levels down to one texel (a mip pyramid of
-    a periodic texture: every level keeps the mean and tiles). Read-only float64."""
-    levels = [_noise(seed, texels, period, spectral_slope)[0]]
-    while min(levels[-1].shape) > 1 and all(n % 2 == 0 for n in levels[-1].shape):
-        a = levels[-1]
-        coarser = 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
-        coarser.setflags(write=False)
-        levels.append(coarser)
-    return tuple(levels)
-
 
 MAX_TAPS = 16
 """Most trilinear taps along a footprint's longer axis (``CloudLayer.field``)."""
 
 _HERMITE_NODES = 8  # Gauss-Hermite nodes of a footprint's mean coverage
 
-
-@lru_cache(maxsize=8)
-def _level_variances(seed: int, texels: int, period: float, spectral_slope: float) -> np.ndarray:
-    """Variance of each mip level of the noise (level 0: 1): (levels,) float64, entry k that of
-    the lattice's means over boxes of 2^k texels. [dimensionless]"""
-    return np.array([level.var() for level in _noise_levels(seed, texels, period, spectral_slope)])
-
-
-def _lost_variance(key, along, across) -> np.ndarray:
-    """The variance of the noise within a footprint of widths ``along`` x ``across`` (m,)
-    [texel] about its mean: 1 - var(box mean) for a box of the footprint's area, from the mip
-    levels' variances (log-linear between them); below 2 texels, the lost variance of a
-    2-texel box times (width / 2)^2 (a smooth field varies linearly within a small box).
-    [dimensionless]"""
-    variances = _level_variances(*key)
-    lost = 1.0 - variances
-    width = np.sqrt(np.maximum(along * across, 1e-300))  # the box of the same area [texel]
-    level = np.log2(np.maximum(width, 1e-300))
-    big = np.interp(level, np.arange(len(lost)), lost)
-    small = lost[1] * (width / 2.0) ** 2 if len(lost) > 1 else np.zeros_like(width)
-    return np.clip(np.where(width >= 2.0, big, np.minimum(small, big)), 0.0, 1.0)
-
-
-@lru_cache(maxsize=8)
-def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.ndarray:
-    """Cubic B-spline coefficients of the noise lattice (periodic), read-only float64."""
-    coefficients = ndimage.spline_filter(_noise(seed, texels, period, spectral_slope)[0], order=3,
-                                         mode="grid-wrap")
-    coefficients.setflags(write=False)
-    return coefficients
-
-
-@lru_cache(maxsize=8)
-def _packed(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
-    """What ``_filter.cloud_field`` reads: (every level in one flat float64 array, each level's offset
-    in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
-    (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
-    levels = (_spline(seed, texels, period, spectral_slope),) + _noise_levels(seed, texels, period, spectral_slope)[1:]
-    sides = np.array([level.shape[0] for level in levels], dtype=np.intp)
-    offsets = np.concatenate([[0], np.cumsum([level.size for level in levels])[:-1]]).astype(np.intp)
-    flat = np.concatenate([level.reshape(-1) for level in levels])
-    flat.setflags(write=False)
-    return flat, offsets, sides
-
-
 TILE_BLEND = 0.125
 """Width of the band about each edge of a copy of the tile, as a fraction of the tile's side, over
-which the copies on both sides blend (``_filter.cloud_field``). [1]"""
+which the copies on both sides blend (``_tiling.cloud_field``). [1]"""
 
 
 def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
@@ -391,24 +87,6 @@ def _compiled(loop):
     from numba import njit
 
     return njit(cache=True, nogil=True, error_model="numpy")(loop)
-
-
-@lru_cache(maxsize=64)
-def _knots(seed, texels, period, spectral_slope, cover, softness):
-    """Field values and coverages of the rank-space smoothstep (see the module docstring)."""
-    ordered = _noise(seed, texels, period, spectral_slope)[1]
-    u0 = 1.0 - cover
-    h = softness * min(cover, 1.0 - cover)
-    t = np.linspace(0.0, 1.0, 33)
-    ranks = u0 - h + 2.0 * h * t
-    values = np.interp(ranks * (ordered.size - 1), np.arange(ordered.size), ordered)
-    if h <= 0.0 or not np.all(np.diff(values) > 0.0):
-        values = np.array([values[16], values[16] + 1e-12])
-        return values, np.array([0.0, 1.0])
-    return values, t * t * (3.0 - 2.0 * t)
-
-
-# --------------------------------------------------------------------------- the layer
 
 
 @dataclass(frozen=True)
@@ -536,7 +214,7 @@ class CloudLayer:
         shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
         out = np.empty(coords.shape[1])
-        from ._filter import cloud_field  # numba, imported on first use
+        from ._tiling import cloud_field  # numba, imported on first use
 
         copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
         if taps is None:
@@ -553,13 +231,13 @@ class CloudLayer:
 
     def _drifted_copies(self, time) -> tuple[int, int]:
         """The copy of the tile (row, col) that ``_taps``'s lattice coordinates (0, 0) are the
-        centre of at ``time`` [s]: the drift's whole tiles, negated (``_filter.cloud_field``)."""
+        centre of at ``time`` [s]: the drift's whole tiles, negated (``_tiling.cloud_field``)."""
         return tuple(-int(math.floor(drift / self.texels)) for drift in self._drift(time))
 
     def _taps(self, s, time, footprint=None) -> tuple:
         """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
         axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
-        None without a footprint, else the taps as ``_filter.cloud_field`` takes them: (count (m,), finer
+        None without a footprint, else the taps as ``_tiling.cloud_field`` takes them: (count (m,), finer
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
         s = np.asarray(s, dtype=np.float64)

@@ -20,7 +20,7 @@ from .settings import (AUTO_LIMITS, AUTO_TIME_CONSTANT, AnimationConfig, AutoExp
                        CanopyConfig, CanopyLayer, CloudsConfig, Config, FlutterConfig, ForegroundConfig, GroundConfig,
                        MoonConfig, OutputConfig, RenderConfig, SiteConfig, SkyConfig, SunConfig, TreesConfig)
 from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DISPLAYS, FOREGROUNDS, PASSES,
-                         PROCEDURAL_MODELS, SKIES, TURBIDITY_RANGE, WHITE_BALANCES)
+                         PROCEDURAL_MODELS, REFLECTANCES, SKIES, TURBIDITY_RANGE, WHITE_BALANCES)
 from .yamlsafe import _Context, _key_lines, load_yaml
 
 __all__ = ["FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
@@ -262,7 +262,7 @@ def _parse_brdf(s: _Section) -> BrdfConfig | None:
         model, parameters = BRDF_PRESETS[value]
         return BrdfConfig(model, tuple(parameters.items()), value)
     b = s.section("brdf")
-    model = b.choice("model", tuple(BRDF_PARAMETERS))
+    model = b.choice("model", REFLECTANCES.names)
     ranges = BRDF_PARAMETERS[model]
     values = {}
     for name, (low, high, brackets) in ranges.items():

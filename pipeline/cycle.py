@@ -14,16 +14,36 @@ from dataclasses import asdict
 import joblib
 import numpy as np
 
-from . import cache, canopy, foreground, foregrounds, shadow
+from . import cache, cache_keys, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow, tree_detail
 from .config import FRAME_BYTES_PER_PIXEL
 from .cores import end_if_orphaned
 from .errors import portable
 from .inputs import grove_of, load_mask
 from .plan import RunPlan
 
+__all__ = ["layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
+           "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item"]
+
 
 def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
-    """Transmittance masks (coarse, fine or None) of one canopy plane at one cycle frame."""
+    """Transmittance masks of one canopy plane at one cycle frame.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    layer_index : int
+        The canopy plane, an index of ``plan.layers``.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    coarse : ndarray, shape (rows, cols)
+        Transmittance [1] on the plane's coarse grid (``LayerPlan.canopy``).
+    fine : ndarray, shape (rows, cols), or None
+        Transmittance [1] on its fine sun mask grid, or None without a sun kernel.
+    """
     c = plan.canopy
     layer, lp = c.layers[layer_index], plan.layers[layer_index]
     periodic = c.layout == "periodic"
@@ -35,18 +55,36 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
     else:
         grove, flutter = grove_of(c)
         heights = tuple(l.height for l in c.layers)
-        leaf_layer, wood_layer = canopy.layer_index(grove, heights)
-        shapes = canopy.project(
-            canopy.leaves_at(grove, flutter, cycle_frame), grove.wood,
+        leaf_layer, wood_layer = grove_geometry.layer_index(grove, heights)
+        shapes = grove_geometry.project(
+            grove_geometry.leaves_at(grove, flutter, cycle_frame), grove.wood,
             sun=np.array(plan.projection), plane_height=layer.height,
         ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
         period = layer.size if periodic else None
-        masks = [canopy.rasterize_transmittance(shapes, g, period=period) for g in grids]
+        masks = [rasteriser.rasterize_transmittance(shapes, g, period=period) for g in grids]
     return masks[0], (masks[1] if lp.sun else None)
 
 
 def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
-    """Everything a layer's cycle products at ``cycle_frame`` depend on (docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache")."""
+    """Everything a layer's cycle products at ``cycle_frame`` depend on: their cache key's params.
+
+    See docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache".
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    layer_index : int
+        The canopy plane, an index of ``plan.layers``.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    dict
+        JSON-able params (``cache.key_of``): the mask file's digest or the trees, the grids, the
+        projection.
+    """
     c = plan.canopy
     lp = plan.layers[layer_index]
     if c.trees is None:
@@ -71,9 +109,28 @@ def _file_digest(path) -> str:
 
 def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
                *, workers: int = 1) -> dict:
-    """A layer's cached cycle products at ``cycle_frame``, computed on a miss: ``coarse`` (the
-    occlusion or tile spectrum), ``mean`` (mean transmittance of a tile), ``fine`` (the fine
-    mask spectrum, when there is a sun kernel). Memory-mapped, read-only."""
+    """A layer's cached cycle products at ``cycle_frame``, computed on a miss.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    layer_index : int
+        The canopy plane, an index of ``plan.layers``.
+    cycle_frame : int
+        The flutter cycle's frame.
+    store : cache.Cache
+        The cache.
+    workers : int
+        FFT threads for a miss.
+
+    Returns
+    -------
+    dict
+        ``coarse`` (the occlusion or tile spectrum, complex64), ``mean`` (mean transmittance of a
+        tile (1,) [1]), ``fine`` (the fine mask spectrum, complex64, when there is a sun kernel).
+        Memory-mapped, read-only.
+    """
     lp = plan.layers[layer_index]
 
     def compute():
@@ -93,13 +150,34 @@ def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.C
 
 def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
                 workers: int = 1, progress=None, cycle_frames=None, command: int | None = None) -> int:
-    """Every cycle product for every cycle frame (each layer's spectra, the foreground passes of
-    built-in trees), or for ``cycle_frames`` only: those already stored are checked here, the
-    missing ones computed in parallel over cycle frames by joblib processes (each with
-    ``workers`` FFT threads; the backend is joblib's current one, Dask included).
-    ``progress(done, total)`` is called as items finish; ``command``: the PID whose worker
-    processes end when it is gone (``cores.end_if_orphaned``). Returns the number of items
-    computed."""
+    """Every cycle product for every cycle frame, computing the missing ones in parallel.
+
+    Each layer's spectra and the foreground passes of built-in trees: those already stored are
+    checked here, the missing ones computed in parallel over cycle frames by joblib processes
+    (the backend is joblib's current one, Dask included).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    store : cache.Cache
+        The cache.
+    jobs : int
+        Parallel joblib processes (at most one per missing item).
+    workers : int
+        FFT threads of each process.
+    progress : callable or None
+        ``progress(done, total)``, called as items finish [items].
+    cycle_frames : iterable of int or None
+        The cycle frames to make; None for all.
+    command : int or None
+        The PID whose worker processes end when it is gone (``cores.end_if_orphaned``).
+
+    Returns
+    -------
+    int
+        The number of items computed.
+    """
     frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
     tasks = [(layer, frame) for frame in frames for layer in range(len(plan.layers))]
     if plan.foreground.cached:
@@ -130,11 +208,26 @@ def _product_key(plan, layer, frame):
 
 
 def disk_needed(plan: RunPlan) -> tuple[float, float]:
-    """(frames, cache) [B] a whole run writes: the frames at FRAME_BYTES_PER_PIXEL, and the
-    most the cycle products take: per layer and cycle frame the coarse spectrum (complex64 half
-    spectrum of its FFT, or of one tile) and the fine one at their exact sizes, per cycle frame
-    the built-in trees' passes (sun, sky: 3 float32, alpha and haze: 1) over the whole frame
-    (they are stored cut to the pixels the trees touch: ``foregrounds.cut_to_trees``)."""
+    """The disk a whole run writes.
+
+    The frames at FRAME_BYTES_PER_PIXEL, and the most the cycle products take: per layer and cycle
+    frame the coarse spectrum (complex64 half spectrum of its FFT, or of one tile) and the fine one
+    at their exact sizes, per cycle frame the built-in trees' passes (sun, sky: 3 float32, alpha
+    and haze: 1) over the whole frame (they are stored cut to the pixels the trees touch:
+    ``foregrounds.cut_to_trees``).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    frames : float
+        The frames' bytes [B].
+    cache : float
+        The cycle products' bytes, at most [B].
+    """
     width, height = plan.camera.width, plan.camera.height
     frames = plan.frames * width * height * FRAME_BYTES_PER_PIXEL[plan.output.half]
     per_frame = 0
@@ -155,19 +248,39 @@ products (``record_config_items``), so that ``sunshade cache list`` can name the
 
 
 def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
-    """Every cycle product a config's run needs: cache key -> (kind, cycle frame)."""
+    """Every cycle product a config's run needs.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    dict of str to tuple
+        Cache key -> (kind, cycle frame).
+    """
     keys = {}
     for frame in range(plan.canopy.cycle):
         for layer in [*range(len(plan.layers)), *([None] if plan.foreground.cached else [])]:
             kind, params = _product_key(plan, layer, frame)
-            keys[cache.key_of(kind, params)] = (kind, frame)
+            keys[cache_keys.key_of(kind, params)] = (kind, frame)
     return keys
 
 
 def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
-    """Record in the cache which items are this config's (``CONFIG_INDEX``/<hash of its path>
-    .json: its name, path and keys, those of earlier versions of it (a preview's among them)
-    kept, and the longest cycle among them), written atomically."""
+    """Record in the cache which items are this config's, written atomically.
+
+    ``CONFIG_INDEX``/<hash of its path>.json: its name, path and keys, those of earlier versions
+    of it (a preview's among them) kept, and the longest cycle among them.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    store : cache.Cache
+        The cache.
+    """
     folder = store.root / CONFIG_INDEX
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{hashlib.sha256(str(plan.source).encode()).hexdigest()[:16]}.json"
@@ -184,8 +297,18 @@ def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
 
 
 def recorded_configs(store: cache.Cache) -> list[dict]:
-    """The configs recorded in a cache (``record_config_items``), each {name, config, cycle,
-    keys}, by name."""
+    """The configs recorded in a cache (``record_config_items``).
+
+    Parameters
+    ----------
+    store : cache.Cache
+        The cache.
+
+    Returns
+    -------
+    list of dict
+        Each {name, config, cycle, keys}, by name (then path); unreadable records left out.
+    """
     found = []
     for path in sorted((store.root / CONFIG_INDEX).glob("*.json")):
         try:
@@ -209,8 +332,22 @@ def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
 
 
 def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
-    """Everything the built-in trees' passes at ``cycle_frame`` depend on: not the light's
-    strength or colour, since they are stored per unit irradiance."""
+    """Everything the built-in trees' passes at ``cycle_frame`` depend on: their cache key's params.
+
+    Not the light's strength or colour, since they are stored per unit irradiance.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    dict
+        JSON-able params (``cache.key_of``).
+    """
     c = plan.canopy
     return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
             "heights": [layer.height for layer in c.layers], "layout": c.layout,
@@ -218,28 +355,43 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
             "camera": asdict(plan.camera),
             "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
             "haze": plan.haze,
-            "wood": {"tip": foreground.TIP_TAPER, "piece": foreground.TAPER_PIECE,  # the stems' cones and bark
-                     "furrows": foreground.BARK_FURROWS, "contrast": foreground.BARK_CONTRAST,
+            "wood": {"tip": tree_detail.TIP_TAPER, "piece": tree_detail.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": tree_detail.BARK_FURROWS, "contrast": tree_detail.BARK_CONTRAST,
                      "probe": foreground.STEM_PROBE},
             "stored": "cut to the trees",  # cut_to_trees
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
-                "detail": foreground.LEAF_PIXELS, "reach": foreground.HAZE_REACH,
-                "most": foreground.MAX_FOREST_REACH, "stems": foreground.STEM_DETAIL_PIXELS}}
+                "detail": tree_detail.LEAF_PIXELS, "reach": tree_detail.HAZE_REACH,
+                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
 
 
 def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
-    """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance:
-    ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
-    a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols), ``haze`` (rows,
-    cols), all cut to the box of the pixels the trees touch (``foregrounds.cut_to_trees``; ``box``). The
-    shading is linear in each channel's light, so a frame scales them by the run's Lighting.
-    Memory-mapped, read-only."""
+    """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance.
+
+    The shading is linear in each channel's light, so a frame scales them by the run's Lighting.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    cycle_frame : int
+        The flutter cycle's frame.
+    store : cache.Cache
+        The cache.
+
+    Returns
+    -------
+    dict
+        ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
+        a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols) [1], ``haze``
+        (rows, cols) [1], all cut to the box of the pixels the trees touch
+        (``foregrounds.cut_to_trees``; ``box``). Memory-mapped, read-only.
+    """
     c = plan.canopy
 
     def compute():
         grove, flutter = grove_of(c)
-        leaves = canopy.leaves_at(grove, flutter, cycle_frame)
-        wood, owner = foreground.taper_wood(grove.wood)
+        leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = tree_detail.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None
         sun_point = np.asarray(plan.projection)
         leaf_visibility = wood_visibility = None
@@ -248,7 +400,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         view = plan.camera
         if c.layout == "periodic":  # the tile's trees on every tile in view
             layer = c.layers[0]
-            leaves, wood, leaf_index, wood_index = foreground.periodic_copies(
+            leaves, wood, leaf_index, wood_index = tree_detail.periodic_copies(
                 leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
                 seed=c.trees.seed, coarse_wood=grove.wood)
             if has_sun:  # a straight capsule gets the mean visibility of its pieces

@@ -168,8 +168,20 @@ a 320 x 180 camera, one S(t) sample every 5 minutes."""
 
 
 def scene_config(name: str, *, preview: bool = False) -> Config:
-    """The Config of the scene ``name`` (a key of SCENES), from its YAML text; ``preview``
-    merges in PREVIEW[name]. Validated and resolved as a config file is."""
+    """The Config of a scene, from its YAML text, validated and resolved as a config file is.
+
+    Parameters
+    ----------
+    name : str
+        A key of SCENES.
+    preview : bool
+        Merge in PREVIEW[name].
+
+    Returns
+    -------
+    settings.Config
+        The resolved config.
+    """
     text, changes = SCENES[name] if isinstance(SCENES[name], tuple) else (SCENES[name], {})
     data = _merged(yaml.safe_load(text), changes)
     if preview:
@@ -197,10 +209,26 @@ def _merged(base: dict, changes: dict) -> dict:
 
 
 def sky_plane_image(sky: sky_models.ProceduralSky, *, alpha: float, size: int) -> np.ndarray:
-    """The sky on the sky plane z = 1 (Max 1991, Fig. 5): radiance (size, size, 3) float32
-    [kcd/m^2] over the square |s|_inf <= tan(alpha) [rad], north up, east to the right (the
-    rasters' layout, as if seen from above through the plane). Clouds are filtered over each
-    cell; the sun disc is added as the cos^4-weighted mean radiance of the cells it covers."""
+    """The sky on the sky plane z = 1 (Max 1991, Fig. 5).
+
+    Over the square |s|_inf <= tan(alpha), north up, east to the right (the rasters' layout, as if
+    seen from above through the plane). Clouds are filtered over each cell; the sun disc is added
+    as the cos^4-weighted mean radiance of the cells it covers.
+
+    Parameters
+    ----------
+    sky : sky.ProceduralSky
+        The sky.
+    alpha : float
+        Half-angle of the sky square [rad].
+    size : int
+        Cells a side [1].
+
+    Returns
+    -------
+    ndarray, shape (size, size, 3), float32
+        Radiance [kcd/m^2].
+    """
     half = np.tan(alpha)
     grid = Grid((-half, half), 2.0 * half / size, (size, size))
     x, y = grid.ground_from_raster(np.arange(size)[:, None], np.arange(size)[None, :])
@@ -224,10 +252,24 @@ def _add_at_offset(target: np.ndarray, block: np.ndarray, block_grid: Grid, grid
 
 
 def weighted_sky_raster(sky: sky_models.ProceduralSky, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
-    """The weighted sky raster e = e_sky + e_sun (Max 1991, Fig. 6) on a sky-plane ``grid``
-    [tan] (the grid an IsolatedPlan correlates): e_sky the sky without the sun disc
-    (``sky.raster``), e_sun the sun kernel rasterized at the same cell, each (rows, cols, 3)
-    float32 [klx]: a cell holds the integral of L cos^4(theta) dA over it."""
+    """The weighted sky raster e = e_sky + e_sun (Max 1991, Fig. 6) on a sky-plane grid.
+
+    A cell holds the integral of L cos^4(theta) dA over it.
+
+    Parameters
+    ----------
+    sky : sky.ProceduralSky
+        The sky.
+    grid : Grid
+        The sky-plane grid (the grid an IsolatedPlan correlates) [tan].
+
+    Returns
+    -------
+    e_sky : ndarray, shape (rows, cols, 3), float32
+        The sky without the sun disc (``sky.raster``) [klx].
+    e_sun : ndarray, shape (rows, cols, 3), float32
+        The sun kernel rasterized at the same cell [klx].
+    """
     e_sky = np.moveaxis(sky.raster(grid).weighted, 0, -1)
     e_sun = np.zeros_like(e_sky)
     kernel = sun_kernel(sky, grid.pixel)
@@ -241,7 +283,23 @@ def log_display(values: np.ndarray, *, top: float | None = None, decades: float 
     ``decades`` below ``top`` (None: the brightest cell; brighter cells clip to full
     brightness), by default down to the dimmest lit cell with a quarter decade to spare, used
     as the display value as it is (a log scale has no use for the sRGB curve); each pixel keeps
-    its hue (its brightest channel is that brightness). [1]"""
+    its hue (its brightest channel is that brightness).
+
+    Parameters
+    ----------
+    values : ndarray, shape (rows, cols, 3)
+        Non-negative RGB values (any unit of light).
+    top : float or None
+        The luminance shown at full brightness, in the unit of ``values``; None: the brightest cell.
+    decades : float or None
+        Decades of luminance shown below ``top``; None: down to the dimmest lit cell, a quarter
+        decade to spare.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols, 3), float32
+        Display values in [0, 1] [1].
+    """
     values = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
     luminance = values @ REC709_LUMINANCE.astype(np.float64)
     top = luminance.max() if top is None else float(top)
@@ -258,9 +316,21 @@ def log_display(values: np.ndarray, *, top: float | None = None, decades: float 
 
 
 def sky_display(radiance: np.ndarray) -> np.ndarray:
-    """Display values in [0, 1] of a sky image (rows, cols, 3) [kcd/m^2]: the median luminance
-    at 0.4, then ``x / (1 + x)`` to keep the sun and its glow from clipping flat
-    (``composite.display_sky`` for a whole image, not an equirectangular upper half). [1]"""
+    """Display values of a sky image: the median luminance at 0.4, then ``x / (1 + x)``.
+
+    To keep the sun and its glow from clipping flat (``composite.display_sky`` for a whole image,
+    not an equirectangular upper half).
+
+    Parameters
+    ----------
+    radiance : ndarray, shape (rows, cols, 3)
+        The sky image [kcd/m^2].
+
+    Returns
+    -------
+    ndarray, shape (rows, cols, 3)
+        sRGB display values in [0, 1] [1].
+    """
     radiance = np.asarray(radiance, dtype=np.float32)
     median = float(np.median(radiance @ REC709_LUMINANCE))
     exposed = radiance * np.float32(0.4 / median if median > 0 else 1.0)
@@ -272,7 +342,20 @@ def i0_quadrature(alpha, *, points: int = 64) -> np.ndarray:
     (Max 1991, error analysis and Fig. 16): the directions inside the sky square of half-angle
     alpha [rad] are, at azimuth phi, those with tan(theta) <= tan(alpha) / max(|cos phi|,
     |sin phi|), so I0 = 8 int_0^{pi/4} sin^2(theta_max(phi)) / 2 dphi (the area of the paper's
-    region K), by Gauss-Legendre in phi."""
+    region K), by Gauss-Legendre in phi.
+
+    Parameters
+    ----------
+    alpha : float or array_like
+        Half-angle of the sky square [rad].
+    points : int
+        Gauss-Legendre points [1].
+
+    Returns
+    -------
+    ndarray
+        I0, the shape of ``alpha`` [sr].
+    """
     alpha = np.asarray(alpha, dtype=np.float64)
     x, w = np.polynomial.legendre.leggauss(points)
     phi = (x + 1.0) * np.pi / 8.0
@@ -283,7 +366,20 @@ def i0_quadrature(alpha, *, points: int = 64) -> np.ndarray:
 def i0_plot(*, width: int = 960, height: int = 640) -> np.ndarray:
     """The plot of I0(alpha) / pi for alpha from 0 to 90 degrees (Max 1991, Fig. 16), the closed
     form ``geometry.I0`` as a curve, ``i0_quadrature`` as dots, the paper's alpha = 70 degrees
-    (about 0.90) marked. Returns display values (height, width, 3) in [0, 1]."""
+    (about 0.90) marked.
+
+    Parameters
+    ----------
+    width : int
+        The picture's width [pixel].
+    height : int
+        Its height [pixel].
+
+    Returns
+    -------
+    ndarray, shape (height, width, 3)
+        Display values in [0, 1] [1].
+    """
     figure, axes = _figure(width, height)
     degrees = np.linspace(0.0, 90.0, 361)
     axes.plot(degrees, I0(np.radians(degrees)) / np.pi, color="tab:blue", lw=2,
@@ -305,9 +401,23 @@ def i0_plot(*, width: int = 960, height: int = 640) -> np.ndarray:
 
 
 def sun_fraction_curve(config: Config) -> tuple[list[datetime], np.ndarray, np.ndarray]:
-    """(UTC times, S, uncovered disc area) at every output frame of a site-and-time ``config``:
-    S is ``sky.sun_fraction()`` of the frame's sky (limb-darkened, luminance-weighted, clouds
-    included), the area is 1 - ``ephemeris.obscured_fraction`` (a uniform disc). [1]"""
+    """The sun's fraction S and the uncovered disc area at every output frame of a site-and-time config.
+
+    Parameters
+    ----------
+    config : settings.Config
+        A resolved config with a site and time.
+
+    Returns
+    -------
+    times : list of datetime
+        UTC times.
+    fraction : ndarray, shape (frames,)
+        S, ``sky.sun_fraction()`` of the frame's sky (limb-darkened, luminance-weighted, clouds
+        included) [1].
+    area : ndarray, shape (frames,)
+        1 - ``ephemeris.obscured_fraction`` (a uniform disc) [1].
+    """
     times, fraction, area = [], [], []
     for frame in range(config.animation.frames):
         scene = scene_at(config, frame)
@@ -319,9 +429,26 @@ def sun_fraction_curve(config: Config) -> tuple[list[datetime], np.ndarray, np.n
 
 
 def sun_fraction_plot(config: Config, *, title: str, width: int = 960, height: int = 640) -> np.ndarray:
-    """The plot of S(t) through an eclipse (docs/method.md, "The procedural sky": the direct sun over that of the
-    clear, uneclipsed sun) for a site-and-time ``config``, UTC time across, the contacts C1 to C4
-    marked. Returns display values (height, width, 3) in [0, 1]."""
+    """The plot of S(t) through an eclipse, UTC time across, the contacts C1 to C4 marked.
+
+    S: the direct sun over that of the clear, uneclipsed sun (docs/method.md, "The procedural sky").
+
+    Parameters
+    ----------
+    config : settings.Config
+        A resolved config with a site and time.
+    title : str
+        The plot's title.
+    width : int
+        The picture's width [pixel].
+    height : int
+        Its height [pixel].
+
+    Returns
+    -------
+    ndarray, shape (height, width, 3)
+        Display values in [0, 1] [1].
+    """
     import matplotlib.dates as mdates
 
     times, fraction, area = sun_fraction_curve(config)
@@ -496,10 +623,26 @@ _MAKERS = {
 
 
 def write_figures(folder: Path, *, store: cache.Cache, preview: bool = False, progress=None) -> list[Path]:
-    """Write every PNG of FIGURES into ``folder`` (which must exist), in order, each atomically
-    (``io.write_png``), and return their paths. ``store`` holds the cycle products (masks'
-    spectra, foreground passes) the renders share; ``preview`` makes the scenes small (seconds,
-    not minutes); ``progress(name, done, total)`` is called after each figure. Prints nothing."""
+    """Write every PNG of FIGURES into ``folder``, in order, each atomically (``io.write_png``).
+
+    Prints nothing.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Where; it must exist.
+    store : cache.Cache
+        Holds the cycle products (masks' spectra, foreground passes) the renders share.
+    preview : bool
+        Make the scenes small (seconds, not minutes).
+    progress : callable or None
+        ``progress(name, done, total)``, called after each figure.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The figures' paths.
+    """
     folder = Path(folder)
     scenes = _Scenes(store, preview)
     written = []

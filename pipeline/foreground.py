@@ -1,27 +1,23 @@
-"""Foreground passes: the trees themselves, seen by the camera (Max 1991, Figs. 8-9), lit by sun
-and sky (``sun``) and by the sky alone (``sky``), with their coverage ``alpha``; built in
-(``tree_passes``, the procedural grove) or read from files (``read_passes``). Geometry,
-coverage, compositing, shading and sun visibility: docs/method.md, "The foreground passes".
-
-Why one module: the leaves' and the wood's projection, coverage, depth order and shading share
-their fragments and are one renderer; split, each part would import the others' internals.
+"""Foreground passes rendered: the trees themselves, seen by the camera (Max 1991, Figs. 8-9), lit by sun
+and sky (``sun``) and by the sky alone (``sky``), with their coverage ``alpha`` (``tree_passes``,
+the procedural grove), and the share of the sun and of the sky that reaches each leaf and stem past
+the others (``sun_visibility``, ``sky_exposure``). Geometry, coverage, compositing, shading and sun
+visibility: docs/method.md, "The foreground passes".
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .camera import Camera, project_points
-from .canopy import Leaves, Shapes, Wood, coverage_fragments
+from .foreground_passes import ForegroundPasses
 from .geometry import Grid, normalized
-from .io import ImageError, read_image
+from .rasteriser import coverage_fragments
+from .tree_detail import bark_pattern
+from .grove_geometry import Leaves, Shapes, Wood
 
-__all__ = ["LEAF_REFLECTANCE", "LEAF_TRANSMITTANCE", "BARK_REFLECTANCE", "ForegroundPasses", "check_passes_size",
-           "read_passes", "sun_visibility", "leaf_sun_visibility", "sky_exposure", "tree_passes", "BARK_FURROWS",
-           "BARK_CONTRAST", "bark_pattern", "TIP_TAPER", "TAPER_PIECE", "taper_wood", "STEM_PROBE", "stem_visibility",
-           "LEAF_PIXELS", "HAZE_REACH", "MAX_FOREST_REACH", "STEM_DETAIL_PIXELS", "periodic_copies"]
+__all__ = ["LEAF_REFLECTANCE", "LEAF_TRANSMITTANCE", "BARK_REFLECTANCE", "sun_visibility", "leaf_sun_visibility",
+           "sky_exposure", "tree_passes", "STEM_PROBE", "stem_visibility"]
 
 LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
 """Default hemispherical reflectance of a green leaf, linear Rec.709 RGB. [1]"""
@@ -32,109 +28,6 @@ BARK_REFLECTANCE = (0.25, 0.20, 0.15)
 
 _DEPTH_RATIO = 1.05  # most ratio of the depths of a wood piece's ends in the camera pass
 _MAX_PIECES = 256  # most pieces one capsule is cut into
-
-
-@dataclass(frozen=True)
-class ForegroundPasses:
-    """The trees of one cycle frame, premultiplied scene-linear.
-
-    Attributes
-    ----------
-    sun : numpy.ndarray
-        (rows, cols, 3) float32, lit by the clear sun and the sky [kcd/m^2].
-    sky : numpy.ndarray
-        (rows, cols, 3) float32, lit by the sky alone [kcd/m^2].
-    alpha : numpy.ndarray
-        (rows, cols) float32 coverage in [0, 1] [1].
-    haze : numpy.ndarray or None
-        (rows, cols) float32, the share of the pixel that the haze in front of the trees veils, sum
-        over fragments of weight (1 - T): a frame adds it times the sky at the horizon
-        (Koschmieder, as the ground); the sun and sky passes hold T times the trees' light. None: no
-        haze [1].
-
-    Raises
-    ------
-    ValueError
-        When alpha is not (rows, cols) or a pass is not (rows, cols, 3).
-    """
-
-    sun: np.ndarray
-    sky: np.ndarray
-    alpha: np.ndarray
-    haze: np.ndarray | None = None
-
-    def __post_init__(self):
-        if np.ndim(self.alpha) != 2:
-            raise ValueError(f"alpha must be (rows, cols), got shape {np.shape(self.alpha)}")
-        rows, cols = np.shape(self.alpha)
-        for name in ("sun", "sky"):
-            if np.shape(getattr(self, name)) != (rows, cols, 3):
-                raise ValueError(f"the {name} pass is {np.shape(getattr(self, name))}, "
-                                 f"expected {(rows, cols, 3)} to go with alpha {(rows, cols)}")
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(rows, cols) of the passes. [pixel]"""
-        return tuple(np.shape(self.alpha))
-
-
-def check_passes_size(passes: ForegroundPasses, camera: Camera) -> None:
-    """Raise ValueError unless the passes are the camera's image size.
-
-    Parameters
-    ----------
-    passes : ForegroundPasses
-        The passes.
-    camera : camera.Camera
-        The camera whose image they go in: (height, width) [pixel].
-    """
-    rows, cols = passes.shape
-    if (rows, cols) != (camera.height, camera.width):
-        raise ValueError(f"the foreground passes are {cols} x {rows} pixels but the camera's image "
-                         f"is {camera.width} x {camera.height}")
-
-
-def read_passes(sun_path, sky_path, alpha_path) -> ForegroundPasses:
-    """Foreground passes from image files (EXR, premultiplied, scene-linear).
-
-    Parameters
-    ----------
-    sun_path, sky_path : str or os.PathLike
-        RGB images [kcd/m^2] (channels past the third are ignored; one or two channels are taken as
-        grey from the first).
-    alpha_path : str or os.PathLike
-        The coverage [1]: the A channel of a 4-channel image, else its first channel.
-
-    Returns
-    -------
-    ForegroundPasses
-        The passes, alpha clipped to [0, 1].
-
-    Raises
-    ------
-    io.ImageError
-        Naming the file: unreadable, non-finite values, alpha outside [0, 1] (beyond 1e-3) or a size
-        that differs from the sun pass's.
-    """
-    images = []
-    for path in (sun_path, sky_path, alpha_path):
-        image = read_image(path)
-        if not np.all(np.isfinite(image)):
-            raise ImageError(path, "the image holds NaN or infinite values")
-        if images and image.shape[:2] != images[0].shape[:2]:
-            (rows, cols), (want_rows, want_cols) = image.shape[:2], images[0].shape[:2]
-            raise ImageError(path, f"its size {cols} x {rows} differs from {want_cols} x {want_rows} "
-                                   f"of the sun pass {sun_path}")
-        images.append(image)
-    sun, sky, alpha = images
-    sun, sky = (im[..., :3] if im.shape[2] >= 3 else np.repeat(im[..., :1], 3, axis=2) for im in (sun, sky))
-    alpha = alpha[..., 3] if alpha.shape[2] == 4 else alpha[..., 0]
-    low, high = float(alpha.min(initial=0.0)), float(alpha.max(initial=0.0))
-    if low < -1e-3 or high > 1 + 1e-3:
-        raise ImageError(alpha_path, f"alpha must lie in [0, 1]; found {low:.4g} to {high:.4g}")
-    return ForegroundPasses(np.ascontiguousarray(sun, dtype=np.float32),
-                            np.ascontiguousarray(sky, dtype=np.float32),
-                            np.clip(alpha, 0.0, 1.0).astype(np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -151,9 +44,9 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -179,9 +72,9 @@ def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -208,9 +101,9 @@ def sky_exposure(leaves: Leaves, wood: Wood | None = None, *, pixel: float | Non
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : canopy.Wood, optional
+    wood : grove_geometry.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     pixel : float, optional
         Raster pixel across the light's beam; default a quarter of the median leaf length (half the
@@ -350,9 +243,9 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
 
     Parameters
     ----------
-    leaves : canopy.Leaves
-        The grove's leaves at one cycle frame (``canopy.leaves_at``) [m].
-    wood : canopy.Wood or None
+    leaves : grove_geometry.Leaves
+        The grove's leaves at one cycle frame (``grove_geometry.leaves_at``) [m].
+    wood : grove_geometry.Wood or None
         Its wood (``grove.wood``) [m]; None: no wood.
     camera : camera.Camera
         The pinhole camera.
@@ -534,123 +427,6 @@ def _leaf_fragments_arrays(flat, shape, leaves, cols, rows, focal, n_forward, n_
     frag_sky[is_leaf] = leaf_sky[i]
 
 
-BARK_FURROWS = (14, 23)
-"""Furrows round a trunk or branch in ``bark_pattern``: two families, so that the ridges are
-uneven, not a corduroy. [count]"""
-
-BARK_CONTRAST = 0.25
-"""Bark reflectance runs from (1 - BARK_CONTRAST) to (1 + BARK_CONTRAST) times its mean
-between the furrows' floors and ridges. [1]"""
-
-
-def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
-    """Factor on the bark's reflectance at wood fragments: vertical furrows round the stem.
-
-    The furrows wander a little with height, mean 1 (so the stem's mean reflectance stays
-    BARK_REFLECTANCE), and fade out where a furrow would be under 4 pixels wide (no moire on a far
-    or thin stem).
-
-    Parameters
-    ----------
-    normal : numpy.ndarray
-        (n, 3) the stem's outward unit normal at the fragment [1].
-    axis : numpy.ndarray
-        (n, 3) the stem's direction (any length) [m].
-    height : numpy.ndarray
-        (n,) the height of the fragment's axis point [m].
-    radius_px : numpy.ndarray
-        (n,) the stem's radius in the image [pixel].
-
-    Returns
-    -------
-    numpy.ndarray
-        (n,) float64 factor [1].
-    """
-    axis = normalized(np.asarray(axis, dtype=np.float64))
-    reference = normalized(np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
-    across = np.cross(axis, reference)
-    angle = np.arctan2(np.sum(normal * across, axis=1), np.sum(normal * reference, axis=1))
-    wander = 0.6 * np.sin(2 * np.pi * height / 0.9) + 0.3 * np.sin(2 * np.pi * height / 0.37 + 1.3)
-    coarse, fine = BARK_FURROWS
-    ridge = 0.6 * np.cos(coarse * angle + wander) + 0.4 * np.cos(fine * angle + 2.1 - 1.7 * wander)
-    period_px = 2 * np.pi * np.asarray(radius_px) / fine
-    fade = np.clip((period_px - 4.0) / 4.0, 0.0, 1.0)
-    return 1.0 + BARK_CONTRAST * fade * ridge
-
-
-TIP_TAPER = 0.7
-"""A stem that nothing continues (a branch's tip, a trunk's top) narrows to this share of its
-radius at its end (``taper_wood``). [1]"""
-
-TAPER_PIECE = 0.25
-"""Length of the pieces a stem is cut into by ``taper_wood``. [m]"""
-
-
-def taper_wood(wood: Wood) -> tuple[Wood, np.ndarray]:
-    """The stems as smooth, tapering tubes, drawn as pieces about TAPER_PIECE [m] long.
-
-    Capsules are chained where one starts at the other's end (a trunk's segments, a branch's
-    two halves); each chain's axis becomes the Catmull-Rom spline through its joints (Catmull
-    & Rom, "A class of local interpolating splines", 1974; uniform, with mirrored end points),
-    so the axis, and with it the normal that shades the stem, turns gradually instead of at a
-    joint at the same height on every trunk; the radius runs linearly from each capsule's own
-    at its start to the next one's (or to TIP_TAPER of its own at a chain's end), so the width
-    changes by millimetres from piece to piece instead of by centimetres at a joint. Each piece
-    also gets its own sun visibility (``stem_visibility``), so the light on a trunk fades where
-    the crown's shade begins.
-
-    Parameters
-    ----------
-    wood : canopy.Wood
-        The capsules: ends (M, 3) and radii (M,) [m].
-
-    Returns
-    -------
-    pieces : canopy.Wood
-        The pieces: ends (k, 3) and radii (k,) [m].
-    owner : numpy.ndarray
-        (k,) int64, the capsule each piece comes from.
-    """
-    start, end = np.asarray(wood.start, dtype=np.float64), np.asarray(wood.end, dtype=np.float64)
-    radius = np.asarray(wood.radius, dtype=np.float64)
-    starts = {tuple(np.round(p, 9)): i for i, p in enumerate(start)}
-    follower = [starts.get(tuple(np.round(p, 9)), -1) for p in end]
-    follower = [f if f != i else -1 for i, f in enumerate(follower)]
-    has_predecessor = np.zeros(len(radius), bool)
-    for f in follower:
-        if f >= 0:
-            has_predecessor[f] = True
-    pieces_start, pieces_end, pieces_radius, owner = [], [], [], []
-    seen = np.zeros(len(radius), bool)
-    heads = [i for i in range(len(radius)) if not has_predecessor[i]] + list(range(len(radius)))
-    for head in heads:  # chains from their heads; then any capsule left (a closed loop)
-        chain, i = [], head
-        while i >= 0 and not seen[i]:
-            seen[i] = True
-            chain.append(i)
-            i = follower[i]
-        if not chain:
-            continue
-        knots = np.vstack([start[chain[0]], end[chain]])
-        radii = np.append(radius[chain], TIP_TAPER * radius[chain[-1]])
-        padded = np.vstack([2 * knots[0] - knots[1], knots, 2 * knots[-1] - knots[-2]])
-        for k, capsule in enumerate(chain):
-            p0, p1, p2, p3 = padded[k : k + 4]
-            count = max(1, int(np.ceil(np.linalg.norm(p2 - p1) / TAPER_PIECE)))
-            u = np.linspace(0.0, 1.0, count + 1)[:, None]
-            curve = 0.5 * ((2 * p1) + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u**2
-                           + (3 * p1 - p0 - 3 * p2 + p3) * u**3)
-            middle = 0.5 * (u[:-1, 0] + u[1:, 0])
-            pieces_start.append(curve[:-1])
-            pieces_end.append(curve[1:])
-            pieces_radius.append(radii[k] + middle * (radii[k + 1] - radii[k]))
-            owner.append(np.full(count, capsule))
-    if not owner:
-        return Wood(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)), np.zeros(0, np.int64)
-    return (Wood(np.concatenate(pieces_start), np.concatenate(pieces_end), np.concatenate(pieces_radius)),
-            np.concatenate(owner).astype(np.int64))
-
-
 STEM_PROBE = 1e-3
 """Radius of the stems' axis lines, as a share of their radius, in ``stem_visibility``. [1]"""
 
@@ -666,9 +442,9 @@ def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | No
 
     Parameters
     ----------
-    leaves : canopy.Leaves
+    leaves : grove_geometry.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    stems : canopy.Wood
+    stems : grove_geometry.Wood
         The wood's pieces (``taper_wood``): ends (K, 3) and radii (K,) [m].
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -754,137 +530,3 @@ def _wood_side(p0, p1, origin, right, up, forward, focal):
     perp = np.column_stack([-image_axis[:, 1], image_axis[:, 0]])
     flip = np.where(np.sum(image_side * perp, axis=1) < 0, -1.0, 1.0)
     return toward, sideways * flip[:, None]
-
-
-# ---------------------------------------------------------------------------------------------
-# A periodic forest in the camera: the tile's trees copied over every tile in view
-# ---------------------------------------------------------------------------------------------
-
-LEAF_PIXELS = 6.0
-"""A periodic forest's copied leaves are drawn at least this long in the image: within the
-distance D = focal x (median leaf length) / LEAF_PIXELS of the camera every leaf is drawn
-(10 m for configs/forest.yaml at 1280 x 720, 2.5 m in its preview); beyond it a leaf is kept
-with probability (D / d)^2 and, kept, grown by d / D in both axes, so its expected area, and the
-crown's coverage, is unchanged (stochastic simplification, Cook, Halstead, Planck & Ryu,
-"Stochastic Simplification of Aggregate Detail", ACM TOG 26(3), 2007): a far crown costs as
-many leaves as it has pixels, not as it has leaves. [pixel]"""
-
-HAZE_REACH = 3.0
-"""Copies of a periodic forest are drawn out to this many haze extinction lengths, where the
-haze lets 1.8 % of their light through, and to no more than MAX_FOREST_REACH. [1]"""
-
-MAX_FOREST_REACH = 600.0
-"""Farthest copies drawn of a periodic forest, whatever the haze. [m]"""
-
-
-STEM_DETAIL_PIXELS = 2.0
-"""Copies of a periodic forest whose stems are all under this radius in the image are drawn
-with the straight capsules (``coarse_wood``) instead of the tapered pieces: a joint's step in
-width is then under half a pixel, and 40 pieces a trunk would cost more than the leaves. [pixel]"""
-
-
-def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
-                    seed: int = 0, coarse_wood: Wood | None = None):
-    """The shapes of one tile of a periodic forest copied over every tile the camera sees.
-
-    Every shape is wrapped into the tile, as ``canopy.grow_grove`` makes them; the copies are those
-    whose bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
-    MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
-
-    Parameters
-    ----------
-    leaves : canopy.Leaves
-        The tile's leaves [m].
-    wood : canopy.Wood
-        The tile's wood [m].
-    camera : camera.Camera
-        The pinhole camera.
-    period : float
-        The tile's side [m].
-    center : array_like
-        (x, y) of the tile's centre [m].
-    haze : float
-        Extinction length of the air (0: none, MAX_FOREST_REACH) [m].
-    seed : int, optional
-        Seed of the leaves' choice (default_rng([seed, 3])).
-    coarse_wood : canopy.Wood, optional
-        The stems as fewer, straight capsules, drawn instead of ``wood`` in the copies that
-        STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere) [m].
-
-    Returns
-    -------
-    leaves : canopy.Leaves
-        The copied leaves [m].
-    wood : canopy.Wood
-        The copied stems [m].
-    leaf_index : numpy.ndarray
-        (N',) int64, the leaf of the tile that each is a copy of (for its per-shape values: sun
-        visibility).
-    wood_index : numpy.ndarray
-        (M',) int64, the same for the stems, those of ``coarse_wood`` numbered after those of
-        ``wood``.
-    """
-    period = float(period)
-    reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
-    position = np.asarray(camera.position, dtype=np.float64)
-    everything = np.concatenate([leaves.center, wood.start, wood.end])
-    low, high = everything.min(axis=0), everything.max(axis=0)
-    # half-width of the tile's shapes
-    margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))
-    radius = np.sqrt(2.0) * margin + float(np.max(wood.radius, initial=0.0))
-    right, up, forward = camera.basis
-    half_diagonal = np.arctan(0.5 * np.hypot(camera.width, camera.height) / camera.focal)
-    count = int(np.ceil((reach + radius) / period))
-    i, j = np.meshgrid(np.arange(-count, count + 1), np.arange(-count, count + 1), indexing="ij")
-    shift = np.column_stack([i.ravel(), j.ravel()]) * period
-    centres = np.asarray(center, dtype=np.float64) + shift
-    middle = np.column_stack([centres, np.full(len(centres), 0.5 * (low[2] + high[2]))])
-    bound = np.hypot(radius, 0.5 * (high[2] - low[2]))
-    to = middle - position
-    distance = np.linalg.norm(to, axis=1)
-    # the cone of the view (the image's half-diagonal about ``forward``), widened by each copy's bounds
-    angle = np.arccos(np.clip(to @ forward / np.maximum(distance, 1e-12), -1.0, 1.0))
-    inside = distance <= bound
-    widen = np.arcsin(np.clip(bound / np.maximum(distance, 1e-12), 0.0, 1.0))
-    seen = inside | ((distance - bound <= reach) & (angle - widen <= half_diagonal))
-    shift = shift[seen]
-    rng = np.random.default_rng([seed, 3])
-    draw = rng.random(len(leaves.center))
-    tile_draw = rng.random(len(shift))
-    length = 2.0 * np.median(np.linalg.norm(leaves.axis_u, axis=1)) if len(draw) else 0.0
-    full_detail = camera.focal * length / LEAF_PIXELS  # [m]
-    by_draw = np.argsort(draw)
-    sorted_draw = draw[by_draw]
-    nearest = np.maximum(distance[seen] - bound, 1e-9)
-    centers, axes_u, axes_v, leaf_index = [], [], [], []
-    for offset, turn, near in zip(shift, tile_draw, nearest):
-        # the leaves a copy could keep: (draw + turn) mod 1 below the share at its nearest point
-        most = min(1.0, (full_detail / near) ** 2)
-        if most >= 1.0:
-            candidates = by_draw
-        else:
-            lo, hi = 1.0 - turn, 1.0 - turn + most
-            candidates = np.concatenate([by_draw[np.searchsorted(sorted_draw, lo):np.searchsorted(sorted_draw, hi)],
-                                         by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
-        c = leaves.center[candidates] + np.array([offset[0], offset[1], 0.0])
-        d = np.linalg.norm(c - position, axis=1)
-        keep_share = np.minimum(1.0, (full_detail / np.maximum(d, 1e-9)) ** 2)
-        chosen = np.mod(draw[candidates] + turn, 1.0) < keep_share
-        kept = candidates[chosen]
-        c, keep_share = c[chosen], keep_share[chosen]
-        grow = 1.0 / np.sqrt(keep_share)[:, None]
-        centers.append(c)
-        axes_u.append(leaves.axis_u[kept] * grow)
-        axes_v.append(leaves.axis_v[kept] * grow)
-        leaf_index.append(kept)
-    sources = [wood] if coarse_wood is None else [wood, coarse_wood]
-    every = Wood(*(np.concatenate([getattr(w, f) for w in sources]) for f in ("start", "end", "radius")))
-    fine = np.arange(len(wood.radius))
-    coarse = fine if coarse_wood is None else len(wood.radius) + np.arange(len(coarse_wood.radius))
-    thin = camera.focal * float(np.max(wood.radius, initial=0.0)) / nearest < STEM_DETAIL_PIXELS
-    wood_index = np.concatenate([coarse if far else fine for far in thin] or [np.zeros(0, np.int64)])
-    moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]),
-                      [len(coarse) if far else len(fine) for far in thin], axis=0)
-    copies = Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index])
-    return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
-            np.concatenate(leaf_index), wood_index)

@@ -52,14 +52,46 @@ class ForegroundModel(Protocol):
 
     def layer(self, cycle_frame: int, *, view: Camera, item: dict | None, sun_irradiance: np.ndarray,
               sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: float) -> ForegroundLayer | None:
-        """The foreground at ``cycle_frame`` (None: nothing in front of the ground): ``item``
-        its cycle product when ``cached``; ``sun_irradiance`` the sun's normal irradiance and
-        ``sky_irradiance`` the sky's horizontal one (3,) [klx], ``sun_down`` the sun's
-        horizontal irradiance (3,) [klx], ``bounce`` the share of the ground's light that
-        reaches the trees' undersides [1]."""
+        """The foreground at a cycle frame, lit by the frame's light.
+
+        Parameters
+        ----------
+        cycle_frame : int
+            The flutter cycle's frame.
+        view : Camera
+            The run's camera.
+        item : dict or None
+            Its cycle product when ``cached`` (per unit light), else None.
+        sun_irradiance : ndarray, shape (3,)
+            The sun's normal irradiance [klx].
+        sky_irradiance : ndarray, shape (3,)
+            The sky's horizontal irradiance [klx].
+        sun_down : ndarray, shape (3,)
+            The sun's horizontal irradiance [klx].
+        bounce : float
+            The share of the ground's light that reaches the trees' undersides [1].
+
+        Returns
+        -------
+        ForegroundLayer or None
+            The passes [kcd/m^2], or None: nothing in front of the ground.
+        """
 
     def check(self, view: Camera, cycle: int) -> None:
-        """Read and check the files of every cycle frame. Raises io.ImageError naming the file."""
+        """Read and check the files of every cycle frame.
+
+        Parameters
+        ----------
+        view : Camera
+            The run's camera (the passes' size must be its image's).
+        cycle : int
+            The flutter cycle's number of frames [1].
+
+        Raises
+        ------
+        io.ImageError
+            Naming the file.
+        """
 
 
 @dataclass(frozen=True)
@@ -77,6 +109,26 @@ class TreesForeground:
     cached = True
 
     def layer(self, cycle_frame, *, view, item, sun_irradiance, sky_irradiance, sun_down, bounce):
+        """See ``ForegroundModel.layer``.
+
+        Parameters
+        ----------
+        cycle_frame : int
+            The flutter cycle's frame.
+        view : Camera
+            The run's camera.
+        item : dict or None
+            The cycle product: ``sun``, ``sky`` (per unit light), ``alpha``, ``box``, maybe ``haze``.
+        sun_irradiance, sky_irradiance, sun_down : ndarray, shape (3,)
+            The sun's normal, the sky's and the sun's horizontal irradiance [klx].
+        bounce : float
+            The share of the ground's light that reaches the trees' undersides [1].
+
+        Returns
+        -------
+        ForegroundLayer
+            The trees lit [kcd/m^2], cut to their box (``tree_box``).
+        """
         # light bounced off the ground reaches the trees' undersides as more diffuse light: half
         # the ground's radiosity, its sun part following S with the sun pass
         sky = item["sky"] * (sky_irradiance * (1.0 + bounce)).astype(np.float32)
@@ -84,6 +136,15 @@ class TreesForeground:
         return ForegroundLayer(sky + sun, sky, item["alpha"], tree_box(item), item.get("haze"))
 
     def check(self, view, cycle):
+        """See ``ForegroundModel.check``: nothing to read.
+
+        Parameters
+        ----------
+        view : Camera
+            The run's camera (not used).
+        cycle : int
+            The flutter cycle's number of frames [1] (not used).
+        """
         pass
 
 
@@ -102,10 +163,39 @@ class ImportedForeground:
     cached = False
 
     def layer(self, cycle_frame, *, view, item, sun_irradiance, sky_irradiance, sun_down, bounce):
+        """See ``ForegroundModel.layer``: the passes read (``inputs.imported_passes``).
+
+        Parameters
+        ----------
+        cycle_frame : int
+            The flutter cycle's frame.
+        view : Camera
+            The run's camera.
+        item : dict or None
+            The cycle product (None: not cached).
+        sun_irradiance, sky_irradiance, sun_down : ndarray, shape (3,)
+            The sun's normal, the sky's and the sun's horizontal irradiance [klx] (not used: the passes are lit).
+        bounce : float
+            The share of the ground's light that reaches the trees' undersides [1] (not used).
+
+        Returns
+        -------
+        ForegroundLayer
+            The passes read [kcd/m^2], over the whole frame.
+        """
         passes = imported_passes(self.config, view, cycle_frame)
         return ForegroundLayer(passes.sun, passes.sky, passes.alpha, (slice(None), slice(None)))
 
     def check(self, view, cycle):
+        """See ``ForegroundModel.check``: each cycle frame's passes read.
+
+        Parameters
+        ----------
+        view : Camera
+            The run's camera.
+        cycle : int
+            The flutter cycle's number of frames [1].
+        """
         for cycle_frame in range(cycle):
             imported_passes(self.config, view, cycle_frame)
 
@@ -124,9 +214,32 @@ class NoForeground:
     cached = False
 
     def layer(self, cycle_frame, **light):
+        """See ``ForegroundModel.layer``.
+
+        Parameters
+        ----------
+        cycle_frame : int
+            The flutter cycle's frame (not used).
+        **light
+            ``view``, ``item`` and the light (not used).
+
+        Returns
+        -------
+        None
+            Nothing in front of the ground.
+        """
         return None
 
     def check(self, view, cycle):
+        """See ``ForegroundModel.check``: nothing to read.
+
+        Parameters
+        ----------
+        view : Camera
+            The run's camera (not used).
+        cycle : int
+            The flutter cycle's number of frames [1] (not used).
+        """
         pass
 
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import brdf as reflect
+from . import brdf_bands
+from . import brdf_camera as reflect
 from . import cache, camera, composite, texture
 from .colour import REC709_LUMINANCE
 from .cores import default_workers
@@ -22,6 +23,9 @@ from .inputs import albedo_mipmap, ground_albedo
 from .lighting import Lighting, auto_exposures, reference_lighting
 from .plan import RunPlan
 from .scene import Scene
+
+__all__ = ["foreground_layer", "irradiance_maps", "FrameResult", "LUX_PER_KLX", "INCIDENT_METER_C", "ev100",
+           "open_ground_light", "render_frame", "light_layers", "brdf_background", "compile_loops"]
 
 
 def foreground_layer(plan: RunPlan, cycle_frame: int, store: cache.Cache,
@@ -55,10 +59,25 @@ def foreground_layer(plan: RunPlan, cycle_frame: int, store: cache.Cache,
 
 
 def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[texture.MipMap, ...]:
-    """The ground raster as MipMaps for the camera, finest first: beyond the fine raster the
-    coarse one with its coarse sun (when there is one), beyond that the open-sky irradiance
-    (isolated canopy), or the raster repeated by the canopy tile (a periodic forest, to the
-    horizon)."""
+    """The ground raster as MipMaps for the camera, finest first.
+
+    Beyond the fine raster the coarse one with its coarse sun (when there is one), beyond that the
+    open-sky irradiance (isolated canopy), or the raster repeated by the canopy tile (a periodic
+    forest, to the horizon).
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    ground : GroundResult
+        The frame's ground, with its ``outer`` raster when there is one.
+
+    Returns
+    -------
+    tuple of texture.MipMap
+        The rasters (rows, cols, channels) [klx], finest first; the fine one blended into the
+        coarse one at its edge (``ground.blend_band``).
+    """
     rasters = [(ground.irradiance, ground.grid)] + ([ground.outer] if ground.outer else [])
     if ground.outer:
         rasters[0] = (blend_band(ground.irradiance, ground.grid, *ground.outer), ground.grid)
@@ -77,11 +96,28 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[texture.MipMap
 
 @dataclass(frozen=True)
 class FrameResult:
-    """radiance : (rows, cols, 3) float32 scene-linear [kcd/m^2]; sun_fraction : S [1];
-    scene : the sun and moon; exposure : the run's exposure [m^2/kcd]; ground : the raster;
-    balance : the white balance's gains for display (3,) [1]; light : the open ground's light
-    (``open_ground_light``); layers : the light passes asked for, {name: (rows, cols,
-    channels) float32} (``light_layers``), empty when none were."""
+    """One finished output frame.
+
+    Attributes
+    ----------
+    radiance : ndarray, shape (rows, cols, 3), float32
+        Scene-linear radiance [kcd/m^2].
+    sun_fraction : float
+        S, the share of the sun's disc not covered [1].
+    scene : Scene
+        The sun and moon.
+    exposure : float
+        The run's exposure [m^2/kcd].
+    ground : GroundResult
+        The ground raster.
+    balance : ndarray, shape (3,), or None
+        The white balance's gains for display [1].
+    light : dict or None
+        The open ground's light (``open_ground_light``).
+    layers : dict
+        The light passes asked for, {name: (rows, cols, channels) float32} (``light_layers``),
+        empty when none were.
+    """
 
     radiance: np.ndarray
     sun_fraction: float
@@ -94,26 +130,53 @@ class FrameResult:
 
 
 LUX_PER_KLX = 1000.0
+"""Lux in a kilolux. [lx/klx]"""
 INCIDENT_METER_C = 250.0
 """The calibration constant C of an incident-light meter with a flat receptor (ISO 2720:1974,
 240 to 400 for flat receptors; 250 as commonly used): EV100 = log2(E / 2.5), E in lux. [lx s]"""
 
 
 def ev100(lux: float) -> float:
-    """The exposure value at ISO 100 that an incident-light meter gives for horizontal
-    illuminance ``lux`` [lx]: log2(E 100 / C) (``INCIDENT_METER_C``); None without light. [EV]"""
+    """The exposure value at ISO 100 that an incident-light meter gives for a horizontal illuminance.
+
+    log2(E 100 / C) (``INCIDENT_METER_C``).
+
+    Parameters
+    ----------
+    lux : float
+        Horizontal illuminance E [lx].
+
+    Returns
+    -------
+    float or None
+        EV100 [EV]; None without light.
+    """
     return float(np.log2(lux * 100.0 / INCIDENT_METER_C)) if lux > 0 else None
 
 
 def open_ground_light(sky, exposure: float, balance) -> dict:
-    """The light of a frame on open ground, for the run's report and the EXR's attributes:
-    ``sun_lux`` the sun's horizontal illuminance now (its clear light times S) and
-    ``sky_lux`` the sky's (clouds and the moon dim it) [lx, for a procedural sky; an HDRI's or
-    a uniform sky's in its own units x 1000]; ``ev100`` what an incident meter reads of the
-    two together [EV]; ``camera_ev100`` the light the camera's exposure [m^2/kcd] is set for
-    (pi / exposure [klx], a white ground at 1) as EV100; ``white_balance`` the display gains
-    (3,) [1]. Sums by luminance (Rec.709) of the sky model's own irradiances (lighting.meter's
-    reading)."""
+    """The light of a frame on open ground, for the run's report and the EXR's attributes.
+
+    Sums by luminance (Rec.709) of the sky model's own irradiances (lighting.meter's reading).
+
+    Parameters
+    ----------
+    sky : sky.Sky
+        The frame's sky.
+    exposure : float
+        The camera's exposure [m^2/kcd].
+    balance : ndarray, shape (3,), or None
+        The white balance's display gains [1]; None: 1.
+
+    Returns
+    -------
+    dict
+        ``sun_lux`` the sun's horizontal illuminance now (its clear light times S) and ``sky_lux``
+        the sky's (clouds and the moon dim it) [lx, for a procedural sky; an HDRI's or a uniform
+        sky's in its own units x 1000]; ``ev100`` what an incident meter reads of the two together
+        [EV]; ``camera_ev100`` the light the camera's exposure is set for (pi / exposure [klx], a
+        white ground at 1) as EV100 [EV]; ``white_balance`` the display gains (3,) [1].
+    """
     sun = float(sky.sun_fraction()) * np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     sun_lux = float(sun @ REC709_LUMINANCE) * LUX_PER_KLX
     sky_lux = float(np.asarray(sky.sky_irradiance, dtype=np.float64) @ REC709_LUMINANCE) * LUX_PER_KLX
@@ -125,12 +188,38 @@ def open_ground_light(sky, exposure: float, balance) -> dict:
 def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
                  workers: int | None = None, timings: dict | None = None,
                  passes: tuple[str, ...] | None = None) -> FrameResult:
-    """The finished frame at output ``frame`` (Max 1991, Fig. 10): the ground raster under the
-    frame's sky, resampled in perspective with the sky; the haze; the foreground passes of its
-    cycle frame blended by S and composited over them. ``timings``, if given, receives the
-    seconds of each stage: ``ground``, ``camera`` (resampling ground and sky), ``composite``,
-    and ``passes`` when light passes are made. ``passes``: the light passes to make
-    (``vocabulary.PASSES``; None: the config's ``output.passes``), in ``FrameResult.layers``."""
+    """The finished frame at an output frame (Max 1991, Fig. 10).
+
+    The ground raster under the frame's sky, resampled in perspective with the sky; the haze; the
+    foreground passes of its cycle frame blended by S and composited over them.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    frame : int
+        Output frame index.
+    store : cache.Cache or None
+        Where the cycle products are (computed on a miss); None: the default cache.
+    workers : int or None
+        FFT threads; None: ``cores.default_workers``.
+    timings : dict or None
+        If given, receives the seconds of each stage [s]: ``ground``, ``camera`` (resampling ground
+        and sky), ``composite``, and ``passes`` when light passes are made.
+    passes : tuple of str or None
+        The light passes to make (``vocabulary.PASSES``; None: the config's ``output.passes``), in
+        ``FrameResult.layers``.
+
+    Returns
+    -------
+    FrameResult
+        The frame's radiance [kcd/m^2], its exposure [m^2/kcd] and light.
+
+    Raises
+    ------
+    ValueError
+        For light passes with a ground reflectance (``ground.brdf``).
+    """
     passes = plan.output.passes if passes is None else tuple(passes)
     brdf = plan.ground.brdf
     workers = workers or default_workers()
@@ -184,7 +273,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
         exposure = composite.exposure_for(light.unshadowed, stops=plan.exposure.stops)
     balance = composite.white_balance(
         plan.exposure.white_balance, sky_irradiance=light.sky_irradiance,
-        sun_irradiance=light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None else np.zeros(3))
+        sun_irradiance=(light.sun_irradiance * light.sun_direction[2] if light.sun_direction is not None
+                        else np.zeros(3)))
     clock.lap("composite")
     layers = {}
     if passes:
@@ -211,7 +301,36 @@ def light_layers(plan: RunPlan, passes, *, ground: GroundResult, sky, foreground
     horizontal illuminance of the ground each pixel sees [lx] (luminance of the irradiance,
     x 1000; 0 where the pixel sees no ground). ``depth`` (1): the distance to the ground seen,
     inf at the sky [m]. ``seen_sky``: the sky's ``camera.sky_view``, and ``maps`` the ground's
-    ``irradiance_maps``, if made already."""
+    ``irradiance_maps``, if made already.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    passes : iterable of str
+        The passes' names (``vocabulary.PASSES``).
+    ground : GroundResult
+        The frame's ground, with its ``sky_part``.
+    sky : sky.Sky
+        The frame's sky.
+    foreground : ForegroundLayer or None
+        The frame's foreground, or None.
+    sun_fraction : float
+        S [1].
+    sky_scale : float
+        Skylight now over the reference skylight [1].
+    distance : ndarray, shape (rows, cols)
+        The distance to the ground each pixel sees, inf at the sky [m].
+    seen_sky : ndarray, shape (rows, cols, 3), float32, or None
+        The sky's ``camera.sky_view`` [kcd/m^2], if made already.
+    maps : tuple of texture.MipMap or None
+        The ground's ``irradiance_maps``, if made already.
+
+    Returns
+    -------
+    dict
+        {name: (rows, cols, channels) float32}, in the order of ``passes``.
+    """
     view = plan.camera
     layers = {}
     alpha = np.zeros((view.height, view.width), dtype=np.float32)
@@ -267,13 +386,35 @@ class _DarkSky:
 
 def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store: cache.Cache,
                     workers: int) -> np.ndarray:
-    """The background B (height, width, 3) float32 [kcd/m^2] with the ground's reflectance
-    ``ground.brdf`` (docs/method.md, "The ground's reflectance"): the sun's term at each
-    pixel's own view, the sky's through view bands chosen by ``brdf.choose_bands``."""
+    """The background B with the ground's reflectance ``ground.brdf``.
+
+    The sun's term at each pixel's own view, the sky's through view bands chosen by
+    ``brdf_bands.choose_bands`` (docs/method.md, "The ground's reflectance").
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    frame : int
+        Output frame index.
+    ground : GroundResult
+        The frame's ground, with its ``sky_part`` and ``coarse_sky``.
+    sky : sky.Sky
+        The frame's sky.
+    store : cache.Cache
+        The cache of the cycle products.
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    ndarray, shape (height, width, 3), float32
+        Radiance [kcd/m^2].
+    """
     view = plan.camera
     model = plan.ground.brdf
     raster = ground.coarse_sky[2][0]  # the first layer's sky raster
-    bands = reflect.choose_bands(model, raster, reflect._camera_views(view)[0])
+    bands = brdf_bands.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
     if plan.canopy.layout == "periodic":
@@ -304,10 +445,16 @@ def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
     cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
     making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
-    lattice as ``brdf.sky_ratio`` does). A render's command calls it while its workers make the cycle products
-    (``run.render_run``), so that after an install the workers of the frame phase load the
+    lattice as ``brdf_bands.sky_ratio`` does). A render's command calls it while its workers make the cycle
+    products (``run.render_run``), so that after an install the workers of the frame phase load the
     loops instead of each compiling them (docs/accuracy.md, "The frame phase"). Nothing is
-    kept; any error is left to the frames."""
+    kept; any error is left to the frames.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The run's plan.
+    """
     try:
         view = plan.camera
         tiny = camera.Camera(view.position, view.yaw, view.pitch, view.vertical_fov, width=8, height=6)
@@ -324,10 +471,10 @@ def compile_loops(plan: RunPlan) -> None:
         blend_band(np.zeros((4, 4, 3), dtype=np.float32), replace(coarse, pixel=coarse.pixel / 2, shape=(4, 4)),
                    np.zeros((2, 2, 3), dtype=np.float32), coarse)
         if plan.ground.brdf is not None:  # the ground reflectance's read of its open-sky ratio
-            from . import _filter
+            from . import _array_loops
 
-            _filter.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
-                                 np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
+            _array_loops.lattice_read(np.zeros((3, 4), dtype=np.float32), np.zeros(1, dtype=np.intp),
+                                      np.zeros((4, 1), dtype=np.float32), 2, np.empty((3, 1), dtype=np.float32))
     except Exception:  # noqa: BLE001 -- only a head start: a frame meets the same error itself
         pass
 
@@ -335,11 +482,11 @@ def compile_loops(plan: RunPlan) -> None:
 def _apply_haze(background, transmittance, veil, horizon) -> None:
     """``background`` (rows, cols, 3) float32, in place: T B + (1 - T) L_horizon + 0, T the haze's
     transmittance (rows, cols, 1), L_horizon (cols, 3) the sky at the horizon; compiled
-    (``_filter.haze_over``), the float32 operations, in order, of ``B *= T; B += (1 - T) L;
+    (``_array_loops.haze_over``), the float32 operations, in order, of ``B *= T; B += (1 - T) L;
     B + 0`` on arrays (tests/test_frame.py holds it to them)."""
-    from . import _filter
+    from . import _array_loops
 
-    _filter.haze_over(background, transmittance, veil, np.ascontiguousarray(horizon, dtype=np.float32))
+    _array_loops.haze_over(background, transmittance, veil, np.ascontiguousarray(horizon, dtype=np.float32))
 
 
 @functools.lru_cache(maxsize=2)

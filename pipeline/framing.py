@@ -7,11 +7,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from . import camera, canopy
+from . import camera, grove_geometry
 from .settings import Config
 from .geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from .inputs import grove_of
 from .scene import shading_scenes, sun_shades
+
+__all__ = ["CAMERA_HEIGHT", "CAMERA_PITCH", "ECLIPSE_PITCH", "CAMERA_TURN", "WINDOW_MARGIN", "AUTO_SUN_PIXELS",
+           "AUTO_SUN_MASK", "AUTO_VIEW_SAMPLES", "Framing", "canopy_extent", "crown_centre", "DAPPLE_TRANSMITTANCE",
+           "ECLIPSE_TRANSMITTANCE", "LOW_SUN", "DAPPLE_CELL", "dappled_point", "shadow_extents", "leaf_shadow_extents",
+           "frame_scene", "AIM_ROW", "seen_ground", "framing_warnings"]
 
 CAMERA_HEIGHT = 1.7
 """Eye height of a camera placed by default. [m]"""
@@ -38,9 +43,22 @@ AUTO_VIEW_SAMPLES = 48
 
 @dataclass(frozen=True)
 class Framing:
-    """The resolved ground windows [m] (x_min, y_min, x_max, y_max; sun_window None: the
-    window), the camera, which of them were placed automatically, and where the shadow falls
-    [m] (None: a periodic forest, shadow everywhere)."""
+    """The resolved ground windows, the camera, which were placed, and where the shadow falls.
+
+    Attributes
+    ----------
+    window : tuple of float
+        The ground window (x_min, y_min, x_max, y_max) [m].
+    sun_window : tuple of float or None
+        The sun window, the same way [m]; None: the window.
+    camera : camera.Camera
+        The camera.
+    auto : tuple of str
+        Which of ``ground.window``, ``ground.sun_window`` and ``camera`` were placed automatically.
+    shadow : tuple of float or None
+        (x_min, y_min, x_max, y_max) of where the shadow falls [m]; None: a periodic forest, shadow
+        everywhere.
+    """
 
     window: tuple[float, float, float, float]
     sun_window: tuple[float, float, float, float] | None
@@ -50,9 +68,23 @@ class Framing:
 
 
 def canopy_extent(config: Config, projection) -> tuple[float, float, float, float]:
-    """(x_min, y_min, x_max, y_max) [m] of every canopy plane: the grove's leaves projected
-    along the sun (``projection`` [tan]) onto each plane over the flutter cycle, or the mask
-    images' areas."""
+    """The box of every canopy plane.
+
+    The grove's leaves projected along the sun onto each plane over the flutter cycle, or the mask
+    images' areas.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    projection : tuple of float
+        The sky-plane point of the sun the leaves are projected along [tan].
+
+    Returns
+    -------
+    tuple of float
+        (x_min, y_min, x_max, y_max) [m].
+    """
     boxes = []
     for layer in config.canopy.layers:
         if config.canopy.trees is None or config.canopy.layout == "periodic":
@@ -60,15 +92,27 @@ def canopy_extent(config: Config, projection) -> tuple[float, float, float, floa
             boxes.append((cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2))
         else:
             grove, flutter = grove_of(config.canopy)
-            boxes.append(tuple(float(v) for v in canopy.grove_bounds(
+            boxes.append(tuple(float(v) for v in grove_geometry.grove_bounds(
                 grove, flutter, sun=np.array(projection), plane_height=layer.height)))
     return _union(boxes)
 
 
 def crown_centre(config: Config) -> np.ndarray:
-    """(x, y, z) [m]: the mean of the grove's leaf stems, or of the mask planes' centres at
-    their heights. Its shadow, not the canopy's bounding box's, is where the leaves' shade is:
-    a low sun throws the trunks' shadows far longer than the crowns'."""
+    """The mean of the grove's leaf stems, or of the mask planes' centres at their heights.
+
+    Its shadow, not the canopy's bounding box's, is where the leaves' shade is: a low sun throws
+    the trunks' shadows far longer than the crowns'.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        (x, y, z) [m].
+    """
     if config.canopy.trees is None or config.canopy.layout == "periodic":
         return np.mean([(*layer.center, layer.height) for layer in config.canopy.layers], axis=0)
     grove, _ = grove_of(config.canopy)
@@ -90,13 +134,28 @@ DAPPLE_CELL = 0.25
 
 
 def dappled_point(config: Config, s, transmittance: float = DAPPLE_TRANSMITTANCE) -> np.ndarray:
-    """(x, y) [m] on the ground where the sun, at sky-plane point ``s`` [tan], gets through the
-    grove's leaves in about ``transmittance`` [1]: each leaf's shadow (its ellipse's area
-    pi |u| |v| times |n . w| / w_z along the sun w) is summed on a map of DAPPLE_CELL cells,
-    averaged over 1 m, and taken as the optical depth of leaves placed at random,
-    T = exp(-area per area); of the points nearest that T, the one nearest the shadow of the
-    leaves' centre. A dense crown under a low sun lets light through only near its rim. Mask
-    images and periodic forests: the shadow of the planes' centre."""
+    """The point on the ground where the sun gets through the grove's leaves in about ``transmittance``.
+
+    Each leaf's shadow (its ellipse's area pi |u| |v| times |n . w| / w_z along the sun w) is summed
+    on a map of DAPPLE_CELL cells, averaged over 1 m, and taken as the optical depth of leaves
+    placed at random, T = exp(-area per area); of the points nearest that T, the one nearest the
+    shadow of the leaves' centre. A dense crown under a low sun lets light through only near its
+    rim. Mask images and periodic forests: the shadow of the planes' centre.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    s : array_like, shape (2,)
+        The sun's sky-plane point [tan].
+    transmittance : float
+        The share of the sun sought [1].
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        (x, y) [m].
+    """
     centre = crown_centre(config)
     middle = centre[:2] - centre[2] * np.asarray(s)
     if config.canopy.trees is None or config.canopy.layout == "periodic":
@@ -136,9 +195,25 @@ def _intersect(a, b):
 
 
 def shadow_extents(config: Config, scenes, projection) -> list:
-    """Per frame, (x_min, y_min, x_max, y_max) [m] of the ground the canopy's shadow falls on: a
-    plane point c at height h shades c - h s along the sun's sky-plane point s [tan], so the
-    shadow lies h cot(elevation) from the canopy, towards the anti-solar azimuth."""
+    """Per frame, the box of the ground the canopy's shadow falls on.
+
+    A plane point c at height h shades c - h s along the sun's sky-plane point s [tan], so the
+    shadow lies h cot(elevation) from the canopy, towards the anti-solar azimuth.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    scenes : iterable of scene.Scene
+        The frames' scenes; one without a sun gets the canopy's box.
+    projection : tuple of float
+        The sun's sky-plane point the canopy's extent is projected along [tan].
+
+    Returns
+    -------
+    list of tuple of float
+        Per scene, (x_min, y_min, x_max, y_max) [m].
+    """
     extent = canopy_extent(config, projection)
     boxes = []
     for scene in scenes:
@@ -152,9 +227,25 @@ def shadow_extents(config: Config, scenes, projection) -> list:
 
 
 def leaf_shadow_extents(config: Config, scenes, projection) -> list:
-    """Per frame, (x_min, y_min, x_max, y_max) [m] of the leaves' shadows alone (every 16th
-    leaf's centre, at its own height, along the frame's sun): a low sun's trunk shadow reaches
-    far beyond them. Mask images: ``shadow_extents``."""
+    """Per frame, the box of the leaves' shadows alone.
+
+    Every 16th leaf's centre, at its own height, along the frame's sun: a low sun's trunk shadow
+    reaches far beyond them. Mask images: ``shadow_extents``.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    scenes : iterable of scene.Scene
+        The frames' scenes, each with a sun.
+    projection : tuple of float
+        The sun's sky-plane point [tan] (for ``shadow_extents``).
+
+    Returns
+    -------
+    list of tuple of float
+        Per scene, (x_min, y_min, x_max, y_max) [m].
+    """
     if config.canopy.trees is None or config.canopy.layout == "periodic":
         return shadow_extents(config, scenes, projection)
     grove, _ = grove_of(config.canopy)
@@ -180,6 +271,20 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
       the window when a window is given but no sun window.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    scenes : sequence of scene.Scene
+        The scenes whose sun shades (``scene.shading_scenes``), or one scene without a sun.
+    projection : tuple of float
+        The sky-plane point of the sun the leaves are projected along [tan].
+
+    Returns
+    -------
+    Framing
+        The windows [m], the camera, what was placed and where the shadow falls.
     """
     ground, c = config.ground, config.camera
     heights = [layer.height for layer in config.canopy.layers]
@@ -263,8 +368,22 @@ middle of the bottom third, the nearest ground, sharpest and least foreshortened
 
 
 def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
-    """Ground points (n, 2) [m] and their distances (n,) [m] of a grid of rays over the image
-    that meet the ground."""
+    """The ground points of a grid of rays over the image that meet the ground.
+
+    Parameters
+    ----------
+    view : camera.Camera
+        The camera.
+    samples : int
+        Rays per side of the image [1].
+
+    Returns
+    -------
+    points : ndarray, shape (n, 2)
+        Where the rays meet the ground (x, y) [m].
+    distance : ndarray, shape (n,)
+        Their distances from the camera [m].
+    """
     u, v = np.meshgrid(np.linspace(0, view.width, samples), np.linspace(0, view.height, samples))
     rays = camera.image_rays(view, u, v).reshape(-1, 3)
     down = rays[:, 2] < -1e-9
@@ -312,10 +431,24 @@ def _pixels(box, pixel) -> float:
 
 
 def framing_warnings(config: Config, plan) -> list[str]:
-    """One-line warnings of a plan whose picture would show no dappled shadow, or a false one:
-    the camera sees none of the sun window; the sun is below the canopy's reach, the sky square
+    """One-line warnings of a plan whose picture would show no dappled shadow, or a false one.
+
+    The camera sees none of the sun window; the sun is below the canopy's reach, the sky square
     (``sky.alpha``), in some frames, so that beyond the sun window nothing shades it; the
-    leaves' shadow falls outside the sun window in some frames."""
+    leaves' shadow falls outside the sun window in some frames.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    plan : plan.RunPlan
+        Its plan.
+
+    Returns
+    -------
+    list of str
+        The warnings, none for a good framing.
+    """
     scenes = list(plan.scenes)
     warnings = []
     fine = plan.sun_window or plan.window

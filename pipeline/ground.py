@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import brdf as brdf_models
+from . import brdf_bands
 from . import cache, shadow
 from .cycle import cycle_item
 from .geometry import Grid, sky_grid, sky_offset
@@ -20,14 +20,34 @@ from .cores import default_workers
 from .plan import LayerPlan, RunPlan
 from .scene import sun_lights, sun_shades
 
+__all__ = ["GroundResult", "render_ground", "sky_view_terms", "BLEND_BAND_PIXELS", "BLEND_BAND_SHARE", "blend_band"]
+
 
 @dataclass(frozen=True)
 class GroundResult:
-    """irradiance : (rows, cols, 3) float32 [radiance x sr]; grid : its ground Grid [m];
-    unshadowed : (3,) irradiance of the open sky; exact : whether every ray that meets the
-    canopy lies inside the sky square (else light from beyond it was taken as unshadowed);
-    sky_part : the same ground lit by the sky alone, without the sun kernel (a GroundResult
-    whose sky_part is None), when ``render_ground`` was asked for ``parts``, else None."""
+    """The irradiance on the ground under one frame's sky and canopy.
+
+    Attributes
+    ----------
+    irradiance : ndarray, shape (rows, cols, 3), float32
+        Irradiance [radiance x sr: klx for a sky in kcd/m^2].
+    grid : Grid
+        Its ground grid [m].
+    unshadowed : ndarray, shape (3,)
+        Irradiance of the open sky [klx].
+    exact : bool
+        Whether every ray that meets the canopy lies inside the sky square (else light from beyond
+        it was taken as unshadowed).
+    outer : tuple or None
+        (raster (rows, cols, 3) [klx], its Grid): the coarse raster of the whole window with the sun
+        at the coarse cell, where the sun window does not cover it (``render_ground(outer=True)``);
+        else None.
+    sky_part : GroundResult or None
+        The same ground lit by the sky alone, without the sun kernel (a GroundResult whose sky_part
+        is None), when ``render_ground`` was asked for ``parts``, else None.
+    coarse_sky : tuple or None
+        The sky's own share on the coarse window (below), else None.
+    """
 
     irradiance: np.ndarray
     grid: Grid
@@ -37,9 +57,16 @@ class GroundResult:
     sky_part: GroundResult | None = None
 
     def sun_part(self) -> GroundResult:
-        """The ground's light from the sun alone: this ground less its ``sky_part``, every
-        raster and total in float32 as subtracted (the two parts sum to this ground to float
-        rounding). [radiance x sr]"""
+        """The ground's light from the sun alone: this ground less its ``sky_part``.
+
+        Every raster and total in float32 as subtracted (the two parts sum to this ground to float
+        rounding).
+
+        Returns
+        -------
+        GroundResult
+            The sun's part [radiance x sr], without ``sky_part``.
+        """
         sky = self.sky_part
         outer = None if self.outer is None else (self.outer[0] - sky.outer[0], self.outer[1])
         return GroundResult(self.irradiance - sky.irradiance, self.grid,
@@ -53,16 +80,40 @@ class GroundResult:
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
                   workers: int | None = None, sky=None, outer: bool = False,
                   parts: bool = False, coarse_sky: bool = False) -> GroundResult:
-    """Ground irradiance at output ``frame``: every canopy layer under the sky (the coarse sky
-    raster, and the fine sun kernel where the sky has a sun), layers combined by the paper's
-    product rule. Cycle products come from ``store`` (computed on a miss); ``sky`` is the
-    frame's sky model, loaded when not given. ``outer``: also the coarse raster of the whole
-    window with the sun at the coarse cell (the paper's single scale), where the sun window
-    does not cover it: what a camera sees beyond the sun window. ``parts``: also the ground lit
-    by the sky alone (``GroundResult.sky_part``), from the same correlations before the sun
-    kernel's light is added (the light passes, docs/runs.md); with several layers the sky
-    part is combined by the same product rule over its own open-sky total. ``coarse_sky``:
-    also keep the sky's own share on the coarse window (GroundResult.coarse_sky)."""
+    """Ground irradiance at an output frame, every canopy layer under the sky.
+
+    The coarse sky raster, and the fine sun kernel where the sky has a sun; layers combined by the
+    paper's product rule.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    frame : int
+        Output frame index.
+    store : cache.Cache or None
+        Where the cycle products come from (computed on a miss); None: the default cache.
+    workers : int or None
+        FFT threads; None: ``cores.default_workers``.
+    sky : sky.Sky or None
+        The frame's sky, loaded when not given.
+    outer : bool
+        Also the coarse raster of the whole window with the sun at the coarse cell (the paper's
+        single scale), where the sun window does not cover it: what a camera sees beyond the sun
+        window.
+    parts : bool
+        Also the ground lit by the sky alone (``GroundResult.sky_part``), from the same
+        correlations before the sun kernel's light is added (the light passes, docs/runs.md); with
+        several layers the sky part is combined by the same product rule over its own open-sky
+        total.
+    coarse_sky : bool
+        Also keep the sky's own share on the coarse window (``GroundResult.coarse_sky``).
+
+    Returns
+    -------
+    GroundResult
+        On the sun window's grid, or the window's without a sun [radiance x sr].
+    """
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     sky = sky or plan.sky.at(plan.scenes[frame])
@@ -101,14 +152,37 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
 
 def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: int, views,
                    ground: GroundResult, *, colour: int | None = None) -> list:
-    """The sky's ground rasters (GroundResult on the coarse window) under the canopy, one per
-    view in ``views`` (B, 3), with the sky raster weighted by the shape at that view: every
-    channel for the view ``colour`` (all of them when None), the channels' sum (one channel)
-    for the others (``brdf.banded_sky``); layers
-    combined by the paper's product rule, each term with its own open-sky total. ``ground``:
-    the frame's GroundResult with its ``coarse_sky`` (each layer's sky raster: an isolated
-    layer's is weighted as it is, a periodic layer's made again unfolded, weighted, then
-    folded)."""
+    """The sky's ground rasters under the canopy, one per view, the sky weighted by the BRDF's shape.
+
+    Every channel for the view ``colour`` (all of them when None), the channels' sum (one channel)
+    for the others (``brdf_bands.banded_sky``); layers combined by the paper's product rule, each term
+    with its own open-sky total.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    frame : int
+        Output frame index.
+    sky : sky.Sky
+        The frame's sky.
+    store : cache.Cache
+        The cache of the cycle products.
+    workers : int
+        FFT threads.
+    views : ndarray, shape (B, 3)
+        View directions [1].
+    ground : GroundResult
+        The frame's ground with its ``coarse_sky`` (each layer's sky raster: an isolated layer's is
+        weighted as it is, a periodic layer's made again unfolded, weighted, then folded).
+    colour : int or None
+        The view whose every channel is kept; None: all of them.
+
+    Returns
+    -------
+    list of GroundResult
+        Per view, on the coarse window [radiance x sr].
+    """
     brdf = plan.ground.brdf
     cycle_frame = frame % plan.canopy.cycle
     grounds, total = [], None
@@ -118,8 +192,8 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
         periodic = isinstance(coarse, shadow.PeriodicPlan)
         raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
         # every view's weighted raster as channels of one: one correlation call for all
-        rasters = [brdf_models.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
-                                               summed=colour is not None and t != colour)
+        rasters = [brdf_bands.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
+                                              summed=colour is not None and t != colour)
                    for t, v in enumerate(views)]
         raster = SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
                                       np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
@@ -176,7 +250,7 @@ def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=Fal
         g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
         return g, total, exact, g_outer, sky_only
-    # a sun under framing.SHADOW_FLOOR throws the canopy's shadow beyond the window: its light
+    # a sun under scene.SHADOW_FLOOR throws the canopy's shadow beyond the window: its light
     # reaches the window unshadowed; set (twilight), it gives none: the sky alone lights it
     if lp.sun is None and not sun_lights(sun):
         return g, total, exact, g_outer, sky_only
@@ -229,10 +303,11 @@ full scale the change of texture is spread over a good part of the view), at mos
 
 
 def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_grid: Grid) -> np.ndarray:
-    """The fine ground raster (rows, cols, 3) [klx] with a band inside its edges where it gives
-    way to the coarse raster (resampled bilinearly onto the fine grid), so that the camera,
-    which reads the fine raster inside the sun window and the coarse one beyond it, shows no
-    seam at the window's edge (issue: a rectangle where sharp sun flecks meet blurred ones).
+    """The fine ground raster with a band inside its edges where it gives way to the coarse one.
+
+    The coarse raster is resampled bilinearly onto the fine grid, so that the camera, which reads
+    the fine raster inside the sun window and the coarse one beyond it, shows no seam at the
+    window's edge (issue: a rectangle where sharp sun flecks meet blurred ones).
 
     Width: ``b = clip(max(BLEND_BAND_PIXELS coarse pixels, BLEND_BAND_SHARE[0] s), ...,
     BLEND_BAND_SHARE[1] s)``, s the window's shorter side [m]. Weight of the fine raster at a
@@ -240,6 +315,22 @@ def blend_band(fine: np.ndarray, fine_grid: Grid, coarse: np.ndarray, coarse_gri
     t = clip(d / b, 0, 1): 0 at the edge (where the coarse raster takes over), 1 from the
     band's inner side on, with zero slope at both ends. Both rasters hold the same light
     (the fine sun kernel and the coarse one have the same sum), so the blend keeps the mean.
+
+    Parameters
+    ----------
+    fine : ndarray, shape (rows, cols, 3), float32
+        The fine ground raster [klx].
+    fine_grid : Grid
+        Its grid (the sun window) [m].
+    coarse : ndarray, shape (r, c, 3), float32
+        The coarse ground raster [klx].
+    coarse_grid : Grid
+        Its grid (the window) [m].
+
+    Returns
+    -------
+    ndarray, shape (rows, cols, 3), float32
+        The blend [klx].
     """
     weight, rest = _band_weights(fine_grid, coarse_grid.pixel)
     under = np.moveaxis(shadow.resample_bilinear(np.moveaxis(coarse, -1, 0), coarse_grid, fine_grid), 0, -1)

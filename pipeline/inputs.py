@@ -9,14 +9,33 @@ import functools
 import numpy as np
 
 from . import albedo as albedos
-from . import camera, canopy, foreground, io, texture
+from . import camera, canopy, foreground_passes, grove_geometry, io, texture
 from .geometry import Grid
 from .settings import CanopyConfig, CanopyLayer, ForegroundConfig, GroundConfig
 
+__all__ = ["load_mask", "grove_of", "albedo_mipmap", "ground_albedo", "imported_passes"]
+
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
-    """Transmittance (rows, cols) of a layer's mask image at ``frame`` of its sequence.
-    Raises io.ImageError."""
+    """The transmittance of a layer's mask image at ``frame`` of its sequence.
+
+    Parameters
+    ----------
+    layer : settings.CanopyLayer
+        The canopy plane; its ``mask`` is a sequence of image files.
+    frame : int
+        The cycle frame; the sequence repeats.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols)
+        Transmittance [1] (``canopy.transmittance_from_image``).
+
+    Raises
+    ------
+    io.ImageError
+        Naming the file.
+    """
     path = layer.mask[frame % len(layer.mask)]
     image = io.read_image(path)
     try:
@@ -27,9 +46,22 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
 
 @functools.lru_cache(maxsize=4)
 def grove_of(canopy_config: CanopyConfig):
-    """The grove of a canopy config and its flutter, grown once per process."""
+    """The grove of a canopy config and its flutter, grown once per process.
+
+    Parameters
+    ----------
+    canopy_config : settings.CanopyConfig
+        A canopy with built-in ``trees``.
+
+    Returns
+    -------
+    grove : canopy.Grove
+        The grove at rest.
+    flutter : canopy.FlutterParams
+        Its flutter: the cycle [frames], swing and twist.
+    """
     trees, layer0 = canopy_config.trees, canopy_config.layers[0]
-    params = canopy.GroveParams(
+    params = grove_geometry.GroveParams(
         count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
         leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
         height=max(layer.height for layer in canopy_config.layers),
@@ -37,13 +69,23 @@ def grove_of(canopy_config: CanopyConfig):
         tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
         center=layer0.center, spread=trees.spread)
     f = canopy_config.flutter
-    return canopy.grow_grove(params), canopy.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+    return grove_geometry.grow_grove(params), grove_geometry.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
 
 
 @functools.lru_cache(maxsize=4)
 def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
-    """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image
-    covering ``albedo_size`` metres a side."""
+    """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image.
+
+    Parameters
+    ----------
+    ground : settings.GroundConfig
+        The ground; its image or ``grass`` covers ``albedo_size`` [m] a side.
+
+    Returns
+    -------
+    texture.MipMap
+        The albedo (rows, cols, 3) [1], periodic over ``albedo_size`` [m].
+    """
     if ground.albedo == "grass":
         image, grid = albedos.grass_albedo(period=ground.albedo_size)
     else:
@@ -57,18 +99,49 @@ def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
 
 @functools.lru_cache(maxsize=4)
 def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
-    """The ground's albedo as the camera reads it: the tile of ``albedo_mipmap`` laid by
-    stochastic tiling (Heitz & Neyret 2018, ``albedo.StochasticTiling``), so that its period
-    does not show in rows to the horizon."""
+    """The ground's albedo as the camera reads it.
+
+    The tile of ``albedo_mipmap`` laid by stochastic tiling (Heitz & Neyret 2018,
+    ``albedo.StochasticTiling``), so that its period does not show in rows to the horizon.
+
+    Parameters
+    ----------
+    ground : settings.GroundConfig
+        The ground.
+
+    Returns
+    -------
+    albedo.StochasticTiling
+        The tiled albedo [1].
+    """
     return albedos.stochastic_tiling(albedo_mipmap(ground))
 
 
-def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground.ForegroundPasses:
-    """The imported passes of ``cycle_frame``, read and checked against the size of the camera
-    ``view``. Raises io.ImageError naming the file."""
-    passes = foreground.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
+def imported_passes(fg: ForegroundConfig, view: camera.Camera, cycle_frame: int) -> foreground_passes.ForegroundPasses:
+    """The imported passes of a cycle frame, read and checked against the camera's size.
+
+    Parameters
+    ----------
+    fg : settings.ForegroundConfig
+        The ``foreground`` section: per cycle frame its ``sun``, ``sky`` and ``alpha`` files.
+    view : camera.Camera
+        The run's camera; the passes must be its image's size.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    foreground_passes.ForegroundPasses
+        The sun and sky passes [kcd/m^2] and alpha [1].
+
+    Raises
+    ------
+    io.ImageError
+        Naming the file.
+    """
+    passes = foreground_passes.read_passes(fg.sun[cycle_frame], fg.sky[cycle_frame], fg.alpha[cycle_frame])
     try:
-        foreground.check_passes_size(passes, view)
+        foreground_passes.check_passes_size(passes, view)
     except ValueError as exc:
         raise io.ImageError(fg.sun[cycle_frame], str(exc)) from None
     return passes

@@ -22,8 +22,14 @@ class Lighting:
     """The clear, uneclipsed light of a run, fixed for all its frames: what the foreground
     passes are lit by and the exposure is set from.
 
-    sun_direction : (3,) unit vector towards the sun, or None; sun_irradiance : (3,) its normal
-    irradiance [klx]; sky_irradiance : (3,) horizontal irradiance of the sky alone [klx].
+    Attributes
+    ----------
+    sun_direction : ndarray, shape (3,), or None
+        Unit vector towards the sun [1], or None without a sun.
+    sun_irradiance : ndarray, shape (3,)
+        The sun's normal irradiance [klx].
+    sky_irradiance : ndarray, shape (3,)
+        Horizontal irradiance of the sky alone [klx].
     """
 
     sun_direction: np.ndarray | None
@@ -32,7 +38,13 @@ class Lighting:
 
     @property
     def unshadowed(self) -> np.ndarray:
-        """Horizontal irradiance of sun and sky together (3,). [klx]"""
+        """Horizontal irradiance of sun and sky together.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            Irradiance [klx].
+        """
         if self.sun_direction is None:
             return self.sky_irradiance
         return self.sky_irradiance + self.sun_irradiance * self.sun_direction[2]
@@ -40,9 +52,20 @@ class Lighting:
 
 @functools.lru_cache(maxsize=8)
 def reference_lighting(plan: RunPlan) -> Lighting:
-    """The run's Lighting: the clear sky of the config with its sun at the projection
-    direction (the middle frame's), no clouds and no moon. Made once per plan (every frame
-    asks for it): its arrays are read-only."""
+    """The run's Lighting: the clear sky of the config with its sun at the projection direction.
+
+    The middle frame's sun, no clouds and no moon. Made once per plan (every frame asks for it).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    Lighting
+        The reference light [klx]; its arrays are read-only.
+    """
     return Lighting(*(None if a is None else _read_only(a) for a in astuple(_reference_lighting(plan))))
 
 
@@ -67,16 +90,43 @@ weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]""
 
 
 def exposure_frames(plan: RunPlan, frame: int) -> range:
-    """The frames whose light the auto exposure of ``frame`` remembers."""
+    """The frames whose light the auto exposure of ``frame`` remembers.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan, with an auto exposure.
+    frame : int
+        Output frame index.
+
+    Returns
+    -------
+    range
+        From ``EXPOSURE_MEMORY`` time constants back (at least frame 0) to ``frame``.
+    """
     memory = int(np.ceil(EXPOSURE_MEMORY * plan.exposure.auto.time_constant * plan.exposure.fps))
     return range(max(0, frame - memory), frame + 1)
 
 
 def auto_exposures(plan: RunPlan, frames=None) -> dict[int, float]:
-    """The exposure of ``frames`` (default: all) with ``camera.exposure: auto`` [m^2/kcd]: each
-    frame's meter reading is the open ground's light (``meter``), followed through
+    """The exposure of frames with ``camera.exposure: auto``.
+
+    Each frame's meter reading is the open ground's light (``meter``), followed through
     ``composite.auto_exposure``'s first-order lag and limits from the first frame it remembers
-    (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered."""
+    (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan, with an auto exposure.
+    frames : iterable of int or None
+        Output frame indices; None for all.
+
+    Returns
+    -------
+    dict of int to float
+        Per frame, its exposure [m^2/kcd].
+    """
     light = reference_lighting(plan)
     frames = range(plan.frames) if frames is None else frames
     windows = {frame: exposure_frames(plan, frame) for frame in frames}
@@ -90,8 +140,21 @@ def auto_exposures(plan: RunPlan, frames=None) -> dict[int, float]:
 
 
 def with_exposures(plan: RunPlan, frames=None) -> RunPlan:
-    """The plan with the auto exposure of ``frames`` (default: all; the others None), metered
-    once for a whole run."""
+    """The plan with the auto exposure of ``frames``, metered once for a whole run.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    frames : iterable of int or None
+        Output frame indices; None for all.
+
+    Returns
+    -------
+    plan.RunPlan
+        The plan, its ``exposures`` per frame [m^2/kcd] (None for the frames not asked); the plan
+        itself with a fixed exposure.
+    """
     if plan.exposure.auto is None:
         return plan
     exposures = auto_exposures(plan, frames)
@@ -99,9 +162,24 @@ def with_exposures(plan: RunPlan, frames=None) -> RunPlan:
 
 
 def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
-    """What an incident-light meter on the open ground reads at a frame (3,): the sky's
-    horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
-    [klx]"""
+    """What an incident-light meter on the open ground reads at a frame.
+
+    The sky's horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    scene : scene.Scene
+        The frame's scene.
+    light : Lighting
+        The run's reference light (``reference_lighting``).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Horizontal irradiance [klx].
+    """
     sky = plan.sky.at(scene, metering=True)
     if light.sun_direction is None:
         return light.unshadowed

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import canopy, io, shadow
+from . import canopy, grove_geometry, io, shadow
 from .camera import Camera
 from .config import size_text
 from .errors import ConfigError
@@ -38,8 +38,16 @@ __all__ = ["LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
 class LayerPlan:
     """One canopy plane's correlation plans, fixed for a whole run.
 
-    height [m]; canopy : its coarse mask Grid on the window's lattice [m]; coarse : the
-    IsolatedPlan or PeriodicPlan; sun : the SunPlan of the fine sun window, or None.
+    Attributes
+    ----------
+    height : float
+        The plane's height over the ground [m].
+    canopy : Grid
+        Its coarse mask grid on the window's lattice [m].
+    coarse : shadow.IsolatedPlan or shadow.PeriodicPlan
+        The plan of the sky light's correlation on the coarse window.
+    sun : shadow.SunPlan or None
+        The plan of the fine sun window, or None without a sun kernel.
     """
 
     height: float
@@ -140,14 +148,37 @@ class RunPlan:
 
     @property
     def frames(self) -> int:
-        """The number of output frames of the animation."""
+        """The number of output frames of the animation.
+
+        Returns
+        -------
+        int
+            ``len(scenes)`` [1].
+        """
         return len(self.scenes)
 
 
 def check_inputs(config: Config) -> RunPlan:
-    """Read every input file of a config and check it (masks, HDRI, albedo image, foreground
-    passes and their size), then plan the run: what a run would stumble on, found before any
-    work starts. Raises io.ImageError naming the file."""
+    """Read every input file of a config and check it, then plan the run.
+
+    The masks, HDRI, albedo image, foreground passes and their size: what a run would stumble on,
+    found before any work starts.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config (``resolve``).
+
+    Returns
+    -------
+    RunPlan
+        The run's plan (``plan_run``).
+
+    Raises
+    ------
+    io.ImageError
+        Naming the file.
+    """
     for layer in config.canopy.layers:
         for frame in range(len(layer.mask)):
             load_mask(layer, frame)
@@ -162,10 +193,29 @@ def check_inputs(config: Config) -> RunPlan:
 
 
 def plan_run(config: Config) -> RunPlan:
-    """The grids and correlation plans of a run, from the config alone (an HDRI sky is read
-    for its sun; no mask image is read). What the config leaves out of ``ground.window``,
-    ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's path over the
-    animation (``frame_scene``). ``config`` must be resolved (``resolve``)."""
+    """The grids and correlation plans of a run, from the config alone.
+
+    An HDRI sky is read for its sun; no mask image is read. What the config leaves out of
+    ``ground.window``, ``ground.sun_window`` and ``camera`` is placed from the canopy and the sun's
+    path over the animation (``frame_scene``).
+
+    Parameters
+    ----------
+    config : settings.Config
+        The config; it must be resolved (``resolve``).
+
+    Returns
+    -------
+    RunPlan
+        Every per-run value the later stages need.
+
+    Raises
+    ------
+    ValueError
+        For a config not resolved (``turbidity: auto`` not looked up).
+    ConfigError
+        For rasters that would pass the compute limits of ``resolve``.
+    """
     if config.sky.model in PROCEDURAL_MODELS and config.sky.turbidity is None:
         raise ValueError("plan_run needs a resolved config (resolve.resolve): turbidity: auto is not looked up")
     scenes = [scene_at(config, f) for f in range(config.animation.frames)]
@@ -246,7 +296,7 @@ def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, 
 # any place and time frames the canopy's dappled shadow (docs/method.md, "Framing").
 
 def _check_sizes(config: Config, plan: RunPlan) -> None:
-    """Refuse a plan whose rasters would pass the stated limits (config.MAX_SUN_PIXELS and
+    """Refuse a plan whose rasters would pass the stated limits (resolve.MAX_SUN_PIXELS and
     MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
     def refuse(key, what, cells, most, advice):
         raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
@@ -292,7 +342,7 @@ def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -
     if config.canopy.trees is None or periodic:
         return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
     grove, flutter = grove_of(config.canopy)
-    bounds = canopy.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
+    bounds = grove_geometry.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
     size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
     center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
     return canopy.lattice_grid(center, size, window, periodic=False)

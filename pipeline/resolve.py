@@ -46,7 +46,7 @@ def load(path) -> Config:
 
     Returns
     -------
-    config.Config
+    settings.Config
         The resolved config.
 
     Raises
@@ -66,7 +66,7 @@ def source_digest(config: Config) -> str:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The config as read, before ``resolve``.
 
     Returns
@@ -91,12 +91,12 @@ def resolve(config: Config) -> Config:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The config as read (``config.load_config``, ``config.parse_config``).
 
     Returns
     -------
-    config.Config
+    settings.Config
         The same config, with the turbidity filled in when it was ``auto``.
 
     Raises

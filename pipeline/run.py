@@ -41,10 +41,12 @@ from .framing import framing_warnings
 from .lighting import with_exposures
 from .cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
 from .plan import RunPlan, check_inputs
-from .runfolder import (INDEX_FILE, LOCK_FILE, FrameWarning, RunSummary, check_frames, current_video, file_stamp,
-                        frame_files, make_folder,
-                        read_index, read_run_file, remove_temporaries, resolved_config, video_file,
-                        write_index, write_run_file)
+from .frameindex import FrameWarning, check_frames, file_stamp, read_index, write_index
+from .runfolder import INDEX_FILE, LOCK_FILE, frame_files, make_folder, remove_temporaries, video_file
+from .runrecord import RunSummary, current_video, read_run_file, resolved_config, write_run_file
+
+__all__ = ["frame_record", "frame_attributes", "REC709_CHROMATICITIES", "LAYER_CHANNELS", "standard_attributes",
+           "exr_layers", "render_run"]
 
 _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
            "sunshade:sun_fraction": "sun_fraction", "sunshade:sun_azimuth_elevation": "sun",
@@ -53,8 +55,24 @@ _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
 
 
 def frame_record(config: Config, frame: int, digest: str) -> dict | None:
-    """What a done frame's EXR says of itself (frame, S, sun and moon azimuth and elevation in
-    degrees, UTC time, the exposure it got [m^2/kcd]), or None unless both its files are there and carry ``digest``."""
+    """What a done frame's EXR says of itself.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The config.
+    frame : int
+        Output frame index.
+    digest : str
+        The config's hash both files must carry.
+
+    Returns
+    -------
+    dict or None
+        ``file`` (the EXR's stem), ``frame``, ``sun_fraction`` S [1], ``sun`` and ``moon``
+        {azimuth, elevation} [deg], ``time_utc``, ``exposure`` [m^2/kcd]; None unless both its files
+        are there and carry ``digest``.
+    """
     exr, png = frame_files(config, frame)
     if not (exr.is_file() and png.is_file()):
         return None
@@ -74,7 +92,23 @@ def frame_record(config: Config, frame: int, digest: str) -> dict | None:
 
 
 def frame_attributes(config: Config, result, digest: str) -> dict:
-    """Metadata of a finished frame: what made it, and the sun and moon of that moment."""
+    """Metadata of a finished frame: what made it, and the sun and moon of that moment.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The config.
+    result : frame.FrameResult
+        The finished frame.
+    digest : str
+        The config's hash.
+
+    Returns
+    -------
+    dict
+        EXR attributes under ``sunshade:`` (hash, version, frame, S [1], exposure [m^2/kcd], sun and
+        moon (azimuth, elevation) [deg], UTC time), and ``standard_attributes`` with light passes.
+    """
     attributes = {
         "sunshade:config_hash": digest,
         "sunshade:version": __version__,
@@ -107,7 +141,20 @@ def standard_attributes(config: Config, result) -> dict:
     standard ``chromaticities``; for a site and time its ``latitude``, ``longitude`` [degrees]
     and ``altitude`` [m], and ``capDate`` (OpenImageIO's ``DateTime``, the frame's UTC time from
     the config, not the clock) with ``utcOffset`` 0 [s]; and under ``sunshade:`` the open
-    ground's light (``frame.open_ground_light``) [lx, EV]."""
+    ground's light (``frame.open_ground_light``) [lx, EV].
+
+    Parameters
+    ----------
+    config : settings.Config
+        The config.
+    result : frame.FrameResult
+        The finished frame, with its ``light``.
+
+    Returns
+    -------
+    dict
+        EXR attribute name -> value.
+    """
     attributes = {"chromaticities": REC709_CHROMATICITIES}
     site = config.sky.site
     if site is not None:
@@ -128,9 +175,23 @@ def standard_attributes(config: Config, result) -> dict:
 
 
 def exr_layers(result, half: bool) -> dict | None:
-    """``io.write_exr``'s layers of a frame's light passes (None without any): RGB passes in
-    the beauty's format, single channels in float32 (lux pass half's 65504; depth is inf at the
-    sky)."""
+    """``io.write_exr``'s layers of a frame's light passes.
+
+    RGB passes in the beauty's format, single channels in float32 (lux pass half's 65504; depth is
+    inf at the sky).
+
+    Parameters
+    ----------
+    result : frame.FrameResult
+        The finished frame, with its ``layers``.
+    half : bool
+        Whether the beauty is written in half floats.
+
+    Returns
+    -------
+    dict or None
+        {channel names: (pixels, "half" or "float")} (``LAYER_CHANNELS``); None without any pass.
+    """
     if not result.layers:
         return None
     return {LAYER_CHANNELS[name]: (pixels, "half" if half and pixels.shape[-1] == 3 else "float")
@@ -145,19 +206,44 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
 
-    jobs : processes at once (default ``render.jobs``, else one per core); each gets
-        cores // jobs FFT threads (one on a cluster). scheduler : a dask.distributed scheduler
-        address (``tcp://host:8786``) to run the tasks on instead. cluster_timeout : how long
-        a lost cluster is waited for (default CLUSTER_TIMEOUT). [s] source_hash : the hash of
-        the config as written (``resolve.source_digest``), recorded in run.json for the next
-        resume (``runfolder.nothing_to_do``). budget : the cache's budget [B]: at the end the
-        least recently used items that neither this run nor another live one uses are removed
-        until the items total at most this (None: none removed; docs/runs.md, "The cache's
-        budget").
-    progress : called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or
-        ``video``. warn : called with each one-line warning of the plan
-        (``framing.framing_warnings``). Raises RunError, config.ConfigError, io.ImageError
-        before any work.
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    frames : tuple of int or None
+        Output frame indices; None for all.
+    store : cache.Cache
+        The cache of the cycle products.
+    jobs : int or None
+        Processes at once (default ``render.jobs``, else one per core); each gets cores // jobs FFT
+        threads (one on a cluster).
+    scheduler : str or None
+        A dask.distributed scheduler address (``tcp://host:8786``) to run the tasks on instead.
+    force : bool
+        Render the frames done already too.
+    progress : callable or None
+        Called as ``progress(stage, done, total)`` with stage ``cycle``, ``frames`` or ``video``.
+    warn : callable or None
+        Called with each one-line warning of the plan (``framing.framing_warnings``).
+    cluster_timeout : float or None
+        How long a lost cluster is waited for (default CLUSTER_TIMEOUT) [s].
+    source_hash : str or None
+        The hash of the config as written (``resolve.source_digest``), recorded in run.json for the
+        next resume (``runrecord.nothing_to_do``).
+    budget : int or None
+        The cache's budget [B]: at the end the least recently used items that neither this run nor
+        another live one uses are removed until the items total at most this (None: none removed;
+        docs/runs.md, "The cache's budget").
+
+    Returns
+    -------
+    runrecord.RunSummary
+        What the run did.
+
+    Raises
+    ------
+    RunError, errors.ConfigError, io.ImageError
+        Before any work.
     """
     started = time.perf_counter()
     timings = {}
@@ -300,8 +386,8 @@ def _frames_here(config, plan, store, todo, digest, threads, codes):
 
 
 @portable
-def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int, command: int | None = None,
-                codes: bool = False):
+def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int,
+                command: int | None = None, codes: bool = False):
     """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
     its index.json entry, the warnings raised meanwhile as (category, text), the PNG's 8-bit
     codes if ``codes`` else None): a worker's warnings are said by the process that runs the

@@ -34,8 +34,10 @@ class Scene:
         Film time, frame / fps [s].
     when : datetime or None
         UTC time (site and time configs), else None.
-    sun, moon : SunDisc or None, MoonDisc or None
-        Their discs, or None (a sky without a sun; no moon).
+    sun : SunDisc or None
+        The sun's disc, or None (a sky without a sun).
+    moon : MoonDisc or None
+        The moon's disc, or None (no moon).
     """
 
     frame: int
@@ -60,6 +62,7 @@ def scene_at(config: Config, frame: int) -> Scene:
     Returns
     -------
     Scene
+        The frame's time, sun and moon.
     """
     frames = config.animation.frames
     fraction = frame / (frames - 1) if frames > 1 else 0.0
@@ -78,6 +81,7 @@ def sky_model(sky: SkyConfig) -> SkyModel:
     Returns
     -------
     skies.SkyModel
+        The model, cached per ``sky`` (the last 8).
     """
     return SKIES.load(sky.model)(sky)
 
@@ -98,6 +102,7 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = Fal
     Returns
     -------
     sky.Sky
+        The sky's radiance and light at the scene.
 
     Raises
     ------
@@ -116,19 +121,54 @@ the plan would make, and a fine mask reaching it would pass the limits (docs/met
 
 
 def sun_lights(sun) -> bool:
-    """Whether a sun disc gives direct light: wholly above the horizon (as
-    ``sun_kernel.sun_irradiance`` and ``sun_kernel.sun_kernel`` need); a sun between the
-    horizon and -6 degrees lights the ground through the sky alone (docs/method.md)."""
+    """Whether a sun disc gives direct light: wholly above the horizon.
+
+    As ``sun_kernel.sun_irradiance`` and ``sun_kernel.sun_kernel`` need; a sun between the
+    horizon and -6 degrees lights the ground through the sky alone (docs/method.md, "Twilight and
+    a sun at the horizon").
+
+    Parameters
+    ----------
+    sun : SunDisc or None
+        The sun's disc (its ``elevation`` and ``angular_radius`` [rad]), or None.
+
+    Returns
+    -------
+    bool
+        True when its lower limb stands over 1e-3 rad above the horizon.
+    """
     return sun is not None and sun.elevation - sun.angular_radius > 1e-3
 
 
 def sun_shades(sun) -> bool:
-    """Whether a sun's light goes through the fine sun kernel and its canopy shadow: it lights
-    the ground and stands at least SHADOW_FLOOR high."""
+    """Whether a sun's light goes through the fine sun kernel and its canopy shadow.
+
+    Parameters
+    ----------
+    sun : SunDisc or None
+        The sun's disc, or None.
+
+    Returns
+    -------
+    bool
+        True when it lights the ground (``sun_lights``) and stands at least ``SHADOW_FLOOR`` high.
+    """
     return sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
 
 
 def shading_scenes(scenes) -> list:
-    """The scenes whose sun casts the canopy's shadow (``sun_shades``): those the windows, the
-    sun window and the fine masks are planned from."""
+    """The scenes whose sun casts the canopy's shadow (``sun_shades``).
+
+    Those the windows, the sun window and the fine masks are planned from.
+
+    Parameters
+    ----------
+    scenes : iterable of Scene
+        A run's scenes.
+
+    Returns
+    -------
+    list of Scene
+        Those whose sun shades, in their order.
+    """
     return [scene for scene in scenes if sun_shades(scene.sun)]

@@ -50,7 +50,7 @@ class CanopyLayer:
 
 @dataclass(frozen=True)
 class TreesConfig:
-    """A seeded procedural grove (``canopy.GroveParams``).
+    """A seeded procedural grove (``grove_geometry.GroveParams``).
 
     Attributes
     ----------
@@ -117,7 +117,13 @@ class CanopyConfig:
 
     @property
     def cycle(self) -> int:
-        """Frames in the canopy's cycle: the flutter cycle, or the length of the mask sequence."""
+        """Frames in the canopy's cycle: the flutter cycle, or the length of the mask sequence.
+
+        Returns
+        -------
+        int
+            The cycle's length [frames].
+        """
         if self.trees is not None:
             return self.flutter.cycle
         return len(self.layers[0].mask)

@@ -182,7 +182,7 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
 
     Parameters
     ----------
-    sky : sky.SkyRaster
+    sky : sky_raster.SkyRaster
         The weighted sky raster on ``plan.sky`` [radiance x sr].
     spectrum : numpy.ndarray
         ``occlusion_spectrum`` of the layer.
@@ -291,7 +291,7 @@ def ground_periodic(
 
     Parameters
     ----------
-    sky : sky.SkyRaster
+    sky : sky_raster.SkyRaster
         The weighted sky raster on ``plan.sky`` [radiance x sr].
     spectrum : numpy.ndarray
         ``transmittance_spectrum`` of the tile.
@@ -427,7 +427,7 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
 
     Parameters
     ----------
-    kernel : sky.SkyRaster
+    kernel : sky_raster.SkyRaster
         The sun disc on a fine sky grid (``sky_grid(start, shape, q)``, q = fine pixel / height);
         it must lie inside the plan's offsets [radiance x sr].
     spectrum : numpy.ndarray
@@ -466,7 +466,7 @@ def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarra
     """``raster`` on ``grid`` sampled bilinearly at the pixel centres of ``target``, edges held.
 
     The coarse sky light under the fine sun window. Separable: a sparse interpolation matrix per
-    axis, ``R @ raster @ C.T``, applied by a compiled loop (``_filter.resample_separable``) with the
+    axis, ``R @ raster @ C.T``, applied by a compiled loop (``_array_loops.resample_separable``) with the
     float32 arithmetic of scipy's sparse products, which tests/test_shadow.py holds it to.
 
     Parameters
@@ -483,17 +483,17 @@ def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarra
     numpy.ndarray
         (channels, target rows, target cols) float32, in the units of ``raster``.
     """
-    from . import _filter
+    from . import _array_loops
 
     out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
     image = np.ascontiguousarray(raster, dtype=np.float32).reshape(-1, *grid.shape)
-    _filter.resample_separable(image, *_interpolations(grid, target), out.reshape(-1, *target.shape))
+    _array_loops.resample_separable(image, *_interpolations(grid, target), out.reshape(-1, *target.shape))
     return out
 
 
 @functools.lru_cache(maxsize=8)
 def _interpolations(grid: Grid, target: Grid) -> tuple:
-    """``interpolation_matrices`` as the rows and weights that ``_filter.resample_separable``
+    """``interpolation_matrices`` as the rows and weights that ``_array_loops.resample_separable``
     reads: (row_at, row_weight, col_at, col_weight), each (n, k), in the matrices' stored order.
     They depend on the grids alone, so the frames of a run make them once. Read-only."""
     tables = []

@@ -16,11 +16,11 @@ from . import ephemeris, equirect, io, sun_disc
 from . import sky as skylib
 from .clouds import CloudLayer
 from .config import MAX_RADIANCE
-from .settings import SkyConfig
 from .eclipse import METER_TABLE
 from .geometry import offset_direction
+from .settings import SkyConfig
 
-__all__ = ["SkyModel", "ProceduralModel", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
+__all__ = ["SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
 
 
 class SkyModel(Protocol):
@@ -30,28 +30,71 @@ class SkyModel(Protocol):
     config: SkyConfig
 
     def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
-        """The UTC time (or None), sun and moon (or None) of the frame at ``fraction`` [1] of the
-        animation (0 the first frame, 1 the last)."""
+        """The UTC time, sun and moon of the frame at ``fraction`` of the animation.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 the first frame, 1 the last [1].
+
+        Returns
+        -------
+        when : datetime or None
+            The UTC time, or None (no site and time).
+        sun : sun_disc.SunDisc or None
+            The sun's disc (azimuth, elevation, angular radius [rad]), or None for a sky without a sun.
+        moon : sun_disc.MoonDisc or None
+            The moon's disc [rad], or None.
+        """
 
     def at(self, scene, *, metering: bool = False) -> skylib.Sky:
-        """The sky at a frame's ``scene`` (``scene.Scene``; None for a sky without a sun);
-        ``metering``: for an exposure meter, which reads the
-        whole sky's light only (a model may make it coarser)."""
+        """The sky at a frame's scene.
+
+        Parameters
+        ----------
+        scene : scene.Scene or None
+            The frame's scene; None for a sky without a sun.
+        metering : bool
+            For an exposure meter, which reads the whole sky's light only (a model may make it coarser).
+
+        Returns
+        -------
+        sky.Sky
+            The sky's radiance [kcd/m^2] by direction and its sun.
+        """
 
     def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray | None, np.ndarray]:
-        """(the sun's normal irradiance (3,) or None without a sun, the sky's horizontal
-        irradiance (3,)) [klx] of the clear, uneclipsed sky with ``sun``: the run's reference
-        light (``lighting.reference_lighting``)."""
+        """The light of the clear, uneclipsed sky with ``sun``: the run's reference light
+        (``lighting.reference_lighting``).
+
+        Parameters
+        ----------
+        sun : sun_disc.SunDisc or None
+            The sun, or None without a sun.
+
+        Returns
+        -------
+        sun_irradiance : ndarray, shape (3,), or None
+            The sun's normal irradiance, or None without a sun [klx].
+        sky_irradiance : ndarray, shape (3,)
+            The sky's horizontal irradiance [klx].
+        """
 
     def check(self) -> None:
-        """Read and check the files the model needs. Raises io.ImageError naming the file."""
+        """Read and check the files the model needs.
+
+        Raises
+        ------
+        io.ImageError
+            Naming the file.
+        """
 
 
 @dataclass(frozen=True)
 class ProceduralModel:
     """The procedural sky (``cie``, ``preetham``): absolute clear-sky daylight in the CIE or
     Preetham shape, the sun and moon from the ephemeris or the config's angles, clouds, the
-    eclipse (docs/method.md, "The procedural sky").
+    eclipse (docs/method.md, "The procedural sky"). Its methods are ``SkyModel``'s.
 
     Parameters
     ----------
@@ -62,6 +105,8 @@ class ProceduralModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
+        """The sun and moon from the ephemeris at the time ``fraction`` through ``sky.time``, or
+        the config's sun with the moon slid from ``offset_start`` to ``offset_end``."""
         sky = self.config
         if sky.site is not None:
             site = sky.site
@@ -79,6 +124,8 @@ class ProceduralModel:
         return None, sun_disc.SunDisc(s.azimuth, s.elevation, s.radius), moon
 
     def at(self, scene, *, metering: bool = False):
+        """The clear sky with the scene's sun, moon, clouds and eclipse; ``metering``: a deep
+        eclipse's line-of-sight table is the coarser ``eclipse.METER_TABLE``."""
         clouds = None
         if self.config.clouds is not None:
             c = self.config.clouds
@@ -88,16 +135,44 @@ class ProceduralModel:
         return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
 
     def clear_light(self, sun):
+        """The clear sky's (no clouds, no moon) with ``sun``."""
         clear = clear_sky(self.config, sun)
         return clear.sun_normal_irradiance, clear.clear_sky_irradiance
 
     def check(self) -> None:
-        pass
+        """Nothing to read."""
+
+
+class ConstantSky:
+    """A sky of one radiance in every direction and no sun, its radiance (3,) [kcd/m^2] given by
+    a subclass. Its methods are ``SkyModel``'s."""
+
+    config: SkyConfig
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """The sky's radiance (3,) in each linear Rec.709 channel [kcd/m^2]."""
+        raise NotImplementedError
+
+    def discs(self, fraction: float):
+        """No time, no sun, no moon."""
+        return None, None, None
+
+    def at(self, scene, *, metering: bool = False):
+        """The radiance in every direction."""
+        return skylib.UniformSky(self.radiance)
+
+    def clear_light(self, sun):
+        """No sun; the sky's horizontal irradiance pi L."""
+        return None, np.pi * self.radiance
+
+    def check(self) -> None:
+        """Nothing to read."""
 
 
 @dataclass(frozen=True)
-class UniformModel:
-    """A sky of one radiance in every direction, no sun (``sky.radiance`` [kcd/m^2]).
+class UniformModel(ConstantSky):
+    """The uniform sky: ``sky.radiance`` [kcd/m^2] in every direction, no sun.
 
     Parameters
     ----------
@@ -107,22 +182,16 @@ class UniformModel:
 
     config: SkyConfig
 
-    def discs(self, fraction: float):
-        return None, None, None
-
-    def at(self, scene, *, metering: bool = False):
-        return skylib.UniformSky(np.asarray(self.config.radiance, dtype=np.float64))
-
-    def clear_light(self, sun):
-        return None, np.pi * np.asarray(self.config.radiance, dtype=np.float64)
-
-    def check(self) -> None:
-        pass
+    @property
+    def radiance(self) -> np.ndarray:
+        """``sky.radiance`` (3,) [kcd/m^2]."""
+        return np.asarray(self.config.radiance, dtype=np.float64)
 
 
 @dataclass(frozen=True)
 class HdriModel:
-    """An equirectangular image of the sky (``sky.hdri``), its sun cut out into a disc.
+    """An equirectangular image of the sky (``sky.hdri``), its sun cut out into a disc. Its
+    methods are ``SkyModel``'s.
 
     Parameters
     ----------
@@ -133,18 +202,22 @@ class HdriModel:
     config: SkyConfig
 
     def discs(self, fraction: float):
+        """No time; the image's sun; no moon."""
         return None, load_hdri(self.config).sun, None
 
     def at(self, scene, *, metering: bool = False):
+        """The image (``load_hdri``)."""
         return load_hdri(self.config)
 
     def clear_light(self, sun):
+        """The image's sun (None without one) and its sky's horizontal irradiance."""
         hdri = load_hdri(self.config)
         if hdri.sun is None:
             return None, hdri.image_irradiance()
         return np.asarray(hdri.sun_normal_irradiance, dtype=np.float64), hdri.image_irradiance()
 
     def check(self) -> None:
+        """Read and check the image (``load_hdri``)."""
         load_hdri(self.config)
 
 
@@ -155,7 +228,7 @@ def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> skylib.Procedur
     ----------
     sky : SkyConfig
         A procedural sky's resolved config section.
-    sun : sky.SunDisc
+    sun : sun_disc.SunDisc
         The sun.
     **state
         ``moon``, ``clouds``, ``time`` [s], ``eclipse_table``: as ``sky.ProceduralSky`` takes them.
@@ -163,6 +236,7 @@ def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> skylib.Procedur
     Returns
     -------
     sky.ProceduralSky
+        Radiance [kcd/m^2] by direction, the sun's and sky's light [klx].
     """
     return skylib.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
                                 cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
@@ -181,7 +255,7 @@ def load_hdri(sky: SkyConfig) -> equirect.EquirectSky:
 
     Returns
     -------
-    sky.EquirectSky
+    equirect.EquirectSky
         Radiance [kcd/m^2] by direction, its sun a disc.
 
     Raises

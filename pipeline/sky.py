@@ -567,7 +567,7 @@ class ProceduralSky:
         sky_raster.SkyRaster
             The weighted sky [klx].
         """
-        from . import _filter
+        from . import _array_loops
 
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
@@ -590,9 +590,9 @@ class ProceduralSky:
                 transmittance, glow = self._cloud_shade(np.stack(np.broadcast_arrays(x, y[part]), axis=-1))
             # compiled: the clear sky between node rows, the clouds' transmittance and glow,
             # the solid angles, as L = lerp; L *= clip(T, 0, 1); L += glow; L * weights
-            _filter.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), self.clouds is not None,
-                             np.ascontiguousarray(transmittance, dtype=np.float64),
-                             np.ascontiguousarray(glow, dtype=np.float32), weights, weighted)
+            _array_loops.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), self.clouds is not None,
+                                  np.ascontiguousarray(transmittance, dtype=np.float64),
+                                  np.ascontiguousarray(glow, dtype=np.float32), weights, weighted)
         outside = self._outside(grid.extent)
         if self._deep:  # the corona, cell by cell (its light beyond the grid is left out)
             idx, corona = self._corona_cells(grid)

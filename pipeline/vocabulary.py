@@ -6,7 +6,8 @@ from .registry import Model, Registry
 
 __all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS",
            "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
-           "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "BRDF_PRESETS"]
+           "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "REFLECTANCES",
+           "BRDF_PRESETS"]
 
 PROCEDURAL_MODELS = ("cie", "preetham")
 """The procedural sky's models (sky.model), named by the clear sky's angular shape."""
@@ -116,6 +117,13 @@ reflectance"): ``lambert`` the paper's constant; ``rpv`` Rahman, Pinty and Verst
 rho0 the amplitude, k the Minnaert bowl (k < 1) or bell (k > 1), theta the Henyey-Greenstein
 asymmetry (negative: backward scattering), rho_c the hot spot (default rho0); ``rossli``
 the MODIS RossThick-LiSparse-Reciprocal kernels' weights (Lucht, Schaaf and Strahler 2000)."""
+
+REFLECTANCES = Registry(
+    "ground.brdf.model",
+    *(Model(name, f"brdf:{home}", tuple(BRDF_PARAMETERS[name]))
+      for name, home in (("lambert", "Lambert"), ("rpv", "Rpv"), ("rossli", "RossLi"))),
+)
+"""The ground's reflectance models (``brdf.Reflectance``), each with its parameters."""
 
 BRDF_PRESETS = {
     "grass": ("rpv", {"rho0": 0.014, "k": 0.810, "theta": -0.169, "rho_c": 0.014}),

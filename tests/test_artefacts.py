@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline import cache, camera as cameras, canopy, foreground, io
+from pipeline import cache, camera as cameras, foreground, grove_geometry, io, tree_detail
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.cycle import foreground_item
 from pipeline.foregrounds import tree_box
@@ -77,12 +77,12 @@ def test_a_periodic_forest_stands_on_every_tile_in_view():
     copy out to 60 m covers the image where the copy's trunk projects (independently, by
     camera.project_points), and the gaps between the copies' trunks stay open."""
     tile = 10.0
-    grove = canopy.grow_grove(canopy.GroveParams(count=1, seed=4, crown_radius=2.0, leaves_per_tree=200,
+    grove = grove_geometry.grow_grove(grove_geometry.GroveParams(count=1, seed=4, crown_radius=2.0, leaves_per_tree=200,
                                                  height=6.0, layout="periodic", tile=tile))
-    leaves = canopy.leaves_at(grove, canopy.FlutterParams(cycle=2), 0)
+    leaves = grove_geometry.leaves_at(grove, grove_geometry.FlutterParams(cycle=2), 0)
     foot = grove.bases[0, :2]
     view = cameras.Camera((foot[0] + 0.6, foot[1] - 3.0, 1.5), 0.0, 0.0, np.radians(40.0), 200, 120)
-    copies, wood, leaf_index, wood_index = foreground.periodic_copies(
+    copies, wood, leaf_index, wood_index = tree_detail.periodic_copies(
         leaves, grove.wood, view, period=tile, center=(0.0, 0.0), haze=400.0)
     assert len(wood.radius) > 10 * len(grove.wood.radius)
     passes = foreground.tree_passes(copies, wood, view, sun_direction=[0.0, 0.6, 0.8], sun_irradiance=1.0,

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline import brdf as R
+from pipeline import brdf_bands, brdf_camera
 from pipeline import camera as cam
 from pipeline import shadow
 from pipeline import texture
@@ -120,13 +121,13 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
     raster = sky.raster(grid)
     e_sun = np.asarray(sky.undimmed_sun_irradiance(), dtype=np.float64)
     view = cam.Camera.look_at((0.0, 0.0, 1.7), (6.0, -6.0, 0.0), vertical_fov=np.radians(70.0), width=48, height=32)
-    views = R.view_vectors(view)
-    bands = R.choose_bands(b, raster, views)
+    views = brdf_camera.view_vectors(view)
+    bands = brdf_bands.choose_bands(b, raster, views)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
     e = raster.weighted.reshape(3, -1).astype(np.float64)
     band_sky = [R.shape(b, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))  # open ground: the raster's sums
                 for k, v in enumerate(bands.directions())]
-    radiance = R.ground_radiance(view, b, _constant(1.0), sun=(_constant(e_sun),),
+    radiance = brdf_camera.ground_radiance(view, b, _constant(1.0), sun=(_constant(e_sun),),
                                  sky_maps=(_constant(np.concatenate(np.atleast_1d(*band_sky))),),
                                  bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
@@ -158,35 +159,38 @@ def test_view_bands_under_a_canopy_against_a_per_pixel_brute_force():
     gx, gy = np.broadcast_arrays(gx, gy)
     v = np.stack([camera_at[0] - gx, camera_at[1] - gy, np.full(gx.shape, camera_at[2])], -1)
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    bands = R.choose_bands(b, raster, v.reshape(-1, 3))
-    colour = shadow.ground_isolated(R.weighted_raster(raster, b, bands.directions()[bands.colour]), spectrum, plan)
-    terms = [shadow.ground_isolated(R.weighted_raster(raster, b, d, summed=True), spectrum, plan).reshape(-1)
+    bands = brdf_bands.choose_bands(b, raster, v.reshape(-1, 3))
+    colour = shadow.ground_isolated(brdf_bands.weighted_raster(raster, b, bands.directions()[bands.colour]),
+                                    spectrum, plan)
+    terms = [shadow.ground_isolated(brdf_bands.weighted_raster(raster, b, d, summed=True), spectrum, plan).reshape(-1)
              for d in bands.directions()]
     weights = bands.weights(np.arccos(R.clamp_view(v.reshape(-1, 3))[:, 2])).astype(np.float32)
-    banded = R.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
-                          R.sky_ratio(b, raster, bands, v.reshape(-1, 3))).reshape(3, 20, 20)
+    banded = brdf_bands.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
+                          brdf_bands.sky_ratio(b, raster, bands, v.reshape(-1, 3))).reshape(3, 20, 20)
     brute = np.empty_like(banded)
     for r in range(0, 20, 3):
         for c in range(0, 20, 3):
-            brute[:, r, c] = shadow.ground_isolated(R.weighted_raster(raster, b, v[r, c]), spectrum, plan)[:, r, c]
+            brute[:, r, c] = shadow.ground_isolated(brdf_bands.weighted_raster(raster, b, v[r, c]), spectrum,
+                                                    plan)[:, r, c]
     sel = (slice(None), slice(0, 20, 3), slice(0, 20, 3))
     error = np.max(np.abs(banded[sel] / brute[sel] - 1))
     assert error < 0.02, (error, len(bands.zeniths))
     lambert = shadow.ground_isolated(raster, spectrum, plan)
     assert np.max(np.abs(lambert[sel] / brute[sel] - 1)) > 0.05  # the brute force sees the BRDF
-    assert 1 <= len(bands.zeniths) <= R.MAX_BANDS
+    assert 1 <= len(bands.zeniths) <= brdf_bands.MAX_BANDS
     # the frame's isolated-canopy path: the blend made on the ground raster relative to open
     # ground, times the open term at the cell's own view (no camera filtering here)
     directions = bands.directions()
-    colour_open = R.weighted_raster(raster, b, directions[bands.colour]).irradiance
-    bands_open = [R.weighted_raster(raster, b, d, summed=True).irradiance[0] for d in directions]
+    colour_open = brdf_bands.weighted_raster(raster, b, directions[bands.colour]).irradiance
+    bands_open = [brdf_bands.weighted_raster(raster, b, d, summed=True).irradiance[0] for d in directions]
     view = cam.Camera.look_at(tuple(camera_at), (0.0, 0.0, 0.0), vertical_fov=np.radians(60.0), width=8, height=6)
-    relative = R.relative_sky(view, window, bands, np.moveaxis(colour, 0, -1),
+    relative = brdf_camera.relative_sky(view, window, bands, np.moveaxis(colour, 0, -1),
                               np.stack(terms, axis=-1).reshape(20, 20, -1), colour_open, bands_open)
     assert relative.shape == (20, 20, 3) and np.all(relative < 1.0)  # shaded everywhere under the leaves
-    cell_weights = R._cell_weights(view, window, bands.zeniths)
+    cell_weights = brdf_camera._cell_weights(view, window, bands.zeniths)
     assert np.allclose(cell_weights, weights, atol=1e-5)  # the cells' own views, from the camera's position
-    opened = R.open_sky(bands, weights, colour_open, bands_open) * R.sky_ratio(b, raster, bands, v.reshape(-1, 3))
+    opened = (brdf_bands.open_sky(bands, weights, colour_open, bands_open)
+              * brdf_bands.sky_ratio(b, raster, bands, v.reshape(-1, 3)))
     through = np.moveaxis(relative, -1, 0) * opened.reshape(3, 20, 20)
     assert np.max(np.abs(through[sel] / brute[sel] - 1)) < 0.02
 
@@ -220,7 +224,7 @@ def test_the_shape_lattice_against_every_cell():
     grid = Grid((-3.0, 3.0), 0.005, (1200, 1200))
     b, view = PRESETS["grass"], unit(60, 315)
     exact = R.shape(b, view[None, None, :], R.cell_directions(grid))
-    approx = R.shape_on_grid(b, view, grid)
+    approx = brdf_bands.shape_on_grid(b, view, grid)
     weight = np.cos(np.arctan(np.hypot(*np.meshgrid(np.arange(1200), np.arange(1200))) * 0.005)) ** 4
     assert np.max(np.abs(approx / exact - 1)) < 0.03
     assert (approx * weight).sum() / (exact * weight).sum() == pytest.approx(1.0, abs=1e-3)
@@ -244,14 +248,14 @@ def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
 
 def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     """sky_ratio's per-pixel bilinear read of its lattice: the compiled loop against numpy."""
-    from pipeline import _filter
+    from pipeline import _array_loops
 
     rng = np.random.default_rng(5)
     lattice = 6
     flat = rng.random((3, lattice * lattice)).astype(np.float32)
     zenith, azimuth = rng.uniform(0.2, 1.4, 50), rng.uniform(-3.0, 3.0, 50)
-    _, _, corner, taps = R._lattice_reads(zenith, azimuth, 0.3, lattice)
+    _, _, corner, taps = brdf_bands._lattice_reads(zenith, azimuth, 0.3, lattice)
     assert np.allclose(taps.sum(axis=0), 1.0, atol=1e-6) and corner.max() <= lattice * lattice - lattice - 2
     out = np.empty((3, 50), dtype=np.float32)
-    _filter.lattice_read(flat, corner, taps, lattice, out)
-    assert np.array_equal(out, R._lattice_read_arrays(flat, corner, taps, lattice))
+    _array_loops.lattice_read(flat, corner, taps, lattice, out)
+    assert np.array_equal(out, brdf_bands._lattice_read_arrays(flat, corner, taps, lattice))

@@ -1,5 +1,5 @@
-"""Tests of pipeline/cache.py: keys, hits and misses, damage and repair, real concurrent
-processes, prune, sizes. Real files in tmp_path, real processes; no mocks."""
+"""Tests of the cache (pipeline/cache.py, cache_store.py, cache_keys.py): keys, hits and misses, damage and
+repair, real concurrent processes, prune, sizes. Real files in tmp_path, real processes; no mocks."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.cache import (CODE_VERSION, ENV_VAR, MAX_PARAM_ARRAY_SIZE, Cache, CacheWarning, cache_dir,
-                            key_of, parse_size)
+from pipeline.cache import ENV_VAR, Cache, cache_dir, parse_size
+from pipeline.cache_keys import CODE_VERSION, MAX_PARAM_ARRAY_SIZE, key_of
+from pipeline.cache_store import CacheWarning
 from pipeline.cli import main
 from pipeline.geometry import Grid
 

@@ -448,7 +448,8 @@ def test_ground_jacobian_matches_finite_differences():
     def hit(uu, vv):
         rays = image_rays(camera, uu, vv)
         t = -camera.position[2] / rays[..., 2]
-        return np.stack([camera.position[0] + t * rays[..., 0], camera.position[1] + t * rays[..., 1]], -1), t * np.linalg.norm(rays, axis=-1)
+        return (np.stack([camera.position[0] + t * rays[..., 0], camera.position[1] + t * rays[..., 1]], -1),
+                t * np.linalg.norm(rays, axis=-1))
 
     full = fraction == 1
     d = 1e-4

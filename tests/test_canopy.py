@@ -1,10 +1,11 @@
 import numpy as np
 import pytest
 
-from pipeline.canopy import (FlutterParams, GroveParams, Leaves, Shapes, Wood, _capsule_pieces, _ellipses,
-                             _translates, coverage_fragments, grove_bounds, grove_mask, grow_grove,
-                             layer_index, leaves_at, occlusion_on_lattice, project, rasterize_transmittance,
-                             shapes_bounds, tile_on_lattice, transmittance_from_image)
+from pipeline.canopy import occlusion_on_lattice, tile_on_lattice, transmittance_from_image
+from pipeline.grove_geometry import (FlutterParams, GroveParams, Leaves, Shapes, Wood, grove_bounds, grow_grove,
+                                     layer_index, leaves_at, project, shapes_bounds)
+from pipeline.rasteriser import (_capsule_pieces, _ellipses, _translates, coverage_fragments, grove_mask,
+                                 rasterize_transmittance)
 from pipeline.geometry import Grid
 
 from reference import image_transmittance

@@ -25,8 +25,13 @@ def iso_relative_luminance(sky_type, zenith, azimuth, sun_zenith, sun_azimuth):
     c, d, e = ISO_INDICATRIX[ISO_TYPES[sky_type][1]]
     chi = np.arccos(np.cos(sun_zenith) * np.cos(zenith)
                     + np.sin(sun_zenith) * np.sin(zenith) * np.cos(abs(azimuth - sun_azimuth)))
-    phi = (lambda z: 1 + a * np.exp(b / np.cos(z)) if z < np.pi / 2 else 1.0)
-    f = (lambda x: 1 + c * (np.exp(d * x) - np.exp(d * np.pi / 2)) + e * np.cos(x) ** 2)
+
+    def phi(z):
+        return 1 + a * np.exp(b / np.cos(z)) if z < np.pi / 2 else 1.0
+
+    def f(x):
+        return 1 + c * (np.exp(d * x) - np.exp(d * np.pi / 2)) + e * np.cos(x) ** 2
+
     return f(chi) * phi(zenith) / (f(sun_zenith) * phi(0.0))
 
 

@@ -10,7 +10,8 @@ import pytest
 
 from pipeline import io
 from pipeline.cache import Cache
-from pipeline.cli import _Progress, main
+from pipeline.cli import main
+from pipeline.cli_runs import _Progress
 
 from scenes import assert_refused, base_config, set_key, write_config
 from test_run import TINY
@@ -444,7 +445,7 @@ def test_cache_list_into_a_closed_pipe_and_a_missing_cache_folder(tmp_path):
 def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
     from dataclasses import replace as swap
 
-    from pipeline.cli import _eclipse_lines
+    from pipeline.cli_runs import _eclipse_lines
     from pipeline.resolve import load
 
     config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
@@ -460,10 +461,10 @@ def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
 def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
     """The first item of a stage carries the workers' start (and after an install the loops'
     compiling): 20 s for it, then one a second, 8 to go, is 8 s left, not 80."""
-    import pipeline.cli as cli
+    import pipeline.cli_runs as cli_runs
 
     clock = iter([0.0, 20.0, 21.0])
-    monkeypatch.setattr(cli.time, "monotonic", lambda: next(clock))
+    monkeypatch.setattr(cli_runs.time, "monotonic", lambda: next(clock))
     stream = _Stream(True)
     progress = _Progress(stream)
     for done in (0, 1, 2):

@@ -2,10 +2,12 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import clouds
+from pipeline import cloud_noise, clouds
 from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
-from pipeline.clouds import (CloudLayer, _knots, delta_eddington_transmittance, fractal_noise,
-                             single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
+from pipeline.cloud_noise import _knots, fractal_noise
+from pipeline.cloud_transfer import (delta_eddington_transmittance, single_scattering_flux_transmittance,
+                                     two_stream_diffuse_transmittance)
+from pipeline.clouds import CloudLayer
 
 SUN = np.array([80.0, 78.0, 75.0])  # normal irradiance above the cloud [klx]
 SKY = np.array([14.0, 17.0, 22.0])  # clear-sky horizontal irradiance [klx]
@@ -124,8 +126,8 @@ def test_full_cover_is_a_uniform_overcast():
 def test_seed_determinism():
     s = sky_points(64)
     a = layer(seed=11).optical_depth(s, 4.0)
-    clouds._noise.cache_clear()
-    clouds._knots.cache_clear()
+    cloud_noise._noise.cache_clear()
+    cloud_noise._knots.cache_clear()
     b = layer(seed=11).optical_depth(s, 4.0)
     np.testing.assert_array_equal(a, b)
     c = layer(seed=12).optical_depth(s, 4.0)
@@ -440,12 +442,12 @@ def reference_field(cl, s, time, footprint=None):
     from scipy import ndimage
 
     key = cl._noise_key()
-    levels = clouds._noise_levels(*key)
+    levels = cloud_noise._noise_levels(*key)
     n, base = cl.texels, np.array(cl._drifted_copies(time))[:, None]
 
     def read(level, coords):
         if level == 0:
-            return ndimage.map_coordinates(clouds._spline(*key), coords, order=3, mode="grid-wrap",
+            return ndimage.map_coordinates(cloud_noise._spline(*key), coords, order=3, mode="grid-wrap",
                                            prefilter=False)
         return ndimage.map_coordinates(levels[level], coords, order=1, mode="grid-wrap")
 

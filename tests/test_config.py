@@ -35,7 +35,8 @@ BAD_CONFIGS = [
     ("height as text", "canopy.height", "tall", "canopy.height: must be a number"),
     ("alpha of 90", "sky.alpha", 90.0, "sky.alpha: must be below 90"),
     ("alpha above 90", "sky.alpha", 120.0, "sky.alpha: must be below 90"),
-    ("misspelt model", "sky.model", "unifrom", "sky.model: unknown value 'unifrom'; valid: cie, preetham, uniform, hdri"),
+    ("misspelt model", "sky.model", "unifrom",
+     "sky.model: unknown value 'unifrom'; valid: cie, preetham, uniform, hdri"),
     ("missing mask", "canopy.mask", "nope.png", "canopy.mask: no such file"),
     ("empty window", "ground.window", [1, 1, 1, 5], "ground.window: must be"),
     ("short window", "ground.window", [0, 0, 1], "ground.window: must be a list of 4 numbers"),
@@ -74,7 +75,8 @@ def test_a_bad_value_is_refused_naming_the_key(tmp_path, name, key, value, messa
 
 
 BAD_SKIES = [
-    ("unknown cie_type", {"model": "cie", "cie_type": 16}, "sky.cie_type: must be one of the CIE standard general skies 1..15"),
+    ("unknown cie_type", {"model": "cie", "cie_type": 16},
+     "sky.cie_type: must be one of the CIE standard general skies 1..15"),
     ("cie_type zero", {"model": "cie", "cie_type": 0}, "sky.cie_type: must be at least 1"),
     ("cie_type with preetham", {"model": "preetham", "cie_type": 12}, "sky.cie_type: only used with model: cie"),
     ("auto without site", {"model": "cie", "turbidity": "auto"}, "sky.turbidity: auto needs sky.site and sky.time"),

@@ -60,7 +60,8 @@ def test_clear_daylight_is_ineichen_in_illuminance():
         for elevation in (5.0, 30.0, 75.0):
             for altitude in (0.0, 1600.0):
                 zenith = 90.0 - elevation
-                am = atmosphere.get_absolute_airmass(atmosphere.get_relative_airmass(zenith), atmosphere.alt2pres(altitude))
+                am = atmosphere.get_absolute_airmass(atmosphere.get_relative_airmass(zenith),
+                                                     atmosphere.alt2pres(altitude))
                 ref = clearsky.ineichen(zenith, am, turbidity, altitude=altitude, dni_extra=1366.1)
                 got = clear_daylight(np.radians(zenith), turbidity, altitude=altitude)
                 assert got.direct_normal_irradiance == pytest.approx(float(ref["dni"]), rel=1e-9)

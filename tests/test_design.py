@@ -29,7 +29,7 @@ def import_table(text: str) -> dict[str, set[str]]:
     section = text.split("### What each stage may import", 1)[1].split("\n#", 1)[0]
     rows = [line.split("|")[1:3] for line in section.splitlines() if line.startswith("| ") and "`" in line]
     groups = {}
-    for left, right in rows:
+    for left, _right in rows:
         for word in ("the physics", "the shared"):
             if left.strip().startswith(word):
                 groups[word] = set(re.findall(r"`(\w+)`", left))
@@ -94,6 +94,14 @@ def test_every_import_is_one_the_design_table_allows():
     assert violations() == []
 
 
+def test_every_module_has_its_row_in_the_modules_table():
+    """docs/design.md, "Modules", says what each module of pipeline/ owns."""
+    section = DESIGN.read_text().split("## Modules", 1)[1].split("\n## ", 1)[0]
+    listed = {name for line in section.splitlines() if line.startswith("| ")
+              for name in re.findall(r"`(\w+)\.py`", line.split("|")[1])}
+    assert set(MODULES) - {"__init__"} - listed == set()
+
+
 def test_the_table_check_fails_on_a_low_module_importing_a_high_one(tmp_path):
     """A copy of the package where geometry.py imports cli (docs/design.md's example) fails."""
     copy = tmp_path / "pipeline"
@@ -105,7 +113,7 @@ def test_the_table_check_fails_on_a_low_module_importing_a_high_one(tmp_path):
 def test_a_resume_with_nothing_to_do_imports_no_numpy():
     """The command, the config and the run folder's checks (docs/design.md): a resume that
     finds every frame done is decided without numpy, a stage or a physics module."""
-    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runfolder; "
+    code = ("import sys, pipeline.cli, pipeline.config, pipeline.resolve, pipeline.runrecord; "
             "print(sorted(m for m in sys.modules if m == 'numpy' or m.startswith('pipeline.')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=PACKAGE.parent).stdout

@@ -168,7 +168,8 @@ def test_the_totality_config_brings_totality_up_to_dusk_not_black():
     day_white = exposure[0] * (readings[0] @ Y) / np.pi  # the day's white ground, exposed
     white = exposure[-1] * (readings[-1] @ Y) / np.pi  # the same ground at totality
     assert day_white == pytest.approx(2.0**config.camera.exposure, rel=1e-3)
-    assert exposure[-1] == pytest.approx(composite.exposure_for(reference) * 2.0**(auto.limits[1] + config.camera.exposure),
+    assert exposure[-1] == pytest.approx(composite.exposure_for(reference)
+                                         * 2.0**(auto.limits[1] + config.camera.exposure),
                                          rel=1e-9)  # held at its most
     assert 2.0**-6 < white / day_white < 2.0**-2
 
@@ -177,7 +178,6 @@ def test_the_crescents_are_reversed_after_third_contact():
     # the lit sliver of the sun (its kernel's centroid from the disc's centre) lies on the far
     # side 20 s after C3 from where it was 20 s before C2 (131 degrees round at Dallas, off the
     # centre line: the moon's path misses the sun's centre): the pinhole images turn round
-    from pipeline.geometry import sky_offset
     from pipeline.sun_kernel import sun_kernel
 
     def sliver(when):

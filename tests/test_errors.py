@@ -4,8 +4,7 @@ import threading
 import pytest
 
 from pipeline import errors
-from pipeline.cli import BadInput
-from pipeline.errors import ConfigError, RunError
+from pipeline.errors import BadInput, ConfigError, RunError
 from pipeline.io import ImageError
 
 EXAMPLES = [

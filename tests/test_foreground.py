@@ -1,12 +1,13 @@
 import numpy as np
 import pytest
 
-from pipeline import _raster, canopy, foreground
+from pipeline import _raster, foreground, grove_geometry
 from pipeline.camera import Camera, project_points
-from pipeline.canopy import Leaves, Wood
-from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, TIP_TAPER, ForegroundPasses,
-                                 check_passes_size, leaf_sun_visibility, read_passes, sky_exposure,
-                                 stem_visibility, sun_visibility, taper_wood, tree_passes)
+from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, leaf_sun_visibility, sky_exposure,
+                                 stem_visibility, sun_visibility, tree_passes)
+from pipeline.foreground_passes import ForegroundPasses, check_passes_size, read_passes
+from pipeline.grove_geometry import Leaves, Wood
+from pipeline.tree_detail import TIP_TAPER, taper_wood
 from pipeline.io import ImageError, write_exr
 
 E_SUN = np.array([90.0, 85.0, 80.0])  # [klx]
@@ -265,8 +266,8 @@ def test_read_passes_round_trip_and_errors(tmp_path):
 
 
 def test_default_grove_renders(capsys):
-    grove = canopy.grow_grove(canopy.GroveParams())
-    leaves = canopy.leaves_at(grove, canopy.FlutterParams(), 0)
+    grove = grove_geometry.grow_grove(grove_geometry.GroveParams())
+    leaves = grove_geometry.leaves_at(grove, grove_geometry.FlutterParams(), 0)
     camera = Camera.look_at((0.0, -20.0, 1.7), (0.0, 0.0, 5.0), vertical_fov=np.radians(45),
                             width=640, height=360)
     s = np.array([0.0, 0.8, 0.6])  # behind the trees

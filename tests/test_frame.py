@@ -33,21 +33,23 @@ def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
 def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path):
     """``compile_loops`` (a render's command runs it while its workers make the cycle
     products) compiles every loop of the frame phase with the types a frame passes: in a
-    fresh process, rendering a frame after it compiles nothing more in ``pipeline._filter``."""
+    fresh process, rendering a frame after it compiles nothing more in ``pipeline._filter``, ``_tiling`` or
+    ``_array_loops``."""
     code = (
         "import sys; sys.path.insert(0, 'tests')\n"
         "from pathlib import Path\n"
-        "from pipeline import _filter, cache\n"
+        "from pipeline import _array_loops, _filter, _tiling, cache\n"
         "from pipeline.frame import compile_loops, render_frame\n"
         "from scenes import plan_of, tiny_grove\n"
         "folder = Path(sys.argv[1])\n"
         "plan = plan_of(tiny_grove(**{'sky.clouds': {'cover': 0.4, 'scale': 300.0}}), folder)\n"
         "compile_loops(plan)\n"
-        "loops = [f for f in vars(_filter).values() if hasattr(f, 'signatures')]\n"
+        "loops = [f for m in (_filter, _tiling, _array_loops) for f in vars(m).values() if hasattr(f, 'signatures')]\n"
         "before = {f.__name__: len(f.signatures) for f in loops}\n"
         "assert sum(before.values()) > 0, before\n"
         "render_frame(plan, 0, store=cache.Cache(folder / 'cache'))\n"
-        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops if len(f.signatures) > before[f.__name__]})\n")
+        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops"
+        " if len(f.signatures) > before[f.__name__]})\n")
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout
     assert out.strip() == "{}", out

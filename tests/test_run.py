@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from pipeline import io
-from pipeline.cache import CacheWarning
+from pipeline.cache_store import CacheWarning
 from pipeline.cli import main
 from pipeline.errors import RunError
 from pipeline.plan import plan_run
@@ -348,7 +348,10 @@ def test_frames_made_from_a_swapped_cache_item_are_rendered_again(finished, caps
     (victim,) = [i for i in items_of_frame(run, 1) if i.startswith(kind)]
     (donor,) = [i for i in items_of_frame(run, 2) if i.startswith(kind)]
     file = "coarse.npy" if kind == "spectra" else "sun.npy"
-    path = lambda item: cache / item.split("/")[0] / item.split("/")[1][:2] / item.split("/")[1] / file
+
+    def path(item):
+        return cache / item.split("/")[0] / item.split("/")[1][:2] / item.split("/")[1] / file
+
     original = path(victim).read_bytes()
     shutil.copyfile(path(donor), path(victim))
     code, out, _ = render_in_process(config, run, cache, capsys, "--verify")
@@ -549,8 +552,8 @@ def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_ru
     assert render_in_process(config, run, cache, capsys, "--frames", "0-2", "--jobs", "1")[0] == 0  # every cycle frame
     store = Cache(cache)
     mine = set(config_item_keys(plan_run(load(config))))
-    others = {name: store.get_or_compute("spectra", {"other": name}, lambda: {"a": np.ones(40_000, np.float32)})
-              for name in ("old", "held")}
+    for name in ("old", "held"):
+        store.get_or_compute("spectra", {"other": name}, lambda: {"a": np.ones(40_000, np.float32)})
     keys = {item.key: item for item in store.list()}
     assert mine < set(keys) and len(keys) == len(mine) + 2
     other_keys = set(keys) - mine
@@ -570,7 +573,7 @@ def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_ru
     assert code == 0
     left = {item.key: item for item in store.list()}
     assert set(left) == mine | {held} and sum(item.bytes for item in left.values()) <= budget
-    assert out.strip().splitlines()[-1].startswith(f"sunshade: the cache was over its budget of ")
+    assert out.strip().splitlines()[-1].startswith("sunshade: the cache was over its budget of ")
     (gone,) = other_keys - {held}
     assert f"removed 1 item ({keys[gone].bytes / 1024:.1f} KiB) that no live run uses" in out
     assert not list((cache / ".runs").glob("*.json"))  # the runs' lists go with them

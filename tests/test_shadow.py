@@ -100,7 +100,10 @@ def test_layers_combine_by_the_product_rule():
     assert np.allclose(shadow.combine_layers([a], i0), a)
 
 
-def ground_from_hdri(image, mask, *, center, size, height, window, alpha=np.radians(85)):
+ALPHA_85 = np.radians(85)
+
+
+def ground_from_hdri(image, mask, *, center, size, height, window, alpha=ALPHA_85):
     """Ground irradiance (channels, rows, cols) of an isolated canopy under an equirect sky."""
     occlusion, grid = canopy.occlusion_on_lattice(mask, center=center, size=size, lattice=window)
     plan = shadow.plan_isolated(window, grid, height=height, alpha=alpha)

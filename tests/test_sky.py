@@ -7,7 +7,7 @@ from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
 from scipy.integrate import quad
 
-from pipeline import _filter, io
+from pipeline import _array_loops, io
 from pipeline.cli import main
 from pipeline.colour import REC709_LUMINANCE
 from pipeline.constants import SUN_ANGULAR_RADIUS
@@ -588,7 +588,7 @@ def test_sky_protocol_values_keep_each_models_meaning():
 
 @pytest.mark.parametrize("clouded", [False, True])
 def test_the_compiled_sky_rows_have_the_bits_of_the_array_operations(clouded):
-    # _filter.sky_rows against the numpy operations ProceduralSky.raster made before it
+    # _array_loops.sky_rows against the numpy operations ProceduralSky.raster made before it
     rng = np.random.default_rng(7)
     rows, cols, nodes = 23, 31, 4
     along = rng.random((3, nodes, cols), dtype=np.float32) * 5.0
@@ -606,8 +606,8 @@ def test_the_compiled_sky_rows_have_the_bits_of_the_array_operations(clouded):
     out = np.empty((3, rows, cols), dtype=np.float32)
     for lo in (0, 10):  # in two parts, as the raster's bounded chunks
         part = slice(lo, 10 if lo == 0 else rows)
-        _filter.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), clouded,
-                         np.ascontiguousarray(transmittance[part]), np.ascontiguousarray(glow[part]), weights, out)
+        _array_loops.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), clouded,
+                              np.ascontiguousarray(transmittance[part]), np.ascontiguousarray(glow[part]), weights, out)
     assert out.tobytes() == expected.tobytes()
 
 

@@ -1,0 +1,157 @@
+"""Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
+pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
+over the view (``frame._apply_haze``), the procedural sky raster's rows (``sky.ProceduralSky.raster``) and the
+ground reflectance's lattice read (``brdf_bands.sky_ratio``). Each does what its array version does, float32 operation
+for float32 operation in the same order, so that no temporary arrays are built, and the tests hold it to that
+version's bits. Imported lazily: numba costs 0.3 s to import.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read"]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
+    """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel.
+
+    R and C are given by the columns they read and their weights, k per row: each output value is
+    the float32 sum, from 0 and in that order, of weights times values, as scipy's sparse products;
+    rows first, then columns.
+
+    Parameters
+    ----------
+    raster : numpy.ndarray
+        (channels, rows, cols) float32, the coarse raster (irradiance [klx]).
+    row_at : numpy.ndarray
+        (R rows, k) int64, the raster rows each output row reads.
+    row_weight : numpy.ndarray
+        (R rows, k) float32, their weights [1].
+    col_at : numpy.ndarray
+        (C rows, k) int64, the raster columns each output column reads.
+    col_weight : numpy.ndarray
+        (C rows, k) float32, their weights [1].
+    out : numpy.ndarray
+        (channels, R rows, C rows) float32, written: the resampled raster, in ``raster``'s units.
+    """
+    along = np.empty(raster.shape[2], dtype=np.float32)
+    for ch in range(raster.shape[0]):
+        for i in range(out.shape[1]):
+            along[:] = 0.0
+            for p in range(row_at.shape[1]):
+                weight, row = row_weight[i, p], row_at[i, p]
+                for c in range(raster.shape[2]):
+                    along[c] += weight * raster[ch, row, c]
+            if col_at.shape[1] == 2:  # bilinear: two reads a value, unrolled
+                for j in range(out.shape[2]):
+                    total = np.float32(0.0) + col_weight[j, 0] * along[col_at[j, 0]]
+                    out[ch, i, j] = total + col_weight[j, 1] * along[col_at[j, 1]]
+            else:
+                for j in range(out.shape[2]):
+                    total = np.float32(0.0)
+                    for p in range(col_at.shape[1]):
+                        total += col_weight[j, p] * along[col_at[j, p]]
+                    out[ch, i, j] = total
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def haze_over(background, transmittance, veil, horizon):
+    """``frame.render_frame``'s haze, in place: the background becomes ``T B + (1 - T) L_horizon + 0``.
+
+    In the float32 operations and order of the array version (``B *= T; B += veil * L; B + 0``, the
+    last turning -0 into +0).
+
+    Parameters
+    ----------
+    background : numpy.ndarray
+        (rows, cols, 3) float32 radiance B, overwritten [kcd/m^2].
+    transmittance : numpy.ndarray
+        (rows, cols, 1) float32, T [1].
+    veil : numpy.ndarray
+        (rows, cols, 1) float32, 1 - T [1].
+    horizon : numpy.ndarray
+        (cols, 3) float32, the sky's radiance at the horizon L_horizon per column [kcd/m^2].
+    """
+    zero = np.float32(0.0)
+    for i in range(background.shape[0]):
+        for j in range(background.shape[1]):
+            t, v = transmittance[i, j, 0], veil[i, j, 0]
+            for k in range(background.shape[2]):
+                background[i, j, k] = (background[i, j, k] * t + v * horizon[j, k]) + zero
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow, weights, out):
+    """Rows ``first`` to ``first + count`` of ``sky.ProceduralSky.raster``'s weighted raster.
+
+    The clear sky interpolated between node rows ``row_at`` and ``row_at + 1`` by ``row_frac``,
+    where ``clouded`` times the clouds' transmittance clipped to [0, 1] and plus their ``glow``,
+    times the cells' solid angles: the float32 operations of the array version, in its order.
+
+    Parameters
+    ----------
+    along : numpy.ndarray
+        (3, nodes, cols) float32, the clear sky's radiance at the node rows [kcd/m^2].
+    row_at : numpy.ndarray
+        (rows,) int, each raster row's node row.
+    row_frac : numpy.ndarray
+        (rows,) float32, its fraction towards the next node row [1].
+    first, count : int
+        The raster rows written.
+    clouded : bool
+        Whether there are clouds (else ``transmittance`` and ``glow`` are not read).
+    transmittance : numpy.ndarray
+        (count, cols) float64, the clouds' transmittance [1].
+    glow : numpy.ndarray
+        (count, cols, 3) float32, the clouds' scattered light [kcd/m^2].
+    weights : numpy.ndarray
+        (rows, cols) float32, the cells' solid angles [sr].
+    out : numpy.ndarray
+        (3, rows, cols) float32, written: the weighted raster [klx].
+    """
+    one = np.float32(1.0)
+    for r in range(count):
+        row = first + r
+        f = row_frac[row]
+        g = one - f
+        a = row_at[row]
+        for c in range(3):
+            for j in range(out.shape[2]):
+                value = along[c, a, j] * g + along[c, a + 1, j] * f
+                if clouded:
+                    value *= np.float32(min(max(transmittance[r, j], 0.0), 1.0))
+                    value += glow[r, j, c]
+                out[c, row, j] = value * weights[row, j]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def lattice_read(flat, corner, taps, lattice, out):
+    """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (``brdf_bands._lattice_read_arrays``).
+
+    Point p takes the four values from flat index corner[p] (its first corner), + 1, + lattice,
+    + lattice + 1 with weights taps[:, p], summed in that order in float32.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (channels, lattice * lattice) float32, the lattice's values [1].
+    corner : numpy.ndarray
+        (n,) intp, each point's first corner.
+    taps : numpy.ndarray
+        (4, n) float32, the bilinear weights of the four corners [1].
+    lattice : int
+        The lattice's side [count].
+    out : numpy.ndarray
+        (channels, n) float32, written: the values read [1].
+    """
+    for p in range(corner.shape[0]):
+        k = corner[p]
+        for c in range(flat.shape[0]):
+            v = flat[c, k] * taps[0, p]
+            v += flat[c, k + 1] * taps[1, p]
+            v += flat[c, k + lattice] * taps[2, p]
+            v += flat[c, k + lattice + 1] * taps[3, p]
+            out[c, p] = v

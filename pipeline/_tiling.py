@@ -1,0 +1,404 @@
+"""Compiled loops of the hashed tilings: the stochastic tiling of the ground albedo
+(``albedo.StochasticTiling.sample``: its reads, then their blend through the inverse lookups) and the cloud
+pattern's filtered reads over the tile's shifted copies (``clouds.CloudLayer.field``). Both shift a lattice's
+vertices by the same hash of the vertex's offsets (``_vertex_key``, ``_unit_hash``). Each does what its array
+version does, operation for operation in the same order (the clouds' reads: scipy's float64 ones), and the tests
+hold it to that version's bits. Imported lazily: numba costs 0.3 s to import.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["tiling_reads", "tiling_lookup", "cloud_field"]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _unit_hash(key):
+    """``albedo.unit_hash`` of one uint64 key."""
+    z = key + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return np.float64(z >> np.uint64(11)) / 9007199254740992.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _seed_key(seed):
+    """``albedo.vertex_keys``'s share of the seed."""
+    return np.uint64(seed) * np.uint64(0x165667B19E3779F9)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _vertex_key(va, vb, seed_key):
+    """``albedo.vertex_keys`` of one lattice vertex (va, vb), ``seed_key`` from ``_seed_key``."""
+    return ((np.uint64(va) * np.uint64(0x9E3779B97F4A7C15)) ^ (np.uint64(vb) * np.uint64(0xC2B2AE3D27D4EB4F))) ^ seed_key  # noqa: E501
+
+
+_SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
+"""``albedo.SECOND_KEY``."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x, read_y, read_pixel,
+          read_weight):
+    """Appends the read of vertex (va, vb) of weight w for footprint j at (x, y) [m] when
+    w >= skip (``albedo.StochasticTiling.offsets``); returns the new count of reads."""
+    if not w >= skip:
+        return count
+    key = _vertex_key(va, vb, seed_key)
+    read_x[count] = x + _unit_hash(key) * period_x
+    read_y[count] = y + _unit_hash(key ^ _SECOND_KEY) * period_y
+    read_pixel[count] = j
+    read_weight[count] = w
+    return count + 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, read_y, read_pixel, read_weight):
+    """The reads of ``albedo.StochasticTiling.sample``, footprint by footprint in vertex order.
+
+    Per footprint j the lattice triangle's three vertices and weights (``weights``) raised to the
+    fourth power (BLEND_SHARPNESS, as two squarings) and renormalised go into ``weight``; each read
+    of weight ``skip`` or more gets its point, (x, y) moved by the vertex's offset (``offsets``),
+    its footprint and its weight.
+
+    Parameters
+    ----------
+    x, y : numpy.ndarray
+        (n,) float64, the footprints' centres on the ground [m].
+    cell : float
+        The triangle lattice's cell [m].
+    seed : int
+        The tiling's seed.
+    skip : float
+        Reads of a lower weight are left out (``albedo.SKIP_WEIGHT``) [1].
+    period_x, period_y : float
+        The exemplar's period along x and y: a vertex's offset is uniform in [0, period) [m].
+    weight : numpy.ndarray
+        (3, n) float64, written: each footprint's three vertex weights [1].
+    read_x, read_y : numpy.ndarray
+        (3 n,) float64, written from the start: the reads' points [m].
+    read_pixel : numpy.ndarray
+        (3 n,) int, written from the start: each read's footprint.
+    read_weight : numpy.ndarray
+        (3 n,) float64, written from the start: each read's weight [1].
+
+    Returns
+    -------
+    int
+        The count of reads written.
+    """
+    root3 = np.sqrt(3.0)
+    seed_key = _seed_key(seed)
+    count = 0
+    for j in range(x.shape[0]):
+        a = x[j] / cell
+        b = y[j] / cell
+        sa, sb = a - b / root3, 2.0 * b / root3
+        ia, ib = np.floor(sa), np.floor(sb)
+        fa, fb = sa - ia, sb - ib
+        ja, jb = np.int64(ia), np.int64(ib)
+        if fa + fb < 1.0:
+            a0, b0, w0 = ja, jb, 1.0 - fa - fb
+            a1, b1, w1 = ja, jb + 1, fb
+            a2, b2, w2 = ja + 1, jb, fa
+        else:
+            a0, b0, w0 = ja + 1, jb + 1, fa + fb - 1.0
+            a1, b1, w1 = ja + 1, jb, 1.0 - fb
+            a2, b2, w2 = ja, jb + 1, 1.0 - fa
+        w0 *= w0
+        w0 *= w0
+        w1 *= w1
+        w1 *= w1
+        w2 *= w2
+        w2 *= w2
+        total = w0 + w1 + w2
+        w0 /= total
+        w1 /= total
+        w2 /= total
+        weight[0, j], weight[1, j], weight[2, j] = w0, w1, w2
+        count = _read(count, j, w0, a0, b0, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w1, a1, b1, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+        count = _read(count, j, w2, a2, b2, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
+                      read_pixel, read_weight)
+    return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _component(lookups, lv, up, k, g, norm, tb):
+    """Component k mapped back from the Gaussian g through the lookups of levels lv and up,
+    blended by tb (``tiling_lookup``)."""
+    bins = lookups.shape[2]
+    position = min(max((g / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+    low = min(int(np.floor(position)), bins - 2)
+    frac = position - low
+    here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
+    there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
+    return here * (1.0 - tb) + there * tb
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """``tiling_lookup`` for three channels, in scalars."""
+    n = out.shape[1]
+    last = lookups.shape[0] - 1
+    reads = values.shape[1]
+    r = 0
+    for j in range(n):
+        g0 = g1 = g2 = 0.0
+        while r < reads and read_pixel[r] == j:
+            w = read_weight[r]
+            g0 += w * np.float64(values[0, r])
+            g1 += w * np.float64(values[1, r])
+            g2 += w * np.float64(values[2, r])
+            r += 1
+        norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
+        lv = int(level[j])
+        up = min(lv + 1, last)
+        tb = np.float64(blend[j])
+        c0 = _component(lookups, lv, up, 0, g0, norm, tb)
+        c1 = _component(lookups, lv, up, 1, g1, norm, tb)
+        c2 = _component(lookups, lv, up, 2, g2, norm, tb)
+        for m in range(3):
+            value = center[m] + (((0.0 + c0 * basis[m, 0]) + c1 * basis[m, 1]) + c2 * basis[m, 2])
+            out[m, j] = np.float32(value if not value < 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """The rest of ``albedo.StochasticTiling.sample``: the reads' means blended into the albedo.
+
+    The reads' means, footprint by footprint (``tiling_reads``' order), are summed by weight into
+    the footprint's Gaussian g, divided by the root of the sum of its squared weights, mapped back
+    through the inverse lookups of its level and the next, blended by ``blend``, and out of the
+    principal axes, held at 0 or more.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        (channels, m) float32, the reads' means (``filtered``) in the Gaussian space [1].
+    read_pixel : numpy.ndarray
+        (m,) int, each read's footprint (``tiling_reads``).
+    read_weight : numpy.ndarray
+        (m,) float64, each read's weight [1].
+    weight : numpy.ndarray
+        (3, n) float64, each footprint's vertex weights [1].
+    level : numpy.ndarray
+        (n,) int16, each footprint's mip level.
+    blend : numpy.ndarray
+        (n,) float32, its blend towards the next level [1].
+    lookups : numpy.ndarray
+        (levels, channels, bins) float64, the inverse lookup tables per level and component [1].
+    center : numpy.ndarray
+        (channels,) float64, the exemplar's mean albedo [1].
+    basis : numpy.ndarray
+        (channels, channels) float64, the principal axes [1].
+    out : numpy.ndarray
+        (channels, n) float32, written: the albedo [1].
+    """
+    channels, n = out.shape
+    bins, last = lookups.shape[2], lookups.shape[0] - 1
+    reads = values.shape[1]
+    if channels == 3:
+        _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
+        return
+    g = np.empty(channels, dtype=np.float64)
+    comp = np.empty(channels, dtype=np.float64)
+    r = 0
+    for j in range(n):
+        for k in range(channels):
+            g[k] = 0.0
+        while r < reads and read_pixel[r] == j:
+            for k in range(channels):
+                g[k] += read_weight[r] * np.float64(values[k, r])
+            r += 1
+        norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
+        lv = int(level[j])
+        up = min(lv + 1, last)
+        tb = np.float64(blend[j])
+        for k in range(channels):
+            position = min(max((g[k] / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
+            low = min(int(np.floor(position)), bins - 2)
+            frac = position - low
+            here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
+            there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
+            comp[k] = here * (1.0 - tb) + there * tb
+        for m in range(channels):
+            acc = 0.0
+            for i in range(channels):
+                acc += comp[i] * basis[m, i]
+            value = center[m] + acc
+            out[m, j] = np.float32(value if not value < 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
+                tile_blend, seed, base_row, base_col):
+    """The reads of ``clouds.CloudLayer.field`` in one loop over samples and taps.
+
+    The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols),
+    uniform in [0, side) texels of level 0, as the ground albedo's stochastic tiling shifts its
+    lattice vertices (``_vertex_key``, ``_unit_hash``), so that the pattern does not repeat (a
+    repeating tile lines its copies up towards the horizon, docs/method.md, "The cloud
+    pattern"); in a band ``tile_blend`` of the side wide about each edge a read blends the
+    copies on both sides, ``sum w v / sqrt(sum w^2)`` (variance preserving, Heitz & Neyret
+    2018) with smoothstep weights. A read inside one copy is that copy's read alone, bit for bit.
+    Each read is that of ``scipy.ndimage.map_coordinates`` with mode ``grid-wrap`` (cubic
+    B-spline with ``prefilter=False`` at level 0, bilinear above), operation for operation, so
+    the result is the same to the bit: the coordinate wrapped into the tile as scipy wraps it,
+    scipy's spline weights (the last one 1 minus the others), the sum over rows then columns of
+    value x row weight x column weight.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        Every level of the noise in one flat float64 array (``cloud_noise._packed``) [1].
+    offsets : numpy.ndarray
+        (levels,) intp, each level's first value in ``flat``.
+    sides : numpy.ndarray
+        (levels,) intp, each (square) level's side [texel].
+    rows, cols : numpy.ndarray
+        (m,) lattice coordinates of the samples [texel of level 0].
+    direct : bool
+        True reads level 0 at (rows, cols) alone (no footprint; the arrays below unused); else
+        sample i averages taps[i] taps spaced along (ex[i], ey[i]) over major[i], each read at level
+        k0[i] and, where blend[i] > 0, blended towards level k0[i] + 1.
+    taps : numpy.ndarray
+        (m,) int, taps per sample.
+    k0 : numpy.ndarray
+        (m,) int, each sample's level.
+    blend : numpy.ndarray
+        (m,) float, its blend towards the next level [1].
+    major : numpy.ndarray
+        (m,) float64, the footprint's length along its major axis [texel of level 0].
+    ex, ey : numpy.ndarray
+        (m,) float64, the unit vector of the major axis [1].
+    out : numpy.ndarray
+        (m,) float64, written: the field [1].
+    tile_blend : float
+        ``clouds.TILE_BLEND``, the blend band's width over the side [1].
+    seed : int
+        The layer's seed.
+    base_row, base_col : int
+        The index of the copy of the tile whose centre is at lattice coordinates (0, 0)
+        (``CloudLayer._drifted_copies``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``out``.
+    """
+    n_levels = sides.shape[0]
+    side0 = sides[0]
+    band = tile_blend * side0
+    seed_key = _seed_key(seed)
+    weights = np.empty((2, 4))
+    index = np.empty((2, 4), dtype=np.intp)
+    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
+    shares = np.empty((2, 2))  # per axis: their smoothstep weights
+    last_row = last_col = 0  # the last copy hashed, and its shift
+    last_shift_row = last_shift_col = 0.0
+    for i in range(rows.shape[0]):
+        n_taps = 1 if direct else taps[i]
+        total = 0.0
+        for t in range(n_taps):
+            if direct:
+                tap_row, tap_col = rows[i], cols[i]
+            else:
+                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
+                tap_row = rows[i] + -ey[i] * step
+                tap_col = cols[i] + ex[i] * step
+            count_row = count_col = 1
+            for axis in range(2):
+                x = tap_row if axis == 0 else tap_col
+                copy = math.floor(x / side0 + 0.5)
+                edge = x - (copy - 0.5) * side0  # [texel] from the copy's lower edge
+                copies[axis, 0] = copy + (base_row if axis == 0 else base_col)
+                shares[axis, 0] = 1.0
+                if edge < 0.5 * band or edge > side0 - 0.5 * band:
+                    u = edge / band + 0.5 if edge < 0.5 * band else (edge - side0) / band + 0.5
+                    u = min(max(u, 0.0), 1.0)
+                    upper_share = u * u * (3.0 - 2.0 * u)
+                    if edge < 0.5 * band:
+                        copies[axis, 1] = copies[axis, 0]
+                        copies[axis, 0] -= 1
+                    else:
+                        copies[axis, 1] = copies[axis, 0] + 1
+                    shares[axis, 0] = 1.0 - upper_share
+                    shares[axis, 1] = upper_share
+                    if axis == 0:
+                        count_row = 2
+                    else:
+                        count_col = 2
+            weighted = 0.0
+            squares = 0.0
+            for cr in range(count_row):
+                for cc in range(count_col):
+                    shift_row = shift_col = 0.0
+                    if copies[0, cr] == last_row and copies[1, cc] == last_col:  # as the last read's
+                        shift_row, shift_col = last_shift_row, last_shift_col
+                    elif copies[0, cr] != 0 or copies[1, cc] != 0:  # the copy's shift, hashed
+                        key = _vertex_key(copies[0, cr], copies[1, cc], seed_key)
+                        shift_row = _unit_hash(key) * side0
+                        shift_col = _unit_hash(key ^ _SECOND_KEY) * side0
+                        last_row, last_col = copies[0, cr], copies[1, cc]
+                        last_shift_row, last_shift_col = shift_row, shift_col
+                    w = shares[0, cr] * shares[1, cc]
+                    at_row = tap_row + shift_row
+                    at_col = tap_col + shift_col
+                    k = 0 if direct else k0[i]
+                    upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+                    finer = 0.0
+                    for level in range(k, k + 2 if upper else k + 1):
+                        side = sides[level]
+                        order = 3 if level == 0 else 1
+                        for axis in range(2):
+                            x = at_row if axis == 0 else at_col
+                            if not direct:
+                                x = (x + 0.5) / 2.0**level - 0.5  # texel centres of the level
+                            if x < 0:  # scipy's grid-wrap of a coordinate
+                                x = 0.0 if side <= 1 else x + side * (int((-1.0 - x) / side) + 1)
+                            elif x > side - 1:
+                                x = 0.0 if side <= 1 else x - side * int(x / side)
+                            if not x > -1.0:  # NaN: scipy's constant 0
+                                break
+                            start = int(math.floor(x)) - order // 2
+                            f = x - math.floor(x)
+                            if order == 3:
+                                z = 1.0 - f
+                                weights[axis, 1] = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 2] = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+                                weights[axis, 0] = z * z * z / 6.0
+                            else:
+                                weights[axis, 0] = 1.0 - f
+                            last = 1.0
+                            for j in range(order):
+                                last -= weights[axis, j]
+                            weights[axis, order] = last
+                            wraps = start < 0 or start + order >= side
+                            for j in range(order + 1):
+                                index[axis, j] = (start + j) % side if wraps else start + j
+                        value = 0.0
+                        if x > -1.0:
+                            base = offsets[level]
+                            for a in range(order + 1):
+                                row = base + index[0, a] * side
+                                for b in range(order + 1):
+                                    value += flat[row + index[1, b]] * weights[0, a] * weights[1, b]
+                        if level == k:
+                            finer = value
+                        else:
+                            value = finer + blend[i] * (value - finer)
+                    weighted += w * value
+                    squares += w * w
+            if count_row * count_col > 1:
+                value = weighted / math.sqrt(squares)
+            total += value / n_taps if not direct else value
+        out[i] = total
+    return out

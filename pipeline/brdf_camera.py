@@ -1,0 +1,219 @@
+"""The ground with the reflectance, as the camera sees it (docs/method.md, "The ground's
+reflectance"): each ground pixel's own view vector, the sun's term exact per pixel, the sky's
+blended from the view bands (``brdf_bands``), and the background the ground makes with the sky."""
+
+from __future__ import annotations
+
+import functools
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import camera as cam
+from .brdf import VIEW_ZENITH_LIMIT, clamp_view, shape
+from .brdf_bands import ViewBands, banded_sky, open_sky, sky_ratio
+
+__all__ = ["view_vectors", "ground_radiance", "relative_sky", "background"]
+
+if TYPE_CHECKING:
+    from .settings import BrdfConfig  # model and parameters: any value with those two fields
+
+
+def view_vectors(camera: cam.Camera):
+    """Unit vectors from the ground point each ground pixel sees towards the pinhole.
+
+    For the pixels of ``camera._view_footprints`` (rows first).
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 3) float64 [1].
+    """
+    fp, _ = cam._view_footprints(camera)
+    d = np.stack([camera.position[0] - fp.x, camera.position[1] - fp.y,
+                  np.full(fp.x.shape, float(camera.position[2]))], axis=-1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+@functools.lru_cache(maxsize=1)
+def _camera_views(camera: cam.Camera):
+    """``view_vectors`` held to VIEW_ZENITH_LIMIT (``clamp_view``) (n, 3), their zenith angles
+    (n,) [rad] and azimuths (n,) [rad, from +y towards +x]: they depend on the camera alone, so
+    the frames of a run, whose camera stands still, make them once. Read-only."""
+    views = clamp_view(view_vectors(camera))
+    zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
+    azimuth = np.arctan2(views[:, 0], views[:, 1])
+    for array in (views, zenith, azimuth):
+        array.flags.writeable = False
+    return views, zenith, azimuth
+
+
+def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_maps, bands: ViewBands,
+                    sun_direction, raster, open_light=None) -> np.ndarray:
+    """The ground's radiance with the reflectance ``brdf``.
+
+    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ], rho
+    the albedo texture, E_sun the ground's light from the sun alone, the sky's term ``banded_sky``:
+    w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster``, V(x) each
+    pixel's own view vector. The sun's term is exact per pixel; the sky's is blended (docs/method.md,
+    "The ground's reflectance"). 0 where no ground is seen.
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    brdf : config.BrdfConfig
+        The model and its parameters (any value with those two fields).
+    albedo : object
+        The albedo texture rho [1].
+    sun : object
+        MipMap chain of E_sun (``GroundResult.sun_part``) [radiance x sr].
+    sky_maps : object
+        The bands' terms: one MipMap chain whose channels are each band's, three for the colour
+        band (``ViewBands.colour``, E_c), one (the channels' sum, G_b) for the others, so that the
+        camera's footprints are filtered once for all of them [radiance x sr]. With
+        ``open_light``, instead the one 3-channel raster of ``relative_sky`` (1 beyond it) [1].
+    bands : ViewBands
+        The view bands.
+    sun_direction : numpy.ndarray or None
+        (3,) unit vector towards the sun [1].
+    raster : sky_raster.SkyRaster
+        The sky raster [radiance x sr].
+    open_light : tuple, optional
+        The colour band's open-sky light (3,) and every band's on the channels' sum (B,)
+        [radiance x sr]: the sky's term is then the read of ``sky_maps`` times the same term on
+        open ground at the pixel's view (``open_sky``): the same formula with the per-point part
+        done on the ground raster before the camera reads it.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) float32 [radiance].
+    """
+    rows, _ = cam._ground_rows(camera)
+    radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    if not len(rows):
+        return radiance
+    fp, _ = cam._view_footprints(camera)
+    views, zenith, azimuth = _camera_views(camera)
+    light = cam._filtered_chain(sun, fp)
+    if sun_direction is not None:
+        light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
+    weights = _band_weights(camera, bands.zeniths)
+    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
+    if open_light is not None:
+        sky = cam._filtered_chain(sky_maps, fp)  # (3, n), relative to open ground
+        sky *= open_sky(bands, weights, *open_light)
+        sky *= ratio
+        light += sky
+    else:
+        light += _stacked_sky(cam._filtered_chain(sky_maps, fp), bands, weights, ratio)
+    rho = cam._albedo_in_view(camera, albedo)
+    light *= rho
+    light *= np.float32(1.0 / np.pi)
+    radiance[rows] = light.T.reshape(len(rows), camera.width, -1)
+    return radiance
+
+
+def _stacked_sky(stack, bands: ViewBands, weights, ratio) -> np.ndarray:
+    """``banded_sky`` of the bands' terms read as one stack (3 + B - 1, n): each band's channel,
+    three for the colour band. [radiance x sr]"""
+    c = bands.colour
+    colour = stack[c:c + 3]
+    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
+    return banded_sky(colour, bands_light, weights, ratio)
+
+
+def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light, colour_open, bands_open):
+    """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a ground raster.
+
+    r-free and 1 on open ground, so the camera can read it like any ground raster (1 beyond it) and
+    ``ground_radiance`` multiply by the open term at each pixel's own view. The views are each cell's
+    own, from its centre to the camera's pinhole (``_cell_weights``).
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    grid : Grid
+        The ground raster's grid [m].
+    bands : ViewBands
+        The view bands.
+    colour : numpy.ndarray
+        (rows, cols, 3): the colour band's term [radiance x sr].
+    bands_light : numpy.ndarray
+        (rows, cols, B): every band's on the channels' sum [radiance x sr].
+    colour_open : numpy.ndarray
+        (3,) the same on open ground [radiance x sr].
+    bands_open : numpy.ndarray
+        (B,) the same on open ground [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 [1].
+    """
+    weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
+    flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
+    colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
+    sky = banded_sky(colour_flat, flat, weights, np.float32(1.0))
+    sky /= np.maximum(open_sky(bands, weights, colour_open, bands_open), np.float32(1e-30))
+    return np.moveaxis(sky, 0, -1).reshape(*grid.shape, 3)
+
+
+@functools.lru_cache(maxsize=2)
+def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
+    cell centres to the camera's pinhole (held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
+    gx, gy = grid.ground_from_raster(np.arange(grid.shape[0])[:, None], np.arange(grid.shape[1])[None, :])
+    across = np.hypot(camera.position[0] - gx, camera.position[1] - gy).reshape(-1)
+    zenith = np.minimum(np.arctan2(across, float(camera.position[2])), VIEW_ZENITH_LIMIT)
+    out = ViewBands(zeniths, 0.0, 0.0).weights(zenith).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def _band_weights(camera: cam.Camera, zeniths: tuple) -> np.ndarray:
+    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own view zeniths: the
+    same while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
+    out = ViewBands(zeniths, 0.0, 0.0).weights(_camera_views(camera)[1]).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def _sun_shape(brdf: BrdfConfig, camera: cam.Camera, sun_direction: tuple) -> np.ndarray:
+    """The shape s(V(x), L_sun) (n,) float32 at the camera's ground pixels' own views: made once
+    while neither the camera nor the sun moves. Read-only. [1]"""
+    out = shape(brdf, _camera_views(camera)[0], np.asarray(sun_direction)[None]).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndarray:
+    """``camera.background`` with the ground's radiance given: f ground + (1 - f) sky.
+
+    Parameters
+    ----------
+    camera : camera.Camera
+        The camera [m].
+    ground_radiance_ : numpy.ndarray
+        (height, width, 3) the ground's radiance [radiance].
+    sky : object
+        The sky, as ``camera.sky_view`` takes it.
+
+    Returns
+    -------
+    numpy.ndarray
+        (height, width, 3) radiance [radiance].
+    """
+    fraction, rest = cam._ground_fractions(camera)
+    out = ground_radiance_ * fraction[..., None]
+    out += cam.sky_view(camera, sky) * rest
+    return out
