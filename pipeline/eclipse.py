@@ -111,7 +111,7 @@ with no edge (``corona_drawn``; what is left out: 5.9% of its light, 4.7% of it 
 
 RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
 """Representative wavelengths of the R, G, B channels: the eclipse sky's and the sun's colour
-(``sky.sun_colour``). [um]"""
+(``sun_disc.sun_colour``). [um]"""
 
 
 def deep_weight(sun_fraction: float) -> float:
@@ -134,7 +134,7 @@ def vertical_optical_depths(turbidity: float) -> tuple[np.ndarray, np.ndarray]:
     """Rayleigh and aerosol vertical optical depths at RGB_WAVELENGTHS.
 
     0.008735 lambda^-4.08 and beta lambda^-1.3 with beta = 0.04608 T - 0.04586 (Preetham et al. 1999,
-    appendix A.1, as ``sky.sun_colour``).
+    appendix A.1, as ``sun_disc.sun_colour``).
 
     Parameters
     ----------

@@ -27,7 +27,7 @@ MAX_KERNEL_CELLS = 4_000_000
 KERNEL_FLOOR = float(np.radians(2.0))
 """Below this sun elevation ``sun_irradiance`` does without the kernel: stretched
 1 / cos^2(theta) > 800 times on the sky plane, it would pass MAX_KERNEL_CELLS; the renderer
-takes such a sun's light as unshadowed (``framing.SHADOW_FLOOR``). [rad]"""
+takes such a sun's light as unshadowed (``scene.SHADOW_FLOOR``). [rad]"""
 
 KERNEL_CACHE_SAMPLES = 1 << 20
 """Most sub-samples of a sun kernel whose samples before the clouds (``_kernel_samples``) are kept

@@ -60,7 +60,8 @@ def test_hot_spot_is_where_the_viewer_has_the_light_behind(b):
 
 def test_white_sky_albedo_against_a_midpoint_quadrature():
     """A lambertian Ross-Li (f_iso alone) has albedo f_iso; the presets' against midpoints."""
-    assert R.white_sky_albedo(BrdfConfig("rossli", (("f_iso", 0.3), ("f_vol", 0.0), ("f_geo", 0.0)))) == pytest.approx(0.3, rel=1e-9)
+    isotropic = BrdfConfig("rossli", (("f_iso", 0.3), ("f_vol", 0.0), ("f_geo", 0.0)))
+    assert R.white_sky_albedo(isotropic) == pytest.approx(0.3, rel=1e-9)
     n = 40
     th = (np.arange(n) + 0.5) * (np.pi / 2) / n
     ph = (np.arange(2 * n) + 0.5) * np.pi / n

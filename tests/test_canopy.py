@@ -264,7 +264,8 @@ def test_layers_split_the_grove_by_nearest_plane():
     grove = grow_grove(GroveParams(count=2, leaves_per_tree=400, crown_radius=2.0, seed=5))
     heights = [7.2, 8.0, 8.5]
     leaf_layer, wood_layer = layer_index(grove, heights)
-    for z, layer in [(grove.leaves.center[:, 2], leaf_layer), (0.5 * (grove.wood.start + grove.wood.end)[:, 2], wood_layer)]:
+    for z, layer in [(grove.leaves.center[:, 2], leaf_layer),
+                     (0.5 * (grove.wood.start + grove.wood.end)[:, 2], wood_layer)]:
         distance = np.abs(z[:, None] - np.array(heights)[None, :])
         assert np.all(distance[np.arange(len(z)), layer] <= distance.min(axis=1))
     assert set(leaf_layer) == {0, 1, 2} and wood_layer[0] == 0  # the trunk's foot goes lowest
@@ -443,7 +444,8 @@ def leaves_and_wood(rng, count: int) -> Shapes:
 def test_compiled_rasteriser_matches_the_array_one_on_many_leaves(period):
     shapes = leaves_and_wood(np.random.default_rng(9), 4000)
     for grid in (Grid((0.0, 4.0), 0.04, (100, 100)), Grid((-1.13, 5.21), 0.031, (170, 190))):
-        new, old = rasterize_transmittance(shapes, grid, period=period), reference_rasterize(shapes, grid, period=period)
+        new = rasterize_transmittance(shapes, grid, period=period)
+        old = reference_rasterize(shapes, grid, period=period)
         assert new.dtype == np.float32 and new.shape == grid.shape
         assert np.abs(new - old).max() <= 1e-3
         assert np.abs(new - old).mean() <= 1e-6  # the same arithmetic: rounding apart

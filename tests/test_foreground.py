@@ -377,7 +377,8 @@ def test_the_compiled_scatter_of_light_has_the_bits_of_bincount():
     light = [rng.random((n, 3)) * 50.0 for _ in range(2)]
     sun, sky = _raster.scatter_light(flat, weight, *light, pixels)
     for image, each in zip((sun, sky), light):
-        expected = np.stack([np.bincount(flat, weights=weight * each[:, c], minlength=pixels) for c in range(3)], axis=-1)
+        expected = np.stack([np.bincount(flat, weights=weight * each[:, c], minlength=pixels) for c in range(3)],
+                            axis=-1)
         assert image.tobytes() == expected.tobytes()
 
 

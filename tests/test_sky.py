@@ -139,7 +139,10 @@ def lens_fraction(d, r, big_r):
     if d <= r - big_r:
         return big_r**2 / r**2
     x = (d * d + r * r - big_r * big_r) / (2 * d)  # chord's distance from the sun's centre
-    seg = lambda rad, a: rad * rad * np.arccos(a / rad) - a * np.sqrt(rad * rad - a * a)
+
+    def seg(rad, a):
+        return rad * rad * np.arccos(a / rad) - a * np.sqrt(rad * rad - a * a)
+
     return (seg(r, x) + seg(big_r, d - x)) / (np.pi * r * r)
 
 
