@@ -1,14 +1,14 @@
-"""Compiled loops of the camera's anisotropic filtering: the filtered reads of a mip map (``camera._filtered``),
-the footprints of the ground's pixels (``camera._row_footprints``, ``camera._footprint_axes``), the choice of taps
-and level (``camera._filter_choice``) and the mip levels halved in place (``camera._constant_mipmap``). Each does
+"""Compiled loops of the camera's anisotropic filtering: the filtered reads of a mip map (``texture._filtered``),
+the footprints of the ground's pixels (``camera._row_footprints``, ``texture._footprint_axes``), the choice of taps
+and level (``texture._filter_choice``) and the mip levels halved in place (``texture._constant_mipmap``). Each does
 what its array version does, float32 operation for float32 operation in the same order, and the tests hold it to
 that version's bits.
 
-The filtering's method is the one documented in ``camera.sample_footprint`` and ``albedo``:
+The filtering's method is the one documented in ``texture.sample_footprint`` and ``albedo``:
 these loops do it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
-and the same order of operations as the array version (``camera._tap_mean``, ``_bilinear``), so
+and the same order of operations as the array version (``texture._tap_mean``, ``_bilinear``), so
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
-The tap counts, levels and blends come from ``camera._filter_choice`` (``filter_choice``), computed once
+The tap counts, levels and blends come from ``texture._filter_choice`` (``filter_choice``), computed once
 for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to import.
 """
 
@@ -22,7 +22,7 @@ __all__ = ["filtered", "footprint_axes", "row_footprints", "filter_choice", "hal
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _first_texel(channels, offset, rows, cols, periodic, col, row):
-    """``camera._first_texel`` of one point: the flat index of channel 0 of the first of the four
+    """``texture._first_texel`` of one point: the flat index of channel 0 of the first of the four
     texels of a bilinear sample at texel coordinates (col, row), and the fractions (fc, fr)
     float32 beyond it."""
     if not periodic:
@@ -41,7 +41,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _bilinear(flat, first, channels, step, k, fc, fr):
     """Channel ``k`` of the bilinear sample whose first texel is ``first`` (``_first_texel``),
-    ``step`` the flat stride of a stored row: ``camera._bilinear``'s float32 arithmetic, each
+    ``step`` the flat stride of a stored row: ``texture._bilinear``'s float32 arithmetic, each
     corner read as ``flat[o:].take(first, mode="clip")``."""
     size = flat.shape[0]
     if first >= 0 and first + step + 2 * channels <= size:  # always, but for NaN coordinates
@@ -72,7 +72,7 @@ def _bilinear(flat, first, channels, step, k, fc, fr):
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _coords(x0, y0, px, py, sx, sy, dx, dy):
-    """``camera._texel_coords`` of one point and step."""
+    """``texture._texel_coords`` of one point and step."""
     col = (sx - x0) * (1.0 / px) - 0.5
     row = (y0 - sy) * (1.0 / py) - 0.5
     dcol = dx * (1.0 / px)
@@ -88,11 +88,11 @@ def _coords(x0, y0, px, py, sx, sy, dx, dy):
 @njit(cache=True, nogil=True, error_model="numpy")
 def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
              level, blend, out):
-    """``camera._filtered``: each read's mean into ``out``.
+    """``texture._filtered``: each read's mean into ``out``.
 
     Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint j = footprint[r]
     (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples
-    (``camera._tap_mean``, the same float32 arithmetic in the same order), in level level[j]
+    (``texture._tap_mean``, the same float32 arithmetic in the same order), in level level[j]
     blended by blend[j] towards the next when > 0. The body is written out in full for three
     channels (a helper function that returns the three means, even inlined, ran three times
     slower) and channel by channel otherwise.
@@ -100,8 +100,8 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
     Parameters
     ----------
     flat : numpy.ndarray
-        (texels x channels,) float32, every level of the mip map flat (``camera.MipMap.texels``),
-        each level stored with its border of one texel (``camera._level_tables``).
+        (texels x channels,) float32, every level of the mip map flat (``texture.MipMap.texels``),
+        each level stored with its border of one texel (``texture._level_tables``).
     channels : int
         Channels per texel.
     offsets : numpy.ndarray
@@ -209,7 +209,7 @@ def _bilinear3(flat, off, rows, cols, periodic, col, row, step):
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _axes(dxdu, dxdv, dydu, dydv):
-    """``camera._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
+    """``texture._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
     (major, minor, ex, ey)."""
     a = dxdu * dxdu + dxdv * dxdv
     b = dxdu * dydu + dxdv * dydv
@@ -246,7 +246,7 @@ def _axes(dxdu, dxdv, dydu, dydv):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def footprint_axes(dxdu, dxdv, dydu, dydv):
-    """``_axes`` (``camera._footprint_axes``) of every Jacobian.
+    """``_axes`` (``texture._footprint_axes``) of every Jacobian.
 
     Parameters
     ----------
@@ -331,7 +331,7 @@ def row_footprints(rows, part, width, height, focal, position, right, up, forwar
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, blend):
-    """``camera._filter_choice`` footprint by footprint, the same float64 operations.
+    """``texture._filter_choice`` footprint by footprint, the same float64 operations.
 
     Parameters
     ----------
@@ -342,7 +342,7 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
     count : int
         The mip map's levels.
     max_taps : int
-        The most taps a footprint takes (``camera.MAX_TAPS``).
+        The most taps a footprint takes (``texture.MAX_TAPS``).
     major, minor : numpy.ndarray
         (n,) float64, the footprints' box widths [m].
     taps : numpy.ndarray
@@ -392,7 +392,7 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def halve_level(texels, source, rows, cols, target):
-    """``camera._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
+    """``texture._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
 
     Pairs of rows first, then pairs of columns, each sum halved in float32. An odd size's missing row
     or column is the border's value, as the padding of the array version.
@@ -400,7 +400,7 @@ def halve_level(texels, source, rows, cols, target):
     Parameters
     ----------
     texels : numpy.ndarray
-        (texels, channels) float32, a mip map's texels (``camera.MipMap.texels``); the level at
+        (texels, channels) float32, a mip map's texels (``texture.MipMap.texels``); the level at
         ``target`` is written.
     source : int
         The stored level's first texel (with its border of the outside value) [texel].
