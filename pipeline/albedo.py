@@ -309,10 +309,8 @@ class StochasticTiling:
 
         Parameters
         ----------
-        fp : texture.Footprints
-            n ground footprints [m].
-        lod_bias : float
-            Bias of the mip level [1].
+        fp, lod_bias
+            As for ``sample``.
         skip : float, optional
             Reads of sharpened weight under this are left out [1].
 

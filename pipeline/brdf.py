@@ -234,7 +234,7 @@ def clamp_view(v) -> np.ndarray:
     Parameters
     ----------
     v : numpy.ndarray
-        (..., 3) unit vectors [1].
+        (..., 3) unit vectors, any zenith angle [1].
 
     Returns
     -------
@@ -256,7 +256,7 @@ def cell_directions(grid) -> np.ndarray:
     Parameters
     ----------
     grid : Grid
-        A sky-plane grid [tan].
+        The sky-plane grid of the cells [tan].
 
     Returns
     -------

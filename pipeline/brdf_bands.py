@@ -215,10 +215,8 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
-        The model and its parameters (any value with those two fields).
-    raster : sky_raster.SkyRaster
-        The sky raster [radiance x sr].
+    brdf, raster
+        As for ``choose_bands``.
     bands : ViewBands
         The view bands.
     views : numpy.ndarray

@@ -197,7 +197,7 @@ def ground_fraction_rows(camera: Camera) -> np.ndarray:
     Parameters
     ----------
     camera : Camera
-        The pinhole camera.
+        The pinhole camera, which has no roll (Notes).
 
     Returns
     -------
@@ -400,7 +400,7 @@ def ground_distance(camera: Camera) -> np.ndarray:
     Parameters
     ----------
     camera : Camera
-        The pinhole camera, above the ground (position z > 0). [m]
+        As in ``ground_hits``.
 
     Returns
     -------
@@ -604,10 +604,8 @@ def background(camera: Camera, *, irradiance, albedo: texture.MipMap, sky, seen_
 
     Parameters
     ----------
-    camera : Camera
-        The pinhole camera, above the ground (position z > 0). [m]
-    irradiance : texture.MipMap or sequence of texture.MipMap
-        The ground irradiance, as ``ground_view`` takes it. [radiance x sr]
+    camera, irradiance
+        As in ``ground_irradiance``.
     albedo : texture.MipMap or albedo.StochasticTiling
         The ground's albedo, as ``ground_view`` takes it. [1]
     sky : sky.Sky

@@ -101,10 +101,8 @@ def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: 
     ----------
     transmittance : numpy.ndarray
         (rows, cols) mask in [0, 1], north-up [1].
-    center : tuple of (float, float)
-        (x, y) of the centre of the mask's area [m].
-    size : tuple of (float, float)
-        (x, y) extent of the mask's area [m].
+    center, size : tuple of (float, float)
+        (x, y) of the centre and (x, y) extent of the mask's area [m].
     grid : Grid
         The target pixels [m].
     periodic : bool, optional
@@ -131,12 +129,8 @@ def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
     ----------
     transmittance : numpy.ndarray
         (rows, cols) in [0, 1] [1].
-    center : tuple of (float, float)
-        (x, y) of the centre of the mask's area [m].
-    size : tuple of (float, float)
-        (x, y) extent of the mask's area [m].
-    lattice : Grid
-        The pixel lattice [m].
+    center, size, lattice
+        As in ``lattice_grid``.
 
     Returns
     -------
@@ -156,10 +150,9 @@ def tile_on_lattice(transmittance, *, center, size, lattice: Grid):
     ----------
     transmittance : numpy.ndarray
         (rows, cols) in [0, 1] [1].
-    center : tuple of (float, float)
-        (x, y) of the centre of the tile [m].
-    size : tuple of (float, float)
-        The period; a whole number of lattice pixels on both axes [m].
+    center, size : tuple of (float, float)
+        (x, y) of the centre of the tile, and the period: a whole number of lattice pixels on
+        both axes [m].
     lattice : Grid
         The pixel lattice [m].
 

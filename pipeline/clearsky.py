@@ -179,10 +179,8 @@ def preetham_relative(cos_zenith, gamma, *, turbidity: float, sun_zenith: float)
         cos theta of the directions, in [0, 1] [1].
     gamma : float or numpy.ndarray
         Angle from the sun, broadcastable with ``cos_zenith`` [rad].
-    turbidity : float
-        T [1].
-    sun_zenith : float
-        theta_s [rad].
+    turbidity, sun_zenith : float
+        T [1] and theta_s [rad].
 
     Returns
     -------

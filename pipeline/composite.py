@@ -320,7 +320,7 @@ def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
     Raises
     ------
     ValueError
-        For a transform not in ``DISPLAYS``.
+        Naming the valid ones, for a transform that is not one of ``DISPLAYS``.
     """
     if transform not in DISPLAYS:
         raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")

@@ -84,7 +84,7 @@ def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames:
     Returns
     -------
     Config
-        The config's values.
+        The config's values, as ``load_config`` returns them.
 
     Raises
     ------

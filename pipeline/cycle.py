@@ -72,12 +72,8 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
 
     Parameters
     ----------
-    plan : plan.RunPlan
-        The run's plan.
-    layer_index : int
-        The canopy plane, an index of ``plan.layers``.
-    cycle_frame : int
-        The flutter cycle's frame.
+    plan, layer_index, cycle_frame
+        As in ``layer_masks``.
 
     Returns
     -------
@@ -113,12 +109,8 @@ def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.C
 
     Parameters
     ----------
-    plan : plan.RunPlan
-        The run's plan.
-    layer_index : int
-        The canopy plane, an index of ``plan.layers``.
-    cycle_frame : int
-        The flutter cycle's frame.
+    plan, layer_index, cycle_frame
+        The layer and the frame, as in ``layer_masks``.
     store : cache.Cache
         The cache.
     workers : int
@@ -219,7 +211,7 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
     Parameters
     ----------
     plan : plan.RunPlan
-        The run's plan.
+        The run's plan: its frames, camera, layers and cycle.
 
     Returns
     -------
@@ -253,7 +245,7 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     Parameters
     ----------
     plan : plan.RunPlan
-        The run's plan.
+        The run's plan: its layers, foreground and cycle.
 
     Returns
     -------
@@ -277,7 +269,7 @@ def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
     Parameters
     ----------
     plan : plan.RunPlan
-        The run's plan.
+        The run's plan (its source names the config).
     store : cache.Cache
         The cache.
     """
@@ -371,10 +363,8 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
 
     Parameters
     ----------
-    plan : plan.RunPlan
-        The run's plan.
-    cycle_frame : int
-        The flutter cycle's frame.
+    plan, cycle_frame
+        As in ``foreground_params``.
     store : cache.Cache
         The cache.
 

@@ -162,14 +162,10 @@ def point_sun_fraction(points, *, sun_direction, moon_direction, sun_radius, moo
     ----------
     points : numpy.ndarray
         (..., 3) points, observer at the origin, x east, y north, z up [m].
-    sun_direction : numpy.ndarray
-        (3,) unit vector of the sun seen by the observer [1].
-    moon_direction : numpy.ndarray
-        (3,) unit vector of the moon seen by the observer [1].
-    sun_radius : float
-        Angular radius of the sun seen by the observer [rad].
-    moon_radius : float
-        Angular radius of the moon seen by the observer [rad].
+    sun_direction, moon_direction : numpy.ndarray
+        (3,) unit vectors of the sun and of the moon seen by the observer [1].
+    sun_radius, moon_radius : float
+        Angular radii of the sun and of the moon seen by the observer [rad].
 
     Returns
     -------
@@ -201,14 +197,8 @@ def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius)
 
     Parameters
     ----------
-    sun_direction : numpy.ndarray
-        (3,) unit vector of the sun seen by the observer [1].
-    moon_direction : numpy.ndarray
-        (3,) unit vector of the moon seen by the observer [1].
-    sun_radius : float
-        Angular radius of the sun seen by the observer [rad].
-    moon_radius : float
-        Angular radius of the moon seen by the observer [rad].
+    sun_direction, moon_direction, sun_radius, moon_radius
+        As in ``point_sun_fraction``.
 
     Returns
     -------
@@ -266,14 +256,8 @@ def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon
     ----------
     directions : numpy.ndarray
         (n, 3) unit vectors, wz >= 0 [1].
-    sun_direction : numpy.ndarray
-        (3,) unit vector of the sun seen by the observer [1].
-    moon_direction : numpy.ndarray
-        (3,) unit vector of the moon seen by the observer [1].
-    sun_radius : float
-        Angular radius of the sun seen by the observer [rad].
-    moon_radius : float
-        Angular radius of the moon seen by the observer [rad].
+    sun_direction, moon_direction, sun_radius, moon_radius
+        As in ``point_sun_fraction``.
     turbidity : float
         T [1].
     nodes : int, optional
@@ -358,12 +342,12 @@ class EclipseField:
         return cls(np.concatenate([f, f[:, :1]], axis=1))
 
     def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
-        """F and M at unit vectors w (wz below 0 taken as the horizon).
+        """F and M at unit vectors w.
 
         Parameters
         ----------
         w : numpy.ndarray
-            (..., 3) unit vectors [1].
+            (..., 3) unit vectors; wz below 0 is taken as the horizon [1].
 
         Returns
         -------
@@ -393,7 +377,7 @@ def floor_colour(turbidity: float) -> np.ndarray:
     Parameters
     ----------
     turbidity : float
-        T [1].
+        T [1], as in ``vertical_optical_depths``.
 
     Returns
     -------
@@ -473,7 +457,7 @@ def corona_drawn_beyond(r0: float) -> float:
     Parameters
     ----------
     r0 : float
-        >= 1 [solar radii].
+        As in ``corona_beyond``; held to CORONA_REACH at most.
 
     Returns
     -------

@@ -439,10 +439,8 @@ def sun_fraction_plot(config: Config, *, title: str, width: int = 960, height: i
         A resolved config with a site and time.
     title : str
         The plot's title.
-    width : int
-        The picture's width [pixel].
-    height : int
-        Its height [pixel].
+    width, height : int
+        The picture's size [pixel].
 
     Returns
     -------

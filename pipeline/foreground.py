@@ -72,15 +72,8 @@ def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
-        The leaves: centres and semi-axes (N, 3) [m].
-    wood : grove_geometry.Wood, optional
-        The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
-    sun_point : tuple of (float, float)
-        (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
-    pixel : float, optional
-        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
-        median semi-axis |U|) [m].
+    leaves, wood, sun_point, pixel
+        The arguments of ``sun_visibility``, passed on.
 
     Returns
     -------
@@ -101,13 +94,8 @@ def sky_exposure(leaves: Leaves, wood: Wood | None = None, *, pixel: float | Non
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
-        The leaves: centres and semi-axes (N, 3) [m].
-    wood : grove_geometry.Wood, optional
-        The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
-    pixel : float, optional
-        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
-        median semi-axis |U|) [m].
+    leaves, wood, pixel
+        As in ``sun_visibility``.
     rings : int, optional
         Rings of equal irradiance [count].
     per_ring : int, optional
@@ -442,15 +430,10 @@ def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | No
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
-        The leaves: centres and semi-axes (N, 3) [m].
+    leaves, sun_point, pixel
+        As in ``sun_visibility``.
     stems : grove_geometry.Wood
         The wood's pieces (``taper_wood``): ends (K, 3) and radii (K,) [m].
-    sun_point : tuple of (float, float)
-        (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
-    pixel : float, optional
-        Raster pixel across the light's beam; default a quarter of the median leaf length (half the
-        median semi-axis |U|) [m].
 
     Returns
     -------

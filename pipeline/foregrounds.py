@@ -113,16 +113,10 @@ class TreesForeground:
 
         Parameters
         ----------
-        cycle_frame : int
-            The flutter cycle's frame.
-        view : Camera
-            The run's camera.
+        cycle_frame, view, sun_irradiance, sky_irradiance, sun_down, bounce
+            As in ``ForegroundModel.layer``.
         item : dict or None
             The cycle product: ``sun``, ``sky`` (per unit light), ``alpha``, ``box``, maybe ``haze``.
-        sun_irradiance, sky_irradiance, sun_down : ndarray, shape (3,)
-            The sun's normal, the sky's and the sun's horizontal irradiance [klx].
-        bounce : float
-            The share of the ground's light that reaches the trees' undersides [1].
 
         Returns
         -------
@@ -136,14 +130,12 @@ class TreesForeground:
         return ForegroundLayer(sky + sun, sky, item["alpha"], tree_box(item), item.get("haze"))
 
     def check(self, view, cycle):
-        """See ``ForegroundModel.check``: nothing to read.
+        """See ``ForegroundModel.check``: nothing to read, the trees are rendered here.
 
         Parameters
         ----------
-        view : Camera
-            The run's camera (not used).
-        cycle : int
-            The flutter cycle's number of frames [1] (not used).
+        view, cycle
+            As in ``ForegroundModel.check`` (not used).
         """
         pass
 
@@ -156,7 +148,7 @@ class ImportedForeground:
     Parameters
     ----------
     config : ForegroundConfig
-        The config's ``foreground`` section.
+        The config's ``foreground`` section, naming the files.
     """
 
     config: ForegroundConfig
@@ -167,16 +159,12 @@ class ImportedForeground:
 
         Parameters
         ----------
-        cycle_frame : int
-            The flutter cycle's frame.
-        view : Camera
-            The run's camera.
+        cycle_frame, view
+            As in ``ForegroundModel.layer``.
         item : dict or None
             The cycle product (None: not cached).
-        sun_irradiance, sky_irradiance, sun_down : ndarray, shape (3,)
-            The sun's normal, the sky's and the sun's horizontal irradiance [klx] (not used: the passes are lit).
-        bounce : float
-            The share of the ground's light that reaches the trees' undersides [1] (not used).
+        sun_irradiance, sky_irradiance, sun_down, bounce
+            Not used: the passes are lit.
 
         Returns
         -------
@@ -191,10 +179,8 @@ class ImportedForeground:
 
         Parameters
         ----------
-        view : Camera
-            The run's camera.
-        cycle : int
-            The flutter cycle's number of frames [1].
+        view, cycle
+            As in ``ForegroundModel.check``.
         """
         for cycle_frame in range(cycle):
             imported_passes(self.config, view, cycle_frame)
@@ -207,7 +193,7 @@ class NoForeground:
     Parameters
     ----------
     config : ForegroundConfig
-        The config's ``foreground`` section.
+        The config's ``foreground`` section (not used).
     """
 
     config: ForegroundConfig
@@ -235,10 +221,8 @@ class NoForeground:
 
         Parameters
         ----------
-        view : Camera
-            The run's camera (not used).
-        cycle : int
-            The flutter cycle's number of frames [1] (not used).
+        view, cycle
+            Not used.
         """
         pass
 

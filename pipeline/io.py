@@ -58,7 +58,7 @@ def read_codes(path) -> np.ndarray:
     Parameters
     ----------
     path : str or os.PathLike
-        The image file.
+        The 8-bit image file.
 
     Returns
     -------
@@ -68,7 +68,7 @@ def read_codes(path) -> np.ndarray:
     Raises
     ------
     ImageError
-        Naming the file.
+        Naming the file, as ``read_image``.
     """
     return _read(path, "uint8")
 
@@ -110,7 +110,7 @@ def read_layers(path) -> dict[str, np.ndarray]:
     Parameters
     ----------
     path : str or os.PathLike
-        The image file.
+        The image file, of any format ``read_image`` reads.
 
     Returns
     -------
@@ -120,7 +120,7 @@ def read_layers(path) -> dict[str, np.ndarray]:
     Raises
     ------
     ImageError
-        Naming the file.
+        Naming the file (from ``read_image``).
     """
     pixels = read_image(path)
     with _quiet_stderr():

@@ -99,12 +99,8 @@ def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
 
     Parameters
     ----------
-    shapes : Shapes
-        The shapes [m].
-    grid : Grid
-        The raster [m].
-    period : tuple of (float, float) or None, optional
-        As for ``rasterize_transmittance`` (every translate keeps its shape index) [m].
+    shapes, grid, period
+        As for ``rasterize_transmittance``; every translate keeps its shape index.
 
     Returns
     -------

@@ -186,10 +186,8 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
         The weighted sky raster on ``plan.sky`` [radiance x sr].
     spectrum : numpy.ndarray
         ``occlusion_spectrum`` of the layer.
-    plan : IsolatedPlan
-        The plan.
-    workers : int, optional
-        FFT thread count.
+    plan, workers
+        As in ``occlusion_spectrum``.
 
     Returns
     -------
@@ -229,16 +227,14 @@ class PeriodicPlan:
 def plan_periodic(window: Grid, tile: Grid, *, height: float, alpha: float) -> PeriodicPlan:
     """Plan the circular correlation of a periodic canopy tile (on ``window``'s lattice) with the sky.
 
+    The sky is the whole square of offsets -A..A (``sky_half_cells``), in cells of ``window.pixel / height``.
+
     Parameters
     ----------
-    window : Grid
-        Ground grid [m].
+    window, height, alpha
+        As in ``plan_isolated``.
     tile : Grid
         One period of the canopy, on the same lattice [m].
-    height : float
-        Canopy height [m].
-    alpha : float
-        Half-angle of the sky square [rad].
 
     Returns
     -------
@@ -291,21 +287,19 @@ def ground_periodic(
 
     Parameters
     ----------
-    sky : sky_raster.SkyRaster
-        The weighted sky raster on ``plan.sky`` [radiance x sr].
+    sky, workers
+        As in ``ground_isolated``.
     spectrum : numpy.ndarray
         ``transmittance_spectrum`` of the tile.
     plan : PeriodicPlan
         The plan.
     mean_transmittance : float
         Mean transmittance of the tile [1].
-    workers : int, optional
-        FFT thread count.
 
     Returns
     -------
     numpy.ndarray
-        (channels, rows, cols) float32 [radiance x sr].
+        The ground irradiance, as ``ground_isolated`` returns it.
     """
     sky_start = sky_offset(sky.grid)
     folded = fold(sky.weighted, sky_start, plan.tile_shape)
@@ -399,15 +393,13 @@ def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int
     ----------
     transmittance : numpy.ndarray
         ``plan.mask.shape`` transmittance [1].
-    plan : SunPlan
-        The plan.
-    workers : int, optional
-        FFT thread count.
+    plan, workers
+        As in ``occlusion_spectrum``, the plan a SunPlan.
 
     Returns
     -------
     numpy.ndarray
-        complex64 (plan.fft_shape[0], plan.fft_shape[1] // 2 + 1).
+        complex64, as ``occlusion_spectrum`` returns it.
 
     Raises
     ------
@@ -432,15 +424,13 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
         it must lie inside the plan's offsets [radiance x sr].
     spectrum : numpy.ndarray
         ``fine_mask_spectrum`` of the mask.
-    plan : SunPlan
-        The plan.
-    workers : int, optional
-        FFT thread count.
+    plan, workers
+        The SunPlan; the FFT thread count (optional).
 
     Returns
     -------
     numpy.ndarray
-        (channels, rows, cols) float32 [radiance x sr].
+        (channels, rows, cols) float32 [radiance x sr], as in ``ground_isolated``.
 
     Raises
     ------

@@ -128,12 +128,8 @@ class MoonDisc:
 
     Parameters
     ----------
-    azimuth : float
-        From north towards east [rad].
-    elevation : float
-        Above the horizon (geometric) [rad].
-    angular_radius : float
-        Radius of the disc, in (0, 0.1) [rad].
+    azimuth, elevation, angular_radius : float
+        As in ``SunDisc``.
 
     Raises
     ------

@@ -389,7 +389,7 @@ def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS
     fp : Footprints
         The footprints' ellipses (``footprints``).
     lod_bias : float, optional
-        Added to the mip level chosen from the footprint. [level]
+        As for ``sample_footprint``. [level]
 
     Returns
     -------
