@@ -171,13 +171,8 @@ class Cache(ItemStore):
 
     Attributes
     ----------
-    root : pathlib.Path
-        The cache folder.
-    hits, misses, repaired : int
-        Count, in this process, the items read, computed (absent or broken) and of those the broken
-        ones that were removed and recomputed.
-    served : dict
-        ``"kind/key"`` to the stamp of each item this store returned (see ``recheck``).
+    root, hits, misses, repaired, served
+        As in ``cache_store.ItemStore``.
     """
 
     # -- maintenance -------------------------------------------------------------------

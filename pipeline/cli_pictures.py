@@ -29,7 +29,7 @@ def run_ground(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config, -o and --png (the files), --frame, --threads, --cache.
 
     Returns
     -------
@@ -38,14 +38,11 @@ def run_ground(args) -> int:
     """
     import numpy as np
 
-    from . import io
     from .composite import display_ground
     from .ground import render_ground
     from .plan import plan_run
 
-    output = checked_output(args.output)
-    exr = output if output.suffix.lower() == ".exr" else None
-    png = output if exr is None else (checked_output(str(output.with_suffix(".png"))) if args.png else None)
+    exr, png = _exr_and_png(args)
     check_threads(args)
     config = config_of(args, named_frames=False)
     check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
@@ -69,13 +66,8 @@ def run_ground(args) -> int:
         "sunshade:version": __version__,
         "sunshade:frame": int(args.frame),
     }
-    written = []
-    if exr is not None:
-        io.write_exr(exr, result.irradiance, attributes)
-        written.append(exr)
-    if png is not None:
-        io.write_png(png, display_ground(result.irradiance, result.unshadowed))
-        written.append(png)
+    written = _write(exr, png, result.irradiance, attributes,
+                     lambda: display_ground(result.irradiance, result.unshadowed))
     rows, cols = result.grid.shape
     print(
         f"sunshade: ground {cols} x {rows} px at {result.grid.pixel:g} m in {elapsed:.2f} s; "
@@ -96,12 +88,12 @@ def run_frame(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config, -o, --half, --passes, --frame, --threads and --cache.
 
     Returns
     -------
     int
-        The exit code: 0 done.
+        The exit code: 0 done (the frame written).
     """
     import numpy as np
 
@@ -153,7 +145,7 @@ def run_mask(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config, -o, --frame, --layer and --fine.
 
     Returns
     -------
@@ -200,7 +192,7 @@ def run_sky(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config, -o, --png, --width, --passes and --frame.
 
     Returns
     -------
@@ -209,13 +201,10 @@ def run_sky(args) -> int:
     """
     import numpy as np
 
-    from . import io
     from .composite import display_sky
     from .scene import load_sky, scene_at
 
-    output = checked_output(args.output)
-    exr = output if output.suffix.lower() == ".exr" else None
-    png = output if exr is None else (checked_output(str(output.with_suffix(".png"))) if args.png else None)
+    exr, png = _exr_and_png(args)
     if not 8 <= args.width <= 16384 or args.width % 2:
         raise BadInput(f"--width must be an even number from 8 to 16384 (got {args.width})")
     passes = passes_flag(args.passes, SKY_PASSES)
@@ -245,12 +234,30 @@ def run_sky(args) -> int:
             types.SimpleNamespace(scene=scene, light=light)))
         attributes.pop("sunshade:camera_ev100", None)  # no camera here
         layers = {LAYER_CHANNELS[name]: (parts[name], "float") for name in passes}
+    written = _write(exr, png, image, attributes, lambda: display_sky(image), layers=layers)
+    print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _exr_and_png(args) -> tuple:
+    """The files of -o and --png (ground, sky): (the EXR or None, the PNG or None); a PNG beside an EXR with
+    --png, of the EXR's name. Raises BadInput as ``checked_output``."""
+    output = checked_output(args.output)
+    exr = output if output.suffix.lower() == ".exr" else None
+    png = output if exr is None else (checked_output(str(output.with_suffix(".png"))) if args.png else None)
+    return exr, png
+
+
+def _write(exr, png, image, attributes: dict, shown, layers=None) -> list:
+    """Write ``image`` with its attributes (and layers) to ``exr`` and ``shown()``, the display picture, to
+    ``png``, where each is not None; the files written, in that order."""
+    from . import io
+
     written = []
     if exr is not None:
         io.write_exr(exr, image, attributes, layers=layers)
         written.append(exr)
     if png is not None:
-        io.write_png(png, display_sky(image))
+        io.write_png(png, shown())
         written.append(png)
-    print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
-    return 0
+    return written

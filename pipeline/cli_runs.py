@@ -30,7 +30,7 @@ def run_check(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config and --cache-size.
 
     Returns
     -------
@@ -135,7 +135,8 @@ def run_render(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the config, --output, --frames, --jobs, --scheduler, --cluster-timeout,
+        --preview, --verify, --force, --cache and --cache-size.
 
     Returns
     -------
@@ -292,7 +293,7 @@ def run_report(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: FOLDER.
 
     Returns
     -------
@@ -323,7 +324,7 @@ def run_figures(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: --output, --preview and --cache.
 
     Returns
     -------
@@ -355,7 +356,7 @@ def run_cache(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The command line, parsed.
+        The command line, parsed: the action, CONFIG, --max-size, --remove and --cache.
 
     Returns
     -------

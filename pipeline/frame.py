@@ -124,7 +124,7 @@ class FrameResult:
     scene: Scene
     exposure: float
     ground: GroundResult
-    balance: np.ndarray | None = None
+    balance: np.ndarray | None
     light: dict | None = None
     layers: dict = field(default_factory=dict)
 
@@ -393,18 +393,12 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
 
     Parameters
     ----------
-    plan : RunPlan
-        The run's plan.
-    frame : int
-        Output frame index.
+    plan, frame
+        As in ``render_frame``.
     ground : GroundResult
         The frame's ground, with its ``sky_part`` and ``coarse_sky``.
-    sky : sky.Sky
-        The frame's sky.
-    store : cache.Cache
-        The cache of the cycle products.
-    workers : int
-        FFT threads.
+    sky, store, workers
+        As in ``ground.sky_view_terms``.
 
     Returns
     -------

@@ -160,10 +160,8 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
 
     Parameters
     ----------
-    plan : plan.RunPlan
-        The run's plan.
-    frame : int
-        Output frame index.
+    plan, frame
+        As in ``render_ground``.
     sky : sky.Sky
         The frame's sky.
     store : cache.Cache

@@ -18,7 +18,7 @@ class Model:
     Attributes
     ----------
     name : str
-        What a config calls it.
+        What a config calls it: the value of the registry's key.
     home : str
         ``"module:Class"``: the class in ``pipeline/module.py`` that makes it, imported when
         first asked for (``Registry.load``).

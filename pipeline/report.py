@@ -311,7 +311,7 @@ def write_report(folder: Path) -> list[Path]:
     Parameters
     ----------
     folder : pathlib.Path or str
-        The run folder.
+        The run folder, as in ``frame_records``.
 
     Returns
     -------

@@ -111,7 +111,7 @@ def make_folder(folder: Path) -> Path:
     Parameters
     ----------
     folder : pathlib.Path
-        The output folder.
+        The output folder to create.
 
     Returns
     -------
@@ -159,7 +159,7 @@ def missing_folders(folder: Path) -> list[Path]:
     Parameters
     ----------
     folder : pathlib.Path
-        The output folder.
+        The output folder, which may not exist yet.
 
     Returns
     -------

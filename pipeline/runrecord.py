@@ -41,10 +41,8 @@ def current_video(config: Config, digest: str, previous: dict, *, force: bool = 
 
     Parameters
     ----------
-    config : config.Config
-        The run's config.
-    digest : str
-        The resolved config's hash (``Config.digest``).
+    config, digest
+        As in ``frameindex.check_frames``.
     previous : dict
         The previous run.json (empty when there is none).
     force : bool, optional
@@ -69,7 +67,7 @@ def read_run_file(folder: Path) -> dict:
     Parameters
     ----------
     folder : pathlib.Path
-        The run folder.
+        The run folder, where run.json is.
 
     Returns
     -------
