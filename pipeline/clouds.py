@@ -326,12 +326,9 @@ class CloudLayer:
 
         Parameters
         ----------
-        s : numpy.ndarray
-            (..., 2) sky-plane points of the directions [tan].
-        time : float
-            [s].
-        footprint : None, float or numpy.ndarray, optional
-            As in ``field`` [tan].
+        s, time, footprint
+            As in ``coverage``: the directions' sky-plane points (..., 2) [tan], the time [s], the
+            footprint [tan].
 
         Returns
         -------
@@ -347,12 +344,8 @@ class CloudLayer:
 
         Parameters
         ----------
-        s : numpy.ndarray
-            (..., 2) sky-plane points of the directions [tan].
-        time : float
-            [s].
-        footprint : None, float or numpy.ndarray, optional
-            As in ``field`` [tan].
+        s, time, footprint
+            As in ``optical_depth``.
 
         Returns
         -------
