@@ -292,12 +292,9 @@ class CloudLayer:
 
         Parameters
         ----------
-        s : numpy.ndarray
-            (..., 2) sky-plane points of the directions [tan].
-        time : float
-            [s].
-        footprint : None, float or numpy.ndarray, optional
-            As in ``field`` [tan].
+        s, time, footprint
+            The directions' sky-plane points (..., 2) [tan], the time [s] and the footprint [tan],
+            as ``field`` takes them.
 
         Returns
         -------
@@ -345,7 +342,7 @@ class CloudLayer:
         Parameters
         ----------
         s, time, footprint
-            As in ``optical_depth``.
+            As ``optical_depth`` takes them (``coverage``'s).
 
         Returns
         -------
@@ -388,10 +385,8 @@ class CloudLayer:
 
         Parameters
         ----------
-        s : numpy.ndarray
-            (..., 2) sky-plane points of the directions [tan].
-        time : float
-            [s].
+        s, time
+            The directions' sky-plane points (..., 2) [tan] and the time [s], as ``field`` takes them.
         sun_s : numpy.ndarray
             (2,) sky-plane point of the sun (above the horizon) [tan].
         sun_irradiance : numpy.ndarray
