@@ -127,10 +127,13 @@ REFLECTANCES = Registry(
 
 BRDF_PRESETS = {
     "grass": ("rpv", {"rho0": 0.014, "k": 0.810, "theta": -0.169, "rho_c": 0.014}),
+    "soil": ("rpv", {"rho0": 0.147, "k": 0.839, "theta": -0.096, "rho_c": 0.147}),
     "sand": ("rpv", {"rho0": 0.30, "k": 1.15, "theta": -0.10, "rho_c": 0.30}),
 }
 """Named ground reflectances a config may give as ``ground.brdf: NAME`` (docs/method.md, "The
-ground's reflectance"): ``grass`` Rahman, Pinty and Verstraete's (1993) fit for grasses in the
-visible band (rho0 = rho_c 0.014, Theta -0.169, k 0.810; their table as reprinted in the SHARM
-manual, Lyapustin 2005); ``sand`` chosen by hand inside the model's ranges (no published fit for
-sand was found): bell-shaped, darker at grazing light, backward scattering."""
+ground's reflectance"): ``grass`` and ``soil`` Rahman, Pinty and Verstraete's (1993) fits for
+grasses (rho0 = rho_c 0.014, Theta -0.169, k 0.810) and for loam soil (rho0 = rho_c 0.147,
+Theta -0.096, k 0.839) in the visible band, their table as reprinted in the SHARM manual
+(Lyapustin 2005); ``sand`` chosen by hand inside the model's ranges (no published fit for sand
+was found, docs/method.md says where we looked): bell-shaped, darker at grazing light, backward
+scattering."""
