@@ -12,12 +12,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import shadow
+from .shadow import IsolatedPlan
 from .brdf import cell_directions, clamp_view, shape
 from .geometry import Grid, fold, sky_grid, sky_offset
-from .sky_raster import SkyRaster
+from .sky_raster import SkyRaster, coarser
 
 __all__ = [
-    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
+    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "ViewBands",
+    "choose_bands", "sky_ratio", "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
 
@@ -30,6 +32,45 @@ it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
 
 MAX_BANDS = 8
 """Most view bands (each one a correlation of the sky raster per canopy layer). [count]"""
+
+
+BAND_SKY_CELL = 0.025
+"""Widest sky cell [tan] (about 1.4 degrees at the zenith) on which the bands' terms are
+correlated under an isolated canopy (``band_factor``). [tan]"""
+
+
+def band_factor(plan) -> int:
+    """How many ground cells a side the bands' terms are correlated on, under an isolated canopy.
+
+    The sky's term under the leaves changes over the shadow of a whole sky's light, much more
+    slowly than the ground pixel: the bands' terms are correlated at a pixel ``factor`` times the
+    ground's (``shadow.coarser_isolated``), the largest power of 2 whose sky cell is at most
+    BAND_SKY_CELL for every layer and that divides every layer's transform; 1 for a periodic
+    canopy (its raster repeats with the tile).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    int
+        The factor [1].
+    """
+    layers = [lp.coarse for lp in plan.layers]
+    if not all(isinstance(c, IsolatedPlan) for c in layers):
+        return 1
+
+    def fits(f: int) -> bool:
+        return all(c.fft_shape[0] % f == 0 and c.fft_shape[1] % (2 * f) == 0
+                   and min(c.window_shape) >= 8 * f
+                   and (c.sky is None or c.sky.pixel * f <= BAND_SKY_CELL * (1 + 1e-9)) for c in layers)
+
+    factor = 1
+    while fits(2 * factor):
+        factor *= 2
+    return factor
 
 
 @dataclass(frozen=True)
@@ -403,7 +444,28 @@ def _channel_sum(raster) -> np.ndarray:
     return _SUM.get((raster,), made)
 
 
-def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
+_COARSER = _LastCall()
+"""``weighted_raster``'s raster summed in blocks: the bands of a frame weight the same one."""
+
+_RING = _LastCall()
+"""``_ring``: the bands of a frame weight the same raster's outside."""
+
+
+def _ring(raster):
+    """The directions (m, 3) [1] and the light (m,) [radiance x sr] of a sky raster's outermost
+    ring of cells, made once for the bands of a frame."""
+    def made():
+        rows, cols = raster.grid.shape
+        ring = np.ones((rows, cols), dtype=bool)
+        ring[1:-1, 1:-1] = False
+        r, c = np.nonzero(ring)
+        sx, sy = raster.grid.ground_from_raster(r, c)
+        w = np.stack([sx, sy, np.ones_like(sx)], axis=-1)
+        return w / np.linalg.norm(w, axis=-1, keepdims=True), raster.weighted.sum(axis=0)[ring].astype(np.float64)
+    return _RING.get((raster,), made)
+
+
+def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False, factor: int = 1):
     """The sky raster with each cell's light times the shape s(view, L_cell).
 
     Max's f_r(V, L) on the sky raster, before the correlation (``shape_on_grid``), folded after the
@@ -422,22 +484,31 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
         The tile period to fold onto [cell].
     summed : bool, optional
         One channel, the channels' sum weighted (the view bands').
+    factor : int, optional
+        The raster's cells summed in blocks of ``factor`` x ``factor`` first (``sky_raster.coarser``,
+        for ``shadow.coarser_isolated``) and weighted at the blocks; the outside still by the
+        raster's own ring [1].
 
     Returns
     -------
     sky_raster.SkyRaster
         The weighted raster, float32 [radiance x sr].
     """
-    s = shape_on_grid(brdf, view, raster.grid)
-    light = _channel_sum(raster) if summed else raster.weighted
+    cells = raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
+    s = shape_on_grid(brdf, view, cells.grid)
+    light = _channel_sum(cells) if summed else cells.weighted
     outside = np.asarray(raster.outside, dtype=np.float64)
     outside = outside.sum(keepdims=True) if summed else outside
     weighted = light * s[None]
-    ring = np.ones(s.shape, dtype=bool)
-    ring[1:-1, 1:-1] = False
-    e = raster.weighted.sum(axis=0)
-    edge = float((e[ring] * s[ring]).sum() / max(float(e[ring].sum()), 1e-30))
-    grid = raster.grid
+    if factor == 1:
+        ring = np.ones(s.shape, dtype=bool)
+        ring[1:-1, 1:-1] = False
+        e = raster.weighted.sum(axis=0)
+        edge = float((e[ring] * s[ring]).sum() / max(float(e[ring].sum()), 1e-30))
+    else:
+        directions, e = _ring(raster)
+        edge = float(shape(brdf, np.asarray(view)[None], directions) @ e / max(float(e.sum()), 1e-30))
+    grid = cells.grid
     if fold_period is not None:
         weighted = fold(weighted, sky_offset(grid), fold_period)
         grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
