@@ -461,7 +461,8 @@ def _ring(raster):
         r, c = np.nonzero(ring)
         sx, sy = raster.grid.ground_from_raster(r, c)
         w = np.stack([sx, sy, np.ones_like(sx)], axis=-1)
-        return w / np.linalg.norm(w, axis=-1, keepdims=True), raster.weighted.sum(axis=0)[ring].astype(np.float64)
+        light = raster.weighted[:, r, c].sum(axis=0, dtype=np.float64)
+        return w / np.linalg.norm(w, axis=-1, keepdims=True), light
     return _RING.get((raster,), made)
 
 

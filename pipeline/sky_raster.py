@@ -63,11 +63,15 @@ def coarser(raster: SkyRaster, factor: int) -> SkyRaster:
     """
     f = int(factor)
     count, rows, cols = raster.weighted.shape
-    shape = (-(-rows // f), -(-cols // f))
-    padded = np.zeros((count, shape[0] * f, shape[1] * f), dtype=np.float32)
-    padded[:, :rows, :cols] = raster.weighted
-    summed = padded.reshape(count, shape[0], f, shape[1], f).sum(axis=(2, 4), dtype=np.float32)
-    grid = Grid(raster.grid.origin, f * raster.grid.pixel, shape)
+    by_cols = np.zeros((count, rows, -(-cols // f)), dtype=np.float32)
+    for m in range(f):  # the m-th column of every block
+        part = raster.weighted[:, :, m::f]
+        by_cols[:, :, :part.shape[2]] += part
+    summed = np.zeros((count, -(-rows // f), by_cols.shape[2]), dtype=np.float32)
+    for m in range(f):
+        part = by_cols[:, m::f]
+        summed[:, :part.shape[1]] += part
+    grid = Grid(raster.grid.origin, f * raster.grid.pixel, summed.shape[1:])
     return SkyRaster(grid, summed, raster.outside)
 
 
