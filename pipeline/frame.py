@@ -429,7 +429,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
                                         np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
                                                         else t.irradiance for k, t in enumerate(terms)], axis=-1),
                                         *open_light)
-        sky_maps = (texture.mipmap(relative, grid, outside="constant", value=np.ones(3, dtype=np.float32)),)
+        sky_maps = (relative, grid)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(plan.ground), sun=irradiance_maps(plan, ground.sun_part()),
         sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)
