@@ -18,8 +18,8 @@ from .geometry import Grid, fold, sky_grid, sky_offset
 from .sky_raster import SkyRaster, coarser
 
 __all__ = [
-    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "ViewBands",
-    "choose_bands", "sky_ratio", "banded_sky",
+    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
+    "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
 
@@ -451,6 +451,24 @@ _RING = _LastCall()
 """``_ring``: the bands of a frame weight the same raster's outside."""
 
 
+def summed_blocks(raster, factor: int):
+    """``sky_raster.coarser``, made once for the bands of a frame (the raster itself for 1).
+
+    Parameters
+    ----------
+    raster : sky_raster.SkyRaster
+        The sky raster [radiance x sr].
+    factor : int
+        Cells a side per block (``band_factor``) [1].
+
+    Returns
+    -------
+    sky_raster.SkyRaster
+        Read-only [radiance x sr].
+    """
+    return raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
+
+
 def _ring(raster):
     """The directions (m, 3) [1] and the light (m,) [radiance x sr] of a sky raster's outermost
     ring of cells, made once for the bands of a frame."""
@@ -495,7 +513,7 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
     sky_raster.SkyRaster
         The weighted raster, float32 [radiance x sr].
     """
-    cells = raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
+    cells = summed_blocks(raster, factor)
     s = shape_on_grid(brdf, view, cells.grid)
     light = _channel_sum(cells) if summed else cells.weighted
     outside = np.asarray(raster.outside, dtype=np.float64)

@@ -407,7 +407,9 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     """
     view = plan.camera
     model = plan.ground.brdf
-    raster = ground.coarse_sky[2][0]  # the first layer's sky raster
+    # the first layer's sky raster, in the blocks the bands are correlated on: the open-sky sums
+    # of the band choice and of the ratio take it coarsened further (brdf_bands.SKY_CELLS)
+    raster = brdf_bands.summed_blocks(ground.coarse_sky[2][0], brdf_bands.band_factor(plan))
     bands = brdf_bands.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
