@@ -250,5 +250,7 @@ def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndar
     """
     fraction, rest = cam._ground_fractions(camera)
     out = ground_radiance_ * fraction[..., None]
-    out += cam.sky_view(camera, sky) * rest
+    seen = cam.sky_view(camera, sky)
+    seen *= rest  # in place: the sky's view is this call's own
+    out += seen
     return out
