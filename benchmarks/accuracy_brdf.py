@@ -53,6 +53,17 @@ CASES = (  # sun azimuth, elevation [deg]; camera position [m]
 TOLERANCES = (0.01, 0.02, 0.05, 1.0)
 
 
+def _at_cells(term, window, cells) -> np.ndarray:
+    """A term's raster (``GroundResult``) at the centres of the window's cells (rows, cols),
+    bilinearly, edges held: (n, channels)."""
+    from scipy.ndimage import map_coordinates
+
+    x, y = window.ground_from_raster(*cells)
+    r, c = term.grid.raster_from_ground(x, y)
+    return np.stack([map_coordinates(term.irradiance[..., k], [r, c], order=1, mode="nearest")
+                     for k in range(term.irradiance.shape[-1])], axis=-1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config")
@@ -135,13 +146,15 @@ def config_case(path: str, samples: int) -> None:
               f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-"
               f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
+        blocks = brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan))  # as the frame takes it
         for tolerance in TOLERANCES:
-            bands = brdf_bands.choose_bands(brdf, raster, views, tolerance=tolerance)
+            bands = brdf_bands.choose_bands(brdf, blocks, views, tolerance=tolerance)
             terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
             weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2])).astype(np.float32)
-            colour = terms[bands.colour].irradiance[cells].T
-            banded = brdf_bands.banded_sky(colour, np.stack([t.irradiance[cells].sum(axis=-1) for t in terms]),
-                                  weights[:, chosen], brdf_bands.sky_ratio(brdf, raster, bands, views)[:, chosen])
+            at_cells = lambda t: _at_cells(t, plan.window, cells)  # noqa: E731 -- the terms' grid may be coarser
+            colour = at_cells(terms[bands.colour]).T
+            banded = brdf_bands.banded_sky(colour, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
+                                  weights[:, chosen], brdf_bands.sky_ratio(brdf, blocks, bands, views)[:, chosen])
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
                   f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")

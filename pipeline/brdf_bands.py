@@ -6,18 +6,21 @@ pixel by its view zenith (``banded_sky``) with a factor that makes the blend exa
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import shadow
+from .shadow import IsolatedPlan
 from .brdf import cell_directions, clamp_view, shape
 from .geometry import Grid, fold, sky_grid, sky_offset
-from .sky_raster import SkyRaster
+from .sky_raster import SkyRaster, coarser
 
 __all__ = [
-    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
+    "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
+    "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
 
@@ -30,6 +33,45 @@ it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
 
 MAX_BANDS = 8
 """Most view bands (each one a correlation of the sky raster per canopy layer). [count]"""
+
+
+BAND_SKY_CELL = 0.025
+"""Widest sky cell [tan] (about 1.4 degrees at the zenith) on which the bands' terms are
+correlated under an isolated canopy (``band_factor``). [tan]"""
+
+
+def band_factor(plan) -> int:
+    """How many ground cells a side the bands' terms are correlated on, under an isolated canopy.
+
+    The sky's term under the leaves changes over the shadow of a whole sky's light, much more
+    slowly than the ground pixel: the bands' terms are correlated at a pixel ``factor`` times the
+    ground's (``shadow.coarser_isolated``), the largest power of 2 whose sky cell is at most
+    BAND_SKY_CELL for every layer and that divides every layer's transform; 1 for a periodic
+    canopy (its raster repeats with the tile).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    int
+        The factor [1].
+    """
+    layers = [lp.coarse for lp in plan.layers]
+    if not all(isinstance(c, IsolatedPlan) for c in layers):
+        return 1
+
+    def fits(f: int) -> bool:
+        return all(c.fft_shape[0] % f == 0 and c.fft_shape[1] % (2 * f) == 0
+                   and min(c.window_shape) >= 8 * f
+                   and (c.sky is None or c.sky.pixel * f <= BAND_SKY_CELL * (1 + 1e-9)) for c in layers)
+
+    factor = 1
+    while fits(2 * factor):
+        factor *= 2
+    return factor
 
 
 @dataclass(frozen=True)
@@ -124,30 +166,46 @@ open sky's term (blocks of the raster's cells). [count]"""
 
 def _coarsened(raster, most_cells: int = 4096, *, channels: bool = False):
     """A sky raster's cells summed in blocks to at most ``most_cells``: directions (m, 3)
-    towards each block's light-weighted centre on the sky plane and weights (m,) (channels
+    towards each block's centre on the sky plane (the same array for the same grid, so that
+    the shape there can be kept while the views stand still) and weights (m,) (channels
     summed), or (m, channels) with ``channels``. [1], [radiance x sr]"""
     dirs, per_channel = _COARSE.get((raster, most_cells), lambda: _coarsen(raster, most_cells))
     return (dirs, per_channel) if channels else (dirs, per_channel.sum(axis=-1))
+
+
+def _block_step(shape, most_cells: int) -> int:
+    """The side of ``_coarsen``'s blocks [cell]."""
+    return max(1, int(np.ceil(np.sqrt(shape[0] * shape[1] / most_cells))))
+
+
+@functools.lru_cache(maxsize=4)
+def _block_directions(grid, most_cells: int) -> np.ndarray:
+    """Unit vectors (m, 3) towards the centres of ``_coarsen``'s blocks of a sky grid. Read-only. [1]"""
+    step = _block_step(grid.shape, most_cells)
+    rows, cols = (max(n // step * step, 1) for n in grid.shape)
+    sx, sy = grid.ground_from_raster(np.arange(rows), np.arange(cols))
+    x, y = sx.reshape(-1, min(step, cols)).mean(axis=-1), sy.reshape(-1, min(step, rows)).mean(axis=-1)
+    w = np.stack(np.broadcast_arrays(x[None, :], y[:, None], 1.0), axis=-1)
+    dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
+    dirs.flags.writeable = False
+    return dirs
 
 
 def _coarsen(raster, most_cells: int):
     """``_coarsened``'s work: (directions (m, 3), light per block and channel (m, channels))."""
     light = raster.weighted
     count, rows, cols = light.shape
-    step = max(1, int(np.ceil(np.sqrt(rows * cols / most_cells))))
+    step = _block_step((rows, cols), most_cells)
     rows, cols = max(rows // step * step, 1), max(cols // step * step, 1)
     step_r, step_c = min(step, rows), min(step, cols)
-    sx, sy = raster.grid.ground_from_raster(np.arange(rows), np.arange(cols))
     cut = light[:, :rows, :cols].reshape(count, rows // step_r, step_r, cols // step_c, step_c)
     per_block = cut.sum(axis=(2, 4), dtype=np.float64)  # (channels, block rows, block cols)
-    weight = per_block.sum(axis=0)
-    safe = np.maximum(weight, 1e-30)
-    # the light-weighted centres: x depends on the column alone, y on the row alone
-    x = (cut.sum(axis=(0, 2), dtype=np.float64) * sx.reshape(-1, step_c)).sum(axis=-1) / safe
-    y = (cut.sum(axis=(0, 4), dtype=np.float64) * sy.reshape(-1, step_r)[..., None]).sum(axis=1) / safe
-    w = np.stack([x, y, np.ones_like(x)], axis=-1)
-    dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
-    return dirs, per_block.reshape(count, -1).T
+    return _block_directions(raster.grid, most_cells), per_block.reshape(count, -1).T
+
+
+_SHAPES = _LastCall(), _LastCall()
+"""The shape at ``choose_bands``' sampled views and at ``sky_ratio``'s lattice of views, towards
+``_coarsen``'s blocks: the same while the camera and the bands' azimuth stand still."""
 
 
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
@@ -180,14 +238,15 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     ViewBands
         The bands, with the error they reached.
     """
-    views = clamp_view(views)
+    views_in, views = views, clamp_view(views)
     pick = views[:: max(1, len(views) // samples)]
     dirs, e = _coarsened(raster, SKY_CELLS)
     zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
     mean = views.mean(axis=0)
     azimuth = float(np.arctan2(mean[0], mean[1]))
     # the bands fix the change with distance; the change across (azimuth) is ``sky_ratio``'s
-    exact = shape(brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None]) @ e
+    exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(
+        brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None])) @ e
     lo, hi = float(zenith.min()), float(zenith.max())
     zeniths = [0.5 * (lo + hi)]
     while True:  # greedy: the next band goes where the blend is worst
@@ -238,10 +297,13 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
         angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
     lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
-    z, t = np.meshgrid(*axes, indexing="ij")
-    a = bands.azimuth + t
-    v = np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
-    own = shape(brdf, v[..., None, :], dirs) @ e  # (lattice, lattice, channels)
+
+    def at_lattice():
+        z, t = np.meshgrid(*axes, indexing="ij")
+        a = bands.azimuth + t
+        return shape(brdf, np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)[..., None, :],
+                     dirs)
+    own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
     summed = at_bands.sum(axis=-1)
     modulation = summed / max(float(summed[bands.colour]), 1e-30)
@@ -403,7 +465,47 @@ def _channel_sum(raster) -> np.ndarray:
     return _SUM.get((raster,), made)
 
 
-def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False):
+_COARSER = _LastCall()
+"""``weighted_raster``'s raster summed in blocks: the bands of a frame weight the same one."""
+
+_RING = _LastCall()
+"""``_ring``: the bands of a frame weight the same raster's outside."""
+
+
+def summed_blocks(raster, factor: int):
+    """``sky_raster.coarser``, made once for the bands of a frame (the raster itself for 1).
+
+    Parameters
+    ----------
+    raster : sky_raster.SkyRaster
+        The sky raster [radiance x sr].
+    factor : int
+        Cells a side per block (``band_factor``) [1].
+
+    Returns
+    -------
+    sky_raster.SkyRaster
+        Read-only [radiance x sr].
+    """
+    return raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
+
+
+def _ring(raster):
+    """The directions (m, 3) [1] and the light (m,) [radiance x sr] of a sky raster's outermost
+    ring of cells, made once for the bands of a frame."""
+    def made():
+        rows, cols = raster.grid.shape
+        ring = np.ones((rows, cols), dtype=bool)
+        ring[1:-1, 1:-1] = False
+        r, c = np.nonzero(ring)
+        sx, sy = raster.grid.ground_from_raster(r, c)
+        w = np.stack([sx, sy, np.ones_like(sx)], axis=-1)
+        light = raster.weighted[:, r, c].sum(axis=0, dtype=np.float64)
+        return w / np.linalg.norm(w, axis=-1, keepdims=True), light
+    return _RING.get((raster,), made)
+
+
+def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False, factor: int = 1):
     """The sky raster with each cell's light times the shape s(view, L_cell).
 
     Max's f_r(V, L) on the sky raster, before the correlation (``shape_on_grid``), folded after the
@@ -422,22 +524,31 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
         The tile period to fold onto [cell].
     summed : bool, optional
         One channel, the channels' sum weighted (the view bands').
+    factor : int, optional
+        The raster's cells summed in blocks of ``factor`` x ``factor`` first (``sky_raster.coarser``,
+        for ``shadow.coarser_isolated``) and weighted at the blocks; the outside still by the
+        raster's own ring [1].
 
     Returns
     -------
     sky_raster.SkyRaster
         The weighted raster, float32 [radiance x sr].
     """
-    s = shape_on_grid(brdf, view, raster.grid)
-    light = _channel_sum(raster) if summed else raster.weighted
+    cells = summed_blocks(raster, factor)
+    s = shape_on_grid(brdf, view, cells.grid)
+    light = _channel_sum(cells) if summed else cells.weighted
     outside = np.asarray(raster.outside, dtype=np.float64)
     outside = outside.sum(keepdims=True) if summed else outside
     weighted = light * s[None]
-    ring = np.ones(s.shape, dtype=bool)
-    ring[1:-1, 1:-1] = False
-    e = raster.weighted.sum(axis=0)
-    edge = float((e[ring] * s[ring]).sum() / max(float(e[ring].sum()), 1e-30))
-    grid = raster.grid
+    if factor == 1:
+        ring = np.ones(s.shape, dtype=bool)
+        ring[1:-1, 1:-1] = False
+        e = raster.weighted.sum(axis=0)
+        edge = float((e[ring] * s[ring]).sum() / max(float(e[ring].sum()), 1e-30))
+    else:
+        directions, e = _ring(raster)
+        edge = float(shape(brdf, np.asarray(view)[None], directions) @ e / max(float(e.sum()), 1e-30))
+    grid = cells.grid
     if fold_period is not None:
         weighted = fold(weighted, sky_offset(grid), fold_period)
         grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)

@@ -77,7 +77,8 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
         The bands' terms: one MipMap chain whose channels are each band's, three for the colour
         band (``ViewBands.colour``, E_c), one (the channels' sum, G_b) for the others, so that the
         camera's footprints are filtered once for all of them [radiance x sr]. With
-        ``open_light``, instead the one 3-channel raster of ``relative_sky`` (1 beyond it) [1].
+        ``open_light``, instead the raster of ``relative_sky`` (rows, cols, 3) and its grid, read
+        bilinearly at each pixel's footprint centre (1 beyond it; it is smooth) [1].
     bands : ViewBands
         The view bands.
     sun_direction : numpy.ndarray or None
@@ -107,7 +108,7 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     weights = _band_weights(camera, bands.zeniths)
     ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
     if open_light is not None:
-        sky = cam._filtered_chain(sky_maps, fp)  # (3, n), relative to open ground
+        sky = _relative_at_pixels(camera, *sky_maps)  # (3, n), relative to open ground
         sky *= open_sky(bands, weights, *open_light)
         sky *= ratio
         light += sky
@@ -166,6 +167,40 @@ def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light
     return np.moveaxis(sky, 0, -1).reshape(*grid.shape, 3)
 
 
+def _relative_at_pixels(camera: cam.Camera, relative, grid) -> np.ndarray:
+    """``relative_sky``'s raster (rows, cols, 3) on ``grid`` at the camera's ground pixels'
+    footprint centres, bilinearly, with a ring of 1 (open ground) round it and 1 beyond (3, n)
+    float32 [1]: the sky's term under the leaves changes over metres, so a point read serves
+    where the sun's light needs the footprint's filter."""
+    from . import _array_loops
+
+    rows, cols = grid.shape
+    padded = np.ones((3, rows + 2, cols + 2), dtype=np.float32)
+    padded[:, 1:-1, 1:-1] = np.moveaxis(relative, -1, 0)
+    corner, taps = _pixel_reads(camera, grid)
+    out = np.empty((3, len(corner)), dtype=np.float32)
+    _array_loops.lattice_read(padded.reshape(3, -1), corner, taps, cols + 2, out)
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def _pixel_reads(camera: cam.Camera, grid):
+    """Where ``_relative_at_pixels`` reads: each ground pixel's first corner in the raster padded
+    by one cell (n,) intp and the bilinear weights of its four corners (4, n) float32, held at
+    the padding's edge. They depend on the camera and the grid alone. Read-only."""
+    fp, _ = cam._view_footprints(camera)
+    r, c = grid.raster_from_ground(fp.x, fp.y)
+    i = np.clip(r + 1.0, 0.0, grid.shape[0] + 1.0)
+    j = np.clip(c + 1.0, 0.0, grid.shape[1] + 1.0)
+    i0, j0 = np.minimum(i.astype(np.intp), grid.shape[0]), np.minimum(j.astype(np.intp), grid.shape[1])
+    fi, fj = (i - i0).astype(np.float32), (j - j0).astype(np.float32)
+    taps = np.stack([(1 - fi) * (1 - fj), (1 - fi) * fj, fi * (1 - fj), fi * fj])
+    corner = i0 * (grid.shape[1] + 2) + j0
+    for array in (corner, taps):
+        array.flags.writeable = False
+    return corner, taps
+
+
 @functools.lru_cache(maxsize=2)
 def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
     """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
@@ -215,5 +250,7 @@ def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndar
     """
     fraction, rest = cam._ground_fractions(camera)
     out = ground_radiance_ * fraction[..., None]
-    out += cam.sky_view(camera, sky) * rest
+    seen = cam.sky_view(camera, sky)
+    seen *= rest  # in place: the sky's view is this call's own
+    out += seen
     return out

@@ -407,7 +407,9 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     """
     view = plan.camera
     model = plan.ground.brdf
-    raster = ground.coarse_sky[2][0]  # the first layer's sky raster
+    # the first layer's sky raster, in the blocks the bands are correlated on: the open-sky sums
+    # of the band choice and of the ratio take it coarsened further (brdf_bands.SKY_CELLS)
+    raster = brdf_bands.summed_blocks(ground.coarse_sky[2][0], brdf_bands.band_factor(plan))
     bands = brdf_bands.choose_bands(model, raster, reflect._camera_views(view)[0])
     terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
@@ -424,11 +426,12 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
         c = bands.colour
         open_light = (np.asarray(terms[c].unshadowed, dtype=np.float64),
                       np.array([float(np.sum(t.unshadowed)) for t in terms]))
-        relative = reflect.relative_sky(view, plan.window, bands, terms[c].irradiance,
+        grid = terms[c].grid  # the window, or the coarser grid of brdf_bands.band_factor
+        relative = reflect.relative_sky(view, grid, bands, terms[c].irradiance,
                                         np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
                                                         else t.irradiance for k, t in enumerate(terms)], axis=-1),
                                         *open_light)
-        sky_maps = (texture.mipmap(relative, plan.window, outside="constant", value=np.ones(3, dtype=np.float32)),)
+        sky_maps = (relative, grid)
     radiance = reflect.ground_radiance(
         view, model, ground_albedo(plan.ground), sun=irradiance_maps(plan, ground.sun_part()),
         sky_maps=sky_maps, bands=bands, sun_direction=sun, raster=raster, open_light=open_light)

@@ -179,31 +179,38 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
     Returns
     -------
     list of GroundResult
-        Per view, on the coarse window [radiance x sr].
+        Per view, on the coarse window, or under an isolated canopy on cells
+        ``brdf_bands.band_factor`` times as wide (``shadow.coarser_isolated``) [radiance x sr].
     """
     brdf = plan.ground.brdf
     cycle_frame = frame % plan.canopy.cycle
-    grounds, total = [], None
+    factor = brdf_bands.band_factor(plan)
+    grounds, total, grid = [], None, plan.window
     for index, lp in enumerate(plan.layers):
         item = cycle_item(plan, index, cycle_frame, store, workers=workers)
         coarse = lp.coarse
         periodic = isinstance(coarse, shadow.PeriodicPlan)
         raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
+        spectrum, layer_grid = item["coarse"], plan.window
+        if factor > 1:  # the bands at a coarser pixel: the sky's term is smooth (brdf_bands.band_factor)
+            coarse, spectrum, layer_grid = shadow.coarser_isolated(spectrum, coarse, factor, plan.window)
+            grid = layer_grid if index == 0 else grid
         # every view's weighted raster as channels of one: one correlation call for all
         rasters = [brdf_bands.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
-                                              summed=colour is not None and t != colour)
+                                              summed=colour is not None and t != colour, factor=factor)
                    for t, v in enumerate(views)]
         raster = SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
                                       np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
         if periodic:
             g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
         else:
-            g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+            g = shadow.ground_isolated(raster, spectrum, coarse, workers=workers)
+            g = g if layer_grid == grid else shadow.resample_bilinear(g, layer_grid, grid)
         grounds.append(g)
         if total is None:
             total, split = raster.irradiance, np.cumsum([len(r.weighted) for r in rasters])[:-1]
     combined = np.moveaxis(shadow.combine_layers(grounds, total), 0, -1)
-    return [GroundResult(g, plan.window, t, True)
+    return [GroundResult(g, grid, t, True)
             for g, t in zip(np.split(combined, split, axis=-1), np.split(total, split))]
 
 

@@ -33,7 +33,7 @@ offsets fixed above and its index bookkeeping; apart, each would restate the sig
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,6 +44,7 @@ from .geometry import Grid, fold, lattice_offset, sky_grid, sky_offset, wrapped_
 
 __all__ = [
     "MAX_SKY_CELLS", "sky_half_cells", "IsolatedPlan", "plan_isolated", "occlusion_spectrum", "ground_isolated",
+    "coarser_isolated",
     "PeriodicPlan", "plan_periodic", "transmittance_spectrum", "ground_periodic", "SunPlan", "sun_offset_range",
     "plan_sun", "fine_mask_spectrum", "ground_sun", "resample_bilinear", "interpolation_matrices", "combine_layers",
 ]
@@ -200,6 +201,58 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
     blocked = _correlate(sky.weighted, spectrum, plan.fft_shape, workers)
     g = _take_wrapped(blocked, plan.start, plan.window_shape)
     return np.subtract(total, g, out=g)
+
+
+def coarser_isolated(spectrum, plan: IsolatedPlan, factor: int, window: Grid):
+    """An isolated layer's plan and occlusion spectrum at ``factor`` times the ground pixel.
+
+    The occlusion averaged over blocks of ``factor`` x ``factor`` cells, by its spectrum (each
+    axis: the block mean's transfer, then the aliases of the decimation summed), so that
+    ``ground_isolated`` of the sky raster summed over the same blocks of sky cells gives the
+    ground's light at the coarser pixel: the full-resolution correlation at the coarse cells'
+    centres, smoothed over less than ``factor`` cells each way. The coarse cells are centred on
+    fine cells of the window (those whose correlation index is a multiple of ``factor``).
+
+    Parameters
+    ----------
+    spectrum : numpy.ndarray
+        ``occlusion_spectrum`` of the layer, complex (plan.fft_shape[0], plan.fft_shape[1] // 2 + 1).
+    plan : IsolatedPlan
+        Its plan; each of ``fft_shape`` a multiple of ``factor``, the columns' of ``2 factor``.
+    factor : int
+        Coarse cell over fine cell [1].
+    window : Grid
+        The ground window of ``plan`` [m].
+
+    Returns
+    -------
+    coarse_plan : IsolatedPlan
+        For ``ground_isolated`` with the sky raster summed in blocks of ``factor`` cells
+        (``sky_raster.coarser``).
+    coarse_spectrum : numpy.ndarray
+        complex64 (fft rows / factor, fft cols / (2 factor) + 1).
+    grid : Grid
+        The coarse cells' grid: centres on the window's cells, inside the window [m].
+    """
+    n0, n1 = plan.fft_shape
+    f = int(factor)
+    shifts = np.arange(f)
+    h0 = np.exp(2j * np.pi * np.outer(np.arange(n0), shifts) / n0).mean(axis=1)  # the block mean's transfer
+    rows = (spectrum * h0[:, None].astype(np.complex64)).reshape(f, n0 // f, -1).mean(axis=0)
+    m0 = n0 // f  # the columns: whole spectrum from the half one (a real raster's), then the same
+    whole = np.concatenate([rows, np.conj(rows[(-np.arange(m0)) % m0, n1 // 2 - 1:0:-1])], axis=1)
+    h1 = np.exp(2j * np.pi * np.outer(np.arange(n1), shifts) / n1).mean(axis=1)
+    coarse = (whole * h1[None, :].astype(np.complex64)).reshape(m0, f, n1 // f).mean(axis=1)
+    coarse = np.ascontiguousarray(coarse[:, : n1 // (2 * f) + 1], dtype=np.complex64)
+    first = [(-s) % f for s in plan.start]  # window index of the first coarse centre
+    shape = tuple((n - 1 - i) // f + 1 for n, i in zip(plan.window_shape, first))
+    start = tuple((i + s) // f for i, s in zip(first, plan.start))
+    coarse_plan = replace(plan, window_shape=shape, fft_shape=(n0 // f, n1 // f), start=start,
+                          sky=None if plan.sky is None else replace(plan.sky, pixel=f * plan.sky.pixel,
+                                                                    shape=tuple(-(-n // f) for n in plan.sky.shape)))
+    origin = (window.origin[0] + (first[1] + 0.5 - 0.5 * f) * window.pixel,
+              window.origin[1] - (first[0] + 0.5 - 0.5 * f) * window.pixel)
+    return coarse_plan, coarse, Grid(origin, f * window.pixel, shape)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .geometry import Grid
 
-__all__ = ["SkyRaster"]
+__all__ = ["SkyRaster", "coarser"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,37 @@ class SkyRaster:
         """The raster's sum over its cells plus ``outside``: the irradiance the open, unshadowed
         ground gets from the light the raster holds, per channel (channels,) float64 [radiance x sr]."""
         return self.weighted.sum(axis=(1, 2), dtype=np.float64) + self.outside
+
+
+def coarser(raster: SkyRaster, factor: int) -> SkyRaster:
+    """A sky raster's cells summed in blocks of ``factor`` x ``factor`` (the last ones padded
+    with dark cells): the same light on cells ``factor`` times as wide, cell [0, 0] holding the
+    first block (``shadow.coarser_isolated``).
+
+    Parameters
+    ----------
+    raster : SkyRaster
+        The sky raster [radiance x sr].
+    factor : int
+        Coarse cell over fine cell [1].
+
+    Returns
+    -------
+    SkyRaster
+        float32, ``outside`` as given [radiance x sr].
+    """
+    f = int(factor)
+    count, rows, cols = raster.weighted.shape
+    by_cols = np.zeros((count, rows, -(-cols // f)), dtype=np.float32)
+    for m in range(f):  # the m-th column of every block
+        part = raster.weighted[:, :, m::f]
+        by_cols[:, :, :part.shape[2]] += part
+    summed = np.zeros((count, -(-rows // f), by_cols.shape[2]), dtype=np.float32)
+    for m in range(f):
+        part = by_cols[:, m::f]
+        summed[:, :part.shape[1]] += part
+    grid = Grid(raster.grid.origin, f * raster.grid.pixel, summed.shape[1:])
+    return SkyRaster(grid, summed, raster.outside)
 
 
 def _grid_footprint(grid: Grid):

@@ -260,3 +260,23 @@ def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     out = np.empty((3, 50), dtype=np.float32)
     _array_loops.lattice_read(flat, corner, taps, lattice, out)
     assert np.array_equal(out, brdf_bands._lattice_read_arrays(flat, corner, taps, lattice))
+
+
+def test_relative_sky_is_read_bilinearly_at_the_footprint_centres_and_is_1_beyond():
+    """The frame's read of ``relative_sky``'s raster (a smooth field: a point read, not the
+    footprint's filter): a linear field comes back exactly inside the cells' centres, 1 far
+    beyond the raster."""
+    view = cam.Camera.look_at((-6.0, 6.0, 1.7), (0.0, 0.0, 0.0), vertical_fov=np.radians(60.0), width=64, height=48)
+    grid = Grid((-4.0, 4.0), 0.2, (40, 40))
+    gx, gy = grid.ground_from_raster(np.arange(40)[:, None], np.arange(40)[None, :])
+    gx, gy = np.broadcast_arrays(gx, gy)
+    field = np.stack([0.5 + 0.05 * gx, 0.6 - 0.03 * gy, 0.7 + 0.01 * (gx + gy)], axis=-1).astype(np.float32)
+    read = brdf_camera._relative_at_pixels(view, field, grid)
+    fp, _ = cam._view_footprints(view)
+    x0, y0, x1, y1 = grid.extent
+    inside = (fp.x > x0 + 0.1) & (fp.x < x1 - 0.1) & (fp.y > y0 + 0.1) & (fp.y < y1 - 0.1)
+    far = (fp.x < x0 - 0.2) | (fp.x > x1 + 0.2) | (fp.y < y0 - 0.2) | (fp.y > y1 + 0.2)
+    want = np.stack([0.5 + 0.05 * fp.x, 0.6 - 0.03 * fp.y, 0.7 + 0.01 * (fp.x + fp.y)])
+    assert inside.sum() > 100 and far.sum() > 100
+    assert np.allclose(read[:, inside], want[:, inside], atol=1e-5)
+    assert np.all(read[:, far] == 1.0)

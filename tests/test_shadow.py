@@ -277,3 +277,38 @@ def test_resample_bilinear_has_the_bits_of_the_sparse_products(fine):
     expected = np.stack([(cols @ (rows @ image).T).T for image in field])
     assert expected.dtype == np.float32
     assert shadow.resample_bilinear(field, coarse, fine).tobytes() == expected.tobytes()
+
+
+@pytest.mark.parametrize("factor, west", [(2, -5.0), (4, -5.25)])
+def test_coarser_isolated_is_the_block_mean_mask_and_the_correlation_at_its_cells(factor, west):
+    """The coarse spectrum is that of the occlusion averaged over blocks (to float rounding); with
+    the sky summed over the same blocks, the ground at the coarse cells is the full-resolution
+    ground there, smoothed over less than a block (a smooth sky: 0.1%)."""
+    import scipy.fft as sfft
+    from dataclasses import replace
+
+    from pipeline.sky_raster import coarser
+
+    rng = np.random.default_rng(1)
+    window, canopy_grid = Grid((west, 5.0), 0.25, (42, 39)), Grid((-2.0, 2.0), 0.25, (16, 16))
+    plan = shadow.plan_isolated(window, canopy_grid, height=4.0, alpha=np.radians(70.0))
+    plan = replace(plan, fft_shape=tuple(-(-n // (2 * factor)) * 2 * factor for n in plan.fft_shape))
+    occlusion = (rng.random((16, 16)) < 0.6).astype(np.float32)
+    spectrum = shadow.occlusion_spectrum(occlusion, plan)
+    coarse_plan, coarse_spectrum, grid = shadow.coarser_isolated(spectrum, plan, factor, window)
+    o = sfft.irfft2(spectrum, s=plan.fft_shape)
+    block = sum(np.roll(o, (-a, -b), axis=(0, 1)) for a in range(factor) for b in range(factor))
+    want = sfft.rfft2(block[::factor, ::factor] / factor**2)
+    assert np.abs(coarse_spectrum - want).max() < 1e-5 * np.abs(want).max()
+    rows, cols = np.mgrid[0:plan.sky.shape[0], 0:plan.sky.shape[1]]
+    light = (1 + 0.3 * np.sin(cols / 7.0) + 0.2 * np.cos(rows / 5.0)).astype(np.float32)[None]
+    sky = SkyRaster(plan.sky, light, np.zeros(1))
+    fine = shadow.ground_isolated(sky, spectrum, plan)
+    coarse = shadow.ground_isolated(coarser(sky, factor), coarse_spectrum, coarse_plan)
+    assert coarse.shape[1:] == grid.shape
+    x, y = grid.ground_from_raster(np.arange(grid.shape[0]), np.arange(grid.shape[1]))
+    r, c = window.raster_from_ground(x, y)  # the coarse centres are centres of the window's cells inside it
+    assert np.allclose(r, np.round(r)) and np.allclose(c, np.round(c))
+    assert r.min() >= 0 and c.min() >= 0 and r.max() <= window.shape[0] - 1 and c.max() <= window.shape[1] - 1
+    assert r.max() > window.shape[0] - 1 - factor and c.max() > window.shape[1] - 1 - factor
+    assert np.max(np.abs(coarse / shadow.resample_bilinear(fine, window, grid) - 1)) < 1e-3
