@@ -52,7 +52,7 @@ def band_factor(plan) -> int:
     Parameters
     ----------
     plan : plan.RunPlan
-        The run's plan.
+        The run's plan: its layers' coarse FFT plans are read.
 
     Returns
     -------
