@@ -485,7 +485,8 @@ def summed_blocks(raster, factor: int):
     Returns
     -------
     sky_raster.SkyRaster
-        Read-only [radiance x sr].
+        [radiance x sr]; not to be written: the same object serves the frame's bands (its key
+        is the raster's identity).
     """
     return raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
 

@@ -78,7 +78,7 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
     Returns
     -------
     dict
-        JSON-able params (``cache.key_of``): the mask file's digest or the trees, the grids, the
+        JSON-able params (``cache_keys.key_of``): the mask file's digest or the trees, the grids, the
         projection.
     """
     c = plan.canopy
@@ -338,7 +338,7 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
     Returns
     -------
     dict
-        JSON-able params (``cache.key_of``).
+        JSON-able params (``cache_keys.key_of``).
     """
     c = plan.canopy
     return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),

@@ -48,7 +48,8 @@ class ForegroundModel(Protocol):
     line in ``vocabulary.FOREGROUNDS`` add a foreground model."""
 
     cached: bool
-    """Whether its passes are cycle products (``cycle.foreground_item``), stored per unit light."""
+    """Whether its passes are cycle products, stored per unit light: those of the built-in trees,
+    which ``cycle.foreground_item`` renders (docs/design.md, "Models plug in")."""
 
     def layer(self, cycle_frame: int, *, view: Camera, item: dict | None, sun_irradiance: np.ndarray,
               sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: float) -> ForegroundLayer | None:

@@ -74,7 +74,7 @@ class GroundResult:
     coarse_sky: tuple | None = None
     """With ``render_ground(coarse_sky=True)``: (sky-only ground (rows, cols, 3) on the coarse
     window [radiance x sr], its open-sky total (3,), each layer's sky raster as correlated),
-    for a ground reflectance's sky term (``brdf.sky_terms``)."""
+    for a ground reflectance's sky term (``sky_view_terms``, ``brdf_bands.weighted_raster``)."""
 
 
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,

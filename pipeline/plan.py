@@ -71,15 +71,12 @@ class ExposurePlan:
         Frames per second of the animation [1/s].
     white_balance : str
         What the picture shows as white (``vocabulary.WHITE_BALANCES``).
-    display : str
-        The display transform (``vocabulary.DISPLAYS``).
     """
 
     stops: float
     auto: AutoExposureConfig | None
     fps: float
     white_balance: str
-    display: str
 
 
 @dataclass(frozen=True)
@@ -102,9 +99,6 @@ class RunPlan:
     auto : tuple of str
         The config keys the plan placed itself (of ``ground.window``, ``ground.sun_window``,
         ``camera``).
-    shadow : tuple of float or None
-        (x_min, y_min, x_max, y_max) of where the canopy's shadow falls over the animation [m];
-        None for a periodic forest.
     exposures : tuple or None
         Per frame, its exposure with ``camera.exposure: auto`` (``lighting.with_exposures``), or
         None: a frame then meters the frames its exposure remembers [m^2/kcd].
@@ -134,7 +128,6 @@ class RunPlan:
     layers: tuple[LayerPlan, ...]
     camera: Camera
     auto: tuple[str, ...]
-    shadow: tuple[float, float, float, float] | None
     exposures: tuple[float | None, ...] | None
     scenes: tuple[Scene, ...]
     sky: SkyModel
@@ -242,8 +235,8 @@ def plan_run(config: Config) -> RunPlan:
             sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
             layers = _plan_layers(config, shading, window, sun_window, projection)
     c = config.camera
-    exposure = ExposurePlan(c.exposure, c.auto_exposure, config.animation.fps, c.white_balance, c.display)
-    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto, framing.shadow,
+    exposure = ExposurePlan(c.exposure, c.auto_exposure, config.animation.fps, c.white_balance)
+    plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
                    config.path)
@@ -292,8 +285,7 @@ def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, 
 
 
 # ---------------------------------------------------------------------------------------------
-# Framing: the ground windows and the camera placed from the canopy and the sun's path, so that
-# any place and time frames the canopy's dappled shadow (docs/method.md, "Framing").
+# The limits and the sun's fine window (framing.py places the windows and the camera).
 
 def _check_sizes(config: Config, plan: RunPlan) -> None:
     """Refuse a plan whose rasters would pass the stated limits (resolve.MAX_SUN_PIXELS and

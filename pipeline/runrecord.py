@@ -100,6 +100,8 @@ def resolved_config(config: Config, plan) -> dict:
     """
     values = asdict(config)
     values.pop("lines")
+    if not values["sky"]["params"]:  # a sky the parser reads itself records as it always did
+        values["sky"].pop("params")
     values["ground"]["window"] = list(plan.window.extent)
     if plan.sun_window is not None:
         values["ground"]["sun_window"] = list(plan.sun_window.extent)
