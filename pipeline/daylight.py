@@ -291,8 +291,10 @@ def twilight_illuminance(elevation_deg) -> np.ndarray:
     than TWILIGHT_MAX_FALL.
 
     ln E(h) = s h + max over h' in [h, 10 degrees] of (ln E_USNO(h') - s h'), s = TWILIGHT_MAX_FALL,
-    on a 0.001-degree grid from the end of civil twilight to 10 degrees, linear in between. It is
-    the curve (``usno_illuminance``) from -4 degrees up and departs from it below, where the
+    on a 0.001-degree grid from the end of civil twilight to 10 degrees, linear in between; the
+    curve's own value where that is not above it. It is the curve (``usno_illuminance``) from -4
+    degrees up (but for 0.9% just under 5 degrees, where its bands meet with a jump) and departs
+    from it below, where the
     curve falls faster than s: 1.06 times the curve at -5 degrees, 1.19 at -6 (4.1 lx for 3.4;
     docs/accuracy.md, "Low sun, civil twilight and the overcast colour").
 
@@ -307,10 +309,13 @@ def twilight_illuminance(elevation_deg) -> np.ndarray:
         float64 of the shape of ``elevation_deg`` [lx].
     """
     s = TWILIGHT_MAX_FALL
-    grid = np.linspace(np.degrees(TWILIGHT_END), TWILIGHT_BLEND[1], 16001)
+    grid = np.arange(round(np.degrees(TWILIGHT_END) * 1000), round(TWILIGHT_BLEND[1] * 1000) + 1) / 1000.0
     capped = np.maximum.accumulate((np.log(usno_illuminance(grid)) - s * grid)[::-1])[::-1]
     h = np.clip(np.asarray(elevation_deg, dtype=np.float64), grid[0], grid[-1])
-    return np.exp(np.interp(h, grid, capped) + s * h)
+    curve = usno_illuminance(h)
+    ramp = np.exp(np.interp(h, grid, capped) + s * h)
+    # the curve's own values where the cap is idle (the ramp there is the curve to rounding)
+    return np.where(ramp > curve * (1.0 + 1e-9), ramp, curve)
 
 
 def _smoothstep(t):
