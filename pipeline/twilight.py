@@ -163,14 +163,27 @@ def _sky_light(view_elevation, view_azimuth, sun_elevation: float, turbidity: fl
     return radiance[:-1] + MULTIPLE_SCATTERING * radiance[-1] * reach[:-1] / reach[-1]
 
 
+def _nodes():
+    """The table's directions: (elevations, azimuths from the sun's), each (TABLE_ELEVATIONS x TABLE_AZIMUTHS,).
+    [rad]"""
+    e = np.radians(90.0) * np.linspace(0.0, 1.0, TABLE_ELEVATIONS) ** 2
+    phi = np.radians(np.linspace(0.0, 180.0, TABLE_AZIMUTHS))
+    return tuple(a.ravel() for a in np.meshgrid(e, phi, indexing="ij"))
+
+
+@lru_cache(maxsize=4)
+def _at_sunset(turbidity: float) -> np.ndarray:
+    """``_sky_light`` at the table's nodes with the sun on the horizon, read-only. [1/sr]"""
+    light = _sky_light(*_nodes(), 0.0, turbidity)
+    light.setflags(write=False)
+    return light
+
+
 @lru_cache(maxsize=8)
 def _table(sun_elevation: float, turbidity: float) -> np.ndarray:
     """(TABLE_ELEVATIONS, TABLE_AZIMUTHS, 3) the colour factor of ``twilight_colour`` at the table's
     nodes, luminance 1 each. [1]"""
-    e = np.radians(90.0) * np.linspace(0.0, 1.0, TABLE_ELEVATIONS) ** 2
-    phi = np.radians(np.linspace(0.0, 180.0, TABLE_AZIMUTHS))
-    ee, pp = (a.ravel() for a in np.meshgrid(e, phi, indexing="ij"))
-    ratio = _sky_light(ee, pp, sun_elevation, turbidity) / _sky_light(ee, pp, 0.0, turbidity)
+    ratio = _sky_light(*_nodes(), sun_elevation, turbidity) / _at_sunset(turbidity)
     ratio /= (ratio @ np.asarray(REC709_LUMINANCE, dtype=np.float64))[:, None]
     ratio = ratio.reshape(TABLE_ELEVATIONS, TABLE_AZIMUTHS, 3)
     ratio.setflags(write=False)
