@@ -10,11 +10,11 @@ Writes three PNGs into the folder:
   middle, stacked top to bottom, each exposed by ``composite.display_sky`` (its median luminance
   at 0.4): the level falls some 1000-fold from the first to the last (printed: the open ground's
   illuminance), the colours are the model's.
-- ``golden-hour-flecks.png``: ``sunshade frame`` of one tree (6 m up, crown radius 3 m, 3000
-  leaves) with the sun at 8 degrees (azimuth 250), looking straight down from 7 m onto the
-  middle of its shadow, 43 m down-sun: the pinhole images are ellipses 0.4 m wide and 2.9 m
-  long, drawn out across the picture (left-right: towards azimuth 70, away from the sun).
-  White balance "shade", flat grey ground.
+- ``golden-hour-flecks.png``: ``sunshade frame`` of a forest (``forest.yaml``'s canopy, 10 m up,
+  18000 leaves a tree) with the sun at 10 degrees (azimuth 250), looking straight down from 6 m:
+  the pinhole images are ellipses 0.54 m wide and 3.1 m long, drawn out across the picture
+  (left-right: towards azimuth 70, away from the sun). White balance "shade", 2 stops over the
+  default exposure, flat grey ground.
 - ``civil-twilight.png``: ``sunshade frame`` at Madrid, 2026-08-13 19:28 UTC (the sun 3.1
   degrees down, azimuth 292), looking 25 degrees up towards the set sun (left) and away from it
   (right), exposed 1.8 stops under the config's default, flat grey ground.
@@ -44,15 +44,16 @@ WIDTH = 768
 
 TREE = "{count: 1, seed: 7, crown_radius: 3.0, leaves_per_tree: 3000, leaf_length: 0.10}"
 
-GOLDEN_HOUR = f"""
-canopy: {{height: 6.0, layout: isolated, trees: {TREE}}}
-sky: {{model: cie, turbidity: 3.0, sun: {{elevation: 8.0, azimuth: 250.0}}, alpha: 85.0}}
-ground: {{window: [10, 0, 70, 30], pixel: 0.04, sun_window: [26, 4, 54, 26], sun_pixel: 0.03,
-         albedo: ALBEDO, albedo_size: 2.0}}
-camera: {{position: [40.1, 14.6, 7.0], yaw: 160.0, pitch: -89.0, fov: 60.0, resolution: [640, 360],
-         white_balance: shade, exposure: -0.7}}
-foreground: {{model: none}}
-animation: {{frames: 1, fps: 24}}
+GOLDEN_HOUR = """
+canopy: {height: 10.0, layout: periodic, size: [20.0, 20.0],
+         trees: {count: 7, seed: 8, crown_radius: 4.5, leaves_per_tree: 18000, leaf_length: 0.11}}
+sky: {model: cie, turbidity: 3.0, sun: {elevation: 10.0, azimuth: 250.0}, alpha: 85.0}
+ground: {window: [-10, -10, 10, 10], pixel: 0.05, sun_window: [-10, -10, 10, 10], sun_pixel: 0.04,
+         albedo: ALBEDO, albedo_size: 2.0}
+camera: {position: [0.0, 0.0, 6.0], yaw: 160.0, pitch: -89.0, fov: 70.0, resolution: [640, 360],
+         white_balance: shade, exposure: 2.0}
+foreground: {model: none}
+animation: {frames: 1, fps: 24}
 """
 
 TWILIGHT = f"""
