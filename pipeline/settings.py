@@ -381,6 +381,8 @@ class CameraConfig:
         The auto exposure; None for a fixed one.
     white_balance : str
         A name in ``vocabulary.WHITE_BALANCES``.
+    follow : str
+        A name in ``vocabulary.FOLLOWS``: whether a placed camera pans with the shadow.
     """
 
     position: tuple[float, float, float] | None = None
@@ -393,6 +395,7 @@ class CameraConfig:
     display: str = "filmic"
     auto_exposure: AutoExposureConfig | None = None
     white_balance: str = "daylight"
+    follow: str = "auto"
 
 
 @dataclass(frozen=True)
