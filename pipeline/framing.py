@@ -1,6 +1,6 @@
 """Framing: the ground windows and the camera placed from the canopy and the sun's path, so that
-any place and time frames the canopy's dappled shadow (docs/method.md, "Framing"). Part of the
-plan stage."""
+any place and time frames the canopy's dappled shadow, the camera following it over a time span
+where one place would lose it (docs/method.md, "Framing"). Part of the plan stage."""
 
 from __future__ import annotations
 
@@ -276,6 +276,9 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
       the window when a window is given but no sun window.
+    - ``camera.follow``: a placed camera (no position, look_at or sun window given) that would
+      lose the shadow over the span (``auto``), or any (``shadow``), walks with it frame by
+      frame (``follow_targets``, ``follow_cameras``); the plan moves the sun window with it.
 
     Parameters
     ----------

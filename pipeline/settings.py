@@ -543,6 +543,8 @@ class Config:
                 values[section].pop(name)
         if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
             values["camera"].pop("auto_exposure")
+        if self.camera.position is not None or self.camera.look_at is not None:
+            values["camera"].pop("follow")  # a camera given where it stands or looks never follows
         if not values["output"]["passes"]:  # without passes a config hashes as it always did
             values["output"].pop("passes")
         if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did
