@@ -115,3 +115,16 @@ def test_follow_shadow_with_a_given_sun_window_is_refused(tmp_path, capsys):
     assert main(["check", str(write(tmp_path, config))]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "camera.follow" in err and "ground.sun_window" in err
+
+
+def test_a_given_camera_hashes_alike_whatever_its_follow(tmp_path):
+    """A camera given where it stands never follows: the key leaves its config's digest (and the
+    frames' config_hash) as it was; a placed camera's digest tells follow's values apart."""
+    digests = {}
+    for follow in ("auto", "fixed"):
+        given = sunset_span(frames=4, follow=follow, position=[0.0, 0.0, 1.7], look_at=[5.0, 0.0, 0.0])
+        placed = sunset_span(frames=4, follow=follow)
+        digests[follow] = (load(write(tmp_path, given, f"given-{follow}.yaml")).digest(),
+                           load(write(tmp_path, placed, f"placed-{follow}.yaml")).digest())
+    assert digests["auto"][0] == digests["fixed"][0]
+    assert digests["auto"][1] != digests["fixed"][1]
