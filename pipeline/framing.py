@@ -17,7 +17,7 @@ __all__ = ["CAMERA_HEIGHT", "CAMERA_PITCH", "ECLIPSE_PITCH", "CAMERA_TURN", "WIN
            "AUTO_SUN_MASK", "AUTO_VIEW_SAMPLES", "Framing", "canopy_extent", "crown_centre", "DAPPLE_TRANSMITTANCE",
            "ECLIPSE_TRANSMITTANCE", "LOW_SUN", "DAPPLE_CELL", "dappled_point", "shadow_extents", "leaf_shadow_extents",
            "frame_scene", "AIM_ROW", "seen_ground", "framing_warnings", "FOLLOW_SLACK",
-           "follow_targets", "follow_cameras"]
+           "follow_targets", "follow_cameras", "SEEN_MARGIN"]
 
 CAMERA_HEIGHT = 1.7
 """Eye height of a camera placed by default. [m]"""
@@ -329,6 +329,8 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
         else:
             auto.append("ground.sun_window")
             sun_window = _seen_sun_window(config, scenes, view, shadow_box, window)
+    if "ground.window" in auto and not periodic:  # only the ground some frame's camera sees
+        window = _seen_window([view] if follow is None else [v for _, v in follow], view, sun_window, window)
     return Framing(tuple(float(v) for v in window),
                    None if sun_window is None else tuple(float(v) for v in sun_window),
                    view, tuple(auto), shadow_box, follow)
@@ -516,6 +518,28 @@ def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
             break
         best = box
     return best
+
+
+SEEN_MARGIN = 2.0
+"""A placed ground.window reaches this far beyond the ground the cameras see (the texture
+filter's reach at the image's far edge). [m]"""
+
+
+def _seen_window(views, middle: camera.Camera, sun_window, window):
+    """The ground the cameras see over the frames with SEEN_MARGIN to spare, within ``window``,
+    and the sun window moved with each camera [m]: the shadow's union over a long span (264 x 86
+    m at a 3.7 degree sun) holds far more ground than a camera at eye height sees."""
+    points, _ = seen_ground(middle)
+    if not len(points):
+        return window
+    seen, fine = [], []
+    for view in views:  # a following camera only walks: its ground walks with it
+        dx, dy = np.subtract(view.position[:2], middle.position[:2])
+        moved = points + (dx, dy)
+        seen.append((*moved.min(axis=0), *moved.max(axis=0)))
+        if sun_window is not None:
+            fine.append((sun_window[0] + dx, sun_window[1] + dy, sun_window[2] + dx, sun_window[3] + dy))
+    return _union([_intersect(_grow(_union(seen), SEEN_MARGIN), window) or window, *fine])
 
 
 def _pixels(box, pixel) -> float:
