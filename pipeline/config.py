@@ -110,6 +110,9 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     if camera.follow == "shadow" and ground.sun_window is not None:
         root.fail("camera.follow", "shadow moves the sun window with the camera: leave out ground.sun_window "
                                    "(or give follow: fixed)")
+    if camera.follow == "shadow" and foreground.model == "passes":
+        root.fail("camera.follow", "shadow moves the camera, and imported foreground passes hold one camera's "
+                                   "view: give follow: fixed")
     if output.passes and ground.brdf is not None:
         root.fail("output.passes", "the light passes are not made with a ground.brdf yet; give one or the other")
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,

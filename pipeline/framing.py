@@ -317,7 +317,8 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     pitch = ECLIPSE_PITCH if deep else CAMERA_PITCH
     view = _place_camera(config, target, s, auto, pitch, aim)
     follow = None
-    movable = sun is not None and c.position is None and c.look_at is None and ground.sun_window is None
+    movable = (sun is not None and c.position is None and c.look_at is None and ground.sun_window is None
+               and config.foreground.model != "passes")  # imported passes hold one camera's view
     if movable and c.follow != "fixed" and len(scenes) > 1:
         targets = follow_targets(config, scenes, target)
         if c.follow == "shadow" or _strays(view, target, targets):

@@ -4,7 +4,7 @@ window that moves with it (docs/method.md, "Framing"). Small groves and small fr
 import numpy as np
 import pytest
 
-from pipeline import camera
+from pipeline import camera, io
 from pipeline.cache import Cache
 from pipeline.cli import main
 from pipeline.frame import render_frame
@@ -168,3 +168,18 @@ def test_the_placed_window_holds_the_ground_the_cameras_see_and_no_more(tmp_path
     # lattice moved with the window)
     assert np.abs(ours - theirs).max() <= 0.005 * theirs.max()
     assert np.abs(ours - theirs).mean() <= 1e-4 * theirs.mean()
+
+
+def test_follow_shadow_with_imported_foreground_passes_is_refused(tmp_path, capsys):
+    """Imported passes were rendered from one camera: a camera that walks would leave them."""
+    for name in ("sun", "sky", "alpha"):
+        io.write_exr(tmp_path / f"fg_{name}.0000.exr", np.zeros((90, 160, 3 if name != "alpha" else 1), np.float32))
+    config = sunset_span(frames=4, follow="shadow")
+    config["foreground"] = {"model": "passes", "sun": "fg_sun.%04d.exr", "sky": "fg_sky.%04d.exr",
+                            "alpha": "fg_alpha.%04d.exr"}
+    assert main(["check", str(write(tmp_path, config))]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "camera.follow" in err and "passes" in err
+    config["camera"]["follow"] = "auto"  # auto keeps one camera for them
+    plan = plan_run(load(write(tmp_path, config)))
+    assert plan.follow is None
