@@ -110,7 +110,7 @@ def open_ground() -> None:
             want = (R.shape(brdf, v, dirs) @ e.T + R.shape(brdf, v, sky.sun_direction) * e_sun) / np.pi
             errors.append(np.max(np.abs(radiance[r, c] / want - 1)))
             lambert.append(np.max(np.abs((e.sum(axis=1) + e_sun) / np.pi / want - 1)))
-        print(f"open ground, {name}: {len(bands.zeniths)} bands; at five views the rendered radiance is within "
+        print(f"open ground, {name}: {bands.count} bands; at five views the rendered radiance is within "
               f"{max(errors):.5f} of the quadrature (Lambert's would be {min(lambert):.3f}-{max(lambert):.3f} off)")
 
 
@@ -150,7 +150,9 @@ def config_case(path: str, samples: int) -> None:
         for tolerance in TOLERANCES:
             bands = brdf_bands.choose_bands(brdf, blocks, views, tolerance=tolerance)
             terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
-            weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2])).astype(np.float32)
+            clamped = R.clamp_view(views)
+            weights = bands.weights(np.arccos(clamped[:, 2]),
+                                    np.arctan2(clamped[:, 0], clamped[:, 1])).astype(np.float32)
             at_cells = lambda t: _at_cells(t, plan.window, cells)  # noqa: E731 -- the terms' grid may be coarser
             colour = at_cells(terms[bands.colour]).T
             banded = brdf_bands.banded_sky(colour, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
@@ -158,7 +160,7 @@ def config_case(path: str, samples: int) -> None:
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
                   f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, "
+            print(f"  tolerance {tolerance:g}: {bands.count} bands, "
                   f"largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
 
@@ -195,10 +197,12 @@ def window_cases() -> None:
                          for d in bands.directions()]
                 colour = shadow.ground_isolated(
                     brdf_bands.weighted_raster(raster, brdf, bands.directions()[bands.colour]), spectrum, plan)
-                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2])).astype(np.float32)
+                clamped = R.clamp_view(flat)
+                weights = bands.weights(np.arccos(clamped[:, 2]),
+                                        np.arctan2(clamped[:, 0], clamped[:, 1])).astype(np.float32)
                 banded = brdf_bands.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
                                       brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
-                cells.append(f"{len(bands.zeniths)}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
+                cells.append(f"{bands.count}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "
                   f"{lambert:.3f}    " + "  ".join(f"{cell:9s}" for cell in cells), flush=True)

@@ -20,7 +20,8 @@ from .sky_raster import SkyRaster, coarser
 
 __all__ = [
     "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
-    "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
+    "ViewBands", "ROUND_TURN", "turn_from", "shaded_bound", "choose_bands", "sky_ratio",
+    "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
 
@@ -28,11 +29,11 @@ if TYPE_CHECKING:
     from .settings import BrdfConfig  # model and parameters: any value with those two fields
 
 BAND_TOLERANCE = 0.01
-"""Largest relative error of the open sky's term over the pixels that ``choose_bands`` accepts:
-it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
+"""Largest bound of the blend's relative error under shading (``shaded_bound``) over the pixels
+that ``choose_bands`` accepts: it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
 
-MAX_BANDS = 8
-"""Most view bands (each one a correlation of the sky raster per canopy layer). [count]"""
+MAX_BANDS = 24
+"""Most view bands (each one a channel of the sky raster's correlation per canopy layer). [count]"""
 
 
 BAND_SKY_CELL = 0.025
@@ -74,24 +75,59 @@ def band_factor(plan) -> int:
     return factor
 
 
+def _hats(x, nodes, period=None) -> np.ndarray:
+    """Hat functions (len(nodes), n) at ``x`` (n,) over sorted ``nodes``: linear between
+    neighbours, held beyond the ends, or wrapped round ``period`` when given; they sum to 1. [1]"""
+    nodes = np.asarray(nodes, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64).reshape(-1)
+    if len(nodes) == 1:
+        return np.ones((1, len(x)))
+    eye = np.eye(len(nodes))
+    if period is None:
+        return np.stack([np.interp(x, nodes, eye[b]) for b in range(len(nodes))])
+    ends = np.concatenate([[nodes[-1] - period], nodes, [nodes[0] + period]])
+    values = np.concatenate([eye[-1:], eye, eye[:1]])
+    x = (x - nodes[0]) % period + nodes[0]
+    return np.stack([np.interp(x, ends, values[:, b]) for b in range(len(nodes))])
+
+
+def turn_from(azimuth, reference: float) -> np.ndarray:
+    """Azimuths turned to ``reference``: in [-pi, pi) [rad]."""
+    return (np.asarray(azimuth) - reference + np.pi) % (2.0 * np.pi) - np.pi
+
+
 @dataclass(frozen=True)
 class ViewBands:
     """View bands: the sky's term with the view V held per band (Max: f_r independent of V over a patch).
 
+    The bands are the views at every pair of a zenith (near to far) and a turn of azimuth (a
+    sector across the image), and a pixel blends them bilinearly in its view's zenith and azimuth.
+
     Attributes
     ----------
     zeniths : tuple of float
-        (B,) the bands' view zenith angles, near to far [rad].
+        (Z,) the bands' view zenith angles, near to far [rad].
     azimuth : float
-        The azimuth of their view direction (from the ground towards the camera) [rad].
+        The azimuth of their middle sector's view direction (from the ground towards the camera) [rad].
     error : float
-        The largest relative error of the open sky's term over the sampled pixels that
-        ``choose_bands`` measured [1].
+        The largest bound of the blend's relative error under any shading over the sampled
+        pixels that ``choose_bands`` measured (``shaded_bound``) [1].
+    turns : tuple of float
+        (T,) the sectors' azimuths from ``azimuth``, in [-pi, pi) [rad].
+    round : bool
+        Whether the sectors wrap round the full circle (a camera with ground all round it).
     """
 
     zeniths: tuple[float, ...]
     azimuth: float
     error: float
+    turns: tuple[float, ...] = (0.0,)
+    round: bool = False
+
+    @property
+    def count(self) -> int:
+        """The number of bands, Z x T [count]."""
+        return len(self.zeniths) * len(self.turns)
 
     @property
     def colour(self) -> int:
@@ -105,38 +141,43 @@ class ViewBands:
         int
             Its index [index].
         """
-        return len(self.zeniths) // 2
+        return (len(self.zeniths) // 2) * len(self.turns) + len(self.turns) // 2
 
     def directions(self) -> np.ndarray:
-        """Unit view vectors of the bands.
+        """Unit view vectors of the bands, zenith by zenith, sector by sector within.
 
         Returns
         -------
         numpy.ndarray
             (B, 3) float64 [1].
         """
-        z = np.asarray(self.zeniths)
-        return np.stack([np.sin(z) * np.sin(self.azimuth), np.sin(z) * np.cos(self.azimuth), np.cos(z)], axis=-1)
+        z, t = np.meshgrid(np.asarray(self.zeniths), np.asarray(self.turns), indexing="ij")
+        z, a = z.reshape(-1), self.azimuth + t.reshape(-1)
+        return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
 
-    def weights(self, zenith) -> np.ndarray:
-        """Weights of each band at view zenith angles; they sum to 1.
+    def weights(self, zenith, azimuth=None) -> np.ndarray:
+        """Weights of each band at views; they sum to 1.
 
-        Linear between neighbouring bands' zeniths (hat functions), held beyond the ends.
+        Products of hat functions: linear between neighbouring bands' zeniths and between
+        neighbouring sectors' azimuths, held beyond the ends (wrapped round with ``round``).
 
         Parameters
         ----------
         zenith : numpy.ndarray
             (n,) view zenith angles [rad].
+        azimuth : numpy.ndarray, optional
+            (n,) view azimuths [rad]; needed with more than one sector.
 
         Returns
         -------
         numpy.ndarray
             (B, n) float64 [1].
         """
-        z = np.asarray(self.zeniths)
-        eye = np.eye(len(z))
-        return np.stack([np.interp(zenith, z, eye[b]) for b in range(len(z))]) if len(z) > 1 \
-            else np.ones((1, np.size(zenith)))
+        by_zenith = _hats(zenith, self.zeniths)
+        if len(self.turns) == 1:
+            return by_zenith
+        by_turn = _hats(turn_from(azimuth, self.azimuth), self.turns, 2.0 * np.pi if self.round else None)
+        return (by_zenith[:, None, :] * by_turn[None, :, :]).reshape(self.count, -1)
 
 
 class _LastCall:
@@ -150,7 +191,7 @@ class _LastCall:
     def get(self, key: tuple, make):
         """The result for ``key``: the last one if ``key`` is the last call's, else ``make()``."""
         same = self.key is not None and len(self.key) == len(key) and all(
-            a == b if isinstance(b, (int, float, str)) else a is b for a, b in zip(self.key, key))
+            a == b if isinstance(b, (int, float, str, bytes)) else a is b for a, b in zip(self.key, key))
         if not same:
             self.key, self.value = key, make()
         return self.value
@@ -208,15 +249,48 @@ _SHAPES = _LastCall(), _LastCall()
 ``_coarsen``'s blocks: the same while the camera and the bands' azimuth stand still."""
 
 
+def shaded_bound(shapes, blend, light) -> np.ndarray:
+    """A bound of the blend's relative error under any canopy, per view.
+
+    Under leaves the sky's term is sum_i e_i m_i s(V, L_i), m_i in [0, 1] the light through the
+    canopy along L_i; the bands give r sum_i e_i m_i d_i(V) with d_i = sum_b w_b s(V_b, L_i) and r
+    (``sky_ratio``) making it exact on open ground (m = 1). The error sum_i e_i m_i (s_i - r d_i)
+    sums to 0 at m = 1, so whatever the shading it is at most half of sum_i e_i |s_i - r d_i|:
+    that over the open term (docs/method.md, "The ground's reflectance").
+
+    Parameters
+    ----------
+    shapes : numpy.ndarray
+        (n, m) s(V, L_i) at each view's own V [1].
+    blend : numpy.ndarray
+        (n, m) the bands' shapes blended at each view, sum_b w_b s(V_b, L_i) [1].
+    light : numpy.ndarray
+        (m,) e_i, the sky's light per direction [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) [1].
+    """
+    own = shapes @ light
+    ratio = own / np.maximum(blend @ light, 1e-30)
+    return 0.5 * (np.abs(shapes - ratio[:, None] * blend) @ light) / np.maximum(own, 1e-30)
+
+
+ROUND_TURN = np.radians(270.0)
+"""Spread of the views' azimuths [rad] beyond which the sectors wrap round the full circle
+(a camera looking down at ground all round it). [rad]"""
+
+
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
                  most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
-    """View bands, 1 to ``most``, added one at a time where the blend is worst.
+    """View bands in zenith and sector, added where the blend is worst under shading.
 
-    First the middle, then both ends, then the sampled view zenith of the largest error, until the
-    blend gives the open sky's term sum_i e_i s(V, L_i) within ``tolerance`` (relative) at every
-    sampled pixel's own view zenith, against that sum per pixel (brute force over the raster's cells,
-    coarsened to SKY_CELLS) at the bands' azimuth. Azimuth of the bands: that of the views' mean (the
-    change with azimuth across the image is ``sky_ratio``'s).
+    First one band at the middle; then, while the largest ``shaded_bound`` over the sampled pixels
+    exceeds ``tolerance``, a zenith (both ends first, then the worst pixel's) or a sector (both ends
+    of the views' azimuths first, or three round the circle, then the worst pixel's), whichever
+    lowers the largest bound more per band added, up to ``most`` bands. Sums over the raster's cells
+    coarsened to SKY_CELLS.
 
     Parameters
     ----------
@@ -227,7 +301,7 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     views : numpy.ndarray
         (n, 3) the pixels' view vectors [1].
     tolerance : float, optional
-        Largest relative error accepted [1].
+        Largest bound accepted [1].
     most : int, optional
         Most bands [count].
     samples : int, optional
@@ -236,41 +310,88 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     Returns
     -------
     ViewBands
-        The bands, with the error they reached.
+        The bands, with the bound they reached.
     """
-    views_in, views = views, clamp_view(views)
-    pick = views[:: max(1, len(views) // samples)]
     dirs, e = _coarsened(raster, SKY_CELLS)
+    # the same bands while the camera and the sky's light stand still (a run's frames)
+    return _CHOSEN.get((brdf, views, dirs, e.tobytes(), tolerance, most, samples),
+                       lambda: _choose(brdf, views, dirs, e, tolerance, most, samples))
+
+
+_CHOSEN = _LastCall()
+"""``choose_bands``' last bands."""
+
+
+def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) -> ViewBands:
+    """``choose_bands``' work over the coarsened raster's directions (m, 3) and light (m,)."""
+    views = clamp_view(views_in)
+    pick = views[:: max(1, len(views) // samples)]
     zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
+    azimuth = np.arctan2(pick[:, 0], pick[:, 1])
     mean = views.mean(axis=0)
-    azimuth = float(np.arctan2(mean[0], mean[1]))
-    # the bands fix the change with distance; the change across (azimuth) is ``sky_ratio``'s
-    exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(
-        brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None])) @ e
+    middle = float(np.arctan2(mean[0], mean[1]))
+    turn = turn_from(azimuth, middle)
+    round_ = float(np.ptp(turn)) > ROUND_TURN
+    if not round_:  # the sectors centred on the views' spread
+        middle += 0.5 * float(turn.min() + turn.max())
+        turn = turn_from(azimuth, middle)
+    exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(brdf, pick[:, None, :], dirs[None]))
+    known: dict = {}
+
+    def shapes_at(bands: ViewBands) -> np.ndarray:
+        """s(V_b, L_i) (B, m), each band's made once per call."""
+        keys = [(z, t) for z in bands.zeniths for t in bands.turns]
+        missing = [k for k in keys if k not in known]
+        if missing:
+            made = shape(brdf, _directions(missing, bands.azimuth)[:, None, :], dirs[None])
+            known.update(zip(missing, made))
+        return np.stack([known[k] for k in keys])
+
+    def bound(zeniths, turns) -> ViewBands:
+        trial = ViewBands(tuple(zeniths), middle, 0.0, tuple(turns), round_)
+        errors = shaded_bound(exact, trial.weights(zenith, azimuth).T @ shapes_at(trial), e)
+        worst = int(np.argmax(errors))
+        return ViewBands(trial.zeniths, middle, float(errors[worst]), trial.turns, round_), worst
+
     lo, hi = float(zenith.min()), float(zenith.max())
-    zeniths = [0.5 * (lo + hi)]
-    while True:  # greedy: the next band goes where the blend is worst
-        trial = ViewBands(tuple(zeniths), azimuth, 0.0)
-        at_bands = shape(brdf, trial.directions()[:, None, :], dirs[None]) @ e
-        relative = np.abs(at_bands @ trial.weights(zenith) - exact) / np.maximum(np.abs(exact), 1e-30)
-        worst = int(np.argmax(relative))
-        bands = ViewBands(trial.zeniths, azimuth, float(relative[worst]))
-        if bands.error <= tolerance or len(zeniths) >= most:
-            return bands
-        zeniths = [lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})
-        if len(zeniths) == len(trial.zeniths):  # the worst sample is a band already
-            return bands
+    bands, worst = bound([0.5 * (lo + hi)], [0.0])
+    while bands.error > tolerance:
+        zeniths, turns = list(bands.zeniths), list(bands.turns)
+        grown = [[lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})]
+        if round_:
+            grown.append([-2.0 * np.pi / 3.0, 0.0, 2.0 * np.pi / 3.0] if len(turns) == 1
+                         else sorted({*turns, float(turn[worst])}))
+        elif float(np.ptp(turn)) > 1e-6:
+            grown.append([float(turn.min()), float(turn.max())] if len(turns) == 1
+                         else sorted({*turns, float(turn[worst])}))
+        options = [(grown[0], turns)] + [(zeniths, t) for t in grown[1:]]
+        options = [(z, t) for z, t in options if bands.count < len(z) * len(t) <= most]
+        if not options:
+            break
+        tried = [bound(z, t) for z, t in options]
+        gain = [(bands.error - b.error) / (b.count - bands.count) for b, _ in tried]
+        bands, worst = tried[int(np.argmax(gain))]
+    return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
+def _directions(nodes, azimuth: float) -> np.ndarray:
+    """Unit view vectors (k, 3) at (zenith, turn) pairs [rad] from ``azimuth`` [rad]. [1]"""
+    z = np.array([n[0] for n in nodes])
+    a = azimuth + np.array([n[1] for n in nodes])
+    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
+
+
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None,
+              weights=None) -> np.ndarray:
     """The factor that makes the banded sky term exact on open ground, per channel and pixel.
 
     The open sky's term at the pixel's own view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives
     on open ground, the colour band's term sum_i e_i s(V_c, L_i) times the blended modulation
     sum_b w_b S_b / S_c (S_b = sum_i e'_i s(V_b, L_i), e' the channels' sum), all over the raster
-    coarsened to SKY_CELLS cells: it carries the change across the image (view azimuth) that the bands
-    do not hold. Read on a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the
-    views' range, bilinearly (held at its edges).
+    coarsened to SKY_CELLS cells: it carries the blend's own error on open ground and the change of
+    the sky's colour with the view. The open term, smooth in the view, is read on a lattice of
+    ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held at
+    its edges); the blend, with its kinks at the bands, at each pixel's own weights.
 
     Parameters
     ----------
@@ -285,6 +406,8 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     angles : tuple of numpy.ndarray, optional
         If given, the views' zenith angles and azimuths after ``clamp_view`` ((n,) each,
         ``_camera_views``) [rad].
+    weights : numpy.ndarray, optional
+        If given, the bands' weights at the views (B, n) (``ViewBands.weights``) [1].
 
     Returns
     -------
@@ -295,6 +418,8 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     if angles is None:
         views = clamp_view(views)
         angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
+    if weights is None:
+        weights = bands.weights(*angles).astype(np.float32)
     lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
 
@@ -306,14 +431,15 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
     summed = at_bands.sum(axis=-1)
-    modulation = summed / max(float(summed[bands.colour]), 1e-30)
-    blended = np.maximum(at_bands[bands.colour][None, :] * (modulation @ bands.weights(axes[0]))[:, None], 1e-30)
-    ratio = np.moveaxis(own / blended[:, None, :], -1, 0).astype(np.float32)
+    modulation = (summed / max(float(summed[bands.colour]), 1e-30)).astype(np.float32)
     from . import _array_loops
 
-    flat = np.ascontiguousarray(ratio.reshape(len(ratio), -1))
-    out = np.empty((len(ratio), len(corner)), dtype=np.float32)
+    flat = np.ascontiguousarray(np.moveaxis(own, -1, 0).reshape(own.shape[-1], -1).astype(np.float32))
+    out = np.empty((len(flat), len(corner)), dtype=np.float32)
     _array_loops.lattice_read(flat, corner, taps, lattice, out)
+    blend = modulation @ weights  # (n,)
+    for channel, light in enumerate(at_bands[bands.colour]):
+        out[channel] /= np.maximum(np.float32(light) * blend, np.float32(1e-30))
     return out
 
 

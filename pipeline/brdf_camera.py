@@ -5,6 +5,7 @@ blended from the view bands (``brdf_bands``), and the background the ground make
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -59,7 +60,7 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
 
     rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ], rho
     the albedo texture, E_sun the ground's light from the sun alone, the sky's term ``banded_sky``:
-    w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster``, V(x) each
+    w_b the bands' weights at the pixel's view zenith and azimuth, r(x) ``sky_ratio`` over ``raster``, V(x) each
     pixel's own view vector. The sun's term is exact per pixel; the sky's is blended (docs/method.md,
     "The ground's reflectance"). 0 where no ground is seen.
 
@@ -105,8 +106,8 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     light = cam._filtered_chain(sun, fp)
     if sun_direction is not None:
         light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
-    weights = _band_weights(camera, bands.zeniths)
-    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
+    weights = _band_weights(camera, _nodes(bands))
+    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth), weights=weights)
     if open_light is not None:
         sky = _relative_at_pixels(camera, *sky_maps)  # (3, n), relative to open ground
         sky *= open_sky(bands, weights, *open_light)
@@ -159,8 +160,8 @@ def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light
     numpy.ndarray
         (rows, cols, 3) float32 [1].
     """
-    weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
-    flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
+    weights = _cell_weights(camera, grid, _nodes(bands))  # (B, rows * cols)
+    flat = np.moveaxis(bands_light.reshape(-1, bands.count), -1, 0)
     colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
     sky = banded_sky(colour_flat, flat, weights, np.float32(1.0))
     sky /= np.maximum(open_sky(bands, weights, colour_open, bands_open), np.float32(1e-30))
@@ -201,23 +202,29 @@ def _pixel_reads(camera: cam.Camera, grid):
     return corner, taps
 
 
+def _nodes(bands: ViewBands) -> ViewBands:
+    """The bands without their error: the key of the weights' caches (the same nodes every frame)."""
+    return replace(bands, error=0.0)
+
+
 @functools.lru_cache(maxsize=2)
-def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
-    """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
-    cell centres to the camera's pinhole (held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
+def _cell_weights(camera: cam.Camera, grid, bands: ViewBands) -> np.ndarray:
+    """``ViewBands.weights`` (B, rows * cols) float32 at the views from a ground grid's cell
+    centres to the camera's pinhole (zenith held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
     gx, gy = grid.ground_from_raster(np.arange(grid.shape[0])[:, None], np.arange(grid.shape[1])[None, :])
-    across = np.hypot(camera.position[0] - gx, camera.position[1] - gy).reshape(-1)
-    zenith = np.minimum(np.arctan2(across, float(camera.position[2])), VIEW_ZENITH_LIMIT)
-    out = ViewBands(zeniths, 0.0, 0.0).weights(zenith).astype(np.float32)
+    dx, dy = np.broadcast_arrays(camera.position[0] - gx, camera.position[1] - gy)
+    zenith = np.minimum(np.arctan2(np.hypot(dx, dy).reshape(-1), float(camera.position[2])), VIEW_ZENITH_LIMIT)
+    out = bands.weights(zenith, np.arctan2(dx, dy).reshape(-1)).astype(np.float32)
     out.flags.writeable = False
     return out
 
 
 @functools.lru_cache(maxsize=2)
-def _band_weights(camera: cam.Camera, zeniths: tuple) -> np.ndarray:
-    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own view zeniths: the
-    same while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
-    out = ViewBands(zeniths, 0.0, 0.0).weights(_camera_views(camera)[1]).astype(np.float32)
+def _band_weights(camera: cam.Camera, bands: ViewBands) -> np.ndarray:
+    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own views: the same
+    while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
+    _, zenith, azimuth = _camera_views(camera)
+    out = bands.weights(zenith, azimuth).astype(np.float32)
     out.flags.writeable = False
     return out
 
