@@ -98,7 +98,7 @@ def open_ground() -> None:
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)
         bands = brdf_bands.choose_bands(brdf, raster, views)
-        band_sky = [R.shape(brdf, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))
+        band_sky = [R.shape(brdf, v, dirs) @ (e.T if k in bands.colours else e.sum(axis=0))
                     for k, v in enumerate(bands.directions())]
         radiance = brdf_camera.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
                                      sky_maps=(constant(np.concatenate(np.atleast_1d(*band_sky))),),
@@ -120,7 +120,7 @@ def config_case(path: str, samples: int) -> None:
 
     from pipeline import cache, camera
     from pipeline.cycle import cycle_item
-    from pipeline.ground import render_ground, sky_view_terms
+    from pipeline.ground import render_ground
     from pipeline.plan import plan_run
     from pipeline.resolve import load
 
@@ -147,22 +147,49 @@ def config_case(path: str, samples: int) -> None:
               f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
         blocks = brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan))  # as the frame takes it
+        clamped = R.clamp_view(views)
+        angles = np.arccos(clamped[:, 2]), np.arctan2(clamped[:, 0], clamped[:, 1])
         for tolerance in TOLERANCES:
             bands = brdf_bands.choose_bands(brdf, blocks, views, tolerance=tolerance)
-            terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
-            clamped = R.clamp_view(views)
-            weights = bands.weights(np.arccos(clamped[:, 2]),
-                                    np.arctan2(clamped[:, 0], clamped[:, 1])).astype(np.float32)
+            terms = _frame_terms(plan, sky, store, bands, ground)
+            weights = bands.weights(*angles).astype(np.float32)[:, chosen]
+            ratio = brdf_bands.sky_ratio(brdf, blocks, bands, views)[:, chosen]
             at_cells = lambda t: _at_cells(t, plan.window, cells)  # noqa: E731 -- the terms' grid may be coarser
-            colour = at_cells(terms[bands.colour]).T
-            banded = brdf_bands.banded_sky(colour, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
-                                  weights[:, chosen], brdf_bands.sky_ratio(brdf, blocks, bands, views)[:, chosen])
+            colours = np.stack([at_cells(terms[c]).T for c in bands.colours])
+            banded = brdf_bands.banded_sky(bands, colours, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
+                                           weights, ratio)
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
                   f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {bands.count} bands, "
-                  f"largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+            print(f"  tolerance {tolerance:g}: {bands.count} bands ({len(bands.zeniths)} zeniths x "
+                  f"{len(bands.turns)} sectors), largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
+            if tolerance == brdf_bands.BAND_TOLERANCE:
+                # the blend alone: the same bands correlated over the whole coarse window (no blocks
+                # of shadow.coarser_isolated) and taken at the cells themselves (no bilinear read)
+                full = [shadow.ground_isolated(
+                    brdf_bands.weighted_raster(raster, brdf, d, summed=k not in bands.colours),
+                    item["coarse"], layer.coarse, workers=2)[(slice(None), *cells)]
+                    for k, d in enumerate(bands.directions())]
+                alone = brdf_bands.banded_sky(bands, np.stack([full[c] for c in bands.colours]),
+                                              np.stack([f.sum(axis=0) for f in full]), weights, ratio)
+                print(f"    the blend alone (full-resolution terms at the cells): largest error "
+                      f"{np.max(np.abs(alone / brute - 1)):.4f}, median {np.median(np.abs(alone / brute - 1)):.4f}; "
+                      f"the blocks and the read move the result by up to {np.max(np.abs(banded / alone - 1)):.4f}",
+                      flush=True)
+
+
+def _frame_terms(plan, sky, store, bands, ground) -> list:
+    """The bands' terms as ``frame.brdf_background`` makes them: the colour bands in every channel,
+    the others on the channels' sum."""
+    from pipeline.ground import sky_view_terms
+
+    directions, colours = bands.directions(), list(bands.colours)
+    others = [b for b in range(bands.count) if b not in colours]
+    made = dict(zip(colours, sky_view_terms(plan, 0, sky, store, 2, directions[colours], ground)))
+    if others:
+        made.update(zip(others, sky_view_terms(plan, 0, sky, store, 2, directions[others], ground, colour=-1)))
+    return [made[b] for b in range(bands.count)]
 
 
 def window_cases() -> None:
@@ -192,16 +219,16 @@ def window_cases() -> None:
             cells = []
             for tolerance in TOLERANCES:
                 bands = brdf_bands.choose_bands(brdf, raster, flat, tolerance=tolerance)
+                directions = bands.directions()
+                colours = np.stack([shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, directions[c]),
+                                                           spectrum, plan).reshape(3, -1) for c in bands.colours])
                 terms = [shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, d, summed=True), spectrum,
-                                                plan).reshape(-1)
-                         for d in bands.directions()]
-                colour = shadow.ground_isolated(
-                    brdf_bands.weighted_raster(raster, brdf, bands.directions()[bands.colour]), spectrum, plan)
+                                                plan).reshape(-1) for d in directions]
                 clamped = R.clamp_view(flat)
                 weights = bands.weights(np.arccos(clamped[:, 2]),
                                         np.arctan2(clamped[:, 0], clamped[:, 1])).astype(np.float32)
-                banded = brdf_bands.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
-                                      brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
+                banded = brdf_bands.banded_sky(bands, colours, np.stack(terms), weights,
+                                               brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
                 cells.append(f"{bands.count}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "

@@ -1,8 +1,8 @@
 """The sky's term of the ground's reflectance through view bands (docs/method.md, "The ground's
 reflectance"): Max holds f_r(V, L) independent of V over a patch, so the sky raster is weighted
 by the shape at a few views, the bands (``weighted_raster``), each correlated, and blended per
-pixel by its view zenith (``banded_sky``) with a factor that makes the blend exact on open ground
-(``sky_ratio``); ``choose_bands`` places the bands. Directions as in ``brdf``."""
+pixel by its view zenith and azimuth (``banded_sky``) with a factor that makes the blend exact on
+open ground (``sky_ratio``); ``choose_bands`` places the bands. Directions as in ``brdf``."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from .sky_raster import SkyRaster, coarser
 
 __all__ = [
     "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
-    "ViewBands", "ROUND_TURN", "turn_from", "shaded_bound", "choose_bands", "sky_ratio",
+    "ViewBands", "ROUND_TURN", "shaded_bound", "choose_bands", "sky_ratio",
     "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
@@ -78,20 +78,21 @@ def band_factor(plan) -> int:
 def _hats(x, nodes, period=None) -> np.ndarray:
     """Hat functions (len(nodes), n) at ``x`` (n,) over sorted ``nodes``: linear between
     neighbours, held beyond the ends, or wrapped round ``period`` when given; they sum to 1. [1]"""
-    nodes = np.asarray(nodes, dtype=np.float64)
-    x = np.asarray(x, dtype=np.float64).reshape(-1)
-    if len(nodes) == 1:
-        return np.ones((1, len(x)))
+    nodes, x = np.asarray(nodes, dtype=np.float64), np.asarray(x, dtype=np.float64).reshape(-1)
     eye = np.eye(len(nodes))
-    if period is None:
-        return np.stack([np.interp(x, nodes, eye[b]) for b in range(len(nodes))])
-    ends = np.concatenate([[nodes[-1] - period], nodes, [nodes[0] + period]])
-    values = np.concatenate([eye[-1:], eye, eye[:1]])
-    x = (x - nodes[0]) % period + nodes[0]
-    return np.stack([np.interp(x, ends, values[:, b]) for b in range(len(nodes))])
+    if len(nodes) > 1 and period is not None:  # wrapped: the last node again before the first, and after
+        x, nodes, eye = (x - nodes[0]) % period + nodes[0], np.concatenate(
+            [[nodes[-1] - period], nodes, [nodes[0] + period]]), np.concatenate([eye[-1:], eye, eye[:1]])
+    return np.stack([np.interp(x, nodes, eye[:, b]) for b in range(eye.shape[1])]) if len(nodes) > 1 \
+        else np.ones((1, len(x)))
 
 
-def turn_from(azimuth, reference: float) -> np.ndarray:
+def _unit(zenith, azimuth) -> np.ndarray:
+    """Unit vectors (..., 3) at zenith angles and azimuths [rad] (from +y towards +x). [1]"""
+    return np.stack([np.sin(zenith) * np.sin(azimuth), np.sin(zenith) * np.cos(azimuth), np.cos(zenith)], axis=-1)
+
+
+def _turn_from(azimuth, reference: float) -> np.ndarray:
     """Azimuths turned to ``reference``: in [-pi, pi) [rad]."""
     return (np.asarray(azimuth) - reference + np.pi) % (2.0 * np.pi) - np.pi
 
@@ -100,8 +101,8 @@ def turn_from(azimuth, reference: float) -> np.ndarray:
 class ViewBands:
     """View bands: the sky's term with the view V held per band (Max: f_r independent of V over a patch).
 
-    The bands are the views at every pair of a zenith (near to far) and a turn of azimuth (a
-    sector across the image), and a pixel blends them bilinearly in its view's zenith and azimuth.
+    The views at every pair of a zenith (near to far) and a turn of azimuth (a sector across the
+    image), blended bilinearly in the view's zenith and azimuth.
 
     Attributes
     ----------
@@ -130,18 +131,36 @@ class ViewBands:
         return len(self.zeniths) * len(self.turns)
 
     @property
-    def colour(self) -> int:
-        """The band whose term is correlated in every channel (the middle one).
+    def colours(self) -> tuple[int, ...]:
+        """The bands whose terms are correlated in every channel: the middle sector's, one per zenith.
 
-        It gives the sky light's colour under the canopy; the others are correlated on the channels' sum
-        and give only how the reflectance modulates it (``banded_sky``).
+        They give the sky light's colour under the canopy, blended by the view zenith; the others
+        are correlated on the channels' sum and give only how the reflectance modulates it
+        (``banded_sky``).
 
         Returns
         -------
-        int
-            Its index [index].
+        tuple of int
+            Their indices, near to far [index].
         """
-        return (len(self.zeniths) // 2) * len(self.turns) + len(self.turns) // 2
+        turns = len(self.turns)
+        return tuple(z * turns + turns // 2 for z in range(len(self.zeniths)))
+
+    def zenith_weights(self, weights) -> np.ndarray:
+        """The zeniths' hat weights from the bands' weights: summed over the sectors.
+
+        Parameters
+        ----------
+        weights : numpy.ndarray
+            (B, n) ``weights`` [1].
+
+        Returns
+        -------
+        numpy.ndarray
+            (Z, n), the dtype of ``weights`` [1].
+        """
+        return _ZENITH.get((weights, len(self.turns)),
+                           lambda: weights.reshape(len(self.zeniths), len(self.turns), -1).sum(axis=1))
 
     def directions(self) -> np.ndarray:
         """Unit view vectors of the bands, zenith by zenith, sector by sector within.
@@ -152,8 +171,7 @@ class ViewBands:
             (B, 3) float64 [1].
         """
         z, t = np.meshgrid(np.asarray(self.zeniths), np.asarray(self.turns), indexing="ij")
-        z, a = z.reshape(-1), self.azimuth + t.reshape(-1)
-        return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
+        return _unit(z.reshape(-1), self.azimuth + t.reshape(-1))
 
     def weights(self, zenith, azimuth=None) -> np.ndarray:
         """Weights of each band at views; they sum to 1.
@@ -176,7 +194,7 @@ class ViewBands:
         by_zenith = _hats(zenith, self.zeniths)
         if len(self.turns) == 1:
             return by_zenith
-        by_turn = _hats(turn_from(azimuth, self.azimuth), self.turns, 2.0 * np.pi if self.round else None)
+        by_turn = _hats(_turn_from(azimuth, self.azimuth), self.turns, 2.0 * np.pi if self.round else None)
         return (by_zenith[:, None, :] * by_turn[None, :, :]).reshape(self.count, -1)
 
 
@@ -243,6 +261,9 @@ def _coarsen(raster, most_cells: int):
     per_block = cut.sum(axis=(2, 4), dtype=np.float64)  # (channels, block rows, block cols)
     return _block_directions(raster.grid, most_cells), per_block.reshape(count, -1).T
 
+
+_ZENITH = _LastCall()
+"""``ViewBands.zenith_weights``: a frame sums the same (cached) weights twice, the next frame again."""
 
 _SHAPES = _LastCall(), _LastCall()
 """The shape at ``choose_bands``' sampled views and at ``sky_ratio``'s lattice of views, towards
@@ -326,15 +347,13 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
     """``choose_bands``' work over the coarsened raster's directions (m, 3) and light (m,)."""
     views = clamp_view(views_in)
     pick = views[:: max(1, len(views) // samples)]
-    zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
-    azimuth = np.arctan2(pick[:, 0], pick[:, 1])
-    mean = views.mean(axis=0)
-    middle = float(np.arctan2(mean[0], mean[1]))
-    turn = turn_from(azimuth, middle)
+    zenith, azimuth = np.arccos(np.clip(pick[:, 2], -1.0, 1.0)), np.arctan2(pick[:, 0], pick[:, 1])
+    middle = float(np.arctan2(*views.mean(axis=0)[:2]))
+    turn = _turn_from(azimuth, middle)
     round_ = float(np.ptp(turn)) > ROUND_TURN
     if not round_:  # the sectors centred on the views' spread
         middle += 0.5 * float(turn.min() + turn.max())
-        turn = turn_from(azimuth, middle)
+        turn = _turn_from(azimuth, middle)
     exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(brdf, pick[:, None, :], dirs[None]))
     known: dict = {}
 
@@ -343,7 +362,8 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
         keys = [(z, t) for z in bands.zeniths for t in bands.turns]
         missing = [k for k in keys if k not in known]
         if missing:
-            made = shape(brdf, _directions(missing, bands.azimuth)[:, None, :], dirs[None])
+            made = shape(brdf, _unit(np.array([k[0] for k in missing]),
+                                     bands.azimuth + np.array([k[1] for k in missing]))[:, None, :], dirs[None])
             known.update(zip(missing, made))
         return np.stack([known[k] for k in keys])
 
@@ -357,14 +377,9 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
     bands, worst = bound([0.5 * (lo + hi)], [0.0])
     while bands.error > tolerance:
         zeniths, turns = list(bands.zeniths), list(bands.turns)
-        grown = [[lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})]
-        if round_:
-            grown.append([-2.0 * np.pi / 3.0, 0.0, 2.0 * np.pi / 3.0] if len(turns) == 1
-                         else sorted({*turns, float(turn[worst])}))
-        elif float(np.ptp(turn)) > 1e-6:
-            grown.append([float(turn.min()), float(turn.max())] if len(turns) == 1
-                         else sorted({*turns, float(turn[worst])}))
-        options = [(grown[0], turns)] + [(zeniths, t) for t in grown[1:]]
+        first = [-2.0 * np.pi / 3.0, 0.0, 2.0 * np.pi / 3.0] if round_ else sorted({turn.min(), turn.max()})
+        options = [(sorted({lo, hi}) if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])}), turns),
+                   (zeniths, first if len(turns) == 1 else sorted({*turns, float(turn[worst])}))]
         options = [(z, t) for z, t in options if bands.count < len(z) * len(t) <= most]
         if not options:
             break
@@ -374,20 +389,12 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
     return bands
 
 
-def _directions(nodes, azimuth: float) -> np.ndarray:
-    """Unit view vectors (k, 3) at (zenith, turn) pairs [rad] from ``azimuth`` [rad]. [1]"""
-    z = np.array([n[0] for n in nodes])
-    a = azimuth + np.array([n[1] for n in nodes])
-    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
-
-
 def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None,
               weights=None) -> np.ndarray:
     """The factor that makes the banded sky term exact on open ground, per channel and pixel.
 
     The open sky's term at the pixel's own view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives
-    on open ground, the colour band's term sum_i e_i s(V_c, L_i) times the blended modulation
-    sum_b w_b S_b / S_c (S_b = sum_i e'_i s(V_b, L_i), e' the channels' sum), all over the raster
+    on open ground (``open_sky`` of S_b,ch = sum_i e_i,ch s(V_b, L_i)), all over the raster
     coarsened to SKY_CELLS cells: it carries the blend's own error on open ground and the change of
     the sky's colour with the view. The open term, smooth in the view, is read on a lattice of
     ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held at
@@ -425,21 +432,16 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
 
     def at_lattice():
         z, t = np.meshgrid(*axes, indexing="ij")
-        a = bands.azimuth + t
-        return shape(brdf, np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)[..., None, :],
-                     dirs)
+        return shape(brdf, _unit(z, bands.azimuth + t)[..., None, :], dirs)
     own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
-    summed = at_bands.sum(axis=-1)
-    modulation = (summed / max(float(summed[bands.colour]), 1e-30)).astype(np.float32)
     from . import _array_loops
 
     flat = np.ascontiguousarray(np.moveaxis(own, -1, 0).reshape(own.shape[-1], -1).astype(np.float32))
     out = np.empty((len(flat), len(corner)), dtype=np.float32)
     _array_loops.lattice_read(flat, corner, taps, lattice, out)
-    blend = modulation @ weights  # (n,)
-    for channel, light in enumerate(at_bands[bands.colour]):
-        out[channel] /= np.maximum(np.float32(light) * blend, np.float32(1e-30))
+    out /= np.maximum(open_sky(bands, weights, at_bands[list(bands.colours)], at_bands.sum(axis=-1)),
+                      np.float32(1e-30))
     return out
 
 
@@ -478,25 +480,28 @@ def _lattice_reads_made(zenith, azimuth, band_azimuth: float, lattice: int):
     return lows, spans, i0 * lattice + j0, taps
 
 
-def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
-    """The sky's term with the reflectance: r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch.
+def banded_sky(bands: ViewBands, colours, bands_light, weights, ratio) -> np.ndarray:
+    """The sky's term with the reflectance: r_ch sum_b w_b G_b sum_z u_z E_z,ch / sum_ch E_z,ch.
 
     The bands give how the reflectance modulates the sky's light at the point with the view, the
-    colour band its colour, the ratio the open sky's term at the pixel's own view (docs/method.md,
-    "The ground's reflectance").
+    colour bands (``ViewBands.colours``) its colour, blended by the view zenith (u_z, the zeniths'
+    hats), the ratio the open sky's term at the pixel's own view (docs/method.md, "The ground's
+    reflectance").
 
     Parameters
     ----------
-    colour : numpy.ndarray
-        E_c (channels, n): the colour band's term (the sky raster weighted at its view, every
-        channel, correlated) [radiance x sr].
+    bands : ViewBands
+        The view bands.
+    colours : numpy.ndarray
+        E_z (Z, channels, n): the colour bands' terms (the sky raster weighted at their views,
+        every channel, correlated) [radiance x sr].
     bands_light : numpy.ndarray
-        G_b (B, n): each band's term on the channels' sum (``weighted_raster(summed=True)``; the
-        colour band's is the sum of E_c's channels) [radiance x sr].
+        G_b (B, n): each band's term on the channels' sum (``weighted_raster(summed=True)``; a
+        colour band's is the sum of its channels) [radiance x sr].
     weights : numpy.ndarray
         w_b (B, n): the bands' weights [1].
     ratio : numpy.ndarray or float
-        r_c (channels, n): ``sky_ratio`` [1].
+        r_ch (channels, n): ``sky_ratio`` [1].
 
     Returns
     -------
@@ -506,16 +511,28 @@ def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
     blend = bands_light[0] * weights[0]
     for b in range(1, len(weights)):
         blend += bands_light[b] * weights[b]
-    blend /= np.maximum(colour.sum(axis=0), np.float32(1e-30))
-    sky = colour * blend[None]
+    sky = _tint(bands, colours, weights)
+    sky *= blend[None]
     sky *= ratio
     return sky
 
 
-def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
-    """``banded_sky``'s blend on open ground, before ``sky_ratio``.
+def _tint(bands: ViewBands, colours, weights) -> np.ndarray:
+    """sum_z u_z E_z,ch / sum_ch E_z,ch (channels, n) float32 for colour bands' terms (Z, channels,
+    n) or (Z, channels) (then broadcast over the n views of ``weights``). [1]"""
+    by_zenith = bands.zenith_weights(np.asarray(weights, dtype=np.float32))
+    colours = np.asarray(colours, dtype=np.float32)
+    colours = colours if colours.ndim == 3 else colours[..., None]
+    tint = np.zeros((colours.shape[1], by_zenith.shape[1]), dtype=np.float32)
+    for z in range(len(colours)):
+        tint += colours[z] * (by_zenith[z] / np.maximum(colours[z].sum(axis=0), np.float32(1e-30)))[None]
+    return tint
 
-    The colour band's open light times sum_b w_b G_b,open / G_c,open.
+
+def open_sky(bands: ViewBands, weights, colours_open, bands_open) -> np.ndarray:
+    """``banded_sky`` on open ground, before ``sky_ratio``.
+
+    sum_b w_b G_b,open sum_z u_z E_z,open / sum_ch E_z,open.
 
     Parameters
     ----------
@@ -523,8 +540,8 @@ def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
         The view bands.
     weights : numpy.ndarray
         w_b (B, n) the weights [1].
-    colour_open : numpy.ndarray
-        (3,) the colour band's open light [radiance x sr].
+    colours_open : numpy.ndarray
+        (Z, 3) the colour bands' open light [radiance x sr].
     bands_open : numpy.ndarray
         G_b,open (B,) each band's open light on the channels' sum [radiance x sr].
 
@@ -533,10 +550,10 @@ def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
     numpy.ndarray
         (3, n) float32 [radiance x sr].
     """
-    bands_open = np.asarray(bands_open, dtype=np.float64)
-    scale = bands_open / max(float(bands_open[bands.colour]), 1e-30)
-    blend = np.tensordot(scale.astype(np.float32), weights, axes=1)
-    return np.asarray(colour_open, dtype=np.float32)[:, None] * blend[None]
+    blend = np.tensordot(np.asarray(bands_open, dtype=np.float32), np.asarray(weights, dtype=np.float32), axes=1)
+    sky = _tint(bands, colours_open, weights)
+    sky *= blend[None]
+    return sky
 
 
 SHAPE_STEP = 0.04
