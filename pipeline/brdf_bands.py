@@ -36,8 +36,8 @@ MAX_BANDS = 24
 """Most view bands (each one a channel of the sky raster's correlation per canopy layer). [count]"""
 
 
-BAND_SKY_CELL = 0.025
-"""Widest sky cell [tan] (about 1.4 degrees at the zenith) on which the bands' terms are
+BAND_SKY_CELL = 0.05
+"""Widest sky cell [tan] (about 2.9 degrees at the zenith) on which the bands' terms are
 correlated under an isolated canopy (``band_factor``). [tan]"""
 
 
@@ -199,20 +199,21 @@ class ViewBands:
 
 
 class _LastCall:
-    """The last call of a function and its result, kept in this process: a frame asks again
-    for what the frame (or the frame before, from the same camera) made. The key's objects are
-    held, so their ids are not reused, and matched by identity; numbers and strings by value."""
+    """The last ``size`` calls of a function and their results, kept in this process: a frame asks
+    again for what the frame (or the frame before, from the same camera) made. The keys' objects
+    are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value."""
 
-    def __init__(self):
-        self.key, self.value = None, None
+    def __init__(self, size: int = 1):
+        self.size, self.calls = size, []
 
     def get(self, key: tuple, make):
-        """The result for ``key``: the last one if ``key`` is the last call's, else ``make()``."""
-        same = self.key is not None and len(self.key) == len(key) and all(
-            a == b if isinstance(b, (int, float, str, bytes)) else a is b for a, b in zip(self.key, key))
-        if not same:
-            self.key, self.value = key, make()
-        return self.value
+        """The result for ``key``: a kept one if ``key`` is a kept call's, else ``make()``."""
+        for kept, value in self.calls:
+            if len(kept) == len(key) and all(a == b if isinstance(b, (int, float, str, bytes)) else a is b
+                                             for a, b in zip(kept, key)):
+                return value
+        self.calls = [(key, make()), *self.calls][: self.size]
+        return self.calls[0][1]
 
 
 _COARSE = _LastCall()
@@ -262,8 +263,8 @@ def _coarsen(raster, most_cells: int):
     return _block_directions(raster.grid, most_cells), per_block.reshape(count, -1).T
 
 
-_ZENITH = _LastCall()
-"""``ViewBands.zenith_weights``: a frame sums the same (cached) weights twice, the next frame again."""
+_ZENITH = _LastCall(2)
+"""``ViewBands.zenith_weights``: of the ground raster's cells and of the pixels, each the same every frame."""
 
 _SHAPES = _LastCall(), _LastCall()
 """The shape at ``choose_bands``' sampled views and at ``sky_ratio``'s lattice of views, towards
