@@ -14,14 +14,17 @@ corner, at an edge or over the middle of the window, so that its views span view
 6-83 degrees and 90, 180 or 360 degrees of azimuth. Brute force: at every 4th pixel in each
 direction, the sky raster weighted by the shape at that pixel's own view and correlated for it
 alone (``brdf_bands.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf_bands.choose_bands``
-at each tolerance, the bands' correlations (the middle band's in every channel, the
+at each tolerance, the bands' correlations (the colour bands' in every channel, the
 others' of the sky's channels' sum) blended by ``brdf_bands.banded_sky`` with ``brdf_bands.sky_ratio``.
 Printed: the largest relative error over the sampled pixels and channels, and Lambert's.
 
 With ``--config``: the same on a shipped config's own sky raster, canopy spectrum and camera,
 frame 0, first layer (isolated layouts): ``--samples`` ground cells the camera sees, spread
 near to far and left to right, each brute-forced (its view's weighted raster correlated over
-the whole coarse window), against the bands at each tolerance, read at the same cell.
+the whole coarse window), against the bands at each tolerance as the frame makes them (on
+``shadow.coarser_isolated``'s blocks), read bilinearly at the same cell; at the default
+tolerance also the blend alone: the same bands correlated at full resolution and taken at the
+cells themselves, so that the blocks' and the read's part of the error shows apart.
 """
 
 from __future__ import annotations
