@@ -83,7 +83,8 @@ def hot_spot(plan, frame: int, results) -> None:
     chooser = plan.layers[0].coarse.sky
     raster = sky.raster(chooser)
     views = brdf_camera.view_vectors(view)
-    bands = brdf_bands.choose_bands(model, raster, views)
+    bands = brdf_bands.choose_bands(model, brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan)),
+                                    views)  # as the frame chooses them (frame.brdf_background)
     print(f"  view bands: {bands.count}, view zeniths "
           + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
           + " deg by sectors at " + ", ".join(f"{np.degrees(t):+.1f}" for t in bands.turns)

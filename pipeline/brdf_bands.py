@@ -346,10 +346,9 @@ _CHOSEN = _LastCall()
 
 def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) -> ViewBands:
     """``choose_bands``' work over the coarsened raster's directions (m, 3) and light (m,)."""
-    views = clamp_view(views_in)
-    pick = views[:: max(1, len(views) // samples)]
+    pick = clamp_view(views_in[:: max(1, len(views_in) // samples)])
     zenith, azimuth = np.arccos(np.clip(pick[:, 2], -1.0, 1.0)), np.arctan2(pick[:, 0], pick[:, 1])
-    middle = float(np.arctan2(*views.mean(axis=0)[:2]))
+    middle = float(np.arctan2(*pick.mean(axis=0)[:2]))
     turn = _turn_from(azimuth, middle)
     round_ = float(np.ptp(turn)) > ROUND_TURN
     if not round_:  # the sectors centred on the views' spread
