@@ -236,6 +236,22 @@ def test_view_bands_hold_views_spread_in_azimuth_under_a_canopy():
     assert max(errors) < 0.02, (max(errors), bands.count)
 
 
+def test_the_shaded_bound_holds_for_any_mask():
+    """``shaded_bound``: for masks m in [0, 1] (random, and the worst one, 1 where the blend is
+    short), the error of the ratio-corrected blend, sum_i e_i m_i (s_i - r d_i), is at most the
+    bound times the open term, and the worst mask reaches it."""
+    rng = np.random.default_rng(8)
+    shapes, blend = rng.uniform(0.5, 2.0, (4, 50)), rng.uniform(0.5, 2.0, (4, 50))
+    light = rng.uniform(0.0, 1.0, 50)
+    bound = brdf_bands.shaded_bound(shapes, blend, light)
+    own = shapes @ light
+    delta = shapes - (own / (blend @ light))[:, None] * blend
+    for mask in rng.uniform(0.0, 1.0, (200, 50)):
+        assert np.all(np.abs((delta * mask) @ light) <= bound * own * (1 + 1e-12))
+    worst = ((delta > 0) * delta) @ light  # the mask open where the blend is short
+    assert np.allclose(worst, bound * own)
+
+
 def test_band_weights_wrap_round_the_circle():
     """Sectors round the full circle: the weights are hats in azimuth that wrap (a view just past
     the last sector leans on the first), products with the zeniths' hats, summing to 1."""
