@@ -14,14 +14,17 @@ corner, at an edge or over the middle of the window, so that its views span view
 6-83 degrees and 90, 180 or 360 degrees of azimuth. Brute force: at every 4th pixel in each
 direction, the sky raster weighted by the shape at that pixel's own view and correlated for it
 alone (``brdf_bands.weighted_raster``, ``shadow.ground_isolated``). Banded: ``brdf_bands.choose_bands``
-at each tolerance, the bands' correlations (the middle band's in every channel, the
+at each tolerance, the bands' correlations (the colour bands' in every channel, the
 others' of the sky's channels' sum) blended by ``brdf_bands.banded_sky`` with ``brdf_bands.sky_ratio``.
 Printed: the largest relative error over the sampled pixels and channels, and Lambert's.
 
 With ``--config``: the same on a shipped config's own sky raster, canopy spectrum and camera,
 frame 0, first layer (isolated layouts): ``--samples`` ground cells the camera sees, spread
 near to far and left to right, each brute-forced (its view's weighted raster correlated over
-the whole coarse window), against the bands at each tolerance, read at the same cell.
+the whole coarse window), against the bands at each tolerance as the frame makes them (on
+``shadow.coarser_isolated``'s blocks), read bilinearly at the same cell; at the default
+tolerance also the blend alone: the same bands correlated at full resolution and taken at the
+cells themselves, so that the blocks' and the read's part of the error shows apart.
 """
 
 from __future__ import annotations
@@ -98,7 +101,7 @@ def open_ground() -> None:
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)
         bands = brdf_bands.choose_bands(brdf, raster, views)
-        band_sky = [R.shape(brdf, v, dirs) @ (e.T if k == bands.colour else e.sum(axis=0))
+        band_sky = [R.shape(brdf, v, dirs) @ (e.T if k in bands.colours else e.sum(axis=0))
                     for k, v in enumerate(bands.directions())]
         radiance = brdf_camera.ground_radiance(view, brdf, constant(1.0), sun=(constant(e_sun),),
                                      sky_maps=(constant(np.concatenate(np.atleast_1d(*band_sky))),),
@@ -110,7 +113,7 @@ def open_ground() -> None:
             want = (R.shape(brdf, v, dirs) @ e.T + R.shape(brdf, v, sky.sun_direction) * e_sun) / np.pi
             errors.append(np.max(np.abs(radiance[r, c] / want - 1)))
             lambert.append(np.max(np.abs((e.sum(axis=1) + e_sun) / np.pi / want - 1)))
-        print(f"open ground, {name}: {len(bands.zeniths)} bands; at five views the rendered radiance is within "
+        print(f"open ground, {name}: {bands.count} bands; at five views the rendered radiance is within "
               f"{max(errors):.5f} of the quadrature (Lambert's would be {min(lambert):.3f}-{max(lambert):.3f} off)")
 
 
@@ -120,7 +123,7 @@ def config_case(path: str, samples: int) -> None:
 
     from pipeline import cache, camera
     from pipeline.cycle import cycle_item
-    from pipeline.ground import render_ground, sky_view_terms
+    from pipeline.ground import render_ground
     from pipeline.plan import plan_run
     from pipeline.resolve import load
 
@@ -147,20 +150,49 @@ def config_case(path: str, samples: int) -> None:
               f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
               f"Lambert's sky term off by up to {np.max(np.abs(lambert / brute - 1)):.3f}")
         blocks = brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan))  # as the frame takes it
+        clamped = R.clamp_view(views)
+        angles = np.arccos(clamped[:, 2]), np.arctan2(clamped[:, 0], clamped[:, 1])
         for tolerance in TOLERANCES:
             bands = brdf_bands.choose_bands(brdf, blocks, views, tolerance=tolerance)
-            terms = sky_view_terms(plan, 0, sky, store, 2, bands.directions(), ground, colour=bands.colour)
-            weights = bands.weights(np.arccos(R.clamp_view(views)[:, 2])).astype(np.float32)
+            terms = _frame_terms(plan, sky, store, bands, ground)
+            weights = bands.weights(*angles).astype(np.float32)[:, chosen]
+            ratio = brdf_bands.sky_ratio(brdf, blocks, bands, views)[:, chosen]
             at_cells = lambda t: _at_cells(t, plan.window, cells)  # noqa: E731 -- the terms' grid may be coarser
-            colour = at_cells(terms[bands.colour]).T
-            banded = brdf_bands.banded_sky(colour, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
-                                  weights[:, chosen], brdf_bands.sky_ratio(brdf, blocks, bands, views)[:, chosen])
+            colours = np.stack([at_cells(terms[c]).T for c in bands.colours])
+            banded = brdf_bands.banded_sky(bands, colours, np.stack([at_cells(t).sum(axis=-1) for t in terms]),
+                                           weights, ratio)
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
                   f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {len(bands.zeniths)} bands, "
-                  f"largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+            print(f"  tolerance {tolerance:g}: {bands.count} bands ({len(bands.zeniths)} zeniths x "
+                  f"{len(bands.turns)} sectors), largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
+            if tolerance == brdf_bands.BAND_TOLERANCE:
+                # the blend alone: the same bands correlated over the whole coarse window (no blocks
+                # of shadow.coarser_isolated) and taken at the cells themselves (no bilinear read)
+                full = [shadow.ground_isolated(
+                    brdf_bands.weighted_raster(raster, brdf, d, summed=k not in bands.colours),
+                    item["coarse"], layer.coarse, workers=2)[(slice(None), *cells)]
+                    for k, d in enumerate(bands.directions())]
+                alone = brdf_bands.banded_sky(bands, np.stack([full[c] for c in bands.colours]),
+                                              np.stack([f.sum(axis=0) for f in full]), weights, ratio)
+                print(f"    the blend alone (full-resolution terms at the cells): largest error "
+                      f"{np.max(np.abs(alone / brute - 1)):.4f}, median {np.median(np.abs(alone / brute - 1)):.4f}; "
+                      f"the blocks and the read move the result by up to {np.max(np.abs(banded / alone - 1)):.4f}",
+                      flush=True)
+
+
+def _frame_terms(plan, sky, store, bands, ground) -> list:
+    """The bands' terms as ``frame.brdf_background`` makes them: the colour bands in every channel,
+    the others on the channels' sum."""
+    from pipeline.ground import sky_view_terms
+
+    directions, colours = bands.directions(), list(bands.colours)
+    others = [b for b in range(bands.count) if b not in colours]
+    made = dict(zip(colours, sky_view_terms(plan, 0, sky, store, 2, directions[colours], ground)))
+    if others:
+        made.update(zip(others, sky_view_terms(plan, 0, sky, store, 2, directions[others], ground, colour=-1)))
+    return [made[b] for b in range(bands.count)]
 
 
 def window_cases() -> None:
@@ -190,15 +222,17 @@ def window_cases() -> None:
             cells = []
             for tolerance in TOLERANCES:
                 bands = brdf_bands.choose_bands(brdf, raster, flat, tolerance=tolerance)
+                directions = bands.directions()
+                colours = np.stack([shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, directions[c]),
+                                                           spectrum, plan).reshape(3, -1) for c in bands.colours])
                 terms = [shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, d, summed=True), spectrum,
-                                                plan).reshape(-1)
-                         for d in bands.directions()]
-                colour = shadow.ground_isolated(
-                    brdf_bands.weighted_raster(raster, brdf, bands.directions()[bands.colour]), spectrum, plan)
-                weights = bands.weights(np.arccos(R.clamp_view(flat)[:, 2])).astype(np.float32)
-                banded = brdf_bands.banded_sky(colour.reshape(3, -1), np.stack(terms), weights,
-                                      brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
-                cells.append(f"{len(bands.zeniths)}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
+                                                plan).reshape(-1) for d in directions]
+                clamped = R.clamp_view(flat)
+                weights = bands.weights(np.arccos(clamped[:, 2]),
+                                        np.arctan2(clamped[:, 0], clamped[:, 1])).astype(np.float32)
+                banded = brdf_bands.banded_sky(bands, colours, np.stack(terms), weights,
+                                               brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
+                cells.append(f"{bands.count}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
             print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "
                   f"{lambert:.3f}    " + "  ".join(f"{cell:9s}" for cell in cells), flush=True)

@@ -83,10 +83,12 @@ def hot_spot(plan, frame: int, results) -> None:
     chooser = plan.layers[0].coarse.sky
     raster = sky.raster(chooser)
     views = brdf_camera.view_vectors(view)
-    bands = brdf_bands.choose_bands(model, raster, views)
-    print(f"  view bands: {len(bands.zeniths)} at view zenith "
+    bands = brdf_bands.choose_bands(model, brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan)),
+                                    views)  # as the frame chooses them (frame.brdf_background)
+    print(f"  view bands: {bands.count}, view zeniths "
           + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
-          + f" deg; open-sky blend error over sampled pixels {bands.error:.4f}")
+          + " deg by sectors at " + ", ".join(f"{np.degrees(t):+.1f}" for t in bands.turns)
+          + f" deg of azimuth; bound of the blend's error under shading over sampled pixels {bands.error:.4f}")
     rows, _ = camera._ground_rows(view)
     ratio = (results["brdf"].radiance[rows] / np.maximum(results["lambert"].radiance[rows], 1e-12))[..., 1].reshape(-1)
     fp, _ = camera._view_footprints(view)

@@ -250,8 +250,10 @@ def clamp_view(v) -> np.ndarray:
     return v
 
 
+@functools.lru_cache(maxsize=4)
 def cell_directions(grid) -> np.ndarray:
-    """Unit vectors towards the centres of a sky-plane grid's cells.
+    """Unit vectors towards the centres of a sky-plane grid's cells; the same array for the same
+    grid (every view band of a frame weights the same grid).
 
     Parameters
     ----------
@@ -261,9 +263,11 @@ def cell_directions(grid) -> np.ndarray:
     Returns
     -------
     numpy.ndarray
-        (rows, cols, 3) float64 [1].
+        (rows, cols, 3) float64, read-only [1].
     """
     rows, cols = grid.shape
     sx, sy = grid.ground_from_raster(np.arange(rows)[:, None], np.arange(cols)[None, :])
     w = np.stack(np.broadcast_arrays(sx, sy, np.ones_like(sx)), axis=-1)
-    return w / np.linalg.norm(w, axis=-1, keepdims=True)
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    w.flags.writeable = False
+    return w

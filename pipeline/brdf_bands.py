@@ -1,8 +1,8 @@
 """The sky's term of the ground's reflectance through view bands (docs/method.md, "The ground's
 reflectance"): Max holds f_r(V, L) independent of V over a patch, so the sky raster is weighted
 by the shape at a few views, the bands (``weighted_raster``), each correlated, and blended per
-pixel by its view zenith (``banded_sky``) with a factor that makes the blend exact on open ground
-(``sky_ratio``); ``choose_bands`` places the bands. Directions as in ``brdf``."""
+pixel by its view zenith and azimuth (``banded_sky``) with a factor that makes the blend exact on
+open ground (``sky_ratio``); ``choose_bands`` places the bands. Directions as in ``brdf``."""
 
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ from .sky_raster import SkyRaster, coarser
 
 __all__ = [
     "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
-    "ViewBands", "choose_bands", "sky_ratio", "banded_sky",
+    "ViewBands", "ROUND_TURN", "shaded_bound", "choose_bands", "sky_ratio",
+    "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
 
@@ -28,15 +29,15 @@ if TYPE_CHECKING:
     from .settings import BrdfConfig  # model and parameters: any value with those two fields
 
 BAND_TOLERANCE = 0.01
-"""Largest relative error of the open sky's term over the pixels that ``choose_bands`` accepts:
-it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
+"""Largest bound of the blend's relative error under shading (``shaded_bound``) over the pixels
+that ``choose_bands`` accepts: it adds view bands until the blend meets it, up to MAX_BANDS. [1]"""
 
-MAX_BANDS = 8
-"""Most view bands (each one a correlation of the sky raster per canopy layer). [count]"""
+MAX_BANDS = 24
+"""Most view bands (each one a channel of the sky raster's correlation per canopy layer). [count]"""
 
 
-BAND_SKY_CELL = 0.025
-"""Widest sky cell [tan] (about 1.4 degrees at the zenith) on which the bands' terms are
+BAND_SKY_CELL = 0.05
+"""Widest sky cell [tan] (about 2.9 degrees at the zenith) on which the bands' terms are
 correlated under an isolated canopy (``band_factor``). [tan]"""
 
 
@@ -74,86 +75,145 @@ def band_factor(plan) -> int:
     return factor
 
 
+def _hats(x, nodes, period=None) -> np.ndarray:
+    """Hat functions (len(nodes), n) at ``x`` (n,) over sorted ``nodes``: linear between
+    neighbours, held beyond the ends, or wrapped round ``period`` when given; they sum to 1. [1]"""
+    nodes, x = np.asarray(nodes, dtype=np.float64), np.asarray(x, dtype=np.float64).reshape(-1)
+    eye = np.eye(len(nodes))
+    if len(nodes) > 1 and period is not None:  # wrapped: the last node again before the first, and after
+        x, nodes, eye = (x - nodes[0]) % period + nodes[0], np.concatenate(
+            [[nodes[-1] - period], nodes, [nodes[0] + period]]), np.concatenate([eye[-1:], eye, eye[:1]])
+    return np.stack([np.interp(x, nodes, eye[:, b]) for b in range(eye.shape[1])]) if len(nodes) > 1 \
+        else np.ones((1, len(x)))
+
+
+def _unit(zenith, azimuth) -> np.ndarray:
+    """Unit vectors (..., 3) at zenith angles and azimuths [rad] (from +y towards +x). [1]"""
+    return np.stack([np.sin(zenith) * np.sin(azimuth), np.sin(zenith) * np.cos(azimuth), np.cos(zenith)], axis=-1)
+
+
+def _turn_from(azimuth, reference: float) -> np.ndarray:
+    """Azimuths turned to ``reference``: in [-pi, pi) [rad]."""
+    return (np.asarray(azimuth) - reference + np.pi) % (2.0 * np.pi) - np.pi
+
+
 @dataclass(frozen=True)
 class ViewBands:
     """View bands: the sky's term with the view V held per band (Max: f_r independent of V over a patch).
 
+    The views at every pair of a zenith (near to far) and a turn of azimuth (a sector across the
+    image), blended bilinearly in the view's zenith and azimuth.
+
     Attributes
     ----------
     zeniths : tuple of float
-        (B,) the bands' view zenith angles, near to far [rad].
+        (Z,) the bands' view zenith angles, near to far [rad].
     azimuth : float
-        The azimuth of their view direction (from the ground towards the camera) [rad].
+        The azimuth of their middle sector's view direction (from the ground towards the camera) [rad].
     error : float
-        The largest relative error of the open sky's term over the sampled pixels that
-        ``choose_bands`` measured [1].
+        The largest bound of the blend's relative error under any shading over the sampled
+        pixels that ``choose_bands`` measured (``shaded_bound``) [1].
+    turns : tuple of float
+        (T,) the sectors' azimuths from ``azimuth``, in [-pi, pi) [rad].
+    round : bool
+        Whether the sectors wrap round the full circle (a camera with ground all round it).
     """
 
     zeniths: tuple[float, ...]
     azimuth: float
     error: float
+    turns: tuple[float, ...] = (0.0,)
+    round: bool = False
 
     @property
-    def colour(self) -> int:
-        """The band whose term is correlated in every channel (the middle one).
+    def count(self) -> int:
+        """The number of bands, Z x T [count]."""
+        return len(self.zeniths) * len(self.turns)
 
-        It gives the sky light's colour under the canopy; the others are correlated on the channels' sum
-        and give only how the reflectance modulates it (``banded_sky``).
+    @property
+    def colours(self) -> tuple[int, ...]:
+        """The bands whose terms are correlated in every channel: the middle sector's, one per zenith.
+
+        They give the sky light's colour under the canopy, blended by the view zenith; the others
+        are correlated on the channels' sum and give only how the reflectance modulates it
+        (``banded_sky``).
 
         Returns
         -------
-        int
-            Its index [index].
+        tuple of int
+            Their indices, near to far [index].
         """
-        return len(self.zeniths) // 2
+        turns = len(self.turns)
+        return tuple(z * turns + turns // 2 for z in range(len(self.zeniths)))
+
+    def zenith_weights(self, weights) -> np.ndarray:
+        """The zeniths' hat weights from the bands' weights: summed over the sectors.
+
+        Parameters
+        ----------
+        weights : numpy.ndarray
+            (B, n) ``weights`` [1].
+
+        Returns
+        -------
+        numpy.ndarray
+            (Z, n), the dtype of ``weights`` [1].
+        """
+        return _ZENITH.get((weights, len(self.turns)),
+                           lambda: weights.reshape(len(self.zeniths), len(self.turns), -1).sum(axis=1))
 
     def directions(self) -> np.ndarray:
-        """Unit view vectors of the bands.
+        """Unit view vectors of the bands, zenith by zenith, sector by sector within.
 
         Returns
         -------
         numpy.ndarray
             (B, 3) float64 [1].
         """
-        z = np.asarray(self.zeniths)
-        return np.stack([np.sin(z) * np.sin(self.azimuth), np.sin(z) * np.cos(self.azimuth), np.cos(z)], axis=-1)
+        z, t = np.meshgrid(np.asarray(self.zeniths), np.asarray(self.turns), indexing="ij")
+        return _unit(z.reshape(-1), self.azimuth + t.reshape(-1))
 
-    def weights(self, zenith) -> np.ndarray:
-        """Weights of each band at view zenith angles; they sum to 1.
+    def weights(self, zenith, azimuth=None) -> np.ndarray:
+        """Weights of each band at views; they sum to 1.
 
-        Linear between neighbouring bands' zeniths (hat functions), held beyond the ends.
+        Products of hat functions: linear between neighbouring bands' zeniths and between
+        neighbouring sectors' azimuths, held beyond the ends (wrapped round with ``round``).
 
         Parameters
         ----------
         zenith : numpy.ndarray
             (n,) view zenith angles [rad].
+        azimuth : numpy.ndarray, optional
+            (n,) view azimuths [rad]; needed with more than one sector.
 
         Returns
         -------
         numpy.ndarray
             (B, n) float64 [1].
         """
-        z = np.asarray(self.zeniths)
-        eye = np.eye(len(z))
-        return np.stack([np.interp(zenith, z, eye[b]) for b in range(len(z))]) if len(z) > 1 \
-            else np.ones((1, np.size(zenith)))
+        by_zenith = _hats(zenith, self.zeniths)
+        if len(self.turns) == 1:
+            return by_zenith
+        by_turn = _hats(_turn_from(azimuth, self.azimuth), self.turns, 2.0 * np.pi if self.round else None)
+        return (by_zenith[:, None, :] * by_turn[None, :, :]).reshape(self.count, -1)
 
 
 class _LastCall:
-    """The last call of a function and its result, kept in this process: a frame asks again
-    for what the frame (or the frame before, from the same camera) made. The key's objects are
-    held, so their ids are not reused, and matched by identity; numbers and strings by value."""
+    """The last ``size`` calls of a function and their results, kept in this process: a frame asks
+    again for what the frame (or the frame before, from the same camera) made. The keys' objects
+    are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value."""
 
-    def __init__(self):
-        self.key, self.value = None, None
+    def __init__(self, size: int = 1):
+        self.size, self.calls = size, []
 
     def get(self, key: tuple, make):
-        """The result for ``key``: the last one if ``key`` is the last call's, else ``make()``."""
-        same = self.key is not None and len(self.key) == len(key) and all(
-            a == b if isinstance(b, (int, float, str)) else a is b for a, b in zip(self.key, key))
-        if not same:
-            self.key, self.value = key, make()
-        return self.value
+        """The result for ``key``: a kept one if ``key`` is a kept call's, else ``make()``."""
+        for kept, value in self.calls:
+            if len(kept) == len(key) and all(a == b if isinstance(b, (int, float, str, bytes)) else a is b
+                                             for a, b in zip(kept, key)):
+                return value
+        self.calls = [(key, make()), *self.calls][: self.size]
+        return self.calls[0][1]
 
 
 _COARSE = _LastCall()
@@ -203,20 +263,56 @@ def _coarsen(raster, most_cells: int):
     return _block_directions(raster.grid, most_cells), per_block.reshape(count, -1).T
 
 
+_ZENITH = _LastCall(2)
+"""``ViewBands.zenith_weights``: of the ground raster's cells and of the pixels, each the same every frame."""
+
 _SHAPES = _LastCall(), _LastCall()
 """The shape at ``choose_bands``' sampled views and at ``sky_ratio``'s lattice of views, towards
 ``_coarsen``'s blocks: the same while the camera and the bands' azimuth stand still."""
 
 
+def shaded_bound(shapes, blend, light) -> np.ndarray:
+    """A bound of the blend's relative error under any canopy, per view.
+
+    Under leaves the sky's term is sum_i e_i m_i s(V, L_i), m_i in [0, 1] the light through the
+    canopy along L_i; the bands give r sum_i e_i m_i d_i(V) with d_i = sum_b w_b s(V_b, L_i) and r
+    (``sky_ratio``) making it exact on open ground (m = 1). The error sum_i e_i m_i (s_i - r d_i)
+    sums to 0 at m = 1, so whatever the shading it is at most half of sum_i e_i |s_i - r d_i|:
+    that over the open term (docs/method.md, "The ground's reflectance").
+
+    Parameters
+    ----------
+    shapes : numpy.ndarray
+        (n, m) s(V, L_i) at each view's own V [1].
+    blend : numpy.ndarray
+        (n, m) the bands' shapes blended at each view, sum_b w_b s(V_b, L_i) [1].
+    light : numpy.ndarray
+        (m,) e_i, the sky's light per direction [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) [1].
+    """
+    own = shapes @ light
+    ratio = own / np.maximum(blend @ light, 1e-30)
+    return 0.5 * (np.abs(shapes - ratio[:, None] * blend) @ light) / np.maximum(own, 1e-30)
+
+
+ROUND_TURN = np.radians(270.0)
+"""Spread of the views' azimuths [rad] beyond which the sectors wrap round the full circle
+(a camera looking down at ground all round it). [rad]"""
+
+
 def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
                  most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
-    """View bands, 1 to ``most``, added one at a time where the blend is worst.
+    """View bands in zenith and sector, added where the blend is worst under shading.
 
-    First the middle, then both ends, then the sampled view zenith of the largest error, until the
-    blend gives the open sky's term sum_i e_i s(V, L_i) within ``tolerance`` (relative) at every
-    sampled pixel's own view zenith, against that sum per pixel (brute force over the raster's cells,
-    coarsened to SKY_CELLS) at the bands' azimuth. Azimuth of the bands: that of the views' mean (the
-    change with azimuth across the image is ``sky_ratio``'s).
+    First one band at the middle; then, while the largest ``shaded_bound`` over the sampled pixels
+    exceeds ``tolerance``, a zenith (both ends first, then the worst pixel's) or a sector (both ends
+    of the views' azimuths first, or three round the circle, then the worst pixel's), whichever
+    lowers the largest bound more per band added, up to ``most`` bands. Sums over the raster's cells
+    coarsened to SKY_CELLS.
 
     Parameters
     ----------
@@ -227,7 +323,7 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     views : numpy.ndarray
         (n, 3) the pixels' view vectors [1].
     tolerance : float, optional
-        Largest relative error accepted [1].
+        Largest bound accepted [1].
     most : int, optional
         Most bands [count].
     samples : int, optional
@@ -236,41 +332,73 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     Returns
     -------
     ViewBands
-        The bands, with the error they reached.
+        The bands, with the bound they reached.
     """
-    views_in, views = views, clamp_view(views)
-    pick = views[:: max(1, len(views) // samples)]
     dirs, e = _coarsened(raster, SKY_CELLS)
-    zenith = np.arccos(np.clip(pick[:, 2], -1.0, 1.0))
-    mean = views.mean(axis=0)
-    azimuth = float(np.arctan2(mean[0], mean[1]))
-    # the bands fix the change with distance; the change across (azimuth) is ``sky_ratio``'s
-    exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(
-        brdf, ViewBands(tuple(zenith), azimuth, 0.0).directions()[:, None, :], dirs[None])) @ e
+    # the same bands while the camera and the sky's light stand still (a run's frames)
+    return _CHOSEN.get((brdf, views, dirs, e.tobytes(), tolerance, most, samples),
+                       lambda: _choose(brdf, views, dirs, e, tolerance, most, samples))
+
+
+_CHOSEN = _LastCall()
+"""``choose_bands``' last bands."""
+
+
+def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) -> ViewBands:
+    """``choose_bands``' work over the coarsened raster's directions (m, 3) and light (m,)."""
+    pick = clamp_view(views_in[:: max(1, len(views_in) // samples)])
+    zenith, azimuth = np.arccos(np.clip(pick[:, 2], -1.0, 1.0)), np.arctan2(pick[:, 0], pick[:, 1])
+    middle = float(np.arctan2(*pick.mean(axis=0)[:2]))
+    turn = _turn_from(azimuth, middle)
+    round_ = float(np.ptp(turn)) > ROUND_TURN
+    if not round_:  # the sectors centred on the views' spread
+        middle += 0.5 * float(turn.min() + turn.max())
+        turn = _turn_from(azimuth, middle)
+    exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(brdf, pick[:, None, :], dirs[None]))
+    known: dict = {}
+
+    def shapes_at(bands: ViewBands) -> np.ndarray:
+        """s(V_b, L_i) (B, m), each band's made once per call."""
+        keys = [(z, t) for z in bands.zeniths for t in bands.turns]
+        missing = [k for k in keys if k not in known]
+        if missing:
+            made = shape(brdf, _unit(np.array([k[0] for k in missing]),
+                                     bands.azimuth + np.array([k[1] for k in missing]))[:, None, :], dirs[None])
+            known.update(zip(missing, made))
+        return np.stack([known[k] for k in keys])
+
+    def bound(zeniths, turns) -> ViewBands:
+        trial = ViewBands(tuple(zeniths), middle, 0.0, tuple(turns), round_)
+        errors = shaded_bound(exact, trial.weights(zenith, azimuth).T @ shapes_at(trial), e)
+        worst = int(np.argmax(errors))
+        return ViewBands(trial.zeniths, middle, float(errors[worst]), trial.turns, round_), worst
+
     lo, hi = float(zenith.min()), float(zenith.max())
-    zeniths = [0.5 * (lo + hi)]
-    while True:  # greedy: the next band goes where the blend is worst
-        trial = ViewBands(tuple(zeniths), azimuth, 0.0)
-        at_bands = shape(brdf, trial.directions()[:, None, :], dirs[None]) @ e
-        relative = np.abs(at_bands @ trial.weights(zenith) - exact) / np.maximum(np.abs(exact), 1e-30)
-        worst = int(np.argmax(relative))
-        bands = ViewBands(trial.zeniths, azimuth, float(relative[worst]))
-        if bands.error <= tolerance or len(zeniths) >= most:
-            return bands
-        zeniths = [lo, hi] if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])})
-        if len(zeniths) == len(trial.zeniths):  # the worst sample is a band already
-            return bands
+    bands, worst = bound([0.5 * (lo + hi)], [0.0])
+    while bands.error > tolerance:
+        zeniths, turns = list(bands.zeniths), list(bands.turns)
+        first = [-2.0 * np.pi / 3.0, 0.0, 2.0 * np.pi / 3.0] if round_ else sorted({turn.min(), turn.max()})
+        options = [(sorted({lo, hi}) if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])}), turns),
+                   (zeniths, first if len(turns) == 1 else sorted({*turns, float(turn[worst])}))]
+        options = [(z, t) for z, t in options if bands.count < len(z) * len(t) <= most]
+        if not options:
+            break
+        tried = [bound(z, t) for z, t in options]
+        gain = [(bands.error - b.error) / (b.count - bands.count) for b, _ in tried]
+        bands, worst = tried[int(np.argmax(gain))]
+    return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None) -> np.ndarray:
+def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None,
+              weights=None) -> np.ndarray:
     """The factor that makes the banded sky term exact on open ground, per channel and pixel.
 
     The open sky's term at the pixel's own view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives
-    on open ground, the colour band's term sum_i e_i s(V_c, L_i) times the blended modulation
-    sum_b w_b S_b / S_c (S_b = sum_i e'_i s(V_b, L_i), e' the channels' sum), all over the raster
-    coarsened to SKY_CELLS cells: it carries the change across the image (view azimuth) that the bands
-    do not hold. Read on a lattice of ``lattice`` x ``lattice`` view zeniths and azimuths over the
-    views' range, bilinearly (held at its edges).
+    on open ground (``open_sky`` of S_b,ch = sum_i e_i,ch s(V_b, L_i)), all over the raster
+    coarsened to SKY_CELLS cells: it carries the blend's own error on open ground and the change of
+    the sky's colour with the view. The open term, smooth in the view, is read on a lattice of
+    ``lattice`` x ``lattice`` view zeniths and azimuths over the views' range, bilinearly (held at
+    its edges); the blend, with its kinks at the bands, at each pixel's own weights.
 
     Parameters
     ----------
@@ -285,6 +413,8 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     angles : tuple of numpy.ndarray, optional
         If given, the views' zenith angles and azimuths after ``clamp_view`` ((n,) each,
         ``_camera_views``) [rad].
+    weights : numpy.ndarray, optional
+        If given, the bands' weights at the views (B, n) (``ViewBands.weights``) [1].
 
     Returns
     -------
@@ -295,25 +425,23 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     if angles is None:
         views = clamp_view(views)
         angles = np.arccos(np.clip(views[:, 2], -1.0, 1.0)), np.arctan2(views[:, 0], views[:, 1])
+    if weights is None:
+        weights = bands.weights(*angles).astype(np.float32)
     lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
 
     def at_lattice():
         z, t = np.meshgrid(*axes, indexing="ij")
-        a = bands.azimuth + t
-        return shape(brdf, np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)[..., None, :],
-                     dirs)
+        return shape(brdf, _unit(z, bands.azimuth + t)[..., None, :], dirs)
     own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
-    summed = at_bands.sum(axis=-1)
-    modulation = summed / max(float(summed[bands.colour]), 1e-30)
-    blended = np.maximum(at_bands[bands.colour][None, :] * (modulation @ bands.weights(axes[0]))[:, None], 1e-30)
-    ratio = np.moveaxis(own / blended[:, None, :], -1, 0).astype(np.float32)
     from . import _array_loops
 
-    flat = np.ascontiguousarray(ratio.reshape(len(ratio), -1))
-    out = np.empty((len(ratio), len(corner)), dtype=np.float32)
+    flat = np.ascontiguousarray(np.moveaxis(own, -1, 0).reshape(own.shape[-1], -1).astype(np.float32))
+    out = np.empty((len(flat), len(corner)), dtype=np.float32)
     _array_loops.lattice_read(flat, corner, taps, lattice, out)
+    out /= np.maximum(open_sky(bands, weights, at_bands[list(bands.colours)], at_bands.sum(axis=-1)),
+                      np.float32(1e-30))
     return out
 
 
@@ -352,25 +480,28 @@ def _lattice_reads_made(zenith, azimuth, band_azimuth: float, lattice: int):
     return lows, spans, i0 * lattice + j0, taps
 
 
-def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
-    """The sky's term with the reflectance: r_c E_c,ch sum_b w_b G_b / sum_ch E_c,ch.
+def banded_sky(bands: ViewBands, colours, bands_light, weights, ratio) -> np.ndarray:
+    """The sky's term with the reflectance: r_ch sum_b w_b G_b sum_z u_z E_z,ch / sum_ch E_z,ch.
 
     The bands give how the reflectance modulates the sky's light at the point with the view, the
-    colour band its colour, the ratio the open sky's term at the pixel's own view (docs/method.md,
-    "The ground's reflectance").
+    colour bands (``ViewBands.colours``) its colour, blended by the view zenith (u_z, the zeniths'
+    hats), the ratio the open sky's term at the pixel's own view (docs/method.md, "The ground's
+    reflectance").
 
     Parameters
     ----------
-    colour : numpy.ndarray
-        E_c (channels, n): the colour band's term (the sky raster weighted at its view, every
-        channel, correlated) [radiance x sr].
+    bands : ViewBands
+        The view bands.
+    colours : numpy.ndarray
+        E_z (Z, channels, n): the colour bands' terms (the sky raster weighted at their views,
+        every channel, correlated) [radiance x sr].
     bands_light : numpy.ndarray
-        G_b (B, n): each band's term on the channels' sum (``weighted_raster(summed=True)``; the
-        colour band's is the sum of E_c's channels) [radiance x sr].
+        G_b (B, n): each band's term on the channels' sum (``weighted_raster(summed=True)``; a
+        colour band's is the sum of its channels) [radiance x sr].
     weights : numpy.ndarray
         w_b (B, n): the bands' weights [1].
     ratio : numpy.ndarray or float
-        r_c (channels, n): ``sky_ratio`` [1].
+        r_ch (channels, n): ``sky_ratio`` [1].
 
     Returns
     -------
@@ -380,16 +511,28 @@ def banded_sky(colour, bands_light, weights, ratio) -> np.ndarray:
     blend = bands_light[0] * weights[0]
     for b in range(1, len(weights)):
         blend += bands_light[b] * weights[b]
-    blend /= np.maximum(colour.sum(axis=0), np.float32(1e-30))
-    sky = colour * blend[None]
+    sky = _tint(bands, colours, weights)
+    sky *= blend[None]
     sky *= ratio
     return sky
 
 
-def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
-    """``banded_sky``'s blend on open ground, before ``sky_ratio``.
+def _tint(bands: ViewBands, colours, weights) -> np.ndarray:
+    """sum_z u_z E_z,ch / sum_ch E_z,ch (channels, n) float32 for colour bands' terms (Z, channels,
+    n) or (Z, channels) (then broadcast over the n views of ``weights``). [1]"""
+    by_zenith = bands.zenith_weights(np.asarray(weights, dtype=np.float32))
+    colours = np.asarray(colours, dtype=np.float32)
+    colours = colours if colours.ndim == 3 else colours[..., None]
+    tint = np.zeros((colours.shape[1], by_zenith.shape[1]), dtype=np.float32)
+    for z in range(len(colours)):
+        tint += colours[z] * (by_zenith[z] / np.maximum(colours[z].sum(axis=0), np.float32(1e-30)))[None]
+    return tint
 
-    The colour band's open light times sum_b w_b G_b,open / G_c,open.
+
+def open_sky(bands: ViewBands, weights, colours_open, bands_open) -> np.ndarray:
+    """``banded_sky`` on open ground, before ``sky_ratio``.
+
+    sum_b w_b G_b,open sum_z u_z E_z,open / sum_ch E_z,open.
 
     Parameters
     ----------
@@ -397,8 +540,8 @@ def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
         The view bands.
     weights : numpy.ndarray
         w_b (B, n) the weights [1].
-    colour_open : numpy.ndarray
-        (3,) the colour band's open light [radiance x sr].
+    colours_open : numpy.ndarray
+        (Z, 3) the colour bands' open light [radiance x sr].
     bands_open : numpy.ndarray
         G_b,open (B,) each band's open light on the channels' sum [radiance x sr].
 
@@ -407,10 +550,10 @@ def open_sky(bands: ViewBands, weights, colour_open, bands_open) -> np.ndarray:
     numpy.ndarray
         (3, n) float32 [radiance x sr].
     """
-    bands_open = np.asarray(bands_open, dtype=np.float64)
-    scale = bands_open / max(float(bands_open[bands.colour]), 1e-30)
-    blend = np.tensordot(scale.astype(np.float32), weights, axes=1)
-    return np.asarray(colour_open, dtype=np.float32)[:, None] * blend[None]
+    blend = np.tensordot(np.asarray(bands_open, dtype=np.float32), np.asarray(weights, dtype=np.float32), axes=1)
+    sky = _tint(bands, colours_open, weights)
+    sky *= blend[None]
+    return sky
 
 
 SHAPE_STEP = 0.04

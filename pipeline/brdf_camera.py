@@ -5,6 +5,7 @@ blended from the view bands (``brdf_bands``), and the background the ground make
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -57,11 +58,11 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
                     sun_direction, raster, open_light=None) -> np.ndarray:
     """The ground's radiance with the reflectance ``brdf``.
 
-    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) E_c(x) sum_b w_b(x) G_b(x) / sum_ch E_c,ch(x) ], rho
-    the albedo texture, E_sun the ground's light from the sun alone, the sky's term ``banded_sky``:
-    w_b the bands' weights at the pixel's view zenith, r(x) ``sky_ratio`` over ``raster``, V(x) each
-    pixel's own view vector. The sun's term is exact per pixel; the sky's is blended (docs/method.md,
-    "The ground's reflectance"). 0 where no ground is seen.
+    rho / pi [ s(V(x), L_sun) E_sun(x) + r(x) sum_b w_b(x) G_b(x) sum_z u_z(x) E_z(x) / sum_ch E_z,ch ],
+    rho the albedo texture, E_sun the ground's light from the sun alone, the sky's term ``banded_sky``:
+    w_b the bands' weights at the pixel's view zenith and azimuth, u_z the zeniths', r(x) ``sky_ratio``
+    over ``raster``, V(x) each pixel's own view vector. The sun's term is exact per pixel; the sky's is
+    blended (docs/method.md, "The ground's reflectance"). 0 where no ground is seen.
 
     Parameters
     ----------
@@ -74,8 +75,8 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     sun : object
         MipMap chain of E_sun (``GroundResult.sun_part``) [radiance x sr].
     sky_maps : object
-        The bands' terms: one MipMap chain whose channels are each band's, three for the colour
-        band (``ViewBands.colour``, E_c), one (the channels' sum, G_b) for the others, so that the
+        The bands' terms: one MipMap chain whose channels are each band's, three for a colour
+        band (``ViewBands.colours``, E_z), one (the channels' sum, G_b) for the others, so that the
         camera's footprints are filtered once for all of them [radiance x sr]. With
         ``open_light``, instead the raster of ``relative_sky`` (rows, cols, 3) and its grid, read
         bilinearly at each pixel's footprint centre (1 beyond it; it is smooth) [1].
@@ -86,7 +87,7 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     raster : sky_raster.SkyRaster
         The sky raster [radiance x sr].
     open_light : tuple, optional
-        The colour band's open-sky light (3,) and every band's on the channels' sum (B,)
+        The colour bands' open-sky light (Z, 3) and every band's on the channels' sum (B,)
         [radiance x sr]: the sky's term is then the read of ``sky_maps`` times the same term on
         open ground at the pixel's view (``open_sky``): the same formula with the per-point part
         done on the ground raster before the camera reads it.
@@ -105,8 +106,8 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
     light = cam._filtered_chain(sun, fp)
     if sun_direction is not None:
         light *= _sun_shape(brdf, camera, tuple(float(c) for c in sun_direction))[None]
-    weights = _band_weights(camera, bands.zeniths)
-    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth))
+    weights = _band_weights(camera, _nodes(bands))
+    ratio = sky_ratio(brdf, raster, bands, views, angles=(zenith, azimuth), weights=weights)
     if open_light is not None:
         sky = _relative_at_pixels(camera, *sky_maps)  # (3, n), relative to open ground
         sky *= open_sky(bands, weights, *open_light)
@@ -122,15 +123,19 @@ def ground_radiance(camera: cam.Camera, brdf: BrdfConfig, albedo, *, sun, sky_ma
 
 
 def _stacked_sky(stack, bands: ViewBands, weights, ratio) -> np.ndarray:
-    """``banded_sky`` of the bands' terms read as one stack (3 + B - 1, n): each band's channel,
-    three for the colour band. [radiance x sr]"""
-    c = bands.colour
-    colour = stack[c:c + 3]
-    bands_light = np.concatenate([stack[:c], colour.sum(axis=0)[None], stack[c + 3:]])
-    return banded_sky(colour, bands_light, weights, ratio)
+    """``banded_sky`` of the bands' terms read as one stack (3 Z + B - Z, n): each band's channel,
+    three for a colour band (``ViewBands.colours``). [radiance x sr]"""
+    colours, starts, at = set(bands.colours), [], 0
+    for band in range(bands.count):
+        starts.append(at)
+        at += 3 if band in colours else 1
+    tints = np.stack([stack[starts[b]:starts[b] + 3] for b in bands.colours])
+    bands_light = np.stack([stack[starts[b]:starts[b] + 3].sum(axis=0) if b in colours else stack[starts[b]]
+                            for b in range(bands.count)])
+    return banded_sky(bands, tints, bands_light, weights, ratio)
 
 
-def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light, colour_open, bands_open):
+def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colours, bands_light, colours_open, bands_open):
     """``banded_sky`` before ``sky_ratio``, over the same on open ground, at each cell of a ground raster.
 
     r-free and 1 on open ground, so the camera can read it like any ground raster (1 beyond it) and
@@ -145,12 +150,12 @@ def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light
         The ground raster's grid [m].
     bands : ViewBands
         The view bands.
-    colour : numpy.ndarray
-        (rows, cols, 3): the colour band's term [radiance x sr].
+    colours : numpy.ndarray
+        (rows, cols, Z, 3): the colour bands' terms (``ViewBands.colours``) [radiance x sr].
     bands_light : numpy.ndarray
         (rows, cols, B): every band's on the channels' sum [radiance x sr].
-    colour_open : numpy.ndarray
-        (3,) the same on open ground [radiance x sr].
+    colours_open : numpy.ndarray
+        (Z, 3) the same on open ground [radiance x sr].
     bands_open : numpy.ndarray
         (B,) the same on open ground [radiance x sr].
 
@@ -159,11 +164,11 @@ def relative_sky(camera: cam.Camera, grid, bands: ViewBands, colour, bands_light
     numpy.ndarray
         (rows, cols, 3) float32 [1].
     """
-    weights = _cell_weights(camera, grid, bands.zeniths)  # (B, rows * cols)
-    flat = np.moveaxis(bands_light.reshape(-1, len(bands.zeniths)), -1, 0)
-    colour_flat = np.moveaxis(colour.reshape(-1, 3), -1, 0)
-    sky = banded_sky(colour_flat, flat, weights, np.float32(1.0))
-    sky /= np.maximum(open_sky(bands, weights, colour_open, bands_open), np.float32(1e-30))
+    weights = _cell_weights(camera, grid, _nodes(bands))  # (B, rows * cols)
+    flat = np.moveaxis(bands_light.reshape(-1, bands.count), -1, 0)
+    colour_flat = np.moveaxis(colours.reshape(-1, *colours.shape[-2:]), 0, -1)  # (Z, 3, rows * cols)
+    sky = banded_sky(bands, colour_flat, flat, weights, np.float32(1.0))
+    sky /= np.maximum(open_sky(bands, weights, colours_open, bands_open), np.float32(1e-30))
     return np.moveaxis(sky, 0, -1).reshape(*grid.shape, 3)
 
 
@@ -201,23 +206,29 @@ def _pixel_reads(camera: cam.Camera, grid):
     return corner, taps
 
 
+def _nodes(bands: ViewBands) -> ViewBands:
+    """The bands without their error: the key of the weights' caches (the same nodes every frame)."""
+    return replace(bands, error=0.0)
+
+
 @functools.lru_cache(maxsize=2)
-def _cell_weights(camera: cam.Camera, grid, zeniths: tuple) -> np.ndarray:
-    """``ViewBands.weights`` (B, rows * cols) float32 at the view zeniths from a ground grid's
-    cell centres to the camera's pinhole (held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
+def _cell_weights(camera: cam.Camera, grid, bands: ViewBands) -> np.ndarray:
+    """``ViewBands.weights`` (B, rows * cols) float32 at the views from a ground grid's cell
+    centres to the camera's pinhole (zenith held to VIEW_ZENITH_LIMIT). Read-only. [1]"""
     gx, gy = grid.ground_from_raster(np.arange(grid.shape[0])[:, None], np.arange(grid.shape[1])[None, :])
-    across = np.hypot(camera.position[0] - gx, camera.position[1] - gy).reshape(-1)
-    zenith = np.minimum(np.arctan2(across, float(camera.position[2])), VIEW_ZENITH_LIMIT)
-    out = ViewBands(zeniths, 0.0, 0.0).weights(zenith).astype(np.float32)
+    dx, dy = np.broadcast_arrays(camera.position[0] - gx, camera.position[1] - gy)
+    zenith = np.minimum(np.arctan2(np.hypot(dx, dy).reshape(-1), float(camera.position[2])), VIEW_ZENITH_LIMIT)
+    out = bands.weights(zenith, np.arctan2(dx, dy).reshape(-1)).astype(np.float32)
     out.flags.writeable = False
     return out
 
 
 @functools.lru_cache(maxsize=2)
-def _band_weights(camera: cam.Camera, zeniths: tuple) -> np.ndarray:
-    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own view zeniths: the
-    same while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
-    out = ViewBands(zeniths, 0.0, 0.0).weights(_camera_views(camera)[1]).astype(np.float32)
+def _band_weights(camera: cam.Camera, bands: ViewBands) -> np.ndarray:
+    """``ViewBands.weights`` (B, n) float32 at the camera's ground pixels' own views: the same
+    while the camera and the bands stay (the sky changes slowly). Read-only. [1]"""
+    _, zenith, azimuth = _camera_views(camera)
+    out = bands.weights(zenith, azimuth).astype(np.float32)
     out.flags.writeable = False
     return out
 

@@ -412,7 +412,14 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     # of the band choice and of the ratio take it coarsened further (brdf_bands.SKY_CELLS)
     raster = brdf_bands.summed_blocks(ground.coarse_sky[2][0], brdf_bands.band_factor(plan))
     bands = brdf_bands.choose_bands(model, raster, reflect._camera_views(view)[0])
-    terms = sky_view_terms(plan, frame, sky, store, workers, bands.directions(), ground, colour=bands.colour)
+    # the colour bands in every channel, the others on the channels' sum (colour -1: none kept)
+    directions, colours = bands.directions(), list(bands.colours)
+    others = [b for b in range(bands.count) if b not in colours]
+    made = dict(zip(colours, sky_view_terms(plan, frame, sky, store, workers, directions[colours], ground)))
+    if others:
+        made.update(zip(others, sky_view_terms(plan, frame, sky, store, workers, directions[others], ground,
+                                               colour=-1)))
+    terms = [made[b] for b in range(bands.count)]
     sun = sky.sun_direction if getattr(sky, "sun", None) is not None else None
     if plan.canopy.layout == "periodic":
         # the bands' rasters as the channels of one raster, repeated by the tile: the camera
@@ -424,13 +431,12 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
     else:
         # an isolated canopy: the blend made on the ground raster, relative to open ground (1
         # beyond the window), so that the camera reads three channels
-        c = bands.colour
-        open_light = (np.asarray(terms[c].unshadowed, dtype=np.float64),
+        open_light = (np.array([np.asarray(terms[c].unshadowed, dtype=np.float64) for c in colours]),
                       np.array([float(np.sum(t.unshadowed)) for t in terms]))
-        grid = terms[c].grid  # the window, or the coarser grid of brdf_bands.band_factor
-        relative = reflect.relative_sky(view, grid, bands, terms[c].irradiance,
-                                        np.concatenate([t.irradiance.sum(axis=-1, keepdims=True) if k == c
-                                                        else t.irradiance for k, t in enumerate(terms)], axis=-1),
+        grid = terms[0].grid  # the window, or the coarser grid of brdf_bands.band_factor
+        relative = reflect.relative_sky(view, grid, bands, np.stack([terms[c].irradiance for c in colours], axis=-2),
+                                        np.concatenate([t.irradiance.sum(axis=-1, keepdims=True)
+                                                        for t in terms], axis=-1),
                                         *open_light)
         sky_maps = (relative, grid)
     radiance = reflect.ground_radiance(
