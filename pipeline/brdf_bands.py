@@ -109,7 +109,7 @@ class ViewBands:
     zeniths : tuple of float
         (Z,) the bands' view zenith angles, near to far [rad].
     azimuth : float
-        The azimuth of their middle sector's view direction (from the ground towards the camera) [rad].
+        The azimuth the sectors are measured from (from the ground towards the camera) [rad].
     error : float
         The largest bound of the blend's relative error under any shading over the sampled
         pixels that ``choose_bands`` measured (``shaded_bound``) [1].
@@ -132,7 +132,7 @@ class ViewBands:
 
     @property
     def colours(self) -> tuple[int, ...]:
-        """The bands whose terms are correlated in every channel: the middle sector's, one per zenith.
+        """The bands whose terms are correlated in every channel: sector T // 2's, one per zenith.
 
         They give the sky light's colour under the canopy, blended by the view zenith; the others
         are correlated on the channels' sum and give only how the reflectance modulates it

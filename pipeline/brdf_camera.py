@@ -45,7 +45,8 @@ def view_vectors(camera: cam.Camera):
 def _camera_views(camera: cam.Camera):
     """``view_vectors`` held to VIEW_ZENITH_LIMIT (``clamp_view``) (n, 3), their zenith angles
     (n,) [rad] and azimuths (n,) [rad, from +y towards +x]: they depend on the camera alone, so
-    the frames of a run, whose camera stands still, make them once. Read-only."""
+    the frames of a run make them once per camera (a following camera's walk changes none of the
+    view directions' spread, only the cache's key). Read-only."""
     views = clamp_view(view_vectors(camera))
     zenith = np.arccos(np.clip(views[:, 2], -1.0, 1.0))
     azimuth = np.arctan2(views[:, 0], views[:, 1])

@@ -107,9 +107,12 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     render = _parse_render(root.section("render"))
     root.done()
     _check_frames(root, animation, camera, output)
-    if camera.follow == "shadow" and ground.sun_window is not None:
-        root.fail("camera.follow", "shadow moves the sun window with the camera: leave out ground.sun_window "
+    if camera.follow == "shadow" and (ground.sun_window is not None or ground.window is not None):
+        given = "ground.sun_window" if ground.sun_window is not None else "ground.window"
+        root.fail("camera.follow", f"shadow moves the windows with the camera: leave out {given} "
                                    "(or give follow: fixed)")
+    if camera.follow == "shadow" and canopy.layout == "periodic":
+        root.fail("camera.follow", "a periodic canopy casts no shadow to follow: give follow: fixed or auto")
     if camera.follow == "shadow" and foreground.model == "passes":
         root.fail("camera.follow", "shadow moves the camera, and imported foreground passes hold one camera's "
                                    "view: give follow: fixed")

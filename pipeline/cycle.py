@@ -22,7 +22,8 @@ from .inputs import grove_of, load_mask
 from .plan import RunPlan
 
 __all__ = ["layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
-           "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item"]
+           "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item",
+           "foreground_views"]
 
 
 def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
@@ -171,10 +172,9 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
         The number of items computed.
     """
     frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
-    tasks = [(layer, frame) for frame in frames for layer in range(len(plan.layers))]
-    if plan.foreground.cached:
-        tasks += [(None, frame) for frame in frames]
-    missing = [(layer, frame) for layer, frame in tasks if store.get(*_product_key(plan, layer, frame)) is None]
+    tasks = [(plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
+    tasks += [(view, None, frame) for view, frame in foreground_views(plan, frames)]
+    missing = [task for task in tasks if store.get(*_product_key(*task)) is None]
     done = len(tasks) - len(missing)
     if progress:
         progress(done, len(tasks))
@@ -182,8 +182,8 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
         return 0
     computed = 0
     results = joblib.Parallel(n_jobs=min(jobs, len(missing)), return_as="generator")(
-        joblib.delayed(_cycle_task)(plan, layer, frame, str(store.root), workers, command)
-        for layer, frame in missing)
+        joblib.delayed(_cycle_task)(view, layer, frame, str(store.root), workers, command)
+        for view, layer, frame in missing)
     for misses in results:
         computed += misses
         done += 1
@@ -197,6 +197,39 @@ def _product_key(plan, layer, frame):
     if layer is None:
         return "foreground", foreground_params(plan, frame)
     return "spectra", cycle_params(plan, layer, frame)
+
+
+def foreground_views(plan: RunPlan, cycle_frames) -> list[tuple[RunPlan, int]]:
+    """The built-in trees' passes a run needs: per item, the plan of a frame that uses it and its cycle frame.
+
+    One per cycle frame; with a camera that follows the shadow, one per camera and cycle frame
+    (``RunPlan.at``: the passes are drawn for the frame's own camera, docs/method.md, "Framing").
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    cycle_frames : iterable of int
+        The cycle frames wanted.
+
+    Returns
+    -------
+    list of (plan.RunPlan, int)
+        Empty when the foreground has no cycle products of its own.
+    """
+    if not plan.foreground.cached:
+        return []
+    wanted = set(cycle_frames)
+    if plan.follow is None:
+        return [(plan, frame) for frame in sorted(wanted)]
+    views = {}
+    for frame in range(plan.frames):
+        cycle_frame = frame % plan.canopy.cycle
+        if cycle_frame in wanted:
+            view = plan.at(frame)
+            views.setdefault(cache_keys.key_of("foreground", foreground_params(view, cycle_frame)),
+                             (view, cycle_frame))
+    return list(views.values())
 
 
 def disk_needed(plan: RunPlan) -> tuple[float, float]:
@@ -229,9 +262,8 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
         if lp.sun is not None:
             rows, cols = lp.sun.fft_shape
             per_frame += rows * (cols // 2 + 1) * 8
-    if plan.foreground.cached:
-        per_frame += 8 * 4 * width * height  # float32 sun and sky (3 each), alpha, haze depth
-    return float(frames), float(per_frame * plan.canopy.cycle)
+    trees = len(foreground_views(plan, range(plan.canopy.cycle))) * 8 * 4 * width * height
+    return float(frames), float(per_frame * plan.canopy.cycle + trees)  # trees: float32 sun, sky, alpha, haze
 
 
 CONFIG_INDEX = ".configs"
@@ -252,11 +284,12 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     dict of str to tuple
         Cache key -> (kind, cycle frame).
     """
+    products = [(plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
+    products += [(view, None, frame) for view, frame in foreground_views(plan, range(plan.canopy.cycle))]
     keys = {}
-    for frame in range(plan.canopy.cycle):
-        for layer in [*range(len(plan.layers)), *([None] if plan.foreground.cached else [])]:
-            kind, params = _product_key(plan, layer, frame)
-            keys[cache_keys.key_of(kind, params)] = (kind, frame)
+    for view, layer, frame in products:
+        kind, params = _product_key(view, layer, frame)
+        keys[cache_keys.key_of(kind, params)] = (kind, frame)
     return keys
 
 

@@ -283,7 +283,7 @@ def usno_illuminance(elevation_deg) -> np.ndarray:
 TWILIGHT_MAX_FALL = 1.0
 """The steepest fall of the modelled twilight light, d ln E / dh: 9.5% a tenth of a degree
 (``twilight_illuminance``). The USNO curve falls 10.0-12.0% a tenth from -3.4 down to -6 degrees;
-issue 31 asks no step over 10% between neighbouring tenths. [1/deg]"""
+capped, the light falls by less than 10% between neighbouring tenths (docs/method.md). [1/deg]"""
 
 
 def twilight_illuminance(elevation_deg) -> np.ndarray:

@@ -318,6 +318,8 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     view = _place_camera(config, target, s, auto, pitch, aim)
     follow = None
     movable = (sun is not None and c.position is None and c.look_at is None and ground.sun_window is None
+               and ground.window is None  # a given window is where the light is computed: the camera stays
+               and not periodic  # an endless forest has no shadow to follow
                and config.foreground.model != "passes")  # imported passes hold one camera's view
     if movable and c.follow != "fixed" and len(scenes) > 1:
         targets = follow_targets(config, scenes, target)

@@ -1,11 +1,14 @@
 """A placed camera that follows the shadow over a time span (``camera.follow``), and its sun
 window that moves with it (docs/method.md, "Framing"). Small groves and small frames."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from pipeline import camera, io
+from pipeline import camera, cycle, io
 from pipeline.cache import Cache
+from pipeline.cache_keys import key_of
 from pipeline.cli import main
 from pipeline.frame import render_frame
 from pipeline.framing import crown_centre, seen_ground, shadow_extents
@@ -111,12 +114,43 @@ def test_a_bad_follow_is_a_one_line_error_naming_the_key(tmp_path, capsys, keys,
     assert err.count("\n") == 1 and message in err
 
 
-def test_follow_shadow_with_a_given_sun_window_is_refused(tmp_path, capsys):
+@pytest.mark.parametrize("key, value, named", [
+    ("sun_window", [0.0, 0.0, 2.0, 2.0], "ground.sun_window"),
+    ("window", [-20.0, -20.0, 20.0, 20.0], "ground.window"),
+    ("layout", "periodic", "periodic"),
+])
+def test_follow_shadow_with_a_given_window_or_a_periodic_canopy_is_refused(tmp_path, capsys, key, value, named):
     config = sunset_span(frames=4, follow="shadow")
-    config["ground"]["sun_window"] = [0.0, 0.0, 2.0, 2.0]
+    (config["canopy"] if key == "layout" else config["ground"])[key] = value
     assert main(["check", str(write(tmp_path, config))]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "camera.follow" in err and "ground.sun_window" in err
+    assert err.count("\n") == 1 and "camera.follow" in err and named in err
+
+
+def test_auto_keeps_one_camera_over_a_given_window(tmp_path):
+    """The light is computed on the window given: a camera that walked off it would see ground the
+    window does not hold."""
+    config = sunset_span(frames=4)
+    assert plan_run(load(write(tmp_path, config, "placed.yaml"))).follow is not None
+    config["ground"]["window"] = [-30.0, -30.0, 30.0, 30.0]
+    assert plan_run(load(write(tmp_path, config, "given.yaml"))).follow is None
+
+
+def test_a_following_camera_s_trees_are_made_and_kept_per_camera(tmp_path):
+    """Built-in trees in the picture are drawn for each frame's camera: the cycle phase, the keys a
+    run holds in use and the disk estimate count one item per camera and cycle frame."""
+    config = sunset_span(frames=4, follow="shadow")
+    config["foreground"] = {"model": "trees"}
+    plan = plan_run(load(write(tmp_path, config)))
+    assert plan.follow is not None and plan.canopy.cycle == 1
+    views = cycle.foreground_views(plan, [0])
+    assert len(views) == len({plan.at(f).camera for f in range(4)}) == 4
+    keys = cycle.config_item_keys(plan)
+    for f in range(4):
+        assert key_of("foreground", cycle.foreground_params(plan.at(f), 0)) in keys
+    fixed = replace(plan, follow=None)
+    assert cycle.disk_needed(plan)[1] - cycle.disk_needed(fixed)[1] == pytest.approx(
+        3 * 8 * 4 * plan.camera.width * plan.camera.height)
 
 
 def test_a_given_camera_hashes_alike_whatever_its_follow(tmp_path):
