@@ -348,8 +348,8 @@ def _check_sizes(config: Config, plan: RunPlan) -> None:
     """Refuse a plan whose rasters would pass the stated limits (resolve.MAX_SUN_PIXELS and
     MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
     def refuse(key, what, cells, most, advice):
-        raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:.3g} cells, about "
-                          f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:.3g}: {advice}")
+        raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:,.0f} cells, about "
+                          f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:,.0f}: {advice}")
 
     if plan.sun_window is not None and np.prod(plan.sun_window.shape) > MAX_SUN_PIXELS:
         refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),
