@@ -113,7 +113,7 @@ def main() -> None:
         def write(i):
             io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()),
                          half=True)
-            io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
+            io.write_png(work / f"f.{i:04d}.png", composite.display_codes(frames[i], exposure=result.exposure))
 
         def write_raw(i):
             np.save(work / f"raw.{i}.npy", frames[i])
@@ -142,10 +142,15 @@ def main() -> None:
         bare = sum(round_trip_seconds(shape, args.threads) for shape in shapes if shape is not None)
         t_exr = median_seconds(lambda i: io.write_exr(work / f"e.{i:04d}.exr", frames[i], half=True), n)
         t_png = median_seconds(lambda i: io.write_png(
-            work / f"p.{i:04d}.png", composite.display(frames[i], exposure=result.exposure)), n)
+            work / f"p.{i:04d}.png", composite.display_codes(frames[i], exposure=result.exposure)), n)
+        t_codes = median_seconds(lambda i: composite.display_codes(frames[i], exposure=result.exposure), n)
+        t_array = median_seconds(lambda i: io.half_dither(frames[i].shape) + composite.display(
+            frames[i], exposure=result.exposure), n)
         print(f"resampling ground and sky: {t_resample * 1e3:.0f} ms; unfiltered bilinear lookup "
               f"of a 2048^2 RGB raster: {base * 1e3:.0f} ms; ratio {t_resample / base:.1f}")
         print(f"haze and compositing: {t_blend * 1e3:.0f} ms")
+        print(f"display codes: compiled {t_codes * 1e3:.1f} ms; the array display and a dither's sum "
+              f"{t_array * 1e3:.1f} ms")
         print(f"writing half EXR + PNG: {t_write * 1e3:.0f} ms (EXR {t_exr * 1e3:.0f}, PNG with display "
               f"{t_png * 1e3:.0f}); raw .npy of the same pixels: {t_raw * 1e3:.1f} ms; ratio {t_write / t_raw:.0f}")
         print(f"ground raster: {t_ground * 1e3:.0f} ms; whole frame (no writing): {t_whole * 1e3:.0f} ms "

@@ -18,7 +18,7 @@ import OpenImageIO as oiio
 from .errors import ImageError
 
 __all__ = ["MAX_IMAGE_VALUES", "PNG_FILTER_SUB", "VIDEO_FORMATS", "read_image", "read_codes", "read_layers",
-           "read_attributes", "write_exr", "write_png", "write_video"]
+           "read_attributes", "write_exr", "write_png", "half_dither", "write_video"]
 
 MAX_IMAGE_VALUES = 2**29
 """Most values (width x height x channels) an image read may hold: its header is read first, and
@@ -235,15 +235,16 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
 def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
     """Write display-referred pixels as an 8-bit PNG, atomically.
 
-    A fixed-seed dither of one code value breaks the banding of smooth gradients; the same
-    pixels always give the same bytes.
+    A fixed-seed dither of one code value breaks the banding of smooth gradients
+    (``half_dither``); the same pixels always give the same bytes. Codes given as uint8 (a
+    frame's, made in one compiled pass by ``composite.display_codes``) are written as they are.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file.
     pixels : numpy.ndarray
-        (rows, cols, channels) display values in [0, 1] [1].
+        (rows, cols, channels) display values in [0, 1] [1], or uint8 codes.
     attributes : dict, optional
         {name: str or int}, written as text chunks.
 
@@ -257,14 +258,17 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.nd
     ImageError
         Naming the file, when it cannot be written.
     """
-    pixels = np.asarray(pixels, dtype=np.float32)
-    codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
-    codes *= 255.0
-    codes += 0.5
-    codes += _half_dither(pixels.shape)
-    np.floor(codes, out=codes)
-    np.clip(codes, 0, 255, out=codes)
-    data = np.ascontiguousarray(codes.astype(np.uint8))  # a transposed view keeps its strides
+    if np.asarray(pixels).dtype == np.uint8:
+        data = np.ascontiguousarray(pixels)
+    else:
+        pixels = np.asarray(pixels, dtype=np.float32)
+        codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
+        codes *= 255.0
+        codes += 0.5
+        codes += half_dither(pixels.shape)
+        np.floor(codes, out=codes)
+        np.clip(codes, 0, 255, out=codes)
+        data = np.ascontiguousarray(codes.astype(np.uint8))  # a transposed view keeps its strides
     rows, cols, channels = data.shape
     spec = oiio.ImageSpec(cols, rows, channels, "uint8")
     # zlib level 2 on rows filtered by "sub" (libpng's PNG_FILTER_SUB): 1280 x 720 frames in
@@ -283,10 +287,20 @@ PNG_FILTER_SUB = 0x10
 
 
 @functools.lru_cache(maxsize=4)
-def _half_dither(shape) -> np.ndarray:
-    """Half the fixed-seed dither of ``write_png``, (shape) float32 in (-0.5, 0.5): the
-    difference of two uniform fields of seeds 0 and 1, halved; made once per frame size
-    (read-only)."""
+def half_dither(shape) -> np.ndarray:
+    """Half the fixed-seed dither of ``write_png``: the difference of two uniform fields of
+    seeds 0 and 1, halved; made once per frame size (read-only).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        (rows, cols, channels) of the pixels.
+
+    Returns
+    -------
+    numpy.ndarray
+        (shape) float32 in (-0.5, 0.5), read-only [code values].
+    """
     noise = np.random.default_rng(0).random(shape, dtype=np.float32)
     noise -= np.random.default_rng(1).random(shape, dtype=np.float32)
     noise *= 0.5

@@ -99,3 +99,11 @@ def test_a_pngs_codes_read_as_they_are_stored(tmp_path):
     fractions = io.read_image(tmp_path / "p.png")
     np.testing.assert_array_equal(codes, np.floor(fractions * 255.0 + 0.5).astype(np.uint8))
     assert np.abs(codes / 255.0 - fractions).max() < 1e-6
+
+
+def test_a_png_of_codes_holds_them_as_given(tmp_path):
+    """uint8 codes (composite.display_codes) are written as they are, without a dither."""
+    codes = np.random.default_rng(5).integers(0, 256, (9, 14, 3), dtype=np.uint8)
+    written = io.write_png(tmp_path / "c.png", codes)
+    np.testing.assert_array_equal(io.read_codes(tmp_path / "c.png"), codes)
+    np.testing.assert_array_equal(written, codes)
