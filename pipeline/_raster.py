@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "box_pixels", "in_order", "ellipses", "capsules", "flutter", "onto", "ellipse_params", "leaf_fragments",
+    "box_pixels", "in_order", "shapes", "flutter", "onto", "ellipse_params", "leaf_fragments",
     "scatter_light", "leaf_heights",
 ]
 
@@ -235,8 +235,9 @@ def _next_box(ii, center, half, index, feature, thickness, most, transmittance, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipses(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
-    """Every ellipse's coverage c of every pixel of its box, into the transmittance or as fragments.
+def shapes(capsule, center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
+    """Every ellipse's or capsule piece's coverage c of every pixel of its box, into the transmittance or
+    as fragments.
 
     ``transmittance`` (rows, cols) is multiplied by 1 - c, or, if the arrays ``fragments`` are not
     empty, fragments are appended from ``count`` (``transmittance`` then only gives the raster's
@@ -244,6 +245,8 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
 
     Parameters
     ----------
+    capsule : bool
+        Capsule pieces (the wood), else ellipses (the leaves).
     center : numpy.ndarray
         (m, 2) float64: the boxes' centres (u, v), in the order drawn (translates of a periodic
         canopy included) [pixel].
@@ -252,79 +255,14 @@ def ellipses(center, half, index, prm, feature, thickness, most, transmittance, 
     index : numpy.ndarray
         (m,) the shape of each box, into the per-shape arrays.
     prm : numpy.ndarray
-        (n, 4) float32 shape parameters: major unit vector, semi-axes A, B.
+        Float32 shape parameters. Ellipses: (n, 4), the major unit vector, semi-axes A, B. Capsule
+        pieces: (n, 8), the axis start relative to the piece's centre (x0, y0), the axis (ex, ey),
+        1 / |axis|^2, the radius, and the stretch [t_lo, t_hi) of the axis whose pixels (judged at
+        their centres) the piece draws.
     feature : numpy.ndarray
-        (n,) feature size (B) [pixel].
+        (n,) feature size (B, or the radius) [pixel].
     thickness : numpy.ndarray
-        (n,) thickness (2 B) [pixel].
-    most : int
-        The most sub-samples of one box before k is lowered [count].
-    transmittance : numpy.ndarray
-        (rows, cols) float64, multiplied by 1 - c in place; only its shape is read when
-        ``fragments`` has room [1].
-    fragments : tuple of numpy.ndarray
-        (flat pixel int64, coverage float32, shape int64), each (size,); empty for the
-        transmittance.
-    owner : numpy.ndarray
-        (n,) the shape number a fragment carries.
-    count : int
-        Fragments already written [count].
-
-    Returns
-    -------
-    int
-        The new count of fragments [count].
-    """
-    samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
-    for ii in range(index.shape[0]):
-        i, x0, y0, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
-                                                               most, transmittance, samples)
-        if w == 0:
-            continue
-        dxs, dys, buf = samples
-        kf = np.float32(k)
-        ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
-        ab, bb, aa = major * minor, minor * minor, major * major
-        eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
-        m = _samples(rx, ry, w, h, k, dxs, dys)
-        for j in range(m):
-            dx, dy = dxs[j], dys[j]
-            p = dx * ex + dy * ey
-            q = dy * ex - dx * ey
-            bp = bb * p
-            aq = aa * q
-            mp = minor * p
-            mq = major * q
-            gauge = np.sqrt(mp * mp + mq * mq)
-            inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
-            d = (gauge - ab) * (gauge + eps) * inv
-            buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
-        _sum_samples(buf, w * h, k)
-        count = _deposit(buf, w, h, k, x0, y0, transmittance, fragments, owner[i], count)
-    return count
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def capsules(center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
-    """As ``ellipses`` for capsule pieces.
-
-    Parameters
-    ----------
-    center : numpy.ndarray
-        (m, 2) float64: the boxes' centres (u, v), in the order drawn (translates of a periodic
-        canopy included) [pixel].
-    half : numpy.ndarray
-        (n, 2) box half-sizes of the shapes [pixel].
-    index : numpy.ndarray
-        (m,) the shape of each box, into the per-shape arrays.
-    prm : numpy.ndarray
-        (n, 8) float32 shape parameters: axis start relative to the piece's centre (x0, y0),
-        axis (ex, ey), 1 / |axis|^2, radius, and the stretch [t_lo, t_hi) of the axis whose pixels
-        (judged at their centres) the piece draws.
-    feature : numpy.ndarray
-        (n,) feature size (the radius) [pixel].
-    thickness : numpy.ndarray
-        (n,) thickness (2 radius) [pixel].
+        (n,) thickness (2 B, or twice the radius) [pixel].
     most : int
         The most sub-samples of one box before k is lowered [count].
     transmittance : numpy.ndarray
@@ -351,28 +289,63 @@ def capsules(center, half, index, prm, feature, thickness, most, transmittance, 
             continue
         dxs, dys, buf = samples
         kf = np.float32(k)
-        x0, y0, ex, ey, inverse, radius, t_lo, t_hi = (prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3],
-                                                      prm[i, 4], prm[i, 5], prm[i, 6], prm[i, 7])
         m = _samples(rx, ry, w, h, k, dxs, dys)
-        for j in range(m):
-            px, py = dxs[j] - x0, dys[j] - y0
-            t = min(max((px * ex + py * ey) * inverse, np.float32(0.0)), np.float32(1.0))
-            qx, qy = px - t * ex, py - t * ey
-            length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
-            inv = np.float32(1.0) / length
-            buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
+        if capsule:
+            _capsule_cover(prm[i], m, dxs, dys, kf, thick, buf)
+        else:
+            _ellipse_cover(prm[i], m, dxs, dys, kf, thick, buf)
         _sum_samples(buf, w * h, k)
-        for r in range(h):
-            # only the pixels of the piece's stretch of the axis, judged at their centres in
-            # float64 as before: the others' coverage is cleared
-            cy = float(r) + 0.5 - float(ry) - float(y0)
-            for c in range(w):
-                cx = float(c) + 0.5 - float(rx) - float(x0)
-                t = (cx * float(ex) + cy * float(ey)) * float(inverse)
-                if not (t >= float(t_lo) and t < float(t_hi)):
-                    buf[r * w + c] = 0.0
+        if capsule:
+            _clear_outside_stretch(prm[i], w, h, rx, ry, buf)
         count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
     return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _ellipse_cover(prm, m, dxs, dys, kf, thick, buf):
+    """The coverage of the first ``m`` sub-samples (dxs, dys) by the ellipse ``prm`` (4,), into ``buf``."""
+    ex, ey, major, minor = prm[0], prm[1], prm[2], prm[3]
+    ab, bb, aa = major * minor, minor * minor, major * major
+    eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
+    for j in range(m):
+        dx, dy = dxs[j], dys[j]
+        p = dx * ex + dy * ey
+        q = dy * ex - dx * ey
+        bp = bb * p
+        aq = aa * q
+        mp = minor * p
+        mq = major * q
+        gauge = np.sqrt(mp * mp + mq * mq)
+        inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
+        d = (gauge - ab) * (gauge + eps) * inv
+        buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _capsule_cover(prm, m, dxs, dys, kf, thick, buf):
+    """The coverage of the first ``m`` sub-samples (dxs, dys) by the capsule piece ``prm`` (8,), into ``buf``."""
+    x0, y0, ex, ey, inverse, radius = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5]
+    for j in range(m):
+        px, py = dxs[j] - x0, dys[j] - y0
+        t = min(max((px * ex + py * ey) * inverse, np.float32(0.0)), np.float32(1.0))
+        qx, qy = px - t * ex, py - t * ey
+        length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
+        inv = np.float32(1.0) / length
+        buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _clear_outside_stretch(prm, w, h, rx, ry, buf):
+    """Clears the coverage of the box's pixels outside the capsule piece's stretch [t_lo, t_hi) of its axis,
+    judged at the pixels' centres in float64 (the pieces of one capsule tile its axis)."""
+    x0, y0, ex, ey, inverse, t_lo, t_hi = prm[0], prm[1], prm[2], prm[3], prm[4], prm[6], prm[7]
+    for r in range(h):
+        cy = float(r) + 0.5 - float(ry) - float(y0)
+        for c in range(w):
+            cx = float(c) + 0.5 - float(rx) - float(x0)
+            t = (cx * float(ex) + cy * float(ey)) * float(inverse)
+            if not (t >= float(t_lo) and t < float(t_hi)):
+                buf[r * w + c] = 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

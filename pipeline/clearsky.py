@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .colour import XYZ_TO_REC709
+from .colour import REC709_LUMINANCE, XYZ_TO_REC709
+from .twilight import twilight_colour
 from .vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS
 
 __all__ = [
@@ -234,8 +235,9 @@ def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shap
     gamma : float or numpy.ndarray
         Angle from the sun, broadcastable with ``cos_zenith`` [rad].
     sun_zenith : float
-        Beyond pi/2 (the sun set, to 96 degrees) the CIE shape follows it and Preetham's colour
-        (and shape) are those at pi/2 [rad].
+        Beyond pi/2 (the sun set, to 96 degrees) the CIE shape follows it, Preetham's shape is
+        the one at pi/2, and the colour (but the overcast and intermediate types') is Preetham's at
+        pi/2 times ``twilight.twilight_colour``'s change since, the luminance kept [rad].
     turbidity : float
         T of the colour (and of the Preetham shape) [1].
     shape : str, optional
@@ -261,4 +263,10 @@ def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shap
             x, y = (np.full_like(Y, c) for c in daylight_chromaticity(DAYLIGHT_CCT[cie_type]))
     elif shape != "preetham":
         raise ValueError(f"unknown sky shape {shape!r} (valid: {', '.join(PROCEDURAL_MODELS)})")
-    return rgb_from_xyY(x, y, Y)
+    rgb = rgb_from_xyY(x, y, Y)
+    if sun_zenith > np.pi / 2 and not (shape == "cie" and cie_type in DAYLIGHT_CCT):
+        # after sunset (docs/method.md, "The procedural sky": low sun and twilight)
+        rgb = rgb * twilight_colour(cos_zenith, gamma, sun_elevation=np.pi / 2 - sun_zenith, turbidity=turbidity)
+        luminance = rgb @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
+        rgb *= (Y / np.maximum(luminance, 1e-300))[..., None]
+    return rgb

@@ -20,7 +20,8 @@ from .settings import (AUTO_LIMITS, AUTO_TIME_CONSTANT, AnimationConfig, AutoExp
                        CanopyConfig, CanopyLayer, CloudsConfig, Config, FlutterConfig, ForegroundConfig, GroundConfig,
                        MoonConfig, OutputConfig, RenderConfig, SiteConfig, SkyConfig, SunConfig, TreesConfig)
 from .vocabulary import (BRDF_PARAMETERS, BRDF_PRESETS, CIE_TYPE_RANGE, DISPLAYS, FOREGROUNDS, PASSES,
-                         PROCEDURAL_MODELS, REFLECTANCES, SKIES, TURBIDITY_RANGE, WHITE_BALANCES)
+                         FOLLOWS, PROCEDURAL_MODELS, REFLECTANCES, SKIES, TURBIDITY_RANGE,
+                         WHITE_BALANCES)
 from .yamlsafe import _Context, _key_lines, load_yaml
 
 __all__ = ["FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
@@ -106,6 +107,12 @@ def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
     render = _parse_render(root.section("render"))
     root.done()
     _check_frames(root, animation, camera, output)
+    if camera.follow == "shadow" and ground.sun_window is not None:
+        root.fail("camera.follow", "shadow moves the sun window with the camera: leave out ground.sun_window "
+                                   "(or give follow: fixed)")
+    if camera.follow == "shadow" and foreground.model == "passes":
+        root.fail("camera.follow", "shadow moves the camera, and imported foreground passes hold one camera's "
+                                   "view: give follow: fixed")
     if output.passes and ground.brdf is not None:
         root.fail("output.passes", "the light passes are not made with a ground.brdf yet; give one or the other")
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,
@@ -507,9 +514,14 @@ def _parse_camera(s: _Section) -> CameraConfig:
     if width * height > MAX_IMAGE_PIXELS:
         s.fail("resolution", f"{width} x {height} is {width * height:.3g} pixels; the most is {MAX_IMAGE_PIXELS:.3g}")
     stops, auto = _parse_exposure(s)
+    follow = s.choice("follow", FOLLOWS, CameraConfig.follow)
+    if follow == "shadow" and (position is not None or look_at is not None):
+        s.fail("follow", "shadow moves the camera to keep the shadow in view: leave out camera.position "
+                         "and camera.look_at (or give follow: fixed)")
     camera = CameraConfig(position, look_at, yaw, pitch, fov, (width, height), exposure=stops,
                           display=s.choice("display", DISPLAYS, CameraConfig.display), auto_exposure=auto,
-                          white_balance=s.choice("white_balance", WHITE_BALANCES, CameraConfig.white_balance))
+                          white_balance=s.choice("white_balance", WHITE_BALANCES, CameraConfig.white_balance),
+                          follow=follow)
     s.done()
     return camera
 

@@ -18,7 +18,8 @@ import numpy as np
 
 __all__ = [
     "SOLAR_CONSTANT", "PRECIPITABLE_WATER", "CLEARNESS_BINS", "TWILIGHT_END", "TWILIGHT_BLEND", "Efficacy",
-    "perez_efficacy", "ClearDaylight", "clear_daylight", "linke_turbidity", "usno_illuminance", "sky_daylight",
+    "perez_efficacy", "ClearDaylight", "clear_daylight", "linke_turbidity", "usno_illuminance", "TWILIGHT_MAX_FALL",
+    "twilight_illuminance", "sky_daylight",
 ]
 
 SOLAR_CONSTANT = 1366.1
@@ -279,6 +280,44 @@ def usno_illuminance(elevation_deg) -> np.ndarray:
     return 10.0**log_e
 
 
+TWILIGHT_MAX_FALL = 1.0
+"""The steepest fall of the modelled twilight light, d ln E / dh: 9.5% a tenth of a degree
+(``twilight_illuminance``). The USNO curve falls 10.0-12.0% a tenth from -3.4 down to -6 degrees;
+issue 31 asks no step over 10% between neighbouring tenths. [1/deg]"""
+
+
+def twilight_illuminance(elevation_deg) -> np.ndarray:
+    """The USNO curve with its fall capped: the lowest curve at or above it whose log falls no faster
+    than TWILIGHT_MAX_FALL.
+
+    ln E(h) = s h + max over h' in [h, 10 degrees] of (ln E_USNO(h') - s h'), s = TWILIGHT_MAX_FALL,
+    on a 0.001-degree grid from the end of civil twilight to 10 degrees, linear in between; the
+    curve's own value where that is not above it. It is the curve (``usno_illuminance``) from -4
+    degrees up (but for 0.9% just under 5 degrees, where its bands meet with a jump) and departs
+    from it below, where the
+    curve falls faster than s: 1.06 times the curve at -5 degrees, 1.19 at -6 (4.1 lx for 3.4;
+    docs/accuracy.md, "Low sun, civil twilight and the overcast colour").
+
+    Parameters
+    ----------
+    elevation_deg : float or numpy.ndarray
+        The sun's altitude, in [-6, 10] (clamped to it) [deg].
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 of the shape of ``elevation_deg`` [lx].
+    """
+    s = TWILIGHT_MAX_FALL
+    grid = np.arange(round(np.degrees(TWILIGHT_END) * 1000), round(TWILIGHT_BLEND[1] * 1000) + 1) / 1000.0
+    capped = np.maximum.accumulate((np.log(usno_illuminance(grid)) - s * grid)[::-1])[::-1]
+    h = np.clip(np.asarray(elevation_deg, dtype=np.float64), grid[0], grid[-1])
+    curve = usno_illuminance(h)
+    ramp = np.exp(np.interp(h, grid, capped) + s * h)
+    # the curve's own values where the cap is idle (the ramp there is the curve to rounding)
+    return np.where(ramp > curve * (1.0 + 1e-9), ramp, curve)
+
+
 def _smoothstep(t):
     t = np.clip(t, 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
@@ -290,9 +329,9 @@ def sky_daylight(sun_elevation: float, linke_turbidity: float, *, altitude: floa
     """The clear sky's direct and diffuse light at any sun from the zenith to the end of civil twilight.
 
     ``clear_daylight`` at and above TWILIGHT_BLEND[1]; below, the global horizontal illuminance E of
-    the USNO curve (``usno_illuminance``, times ``distance_factor``) blended into Ineichen & Perez's
-    by a smoothstep in log E over TWILIGHT_BLEND. The sun keeps Ineichen & Perez's direct normal light
-    while its whole disc is up (0 below), and the sky takes the rest: diffuse = E - direct x
+    the USNO curve with its fall capped (``twilight_illuminance``, times ``distance_factor``) blended
+    into Ineichen & Perez's by a smoothstep in log E over TWILIGHT_BLEND. The sun keeps Ineichen &
+    Perez's direct normal light while its whole disc is up (0 below), and the sky takes the rest: diffuse = E - direct x
     sin(elevation), at least 5% of E.
 
     Parameters
@@ -330,7 +369,7 @@ def sky_daylight(sun_elevation: float, linke_turbidity: float, *, altitude: floa
         return clear_daylight(np.pi / 2 - sun_elevation, linke_turbidity, **kwargs)
     ip = clear_daylight(np.pi / 2 - max(sun_elevation, 1e-4), linke_turbidity, **kwargs)
     direct = ip.direct_normal_illuminance if sun_elevation > sun_radius else 0.0
-    usno = float(usno_illuminance(h)) * distance_factor / 1000.0
+    usno = float(twilight_illuminance(h)) * distance_factor / 1000.0
     w = float(_smoothstep((h - low) / (high - low)))
     if w > 0.0:
         modelled = direct * np.sin(sun_elevation) + ip.diffuse_horizontal_illuminance

@@ -220,6 +220,7 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     ValueError
         For light passes with a ground reflectance (``ground.brdf``).
     """
+    plan = plan.at(frame)  # a following camera's view and sun window (docs/method.md, "Framing")
     passes = plan.output.passes if passes is None else tuple(passes)
     brdf = plan.ground.brdf
     workers = workers or default_workers()

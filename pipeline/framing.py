@@ -1,6 +1,6 @@
 """Framing: the ground windows and the camera placed from the canopy and the sun's path, so that
-any place and time frames the canopy's dappled shadow (docs/method.md, "Framing"). Part of the
-plan stage."""
+any place and time frames the canopy's dappled shadow, the camera following it over a time span
+where one place would lose it (docs/method.md, "Framing"). Part of the plan stage."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from .scene import shading_scenes, sun_shades
 __all__ = ["CAMERA_HEIGHT", "CAMERA_PITCH", "ECLIPSE_PITCH", "CAMERA_TURN", "WINDOW_MARGIN", "AUTO_SUN_PIXELS",
            "AUTO_SUN_MASK", "AUTO_VIEW_SAMPLES", "Framing", "canopy_extent", "crown_centre", "DAPPLE_TRANSMITTANCE",
            "ECLIPSE_TRANSMITTANCE", "LOW_SUN", "DAPPLE_CELL", "dappled_point", "shadow_extents", "leaf_shadow_extents",
-           "frame_scene", "AIM_ROW", "seen_ground", "framing_warnings"]
+           "frame_scene", "AIM_ROW", "seen_ground", "framing_warnings", "FOLLOW_SLACK",
+           "follow_targets", "follow_cameras", "SEEN_MARGIN"]
 
 CAMERA_HEIGHT = 1.7
 """Eye height of a camera placed by default. [m]"""
@@ -58,6 +59,9 @@ class Framing:
     shadow : tuple of float or None
         (x_min, y_min, x_max, y_max) of where the shadow falls [m]; None: a periodic forest, shadow
         everywhere.
+    follow : tuple of (int, camera.Camera) or None
+        With a camera that follows the shadow (``camera.follow``), per shading scene its frame and
+        its camera (``camera`` is the middle one's); None: one camera for every frame.
     """
 
     window: tuple[float, float, float, float]
@@ -65,6 +69,7 @@ class Framing:
     camera: camera.Camera
     auto: tuple[str, ...]
     shadow: tuple[float, float, float, float] | None
+    follow: tuple[tuple[int, camera.Camera], ...] | None = None
 
 
 def canopy_extent(config: Config, projection) -> tuple[float, float, float, float]:
@@ -271,6 +276,9 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     - ``ground.sun_window``: the ground the camera sees of the shadow (with a pinhole image's
       length to spare), cut at the distance where it would pass AUTO_SUN_PIXELS fine pixels;
       the window when a window is given but no sun window.
+    - ``camera.follow``: a placed camera (no position, look_at or sun window given) that would
+      lose the shadow over the span (``auto``), or any (``shadow``), walks with it frame by
+      frame (``follow_targets``, ``follow_cameras``); the plan moves the sun window with it.
 
     Parameters
     ----------
@@ -306,7 +314,15 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     if ground.sun_window is not None and c.position is None and c.look_at is None:
         sw = ground.sun_window  # a given sun window: the camera looks at its middle
         target, aim = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2]), 0.5
-    view = _place_camera(config, target, s, auto, ECLIPSE_PITCH if deep else CAMERA_PITCH, aim)
+    pitch = ECLIPSE_PITCH if deep else CAMERA_PITCH
+    view = _place_camera(config, target, s, auto, pitch, aim)
+    follow = None
+    movable = (sun is not None and c.position is None and c.look_at is None and ground.sun_window is None
+               and config.foreground.model != "passes")  # imported passes hold one camera's view
+    if movable and c.follow != "fixed" and len(scenes) > 1:
+        targets = follow_targets(config, scenes, target)
+        if c.follow == "shadow" or _strays(view, target, targets):
+            follow = tuple(zip((sc.frame for sc in scenes), follow_cameras(view, target, targets)))
     sun_window = ground.sun_window
     if sun_window is None and sun is not None:
         if ground.window is not None:
@@ -314,9 +330,88 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
         else:
             auto.append("ground.sun_window")
             sun_window = _seen_sun_window(config, scenes, view, shadow_box, window)
+    if "ground.window" in auto and not periodic:  # only the ground some frame's camera sees
+        window = _seen_window([view] if follow is None else [v for _, v in follow], view, sun_window, window)
     return Framing(tuple(float(v) for v in window),
                    None if sun_window is None else tuple(float(v) for v in sun_window),
-                   view, tuple(auto), shadow_box)
+                   view, tuple(auto), shadow_box, follow)
+
+
+FOLLOW_SLACK = 0.15
+"""With ``camera.follow: auto`` a placed camera follows the shadow when, seen from the middle
+frame's camera, some frame's target lies further than this share of the image's width from
+where that camera sees its own (or outside the image). [1]"""
+
+
+def follow_targets(config: Config, scenes, target) -> np.ndarray:
+    """Per scene, the ground point a camera that follows the shadow aims at.
+
+    The shadow of the crown's centre along the scene's sun, ``c - h s``, plus the middle scene's
+    ``target``'s offset from it, taken in the sun's own axes and stretched along the sun by
+    ``1 / sin(elevation)`` as the shadow of a round crown is: the target keeps its place in the
+    shadow (its rim, its dappled part) as the shadow moves and lengthens, smoothly, where the
+    dappled point found anew in each frame would jump from one side of the shadow to the other
+    (docs/method.md, "Framing").
+
+    Parameters
+    ----------
+    config : settings.Config
+        The resolved config.
+    scenes : sequence of scene.Scene
+        The scenes whose sun shades, in frame order.
+    target : array_like, shape (2,)
+        The middle scene's target (``dappled_point``) (x, y) [m].
+
+    Returns
+    -------
+    ndarray, shape (len(scenes), 2)
+        (x, y) [m].
+    """
+    centre = crown_centre(config)
+    sky = np.array([sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation) for sc in scenes])
+    middles = centre[:2] - centre[2] * sky
+    azimuth = np.array([sc.sun.azimuth for sc in scenes])
+    elevation = np.array([sc.sun.elevation for sc in scenes])
+    along = np.column_stack([np.sin(azimuth), np.cos(azimuth)])
+    across = np.column_stack([np.cos(azimuth), -np.sin(azimuth)])
+    m = len(scenes) // 2
+    offset = np.asarray(target, dtype=np.float64) - middles[m]
+    stretch = (offset @ along[m]) * np.sin(elevation[m])  # the offset along the sun times sin(h)
+    return middles + (stretch / np.sin(elevation))[:, None] * along + (offset @ across[m]) * across
+
+
+def follow_cameras(view: camera.Camera, target, targets) -> list:
+    """``view`` moved over the ground, its yaw and pitch kept, so that it sees each target where it
+    sees ``target``.
+
+    Parameters
+    ----------
+    view : camera.Camera
+        The camera that looks at ``target``.
+    target : array_like, shape (2,)
+        Its ground point (x, y) [m].
+    targets : array_like, shape (n, 2)
+        The ground points to look at (x, y) [m].
+
+    Returns
+    -------
+    list of camera.Camera
+        One per target.
+    """
+    moves = np.asarray(targets, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    x, y, z = view.position
+    return [camera.Camera((float(x + dx), float(y + dy), z), view.yaw, view.pitch, view.vertical_fov,
+                          view.width, view.height) for dx, dy in moves]
+
+
+def _strays(view: camera.Camera, target, targets) -> bool:
+    """Whether some target lies further than FOLLOW_SLACK of the image's width from where
+    ``view`` sees ``target``, or outside the image."""
+    points = np.column_stack([np.vstack([target, targets]), np.zeros(len(targets) + 1)])
+    u, v, depth = camera.project_points(view, points)
+    inside = (depth[1:] > 0) & (u[1:] >= 0) & (u[1:] <= view.width) & (v[1:] >= 0) & (v[1:] <= view.height)
+    drift = np.hypot(u[1:] - u[0], v[1:] - v[0]) / view.width
+    return bool(np.any(~inside) or np.any(drift > FOLLOW_SLACK))
 
 
 def _eclipsed(scenes) -> bool:
@@ -426,6 +521,28 @@ def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
     return best
 
 
+SEEN_MARGIN = 2.0
+"""A placed ground.window reaches this far beyond the ground the cameras see (the texture
+filter's reach at the image's far edge). [m]"""
+
+
+def _seen_window(views, middle: camera.Camera, sun_window, window):
+    """The ground the cameras see over the frames with SEEN_MARGIN to spare, within ``window``,
+    and the sun window moved with each camera [m]: the shadow's union over a long span (264 x 86
+    m at a 3.7 degree sun) holds far more ground than a camera at eye height sees."""
+    points, _ = seen_ground(middle)
+    if not len(points):
+        return window
+    seen, fine = [], []
+    for view in views:  # a following camera only walks: its ground walks with it
+        dx, dy = np.subtract(view.position[:2], middle.position[:2])
+        moved = points + (dx, dy)
+        seen.append((*moved.min(axis=0), *moved.max(axis=0)))
+        if sun_window is not None:
+            fine.append((sun_window[0] + dx, sun_window[1] + dy, sun_window[2] + dx, sun_window[3] + dy))
+    return _union([_intersect(_grow(_union(seen), SEEN_MARGIN), window) or window, *fine])
+
+
 def _pixels(box, pixel) -> float:
     return (box[2] - box[0]) * (box[3] - box[1]) / pixel**2
 
@@ -469,7 +586,8 @@ def framing_warnings(config: Config, plan) -> list[str]:
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
         shading = shading_scenes(scenes)
         boxes = leaf_shadow_extents(config, shading, plan.projection)
-        missed = [f for f, box in zip((sc.frame for sc in shading), boxes) if _intersect(box, fine.extent) is None]
+        missed = [sc.frame for sc, box in zip(shading, boxes)
+                  if _intersect(box, plan.at(sc.frame).sun_window.extent) is None]
         if missed:
             elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
             warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "

@@ -114,6 +114,7 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
     GroundResult
         On the sun window's grid, or the window's without a sun [radiance x sr].
     """
+    plan = plan.at(frame)  # a following camera's sun window (docs/method.md, "Framing")
     workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     sky = sky or plan.sky.at(plan.scenes[frame])

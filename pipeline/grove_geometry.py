@@ -117,23 +117,6 @@ class Leaves:
 
 
 @dataclass(frozen=True)
-class Wood:
-    """Trunks and branches as capsules.
-
-    Attributes
-    ----------
-    start, end : numpy.ndarray
-        (M, 3) segment ends [m].
-    radius : numpy.ndarray
-        (M,) radii [m].
-    """
-
-    start: np.ndarray
-    end: np.ndarray
-    radius: np.ndarray
-
-
-@dataclass(frozen=True)
 class Grove:
     """A grove at rest.
 
@@ -209,6 +192,23 @@ class Shapes:
         leaves, wood = _every(leaves, len(self.center)), _every(wood, len(self.radius))
         return Shapes(self.center[leaves], self.axis_a[leaves], self.axis_b[leaves],
                       self.start[wood], self.end[wood], self.radius[wood])
+
+
+@dataclass(frozen=True)
+class Wood:
+    """Trunks and branches as capsules.
+
+    Attributes
+    ----------
+    start, end : numpy.ndarray
+        (M, 3) segment ends [m].
+    radius : numpy.ndarray
+        (M,) radii [m].
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    radius: np.ndarray
 
 
 def _every(select, n: int):

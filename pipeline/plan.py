@@ -120,6 +120,10 @@ class RunPlan:
         What a run writes (its folder, the passes, half floats, the video, the report).
     source : Path
         The config file (the cache records which items are whose by it).
+    follow : tuple or None
+        With a camera that follows the shadow (``camera.follow``), per output frame its camera and
+        how far its sun window moves with it, (rows, cols) of fine pixels (``at``); None: one
+        camera and one sun window for every frame.
     """
 
     window: Grid
@@ -138,6 +142,34 @@ class RunPlan:
     exposure: ExposurePlan
     output: OutputConfig
     source: Path
+    follow: tuple[tuple[Camera, tuple[int, int]], ...] | None = None
+
+    def at(self, frame: int) -> RunPlan:
+        """The plan as one frame sees it: with a following camera, the frame's camera and its sun
+        window moved with it by whole fine pixels, the sun's offsets moved back so that the fine
+        mask (and the cached spectrum) stays the same (docs/method.md, "Framing").
+
+        Parameters
+        ----------
+        frame : int
+            Output frame index.
+
+        Returns
+        -------
+        RunPlan
+            The frame's plan, without ``follow``; this plan itself when it has none.
+        """
+        if self.follow is None:
+            return self
+        view, (dr, dc) = self.follow[frame]
+        sun_window, layers = self.sun_window, self.layers
+        if sun_window is not None:
+            x0, y0 = sun_window.origin
+            sun_window = replace(sun_window, origin=(x0 + dc * sun_window.pixel, y0 - dr * sun_window.pixel))
+            layers = tuple(lp if lp.sun is None else replace(lp, sun=replace(
+                lp.sun, offset_lo=(lp.sun.offset_lo[0] - dr, lp.sun.offset_lo[1] - dc),
+                offset_hi=(lp.sun.offset_hi[0] - dr, lp.sun.offset_hi[1] - dc))) for lp in layers)
+        return replace(self, camera=view, sun_window=sun_window, layers=layers, follow=None)
 
     @property
     def frames(self) -> int:
@@ -227,21 +259,44 @@ def plan_run(config: Config) -> RunPlan:
     window = Grid.from_window(framing.window, config.ground.pixel)
     sun_window = (_sun_window(config, shading, min(heights), framing.sun_window or framing.window)
                   if has_sun else None)
-    layers = _plan_layers(config, shading, window, sun_window, projection)
+    shifts = _follow_shifts(framing, sun_window, len(scenes))
+    layers = _plan_layers(config, shading, window, sun_window, projection, shifts)
     if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None:
         # the sun's path over the animation widens the fine mask: keep it within AUTO_SUN_MASK
         cells = max(np.prod(lp.sun.mask.shape) for lp in layers)
         if cells > AUTO_SUN_MASK:
             sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
-            layers = _plan_layers(config, shading, window, sun_window, projection)
+            shifts = _follow_shifts(framing, sun_window, len(scenes))
+            layers = _plan_layers(config, shading, window, sun_window, projection, shifts)
+    follow = None
+    if framing.follow is not None:
+        follow = tuple((_nearest(framing.follow, f), shifts[f] if shifts else (0, 0)) for f in range(len(scenes)))
     c = config.camera
     exposure = ExposurePlan(c.exposure, c.auto_exposure, config.animation.fps, c.white_balance)
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
-                   config.path)
+                   config.path, follow)
     _check_sizes(config, plan)
     return plan
+
+
+def _nearest(follow, frame: int) -> Camera:
+    """The camera of the shading frame nearest ``frame`` (a set sun's frames keep the last)."""
+    return min(follow, key=lambda item: abs(item[0] - frame))[1]
+
+
+def _follow_shifts(framing, sun_window: Grid | None, frames: int):
+    """Per output frame, (rows, cols) of fine pixels the sun window moves with a following camera
+    (its ground moves with the camera's foot); None without one."""
+    if framing.follow is None or sun_window is None:
+        return None
+    x, y = framing.camera.position[:2]
+    shifts = []
+    for f in range(frames):
+        px, py = _nearest(framing.follow, f).position[:2]
+        shifts.append((int(round(-(py - y) / sun_window.pixel)), int(round((px - x) / sun_window.pixel))))
+    return shifts
 
 
 def _check_auto_window(config: Config, framing) -> None:
@@ -262,7 +317,7 @@ def _check_auto_window(config: Config, framing) -> None:
                               f"{most:.3g}: give ground.window or raise ground.pixel")
 
 
-def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, projection):
+def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, projection, shifts=None):
     """Each canopy plane's LayerPlan: its mask grid, coarse plan and fine sun plan."""
     has_sun = sun_window is not None
     layers = []
@@ -275,8 +330,10 @@ def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, 
         sun = None
         if has_sun:
             q = sun_window.pixel / layer.height
-            centres = [sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation)
-                       for sc in scenes]
+            centres = np.array([sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation)
+                                for sc in scenes])
+            if shifts is not None:  # a sun window moved (dr, dc) reads the mask as the kernel moved so
+                centres = centres + q * np.array([(shifts[sc.frame][1], -shifts[sc.frame][0]) for sc in scenes])
             reach = max(_sun_reach(sc.sun) for sc in scenes)
             lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
             sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)

@@ -66,8 +66,8 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
     count = 0
     parts = []
-    for primitive, kernel, offset in ((_ellipses(shapes, grid), _raster.ellipses, 0),
-                                      (_capsule_pieces(shapes, grid), _raster.capsules, len(shapes.center))):
+    for primitive, capsule, offset in ((_ellipses(shapes, grid), False, 0),
+                                       (_capsule_pieces(shapes, grid), True, len(shapes.center))):
         center, half, params, feature, thickness, owner = primitive
         if period_px is None:
             # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
@@ -78,12 +78,12 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
         else:
             index, center = _translates(center, half, period_px, grid.shape)
             params = params.astype(np.float32)
-        parts.append((kernel, center, half, index, params, feature, thickness, owner + offset))
+        parts.append((capsule, center, half, index, params, feature, thickness, owner + offset))
     size = sum(_raster.box_pixels(*part[1:4], rows, cols) for part in parts) if emit else 0
     fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
     transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
-    for kernel, *arrays, owner in parts:
-        count = kernel(*arrays, 16 * _CHUNK, transmittance, fragments, owner, count)
+    for capsule, *arrays, owner in parts:
+        count = _raster.shapes(capsule, *arrays, 16 * _CHUNK, transmittance, fragments, owner, count)
     if emit:
         return tuple(f[:count] for f in fragments)
     return transmittance.astype(np.float32)

@@ -29,7 +29,7 @@ class Scene:
     Attributes
     ----------
     frame : int
-        Output frame index.
+        The output frame's index, from 0.
     time : float
         Film time, frame / fps [s].
     when : datetime or None

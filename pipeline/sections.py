@@ -196,7 +196,7 @@ _VALID_KEYS = {
     "ground": ("window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"),
     "ground.brdf": ("model", "rho0", "k", "theta", "rho_c", "f_iso", "f_vol", "f_geo"),
     "camera": ("position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
-               "white_balance"),
+               "white_balance", "follow"),
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
     "foreground": ("model", "sun", "sky", "alpha"),
     "animation": ("frames", "fps"),

@@ -381,6 +381,8 @@ class CameraConfig:
         The auto exposure; None for a fixed one.
     white_balance : str
         A name in ``vocabulary.WHITE_BALANCES``.
+    follow : str
+        A name in ``vocabulary.FOLLOWS``: whether a placed camera pans with the shadow.
     """
 
     position: tuple[float, float, float] | None = None
@@ -393,6 +395,7 @@ class CameraConfig:
     display: str = "filmic"
     auto_exposure: AutoExposureConfig | None = None
     white_balance: str = "daylight"
+    follow: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -540,6 +543,8 @@ class Config:
                 values[section].pop(name)
         if values["camera"]["auto_exposure"] is None:  # a fixed exposure hashes as it always did
             values["camera"].pop("auto_exposure")
+        if self.camera.position is not None or self.camera.look_at is not None:
+            values["camera"].pop("follow")  # a camera given where it stands or looks never follows
         if not values["output"]["passes"]:  # without passes a config hashes as it always did
             values["output"].pop("passes")
         if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did

@@ -6,8 +6,8 @@ from .registry import Model, Registry
 
 __all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS",
            "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
-           "WHITE_BALANCES", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS", "REFLECTANCES",
-           "BRDF_PRESETS"]
+           "WHITE_BALANCES", "FOLLOWS", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS",
+           "REFLECTANCES", "BRDF_PRESETS"]
 
 PROCEDURAL_MODELS = ("cie", "preetham")
 """The procedural sky's models (sky.model), named by the clear sky's angular shape."""
@@ -55,6 +55,11 @@ WHITE_BALANCES = ("daylight", "shade", "none")
 """What a picture shows as white, as a camera's white balance: ``daylight`` the open ground's
 light (sun and sky), ``shade`` the sky's light alone (the shade under trees comes out neutral and
 the sun flecks warm, as in photographs taken in the shade), ``none`` linear Rec.709's D65 white."""
+
+FOLLOWS = ("auto", "shadow", "fixed")
+"""How a camera the plan places moves over the frames (``camera.follow``, docs/method.md,
+"Framing"): ``shadow`` pans with the canopy's shadow, ``fixed`` stays where the middle frame puts
+it, ``auto`` pans when the shadow would stray from a fixed camera's view."""
 
 SEED_MAX = 2**63 - 1
 """Largest random seed (trees, clouds): the compiled hashes take a signed 64-bit integer. [1]"""

@@ -120,7 +120,7 @@ def test_layer_errors_name_the_layer_key(tmp_path):
              "time", "moon", "clouds", "skylight", "haze", "luminance"}),
     ("ground", {"window", "pixel", "sun_window", "sun_pixel", "albedo", "albedo_size", "brdf"}),
     ("camera", {"position", "look_at", "yaw", "pitch", "fov", "resolution", "exposure", "display",
-                "white_balance"}),
+                "white_balance", "follow"}),
 ])
 def test_an_unknown_key_lists_every_valid_key_of_its_section(tmp_path, section, keys):
     """The keys the README's config documents for the section, whichever the parser read."""
