@@ -3,6 +3,12 @@ camera, haze and compositing, writing; and the foreground passes per cycle frame
 a baseline measured in the same run.
 
     python benchmarks/bench_frame.py [--frames 4] [--threads 2] [--config configs/eclipse.yaml --cache DIR]
+    python benchmarks/bench_frame.py --table configs/*.yaml [--cache DIR] [--frames 3]
+
+``--table``: for each config, its frame (``render_frame``, no writing; median of the first
+``--frames`` frames after one unmeasured) over its bare FFT work, one Markdown row each (the
+table of docs/accuracy.md, "Each config's frame over its FFT work"), after the bare 2048^2
+rfft2 + irfft2 round trip of the same moment and the load average.
 
 Default grove (bench_cycle.CONFIG) with drifting clouds, the camera placed by default, 1280 x
 720; or the first frames of ``--config`` as it stands (its cycle products in ``--cache``).
@@ -16,6 +22,7 @@ raw .npy bytes.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 import tempfile
@@ -23,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import fft as sfft
 from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -56,14 +64,59 @@ def bilinear_baseline(view: camera.Camera, repeats=3) -> float:
     return best
 
 
+def bare_fft_seconds(plan, threads: int) -> float:
+    """The bare FFT work of a plan's ground raster: rfft2 + irfft2 of a 3-channel float32 stack
+    at each layer's fine and coarse FFT shapes (bench_sun's round trip), summed. [s]"""
+    shapes = [getattr(part, "fft_shape", None) for layer in plan.layers for part in (layer.sun, layer.coarse)]
+    return sum(round_trip_seconds(shape, threads) for shape in shapes if shape is not None)
+
+
+def timed(f) -> float:
+    """Seconds ``f()`` takes. [s]"""
+    started = time.perf_counter()
+    f()
+    return time.perf_counter() - started
+
+
+def table(paths, cache_root: Path, frames: int, threads: int) -> None:
+    """Print a Markdown row per config: its frame over its bare FFT work."""
+    plane = np.random.default_rng(0).random((2048, 2048), dtype=np.float32)
+    trip = min(timed(lambda: sfft.irfft2(sfft.rfft2(plane, workers=threads), s=plane.shape, workers=threads))
+               for _ in range(5))
+    print(f"load average {os.getloadavg()[0]:.1f}; bare rfft2 + irfft2 of one float32 2048^2 plane "
+          f"({threads} workers, best of 5): {trip * 1e3:.1f} ms", flush=True)
+    print("| config | camera | frame, median [ms] | bare FFT work [ms] | frame / bare FFT | load |")
+    print("|---|---|---|---|---|---|")
+    for path in paths:
+        config = load(path)
+        plan = plan_run(config)
+        store = cache.Cache(cache_root / Path(path).stem)
+        cycle_phase(plan, store, jobs=2, workers=1,
+                    cycle_frames={f % config.canopy.cycle for f in range(frames + 1)})
+        render_frame(plan, 0, store=store, workers=threads)  # loads, compiles: not measured
+        each = [timed(lambda i=i: render_frame(plan, i + 1, store=store, workers=threads)) for i in range(frames)]
+        whole, best = float(np.median(each)), min(each)
+        bare = bare_fft_seconds(plan, threads)
+        print(f"| {Path(path).stem} | {plan.camera.width} x {plan.camera.height} | {whole * 1e3:.0f} "
+              f"(best {best * 1e3:.0f}) | {bare * 1e3:.0f} | {whole / bare:.1f} (best {best / bare:.1f}) | "
+              f"{os.getloadavg()[0]:.1f} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=4)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--config", default=None, help="a config to time instead of the grove")
     parser.add_argument("--cache", default=None, help="its cache folder (default: a fresh one)")
+    parser.add_argument("--table", nargs="+", metavar="CONFIG", help="a row per config: frame / bare FFT")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="sunshade-bench-"))
+    if args.table:
+        try:
+            table(args.table, Path(args.cache) if args.cache else work, args.frames, args.threads)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+        return
     try:
         config_dict = dict(CONFIG)
         config_dict["sky"] = {**CONFIG["sky"], "clouds": {"cover": 0.4}}
@@ -113,7 +166,7 @@ def main() -> None:
         def write(i):
             io.write_exr(work / f"f.{i:04d}.exr", frames[i], frame_attributes(config, result, config.digest()),
                          half=True)
-            io.write_png(work / f"f.{i:04d}.png", composite.display(frames[i], exposure=result.exposure))
+            io.write_png(work / f"f.{i:04d}.png", composite.display_codes(frames[i], exposure=result.exposure))
 
         def write_raw(i):
             np.save(work / f"raw.{i}.npy", frames[i])
@@ -138,14 +191,18 @@ def main() -> None:
         t_raw, t_ground, t_whole = (median_seconds(f, n) for f in (write_raw, ground, whole))
         t_passes = median_seconds(passes, n) if config.foreground.model == "trees" else float("nan")
         base = bilinear_baseline(view)
-        shapes = [getattr(part, "fft_shape", None) for layer in plan.layers for part in (layer.sun, layer.coarse)]
-        bare = sum(round_trip_seconds(shape, args.threads) for shape in shapes if shape is not None)
+        bare = bare_fft_seconds(plan, args.threads)
         t_exr = median_seconds(lambda i: io.write_exr(work / f"e.{i:04d}.exr", frames[i], half=True), n)
         t_png = median_seconds(lambda i: io.write_png(
-            work / f"p.{i:04d}.png", composite.display(frames[i], exposure=result.exposure)), n)
+            work / f"p.{i:04d}.png", composite.display_codes(frames[i], exposure=result.exposure)), n)
+        t_codes = median_seconds(lambda i: composite.display_codes(frames[i], exposure=result.exposure), n)
+        t_array = median_seconds(lambda i: io.half_dither(frames[i].shape) + composite.display(
+            frames[i], exposure=result.exposure), n)
         print(f"resampling ground and sky: {t_resample * 1e3:.0f} ms; unfiltered bilinear lookup "
               f"of a 2048^2 RGB raster: {base * 1e3:.0f} ms; ratio {t_resample / base:.1f}")
         print(f"haze and compositing: {t_blend * 1e3:.0f} ms")
+        print(f"display codes: compiled {t_codes * 1e3:.1f} ms; the array display and a dither's sum "
+              f"{t_array * 1e3:.1f} ms")
         print(f"writing half EXR + PNG: {t_write * 1e3:.0f} ms (EXR {t_exr * 1e3:.0f}, PNG with display "
               f"{t_png * 1e3:.0f}); raw .npy of the same pixels: {t_raw * 1e3:.1f} ms; ratio {t_write / t_raw:.0f}")
         print(f"ground raster: {t_ground * 1e3:.0f} ms; whole frame (no writing): {t_whole * 1e3:.0f} ms "

@@ -1,7 +1,8 @@
 """Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
 pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
 over the view (``frame._apply_haze``), the procedural sky raster's rows (``sky.ProceduralSky.raster``) and the
-ground reflectance's lattice read (``brdf_bands.sky_ratio``). Each does what its array version does, float32 operation
+ground reflectance's lattice read (``brdf_bands.sky_ratio``) and a frame's display codes
+(``composite.display_codes``, around numpy's power). Each does what its array version does, float32 operation
 for float32 operation in the same order, so that no temporary arrays are built, and the tests hold it to that
 version's bits. Imported lazily: numba costs 0.3 s to import.
 """
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read"]
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "exposed_display", "display_codes"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -155,3 +156,66 @@ def lattice_read(flat, corner, taps, lattice, out):
             v += flat[c, k + lattice] * taps[2, p]
             v += flat[c, k + lattice + 1] * taps[3, p]
             out[c, p] = v
+
+
+_ACES = tuple(np.float32(c) for c in (0.0, 1.0, 2.51, 0.03, 2.43, 0.59, 0.14))
+_SRGB = tuple(np.float32(c) for c in (0.0031308, 12.92, 1.055, 0.055, 255.0, 0.5))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def exposed_display(radiance, gain, filmic, out):
+    """``composite.display`` up to the sRGB power: exposed, ACES-filmic if ``filmic``, clipped.
+
+    ``x = max(L g, 0)`` then ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14)`` clipped to [0, 1]
+    (``composite.aces_filmic``), or ``L g`` clipped to [0, 1]: the float32 operations of the array
+    versions, in their order.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (rows, cols, 3) C-contiguous float32 scene-linear radiance L [kcd/m^2].
+    gain : numpy.ndarray
+        (3,) float32, exposure times white balance g per channel [m^2/kcd].
+    filmic : bool
+        Whether the filmic roll-off is applied.
+    out : numpy.ndarray
+        (rows, cols, 3) C-contiguous float32, written: display-linear values in [0, 1] [1].
+    """
+    zero, one, a, b, c, d, e = _ACES
+    flat, linear = radiance.reshape(-1, 3), out.reshape(-1, 3)
+    for p in range(flat.shape[0]):  # the three channels spelled out: the loop vectorises
+        for k in (0, 1, 2):
+            x = flat[p, k] * gain[k]
+            if filmic:
+                x = max(x, zero)
+                x = (x * a + b) * x / ((x * c + d) * x + e)
+            linear[p, k] = min(max(x, zero), one)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def display_codes(linear, powered, half_dither, out):
+    """``composite.srgb_encode`` from its power on, then ``io.write_png``'s 8-bit codes.
+
+    ``12.92 x`` where ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``; clipped to [0, 1],
+    then ``floor(v 255 + 0.5 + n)`` clipped to [0, 255], n the dither: the float32 operations of
+    the array versions, in their order.
+
+    Parameters
+    ----------
+    linear : numpy.ndarray
+        (rows, cols, 3) C-contiguous float32 display-linear values x in [0, 1] (``exposed_display``),
+        as are the other arrays [1].
+    powered : numpy.ndarray
+        (rows, cols, 3) float32, x^(1/2.4) as numpy's power gives it [1].
+    half_dither : numpy.ndarray
+        (rows, cols, 3) float32, n (``io.half_dither``) [1].
+    out : numpy.ndarray
+        (rows, cols, 3) uint8, written: the codes.
+    """
+    knee, slope, scale, offset, full, half = _SRGB
+    zero, one = _ACES[0], _ACES[1]
+    x, powers, noise, codes = linear.ravel(), powered.ravel(), half_dither.ravel(), out.reshape(-1)
+    for n in range(x.size):
+        v = x[n] * slope if x[n] <= knee else powers[n] * scale - offset
+        v = min(max(v, zero), one) * full + half + noise[n]
+        codes[n] = np.uint8(min(max(np.floor(v), zero), full))

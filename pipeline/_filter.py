@@ -85,7 +85,6 @@ def _coords(x0, y0, px, py, sx, sy, dx, dy):
     return col, row, dcol, drow
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
 def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
              level, blend, out):
     """``texture._filtered``: each read's mean into ``out``.
@@ -95,7 +94,8 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
     (``texture._tap_mean``, the same float32 arithmetic in the same order), in level level[j]
     blended by blend[j] towards the next when > 0. The body is written out in full for three
     channels (a helper function that returns the three means, even inlined, ran three times
-    slower) and channel by channel otherwise.
+    slower) and channel by channel otherwise, in two compiled loops (``_filtered3`` and
+    ``_filtered_channels``): a run compiles the one it uses.
 
     Parameters
     ----------
@@ -131,6 +131,15 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
     out : numpy.ndarray
         (channels, m) float32, written: the reads' means, in the raster's units.
     """
+    loop = _filtered3 if channels == 3 else _filtered_channels
+    loop(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps, level,
+         blend, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
+               level, blend, out):
+    """``filtered`` of three channels."""
     for r in range(x.shape[0]):
         j = footprint[r]
         lv, t, n = int(level[j]), blend[j], int(taps[j])
@@ -149,31 +158,53 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
             rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
         step, stepb = (cols + 2) * channels, (colsb + 2) * channels
         nf = np.float32(n)
-        if channels == 3:
-            col, row, colb, rowb = col0, row0, colb0, rowb0
-            t0 = t1 = t2 = np.float32(0.0)
-            for i in range(n):
-                s0, s1, s2 = _bilinear3(flat, off, rows, cols, periodic, col, row, step)
-                col += dcol
-                row += drow
-                if blended:
-                    u0, u1, u2 = _bilinear3(flat, offb, rowsb, colsb, periodic, colb, rowb, stepb)
-                    colb += dcolb
-                    rowb += drowb
-                    s0 += (u0 - s0) * t
-                    s1 += (u1 - s1) * t
-                    s2 += (u2 - s2) * t
-                if i == 0:
-                    t0, t1, t2 = s0, s1, s2
-                else:
-                    t0 += s0
-                    t1 += s1
-                    t2 += s2
-            out[0, r] = t0 / nf
-            out[1, r] = t1 / nf
-            out[2, r] = t2 / nf
-            continue
-        # any other count of channels: each tap's texel found once, then every channel read
+        col, row, colb, rowb = col0, row0, colb0, rowb0
+        t0 = t1 = t2 = np.float32(0.0)
+        for i in range(n):
+            s0, s1, s2 = _bilinear3(flat, off, rows, cols, periodic, col, row, step)
+            col += dcol
+            row += drow
+            if blended:
+                u0, u1, u2 = _bilinear3(flat, offb, rowsb, colsb, periodic, colb, rowb, stepb)
+                colb += dcolb
+                rowb += drowb
+                s0 += (u0 - s0) * t
+                s1 += (u1 - s1) * t
+                s2 += (u2 - s2) * t
+            if i == 0:
+                t0, t1, t2 = s0, s1, s2
+            else:
+                t0 += s0
+                t1 += s1
+                t2 += s2
+        out[0, r] = t0 / nf
+        out[1, r] = t1 / nf
+        out[2, r] = t2 / nf
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey,
+                       taps, level, blend, out):
+    """``filtered`` of any count of channels."""
+    for r in range(x.shape[0]):
+        j = footprint[r]
+        lv, t, n = int(level[j]), blend[j], int(taps[j])
+        blended = t > 0
+        spacing = major[j] / n
+        first = (0.5 - 0.5 * n) * spacing
+        sx, sy, dx, dy = x[r] + first * ex[j], y[r] + first * ey[j], spacing * ex[j], spacing * ey[j]
+        col0, row0, dcol, drow = _coords(origins[lv, 0], origins[lv, 1], pixels[lv, 0], pixels[lv, 1],
+                                         sx, sy, dx, dy)
+        rows, cols, off = shapes[lv, 0], shapes[lv, 1], offsets[lv]
+        colb0, rowb0, dcolb, drowb = col0, row0, dcol, drow
+        rowsb, colsb, offb = rows, cols, off
+        if blended:
+            colb0, rowb0, dcolb, drowb = _coords(origins[lv + 1, 0], origins[lv + 1, 1], pixels[lv + 1, 0],
+                                                 pixels[lv + 1, 1], sx, sy, dx, dy)
+            rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
+        step, stepb = (cols + 2) * channels, (colsb + 2) * channels
+        nf = np.float32(n)
+        # each tap's texel found once, then every channel read
         # there (the same float32 operations per channel, in the same order, as channel by
         # channel: a stack of many rasters filtered in one pass costs little more per channel)
         col, row, colb, rowb = col0, row0, colb0, rowb0

@@ -80,9 +80,53 @@ def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
         sky_weight[i] = np.float32(values[1])
 
 
+def _hermite_loop(field, spread, nodes, weights, values, levels, out):
+    """``CloudLayer.coverage``'s mean over a footprint (compiled by ``_compiled``): ``out`` (m,)
+    gets ``sum_k weights[k] interp(field + nodes[k] spread, values, levels)``, summed from 0 in
+    the order of the nodes, each interpolation that of ``np.interp`` operation for operation (as
+    ``_scattering_loop``'s: the value at or below x by bisection, the ends held, where the
+    slope's line is NaN the same from the other end), so the coverage is that of the array
+    expression ``out += w * np.interp(field + z * spread, values, levels)`` to the bit.
+    ``values`` non-decreasing."""
+    last = values.shape[0] - 1
+    slopes = np.empty(last)  # as np.interp's, per interval
+    for j in range(last):
+        slopes[j] = (levels[j + 1] - levels[j]) / (values[j + 1] - values[j])
+    lo = 0
+    for i in range(field.shape[0]):
+        total = 0.0
+        for k in range(nodes.shape[0]):
+            x = field[i] + nodes[k] * spread[i]
+            if x != x:
+                value = x
+            elif x >= values[last]:
+                value = levels[last]
+            elif x < values[0]:
+                value = levels[0]
+            else:
+                if not values[lo] <= x < values[lo + 1]:  # else the last point's interval holds it
+                    lo, hi = 0, last
+                    while hi - lo > 1:
+                        mid = (lo + hi) >> 1
+                        if values[mid] <= x:
+                            lo = mid
+                        else:
+                            hi = mid
+                if values[lo] == x:
+                    value = levels[lo]
+                else:
+                    value = slopes[lo] * (x - values[lo]) + levels[lo]
+                    if value != value:
+                        value = slopes[lo] * (x - values[lo + 1]) + levels[lo + 1]
+                        if value != value and levels[lo] == levels[lo + 1]:
+                            value = levels[lo]
+            total += weights[k] * value
+        out[i] = total
+
+
 @lru_cache(maxsize=4)
 def _compiled(loop):
-    """``loop`` (``_scattering_loop``) compiled by numba (imported here, on
+    """``loop`` (``_scattering_loop``, ``_hermite_loop``) compiled by numba (imported here, on
     first use: it costs 0.3 s to import; the compiled code is cached on disk)."""
     from numba import njit
 
@@ -313,9 +357,10 @@ class CloudLayer:
         along, across = self._widths(s.shape[:-1], footprint)
         spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
         nodes, weights = _hermegauss(_HERMITE_NODES)
-        out = np.zeros(field.shape)
-        for z, w in zip(nodes, weights / weights.sum()):
-            out += w * np.interp(field + z * spread, values, levels)
+        out = np.empty(field.shape)
+        _compiled(_hermite_loop)(field.reshape(-1), spread.reshape(-1), nodes, weights / weights.sum(),
+                                 np.ascontiguousarray(values, dtype=np.float64),
+                                 np.ascontiguousarray(levels, dtype=np.float64), out.reshape(-1))
         return out
 
     def optical_depth(self, s, time, footprint=None) -> np.ndarray:

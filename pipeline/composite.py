@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import io
 from .colour import REC709_LUMINANCE
 from .vocabulary import DISPLAYS, WHITE_BALANCES
 
 __all__ = ["srgb_encode", "display_ground", "display_sky", "white_balance", "composite_frame", "henyey_greenstein",
-           "haze_transmittance", "aerial_perspective", "aces_filmic", "display", "exposure_for", "auto_exposure"]
+           "haze_transmittance", "aerial_perspective", "aces_filmic", "display", "display_codes", "exposure_for",
+           "auto_exposure"]
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
@@ -329,6 +331,50 @@ def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
     if transform == "filmic":
         exposed = aces_filmic(exposed)
     return srgb_encode(exposed)
+
+
+def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
+                  balance=None) -> np.ndarray:
+    """The 8-bit codes ``io.write_png`` writes of ``display(radiance, ...)``, bit for bit, in
+    two compiled passes around numpy's power (docs/runs.md, "Writing").
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (rows, cols, 3) scene-linear radiance [kcd/m^2].
+    exposure : float
+        Exposure [m^2/kcd].
+    transform : str, optional
+        One of ``DISPLAYS``, as ``display``.
+    balance : array_like, optional
+        (3,) the white balance's gains [1]; None: 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) uint8 sRGB codes, dithered as ``io.write_png`` dithers.
+
+    Raises
+    ------
+    ValueError
+        Naming the valid ones, for a transform that is not one of ``DISPLAYS``.
+    """
+    if transform not in DISPLAYS:
+        raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
+    from . import _array_loops  # numba costs 0.3 s to import: only where frames are written
+
+    radiance = np.ascontiguousarray(radiance, dtype=np.float32)
+    gain = np.broadcast_to(np.float32(exposure) if balance is None
+                           else (np.asarray(balance) * exposure).astype(np.float32), 3)
+    linear = np.empty_like(radiance)
+    _array_loops.exposed_display(radiance, np.ascontiguousarray(gain, dtype=np.float32), transform == "filmic",
+                                 linear)
+    # numpy's power, as srgb_encode takes it (its vector loops may differ from a compiled powf in
+    # the last bit), over an array of the same shape
+    powered = np.power(linear, np.float32(1.0 / 2.4))
+    codes = np.empty(radiance.shape, dtype=np.uint8)
+    _array_loops.display_codes(linear, powered, io.half_dither(radiance.shape), codes)
+    return codes
 
 
 def exposure_for(unshadowed, *, stops: float = 0.0) -> float:

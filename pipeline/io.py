@@ -1,4 +1,5 @@
-"""Images through OpenImageIO, written atomically with their metadata; video through imageio.
+"""Images through OpenImageIO (PNGs written here, deflated by zlib-ng), written atomically with their
+metadata; video through imageio.
 
 Every file is written under a temporary name in its final folder and renamed into place, so a
 crash never leaves a half-written file under the real name.
@@ -9,7 +10,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import struct
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +20,8 @@ import OpenImageIO as oiio
 
 from .errors import ImageError
 
-__all__ = ["MAX_IMAGE_VALUES", "PNG_FILTER_SUB", "VIDEO_FORMATS", "read_image", "read_codes", "read_layers",
-           "read_attributes", "write_exr", "write_png", "write_video"]
+__all__ = ["MAX_IMAGE_VALUES", "PNG_FILTER_SUB", "PNG_ZLIB_LEVEL", "VIDEO_FORMATS", "read_image", "read_codes",
+           "read_layers", "read_attributes", "write_exr", "write_png", "half_dither", "write_video"]
 
 MAX_IMAGE_VALUES = 2**29
 """Most values (width x height x channels) an image read may hold: its header is read first, and
@@ -235,15 +238,16 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
 def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
     """Write display-referred pixels as an 8-bit PNG, atomically.
 
-    A fixed-seed dither of one code value breaks the banding of smooth gradients; the same
-    pixels always give the same bytes.
+    A fixed-seed dither of one code value breaks the banding of smooth gradients
+    (``half_dither``); the same pixels always give the same bytes. Codes given as uint8 (a
+    frame's, made in one compiled pass by ``composite.display_codes``) are written as they are.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file.
     pixels : numpy.ndarray
-        (rows, cols, channels) display values in [0, 1] [1].
+        (rows, cols, channels) display values in [0, 1] [1], or uint8 codes.
     attributes : dict, optional
         {name: str or int}, written as text chunks.
 
@@ -257,36 +261,81 @@ def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.nd
     ImageError
         Naming the file, when it cannot be written.
     """
-    pixels = np.asarray(pixels, dtype=np.float32)
-    codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
-    codes *= 255.0
-    codes += 0.5
-    codes += _half_dither(pixels.shape)
-    np.floor(codes, out=codes)
-    np.clip(codes, 0, 255, out=codes)
-    data = np.ascontiguousarray(codes.astype(np.uint8))  # a transposed view keeps its strides
-    rows, cols, channels = data.shape
-    spec = oiio.ImageSpec(cols, rows, channels, "uint8")
-    # zlib level 2 on rows filtered by "sub" (libpng's PNG_FILTER_SUB): 1280 x 720 frames in
-    # about 50 ms, where level 3 with libpng's adaptive choice of filter took 120-160 ms, in
-    # files about 1 % larger; lossless either way
-    spec.attribute("png:compressionLevel", 2)
-    spec.attribute("png:filter", PNG_FILTER_SUB)
-    for name, value in (attributes or {}).items():
-        spec.attribute(name, value)
-    _write_atomic(path, spec, data)
+    if np.asarray(pixels).dtype == np.uint8:
+        data = np.ascontiguousarray(pixels)
+    else:
+        pixels = np.asarray(pixels, dtype=np.float32)
+        codes = np.clip(pixels, 0.0, 1.0)  # floor(p 255 + 0.5 + noise / 2), in place, in that order
+        codes *= 255.0
+        codes += 0.5
+        codes += half_dither(pixels.shape)
+        np.floor(codes, out=codes)
+        np.clip(codes, 0, 255, out=codes)
+        data = np.ascontiguousarray(codes.astype(np.uint8))  # a transposed view keeps its strides
+    path = Path(path)
+    temporary = _temporary(path)
+    try:
+        temporary.write_bytes(_png_bytes(data, attributes or {}))
+        os.replace(temporary, path)
+    except OSError as exc:
+        raise ImageError(path, f"cannot write ({exc.strerror or exc})") from None
+    finally:
+        if temporary.exists():
+            temporary.unlink()
     return data
 
 
-PNG_FILTER_SUB = 0x10
-"""libpng's PNG_FILTER_SUB: each byte less the one a pixel to its left."""
+PNG_FILTER_SUB = 1
+"""The PNG filter type "Sub" (ISO/IEC 15948, 9.2): each byte less the one a pixel to its left."""
+
+PNG_ZLIB_LEVEL = 2
+"""The zlib level of a PNG's pixels (zlib-ng): 1280 x 720 frames in 10 to 25 ms, where libpng's
+zlib at level 2 took 30 to 40 ms and level 3 with libpng's adaptive choice of filter 120-160
+ms, in files of about the same size (docs/runs.md, "Writing"); lossless either way."""
+
+_PNG_COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}  # channels: grey, grey and alpha, RGB, RGBA
+
+
+def _png_bytes(codes: np.ndarray, attributes: dict) -> bytes:
+    """A PNG file of (rows, cols, channels) uint8 codes, C-contiguous: the rows filtered by "Sub"
+    and deflated by zlib-ng in one IDAT chunk, an sRGB chunk and a tEXt chunk per attribute."""
+    from zlib_ng import zlib_ng  # 5 ms to import: only where a PNG is written
+
+    rows, cols, channels = codes.shape
+    line = codes.reshape(rows, cols * channels)
+    filtered = np.empty((rows, cols * channels + 1), dtype=np.uint8)
+    filtered[:, 0] = PNG_FILTER_SUB
+    filtered[:, 1:1 + channels] = line[:, :channels]
+    np.subtract(line[:, channels:], line[:, :-channels], out=filtered[:, 1 + channels:])  # modulo 256
+    deflate = zlib_ng.compressobj(PNG_ZLIB_LEVEL, zlib.DEFLATED, 15, 8, zlib.Z_FILTERED)
+    pixels = deflate.compress(filtered) + deflate.flush()
+    header = struct.pack(">IIBBBBB", cols, rows, 8, _PNG_COLOUR_TYPES[channels], 0, 0, 0)
+    text = [_png_chunk(b"tEXt", f"{name}\0{value}".encode("latin-1", "replace"))
+            for name, value in attributes.items()]
+    return b"".join([b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header), _png_chunk(b"sRGB", b"\0"), *text,
+                     _png_chunk(b"IDAT", pixels), _png_chunk(b"IEND", b"")])
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    """A PNG chunk: length, kind, data, the CRC-32 of kind and data."""
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(data, zlib.crc32(kind)))
 
 
 @functools.lru_cache(maxsize=4)
-def _half_dither(shape) -> np.ndarray:
-    """Half the fixed-seed dither of ``write_png``, (shape) float32 in (-0.5, 0.5): the
-    difference of two uniform fields of seeds 0 and 1, halved; made once per frame size
-    (read-only)."""
+def half_dither(shape) -> np.ndarray:
+    """Half the fixed-seed dither of ``write_png``: the difference of two uniform fields of
+    seeds 0 and 1, halved; made once per frame size (read-only).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        (rows, cols, channels) of the pixels.
+
+    Returns
+    -------
+    numpy.ndarray
+        (shape) float32 in (-0.5, 0.5), read-only [code values].
+    """
     noise = np.random.default_rng(0).random(shape, dtype=np.float32)
     noise -= np.random.default_rng(1).random(shape, dtype=np.float32)
     noise *= 0.5

@@ -32,7 +32,7 @@ import joblib
 import numpy as np
 
 from . import __version__, cache, io
-from .composite import display
+from .composite import display_codes
 from .settings import Config
 from .errors import RunError, SunshadeError, portable
 from .cycle import config_item_keys, cycle_phase, record_config_items
@@ -290,7 +290,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 mark = time.perf_counter()
                 command = None if scheduler else os.getpid()  # whose local workers end with it
                 if jobs > 1 and not scheduler:  # the frames' loops compiled meanwhile, here, once
-                    compiling = threading.Thread(target=compile_loops, args=(plan,), daemon=True)
+                    compiling = threading.Thread(target=_compile_frame_loops, args=(plan,), daemon=True)
                     compiling.start()
                 cycle_phase(plan, store, jobs=jobs, workers=threads, command=command,
                             cycle_frames={f % config.canopy.cycle for f in todo},
@@ -396,6 +396,14 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
     return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
 
 
+def _compile_frame_loops(plan: RunPlan) -> None:
+    """``frame.compile_loops``, and the display codes' loops of the writing (``display_codes`` of a
+    tiny picture): the frames' workers then load them from numba's cache on disk."""
+    compile_loops(plan)
+    with contextlib.suppress(Exception):  # only a head start: a frame meets the same error itself
+        display_codes(np.zeros((2, 2, 3), dtype=np.float32), exposure=1.0)
+
+
 def _render_task(plan: RunPlan, frame: int, root: str, threads: int):
     """Render one frame: (frame, its ``FrameResult``, stage seconds [s], the cache items it
     was made from (``cache.Cache.served``), the warnings raised meanwhile as (category, text))."""
@@ -415,8 +423,8 @@ def _write_task(config: Config, rendered, digest: str, codes: bool):
     exr, png = frame_files(config, frame)
     io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half,
                  layers=exr_layers(result, config.output.half))
-    picture = display(result.radiance, exposure=result.exposure, transform=config.camera.display,
-                      balance=result.balance)
+    picture = display_codes(result.radiance, exposure=result.exposure, transform=config.camera.display,
+                            balance=result.balance)
     written = io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()

@@ -532,3 +532,30 @@ def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
     clouds._compiled(clouds._scattering_loop)(tau, nodes, tables, sun, sky)
     assert sun.tobytes() == (start + np.interp(tau, nodes, tables[0]).astype(np.float32)).tobytes()
     assert sky.tobytes() == np.interp(tau, nodes, tables[1]).astype(np.float32).tobytes()
+
+
+def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit():
+    """``coverage`` with a footprint (the compiled Gauss-Hermite sum over ``np.interp``s) gives the
+    bits of the array expression it stands for, over fields through and beyond the knots, knots
+    hit exactly, NaN and zero spreads."""
+    from pipeline.cloud_noise import _knots, _lost_variance
+
+    rng = np.random.default_rng(8)
+    cl = layer(texels=64, seed=2)
+    values, levels = _knots(*cl._noise_key(), cl.cover, cl.softness)
+    s = rng.normal(0, 1, (3000, 2))
+    footprint = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (3000, 2)))
+    footprint[:50] = 0.0
+    field = cl.field(s, 17.0, footprint)
+    along, across = cl._widths((3000,), footprint)
+    spread = np.sqrt(_lost_variance(cl._noise_key(), along, across))
+    nodes, weights = np.polynomial.hermite_e.hermegauss(8)
+    want = np.zeros(3000)
+    for z, w in zip(nodes, weights / weights.sum()):
+        want += w * np.interp(field + z * spread, values, levels)
+    np.testing.assert_array_equal(cl.coverage(s, 17.0, footprint), want)
+    out = np.empty(4)
+    clouds._compiled(clouds._hermite_loop)(np.array([values[3], np.nan, -50.0, 50.0]), np.zeros(4), nodes,
+                                           weights / weights.sum(), values, levels, out)
+    np.testing.assert_array_equal(out[[0, 2, 3]], [levels[3], levels[0], levels[-1]])
+    assert np.isnan(out[1])

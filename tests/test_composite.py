@@ -119,3 +119,26 @@ def test_display_applies_the_white_balance_before_the_tone_curve():
     warm = display(radiance, exposure=1.0, transform="srgb", balance=np.array([1.5, 1.0, 0.5]))
     assert np.allclose(display(radiance * np.float32([1.5, 1.0, 0.5]), exposure=1.0, transform="srgb"), warm)
     assert warm[0, 0, 0] > plain[0, 0, 0] > warm[0, 0, 2]
+
+
+@pytest.mark.parametrize("transform", ["filmic", "srgb"])
+def test_display_codes_are_the_codes_of_the_display_written_as_png(transform):
+    """display_codes (two compiled passes around numpy's power) gives, bit for bit, the codes of
+    display() quantised as write_png does: floor(clip(p, 0, 1) 255 + 0.5 + (u0 - u1) / 2), u0 and
+    u1 uniform of seeds 0 and 1; over radiance from below 0 to far above white, through the sRGB
+    knee, with and without a white balance."""
+    rng = np.random.default_rng(11)
+    shape = (37, 53, 3)  # no multiple of a vector's width: the loops' tails are read too
+    radiance = rng.uniform(-0.2, 1.5, shape).astype(np.float32) ** 3 * 4
+    radiance[:4] = np.geomspace(1e-5, 20.0, shape[1], dtype=np.float32)[None, :, None]
+    radiance[4, :, :] = np.float32(0.0031308) / np.float32(0.37)  # at the knee after the exposure
+    noise = np.random.default_rng(0).random(shape, dtype=np.float32)
+    noise -= np.random.default_rng(1).random(shape, dtype=np.float32)
+    for exposure, balance in ((0.37, None), (2.9, np.array([1.12, 1.0, 0.83])), (150.0, None)):
+        picture = display(radiance, exposure=exposure, transform=transform, balance=balance)
+        want = np.clip(np.floor(np.clip(picture, 0.0, 1.0) * 255.0 + 0.5 + 0.5 * noise), 0, 255).astype(np.uint8)
+        codes = composite.display_codes(radiance, exposure=exposure, transform=transform, balance=balance)
+        assert codes.dtype == np.uint8
+        np.testing.assert_array_equal(codes, want)
+    with pytest.raises(ValueError, match="valid: "):
+        composite.display_codes(radiance, exposure=1.0, transform="log")

@@ -99,3 +99,37 @@ def test_a_pngs_codes_read_as_they_are_stored(tmp_path):
     fractions = io.read_image(tmp_path / "p.png")
     np.testing.assert_array_equal(codes, np.floor(fractions * 255.0 + 0.5).astype(np.uint8))
     assert np.abs(codes / 255.0 - fractions).max() < 1e-6
+
+
+def test_a_png_of_codes_holds_them_as_given(tmp_path):
+    """uint8 codes (composite.display_codes) are written as they are, without a dither."""
+    codes = np.random.default_rng(5).integers(0, 256, (9, 14, 3), dtype=np.uint8)
+    written = io.write_png(tmp_path / "c.png", codes)
+    np.testing.assert_array_equal(io.read_codes(tmp_path / "c.png"), codes)
+    np.testing.assert_array_equal(written, codes)
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_a_png_decodes_to_its_codes_and_holds_its_text(tmp_path, channels):
+    """The PNG written here (rows filtered by "Sub", deflated by zlib-ng) decodes to its codes in
+    Pillow and in OpenImageIO, grey, grey and alpha, RGB or RGBA; its attributes are text chunks."""
+    from PIL import Image
+
+    rng = np.random.default_rng(channels)
+    codes = rng.integers(0, 256, (23, 31, channels), dtype=np.uint8)
+    codes[:7] = np.arange(31, dtype=np.uint8)[None, :, None] * 8  # a ramp: "Sub" leaves small numbers
+    path = tmp_path / "p.png"
+    io.write_png(path, codes, {"sunshade:frame": "7", "sunshade:config_hash": "ab12"})
+    with Image.open(path) as image:
+        decoded = np.asarray(image)
+        assert image.text == {"sunshade:frame": "7", "sunshade:config_hash": "ab12"}
+    np.testing.assert_array_equal(decoded.reshape(codes.shape), codes)
+    np.testing.assert_array_equal(io.read_codes(path), codes)
+    assert io.read_attributes(path, ["sunshade:frame"]) == {"sunshade:frame": "7"}
+
+
+def test_a_png_that_cannot_be_written_names_its_file_and_leaves_nothing(tmp_path):
+    (tmp_path / "taken").mkdir()
+    with pytest.raises(io.ImageError, match="taken"):
+        io.write_png(tmp_path / "taken", np.zeros((2, 2, 3), dtype=np.uint8))
+    assert [p.name for p in tmp_path.iterdir()] == ["taken"]
