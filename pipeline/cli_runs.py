@@ -112,8 +112,12 @@ def _framing_lines(plan) -> list[str]:
         lines.append(f"  ground.sun_window: {box(plan.sun_window)} m at {plan.sun_window.pixel:.4g} m"
                      f"{mark('ground.sun_window')}")
     view = plan.camera
+    walk = ""
+    if plan.follow is not None:  # camera.follow: the camera above is the middle shading frame's
+        first, last = plan.at(0).camera.position, plan.at(plan.frames - 1).camera.position
+        walk = f"; follows the shadow, walking {np.hypot(last[0] - first[0], last[1] - first[1]):.1f} m"
     lines.append(f"  camera: position [{', '.join(f'{v:.2f}' for v in view.position)}] m, "
-                 f"yaw {np.degrees(view.yaw):.1f}, pitch {np.degrees(view.pitch):.1f} degrees{mark('camera')}")
+                 f"yaw {np.degrees(view.yaw):.1f}, pitch {np.degrees(view.pitch):.1f} degrees{mark('camera')}{walk}")
     return lines
 
 

@@ -127,6 +127,15 @@ def test_follow_shadow_with_a_given_window_or_a_periodic_canopy_is_refused(tmp_p
     assert err.count("\n") == 1 and "camera.follow" in err and named in err
 
 
+def test_check_says_the_camera_follows_and_how_far_it_walks(tmp_path, capsys):
+    path = write(tmp_path, sunset_span(frames=4, follow="shadow"))
+    plan = plan_run(load(path))
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    walked = np.hypot(*np.subtract(plan.at(3).camera.position[:2], plan.at(0).camera.position[:2]))
+    assert walked > 5.0 and f"follows the shadow, walking {walked:.1f} m" in out
+
+
 def test_auto_keeps_one_camera_over_a_given_window(tmp_path):
     """The light is computed on the window given: a camera that walked off it would see ground the
     window does not hold."""
