@@ -1,8 +1,9 @@
 """Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
 pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
 over the view (``frame._apply_haze``), the procedural sky raster's rows (``sky.ProceduralSky.raster``) and the
-ground reflectance's lattice read (``brdf_bands.sky_ratio``) and a frame's display codes
-(``composite.display_codes``, around numpy's power). Each does what its array version does, float32 operation
+ground reflectance's lattice read (``brdf_bands.sky_ratio``), a frame's display codes
+(``composite.display_codes``, around numpy's power) and the clouds' ``np.interp`` tables
+(``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float32 operation
 for float32 operation in the same order, so that no temporary arrays are built, and the tests hold it to that
 version's bits. Imported lazily: numba costs 0.3 s to import.
 """
@@ -12,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "exposed_display", "display_codes"]
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "exposed_display", "display_codes",
+           "scattering_weights", "hermite_mean"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -219,3 +221,123 @@ def display_codes(linear, powered, half_dither, out):
         v = x[n] * slope if x[n] <= knee else powers[n] * scale - offset
         v = min(max(v, zero), one) * full + half + noise[n]
         codes[n] = np.uint8(min(max(np.floor(v), zero), full))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _interval(points, x):
+    """The index lo of the interval [points[lo], points[lo + 1]) that holds x, by bisection as
+    ``np.interp`` finds it (``points`` non-decreasing, points[0] <= x < points[-1])."""
+    lo, hi = 0, points.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if points[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def scattering_weights(tau, nodes, tables, sun_weight, sky_weight):
+    """The multiple-scattering weights of ``clouds.CloudLayer.radiance``: ``np.interp`` of two tables at
+    optical depths ``tau``, operation for operation (the node at or below tau by bisection, the ends
+    held, the interval's slope times the distance from its first node plus its first value, and where
+    that is NaN the same from the other end), so the weights are the same to the bit.
+
+    Parameters
+    ----------
+    tau : numpy.ndarray
+        (m,) float64 optical depths [1].
+    nodes : numpy.ndarray
+        (k,) float64 optical depths of the tables, strictly increasing [1].
+    tables : numpy.ndarray
+        (2, k) float64: the sun's and the sky's weights at the nodes [1/sr].
+    sun_weight : numpy.ndarray
+        (m,) float32, float32(interp(tau, nodes, tables[0])) added in place [1/sr].
+    sky_weight : numpy.ndarray
+        (m,) float32, set in place to float32(interp(tau, nodes, tables[1])) [1/sr].
+    """
+    last = nodes.shape[0] - 1
+    slopes = np.empty((2, last))  # as np.interp's, per interval
+    for k in range(2):
+        for j in range(last):
+            slopes[k, j] = (tables[k, j + 1] - tables[k, j]) / (nodes[j + 1] - nodes[j])
+    values = np.empty(2)
+    lo = 0
+    for i in range(tau.shape[0]):
+        x = tau[i]
+        # the interval [nodes[lo], nodes[lo + 1]) that holds x, for both tables: the previous
+        # point's (neighbours are alike), else found by bisection
+        if x == x and nodes[0] <= x < nodes[last] and not nodes[lo] <= x < nodes[lo + 1]:
+            lo = _interval(nodes, x)
+        for k in range(2):
+            if x != x:
+                values[k] = x
+            elif x >= nodes[last]:
+                values[k] = tables[k, last]
+            elif x < nodes[0]:
+                values[k] = tables[k, 0]
+            elif nodes[lo] == x:
+                values[k] = tables[k, lo]
+            else:
+                value = slopes[k, lo] * (x - nodes[lo]) + tables[k, lo]
+                if value != value:
+                    value = slopes[k, lo] * (x - nodes[lo + 1]) + tables[k, lo + 1]
+                    if value != value and tables[k, lo] == tables[k, lo + 1]:
+                        value = tables[k, lo]
+                values[k] = value
+        sun_weight[i] += np.float32(values[0])
+        sky_weight[i] = np.float32(values[1])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def hermite_mean(field, spread, nodes, weights, values, levels, out):
+    """``clouds.CloudLayer.coverage``'s mean over a footprint: ``out`` gets ``sum_k weights[k]
+    interp(field + nodes[k] spread, values, levels)``, summed from 0 in the order of the nodes, each
+    interpolation that of ``np.interp`` operation for operation (as ``scattering_weights``'s), so the
+    coverage is that of the array expression ``out += w * np.interp(field + z * spread, values,
+    levels)`` to the bit.
+
+    Parameters
+    ----------
+    field : numpy.ndarray
+        (m,) float64, the cloud pattern at the footprints' centres [1].
+    spread : numpy.ndarray
+        (m,) float64, the pattern's standard deviation lost within each footprint [1].
+    nodes, weights : numpy.ndarray
+        (n,) float64 Gauss-Hermite nodes and weights, the weights summing to 1 [1].
+    values : numpy.ndarray
+        (k,) float64 pattern values of the coverage table, non-decreasing [1].
+    levels : numpy.ndarray
+        (k,) float64 coverage at ``values`` [1].
+    out : numpy.ndarray
+        (m,) float64, written: the mean coverage [1].
+    """
+    last = values.shape[0] - 1
+    slopes = np.empty(last)  # as np.interp's, per interval
+    for j in range(last):
+        slopes[j] = (levels[j + 1] - levels[j]) / (values[j + 1] - values[j])
+    lo = 0
+    for i in range(field.shape[0]):
+        total = 0.0
+        for k in range(nodes.shape[0]):
+            x = field[i] + nodes[k] * spread[i]
+            if x != x:
+                value = x
+            elif x >= values[last]:
+                value = levels[last]
+            elif x < values[0]:
+                value = levels[0]
+            else:
+                if not values[lo] <= x < values[lo + 1]:  # else the last point's interval holds it
+                    lo = _interval(values, x)
+                if values[lo] == x:
+                    value = levels[lo]
+                else:
+                    value = slopes[lo] * (x - values[lo]) + levels[lo]
+                    if value != value:
+                        value = slopes[lo] * (x - values[lo + 1]) + levels[lo + 1]
+                        if value != value and levels[lo] == levels[lo + 1]:
+                            value = levels[lo]
+            total += weights[k] * value
+        out[i] = total

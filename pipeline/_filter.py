@@ -136,28 +136,40 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
          blend, out)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps, level, blend):
+    """Read r's taps as ``filtered`` lays them out: (blend t, taps n, blended, the first tap's (col, row) and the
+    step between taps (dcol, drow) in level ``level[j]``, its rows, cols and first texel, the same in the next
+    level (the same level when not blended), the two levels' row strides in ``flat``, n as float32)."""
+    j = footprint[r]
+    lv, t, n = int(level[j]), blend[j], int(taps[j])
+    blended = t > 0
+    spacing = major[j] / n
+    first = (0.5 - 0.5 * n) * spacing
+    sx, sy, dx, dy = x[r] + first * ex[j], y[r] + first * ey[j], spacing * ex[j], spacing * ey[j]
+    col0, row0, dcol, drow = _coords(origins[lv, 0], origins[lv, 1], pixels[lv, 0], pixels[lv, 1],
+                                     sx, sy, dx, dy)
+    rows, cols, off = shapes[lv, 0], shapes[lv, 1], offsets[lv]
+    colb0, rowb0, dcolb, drowb = col0, row0, dcol, drow
+    rowsb, colsb, offb = rows, cols, off
+    if blended:
+        colb0, rowb0, dcolb, drowb = _coords(origins[lv + 1, 0], origins[lv + 1, 1], pixels[lv + 1, 0],
+                                             pixels[lv + 1, 1], sx, sy, dx, dy)
+        rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
+    step, stepb = (cols + 2) * channels, (colsb + 2) * channels
+    nf = np.float32(n)
+    return (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
+            step, stepb, nf)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
                level, blend, out):
     """``filtered`` of three channels."""
     for r in range(x.shape[0]):
-        j = footprint[r]
-        lv, t, n = int(level[j]), blend[j], int(taps[j])
-        blended = t > 0
-        spacing = major[j] / n
-        first = (0.5 - 0.5 * n) * spacing
-        sx, sy, dx, dy = x[r] + first * ex[j], y[r] + first * ey[j], spacing * ex[j], spacing * ey[j]
-        col0, row0, dcol, drow = _coords(origins[lv, 0], origins[lv, 1], pixels[lv, 0], pixels[lv, 1],
-                                         sx, sy, dx, dy)
-        rows, cols, off = shapes[lv, 0], shapes[lv, 1], offsets[lv]
-        colb0, rowb0, dcolb, drowb = col0, row0, dcol, drow
-        rowsb, colsb, offb = rows, cols, off
-        if blended:
-            colb0, rowb0, dcolb, drowb = _coords(origins[lv + 1, 0], origins[lv + 1, 1], pixels[lv + 1, 0],
-                                                 pixels[lv + 1, 1], sx, sy, dx, dy)
-            rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
-        step, stepb = (cols + 2) * channels, (colsb + 2) * channels
-        nf = np.float32(n)
+        (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
+         step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
+                                  level, blend)
         col, row, colb, rowb = col0, row0, colb0, rowb0
         t0 = t1 = t2 = np.float32(0.0)
         for i in range(n):
@@ -187,23 +199,9 @@ def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodi
                        taps, level, blend, out):
     """``filtered`` of any count of channels."""
     for r in range(x.shape[0]):
-        j = footprint[r]
-        lv, t, n = int(level[j]), blend[j], int(taps[j])
-        blended = t > 0
-        spacing = major[j] / n
-        first = (0.5 - 0.5 * n) * spacing
-        sx, sy, dx, dy = x[r] + first * ex[j], y[r] + first * ey[j], spacing * ex[j], spacing * ey[j]
-        col0, row0, dcol, drow = _coords(origins[lv, 0], origins[lv, 1], pixels[lv, 0], pixels[lv, 1],
-                                         sx, sy, dx, dy)
-        rows, cols, off = shapes[lv, 0], shapes[lv, 1], offsets[lv]
-        colb0, rowb0, dcolb, drowb = col0, row0, dcol, drow
-        rowsb, colsb, offb = rows, cols, off
-        if blended:
-            colb0, rowb0, dcolb, drowb = _coords(origins[lv + 1, 0], origins[lv + 1, 1], pixels[lv + 1, 0],
-                                                 pixels[lv + 1, 1], sx, sy, dx, dy)
-            rowsb, colsb, offb = shapes[lv + 1, 0], shapes[lv + 1, 1], offsets[lv + 1]
-        step, stepb = (cols + 2) * channels, (colsb + 2) * channels
-        nf = np.float32(n)
+        (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
+         step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
+                                  level, blend)
         # each tap's texel found once, then every channel read
         # there (the same float32 operations per channel, in the same order, as channel by
         # channel: a stack of many rasters filtered in one pass costs little more per channel)

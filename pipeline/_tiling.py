@@ -249,24 +249,25 @@ def _grid_wrap(x, side):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cubic_weights(f):
+    """The cubic B-spline's four weights at fraction f of a texel, as scipy's ``map_coordinates``
+    (order 3) computes them."""
+    z = 1.0 - f
+    w1 = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
+    w2 = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
+    w0 = z * z * z / 6.0
+    return w0, w1, w2, 1.0 - w0 - w1 - w2
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _cubic_read(flat, base, side, row, col):
     """scipy's cubic B-spline read (``map_coordinates``, order 3, ``prefilter=False``, grid-wrap)
     of the level at ``base`` in ``flat`` at (row, col) [texel]: 0 where either is NaN."""
     row, col = _grid_wrap(row, side), _grid_wrap(col, side)
     if not (row > -1.0 and col > -1.0):  # NaN: scipy's constant 0
         return 0.0
-    f = row - math.floor(row)
-    z = 1.0 - f
-    r1 = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
-    r2 = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
-    r0 = z * z * z / 6.0
-    r3 = 1.0 - r0 - r1 - r2
-    f = col - math.floor(col)
-    z = 1.0 - f
-    c1 = (f * f * (f - 2.0) * 3.0 + 4.0) / 6.0
-    c2 = (z * z * (z - 2.0) * 3.0 + 4.0) / 6.0
-    c0 = z * z * z / 6.0
-    c3 = 1.0 - c0 - c1 - c2
+    r0, r1, r2, r3 = _cubic_weights(row - math.floor(row))
+    c0, c1, c2, c3 = _cubic_weights(col - math.floor(col))
     r, c = int(math.floor(row)) - 1, int(math.floor(col)) - 1
     if r < 0 or r + 3 >= side or c < 0 or c + 3 >= side:
         i0, i1, i2, i3 = r % side, (r + 1) % side, (r + 2) % side, (r + 3) % side

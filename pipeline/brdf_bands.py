@@ -317,7 +317,7 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
     Parameters
     ----------
     brdf : config.BrdfConfig
-        The model and its parameters (any value with those two fields).
+        As in ``brdf.shape``.
     raster : sky_raster.SkyRaster
         The sky raster [radiance x sr].
     views : numpy.ndarray

@@ -33,106 +33,6 @@ TILE_BLEND = 0.125
 which the copies on both sides blend (``_tiling.cloud_field``). [1]"""
 
 
-def _scattering_loop(tau, nodes, tables, sun_weight, sky_weight):
-    """The multiple-scattering weights of ``CloudLayer.radiance`` at optical depths ``tau`` (m,)
-    (compiled by ``_compiled``): ``sun_weight`` (m,) float32 gets float32(interp(tau, nodes,
-    tables[0])) added, ``sky_weight`` (m,) float32 is set to float32(interp(tau, nodes,
-    tables[1])), each interpolation that of ``np.interp`` operation for operation (the node at
-    or below tau by binary search, the ends held, the slope of the interval times the distance
-    from its first node plus its first value, and where that is NaN the same from the other
-    end), so the weights are the same to the bit. ``nodes`` strictly increasing."""
-    last = nodes.shape[0] - 1
-    slopes = np.empty((2, last))  # as np.interp's, per interval
-    for k in range(2):
-        for j in range(last):
-            slopes[k, j] = (tables[k, j + 1] - tables[k, j]) / (nodes[j + 1] - nodes[j])
-    values = np.empty(2)
-    lo = 0
-    for i in range(tau.shape[0]):
-        x = tau[i]
-        # the interval [nodes[lo], nodes[lo + 1]) that holds x, for both tables: the previous
-        # point's (neighbours are alike), else found by bisection
-        if x == x and nodes[0] <= x < nodes[last] and not nodes[lo] <= x < nodes[lo + 1]:
-            lo, hi = 0, last
-            while hi - lo > 1:
-                mid = (lo + hi) >> 1
-                if nodes[mid] <= x:
-                    lo = mid
-                else:
-                    hi = mid
-        for k in range(2):
-            if x != x:
-                values[k] = x
-            elif x >= nodes[last]:
-                values[k] = tables[k, last]
-            elif x < nodes[0]:
-                values[k] = tables[k, 0]
-            elif nodes[lo] == x:
-                values[k] = tables[k, lo]
-            else:
-                value = slopes[k, lo] * (x - nodes[lo]) + tables[k, lo]
-                if value != value:
-                    value = slopes[k, lo] * (x - nodes[lo + 1]) + tables[k, lo + 1]
-                    if value != value and tables[k, lo] == tables[k, lo + 1]:
-                        value = tables[k, lo]
-                values[k] = value
-        sun_weight[i] += np.float32(values[0])
-        sky_weight[i] = np.float32(values[1])
-
-
-def _hermite_loop(field, spread, nodes, weights, values, levels, out):
-    """``CloudLayer.coverage``'s mean over a footprint (compiled by ``_compiled``): ``out`` (m,)
-    gets ``sum_k weights[k] interp(field + nodes[k] spread, values, levels)``, summed from 0 in
-    the order of the nodes, each interpolation that of ``np.interp`` operation for operation (as
-    ``_scattering_loop``'s: the value at or below x by bisection, the ends held, where the
-    slope's line is NaN the same from the other end), so the coverage is that of the array
-    expression ``out += w * np.interp(field + z * spread, values, levels)`` to the bit.
-    ``values`` non-decreasing."""
-    last = values.shape[0] - 1
-    slopes = np.empty(last)  # as np.interp's, per interval
-    for j in range(last):
-        slopes[j] = (levels[j + 1] - levels[j]) / (values[j + 1] - values[j])
-    lo = 0
-    for i in range(field.shape[0]):
-        total = 0.0
-        for k in range(nodes.shape[0]):
-            x = field[i] + nodes[k] * spread[i]
-            if x != x:
-                value = x
-            elif x >= values[last]:
-                value = levels[last]
-            elif x < values[0]:
-                value = levels[0]
-            else:
-                if not values[lo] <= x < values[lo + 1]:  # else the last point's interval holds it
-                    lo, hi = 0, last
-                    while hi - lo > 1:
-                        mid = (lo + hi) >> 1
-                        if values[mid] <= x:
-                            lo = mid
-                        else:
-                            hi = mid
-                if values[lo] == x:
-                    value = levels[lo]
-                else:
-                    value = slopes[lo] * (x - values[lo]) + levels[lo]
-                    if value != value:
-                        value = slopes[lo] * (x - values[lo + 1]) + levels[lo + 1]
-                        if value != value and levels[lo] == levels[lo + 1]:
-                            value = levels[lo]
-            total += weights[k] * value
-        out[i] = total
-
-
-@lru_cache(maxsize=4)
-def _compiled(loop):
-    """``loop`` (``_scattering_loop``, ``_hermite_loop``) compiled by numba (imported here, on
-    first use: it costs 0.3 s to import; the compiled code is cached on disk)."""
-    from numba import njit
-
-    return njit(cache=True, nogil=True, error_model="numpy")(loop)
-
-
 @dataclass(frozen=True)
 class CloudLayer:
     """A horizontal layer of drifting fractal cloud (see the module docstring for the model).
@@ -358,9 +258,11 @@ class CloudLayer:
         spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
         nodes, weights = _hermegauss(_HERMITE_NODES)
         out = np.empty(field.shape)
-        _compiled(_hermite_loop)(field.reshape(-1), spread.reshape(-1), nodes, weights / weights.sum(),
-                                 np.ascontiguousarray(values, dtype=np.float64),
-                                 np.ascontiguousarray(levels, dtype=np.float64), out.reshape(-1))
+        from ._array_loops import hermite_mean  # numba, imported on first use
+
+        hermite_mean(field.reshape(-1), spread.reshape(-1), nodes, weights / weights.sum(),
+                     np.ascontiguousarray(values, dtype=np.float64), np.ascontiguousarray(levels, dtype=np.float64),
+                     out.reshape(-1))
         return out
 
     def optical_depth(self, s, time, footprint=None) -> np.ndarray:
@@ -483,9 +385,11 @@ class CloudLayer:
         if multiple_scattering:
             nodes, m_sun, m_sky = self._multiple_tables(mu0)
             sky_weight = np.empty_like(sun_weight)  # the np.interp of tables [1/sr], compiled
-            _compiled(_scattering_loop)(np.ascontiguousarray(tau, dtype=np.float64).reshape(-1), nodes,
-                                        np.stack([m_sun * (mu0 / np.pi), m_sky / np.pi]),
-                                        sun_weight.reshape(-1), sky_weight.reshape(-1))
+            from ._array_loops import scattering_weights  # numba, imported on first use
+
+            scattering_weights(np.ascontiguousarray(tau, dtype=np.float64).reshape(-1), nodes,
+                               np.stack([m_sun * (mu0 / np.pi), m_sky / np.pi]), sun_weight.reshape(-1),
+                               sky_weight.reshape(-1))
             for c in range(3):
                 np.multiply(sun_weight, f32(sun_rgb[c]), out=out[..., c])
                 out[..., c] += sky_weight * f32(sky_rgb[c])

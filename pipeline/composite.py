@@ -324,13 +324,18 @@ def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
     ValueError
         Naming the valid ones, for a transform that is not one of ``DISPLAYS``.
     """
-    if transform not in DISPLAYS:
-        raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
+    _check_display(transform)
     gain = np.float32(exposure) if balance is None else (np.asarray(balance) * exposure).astype(np.float32)
     exposed = np.asarray(radiance, dtype=np.float32) * gain
     if transform == "filmic":
         exposed = aces_filmic(exposed)
     return srgb_encode(exposed)
+
+
+def _check_display(transform: str) -> None:
+    """Raises ValueError naming the valid ones for a transform that is not one of ``DISPLAYS``."""
+    if transform not in DISPLAYS:
+        raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
 
 
 def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
@@ -340,14 +345,8 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
 
     Parameters
     ----------
-    radiance : numpy.ndarray
-        (rows, cols, 3) scene-linear radiance [kcd/m^2].
-    exposure : float
-        Exposure [m^2/kcd].
-    transform : str, optional
-        One of ``DISPLAYS``, as ``display``.
-    balance : array_like, optional
-        (3,) the white balance's gains [1]; None: 1.
+    radiance, exposure, transform, balance
+        As ``display``'s.
 
     Returns
     -------
@@ -357,10 +356,9 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
     Raises
     ------
     ValueError
-        Naming the valid ones, for a transform that is not one of ``DISPLAYS``.
+        As ``display``.
     """
-    if transform not in DISPLAYS:
-        raise ValueError(f"unknown display transform {transform!r}; valid: {', '.join(DISPLAYS)}")
+    _check_display(transform)
     from . import _array_loops  # numba costs 0.3 s to import: only where frames are written
 
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import cloud_noise, clouds
+from pipeline import _array_loops, cloud_noise, clouds
 from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
 from pipeline.cloud_noise import _knots, fractal_noise
 from pipeline.cloud_transfer import (delta_eddington_transmittance, single_scattering_flux_transmittance,
@@ -529,7 +529,7 @@ def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
     tau = np.concatenate([rng.random(20000) * 6.5 - 0.2, nodes, [np.nan, -np.inf, np.inf]])
     start = rng.random(tau.size).astype(np.float32)
     sun, sky = start.copy(), np.empty_like(start)
-    clouds._compiled(clouds._scattering_loop)(tau, nodes, tables, sun, sky)
+    _array_loops.scattering_weights(tau, nodes, tables, sun, sky)
     assert sun.tobytes() == (start + np.interp(tau, nodes, tables[0]).astype(np.float32)).tobytes()
     assert sky.tobytes() == np.interp(tau, nodes, tables[1]).astype(np.float32).tobytes()
 
@@ -555,7 +555,7 @@ def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit():
         want += w * np.interp(field + z * spread, values, levels)
     np.testing.assert_array_equal(cl.coverage(s, 17.0, footprint), want)
     out = np.empty(4)
-    clouds._compiled(clouds._hermite_loop)(np.array([values[3], np.nan, -50.0, 50.0]), np.zeros(4), nodes,
-                                           weights / weights.sum(), values, levels, out)
+    _array_loops.hermite_mean(np.array([values[3], np.nan, -50.0, 50.0]), np.zeros(4), nodes,
+                              weights / weights.sum(), values, levels, out)
     np.testing.assert_array_equal(out[[0, 2, 3]], [levels[3], levels[0], levels[-1]])
     assert np.isnan(out[1])
