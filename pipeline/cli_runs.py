@@ -54,6 +54,8 @@ def run_check(args) -> int:
         print(line)
     for line in _eclipse_lines(config):
         print(line)
+    for line in _light_lines(plan):
+        print(line)
     frames, cycle = disk_needed(plan)
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
           f"cache at most {_size(cycle)}, "
@@ -94,6 +96,36 @@ def _eclipse_lines(config) -> list[str]:
         inside = [name for name, when in found.contacts.items() if when is not None and site.start <= when <= site.end]
         lines.append(f"  eclipse: the time span {site.start:%H:%M:%S}-{site.end:%H:%M:%S} UTC holds "
                      f"{', '.join(inside) if inside else 'no contact (it lies between two)'}")
+    return lines
+
+
+def _light_lines(plan) -> list[str]:
+    """A procedural sky's light on open ground at the first, middle and last frames: how far a sun
+    fleck can stand above open shade ((sun + sky) / sky), and the frames whose sun gives no direct
+    light (set, or not wholly up)."""
+    import numpy as np
+
+    from .frame import open_ground_light
+    from .scene import sun_lights
+    from .skies import ProceduralModel
+
+    if not isinstance(plan.sky, ProceduralModel):
+        return []
+    shown = []
+    for frame in sorted({0, plan.frames // 2, plan.frames - 1}):
+        scene = plan.scenes[frame]
+        light = open_ground_light(plan.sky.at(scene), 1.0, None)
+        sun, sky = light["sun_lux"] if sun_lights(scene.sun) else 0.0, light["sky_lux"]
+        elevation = "" if scene.sun is None else f" (sun {np.degrees(scene.sun.elevation):.1f} degrees)"
+        ratio = f", a fleck at most {(sun + sky) / sky:.2f} x open shade" if sky > 0 else ""
+        shown.append(f"frame {frame}{elevation}: sun {sun:.0f} lx, sky {sky:.0f} lx{ratio}")
+    lines = ["  light on open ground: " + "; ".join(shown)]
+    dark = [sc.frame for sc in plan.scenes if not sun_lights(sc.sun)]
+    if dark:
+        from .framing import frame_ranges
+
+        lines.append(f"  the sun gives no direct light (set, or not wholly up) in {len(dark)} of {plan.frames} "
+                     f"frames ({frame_ranges(dark)}): the sky alone lights them")
     return lines
 
 
@@ -168,8 +200,7 @@ def run_render(args) -> int:
         folder = flag_path("--output", args.output).expanduser().absolute()
         written = replace(written, output=replace(written.output, folder=folder))
     config = preview(written) if args.preview else written
-    if args.preview:
-        print(_preview_line(written, config), flush=True)
+    banner = _preview_line(written, config) if args.preview else None  # said once the config holds
 
     def resolved():
         return preview(resolve(written)) if args.preview else resolve(written)
@@ -188,7 +219,11 @@ def run_render(args) -> int:
                                                     source_hash=source_hash)
     if summary is None:
         config = resolved()
+        if banner:
+            print(banner, flush=True)
         summary = _render_run(config, store, frames, args, source_hash, budget)
+    elif banner:
+        print(banner, flush=True)
     made = f"; video {summary.video}" if summary.video else ""
     count = len(summary.rendered)
     print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "

@@ -17,7 +17,8 @@ __all__ = ["CAMERA_HEIGHT", "CAMERA_PITCH", "ECLIPSE_PITCH", "CAMERA_TURN", "WIN
            "AUTO_SUN_MASK", "AUTO_VIEW_SAMPLES", "Framing", "canopy_extent", "crown_centre", "DAPPLE_TRANSMITTANCE",
            "ECLIPSE_TRANSMITTANCE", "LOW_SUN", "DAPPLE_CELL", "dappled_point", "shadow_extents", "leaf_shadow_extents",
            "frame_scene", "AIM_ROW", "seen_ground", "framing_warnings", "FOLLOW_SLACK",
-           "follow_targets", "follow_cameras", "SEEN_MARGIN"]
+           "follow_targets", "follow_cameras", "SEEN_MARGIN",
+           "frame_ranges"]
 
 CAMERA_HEIGHT = 1.7
 """Eye height of a camera placed by default. [m]"""
@@ -583,7 +584,7 @@ def framing_warnings(config: Config, plan) -> list[str]:
     if low and plan.sun_window is not None:
         warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
                         f"degrees reaches down to {np.degrees(reach):g} degrees elevation) in "
-                        f"{len(low)} of {len(scenes)} frames ({_ranges(low)}): beyond {key} its "
+                        f"{len(low)} of {len(scenes)} frames ({frame_ranges(low)}): beyond {key} its "
                         f"light is taken as unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
         shading = shading_scenes(scenes)
@@ -593,13 +594,25 @@ def framing_warnings(config: Config, plan) -> list[str]:
         if missed:
             elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
             warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "
-                            f"{len(scenes)} frames ({_ranges(missed)}; the sun at "
+                            f"{len(scenes)} frames ({frame_ranges(missed)}; the sun at "
                             f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
                             f"does not reach the window along the sun there")
     return warnings
 
 
-def _ranges(frames) -> str:
+def frame_ranges(frames) -> str:
+    """Frame numbers as ranges, for a message: ``[0, 1, 2, 5]`` -> ``"0-2,5"``.
+
+    Parameters
+    ----------
+    frames : list of int
+        Increasing frame numbers, at least one.
+
+    Returns
+    -------
+    str
+        The runs of consecutive frames, comma-separated.
+    """
     parts, start = [], frames[0]
     for a, b in zip(frames, frames[1:] + [None]):
         if b != a + 1:

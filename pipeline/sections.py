@@ -143,7 +143,9 @@ class _Section:
     def choice(self, name, choices, default=_MISSING):
         value = self.raw(name, default)
         if value not in choices:
-            self.fail(name, f"unknown value {value!r}; valid: {', '.join(choices)}")
+            read = " (YAML reads yes, no, on and off as true and false: quote the word)" if isinstance(
+                value, bool) else ""
+            self.fail(name, f"unknown value {value!r}{read}; valid: {', '.join(choices)}")
         return value
 
     def file(self, name):

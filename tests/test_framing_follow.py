@@ -136,6 +136,43 @@ def test_check_says_the_camera_follows_and_how_far_it_walks(tmp_path, capsys):
     assert walked > 5.0 and f"follows the shadow, walking {walked:.1f} m" in out
 
 
+def test_check_gives_the_open_ground_s_light_and_the_frames_whose_sun_is_set(tmp_path, capsys):
+    """At a low sun a fleck stands little above the shade: check says how little, from the sky's own
+    light, and which frames the sky alone lights."""
+    config = sunset_span(frames=4)
+    config["sky"]["time"] = {"start": "2026-08-12T18:50:00Z", "end": "2026-08-12T19:30:00Z"}  # Madrid: 4 to -3 degrees
+    path = write(tmp_path, config)
+    plan = plan_run(load(path))
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    light = next(line for line in out.splitlines() if "light on open ground" in line)
+    sky = plan.sky.at(plan.scenes[0])
+    sun_lux = 1000 * float(sky.sun_fraction() * np.asarray(sky.undimmed_sun_irradiance()) @ [0.2126, 0.7152, 0.0722])
+    assert f"frame 0 (sun {np.degrees(plan.scenes[0].sun.elevation):.1f} degrees): sun {sun_lux:.0f} lx" in light
+    set_frames = [f for f in range(4) if plan.scenes[f].sun.elevation < 0]
+    assert set_frames and f"in {len(set_frames)} of 4 frames" in out and "the sky alone lights them" in out
+
+
+def test_a_yaml_boolean_where_a_word_is_wanted_says_so(tmp_path, capsys):
+    path = write(tmp_path, sunset_span(frames=4, follow=True))  # what YAML makes of `follow: yes`
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "camera.follow: unknown value True (YAML reads yes" in err
+
+
+def test_a_preview_of_a_bad_config_is_the_error_s_one_line(tmp_path, capsys):
+    """The preview's line comes once the config holds: a span past civil twilight is refused in one line
+    with --preview too, and nothing is written."""
+    config = sunset_span(frames=4)
+    config["sky"]["time"]["end"] = "2026-08-12T20:40:00Z"  # Madrid: 15 degrees below the horizon
+    path = write(tmp_path, config)
+    assert main(["render", str(path), "--preview", "--output", str(tmp_path / "run"),
+                 "--cache", str(tmp_path / "cache")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1 and "sky.time.end" in captured.err
+    assert not (tmp_path / "run").exists()
+
+
 def test_auto_keeps_one_camera_over_a_given_window(tmp_path):
     """The light is computed on the window given: a camera that walked off it would see ground the
     window does not hold."""
