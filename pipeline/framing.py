@@ -581,11 +581,13 @@ def framing_warnings(config: Config, plan) -> list[str]:
                         f"its frames will show no sun flecks (leave camera out to place it)")
     reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
     low = [f for f, scene in enumerate(scenes) if sun_shades(scene.sun) and scene.sun.elevation < reach]
-    if low and plan.sun_window is not None:
+    beyond = 1.0 - float(seen.mean())  # the share of the ground seen where that sun is unshadowed
+    if low and plan.sun_window is not None and beyond > 0:
         warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
                         f"degrees reaches down to {np.degrees(reach):g} degrees elevation) in "
-                        f"{len(low)} of {len(scenes)} frames ({frame_ranges(low)}): beyond {key} its "
-                        f"light is taken as unshadowed there; raise sky.alpha")
+                        f"{len(low)} of {len(scenes)} frames ({frame_ranges(low)}): beyond {key}, "
+                        f"{100 * beyond:.0f}% of the ground the camera sees, its light is taken as "
+                        f"unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
         shading = shading_scenes(scenes)
         boxes = leaf_shadow_extents(config, shading, plan.projection)

@@ -3,6 +3,8 @@ exposure. Small groves and small frames: each render takes a second or two."""
 
 from pathlib import Path
 
+import re
+
 import numpy as np
 import pytest
 import yaml
@@ -184,6 +186,7 @@ def test_a_shadow_that_leaves_the_sun_window_or_the_sky_square_is_warned_of(tmp_
     low = [f for f in range(5) if scene_at(load(path), f).sun.elevation < np.radians(20.0)]
     assert low and f"the sun is below the sky square (sky.alpha 70 degrees reaches down to 20 degrees " \
         f"elevation) in {len(low)} of 5 frames" in err
+    assert re.search(r"beyond ground.sun_window, \d+% of the ground the camera sees, its light", err)
     plan = plan_run(load(path))
     # by hand: the shadow of the crown's centre lies h cot(elevation) from it
     config = load(path)
