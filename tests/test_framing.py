@@ -1,9 +1,8 @@
 """Framing: windows and camera placed from the canopy and the sun's path; the warnings; auto
 exposure. Small groves and small frames: each render takes a second or two."""
 
-from pathlib import Path
-
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
