@@ -3,12 +3,13 @@ and how long a lost Dask cluster is waited for."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
 
 __all__ = ["MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
-           "default_workers", "jobs_and_threads", "end_if_orphaned"]
+           "default_workers", "jobs_and_threads", "end_if_orphaned", "compiled_once"]
 
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
@@ -118,3 +119,42 @@ def _watch(command: int) -> None:
     while os.getppid() == command:
         time.sleep(ORPHAN_CHECK)
     os._exit(1)
+
+
+_ran_loops: set[str] = set()  # the compiled loops this process has run (compiled, or loaded from numba's cache)
+
+
+@contextlib.contextmanager
+def compiled_once(loop):
+    """Hold off the machine's other processes while this one first runs a compiled loop that numba's
+    cache on disk lacks, so that one process compiles it and the others load it from that cache.
+
+    After an install the cycle phase's workers each compiled the same leaf rasteriser (3.7 s of CPU
+    for configs/eclipse.yaml); now the first to start compiles it while the others wait for it (docs/runs.md,
+    "Compiled loops"). A lock file beside numba's cache of ``loop``; nothing is held once this process
+    has run the loop, when numba's cache has it, or where numba keeps no cache of it.
+
+    Parameters
+    ----------
+    loop : numba dispatcher
+        A function compiled with ``cache=True`` that the work inside the ``with`` runs first.
+    """
+    name = f"{loop.py_func.__module__}.{loop.py_func.__qualname__}"
+    lock = None
+    if name not in _ran_loops:
+        try:
+            cached = loop._cache  # numba's FunctionCache: its index file, its folder
+            if not os.path.exists(cached._cache_file._index_path):
+                from filelock import FileLock
+
+                os.makedirs(cached._cache_path, exist_ok=True)
+                lock = FileLock(os.path.join(cached._cache_path, f"{name}.compiling.lock"))
+                lock.acquire()
+        except (AttributeError, OSError):  # no cache, or none that can be written: each compiles
+            lock = None
+    try:
+        yield
+        _ran_loops.add(name)
+    finally:
+        if lock is not None:
+            lock.release()

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import cache, cache_keys, canopy, foreground, foregrounds, grove_geometry, rasteriser, shadow, tree_detail
 from .config import FRAME_BYTES_PER_PIXEL
-from .cores import end_if_orphaned
+from .cores import compiled_once, end_if_orphaned
 from .errors import portable
 from .inputs import grove_of, load_mask
 from .plan import RunPlan
@@ -349,10 +349,13 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
 def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
     end_if_orphaned(command)
     store = cache.Cache(root)
-    if layer is None:
-        foreground_item(plan, frame, store)
-    else:
-        cycle_item(plan, layer, frame, store, workers=workers)
+    from . import _raster  # numba costs 0.3 s to import: a worker needs it anyway
+
+    with compiled_once(_raster.shapes):  # after an install, one worker compiles the rasteriser
+        if layer is None:
+            foreground_item(plan, frame, store)
+        else:
+            cycle_item(plan, layer, frame, store, workers=workers)
     return store.misses
 
 

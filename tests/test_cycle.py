@@ -1,3 +1,4 @@
+import json
 import os
 import subprocess
 import sys
@@ -95,3 +96,30 @@ def test_a_config_recorded_twice_keeps_its_longest_cycle(tmp_path):
     (entry,) = recorded_configs(store)
     assert entry["cycle"] == 3
     assert entry["keys"] == set(config_item_keys(full)) | set(config_item_keys(quick))
+
+
+_COMPILING = """
+import json, os, sys, time
+sys.path.insert(0, sys.argv[1])
+from pipeline.cores import compiled_once
+import loops
+open(os.path.join(sys.argv[1], "ready-" + sys.argv[2]), "w").close()
+while len([n for n in os.listdir(sys.argv[1]) if n.startswith("ready-")]) < 2:  # both start at once
+    time.sleep(0.01)
+with compiled_once(loops.step):
+    loops.step(1.0)
+print(json.dumps([loops.step.stats.cache_hits.get(s, 0) for s in loops.step.signatures]))
+"""
+
+
+def test_one_process_compiles_a_loop_the_others_load_it(tmp_path):
+    """Two processes that first run the same compiled loop at once, numba's cache empty: inside
+    ``cores.compiled_once`` one compiles it and the other loads it from numba's cache (without the
+    lock both compiled it: the cycle phase's workers after an install)."""
+    (tmp_path / "loops.py").write_text("from numba import njit\n\n\n@njit(cache=True)\ndef step(x):\n"
+                                       "    return x + 1.0\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PYTHONPATH=str(Path.cwd()))
+    runs = [subprocess.Popen([sys.executable, "-c", _COMPILING, str(tmp_path), str(k)], env=env,
+                             stdout=subprocess.PIPE, text=True) for k in range(2)]
+    hits = sorted(sum(json.loads(run.communicate(timeout=120)[0])) for run in runs)
+    assert hits == [0, 1]
