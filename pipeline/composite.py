@@ -362,11 +362,10 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
     from . import _array_loops  # numba costs 0.3 s to import: only where frames are written
 
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
-    gain = np.broadcast_to(np.float32(exposure) if balance is None
-                           else (np.asarray(balance) * exposure).astype(np.float32), 3)
+    gain = np.array(np.broadcast_to(np.float32(exposure) if balance is None  # a copy: one compiled signature
+                                    else (np.asarray(balance) * exposure).astype(np.float32), 3), dtype=np.float32)
     linear = np.empty_like(radiance)
-    _array_loops.exposed_display(radiance, np.ascontiguousarray(gain, dtype=np.float32), transform == "filmic",
-                                 linear)
+    _array_loops.exposed_display(radiance, gain, transform == "filmic", linear)
     # numpy's power, as srgb_encode takes it (its vector loops may differ from a compiled powf in
     # the last bit), over an array of the same shape
     powered = np.power(linear, np.float32(1.0 / 2.4))
