@@ -248,7 +248,7 @@ def read_index(folder: Path) -> dict:
     return document["frames"]
 
 
-def write_index(folder: Path, index: dict) -> None:
+def write_index(folder: Path, index: dict, encoded: dict | None = None) -> None:
     """index.json, written atomically (a temporary name, then renamed).
 
     Parameters
@@ -257,6 +257,11 @@ def write_index(folder: Path, index: dict) -> None:
         The run folder.
     index : dict
         {frame as text: entry}.
+    encoded : dict, optional
+        {frame as text: its entry's JSON}, kept by a caller that writes the index again as each
+        frame lands, so that each entry is encoded once (the whole index encoded at each of 240
+        frames took 2.7 s of the command's CPU): an entry not in it is encoded and added. A caller
+        that replaces an entry removes its text. The file's bytes are the same either way.
 
     Raises
     ------
@@ -266,8 +271,13 @@ def write_index(folder: Path, index: dict) -> None:
     path = folder / INDEX_FILE
     temporary = path.with_name(f".{INDEX_FILE}.tmp-{os.getpid()}")
     try:
-        temporary.write_text(json.dumps({"format": INDEX_FORMAT, "frames": index},
-                                        separators=(",", ":")) + "\n")
+        encoded = {} if encoded is None else encoded
+        for key, entry in index.items():
+            if key not in encoded:
+                encoded[key] = json.dumps(entry, separators=(",", ":"))
+        # json.dumps({"format": INDEX_FORMAT, "frames": index}, separators=(",", ":")), entry by entry
+        frames = ",".join(f"{json.dumps(key)}:{encoded[key]}" for key in index)
+        temporary.write_text(f'{{"format":{json.dumps(INDEX_FORMAT)},"frames":{{{frames}}}}}\n')
         temporary.replace(path)
     except OSError as exc:
         temporary.unlink(missing_ok=True)

@@ -299,6 +299,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 record_config_items(plan, store)
                 mark = time.perf_counter()
                 stages = timings["frame_stages"] = {}
+                encoded = {}  # each index entry's JSON, as write_index made it
                 stream = _VideoStream.start(config, digest, records, todo, previous, force=remake_video,
                                             in_process=jobs == 1 and not scheduler)
                 try:
@@ -308,7 +309,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                         for category, text in caught:  # raised in a worker: said here, once
                             warnings.warn(text, category, stacklevel=2)
                         index[str(frame)] = entry
-                        write_index(folder, index)
+                        encoded.pop(str(frame), None)
+                        write_index(folder, index, encoded)
                         records[frame] = entry["record"]
                         for stage, value in seconds.items():
                             stages[stage] = stages.get(stage, 0.0) + value

@@ -572,3 +572,24 @@ def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_ru
     (gone,) = other_keys - {held}
     assert f"removed 1 item ({keys[gone].bytes / 1024:.1f} KiB) that no live run uses" in out
     assert not list((cache / ".runs").glob("*.json"))  # the runs' lists go with them
+
+
+def test_index_entries_encoded_once_give_the_same_bytes(tmp_path):
+    """write_index with the texts of entries already encoded writes the bytes of encoding the whole
+    index (json.dumps), and an entry replaced with its text removed is encoded again."""
+    from pipeline.frameindex import INDEX_FORMAT, write_index
+
+    index = {"3": {"files": {"exr": {"bytes": 10}}, "items": ["a", "b"]}, "0": {"record": {"light": 1.5e-7}}}
+    encoded = {}
+    write_index(tmp_path, index, encoded)
+    whole = json.dumps({"format": INDEX_FORMAT, "frames": index}, separators=(",", ":")) + "\n"
+    assert (tmp_path / "index.json").read_text() == whole and set(encoded) == {"3", "0"}
+    index["3"] = {"record": None, "name": "caf\u00e9"}
+    encoded.pop("3")
+    index["7"] = {"items": []}
+    write_index(tmp_path, index, encoded)
+    whole = json.dumps({"format": INDEX_FORMAT, "frames": index}, separators=(",", ":")) + "\n"
+    assert (tmp_path / "index.json").read_text() == whole
+    stale = dict(encoded, **{"0": '{"x":1}'})  # a text the caller failed to remove is what is written
+    write_index(tmp_path, index, stale)
+    assert (tmp_path / "index.json").read_text() != whole
