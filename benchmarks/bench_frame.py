@@ -5,7 +5,8 @@ a baseline measured in the same run.
     python benchmarks/bench_frame.py [--frames 4] [--threads 2] [--config configs/eclipse.yaml --cache DIR]
     python benchmarks/bench_frame.py --table configs/*.yaml [--cache DIR] [--frames 3]
 
-``--table``: for each config, its frame (``render_frame``, no writing; median of the first
+``--table``: for each config, its frame (``render_frame`` on the plan with its exposures metered, as a run
+meters them before its frames; no writing; median of the first
 ``--frames`` frames after one unmeasured) over its bare FFT work, one Markdown row each (the
 table of docs/accuracy.md, "Each config's frame over its FFT work"), after the bare 2048^2
 rfft2 + irfft2 round trip of the same moment and the load average.
@@ -43,7 +44,7 @@ from pipeline.cycle import cycle_phase  # noqa: E402
 from pipeline.frame import foreground_layer, irradiance_maps, render_frame  # noqa: E402
 from pipeline.ground import render_ground  # noqa: E402
 from pipeline.inputs import grove_of, ground_albedo  # noqa: E402
-from pipeline.lighting import reference_lighting  # noqa: E402
+from pipeline.lighting import reference_lighting, with_exposures  # noqa: E402
 from pipeline.plan import plan_run  # noqa: E402
 from pipeline.config import parse_config  # noqa: E402
 from pipeline.resolve import load, resolve  # noqa: E402
@@ -93,6 +94,7 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
         store = cache.Cache(cache_root / Path(path).stem)
         cycle_phase(plan, store, jobs=2, workers=1,
                     cycle_frames={f % config.canopy.cycle for f in range(frames + 1)})
+        plan = with_exposures(plan, range(frames + 1))  # a run meters its frames once, before them
         render_frame(plan, 0, store=store, workers=threads)  # loads, compiles: not measured
         each = [timed(lambda i=i: render_frame(plan, i + 1, store=store, workers=threads)) for i in range(frames)]
         whole, best = float(np.median(each)), min(each)
