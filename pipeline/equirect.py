@@ -20,14 +20,10 @@ from .camera import equirect_lookup
 from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
 from .geometry import Grid, direction_vector, sky_grid, sky_offset
-from .sky_raster import SkyRaster, _bilinear_shares, _flush, _grid_footprint
+from .sky_raster import SkyRaster, kept_raster, _bilinear_shares, _flush, _grid_footprint
 from .sun_disc import LIMB_DARKENING, SunDisc, _angle, _disc_samples
 
-__all__ = ["KEPT_RASTERS", "EquirectSky", "cut_sun"]
-
-
-KEPT_RASTERS = 4
-"""Most sky-plane rasters an ``EquirectSky`` keeps (a run asks for one or two per layer). [count]"""
+__all__ = ["EquirectSky", "cut_sun"]
 
 
 @dataclass(frozen=True)
@@ -162,18 +158,7 @@ class EquirectSky:
             The weighted sky, ``outside`` the image's light off the grid [radiance x sr].
         """
         key = (grid, None if fold_period is None else tuple(int(n) for n in fold_period))
-        try:
-            kept = self._rasters.get(key)
-        except TypeError:  # a grid given with lists: not kept
-            return self._raster(grid, fold_period=fold_period)
-        if kept is None:
-            kept = self._raster(grid, fold_period=fold_period)
-            for array in (kept.weighted, kept.outside):
-                array.flags.writeable = False
-            if len(self._rasters) >= KEPT_RASTERS:
-                self._rasters.pop(next(iter(self._rasters)))
-            self._rasters[key] = kept
-        return kept
+        return kept_raster(self._rasters, key, lambda: self._raster(grid, fold_period=fold_period))
 
     @cached_property
     def _rasters(self) -> dict:

@@ -14,7 +14,7 @@ share its cached state; the uniform sky and the interface are short.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property, lru_cache
+from functools import cached_property
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -24,8 +24,9 @@ from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
 from .vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS, TURBIDITY_RANGE
 from .geometry import Grid, direction_vector, fold, projected_solid_angle, sky_grid, sky_offset, tangent_axes
-from .sky_nodes import gauss_legendre, lerp_nodes, outside_nodes, raster_nodes, solid_angles32
-from .sky_raster import SkyRaster
+from .sky_nodes import (gauss_legendre, lerp_nodes, outside_nodes, raster_nodes, relative_at, relative_nodes,
+                        solid_angles32)
+from .sky_raster import SkyRaster, kept_raster
 from .sun_disc import SunDisc, MoonDisc, _angle, _disc_samples, sun_colour, sun_disc_radiance
 
 __all__ = ["CLEAR_SKY_NODE_SPACING", "ProceduralSky", "Sky", "UniformSky"]
@@ -160,6 +161,8 @@ class UniformSky:
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
 
+
+_kept_rasters: dict = {}  # ProceduralSky.raster's without clouds: (the sky at time 0, grid, fold) -> raster
 
 CLEAR_SKY_NODE_SPACING = 0.02
 """Largest spacing of the nodes on which ``ProceduralSky.raster`` evaluates the clear sky. [tan]"""
@@ -335,7 +338,15 @@ class ProceduralSky:
         return self.moon_visible * self.skylight
 
     def _relative_sky(self, s) -> np.ndarray:
-        """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1. [1]"""
+        """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1;
+        for read-only points (a still camera's rays), kept while the sun stands still
+        (``sky_nodes.relative_at``). [1]"""
+        if isinstance(s, np.ndarray) and not s.flags.writeable:
+            return relative_at(self._clear_key, s)
+        return self._shape_at(s)
+
+    def _shape_at(self, s) -> np.ndarray:
+        """``_relative_sky`` computed. [1]"""
         w = _unit(s)
         return clearsky.relative_sky(w[..., 2], _angle(w, self.sun_direction),
                                      sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
@@ -345,7 +356,7 @@ class ProceduralSky:
     def _relative_irradiance(self) -> np.ndarray:
         """Horizontal irradiance (3,) of the sky of zenith luminance 1 (``_relative_sky``). [sr]"""
         weight = outside_nodes(None)[1]
-        return (_relative_nodes(self._clear_key, outside_nodes, None) * weight[..., None]).sum(axis=(0, 1, 2))
+        return (relative_nodes(self._clear_key, outside_nodes, None) * weight[..., None]).sum(axis=(0, 1, 2))
 
     @cached_property
     def _clear_key(self) -> ProceduralSky:
@@ -524,7 +535,7 @@ class ProceduralSky:
         """Horizontal irradiance of the clear sky (3,), no sun disc, eclipse-dimmed. [klx]"""
         if self._deep:
             s, weight = outside_nodes(None)
-            L = _relative_nodes(self._clear_key, outside_nodes, None) * (self.zenith_luminance * self._dimming_at(s))
+            L = relative_nodes(self._clear_key, outside_nodes, None) * (self.zenith_luminance * self._dimming_at(s))
             return (L * weight[..., None]).sum(axis=(0, 1, 2))
         return self._relative_irradiance * (self.zenith_luminance * self._sky_dimming)
 
@@ -540,9 +551,9 @@ class ProceduralSky:
         """Irradiance [klx] of the sky (``radiance``) outside the sky-plane rectangle ``extent``
         (x_min, y_min, x_max, y_max) [tan] (None: the whole hemisphere), by the quadrature of
         ``outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
-        with this clear sky (``_relative_nodes``)."""
+        with this clear sky (``sky_nodes.relative_nodes``)."""
         s, weight = outside_nodes(extent)
-        L = _relative_nodes(self._clear_key, outside_nodes, extent) * (self.zenith_luminance * self._dimming_at(s))
+        L = relative_nodes(self._clear_key, outside_nodes, extent) * (self.zenith_luminance * self._dimming_at(s))
         return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
     def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
@@ -565,16 +576,25 @@ class ProceduralSky:
         Returns
         -------
         sky_raster.SkyRaster
-            The weighted sky [klx].
+            The weighted sky [klx]; without clouds, kept for the next frames with the same sky
+            and grid (read-only: while the sun stands still every frame gets the same raster;
+            a frame of forest.yaml spent 110 ms on its sky raster).
         """
+        if self.clouds is not None:
+            return self._raster(grid, fold_period)
+        key = (replace(self, time=0.0), grid, None if fold_period is None else tuple(int(n) for n in fold_period))
+        return kept_raster(_kept_rasters, key, lambda: self._raster(grid, fold_period))
+
+    def _raster(self, grid: Grid, fold_period) -> SkyRaster:
+        """``raster`` computed. [klx]"""
         from . import _array_loops
 
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
         _, row_at, row_frac = lerp_nodes(rows, k)
         _, col_at, col_frac = lerp_nodes(cols, k)
-        # clear_radiance at the nodes, the shape computed once for all frames (_relative_nodes)
-        relative = _relative_nodes(self._clear_key, raster_nodes, grid, k)
+        # clear_radiance at the nodes, the shape computed once for all frames (relative_nodes)
+        relative = relative_nodes(self._clear_key, raster_nodes, grid, k)
         dimming = self._dimming_at(raster_nodes(grid, k)[0]) if self._deep else self._sky_dimming
         nodes = np.moveaxis(relative * (self.zenith_luminance * dimming), -1, 0)
         nodes = nodes.astype(np.float32)
@@ -678,13 +698,3 @@ class ProceduralSky:
         theta0, theta1 = row * np.pi / height, (row + 1) * np.pi / height
         texel = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
         np.add.at(image, (row, col), energy / texel[:, None])
-
-
-@lru_cache(maxsize=16)
-def _relative_nodes(clear: ProceduralSky, nodes, *where) -> np.ndarray:
-    """``clear._relative_sky`` (..., 3) at the points ``nodes(*where)[0]`` (``outside_nodes``,
-    ``raster_nodes``), read-only, cached: the clear sky's shape is the same in every frame while
-    the sun stands still. [1]"""
-    relative = clear._relative_sky(nodes(*where)[0])
-    relative.setflags(write=False)
-    return relative

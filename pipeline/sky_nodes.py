@@ -1,6 +1,7 @@
 """The nodes on which the procedural sky is evaluated: Gauss-Legendre quadrature, the quadrature of
 the sky outside a sky-plane rectangle, every k-th cell of a raster with its bilinear
-interpolation, and the cells' projected solid angles, each made once and cached read-only.
+interpolation, and the cells' projected solid angles, each made once and cached read-only; and
+the clear sky's shape at such nodes and at a still camera's points, kept while the sun stands still.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ import numpy as np
 
 from .geometry import Grid, projected_solid_angle
 
-__all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "solid_angles32"]
+__all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "solid_angles32", "relative_nodes",
+           "relative_at"]
 
 
 # numpy's Gauss-Legendre nodes and weights, cached: numpy finds them as the eigenvalues of a
@@ -157,3 +159,61 @@ def lerp_nodes(n: int, k: int):
     at = np.minimum(np.searchsorted(nodes, index, side="right") - 1, len(nodes) - 2)
     span = np.maximum(nodes[at + 1] - nodes[at], 1)
     return nodes, at, ((index - nodes[at]) / span).astype(np.float32)
+
+
+@lru_cache(maxsize=16)
+def relative_nodes(clear, nodes, *where) -> np.ndarray:
+    """The clear sky's shape at a set of nodes, read-only, cached: the same in every frame while the sun
+    stands still.
+
+    Parameters
+    ----------
+    clear : sky.ProceduralSky
+        The sky without what does not shape its clear sky (``ProceduralSky._clear_key``).
+    nodes : callable
+        ``outside_nodes`` or ``raster_nodes``.
+    *where
+        Their arguments.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) ``clear._shape_at`` at ``nodes(*where)[0]``: zenith luminance 1 [1].
+    """
+    relative = clear._shape_at(nodes(*where)[0])
+    relative.setflags(write=False)
+    return relative
+
+
+POINTS_KEPT = 2
+"""How many (clear sky, points) ``relative_at`` keeps: a frame's camera, and a second view."""
+_kept_points: dict = {}  # (clear sky, id(points)) -> (points, their relative sky), oldest first
+
+
+def relative_at(clear, s: np.ndarray) -> np.ndarray:
+    """The clear sky's shape at read-only points, kept for the last ``POINTS_KEPT`` skies and points: a
+    camera that stands still (its rays made once, ``camera._sky_rays``) sees the clear sky's shape at
+    the same points in every frame while the sun stands still (76 ms of a frame of sun-and-shade.yaml).
+
+    Parameters
+    ----------
+    clear : sky.ProceduralSky
+        As ``relative_nodes`` takes it.
+    s : numpy.ndarray
+        (..., 2) read-only sky-plane points [tan].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) read-only ``clear._shape_at(s)`` [1].
+    """
+    key = (clear, id(s))
+    kept = _kept_points.get(key)
+    if kept is not None and kept[0] is s:  # the same array, not one at a reused address
+        return kept[1]
+    relative = clear._shape_at(s)
+    relative.setflags(write=False)
+    while len(_kept_points) >= POINTS_KEPT:
+        _kept_points.pop(next(iter(_kept_points)))
+    _kept_points[key] = (s, relative)
+    return relative

@@ -16,7 +16,12 @@ import numpy as np
 
 from .geometry import Grid
 
-__all__ = ["SkyRaster", "coarser"]
+__all__ = ["KEPT_RASTERS", "SkyRaster", "coarser", "kept_raster"]
+
+
+KEPT_RASTERS = 4
+"""Most sky-plane rasters a still sky keeps for the next frames (an ``EquirectSky``; a procedural
+sky without clouds, ``sky.ProceduralSky.raster``): a run asks for one or two per layer. [count]"""
 
 
 @dataclass(frozen=True)
@@ -42,6 +47,39 @@ class SkyRaster:
         """The raster's sum over its cells plus ``outside``: the irradiance the open, unshadowed
         ground gets from the light the raster holds, per channel (channels,) float64 [radiance x sr]."""
         return self.weighted.sum(axis=(1, 2), dtype=np.float64) + self.outside
+
+
+def kept_raster(kept: dict, key, compute) -> SkyRaster:
+    """The raster ``compute()`` makes, kept in ``kept`` under ``key`` for the next call (read-only; at
+    most ``KEPT_RASTERS``, the oldest dropped first): a still sky gives every frame of a run the same
+    raster. A key that cannot be hashed (a grid given with lists) keeps nothing.
+
+    Parameters
+    ----------
+    kept : dict
+        {key: raster}, the sky's, written.
+    key : tuple
+        What the raster depends on (the grid, the fold, a sky that changes over time).
+    compute : callable
+        ``compute()`` -> SkyRaster.
+
+    Returns
+    -------
+    SkyRaster
+        The raster [radiance x sr].
+    """
+    try:
+        raster = kept.get(key)
+    except TypeError:
+        return compute()
+    if raster is None:
+        raster = compute()
+        for array in (raster.weighted, raster.outside):
+            array.flags.writeable = False
+        while len(kept) >= KEPT_RASTERS:
+            kept.pop(next(iter(kept)))
+        kept[key] = raster
+    return raster
 
 
 def coarser(raster: SkyRaster, factor: int) -> SkyRaster:

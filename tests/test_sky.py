@@ -627,3 +627,45 @@ def test_an_hdri_keeps_its_rasters_read_only():
     assert folded.weighted.tobytes() == sky._raster(grid, fold_period=(16, 16)).weighted.tobytes()
     other = sky.raster(sky_grid((-10, -10), (20, 20), 0.05))
     assert other.weighted.shape == (3, 20, 20) and sky.raster(grid) is first
+
+
+def test_a_still_sky_keeps_its_raster_and_its_shape_at_a_cameras_points():
+    """Without clouds a frame's procedural sky (a new object each frame, its time moved on) gets the
+    raster kept from the frame before, read-only, the same as computed afresh; another sun or a
+    moon makes its own, and a sky with clouds keeps none. The clear sky's shape at read-only points
+    (a still camera's) is kept the same way, and equals it computed at writable ones."""
+    from pipeline.sky_raster import KEPT_RASTERS
+
+    grid = square(30, 0.01)
+    first = sun_sky(50.0)
+    raster = first.raster(grid)
+    later = replace(first, time=7.5)
+    assert later.raster(grid) is raster and not raster.weighted.flags.writeable
+    np.testing.assert_array_equal(raster.weighted, later._raster(grid, None).weighted)
+    assert sun_sky(51.0).raster(grid) is not raster
+    assert sun_sky(50.0, moon=moon_at(first.sun, 0.004)).raster(grid) is not raster
+    assert sun_sky(50.0).raster(grid) is raster  # an equal sky, made again
+    for k in range(KEPT_RASTERS):  # the oldest dropped once more skies are kept
+        sun_sky(52.0 + k).raster(grid)
+    assert sun_sky(50.0).raster(grid) is not raster
+    cloudy = replace(first, clouds=_ConstantClouds())
+    assert cloudy.raster(grid) is not cloudy.raster(grid)
+
+    s = np.stack(np.meshgrid(np.linspace(-1, 1, 7), np.linspace(-0.5, 2, 5)), axis=-1)
+    still = s.copy()
+    still.flags.writeable = False
+    kept = later.clear_radiance(still)
+    np.testing.assert_array_equal(kept, first.clear_radiance(s))
+    assert first._relative_sky(still) is later._relative_sky(still)  # the same clear sky
+    assert sun_sky(40.0)._relative_sky(still) is not first._relative_sky(still)
+    assert first._relative_sky(s) is not first._relative_sky(s)
+
+
+class _ConstantClouds:
+    """Clouds of transmittance 1/2 and no glow."""
+
+    def transmittance(self, s, time, footprint=None):
+        return np.full(np.shape(s)[:-1], 0.5)
+
+    def radiance(self, s, time, **light):
+        return np.zeros(np.shape(s)[:-1] + (3,), dtype=np.float32)
