@@ -576,14 +576,14 @@ class ProceduralSky:
         Returns
         -------
         sky_raster.SkyRaster
-            The weighted sky [klx]; without clouds, kept for the next frames with the same sky
-            and grid (read-only: while the sun stands still every frame gets the same raster;
+            The weighted sky [klx]; without clouds, kept, from the second frame that asks for the same
+            sky and grid, for the next (read-only: while the sun stands still every frame gets the same raster;
             a frame of forest.yaml spent 110 ms on its sky raster).
         """
         if self.clouds is not None:
             return self._raster(grid, fold_period)
         key = (replace(self, time=0.0), grid, None if fold_period is None else tuple(int(n) for n in fold_period))
-        return kept_raster(_kept_rasters, key, lambda: self._raster(grid, fold_period))
+        return kept_raster(_kept_rasters, key, lambda: self._raster(grid, fold_period), again=True)
 
     def _raster(self, grid: Grid, fold_period) -> SkyRaster:
         """``raster`` computed. [klx]"""

@@ -631,19 +631,24 @@ def test_an_hdri_keeps_its_rasters_read_only():
 
 def test_a_still_sky_keeps_its_raster_and_its_shape_at_a_cameras_points():
     """Without clouds a frame's procedural sky (a new object each frame, its time moved on) gets the
-    raster kept from the frame before, read-only, the same as computed afresh; another sun or a
-    moon makes its own, and a sky with clouds keeps none. The clear sky's shape at read-only points
-    (a still camera's) is kept the same way, and equals it computed at writable ones."""
+    raster kept from the frame before, read-only, the same as computed afresh, once a second frame
+    has asked for it (a sky that moves asks once per key: nothing kept); another sun or a moon makes
+    its own, and a sky with clouds keeps none. The clear sky's shape at read-only points (a still
+    camera's) is kept the same way, and equals it computed at writable ones."""
     from pipeline.sky_raster import KEPT_RASTERS
 
     grid = square(30, 0.01)
     first = sun_sky(50.0)
-    raster = first.raster(grid)
-    later = replace(first, time=7.5)
-    assert later.raster(grid) is raster and not raster.weighted.flags.writeable
+    once = first.raster(grid)
+    raster = replace(first, time=7.5).raster(grid)
+    later = replace(first, time=15.0)
+    assert raster is not once and later.raster(grid) is raster and not raster.weighted.flags.writeable
+    assert once.weighted.flags.writeable
+    np.testing.assert_array_equal(raster.weighted, once.weighted)
     np.testing.assert_array_equal(raster.weighted, later._raster(grid, None).weighted)
-    assert sun_sky(51.0).raster(grid) is not raster
-    assert sun_sky(50.0, moon=moon_at(first.sun, 0.004)).raster(grid) is not raster
+    moved = [sun_sky(51.0), sun_sky(50.0, moon=moon_at(first.sun, 0.004))]
+    assert all(sky.raster(grid).weighted.flags.writeable for sky in moved)  # asked once: not kept
+    assert all(sky.raster(grid) is not raster for sky in moved)
     assert sun_sky(50.0).raster(grid) is raster  # an equal sky, made again
     for k in range(KEPT_RASTERS):  # the oldest dropped once more skies are kept
         sun_sky(52.0 + k).raster(grid)
