@@ -191,9 +191,10 @@ _kept_points: dict = {}  # (clear sky, id(points)) -> (points, their relative sk
 
 
 def relative_at(clear, s: np.ndarray) -> np.ndarray:
-    """The clear sky's shape at read-only points, kept for the last ``POINTS_KEPT`` skies and points: a
-    camera that stands still (its rays made once, ``camera._sky_rays``) sees the clear sky's shape at
-    the same points in every frame while the sun stands still (76 ms of a frame of sun-and-shade.yaml).
+    """The clear sky's shape at read-only points, kept from the second time they are asked for with the
+    same sky, for the last ``POINTS_KEPT`` skies and points: a camera that stands still (its rays made
+    once, ``camera._sky_rays``) sees the clear sky's shape at the same points in every frame while the
+    sun stands still (76 ms of a frame of sun-and-shade.yaml).
 
     Parameters
     ----------
@@ -205,15 +206,18 @@ def relative_at(clear, s: np.ndarray) -> np.ndarray:
     Returns
     -------
     numpy.ndarray
-        (..., 3) read-only ``clear._shape_at(s)`` [1].
+        (..., 3) ``clear._shape_at(s)``, read-only when kept [1].
     """
     key = (clear, id(s))
-    kept = _kept_points.get(key)
-    if kept is not None and kept[0] is s:  # the same array, not one at a reused address
+    kept = _kept_points.pop(key, None)
+    seen = kept is not None and kept[0] is s  # the same array, not one at a reused address
+    if seen and kept[1] is not None:
+        _kept_points[key] = kept
         return kept[1]
     relative = clear._shape_at(s)
-    relative.setflags(write=False)
+    if seen:  # kept once asked for again: a sun that moves asks once (sky_raster.kept_raster's ``again``)
+        relative.setflags(write=False)
     while len(_kept_points) >= POINTS_KEPT:
         _kept_points.pop(next(iter(_kept_points)))
-    _kept_points[key] = (s, relative)
+    _kept_points[key] = (s, relative if seen else None)
     return relative
