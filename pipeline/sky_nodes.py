@@ -13,7 +13,7 @@ import numpy as np
 from .geometry import Grid, projected_solid_angle
 
 __all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "solid_angles32", "relative_nodes",
-           "relative_at"]
+           "relative_at", "kept_at"]
 
 
 # numpy's Gauss-Legendre nodes and weights, cached: numpy finds them as the eigenvalues of a
@@ -186,15 +186,15 @@ def relative_nodes(clear, nodes, *where) -> np.ndarray:
 
 
 POINTS_KEPT = 2
-"""How many (clear sky, points) ``relative_at`` keeps: a frame's camera, and a second view."""
-_kept_points: dict = {}  # (clear sky, id(points)) -> (points, their relative sky), oldest first
+"""How many (sky, points) ``kept_at`` keeps: a frame's camera, and a second view."""
+_kept_points: dict = {}  # relative_at's: (clear sky, id(points)) -> (points, their relative sky or None)
 
 
 def relative_at(clear, s: np.ndarray) -> np.ndarray:
-    """The clear sky's shape at read-only points, kept from the second time they are asked for with the
-    same sky, for the last ``POINTS_KEPT`` skies and points: a camera that stands still (its rays made
-    once, ``camera._sky_rays``) sees the clear sky's shape at the same points in every frame while the
-    sun stands still (76 ms of a frame of sun-and-shade.yaml).
+    """The clear sky's shape at read-only points, kept (``kept_at``) for the last ``POINTS_KEPT`` skies
+    and points: a camera that stands still (its rays made once, ``camera._sky_rays``) sees the clear
+    sky's shape at the same points in every frame while the sun stands still (76 ms of a frame of
+    sun-and-shade.yaml).
 
     Parameters
     ----------
@@ -208,16 +208,41 @@ def relative_at(clear, s: np.ndarray) -> np.ndarray:
     numpy.ndarray
         (..., 3) ``clear._shape_at(s)``, read-only when kept [1].
     """
-    key = (clear, id(s))
-    kept = _kept_points.pop(key, None)
-    seen = kept is not None and kept[0] is s  # the same array, not one at a reused address
-    if seen and kept[1] is not None:
-        _kept_points[key] = kept
-        return kept[1]
-    relative = clear._shape_at(s)
-    if seen:  # kept once asked for again: a sun that moves asks once (sky_raster.kept_raster's ``again``)
-        relative.setflags(write=False)
-    while len(_kept_points) >= POINTS_KEPT:
-        _kept_points.pop(next(iter(_kept_points)))
-    _kept_points[key] = (s, relative if seen else None)
-    return relative
+    return kept_at(_kept_points, clear, s, lambda: clear._shape_at(s))
+
+
+def kept_at(kept: dict, key, points: np.ndarray, compute) -> np.ndarray:
+    """What ``compute()`` gives at read-only ``points`` for ``key``, kept in ``kept`` from the second
+    time the same key and the same array (not one at a reused address) are asked for, for the last
+    ``POINTS_KEPT`` of them, read-only: a sky that moves asks once per key, and arrays kept for nothing
+    are fresh memory to fill in the next frame (as ``sky_raster.kept_raster``'s ``again``).
+
+    Parameters
+    ----------
+    kept : dict
+        {(key, id(points)): (points, the array or None when asked for once)}, written.
+    key : hashable
+        What the result depends on besides the points (a sky).
+    points : numpy.ndarray
+        The read-only points (a still camera's rays).
+    compute : callable
+        ``compute()`` -> numpy.ndarray, the result at ``points``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``compute()``'s array, read-only when kept.
+    """
+    slot = (key, id(points))
+    found = kept.pop(slot, None)
+    seen = found is not None and found[0] is points
+    if seen and found[1] is not None:
+        kept[slot] = found
+        return found[1]
+    result = compute()
+    if seen:
+        result.setflags(write=False)
+    while len(kept) >= POINTS_KEPT:
+        kept.pop(next(iter(kept)))
+    kept[slot] = (points, result if seen else None)
+    return result

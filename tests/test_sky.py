@@ -674,3 +674,18 @@ class _ConstantClouds:
 
     def radiance(self, s, time, **light):
         return np.zeros(np.shape(s)[:-1] + (3,), dtype=np.float32)
+
+
+def test_an_hdri_keeps_a_still_cameras_view():
+    """An HDRI's view at read-only directions (a still camera's rays) is kept from the second frame
+    that asks for it, read-only, and equals the lookup at the same directions given writable."""
+    hdri = EquirectSky(sun_sky(40.0).equirect(64))
+    w = np.stack(np.meshgrid(np.linspace(-0.9, 0.9, 9), np.linspace(-0.5, 0.5, 4)), axis=-1)
+    w = np.concatenate([w, np.full(w.shape[:-1] + (1,), 0.3)], axis=-1)
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    still = w.copy()
+    still.flags.writeable = False
+    views = [hdri.view_radiance(still, None) for _ in range(3)]
+    assert views[0] is not views[1] and views[2] is views[1] and not views[1].flags.writeable
+    np.testing.assert_array_equal(views[1], hdri.view_radiance(w, None))
+    assert hdri.view_radiance(w, None) is not hdri.view_radiance(w, None)
