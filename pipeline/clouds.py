@@ -14,10 +14,13 @@ from .cloud_noise import _knots, _lost_variance, _packed
 from .cloud_transfer import (_slab_path, delta_eddington_transmittance, diffuse_direct_transmittance,
                              single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 from .composite import henyey_greenstein
+from .sky_nodes import kept_at
 
 __all__ = ["CloudLayer", "MAX_TAPS", "TILE_BLEND"]
 
 _TAU_NODES = 48  # optical-depth nodes of the per-call multiple-scattering table
+_kept_taps: dict = {}  # CloudLayer._footprint_taps's at a still camera's points (sky_nodes.kept_at), not written
+_kept_spreads: dict = {}  # CloudLayer._spread's, the same
 
 # numpy's Gauss-Hermite nodes and weights, cached: numpy finds them as the eigenvalues of a
 # matrix at each call. Callers must not write to them.
@@ -184,7 +187,7 @@ class CloudLayer:
         None without a footprint, else the taps as ``_tiling.cloud_field`` takes them: (count (m,), finer
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
-        s = np.asarray(s, dtype=np.float64)
+        s = original = np.asarray(s, dtype=np.float64)
         n = self.texels
         per_texel = self.altitude / self.texel
         # Drift reduced modulo the tile first, so that late frames keep full precision.
@@ -199,6 +202,15 @@ class CloudLayer:
         coords[1] -= shift_col
         if footprint is None:
             return shape, coords, None
+        if isinstance(footprint, np.ndarray) and not (original.flags.writeable or footprint.flags.writeable):
+            return shape, coords, kept_at(_kept_taps, self, (original, footprint),  # to numba: left writable
+                                          lambda: self._footprint_taps(s, shape, footprint), read_only=False)
+        return shape, coords, self._footprint_taps(s, shape, footprint)
+
+    def _footprint_taps(self, s, shape, footprint) -> tuple:
+        """``_taps``'s taps at sky-plane points s (m, 2) [tan] of a footprint [tan] (``field``), which
+        do not move with time: a still camera's are kept (``sky_nodes.kept_at``: 30 ms of a frame of
+        sun-and-shade.yaml)."""
         levels = len(_packed(*self._noise_key())[2])
         along, across = self._widths(shape, footprint)
         major, minor = np.maximum(along, across), np.minimum(along, across)
@@ -210,7 +222,7 @@ class CloudLayer:
         ey = np.where(radius > 0, s[:, 1] / np.maximum(radius, 1e-300), 0.0)
         ex, ey = np.where(along >= across, ex, -ey), np.where(along >= across, ey, ex)
         k0 = np.minimum(np.floor(level).astype(np.intp), levels - 1)
-        return shape, coords, (taps, k0, level - k0, major, ex, ey)
+        return taps, k0, level - k0, major, ex, ey
 
     def _widths(self, shape, footprint):
         """A footprint (``field``) as its widths along the radius and across it, each
@@ -254,8 +266,7 @@ class CloudLayer:
         field = self.field(s, time, footprint)
         if footprint is None:
             return np.interp(field, values, levels)
-        along, across = self._widths(s.shape[:-1], footprint)
-        spread = np.sqrt(_lost_variance(self._noise_key(), along, across)).reshape(field.shape)
+        spread = self._spread(s, footprint).reshape(field.shape)
         nodes, weights = _hermegauss(_HERMITE_NODES)
         out = np.empty(field.shape)
         from ._array_loops import hermite_mean  # numba, imported on first use
@@ -264,6 +275,17 @@ class CloudLayer:
                      np.ascontiguousarray(values, dtype=np.float64), np.ascontiguousarray(levels, dtype=np.float64),
                      out.reshape(-1))
         return out
+
+    def _spread(self, s, footprint) -> np.ndarray:
+        """The standard deviation of the field that a footprint filters out at sky-plane points s (..., 2)
+        [tan] (``coverage``), flat [1]: a still camera's is kept (``sky_nodes.kept_at``)."""
+        def compute():
+            along, across = self._widths(s.shape[:-1], footprint)
+            return np.sqrt(_lost_variance(self._noise_key(), along, across))
+
+        if isinstance(footprint, np.ndarray) and not (s.flags.writeable or footprint.flags.writeable):
+            return kept_at(_kept_spreads, self, (s, footprint), compute, read_only=False)  # to numba
+        return compute()
 
     def optical_depth(self, s, time, footprint=None) -> np.ndarray:
         """Vertical optical depth tau = thickness x coverage where ``s`` meets the layer at ``time``.

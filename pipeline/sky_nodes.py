@@ -211,38 +211,43 @@ def relative_at(clear, s: np.ndarray) -> np.ndarray:
     return kept_at(_kept_points, clear, s, lambda: clear._shape_at(s))
 
 
-def kept_at(kept: dict, key, points: np.ndarray, compute) -> np.ndarray:
+def kept_at(kept: dict, key, points, compute, *, read_only: bool = True):
     """What ``compute()`` gives at read-only ``points`` for ``key``, kept in ``kept`` from the second
-    time the same key and the same array (not one at a reused address) are asked for, for the last
+    time the same key and the same arrays (not others at reused addresses) are asked for, for the last
     ``POINTS_KEPT`` of them, read-only: a sky that moves asks once per key, and arrays kept for nothing
     are fresh memory to fill in the next frame (as ``sky_raster.kept_raster``'s ``again``).
 
     Parameters
     ----------
     kept : dict
-        {(key, id(points)): (points, the array or None when asked for once)}, written.
+        {(key, ids of the points): (points, the result or None when asked for once)}, written.
     key : hashable
-        What the result depends on besides the points (a sky).
-    points : numpy.ndarray
-        The read-only points (a still camera's rays).
+        What the result depends on besides the points (a sky, a cloud layer).
+    points : numpy.ndarray or tuple of numpy.ndarray
+        The read-only points (a still camera's rays; with their footprints).
     compute : callable
-        ``compute()`` -> numpy.ndarray, the result at ``points``.
+        ``compute()`` -> a numpy.ndarray or a tuple of them, the result at ``points``.
+    read_only : bool
+        Whether what is kept is made read-only; False for arrays that go to numba's loops, which
+        compile read-only arrays as another signature (the callers then must not write to them).
 
     Returns
     -------
-    numpy.ndarray
-        ``compute()``'s array, read-only when kept.
+    numpy.ndarray or tuple of numpy.ndarray
+        ``compute()``'s, read-only when kept and ``read_only``.
     """
-    slot = (key, id(points))
+    arrays = points if isinstance(points, tuple) else (points,)
+    slot = (key, tuple(id(a) for a in arrays))
     found = kept.pop(slot, None)
-    seen = found is not None and found[0] is points
+    seen = found is not None and all(a is b for a, b in zip(found[0], arrays))
     if seen and found[1] is not None:
         kept[slot] = found
         return found[1]
     result = compute()
-    if seen:
-        result.setflags(write=False)
+    if seen and read_only:
+        for array in result if isinstance(result, tuple) else (result,):
+            array.setflags(write=False)
     while len(kept) >= POINTS_KEPT:
         kept.pop(next(iter(kept)))
-    kept[slot] = (points, result if seen else None)
+    kept[slot] = (arrays, result if seen else None)
     return result
