@@ -1,0 +1,64 @@
+"""CPU per frame of each config's ``render_frame`` in one process, and a digest of the frames'
+radiance, with this checkout's ``pipeline`` or another tree's (to set two revisions side by side).
+
+    python benchmarks/bench_frame_cpu.py [CONFIG ...] [--code TREE] [--frames 8] [--cache DIR]
+
+For each config (default: every one in configs/): the plan with its exposures metered (as a run
+meters them), the cycle products of the frames made first (``--cache``, default a fresh folder,
+not timed), frame 0 rendered once untimed (loads, compiles), then frames 1 to ``--frames``
+rendered one after another in this process with one FFT thread: their mean CPU seconds per frame,
+and the SHA-256 of their radiance. Frames in one process are where what a still sky keeps from
+one frame to the next (docs/accuracy.md, "What a still sky keeps") is used, so equal digests from
+two trees show that keeping it changes no pixel. ``--code TREE`` imports ``pipeline`` from TREE
+(e.g. a ``git worktree add`` of an older commit); the configs are read from this checkout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("configs", nargs="*", help="default: every config in configs/")
+    parser.add_argument("--code", default=str(ROOT), help="the tree whose pipeline package runs")
+    parser.add_argument("--frames", type=int, default=8)
+    parser.add_argument("--cache", default=None, help="the cycle products' folder (default: a fresh one)")
+    args = parser.parse_args()
+    sys.path.insert(0, str(Path(args.code).resolve()))
+    from pipeline import cache
+    from pipeline.cycle import cycle_phase
+    from pipeline.frame import render_frame
+    from pipeline.lighting import with_exposures
+    from pipeline.plan import plan_run
+    from pipeline.resolve import load
+
+    root = Path(args.cache or tempfile.mkdtemp(prefix="sunshade-bench-"))
+    paths = args.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.yaml"))
+    print(f"pipeline from {args.code}; load average {os.getloadavg()[0]:.1f}", flush=True)
+    for path in paths:
+        plan = plan_run(load(path))
+        frames = list(range(1, args.frames + 1))
+        plan = with_exposures(plan, [0, *frames])
+        store = cache.Cache(root / Path(path).stem)
+        cycle_phase(plan, store, jobs=2, workers=1, cycle_frames={f % plan.canopy.cycle for f in [0, *frames]})
+        render_frame(plan, 0, store=store, workers=1)
+        digest = hashlib.sha256()
+        cpu = time.process_time()
+        for frame in frames:
+            digest.update(render_frame(plan, frame, store=store, workers=1).radiance.tobytes())
+        per_frame = (time.process_time() - cpu) / len(frames)
+        print(f"{Path(path).stem}: {per_frame * 1e3:.0f} ms of CPU a frame (frames 1-{args.frames}), "
+              f"radiance {digest.hexdigest()[:16]}, load {os.getloadavg()[0]:.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
