@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = [
     "Grid", "lattice_offset", "sky_grid", "sky_offset", "fold", "wrapped_spans", "direction_vector", "tangent_axes",
-    "normalized", "sky_plane_from_direction", "direction_from_sky_plane", "cos4_antiderivative",
+    "normalized", "length3", "sky_plane_from_direction", "direction_from_sky_plane", "cos4_antiderivative",
     "projected_solid_angle", "sky_square_irradiance", "I0", "pinhole_image_axes", "offset_direction",
 ]
 
@@ -301,6 +301,26 @@ def normalized(v) -> np.ndarray:
         (..., n) unit vectors [1].
     """
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
+
+
+def length3(v) -> np.ndarray:
+    """The lengths of 3-vectors: ``np.linalg.norm(v, axis=-1)``, the same bits in less than half the
+    time (numpy reduces a last axis of three as (x^2 + y^2) + z^2, as here; a test holds the two
+    together): the sun kernel measures millions of angles a frame under a moving sun.
+
+    Parameters
+    ----------
+    v : numpy.ndarray
+        (..., 3) float64 vectors.
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) their lengths.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    return np.sqrt(x * x + y * y + z * z)
 
 
 def sky_plane_from_direction(azimuth, zenith):

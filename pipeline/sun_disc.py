@@ -14,7 +14,7 @@ import numpy as np
 from . import eclipse
 from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
-from .geometry import direction_vector
+from .geometry import direction_vector, length3
 
 __all__ = ["LIMB_DARKENING", "RGB_WAVELENGTHS", "MoonDisc", "SunDisc", "sun_colour", "sun_disc_radiance"]
 
@@ -155,7 +155,7 @@ def _check_disc(disc, name):
 
 def _angle(w, c):
     """Angle [rad] between unit vectors w (..., 3) and c (3,), stable for small angles."""
-    return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(w - c, axis=-1), 0.0, 1.0))
+    return 2.0 * np.arcsin(np.clip(0.5 * length3(w - c), 0.0, 1.0))
 
 
 def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon: MoonDisc | None = None):

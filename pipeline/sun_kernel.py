@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 from .equirect import EquirectSky
-from .geometry import sky_grid, tangent_axes
+from .geometry import length3, sky_grid, tangent_axes
 from .sky import ProceduralSky
 from .sky_raster import SkyRaster
 from .sun_disc import _angle, _disc_samples
@@ -197,7 +197,7 @@ def _kept_kernel_samples(sky, q: float) -> tuple:
     def footprint(centre, rho):
         # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho
         away = w * np.cos(rho)[..., None] - centre
-        norm = np.maximum(np.linalg.norm(away, axis=-1), 1e-300)
+        norm = np.maximum(length3(away), 1e-300)
         return h_sub * cos_t * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
 
     chunks = []

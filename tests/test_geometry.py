@@ -116,3 +116,17 @@ def test_normalized_scales_to_unit_length_and_leaves_zero_alone():
     v = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [1e-100, 0.0, 0.0]])
     u = normalized(v)
     assert np.allclose(u, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+
+
+def test_length3_is_numpys_norm_to_the_bit():
+    """length3 gives np.linalg.norm(v, axis=-1)'s bits on vectors of every scale (numpy sums the
+    squares of a last axis of three left to right; summed the other way, many lengths differ)."""
+    from pipeline.geometry import length3
+
+    rng = np.random.default_rng(3)
+    v = rng.standard_normal((400_000, 3)) * np.exp(rng.uniform(-30, 30, (400_000, 3)))
+    np.testing.assert_array_equal(length3(v), np.linalg.norm(v, axis=-1))
+    grid = rng.standard_normal((7, 16, 16, 3))
+    np.testing.assert_array_equal(length3(grid), np.linalg.norm(grid, axis=-1))
+    squares = v * v
+    assert not np.array_equal(np.sqrt(squares[:, 0] + (squares[:, 1] + squares[:, 2])), length3(v))
