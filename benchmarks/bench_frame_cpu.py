@@ -1,7 +1,7 @@
 """CPU per frame of each config's ``render_frame`` in one process, and a digest of the frames'
 radiance, with this checkout's ``pipeline`` or another tree's (to set two revisions side by side).
 
-    python benchmarks/bench_frame_cpu.py [CONFIG ...] [--code TREE] [--frames 8] [--cache DIR]
+    python benchmarks/bench_frame_cpu.py [CONFIG ...] [--code TREE] [--frames 8] [--cache DIR] [--write]
 
 For each config (default: every one in configs/): the plan with its exposures metered (as a run
 meters them), the cycle products of the frames made first (``--cache``, default a fresh folder,
@@ -11,6 +11,9 @@ and the SHA-256 of their radiance. Frames in one process are where what a still 
 one frame to the next (docs/accuracy.md, "What a still sky keeps") is used, so equal digests from
 two trees show that keeping it changes no pixel. ``--code TREE`` imports ``pipeline`` from TREE
 (e.g. a ``git worktree add`` of an older commit); the configs are read from this checkout.
+``--write`` also writes each frame's files as a run writes them (``run._write_task``: the EXR,
+the display codes and the PNG, and their stamps for index.json) into a fresh folder, and gives
+that CPU apart, with the SHA-256 of the PNGs' bytes.
 """
 
 from __future__ import annotations
@@ -18,9 +21,11 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
+import shutil
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,6 +37,7 @@ def main() -> None:
     parser.add_argument("--code", default=str(ROOT), help="the tree whose pipeline package runs")
     parser.add_argument("--frames", type=int, default=8)
     parser.add_argument("--cache", default=None, help="the cycle products' folder (default: a fresh one)")
+    parser.add_argument("--write", action="store_true", help="also time writing each frame's files")
     args = parser.parse_args()
     sys.path.insert(0, str(Path(args.code).resolve()))
     from pipeline import cache
@@ -40,24 +46,38 @@ def main() -> None:
     from pipeline.lighting import with_exposures
     from pipeline.plan import plan_run
     from pipeline.resolve import load
+    from pipeline.run import _write_task
+    from pipeline.runfolder import frame_files
 
     root = Path(args.cache or tempfile.mkdtemp(prefix="sunshade-bench-"))
     paths = args.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.yaml"))
     print(f"pipeline from {args.code}; load average {os.getloadavg()[0]:.1f}", flush=True)
     for path in paths:
-        plan = plan_run(load(path))
+        config = load(path)
+        plan = plan_run(config)
         frames = list(range(1, args.frames + 1))
         plan = with_exposures(plan, [0, *frames])
         store = cache.Cache(root / Path(path).stem)
         cycle_phase(plan, store, jobs=2, workers=1, cycle_frames={f % plan.canopy.cycle for f in [0, *frames]})
         render_frame(plan, 0, store=store, workers=1)
-        digest = hashlib.sha256()
-        cpu = time.process_time()
+        digest, written, rendering, writing = hashlib.sha256(), hashlib.sha256(), 0.0, 0.0
+        config = replace(config, output=replace(config.output, folder=Path(tempfile.mkdtemp(prefix="sunshade-bench-"))))
         for frame in frames:
-            digest.update(render_frame(plan, frame, store=store, workers=1).radiance.tobytes())
-        per_frame = (time.process_time() - cpu) / len(frames)
-        print(f"{Path(path).stem}: {per_frame * 1e3:.0f} ms of CPU a frame (frames 1-{args.frames}), "
+            cpu = time.process_time()
+            result = render_frame(plan, frame, store=store, workers=1)
+            rendering += time.process_time() - cpu
+            digest.update(result.radiance.tobytes())
+            if args.write:
+                cpu = time.process_time()
+                _write_task(config, (frame, result, {}, {}, []), "bench", False)
+                writing += time.process_time() - cpu
+                written.update(frame_files(config, frame)[1].read_bytes())
+        print(f"{Path(path).stem}: {rendering / len(frames) * 1e3:.0f} ms of CPU a frame (frames 1-{args.frames}), "
               f"radiance {digest.hexdigest()[:16]}, load {os.getloadavg()[0]:.1f}", flush=True)
+        shutil.rmtree(config.output.folder)
+        if args.write:
+            print(f"{Path(path).stem}: writing {writing / len(frames) * 1e3:.0f} ms of CPU a frame, "
+                  f"PNGs {written.hexdigest()[:16]}", flush=True)
 
 
 if __name__ == "__main__":

@@ -188,17 +188,21 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
               layers: dict | None = None) -> None:
     """Write scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless), atomically.
 
-    No time stamp is written unless ``attributes`` gives ``DateTime`` (OpenEXR's capDate), so the
-    same pixels and attributes always give the same bytes.
+    Written through the OpenEXR bindings: a 1280 x 720 half RGB frame in 33 ms of CPU, where
+    OpenImageIO took 53 ms for the same header and the same compressed pixels (docs/runs.md,
+    "Writing"). No time stamp is written unless ``attributes`` gives ``DateTime`` (OpenEXR's
+    capDate), so the same pixels and attributes always give the same bytes.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file.
     pixels : numpy.ndarray
-        (rows, cols, channels) scene-linear values, channels R, G, B (A) [kcd/m^2].
+        (rows, cols, channels) scene-linear values, channels R, G, B (A), or Y alone [kcd/m^2].
     attributes : dict, optional
-        {name: str, int, float, or a tuple of floats} for its header.
+        {name: str, int, float, or a tuple of floats} for its header: two or three floats are
+        a V2f or V3f, eight named ``chromaticities`` OpenEXR's chromaticities, other counts a
+        float vector; ``DateTime`` ("YYYY:MM:DD HH:MM:SS") is written as capDate.
     half : bool, optional
         Write the pixels as half floats.
     layers : dict, optional
@@ -212,27 +216,44 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
     ImageError
         Naming the file, when it cannot be written.
     """
-    pixels = np.ascontiguousarray(pixels, dtype=np.float32)
+    import OpenEXR  # 6 ms to import: only where an EXR is written
+
+    pixels = np.asarray(pixels, dtype=np.float32)
     rows, cols, channels = pixels.shape
-    spec = oiio.ImageSpec(cols, rows, channels, "half" if half else "float")
-    if layers:
-        names, formats = list("RGBA"[:channels]), [spec.format] * channels
-        for layer_names, (layer, kind) in layers.items():  # noqa: B007 -- the pixels are joined below
-            names += list(layer_names)
-            formats += [oiio.TypeDesc(kind)] * len(layer_names)
-        pixels = np.concatenate([pixels, *(np.asarray(p, dtype=np.float32).reshape(rows, cols, -1)
-                                           for p, _ in layers.values())], axis=-1)
-        spec = oiio.ImageSpec(cols, rows, len(names), spec.format)
-        spec.channelnames = tuple(names)
-        spec.channelformats = tuple(formats)
-    spec.attribute("compression", "piz")
-    spec.attribute("DateTime", "")  # else OpenEXR's capDate holds the time of writing
+    names = ("Y",) if channels == 1 and not layers else tuple("RGBA"[:channels])
+    planes = [(names, pixels, half)]
+    for layer_names, (layer, kind) in (layers or {}).items():
+        planes.append((layer_names, np.asarray(layer, dtype=np.float32).reshape(rows, cols, -1), kind == "half"))
+    stored = {}
+    with np.errstate(over="ignore"):  # beyond 65504 a half is inf, as OpenEXR's own conversion
+        for plane_names, plane, in_half in planes:
+            for k, name in enumerate(plane_names):
+                stored[name] = np.ascontiguousarray(plane[..., k], dtype=np.float16 if in_half else np.float32)
+    header = {"compression": OpenEXR.PIZ_COMPRESSION}
     for name, value in (attributes or {}).items():
-        if isinstance(value, (tuple, list)):
-            spec.attribute(name, oiio.TypeDesc(f"float[{len(value)}]"), tuple(float(v) for v in value))
+        if name == "DateTime":
+            if value:
+                header["capDate"] = str(value)
+        elif isinstance(value, (tuple, list)):
+            values = tuple(float(v) for v in value)
+            header[name] = values if len(values) in (2, 3) or name == "chromaticities" else list(values)
+        elif isinstance(value, (int, np.integer)):
+            header[name] = int(value)
+        elif isinstance(value, (float, np.floating)):
+            header[name] = float(value)
         else:
-            spec.attribute(name, value)
-    _write_atomic(path, spec, pixels)
+            header[name] = str(value)
+    path = Path(path)
+    temporary = _temporary(path)
+    try:
+        with OpenEXR.File(header, stored) as exr:
+            exr.write(str(temporary))
+        os.replace(temporary, path)
+    except (OSError, RuntimeError) as exc:
+        raise ImageError(path, f"cannot write ({getattr(exc, 'strerror', None) or exc})") from None
+    finally:
+        if temporary.exists():
+            temporary.unlink()
 
 
 def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
@@ -427,22 +448,3 @@ def _codes(frame) -> np.ndarray:
 def _temporary(path: Path) -> Path:
     """A temporary name beside ``path`` with its suffix (writers pick the format by suffix)."""
     return path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
-
-
-def _write_atomic(path, spec, data) -> None:
-    path = Path(path)
-    temporary = _temporary(path)
-    out = oiio.ImageOutput.create(str(path))
-    if out is None:
-        raise ImageError(path, f"cannot write this format ({oiio.geterror().strip()})")
-    try:
-        if not out.open(str(temporary), spec):
-            raise ImageError(path, f"cannot write ({out.geterror().strip()})")
-        ok = out.write_image(data)
-        ok = out.close() and ok
-        if not ok:
-            raise ImageError(path, f"cannot write ({out.geterror().strip()})")
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
