@@ -260,8 +260,8 @@ def background(camera: cam.Camera, ground_radiance_: np.ndarray, sky) -> np.ndar
     numpy.ndarray
         (height, width, 3) radiance [radiance].
     """
-    fraction, rest = cam._ground_fractions(camera)
-    out = ground_radiance_ * fraction[..., None]
+    _, row, rest = cam._ground_fractions(camera)
+    out = ground_radiance_ * row
     seen = cam.sky_view(camera, sky)
     seen *= rest  # in place: the sky's view is this call's own
     out += seen
