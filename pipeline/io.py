@@ -227,8 +227,9 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
     stored = {}
     with np.errstate(over="ignore"):  # beyond 65504 a half is inf, as OpenEXR's own conversion
         for plane_names, plane, in_half in planes:
-            for k, name in enumerate(plane_names):
-                stored[name] = np.ascontiguousarray(plane[..., k], dtype=np.float16 if in_half else np.float32)
+            # channel by channel, converted in one pass: (channels, rows, cols), C order
+            planar = plane.transpose(2, 0, 1).astype(np.float16 if in_half else np.float32, order="C")
+            stored.update(zip(plane_names, planar))
     header = {"compression": OpenEXR.PIZ_COMPRESSION}
     for name, value in (attributes or {}).items():
         if name == "DateTime":
