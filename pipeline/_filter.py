@@ -9,7 +9,9 @@ these loops do it footprint by footprint, every tap of a footprint in turn, with
 and the same order of operations as the array version (``texture._tap_mean``, ``_bilinear``), so
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
 The tap counts, levels and blends come from ``texture._filter_choice`` (``filter_choice``), computed once
-for all the reads that share a footprint. Imported lazily: numba costs 0.3 s to import.
+for all the reads that share a footprint. A still camera reads each frame's raster at the same places:
+``tap_table`` finds them once and ``filtered3_at`` reads there (the same bits; docs/accuracy.md, "A still
+camera's taps"). Imported lazily: numba costs 0.3 s to import.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["filtered", "footprint_axes", "row_footprints", "filter_choice", "halve_level"]
+__all__ = ["filtered", "tap_table", "filtered3_at", "footprint_axes", "row_footprints", "filter_choice",
+           "halve_level"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -226,6 +229,104 @@ def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodi
                     out[k, r] += s
         for k in range(channels):
             out[k, r] /= nf
+
+
+def tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend):
+    """Where ``filtered``'s taps fall for read r = footprint r, for ``filtered3_at``: each tap's first
+    texel and fractions (``_first_texel``), the same float64 steps along the major axis in the same
+    order, and after each tap its sample in the next level when blended.
+
+    Parameters
+    ----------
+    channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend
+        As for ``filtered``.
+
+    Returns
+    -------
+    start : numpy.ndarray
+        (m + 1,) int64: read r's samples are ``start[r]`` to ``start[r + 1]``.
+    first : numpy.ndarray
+        (samples,) int64: each sample's first texel in the flat texels (``_first_texel``).
+    fc, fr : numpy.ndarray
+        (samples,) float32: its fractions beyond that texel along a row and a column [1].
+    """
+    samples = int(np.sum(taps.astype(np.int64) * np.where(blend > 0, 2, 1)))
+    start, first = np.empty(len(x) + 1, dtype=np.int64), np.empty(samples, dtype=np.int64)
+    fc, fr = np.empty(samples, dtype=np.float32), np.empty(samples, dtype=np.float32)
+    _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, np.arange(len(x)), major, ex, ey, taps,
+               level, blend, start, first, fc, fr)
+    return start, first, fc, fr
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps, level,
+               blend, start, first, fc, fr):
+    """``tap_table``'s loop, into its arrays."""
+    k = 0
+    for r in range(x.shape[0]):
+        (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
+         step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
+                                  level, blend)
+        start[r] = k
+        col, row, colb, rowb = col0, row0, colb0, rowb0
+        for _ in range(n):
+            first[k], fc[k], fr[k] = _first_texel(channels, off, rows, cols, periodic, col, row)
+            k += 1
+            col += dcol
+            row += drow
+            if blended:
+                first[k], fc[k], fr[k] = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
+                k += 1
+                colb += dcolb
+                rowb += drowb
+    start[x.shape[0]] = k
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out):
+    """``_filtered3`` of read r = footprint r, its samples where ``tap_table`` found them: the same
+    float32 arithmetic in the same order, the same bits (a still camera reads the same places of
+    each frame's raster, so the places are found once).
+
+    Parameters
+    ----------
+    flat, shapes, taps, level, blend
+        As for ``filtered`` (three channels).
+    start, first, fc, fr : numpy.ndarray
+        ``tap_table``'s, for these footprints and a mip map of this geometry.
+    out : numpy.ndarray
+        (3, m) float32, written: the reads' means, in the raster's units.
+    """
+    for r in range(out.shape[1]):
+        lv, t, n = int(level[r]), blend[r], int(taps[r])
+        blended = t > 0
+        step = (shapes[lv, 1] + 2) * 3
+        stepb = (shapes[lv + 1, 1] + 2) * 3 if blended else step
+        nf = np.float32(n)
+        k = start[r]
+        t0 = t1 = t2 = np.float32(0.0)
+        for i in range(n):
+            f, c, w = first[k], fc[k], fr[k]
+            s0, s1, s2 = (_bilinear(flat, f, 3, step, 0, c, w), _bilinear(flat, f, 3, step, 1, c, w),
+                          _bilinear(flat, f, 3, step, 2, c, w))
+            k += 1
+            if blended:
+                f, c, w = first[k], fc[k], fr[k]
+                u0, u1, u2 = (_bilinear(flat, f, 3, stepb, 0, c, w), _bilinear(flat, f, 3, stepb, 1, c, w),
+                              _bilinear(flat, f, 3, stepb, 2, c, w))
+                k += 1
+                s0 += (u0 - s0) * t
+                s1 += (u1 - s1) * t
+                s2 += (u2 - s2) * t
+            if i == 0:
+                t0, t1, t2 = s0, s1, s2
+            else:
+                t0 += s0
+                t1 += s1
+                t2 += s2
+        out[0, r] = t0 / nf
+        out[1, r] = t1 / nf
+        out[2, r] = t2 / nf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

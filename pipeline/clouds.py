@@ -14,12 +14,12 @@ from .cloud_noise import _knots, _lost_variance, _packed
 from .cloud_transfer import (_slab_path, delta_eddington_transmittance, diffuse_direct_transmittance,
                              single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 from .composite import henyey_greenstein
-from .sky_nodes import kept_at
+from .kept import kept_at
 
 __all__ = ["CloudLayer", "MAX_TAPS", "TILE_BLEND"]
 
 _TAU_NODES = 48  # optical-depth nodes of the per-call multiple-scattering table
-_kept_taps: dict = {}  # CloudLayer._footprint_taps's at a still camera's points (sky_nodes.kept_at), not written
+_kept_taps: dict = {}  # CloudLayer._footprint_taps's at a still camera's points (kept.kept_at), not written
 _kept_spreads: dict = {}  # CloudLayer._spread's, the same
 
 # numpy's Gauss-Hermite nodes and weights, cached: numpy finds them as the eigenvalues of a
@@ -209,7 +209,7 @@ class CloudLayer:
 
     def _footprint_taps(self, s, shape, footprint) -> tuple:
         """``_taps``'s taps at sky-plane points s (m, 2) [tan] of a footprint [tan] (``field``), which
-        do not move with time: a still camera's are kept (``sky_nodes.kept_at``: 30 ms of a frame of
+        do not move with time: a still camera's are kept (``kept.kept_at``: 30 ms of a frame of
         sun-and-shade.yaml)."""
         levels = len(_packed(*self._noise_key())[2])
         along, across = self._widths(shape, footprint)
@@ -278,7 +278,7 @@ class CloudLayer:
 
     def _spread(self, s, footprint) -> np.ndarray:
         """The standard deviation of the field that a footprint filters out at sky-plane points s (..., 2)
-        [tan] (``coverage``), flat [1]: a still camera's is kept (``sky_nodes.kept_at``)."""
+        [tan] (``coverage``), flat [1]: a still camera's is kept (``kept.kept_at``)."""
         def compute():
             along, across = self._widths(s.shape[:-1], footprint)
             return np.sqrt(_lost_variance(self._noise_key(), along, across))

@@ -20,7 +20,7 @@ from .camera import equirect_lookup
 from .colour import REC709_LUMINANCE
 from .constants import SUN_ANGULAR_RADIUS
 from .geometry import Grid, direction_vector, sky_grid, sky_offset
-from .sky_nodes import kept_at
+from .kept import kept_at
 from .sky_raster import SkyRaster, kept_raster, _bilinear_shares, _flush, _grid_footprint
 from .sun_disc import LIMB_DARKENING, SunDisc, _angle, _disc_samples
 
@@ -119,7 +119,7 @@ class EquirectSky:
         -------
         numpy.ndarray
             (..., 3) float32 bilinear samples of the image [radiance]; at a still camera's read-only
-            w, kept for the next frames (``sky_nodes.kept_at``: 53 ms of a frame of hdri.yaml).
+            w, kept for the next frames (``kept.kept_at``: 53 ms of a frame of hdri.yaml).
         """
         if isinstance(w, np.ndarray) and not w.flags.writeable:
             return kept_at(self._views, None, w, lambda: equirect_lookup(self.image, w, rotation=self.rotation,
@@ -128,7 +128,7 @@ class EquirectSky:
 
     @cached_property
     def _views(self) -> dict:
-        """``view_radiance``'s results at read-only directions (``sky_nodes.kept_at``)."""
+        """``view_radiance``'s results at read-only directions (``kept.kept_at``)."""
         return {}
 
     def _sun_samples(self, w, footprint):

@@ -447,7 +447,7 @@ def brdf_background(plan: RunPlan, frame: int, ground: GroundResult, sky, store:
 
 def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
-    cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
+    cache on disk, by resampling a tiny view of the plan's ground and sky (twice) with its haze, and by
     making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
     lattice as ``brdf_bands.sky_ratio`` does). A render's command calls it while its workers make the cycle
     products (``run.render_run``), so that after an install the workers of the frame phase load the
@@ -466,7 +466,8 @@ def compile_loops(plan: RunPlan) -> None:
         maps = (texture.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
                 texture.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
         sky = plan.sky.at(plan.scenes[0])
-        background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky)
+        for _ in range(2):  # the second read of the same view compiles the kept taps' loops (texture._filtered)
+            background, _ = camera.background(tiny, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky)
         share = np.ones((tiny.height, tiny.width, 1), dtype=np.float32)
         share.flags.writeable = False  # as _haze_of_view's
         _apply_haze(background, share, share, camera.horizon_sky(tiny, sky))

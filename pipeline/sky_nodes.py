@@ -11,9 +11,10 @@ from functools import lru_cache
 import numpy as np
 
 from .geometry import Grid, projected_solid_angle
+from .kept import kept_at
 
 __all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "solid_angles32", "relative_nodes",
-           "relative_at", "kept_at"]
+           "relative_at"]
 
 
 # numpy's Gauss-Legendre nodes and weights, cached: numpy finds them as the eigenvalues of a
@@ -185,13 +186,11 @@ def relative_nodes(clear, nodes, *where) -> np.ndarray:
     return relative
 
 
-POINTS_KEPT = 2
-"""How many (sky, points) ``kept_at`` keeps: a frame's camera, and a second view."""
 _kept_points: dict = {}  # relative_at's: (clear sky, id(points)) -> (points, their relative sky or None)
 
 
 def relative_at(clear, s: np.ndarray) -> np.ndarray:
-    """The clear sky's shape at read-only points, kept (``kept_at``) for the last ``POINTS_KEPT`` skies
+    """The clear sky's shape at read-only points, kept (``kept.kept_at``) for the last ``POINTS_KEPT`` skies
     and points: a camera that stands still (its rays made once, ``camera._sky_rays``) sees the clear
     sky's shape at the same points in every frame while the sun stands still (76 ms of a frame of
     sun-and-shade.yaml).
@@ -209,45 +208,3 @@ def relative_at(clear, s: np.ndarray) -> np.ndarray:
         (..., 3) ``clear._shape_at(s)``, read-only when kept [1].
     """
     return kept_at(_kept_points, clear, s, lambda: clear._shape_at(s))
-
-
-def kept_at(kept: dict, key, points, compute, *, read_only: bool = True):
-    """What ``compute()`` gives at read-only ``points`` for ``key``, kept in ``kept`` from the second
-    time the same key and the same arrays (not others at reused addresses) are asked for, for the last
-    ``POINTS_KEPT`` of them, read-only: a sky that moves asks once per key, and arrays kept for nothing
-    are fresh memory to fill in the next frame (as ``sky_raster.kept_raster``'s ``again``).
-
-    Parameters
-    ----------
-    kept : dict
-        {(key, ids of the points): (points, the result or None when asked for once)}, written.
-    key : hashable
-        What the result depends on besides the points (a sky, a cloud layer).
-    points : numpy.ndarray or tuple of numpy.ndarray
-        The read-only points (a still camera's rays; with their footprints).
-    compute : callable
-        ``compute()`` -> a numpy.ndarray or a tuple of them, the result at ``points``.
-    read_only : bool
-        Whether what is kept is made read-only; False for arrays that go to numba's loops, which
-        compile read-only arrays as another signature (the callers then must not write to them).
-
-    Returns
-    -------
-    numpy.ndarray or tuple of numpy.ndarray
-        ``compute()``'s, read-only when kept and ``read_only``.
-    """
-    arrays = points if isinstance(points, tuple) else (points,)
-    slot = (key, tuple(id(a) for a in arrays))
-    found = kept.pop(slot, None)
-    seen = found is not None and all(a is b for a, b in zip(found[0], arrays))
-    if seen and found[1] is not None:
-        kept[slot] = found
-        return found[1]
-    result = compute()
-    if seen and read_only:
-        for array in result if isinstance(result, tuple) else (result,):
-            array.setflags(write=False)
-    while len(kept) >= POINTS_KEPT:
-        kept.pop(next(iter(kept)))
-    kept[slot] = (arrays, result if seen else None)
-    return result

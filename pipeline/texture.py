@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kept import kept_at
+
 __all__ = ["LOD_BIAS", "MAX_TAPS", "Footprints", "MipMap", "footprints", "mipmap", "sample_footprint",
            "sample_footprints"]
 
@@ -409,10 +411,21 @@ def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
 
     taps, level, blend = _filter_choice(mip, lod_bias, fp.major, fp.minor)
     out = np.empty((mip.channels, n), dtype=np.float32)
+    tables = _level_tables(mip)
     x, y, major, ex, ey = _float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
-    _filter.filtered(*_level_tables(mip), mip.outside == "periodic", x, y, np.arange(n), major, ex, ey,
-                     taps, level, blend, out)
+    periodic = mip.outside == "periodic"
+    if mip.channels == 3:  # where the taps fall depends on the footprints and the levels' geometry alone
+        geometry = (lod_bias, periodic, mip.texels.shape, mip.shapes, mip.offsets, mip.origins, mip.pixels)
+        kept = kept_at(_TAPS, geometry, (fp.x, fp.y, fp.major, fp.ex, fp.ey), lambda: _filter.tap_table(
+            *tables[1:], periodic, x, y, major, ex, ey, taps, level, blend), read_only=False, first=lambda: None)
+        if kept is not None:
+            _filter.filtered3_at(tables[0], tables[3], taps, level, blend, *kept, out)
+            return out
+    _filter.filtered(*tables, periodic, x, y, np.arange(n), major, ex, ey, taps, level, blend, out)
     return out
+
+
+_TAPS: dict = {}  # _filtered's tap tables: a still camera reads each frame's irradiance at the same places
 
 
 def _float64(*arrays) -> tuple:

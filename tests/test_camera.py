@@ -301,11 +301,31 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     jac[300:310] = 0.0
     fp = footprints(x, y, jac)
     for bias in (LOD_BIAS, 0.0, 1.3):
-        got = texture._filtered(mip, fp, bias)
         want = texture._filtered_arrays(mip, fp, bias)
-        assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
-        np.testing.assert_array_equal(got, want)
+        for _ in range(3):  # three channels: the second and third read from the kept tap table
+            got = texture._filtered(mip, fp, bias)
+            assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
+            np.testing.assert_array_equal(got, want)
     assert np.isnan(texture._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
+    # another frame's raster on the same grid: the kept taps read its texels
+    other = mipmap(raster[::-1] * 2.0, grid, outside=outside, value=mip.value, period=mip.period)
+    np.testing.assert_array_equal(texture._filtered(other, fp, LOD_BIAS),
+                                  texture._filtered_arrays(other, fp, LOD_BIAS))
+
+
+def test_a_still_cameras_tap_table_is_kept_from_the_second_read():
+    """texture._filtered keeps where a still camera's taps fall (kept.kept_at) only once the same
+    footprints and levels are read a second time, and reads from it afterwards."""
+    rng = np.random.default_rng(5)
+    grid = Grid((0.0, 1.0), 0.05, (20, 20))
+    mip = mipmap(rng.random((20, 20, 3)).astype(np.float32), grid, outside="periodic", period=(1.0, 1.0))
+    fp = footprints(rng.uniform(0, 1, 50), rng.uniform(0, 1, 50), rng.normal(0, 0.05, (50, 2, 2)))
+    texture._TAPS.clear()
+    texture._filtered(mip, fp, LOD_BIAS)
+    assert [entry[1] for entry in texture._TAPS.values()] == [None]
+    texture._filtered(mip, fp, LOD_BIAS)
+    (start, first, fc, fr), = [entry[1] for entry in texture._TAPS.values()]
+    assert start[0] == 0 and start[-1] == len(first) == len(fc) == len(fr) >= 50
 
 
 @pytest.mark.parametrize("view", [
