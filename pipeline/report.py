@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import contextlib
 import csv
 import json
 import math
@@ -16,7 +17,7 @@ from .errors import RunError
 from .runfolder import INDEX_FILE, RUN_FILE
 
 __all__ = ["CSV_FILE", "CURVE_FILE", "SHEET_FILE", "SHEET_FRAMES", "COLUMNS", "SET_SUN", "frame_records", "rows",
-           "write_csv", "contacts", "write_light_curve", "write_contact_sheet", "write_report"]
+           "write_csv", "contacts", "import_drawing", "write_light_curve", "write_contact_sheet", "write_report"]
 
 CSV_FILE = "light.csv"
 CURVE_FILE = "light-curve.png"
@@ -171,6 +172,17 @@ def contacts(table) -> list[tuple[str, float]]:
         if s0 < full <= s1:
             found.append(("C4", t1))
     return found
+
+
+def import_drawing() -> None:
+    """Import what ``write_light_curve`` draws with (matplotlib's Figure and its Agg canvas: 0.8 s
+    of a 1.2 s report, more where matplotlib has not yet built its font cache), so that a render
+    can import it while its frames render and write its report without that wait. Any error is
+    left to ``write_light_curve``.
+    """
+    with contextlib.suppress(Exception):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
+        from matplotlib.figure import Figure  # noqa: F401
 
 
 def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = None) -> Path | None:

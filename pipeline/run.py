@@ -302,6 +302,10 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
                 encoded = {}  # each index entry's JSON, as write_index made it
                 stream = _VideoStream.start(config, digest, records, todo, previous, force=remake_video,
                                             in_process=jobs == 1 and not scheduler)
+                if config.output.report:  # its drawing library imported meanwhile, not after the frames
+                    from .report import import_drawing
+
+                    threading.Thread(target=import_drawing, name="sunshade-report", daemon=True).start()
                 try:
                     for frame, seconds, entry, caught, codes in _frame_phase(
                             config, plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
