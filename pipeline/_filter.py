@@ -286,7 +286,9 @@ def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footp
 def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out):
     """``_filtered3`` of read r = footprint r, its samples where ``tap_table`` found them: the same
     float32 arithmetic in the same order, the same bits (a still camera reads the same places of
-    each frame's raster, so the places are found once).
+    each frame's raster, so the places are found once). Its blend and sums are written out as
+    ``_filtered3``'s: the two sharing an inlined helper for them made ``_filtered3`` a quarter to
+    a half slower (921,600 random reads: 103 to 111 ms, 134 to 158 with the helper).
 
     Parameters
     ----------
