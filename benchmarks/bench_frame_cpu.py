@@ -78,6 +78,8 @@ def main() -> None:
         if args.write:
             print(f"{Path(path).stem}: writing {writing / len(frames) * 1e3:.0f} ms of CPU a frame, "
                   f"PNGs {written.hexdigest()[:16]}", flush=True)
+    if args.cache is None:  # a fresh folder of this run's: not left behind
+        shutil.rmtree(root, ignore_errors=True)
 
 
 if __name__ == "__main__":
