@@ -24,7 +24,7 @@ def leaves(size_px=800, extent_m=20.0, seed=7, oversample=4):
     x = (xx + 0.5) * px - extent_m / 2
     y = extent_m / 2 - (yy + 0.5) * px
     for cx, cy, radius in ((-3.5, 2.0, 5.0), (4.0, 3.0, 4.0), (1.0, -4.5, 4.5)):
-        for k in range(5):  # branches from the trunk
+        for _ in range(5):  # branches from the trunk
             a = rng.uniform(0, 2 * np.pi)
             t = (x - cx) * np.cos(a) + (y - cy) * np.sin(a)
             d = np.abs(-(x - cx) * np.sin(a) + (y - cy) * np.cos(a))
