@@ -21,7 +21,7 @@ def kept_at(kept: dict, key, points, compute, *, read_only: bool = True, first=N
     kept : dict
         {(key, ids of the points): (points, the result or None when asked for once)}, written.
     key : hashable
-        What the result depends on besides the points (a sky, a cloud layer).
+        What the result depends on besides the points (a sky, a cloud layer, a mip map's geometry).
     points : numpy.ndarray or tuple of numpy.ndarray
         The read-only points (a still camera's rays; with their footprints).
     compute : callable
