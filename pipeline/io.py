@@ -1,5 +1,5 @@
-"""Images through OpenImageIO (PNGs written here, deflated by zlib-ng), written atomically with their
-metadata; video through imageio.
+"""Images read through OpenImageIO and written atomically with their metadata (EXRs through OpenEXR's
+bindings, PNGs here, deflated by zlib-ng); video through imageio.
 
 Every file is written under a temporary name in its final folder and renamed into place, so a
 crash never leaves a half-written file under the real name.
