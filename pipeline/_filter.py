@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .cores import in_shares
+
 __all__ = ["filtered", "tap_table", "filtered3_at", "footprint_axes", "row_footprints", "filter_choice",
            "halve_level"]
 
@@ -98,7 +100,8 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
     blended by blend[j] towards the next when > 0. The body is written out in full for three
     channels (a helper function that returns the three means, even inlined, ran three times
     slower) and channel by channel otherwise, in two compiled loops (``_filtered3`` and
-    ``_filtered_channels``): a run compiles the one it uses.
+    ``_filtered_channels``): a run compiles the one it uses. The reads are shared among the threads
+    of ``cores.loop_threads``.
 
     Parameters
     ----------
@@ -135,8 +138,8 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
         (channels, m) float32, written: the reads' means, in the raster's units.
     """
     loop = _filtered3 if channels == 3 else _filtered_channels
-    loop(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps, level,
-         blend, out)
+    in_shares(x.shape[0], lambda start, stop: loop(flat, channels, offsets, shapes, origins, pixels, periodic, x, y,
+                                                   footprint, major, ex, ey, taps, level, blend, out, start, stop))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -167,9 +170,9 @@ def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
-               level, blend, out):
-    """``filtered`` of three channels."""
-    for r in range(x.shape[0]):
+               level, blend, out, start, stop):
+    """``filtered`` of three channels, reads start to stop - 1."""
+    for r in range(start, stop):
         (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
          step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
                                   level, blend)
@@ -199,9 +202,9 @@ def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey,
-                       taps, level, blend, out):
-    """``filtered`` of any count of channels."""
-    for r in range(x.shape[0]):
+                       taps, level, blend, out, start, stop):
+    """``filtered`` of any count of channels, reads start to stop - 1."""
+    for r in range(start, stop):
         (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
          step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
                                   level, blend)
@@ -283,7 +286,7 @@ def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footp
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out):
+def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out, begin, end):
     """``_filtered3`` of read r = footprint r, its samples where ``tap_table`` found them: the same
     float32 arithmetic in the same order, the same bits (a still camera reads the same places of
     each frame's raster, so the places are found once). Its blend and sums are written out as
@@ -298,8 +301,10 @@ def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out):
         ``tap_table``'s, for these footprints and a mip map of this geometry.
     out : numpy.ndarray
         (3, m) float32, written: the reads' means, in the raster's units.
+    begin, end : int
+        The reads done: begin to end - 1 (``cores.in_shares``'s share).
     """
-    for r in range(out.shape[1]):
+    for r in range(begin, end):
         lv, t, n = int(level[r]), blend[r], int(taps[r])
         blended = t > 0
         step = (shapes[lv, 1] + 2) * 3

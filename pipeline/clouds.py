@@ -14,6 +14,7 @@ from .cloud_noise import _knots, _lost_variance, _packed
 from .cloud_transfer import (_slab_path, delta_eddington_transmittance, diffuse_direct_transmittance,
                              single_scattering_flux_transmittance, two_stream_diffuse_transmittance)
 from .composite import henyey_greenstein
+from .cores import in_shares
 from .kept import kept_at
 
 __all__ = ["CloudLayer", "MAX_TAPS", "TILE_BLEND"]
@@ -164,12 +165,15 @@ class CloudLayer:
         from ._tiling import cloud_field  # numba, imported on first use
 
         copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
+        rows, cols = coords[0], coords[1]  # contiguous, as each sample's taps: a share is their slices
         if taps is None:
             unused, none = np.empty(0), np.empty(0, dtype=np.intp)
-            cloud_field(flat, offsets, sides, coords[0], coords[1], True, none, none, unused, unused, unused,
-                        unused, out, *copies)
+            in_shares(len(out), lambda a, b: cloud_field(
+                flat, offsets, sides, rows[a:b], cols[a:b], True, none, none, unused, unused, unused, unused,
+                out[a:b], *copies))
         else:
-            cloud_field(flat, offsets, sides, coords[0], coords[1], False, *taps, out, *copies)
+            in_shares(len(out), lambda a, b: cloud_field(
+                flat, offsets, sides, rows[a:b], cols[a:b], False, *(t[a:b] for t in taps), out[a:b], *copies))
         return out.reshape(shape)
 
     def _drift(self, time) -> tuple[float, float]:
@@ -271,9 +275,11 @@ class CloudLayer:
         out = np.empty(field.shape)
         from ._array_loops import hermite_mean  # numba, imported on first use
 
-        hermite_mean(field.reshape(-1), spread.reshape(-1), nodes, weights / weights.sum(),
-                     np.ascontiguousarray(values, dtype=np.float64), np.ascontiguousarray(levels, dtype=np.float64),
-                     out.reshape(-1))
+        field, spread, flat = field.reshape(-1), spread.reshape(-1), out.reshape(-1)
+        weights = weights / weights.sum()
+        values, levels = (np.ascontiguousarray(t, dtype=np.float64) for t in (values, levels))
+        in_shares(len(flat), lambda a, b: hermite_mean(field[a:b], spread[a:b], nodes, weights, values, levels,
+                                                      flat[a:b]))
         return out
 
     def _spread(self, s, footprint) -> np.ndarray:
@@ -409,9 +415,10 @@ class CloudLayer:
             sky_weight = np.empty_like(sun_weight)  # the np.interp of tables [1/sr], compiled
             from ._array_loops import scattering_weights  # numba, imported on first use
 
-            scattering_weights(np.ascontiguousarray(tau, dtype=np.float64).reshape(-1), nodes,
-                               np.stack([m_sun * (mu0 / np.pi), m_sky / np.pi]), sun_weight.reshape(-1),
-                               sky_weight.reshape(-1))
+            taus, tables = np.ascontiguousarray(tau, dtype=np.float64).reshape(-1), np.stack(
+                [m_sun * (mu0 / np.pi), m_sky / np.pi])
+            suns, skies = sun_weight.reshape(-1), sky_weight.reshape(-1)
+            in_shares(len(taus), lambda a, b: scattering_weights(taus[a:b], nodes, tables, suns[a:b], skies[a:b]))
             for c in range(3):
                 np.multiply(sun_weight, f32(sun_rgb[c]), out=out[..., c])
                 out[..., c] += sky_weight * f32(sky_rgb[c])

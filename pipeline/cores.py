@@ -1,15 +1,18 @@
-"""The machines a run uses: how many frames are rendered at once, with how many FFT threads,
-and how long a lost Dask cluster is waited for."""
+"""The machines a run uses: how many frames are rendered at once, with how many FFT threads (and
+threads for a frame's compiled loops), and how long a lost Dask cluster is waited for."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import contextvars
 import os
 import threading
 import time
 
 __all__ = ["MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
-           "default_workers", "jobs_and_threads", "end_if_orphaned", "compiled_once"]
+           "default_workers", "jobs_and_threads", "loop_threads", "in_shares", "SHARES_PER_THREAD", "SMALLEST_SHARE",
+           "end_if_orphaned", "compiled_once"]
 
 MAX_JOBS_PER_CORE = 4
 """Most worker processes a local run starts per core (--jobs, render.jobs): each holds a
@@ -85,6 +88,62 @@ def jobs_and_threads(jobs: int | None, scheduler: str | None) -> tuple[int, int]
     """
     jobs = jobs or default_workers()
     return jobs, 1 if scheduler else max(1, default_workers() // jobs)
+
+
+SHARES_PER_THREAD = 8
+"""Shares a loop is cut into per thread (``in_shares``): its items cost unequally (a sky pixel near
+the horizon reads 16 taps, one overhead a few), so equal halves would leave one thread idle."""
+SMALLEST_SHARE = 16384
+"""Fewest items worth a share of their own (``in_shares``): below it a thread costs more than it
+saves. [items]"""
+_LOOP_THREADS = contextvars.ContextVar("sunshade_loop_threads", default=1)
+_pools: dict = {}  # (process, threads): the executor of in_shares
+
+
+@contextlib.contextmanager
+def loop_threads(count: int):
+    """Within the ``with`` (in this thread), ``in_shares`` runs loops in ``count`` threads, as
+    scipy.fft's ``workers`` runs the FFTs: a frame's compiled loops then use the cores its FFTs use
+    (``frame.render_frame``; a run of one frame per core gives each frame one thread, the loops
+    running as before).
+
+    Parameters
+    ----------
+    count : int
+        Threads [count].
+    """
+    token = _LOOP_THREADS.set(max(1, int(count)))
+    try:
+        yield
+    finally:
+        _LOOP_THREADS.reset(token)
+
+
+def in_shares(count: int, loop) -> None:
+    """``loop(start, stop)`` over items [0, count), cut into shares run in the threads of
+    ``loop_threads`` (SHARES_PER_THREAD shares each, none under SMALLEST_SHARE items); in this
+    thread alone outside one, or for few items. Each item's result is the same whichever share
+    holds it, so the bits do not depend on the threads.
+
+    Parameters
+    ----------
+    count : int
+        Items [count].
+    loop : callable
+        ``loop(start, stop)`` does items start to stop - 1; a compiled loop that releases the GIL
+        (``nogil=True``), or the threads wait on each other.
+    """
+    threads = min(_LOOP_THREADS.get(), count // SMALLEST_SHARE)
+    if threads <= 1:
+        loop(0, count)
+        return
+    shares = min(threads * SHARES_PER_THREAD, count // SMALLEST_SHARE)
+    bounds = [count * k // shares for k in range(shares + 1)]
+    key = (os.getpid(), threads)  # a forked process makes its own: its parent's threads are not in it
+    if key not in _pools:
+        _pools[key] = concurrent.futures.ThreadPoolExecutor(threads, thread_name_prefix="sunshade-loop")
+    for _ in _pools[key].map(lambda k: loop(bounds[k], bounds[k + 1]), range(shares)):
+        pass
 
 
 def end_if_orphaned(command: int | None) -> None:

@@ -15,7 +15,7 @@ from . import brdf_bands
 from . import brdf_camera as reflect
 from . import cache, camera, composite, texture
 from .colour import REC709_LUMINANCE
-from .cores import default_workers
+from .cores import default_workers, loop_threads
 from .cycle import foreground_item
 from .foregrounds import ForegroundLayer
 from .ground import GroundResult, blend_band, render_ground, sky_view_terms
@@ -202,7 +202,8 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     store : cache.Cache or None
         Where the cycle products are (computed on a miss); None: the default cache.
     workers : int or None
-        FFT threads; None: ``cores.default_workers``.
+        FFT threads, and threads of the compiled loops (``cores.loop_threads``); None:
+        ``cores.default_workers``.
     timings : dict or None
         If given, receives the seconds of each stage [s]: ``ground``, ``camera`` (resampling ground
         and sky), ``composite``, and ``passes`` when light passes are made.
@@ -220,10 +221,17 @@ def render_frame(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = N
     ValueError
         For light passes with a ground reflectance (``ground.brdf``).
     """
+    workers = workers or default_workers()
+    with loop_threads(workers):
+        return _render_frame(plan, frame, store, workers, timings, passes)
+
+
+def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers: int, timings: dict | None,
+                  passes: tuple[str, ...] | None) -> FrameResult:
+    """``render_frame`` in the threads of its compiled loops."""
     plan = plan.at(frame)  # a following camera's view and sun window (docs/method.md, "Framing")
     passes = plan.output.passes if passes is None else tuple(passes)
     brdf = plan.ground.brdf
-    workers = workers or default_workers()
     store = store or cache.Cache(cache.cache_dir(None))
     clock = _Stopwatch(timings)
     scene = plan.scenes[frame]

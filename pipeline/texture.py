@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cores import in_shares
 from .kept import kept_at
 
 __all__ = ["LOD_BIAS", "MAX_TAPS", "Footprints", "MipMap", "footprints", "mipmap", "sample_footprint",
@@ -419,7 +420,7 @@ def _filtered(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
         kept = kept_at(_TAPS, geometry, (fp.x, fp.y, fp.major, fp.ex, fp.ey), lambda: _filter.tap_table(
             *tables[1:], periodic, x, y, major, ex, ey, taps, level, blend), read_only=False, first=lambda: None)
         if kept is not None:
-            _filter.filtered3_at(tables[0], tables[3], taps, level, blend, *kept, out)
+            in_shares(n, lambda a, b: _filter.filtered3_at(tables[0], tables[3], taps, level, blend, *kept, out, a, b))
             return out
     _filter.filtered(*tables, periodic, x, y, np.arange(n), major, ex, ey, taps, level, blend, out)
     return out

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from pipeline import camera, texture
+from pipeline import camera, cores, texture
 from pipeline.camera import (Camera, background, ground_hits, ground_view, image_rays, pixel_rays, project_points,
                              sky_view)
 from pipeline.texture import LOD_BIAS, MAX_TAPS, footprints, mipmap, sample_footprint, sample_footprints
@@ -276,11 +276,20 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
     ("constant", (27, 45), 3), ("constant", (32, 32), 2), ("periodic", (32, 64), 3),
     ("periodic", (27, 45), 1), ("periodic", (30, 40), 4),
 ])
-def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels):
+@pytest.mark.parametrize("threads", [1, 3])
+def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels, threads, monkeypatch):
     """texture._filtered (numba, footprint by footprint) against texture._filtered_arrays (numpy,
     grouped by level), the reference it replaces: the same float32 arithmetic in the same order
     gives the same bits, for every level, blend and tap count, far points, degenerate
-    footprints and a NaN outside value (the finer rasters of a chain)."""
+    footprints and a NaN outside value (the finer rasters of a chain); in one thread or shared
+    among three (cores.in_shares)."""
+    monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
+    with cores.loop_threads(threads):
+        _compiled_filtering_matches_the_array_version(outside, shape, channels)
+
+
+def _compiled_filtering_matches_the_array_version(outside, shape, channels):
+    texture._TAPS.clear()
     rng = np.random.default_rng(21)
     raster = rng.random(shape + (channels,)).astype(np.float32)
     grid = Grid((-1.3, 0.9), 0.05, shape)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import _array_loops, cloud_noise, clouds
+from pipeline import _array_loops, cloud_noise, clouds, cores
 from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
 from pipeline.cloud_noise import _knots, fractal_noise
 from pipeline.cloud_transfer import (delta_eddington_transmittance, single_scattering_flux_transmittance,
@@ -499,10 +499,17 @@ def reference_field(cl, s, time, footprint=None):
     return result.reshape(shape)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed):
+@pytest.mark.parametrize("seed, threads", [(0, 1), (1, 1), (2, 1), (0, 3)])
+def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed, threads, monkeypatch):
     """Random directions (out to 30 tan, and on the tile's edges, where the reads wrap), times
-    (to 5 h), round and long footprints from a hundredth of a texel to beyond the tile."""
+    (to 5 h), round and long footprints from a hundredth of a texel to beyond the tile; in one
+    thread, or shared among three (cores.in_shares)."""
+    monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
+    with cores.loop_threads(threads):
+        _compiled_field_is_the_map_coordinates_field(seed)
+
+
+def _compiled_field_is_the_map_coordinates_field(seed):
     rng = np.random.default_rng(seed)
     cl = layer(texels=64 * 2**seed, wind=tuple(rng.normal(0, 20, 2)), seed=seed)
     n = 2000
@@ -534,10 +541,33 @@ def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
     assert sky.tobytes() == np.interp(tau, nodes, tables[1]).astype(np.float32).tobytes()
 
 
-def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit():
+def test_a_cloud_layers_light_shared_among_threads_is_the_same_to_the_bit(monkeypatch):
+    """``radiance`` (its field, mean coverage and scattering weights) of many directions with
+    footprints: the same bits in one thread as shared among three (cores.in_shares)."""
+    rng = np.random.default_rng(3)
+    cl = layer(texels=64, seed=4, thickness=2.0)
+    s = rng.normal(0, 1, (5000, 2))
+    footprint = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (5000, 2)))
+    monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
+    lights = []
+    for threads in (1, 3):
+        with cores.loop_threads(threads):
+            lights.append(cl.radiance(s, 40.0, sun_s=direction_at(35, 150), sun_irradiance=SUN,
+                                      sky_irradiance=SKY, footprint=footprint))
+    assert lights[0].tobytes() == lights[1].tobytes()
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit(threads, monkeypatch):
     """``coverage`` with a footprint (the compiled Gauss-Hermite sum over ``np.interp``s) gives the
     bits of the array expression it stands for, over fields through and beyond the knots, knots
-    hit exactly, NaN and zero spreads."""
+    hit exactly, NaN and zero spreads; in one thread or three (cores.in_shares)."""
+    monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
+    with cores.loop_threads(threads):
+        _compiled_mean_coverage_is_the_array_quadrature()
+
+
+def _compiled_mean_coverage_is_the_array_quadrature():
     from pipeline.cloud_noise import _knots, _lost_variance
 
     rng = np.random.default_rng(8)
