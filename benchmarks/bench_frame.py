@@ -7,7 +7,8 @@ a baseline measured in the same run.
 
 ``--table``: for each config, its frame (``render_frame`` on the plan with its exposures metered, as a run
 meters them before its frames; no writing; median of the first
-``--frames`` frames after one unmeasured) over its bare FFT work, one Markdown row each (the
+``--frames`` frames after one unmeasured) over its bare FFT work (the median of its measures, one
+just after each frame: on a shared machine a single measure moved by half), one Markdown row each (the
 table of docs/accuracy.md, "Each config's frame over its FFT work"), after the bare 2048^2
 rfft2 + irfft2 round trip of the same moment and the load average.
 
@@ -96,9 +97,11 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
                     cycle_frames={f % config.canopy.cycle for f in range(frames + 1)})
         plan = with_exposures(plan, range(frames + 1))  # a run meters its frames once, before them
         render_frame(plan, 0, store=store, workers=threads)  # loads, compiles: not measured
-        each = [timed(lambda i=i: render_frame(plan, i + 1, store=store, workers=threads)) for i in range(frames)]
-        whole, best = float(np.median(each)), min(each)
-        bare = bare_fft_seconds(plan, threads)
+        each, bares = [], []
+        for i in range(frames):  # each frame's bare FFT work timed just after it, under the same load
+            each.append(timed(lambda i=i: render_frame(plan, i + 1, store=store, workers=threads)))
+            bares.append(bare_fft_seconds(plan, threads))
+        whole, best, bare = float(np.median(each)), min(each), float(np.median(bares))
         print(f"| {Path(path).stem} | {plan.camera.width} x {plan.camera.height} | {whole * 1e3:.0f} "
               f"(best {best * 1e3:.0f}) | {bare * 1e3:.0f} | {whole / bare:.1f} (best {best / bare:.1f}) | "
               f"{os.getloadavg()[0]:.1f} |", flush=True)
