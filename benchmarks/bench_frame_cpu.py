@@ -2,6 +2,7 @@
 radiance, with this checkout's ``pipeline`` or another tree's (to set two revisions side by side).
 
     python benchmarks/bench_frame_cpu.py [CONFIG ...] [--code TREE] [--frames 8] [--cache DIR] [--write]
+        [--profile]
 
 For each config (default: every one in configs/): the plan with its exposures metered (as a run
 meters them), the cycle products of the frames made first (``--cache``, default a fresh folder,
@@ -13,14 +14,18 @@ two trees show that keeping it changes no pixel. ``--code TREE`` imports ``pipel
 (e.g. a ``git worktree add`` of an older commit); the configs are read from this checkout.
 ``--write`` also writes each frame's files as a run writes them (``run._write_task``: the EXR,
 the display codes and the PNG, and their stamps for index.json) into a fresh folder, and gives
-that CPU apart, with the SHA-256 of the PNGs' bytes.
+that CPU apart, with the SHA-256 of the PNGs' bytes. ``--profile`` runs the timed frames' rendering
+under cProfile and prints its 15 costliest functions by their own time (the CPU figure then
+includes the profiler's overhead).
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import hashlib
 import os
+import pstats
 import shutil
 import sys
 import tempfile
@@ -38,6 +43,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=8)
     parser.add_argument("--cache", default=None, help="the cycle products' folder (default: a fresh one)")
     parser.add_argument("--write", action="store_true", help="also time writing each frame's files")
+    parser.add_argument("--profile", action="store_true", help="profile the timed frames' rendering")
     args = parser.parse_args()
     sys.path.insert(0, str(Path(args.code).resolve()))
     from pipeline import cache
@@ -62,9 +68,14 @@ def main() -> None:
         render_frame(plan, 0, store=store, workers=1)
         digest, written, rendering, writing = hashlib.sha256(), hashlib.sha256(), 0.0, 0.0
         config = replace(config, output=replace(config.output, folder=Path(tempfile.mkdtemp(prefix="sunshade-bench-"))))
+        profile = cProfile.Profile() if args.profile else None
         for frame in frames:
             cpu = time.process_time()
+            if profile:
+                profile.enable()
             result = render_frame(plan, frame, store=store, workers=1)
+            if profile:
+                profile.disable()
             rendering += time.process_time() - cpu
             digest.update(result.radiance.tobytes())
             if args.write:
@@ -75,6 +86,8 @@ def main() -> None:
         print(f"{Path(path).stem}: {rendering / len(frames) * 1e3:.0f} ms of CPU a frame (frames 1-{args.frames}), "
               f"radiance {digest.hexdigest()[:16]}, load {os.getloadavg()[0]:.1f}", flush=True)
         shutil.rmtree(config.output.folder)
+        if profile:
+            pstats.Stats(profile).sort_stats("tottime").print_stats(15)
         if args.write:
             print(f"{Path(path).stem}: writing {writing / len(frames) * 1e3:.0f} ms of CPU a frame, "
                   f"PNGs {written.hexdigest()[:16]}", flush=True)
