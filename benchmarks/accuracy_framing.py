@@ -13,6 +13,7 @@ exposure"), with the scenes of tests/test_framing.py:
 
 import importlib.util
 import sys
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -37,6 +38,14 @@ spec.loader.exec_module(scenes)
 
 def main():
     folder = Path(tempfile.mkdtemp(prefix="framing-"))
+    try:
+        report(folder)
+    finally:  # nothing left behind
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def report(folder: Path) -> None:
+    """Print the figures, the scenes' configs and cache in ``folder``."""
     store = Cache(folder / "cache")
     for site in scenes.SITES:
         config = load(scenes.write(folder, scenes.dapple_scene(site), f"{site}.yaml"))

@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import copy
 import sys
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -128,6 +129,14 @@ def main() -> None:
     parser.add_argument("--images", type=Path, default=None, help="write each frame's PNG here")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="low-sun-framing-"))
+    try:
+        report(args, folder)
+    finally:  # nothing left behind
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def report(args, folder: Path) -> None:
+    """Print the table, the cases' configs (and the cache, without ``--cache``) in ``folder``."""
     store = Cache(args.cache or folder / "cache")
     print(" case              frame  sun [deg]  az [deg]  p95/p5  most  camera (x, y, z) [m]   yaw [deg]  window [m]"
           "                       sun window [m]                  s")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -110,6 +111,7 @@ def frame_digests(config, frames, repeat) -> None:
             totals.append(time.perf_counter() - start)
             paths = [folder / entry["files"][k]["name"] for k in ("exr", "png")]
             digests.append(seconds(lambda: [file_digest(p) for p in paths]))
+    shutil.rmtree(folder, ignore_errors=True)
     total, digest = statistics.median(totals), statistics.median(digests)
     print(f"frame digests: a frame rendered and written {total * 1e3:.1f} ms (median), BLAKE2b of "
           f"its EXR and PNG {digest * 1e3:.2f} ms: {100 * digest / total:.2f} %")
@@ -150,9 +152,14 @@ def main() -> None:
                 cache.cache_dir(args.cache), args.repeat)
         return
     frames = parse_frames(args.frames, config.animation.frames)
-    os.environ.setdefault(cache.ENV_VAR, tempfile.mkdtemp(prefix="sunshade-bench-cache-"))
-    cache_checks(config, frames, args.repeat)
-    frame_digests(config, frames, max(1, args.repeat // 2))
+    scratch = None if cache.ENV_VAR in os.environ else tempfile.mkdtemp(prefix="sunshade-bench-cache-")
+    os.environ.setdefault(cache.ENV_VAR, scratch or "")
+    try:
+        cache_checks(config, frames, args.repeat)
+        frame_digests(config, frames, max(1, args.repeat // 2))
+    finally:  # nothing of ours left behind
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -114,6 +114,7 @@ def main() -> None:
     finally:
         if baseline is not None:
             subprocess.run(["git", "worktree", "remove", "--force", str(baseline)], cwd=ROOT, capture_output=True)
+            shutil.rmtree(baseline.parent, ignore_errors=True)  # the temporary folder that held it
 
 
 if __name__ == "__main__":
