@@ -131,9 +131,9 @@ class EquirectSky:
         """``view_radiance``'s results at read-only directions (``kept.kept_at``)."""
         return {}
 
-    def _sun_samples(self, w, footprint):
+    def _sun_samples(self, w, footprint, widest):
         """Radiance (..., 3) of the cut sun at unit vectors w (..., 3) (see ``_disc_samples``). [radiance]"""
-        return _disc_samples(w, footprint, self.sun, self.sun_direction, self.sun_normal_irradiance)
+        return _disc_samples(w, footprint, widest, self.sun, self.sun_direction, self.sun_normal_irradiance)
 
     def image_irradiance(self) -> np.ndarray:
         """The image's irradiance on the open ground: its upper hemisphere, texels piecewise constant.

@@ -325,10 +325,10 @@ class ProceduralSky:
             return 0.0
         return float(self.sun_cloud_transmittance * (e @ self.moon_visible) / e.sum())
 
-    def _sun_samples(self, w, footprint):
+    def _sun_samples(self, w, footprint, widest):
         """Visible sun radiance (..., 3) [kcd/m^2] at unit vectors w (..., 3), cut by the moon and
         dimmed by the clouds' transmittance towards the sun's centre (see ``_disc_samples``)."""
-        return _disc_samples(w, footprint, self.sun, self.sun_direction, self.sun_normal_irradiance,
+        return _disc_samples(w, footprint, widest, self.sun, self.sun_direction, self.sun_normal_irradiance,
                              self.moon) * self.sun_cloud_transmittance
 
     # --- the sky ------------------------------------------------------------------------------
@@ -664,7 +664,7 @@ class ProceduralSky:
         r = self.sun.angular_radius
         spacing = min(r / 64.0, np.pi / height / 4.0)
         sky = image.copy() if parts else None
-        self._deposit(image, lambda w: self._sun_samples(w, lambda centre, rho: spacing), r, spacing)
+        self._deposit(image, lambda w: self._sun_samples(w, lambda centre, rho, near: spacing, spacing), r, spacing)
         if self._deep:  # the corona, more coarsely: it is smooth beyond the limb; not S's light,
             # so in the sky's part
             spacing = min(r / 16.0, np.pi / height / 4.0)

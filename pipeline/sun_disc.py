@@ -158,11 +158,17 @@ def _angle(w, c):
     return 2.0 * np.arcsin(np.clip(0.5 * length3(w - c), 0.0, 1.0))
 
 
-def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon: MoonDisc | None = None):
+def _disc_samples(w, footprint, widest: float, sun: SunDisc, direction, normal_irradiance,
+                  moon: MoonDisc | None = None):
     """Radiance (..., 3) of the limb-darkened sun disc at unit vectors w (..., 3), optionally cut
     by a dark moon, the disc edges (sun limb, moon limb) anti-aliased by a linear ramp over
-    ``footprint(centre, rho)`` [rad]: the sample spacing measured along the angular distance rho
-    from ``centre``.
+    ``footprint(centre, rho, near)`` [rad]: the sample spacing measured along the angular distance
+    rho from ``centre``, at the samples ``w[near]`` (``near`` a boolean mask of w's leading axes,
+    rho their angles), at most ``widest`` [rad].
+
+    The ramp is computed only within ``widest`` of a limb (``_limb_ramp``): beyond, it is exactly
+    1 or 0, as its expression gives there. A low sun's kernel holds millions of samples a frame
+    (docs/accuracy.md, "A low sun's kernel").
 
     sun : SunDisc (its radius and limb darkening); direction : (3,) unit vector of its centre. [1]
     normal_irradiance : (3,) of the whole disc. [radiance x sr]
@@ -170,11 +176,30 @@ def _disc_samples(w, footprint, sun: SunDisc, direction, normal_irradiance, moon
     """
     r = sun.angular_radius
     rho = _angle(w, direction)
-    value = sun_disc_radiance(np.minimum(rho, r), angular_radius=r, normal_irradiance=normal_irradiance,
-                              limb_darkening=sun.limb_darkening)
-    cover = np.clip(0.5 - (rho - r) / footprint(direction, rho), 0.0, 1.0)
+    cover = _limb_ramp(rho, r, -1.0, lambda near: footprint(direction, rho[near], near), widest)
     if moon is not None:
         centre = direction_vector(moon.azimuth, moon.elevation)
         rho_m = _angle(w, centre)
-        cover *= np.clip(0.5 + (rho_m - moon.angular_radius) / footprint(centre, rho_m), 0.0, 1.0)
+        cover *= _limb_ramp(rho_m, moon.angular_radius, 1.0, lambda near: footprint(centre, rho_m[near], near),
+                            widest)
+    lit = ~(cover <= 0.0)  # elsewhere the radiance times the cover is +0, whatever the radiance
+    value = np.zeros(rho.shape + (3,))
+    value[lit] = sun_disc_radiance(np.minimum(rho[lit], r), angular_radius=r, normal_irradiance=normal_irradiance,
+                                   limb_darkening=sun.limb_darkening)
     return value * cover[..., None]
+
+
+def _limb_ramp(rho, radius: float, sign: float, footprint_at, widest: float) -> np.ndarray:
+    """``clip(0.5 + sign (rho - radius) / f, 0, 1)`` at angles rho (...) [rad] from a disc's centre
+    of ``radius`` [rad] (sign -1: 1 inside the disc, the sun's cover; +1: 1 outside, the moon's),
+    f = ``footprint_at(near)`` [rad] at most ``widest`` [rad], computed where |rho - radius| <
+    widest (``near``, and where rho is NaN). Elsewhere |rho - radius| / f >= 1, so the expression
+    is clipped to exactly 1 or 0: the same values, the footprint computed only near the limb."""
+    beyond = sign * (rho - radius)  # [rad] past the limb, towards where the ramp is 1
+    ramp = (beyond > 0.0).astype(np.float64)
+    near = ~(np.abs(beyond) >= widest)  # NaN too
+    if sign < 0:
+        ramp[near] = np.clip(0.5 - (rho[near] - radius) / footprint_at(near), 0.0, 1.0)
+    else:
+        ramp[near] = np.clip(0.5 + (rho[near] - radius) / footprint_at(near), 0.0, 1.0)
+    return ramp

@@ -194,11 +194,12 @@ def _kept_kernel_samples(sky, q: float) -> tuple:
     offsets = (np.arange(n) + 0.5) / n - 0.5
     ox, oy = np.meshgrid(offsets * q, -offsets * q)
 
-    def footprint(centre, rho):
-        # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho
-        away = w * np.cos(rho)[..., None] - centre
+    def footprint(centre, rho, near):
+        # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho, at w[near]:
+        # at most h_sub (cos_t <= 1, the ratio <= 1 to rounding), so 2 h_sub is a safe ``widest``
+        away = w[near] * np.cos(rho)[..., None] - centre
         norm = np.maximum(length3(away), 1e-300)
-        return h_sub * cos_t * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
+        return h_sub * cos_t[near] * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
 
     chunks = []
     chunk = max(1, (1 << 20) // (n * n))
@@ -208,7 +209,7 @@ def _kept_kernel_samples(sky, q: float) -> tuple:
         sy = cy.ravel()[idx, None, None] + oy
         cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
         w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
-        disc = _disc_samples(w, footprint, sky.sun, sky.sun_direction, sky.sun_normal_irradiance,
+        disc = _disc_samples(w, footprint, 2.0 * h_sub, sky.sun, sky.sun_direction, sky.sun_normal_irradiance,
                              getattr(sky, "moon", None))
         cos4 = cos_t**4
         for a in (idx, disc, cos4):

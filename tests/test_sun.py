@@ -395,3 +395,36 @@ def test_sun_kernel_at_5_degrees_is_the_pinhole_ellipse():
     row = int(np.argmin(np.abs(y[:, 0] - centre_y)))
     assert coverage[:, column].sum() * q == pytest.approx(length, rel=2e-3)
     assert coverage[row].sum() * q == pytest.approx(width, rel=2e-3)
+
+
+def test_the_disc_samples_are_those_of_the_ramp_and_radiance_everywhere():
+    """sun_disc._disc_samples computes the limbs' ramp only near the limbs and the radiance only
+    where the cover is above 0: the same bits as the whole expressions at every sample (a sun cut by
+    a moon, samples inside, on and beyond both limbs, footprints up to ``widest``, a NaN)."""
+    from pipeline.sun_disc import MoonDisc, _angle, _disc_samples, direction_vector, sun_disc_radiance
+
+    rng = np.random.default_rng(12)
+    sun = SunDisc(azimuth=2.0, elevation=0.3, angular_radius=0.0047)
+    moon = MoonDisc(azimuth=2.0, elevation=0.3 + 0.004, angular_radius=0.0049)
+    direction, centre = direction_vector(sun.azimuth, sun.elevation), direction_vector(moon.azimuth, moon.elevation)
+    tangent = np.cross(direction, [0.0, 0.0, 1.0])
+    tangent /= np.linalg.norm(tangent)
+    up = np.cross(tangent, direction)
+    a, b = rng.uniform(-0.012, 0.012, (2, 40000))
+    w = direction + a[:, None] * tangent + b[:, None] * up
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    w[7] = np.nan
+    widest = 4e-4
+    spacing = rng.uniform(0.0, widest, len(w))  # each sample's footprint, at most widest
+
+    def footprint(where_from, rho, near=None):
+        return spacing if near is None else spacing[near]
+
+    got = _disc_samples(w, footprint, widest, sun, direction, np.ones(3), moon)
+    rho, rho_m = _angle(w, direction), _angle(w, centre)
+    cover = np.clip(0.5 - (rho - sun.angular_radius) / spacing, 0.0, 1.0)
+    cover *= np.clip(0.5 + (rho_m - moon.angular_radius) / spacing, 0.0, 1.0)
+    want = sun_disc_radiance(np.minimum(rho, sun.angular_radius), angular_radius=sun.angular_radius,
+                             normal_irradiance=np.ones(3), limb_darkening=sun.limb_darkening) * cover[..., None]
+    assert ((cover > 0) & (cover < 1)).sum() > 100 and (cover == 0).sum() > 100 and (cover == 1).sum() > 100
+    assert got.tobytes() == want.tobytes()
