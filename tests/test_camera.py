@@ -285,41 +285,37 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     among three (cores.in_shares)."""
     monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
     with cores.loop_threads(threads):
-        _compiled_filtering_matches_the_array_version(outside, shape, channels)
-
-
-def _compiled_filtering_matches_the_array_version(outside, shape, channels):
-    texture._TAPS.clear()
-    rng = np.random.default_rng(21)
-    raster = rng.random(shape + (channels,)).astype(np.float32)
-    grid = Grid((-1.3, 0.9), 0.05, shape)
-    x_min, y_min, x_max, y_max = grid.extent
-    if outside == "constant":
-        value = rng.random(channels)
-        value[0] = np.nan
-        mip = mipmap(raster, grid, outside="constant", value=value)
-    else:
-        mip = mipmap(raster, grid, outside="periodic", period=(x_max - x_min, 0.9 * (y_max - y_min)))
-    n = 3000
-    x = rng.uniform(x_min - 1.0, x_max + 1.0, n)
-    y = rng.uniform(y_min - 1.0, y_max + 1.0, n)
-    x[:40] = rng.uniform(-4e5, 4e5, 40)
-    scale = np.exp(rng.uniform(np.log(0.001), np.log(50.0), n))
-    jac = rng.normal(0.0, 1.0, (n, 2, 2)) * scale[:, None, None]
-    jac[40:300, :, 1] *= rng.uniform(5.0, 40.0, (260, 1))
-    jac[300:310] = 0.0
-    fp = footprints(x, y, jac)
-    for bias in (LOD_BIAS, 0.0, 1.3):
-        want = texture._filtered_arrays(mip, fp, bias)
-        for _ in range(3):  # three channels: the second and third read from the kept tap table
-            got = texture._filtered(mip, fp, bias)
-            assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
-            np.testing.assert_array_equal(got, want)
-    assert np.isnan(texture._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
-    # another frame's raster on the same grid: the kept taps read its texels
-    other = mipmap(raster[::-1] * 2.0, grid, outside=outside, value=mip.value, period=mip.period)
-    np.testing.assert_array_equal(texture._filtered(other, fp, LOD_BIAS),
-                                  texture._filtered_arrays(other, fp, LOD_BIAS))
+        texture._TAPS.clear()
+        rng = np.random.default_rng(21)
+        raster = rng.random(shape + (channels,)).astype(np.float32)
+        grid = Grid((-1.3, 0.9), 0.05, shape)
+        x_min, y_min, x_max, y_max = grid.extent
+        if outside == "constant":
+            value = rng.random(channels)
+            value[0] = np.nan
+            mip = mipmap(raster, grid, outside="constant", value=value)
+        else:
+            mip = mipmap(raster, grid, outside="periodic", period=(x_max - x_min, 0.9 * (y_max - y_min)))
+        n = 3000
+        x = rng.uniform(x_min - 1.0, x_max + 1.0, n)
+        y = rng.uniform(y_min - 1.0, y_max + 1.0, n)
+        x[:40] = rng.uniform(-4e5, 4e5, 40)
+        scale = np.exp(rng.uniform(np.log(0.001), np.log(50.0), n))
+        jac = rng.normal(0.0, 1.0, (n, 2, 2)) * scale[:, None, None]
+        jac[40:300, :, 1] *= rng.uniform(5.0, 40.0, (260, 1))
+        jac[300:310] = 0.0
+        fp = footprints(x, y, jac)
+        for bias in (LOD_BIAS, 0.0, 1.3):
+            want = texture._filtered_arrays(mip, fp, bias)
+            for _ in range(3):  # three channels: the second and third read from the kept tap table
+                got = texture._filtered(mip, fp, bias)
+                assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
+                np.testing.assert_array_equal(got, want)
+        assert np.isnan(texture._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
+        # another frame's raster on the same grid: the kept taps read its texels
+        other = mipmap(raster[::-1] * 2.0, grid, outside=outside, value=mip.value, period=mip.period)
+        np.testing.assert_array_equal(texture._filtered(other, fp, LOD_BIAS),
+                                      texture._filtered_arrays(other, fp, LOD_BIAS))
 
 
 def test_a_still_cameras_tap_table_is_kept_from_the_second_read():

@@ -506,26 +506,22 @@ def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed, thread
     thread, or shared among three (cores.in_shares)."""
     monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
     with cores.loop_threads(threads):
-        _compiled_field_is_the_map_coordinates_field(seed)
-
-
-def _compiled_field_is_the_map_coordinates_field(seed):
-    rng = np.random.default_rng(seed)
-    cl = layer(texels=64 * 2**seed, wind=tuple(rng.normal(0, 20, 2)), seed=seed)
-    n = 2000
-    s = rng.normal(0, 1, (n, 2)) * np.exp(rng.uniform(-6, np.log(30), (n, 1)))
-    per_texel = cl.altitude / cl.texel
-    edge = rng.integers(-3, 4, (n // 4, 2)) * cl.texels + rng.uniform(-1.5, 1.5, (n // 4, 2))
-    s[: n // 4] = edge / per_texel * [1, -1]  # at time 0 on a tile's edge, read across it
-    s[5] = 0.0
-    for time in (0.0, rng.uniform(0, 5 * 3600)):
-        np.testing.assert_array_equal(cl.field(s, time), reference_field(cl, s, time))
-        texel = 1.0 / per_texel  # one texel [tan]
-        round_ = texel * np.exp(rng.uniform(np.log(0.01), np.log(4 * cl.texels), n))
-        long_ = texel * np.exp(rng.uniform(np.log(0.01), np.log(4 * cl.texels), (n, 2)))
-        for footprint in (round_, long_, 3.0 * texel):
-            np.testing.assert_array_equal(cl.field(s, time, footprint),
-                                          reference_field(cl, s, time, footprint))
+        rng = np.random.default_rng(seed)
+        cl = layer(texels=64 * 2**seed, wind=tuple(rng.normal(0, 20, 2)), seed=seed)
+        n = 2000
+        s = rng.normal(0, 1, (n, 2)) * np.exp(rng.uniform(-6, np.log(30), (n, 1)))
+        per_texel = cl.altitude / cl.texel
+        edge = rng.integers(-3, 4, (n // 4, 2)) * cl.texels + rng.uniform(-1.5, 1.5, (n // 4, 2))
+        s[: n // 4] = edge / per_texel * [1, -1]  # at time 0 on a tile's edge, read across it
+        s[5] = 0.0
+        for time in (0.0, rng.uniform(0, 5 * 3600)):
+            np.testing.assert_array_equal(cl.field(s, time), reference_field(cl, s, time))
+            texel = 1.0 / per_texel  # one texel [tan]
+            round_ = texel * np.exp(rng.uniform(np.log(0.01), np.log(4 * cl.texels), n))
+            long_ = texel * np.exp(rng.uniform(np.log(0.01), np.log(4 * cl.texels), (n, 2)))
+            for footprint in (round_, long_, 3.0 * texel):
+                np.testing.assert_array_equal(cl.field(s, time, footprint),
+                                              reference_field(cl, s, time, footprint))
 
 
 def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
@@ -564,28 +560,25 @@ def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit(threads, 
     hit exactly, NaN and zero spreads; in one thread or three (cores.in_shares)."""
     monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
     with cores.loop_threads(threads):
-        _compiled_mean_coverage_is_the_array_quadrature()
+        from pipeline.cloud_noise import _knots, _lost_variance
 
+        rng = np.random.default_rng(8)
+        cl = layer(texels=64, seed=2)
+        values, levels = _knots(*cl._noise_key(), cl.cover, cl.softness)
+        s = rng.normal(0, 1, (3000, 2))
+        footprint = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (3000, 2)))
+        footprint[:50] = 0.0
+        field = cl.field(s, 17.0, footprint)
+        along, across = cl._widths((3000,), footprint)
+        spread = np.sqrt(_lost_variance(cl._noise_key(), along, across))
+        nodes, weights = np.polynomial.hermite_e.hermegauss(8)
+        want = np.zeros(3000)
+        for z, w in zip(nodes, weights / weights.sum()):
+            want += w * np.interp(field + z * spread, values, levels)
+        np.testing.assert_array_equal(cl.coverage(s, 17.0, footprint), want)
+        out = np.empty(4)
+        _array_loops.hermite_mean(np.array([values[3], np.nan, -50.0, 50.0]), np.zeros(4), nodes,
+                                  weights / weights.sum(), values, levels, out)
+        np.testing.assert_array_equal(out[[0, 2, 3]], [levels[3], levels[0], levels[-1]])
+        assert np.isnan(out[1])
 
-def _compiled_mean_coverage_is_the_array_quadrature():
-    from pipeline.cloud_noise import _knots, _lost_variance
-
-    rng = np.random.default_rng(8)
-    cl = layer(texels=64, seed=2)
-    values, levels = _knots(*cl._noise_key(), cl.cover, cl.softness)
-    s = rng.normal(0, 1, (3000, 2))
-    footprint = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (3000, 2)))
-    footprint[:50] = 0.0
-    field = cl.field(s, 17.0, footprint)
-    along, across = cl._widths((3000,), footprint)
-    spread = np.sqrt(_lost_variance(cl._noise_key(), along, across))
-    nodes, weights = np.polynomial.hermite_e.hermegauss(8)
-    want = np.zeros(3000)
-    for z, w in zip(nodes, weights / weights.sum()):
-        want += w * np.interp(field + z * spread, values, levels)
-    np.testing.assert_array_equal(cl.coverage(s, 17.0, footprint), want)
-    out = np.empty(4)
-    _array_loops.hermite_mean(np.array([values[3], np.nan, -50.0, 50.0]), np.zeros(4), nodes,
-                              weights / weights.sum(), values, levels, out)
-    np.testing.assert_array_equal(out[[0, 2, 3]], [levels[3], levels[0], levels[-1]])
-    assert np.isnan(out[1])
