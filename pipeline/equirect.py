@@ -22,7 +22,7 @@ from .constants import SUN_ANGULAR_RADIUS
 from .geometry import Grid, direction_vector, sky_grid, sky_offset
 from .kept import kept_at
 from .sky_raster import SkyRaster, kept_raster, _bilinear_shares, _flush, _grid_footprint
-from .sun_disc import LIMB_DARKENING, SunDisc, _angle, _disc_samples
+from .sun_disc import LIMB_DARKENING, SunDisc, _angle
 
 __all__ = ["EquirectSky", "cut_sun"]
 
@@ -130,10 +130,6 @@ class EquirectSky:
     def _views(self) -> dict:
         """``view_radiance``'s results at read-only directions (``kept.kept_at``)."""
         return {}
-
-    def _sun_samples(self, w, footprint, widest):
-        """Radiance (..., 3) of the cut sun at unit vectors w (..., 3) (see ``_disc_samples``). [radiance]"""
-        return _disc_samples(w, footprint, widest, self.sun, self.sun_direction, self.sun_normal_irradiance)
 
     def image_irradiance(self) -> np.ndarray:
         """The image's irradiance on the open ground: its upper hemisphere, texels piecewise constant.
