@@ -159,12 +159,21 @@ class CloudLayer:
         numpy.ndarray
             (...) float64 noise [1].
         """
-        shape, coords, taps = self._taps(s, time, footprint)
         flat, offsets, sides = _packed(*self._noise_key())
+        copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
+        s = np.asarray(s, dtype=np.float64)
+        if footprint is None and _on_grid(s):  # a raster's: each row's and column's weights once
+            from ._tiling import cloud_grid  # numba, imported on first use
+
+            rows, cols = self._lattice(s[:, 0], time)[0], self._lattice(s[0], time)[1]
+            out = np.empty(s.shape[:2])
+            in_shares(out.size, lambda a, b: cloud_grid(flat, offsets, sides, rows, cols, a, b, out.reshape(-1),
+                                                        *copies))
+            return out
+        shape, coords, taps = self._taps(s, time, footprint)
         out = np.empty(coords.shape[1])
         from ._tiling import cloud_field  # numba, imported on first use
 
-        copies = (TILE_BLEND, self.seed, *self._drifted_copies(time))
         rows, cols = coords[0], coords[1]  # contiguous, as each sample's taps: a share is their slices
         if taps is None:
             unused, none = np.empty(0), np.empty(0, dtype=np.intp)
@@ -192,24 +201,29 @@ class CloudLayer:
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
         s = original = np.asarray(s, dtype=np.float64)
-        n = self.texels
-        per_texel = self.altitude / self.texel
-        # Drift reduced modulo the tile first, so that late frames keep full precision.
-        drift_row, drift_col = self._drift(time)
-        shift_col, shift_row = np.mod(drift_col, n), np.mod(drift_row, n)
         shape = s.shape[:-1]
         s = s.reshape(-1, 2)  # at least one axis
-        coords = np.empty((2, s.shape[0]))
-        np.multiply(s[:, 1], -per_texel, out=coords[0])
-        coords[0] -= shift_row
-        np.multiply(s[:, 0], per_texel, out=coords[1])
-        coords[1] -= shift_col
+        coords = self._lattice(s, time)
         if footprint is None:
             return shape, coords, None
         if isinstance(footprint, np.ndarray) and not (original.flags.writeable or footprint.flags.writeable):
             return shape, coords, kept_at(_kept_taps, self, (original, footprint),  # to numba: left writable
                                           lambda: self._footprint_taps(s, shape, footprint), read_only=False)
         return shape, coords, self._footprint_taps(s, shape, footprint)
+
+    def _lattice(self, s, time) -> np.ndarray:
+        """The lattice coordinates (row, col) (2, m) [texel of level 0] of sky-plane points s (m, 2)
+        [tan] at ``time`` [s] (``_taps``)."""
+        per_texel = self.altitude / self.texel
+        # Drift reduced modulo the tile first, so that late frames keep full precision.
+        drift_row, drift_col = self._drift(time)
+        shift_col, shift_row = np.mod(drift_col, self.texels), np.mod(drift_row, self.texels)
+        coords = np.empty((2, s.shape[0]))
+        np.multiply(s[:, 1], -per_texel, out=coords[0])
+        coords[0] -= shift_row
+        np.multiply(s[:, 0], per_texel, out=coords[1])
+        coords[1] -= shift_col
+        return coords
 
     def _footprint_taps(self, s, shape, footprint) -> tuple:
         """``_taps``'s taps at sky-plane points s (m, 2) [tan] of a footprint [tan] (``field``), which
@@ -451,6 +465,13 @@ class CloudLayer:
                                  sky_irradiance=sky_irradiance,
                                  multiple_scattering=multiple_scattering, tau=tau)
         return transmittance, radiance
+
+
+def _on_grid(s: np.ndarray) -> bool:
+    """Whether sky-plane points s (..., 2) [tan] are a grid: (rows, cols, 2), x the same down each
+    column and y the same along each row (a raster's points, ``CloudLayer.field``)."""
+    return (s.ndim == 3 and s.shape[0] > 1 and s.shape[1] > 1 and bool((s[:, :, 0] == s[:1, :, 0]).all())
+            and bool((s[:, :, 1] == s[:, :1, 1]).all()))
 
 
 @lru_cache(maxsize=16)

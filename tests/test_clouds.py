@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import _array_loops, cloud_noise, clouds, cores
+from pipeline import _array_loops, _tiling, cloud_noise, clouds, cores
 from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
 from pipeline.cloud_noise import _knots, fractal_noise
 from pipeline.cloud_transfer import (delta_eddington_transmittance, single_scattering_flux_transmittance,
@@ -522,6 +522,27 @@ def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed, thread
             for footprint in (round_, long_, 3.0 * texel):
                 np.testing.assert_array_equal(cl.field(s, time, footprint),
                                               reference_field(cl, s, time, footprint))
+
+
+@pytest.mark.parametrize("seed, threads", [(0, 1), (1, 3)])
+def test_a_grids_field_is_the_map_coordinates_field_to_the_bit(seed, threads, monkeypatch):
+    """A raster's points (x down each column, y along each row; ``_tiling.cloud_grid``) over
+    several copies of the tile and their blend bands, with a row and a column at a tile's edge
+    and one at x = 0: the bits of the reference at the same points, in one thread or three."""
+    monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
+    rng = np.random.default_rng(seed)
+    cl = layer(texels=64, wind=tuple(rng.normal(0, 20, 2)), seed=seed)
+    per_texel = cl.altitude / cl.texel
+    x = np.sort(rng.uniform(-4.0, 4.0, 90)) * cl.texels / per_texel  # four tiles across
+    y = np.sort(rng.uniform(-4.0, 4.0, 70))[::-1] * cl.texels / per_texel
+    x[10], y[7], x[50] = 1.5 * cl.texels / per_texel, -2.5 * cl.texels / per_texel, 0.0
+    s = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1)
+    monkeypatch.setattr(_tiling, "cloud_field", None)  # the grid's own loop, not the samples'
+    with cores.loop_threads(threads):
+        for time in (0.0, rng.uniform(0, 5 * 3600)):
+            field = cl.field(s, time)
+            assert field.shape == (70, 90)
+            assert field.tobytes() == reference_field(cl, s.reshape(-1, 2), time).reshape(70, 90).tobytes()
 
 
 def test_the_compiled_scattering_weights_are_np_interp_to_the_bit():
