@@ -23,6 +23,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import texture
+from .kept import kept_at
 
 __all__ = ["MIN_DOWNWARD", "MIN_UPWARD", "Camera", "background", "equirect_lookup", "ground_distance",
            "ground_fraction_rows", "ground_hits", "ground_irradiance", "ground_view", "horizon_sky", "image_rays",
@@ -444,15 +445,23 @@ def _albedo_in_view(camera: Camera, albedo) -> np.ndarray:
 
 
 def _filtered_chain(maps, fp: texture.Footprints) -> np.ndarray:
-    """(channels, n) samples of the first of ``maps`` whose footprint stays finite."""
+    """(channels, n) samples of the first of ``maps`` whose footprint stays finite; the footprints
+    read from a later map are a still camera's same arrays each frame, so that their taps are kept
+    (docs/accuracy.md, "The far ground's taps")."""
     values = texture._filtered(maps[0], fp, texture.LOD_BIAS)
     for mip in maps[1:]:
         missing = np.flatnonzero(~np.isfinite(values).all(axis=0))
         if not len(missing):
             break
-        subset = texture.Footprints(*(getattr(fp, f.name)[missing] for f in fields(texture.Footprints)))
+        arrays = tuple(getattr(fp, f.name) for f in fields(texture.Footprints))
+        subset = kept_at(_SUBSETS, missing.tobytes(), arrays, lambda: texture.Footprints(*(a[missing] for a in arrays)),
+                         read_only=False)  # to numba's loops, as they are
         values[:, missing] = texture._filtered(mip, subset, texture.LOD_BIAS)
     return values
+
+
+_SUBSETS: dict = {}  # _filtered_chain's footprints beyond a map: a still camera's are the same each frame,
+# kept as the same arrays so that texture._filtered keeps their taps too
 
 
 def _row_footprints(camera: Camera, rows, part):

@@ -333,6 +333,31 @@ def test_a_still_cameras_tap_table_is_kept_from_the_second_read():
     assert start[0] == 0 and start[-1] == len(first) == len(fc) == len(fr) >= 50
 
 
+def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
+    """camera._filtered_chain reads the footprints whose read of the fine map is not finite from the
+    coarse one: a still camera's are the same each frame, kept as the same arrays (camera._SUBSETS)
+    so that texture._filtered keeps their taps as well; every frame's read has the array version's bits."""
+    rng = np.random.default_rng(8)
+    fine = mipmap(rng.random((24, 30, 3)).astype(np.float32), Grid((-0.6, -0.4), 0.04, (24, 30)),
+                  outside="constant", value=np.full(3, np.nan))
+    coarse = mipmap(rng.random((30, 30, 3)).astype(np.float32), Grid((-1.5, -1.5), 0.1, (30, 30)),
+                    outside="constant", value=np.zeros(3))
+    n = 2000
+    fp = footprints(rng.uniform(-1.4, 1.4, n), rng.uniform(-1.4, 1.4, n),
+                    rng.normal(0.0, 1.0, (n, 2, 2)) * np.exp(rng.uniform(np.log(0.005), np.log(0.5), n))[:, None, None])
+    want = texture._filtered_arrays(fine, fp, LOD_BIAS)
+    missing = np.flatnonzero(~np.isfinite(want).all(axis=0))
+    subset = texture.Footprints(*(a[missing] for a in (fp.x, fp.y, fp.major, fp.minor, fp.ex, fp.ey)))
+    want[:, missing] = texture._filtered_arrays(coarse, subset, LOD_BIAS)
+    assert 200 < len(missing) < n - 200
+    camera._SUBSETS.clear()
+    texture._TAPS.clear()
+    for _ in range(4):  # the subset kept from the second frame, its taps from the fourth
+        np.testing.assert_array_equal(camera._filtered_chain((fine, coarse), fp), want)
+    tables = [entry[1] for entry in texture._TAPS.values()]
+    assert len(tables) == 2 and all(table is not None for table in tables)  # the fine read's and the subset's
+
+
 @pytest.mark.parametrize("view", [
     Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=np.radians(60.0), width=160, height=90),
     Camera((1.0, 2.0, 30.0), 0.3, -np.pi / 2, 1.0, 60, 40),  # straight down
