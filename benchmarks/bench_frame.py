@@ -10,7 +10,11 @@ meters them before its frames; no writing; median of the first
 ``--frames`` frames after one unmeasured) over its bare FFT work (the median of its measures, one
 just after each frame: on a shared machine a single measure moved by half), one Markdown row each (the
 table of docs/accuracy.md, "Each config's frame over its FFT work"), after the bare 2048^2
-rfft2 + irfft2 round trip of the same moment and the load average.
+rfft2 + irfft2 round trip of the same moment and the load average. Two measures of the FFT work:
+the round trips at each layer's fine and coarse FFT shapes (below), and the frame's own FFT calls,
+recorded as it makes them and made again bare (the same functions, shapes and threads on random
+values: with a sun window a layer's coarse grid is correlated twice, the sky and the sun beyond the
+window; an eclipse's sky adds its own).
 
 Default grove (bench_cycle.CONFIG) with drifting clouds, the camera placed by default, 1280 x
 720; or the first frames of ``--config`` as it stands (its cycle products in ``--cache``).
@@ -73,6 +77,46 @@ def bare_fft_seconds(plan, threads: int) -> float:
     return sum(round_trip_seconds(shape, threads) for shape in shapes if shape is not None)
 
 
+FFT_CALLS = ("rfft2", "irfft2", "rfftn", "irfftn", "rfft", "irfft", "fft", "ifft", "fft2", "ifft2")
+"""The scipy.fft functions whose calls ``frame_fft_calls`` records."""
+
+
+def frame_fft_calls(render) -> list:
+    """The FFTs ``render()`` calls: (scipy.fft function name, its array's shape and dtype, its other
+    arguments), in order, recorded by wrapping the functions of scipy.fft for the call."""
+    calls, originals = [], {name: getattr(sfft, name) for name in FFT_CALLS}
+
+    def recorder(name):
+        def record(x, *args, **kwargs):
+            calls.append((name, np.shape(x), np.asarray(x).dtype, args, kwargs))
+            return originals[name](x, *args, **kwargs)
+        return record
+
+    try:
+        for name in FFT_CALLS:
+            setattr(sfft, name, recorder(name))
+        render()
+    finally:
+        for name, function in originals.items():
+            setattr(sfft, name, function)
+    return calls
+
+
+def fft_calls_seconds(calls, repeats=3) -> float:
+    """The bare work of recorded FFT calls (``frame_fft_calls``): each made again as it was (the same
+    function, shape, dtype and arguments, threads included) on random values, best of ``repeats``,
+    summed. [s]"""
+    rng = np.random.default_rng(0)
+    total = 0.0
+    for name, shape, dtype, args, kwargs in calls:
+        x = rng.random(shape).astype(dtype)
+        if np.iscomplexobj(x):
+            x += 1j * rng.random(shape).astype(x.real.dtype)
+        function = getattr(sfft, name)
+        total += min(timed(lambda: function(x, *args, **kwargs)) for _ in range(repeats))
+    return total
+
+
 def timed(f) -> float:
     """Seconds ``f()`` takes. [s]"""
     started = time.perf_counter()
@@ -87,8 +131,9 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
                for _ in range(5))
     print(f"load average {os.getloadavg()[0]:.1f}; bare rfft2 + irfft2 of one float32 2048^2 plane "
           f"({threads} workers, best of 5): {trip * 1e3:.1f} ms", flush=True)
-    print("| config | camera | frame, median [ms] | bare FFT work [ms] | frame / bare FFT | load |")
-    print("|---|---|---|---|---|---|")
+    print("| config | camera | frame, median [ms] | bare FFT work [ms] | frame / bare FFT | its FFT calls [ms] "
+          "| frame / its FFT calls | load |")
+    print("|---|---|---|---|---|---|---|---|")
     for path in paths:
         config = load(path)
         plan = plan_run(config)
@@ -97,13 +142,16 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
                     cycle_frames={f % config.canopy.cycle for f in range(frames + 1)})
         plan = with_exposures(plan, range(frames + 1))  # a run meters its frames once, before them
         render_frame(plan, 0, store=store, workers=threads)  # loads, compiles: not measured
-        each, bares = [], []
+        each, bares, own = [], [], []
         for i in range(frames):  # each frame's bare FFT work timed just after it, under the same load
-            each.append(timed(lambda i=i: render_frame(plan, i + 1, store=store, workers=threads)))
+            calls = frame_fft_calls(lambda i=i: each.append(
+                timed(lambda: render_frame(plan, i + 1, store=store, workers=threads))))
             bares.append(bare_fft_seconds(plan, threads))
-        whole, best, bare = float(np.median(each)), min(each), float(np.median(bares))
+            own.append(fft_calls_seconds(calls))
+        whole, best, bare, mine = float(np.median(each)), min(each), float(np.median(bares)), float(np.median(own))
         print(f"| {Path(path).stem} | {plan.camera.width} x {plan.camera.height} | {whole * 1e3:.0f} "
               f"(best {best * 1e3:.0f}) | {bare * 1e3:.0f} | {whole / bare:.1f} (best {best / bare:.1f}) | "
+              f"{mine * 1e3:.0f} ({len(calls)} calls) | {whole / mine:.1f} (best {best / mine:.1f}) | "
               f"{os.getloadavg()[0]:.1f} |", flush=True)
 
 

@@ -142,7 +142,9 @@ class CloudLayer:
         Parameters
         ----------
         s : numpy.ndarray
-            (..., 2) sky-plane points of the directions [tan].
+            (..., 2) sky-plane points of the directions [tan]. A raster's grid, (rows, cols, 2) with x
+            the same down each column and y along each row, is read without a footprint row by row
+            (``_tiling.cloud_grid``), to the same bits.
         time : float
             [s].
         footprint : None, float or numpy.ndarray, optional
