@@ -312,3 +312,22 @@ def test_coarser_isolated_is_the_block_mean_mask_and_the_correlation_at_its_cell
     assert r.min() >= 0 and c.min() >= 0 and r.max() <= window.shape[0] - 1 and c.max() <= window.shape[1] - 1
     assert r.max() > window.shape[0] - 1 - factor and c.max() > window.shape[1] - 1 - factor
     assert np.max(np.abs(coarse / shadow.resample_bilinear(fine, window, grid) - 1)) < 1e-3
+
+
+@pytest.mark.parametrize("fft_shape, start, count, workers", [
+    ((540, 625), -174, 175, 1), ((864, 864), -439, 440, 2), ((75, 96), 30, 60, 1), ((81, 50), -7, 81, 2),
+    ((64, 90), 5, 150, 1),  # more rows than the period: wrapped round
+])
+def test_a_correlations_kept_rows_are_irfft2s_rows_to_the_bit(fft_shape, start, count, workers):
+    """shadow._correlate with ``rows``: its complex pass down the columns, then the real pass along
+    the rows kept and one float32 scale, gives the bits of the whole inverse (scipy's irfft2) at
+    those rows, for odd and even sizes, a window wrapped round the period, in one thread or two."""
+    rng = np.random.default_rng(sum(fft_shape))
+    sky = rng.random((3, fft_shape[0] - 3, fft_shape[1] - 5), dtype=np.float32)
+    mask = rng.random(fft_shape, dtype=np.float32)
+    spectrum = np.fft.rfft2(mask).astype(np.complex64)
+    whole = shadow._correlate(sky, spectrum, fft_shape, workers)
+    assert whole.shape == (3, *fft_shape) and whole.dtype == np.float32
+    want = whole[:, (start + np.arange(count)) % fft_shape[0]]
+    got = shadow._correlate(sky, spectrum, fft_shape, workers, rows=(start, count))
+    assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
