@@ -498,9 +498,7 @@ def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
             f"the sun kernel at offsets {start} size {shape} lies outside the planned "
             f"offsets {plan.offset_lo}..{plan.offset_hi}"
         )
-    e = np.zeros(kernel.weighted.shape[:-2] + plan.fft_shape, dtype=np.float32)
-    e[..., u0[0]:u0[0] + shape[0], u0[1]:u0[1] + shape[1]] = kernel.weighted
-    lit = _correlate(e, spectrum, plan.fft_shape, workers, rows=(0, plan.window_shape[0]))
+    lit = _correlate(kernel.weighted, spectrum, plan.fft_shape, workers, rows=(0, plan.window_shape[0]), at=u0)
     return np.ascontiguousarray(lit[..., :, : plan.window_shape[1]])
 
 
@@ -608,16 +606,26 @@ def combine_layers(grounds, unshadowed):
     return out
 
 
-def _correlate(sky, spectrum, fft_shape, workers, rows=None):
+def _correlate(sky, spectrum, fft_shape, workers, rows=None, at=None):
     """Circular correlation of sky (channels, rows, cols) with a mask given by its spectrum: the
     whole (channels, *fft_shape), or with ``rows`` = (start, count) only its rows (start + u) mod
-    fft_shape[0], u < count (channels, count, fft_shape[1]).
+    fft_shape[0], u < count (channels, count, fft_shape[1]). With ``at`` = (row, col), sky is a block
+    at that place in a raster of zeros of ``fft_shape`` (the fine sun kernel).
 
-    Fewer rows are made as ``irfft2`` makes them, to the bit: its complex pass down the columns
-    (unscaled), then its real pass along the rows kept, then its one scale 1 / (rows x cols) in
-    float32 (pocketfft's ``c2r`` over two axes; a grove frame's 1500 x 1440 inverse 43 to 28 ms for
-    the 800 rows its window keeps, docs/accuracy.md, "The rows a window keeps")."""
-    sky_spectrum = sfft.rfft2(sky, s=fft_shape, axes=(-2, -1), workers=workers)
+    Both are made as ``rfft2`` and ``irfft2`` make them, to the bit (pocketfft's ``r2c`` and ``c2r``
+    over two axes, docs/accuracy.md, "The rows a window keeps"): forward, a real pass along the rows
+    (a row of zeros gives zeros: only the block's rows are transformed), then a complex pass down the
+    columns; back, the complex pass down the columns unscaled, the real pass along the rows kept,
+    and one scale 1 / (rows x cols) in float32 (a grove frame's 1500 x 1440 inverse 43 to 28 ms for
+    the 800 rows its window keeps)."""
+    if at is None:
+        sky_spectrum = sfft.rfft2(sky, s=fft_shape, axes=(-2, -1), workers=workers)
+    else:
+        placed = np.zeros(sky.shape[:-1] + (fft_shape[1],), dtype=np.float32)
+        placed[..., at[1]:at[1] + sky.shape[-1]] = sky
+        sky_spectrum = np.zeros(sky.shape[:-2] + (fft_shape[0], fft_shape[1] // 2 + 1), dtype=np.complex64)
+        sky_spectrum[..., at[0]:at[0] + sky.shape[-2], :] = sfft.rfft(placed, axis=-1, workers=workers)
+        sky_spectrum = sfft.fft(sky_spectrum, axis=-2, workers=workers, overwrite_x=True)
     np.conjugate(sky_spectrum, out=sky_spectrum)
     sky_spectrum *= spectrum
     if rows is None or rows[1] >= fft_shape[0]:

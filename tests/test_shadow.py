@@ -331,3 +331,20 @@ def test_a_correlations_kept_rows_are_irfft2s_rows_to_the_bit(fft_shape, start, 
     want = whole[:, (start + np.arange(count)) % fft_shape[0]]
     got = shadow._correlate(sky, spectrum, fft_shape, workers, rows=(start, count))
     assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("fft_shape, at, block, workers", [
+    ((750, 1296), (300, 500), (14, 20), 1), ((81, 50), (0, 0), (81, 50), 2), ((64, 90), (40, 71), (24, 19), 1),
+])
+def test_a_block_placed_in_zeros_correlates_as_the_whole_raster_to_the_bit(fft_shape, at, block, workers):
+    """shadow._correlate with ``at`` (the fine sun kernel: only its rows transformed along the rows)
+    gives the bits of the raster of zeros with the block in place, whole or at kept rows."""
+    rng = np.random.default_rng(block[0])
+    kernel = rng.random((3, *block), dtype=np.float32)
+    raster = np.zeros((3, *fft_shape), dtype=np.float32)
+    raster[:, at[0]:at[0] + block[0], at[1]:at[1] + block[1]] = kernel
+    spectrum = np.fft.rfft2(rng.random(fft_shape)).astype(np.complex64)
+    for rows in (None, (0, fft_shape[0] // 2)):
+        want = shadow._correlate(raster, spectrum, fft_shape, workers, rows=rows)
+        got = shadow._correlate(kernel, spectrum, fft_shape, workers, rows=rows, at=at)
+        assert got.tobytes() == want.tobytes()
