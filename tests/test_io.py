@@ -63,7 +63,7 @@ def test_bad_video_format_or_no_frames_writes_nothing(tmp_path):
 
 
 def test_png_holds_the_dithered_codes_and_is_deterministic(tmp_path):
-    """write_png (cached dither, in-place arithmetic, zlib level 2 on "sub"-filtered rows)
+    """write_png (cached dither, in-place arithmetic, Huffman codes of "sub"-filtered rows)
     decodes to exactly the codes of the dither written out in full as it was first made:
     floor(clip(p, 0, 1) 255 + 0.5 + (u0 - u1) / 2), u0 and u1 uniform of seeds 0 and 1."""
     rng = np.random.default_rng(4)
