@@ -495,8 +495,9 @@ def compile_loops(plan: RunPlan) -> None:
 @functools.lru_cache(maxsize=1)
 def _stand_in_albedo():
     """A tiny albedo laid by stochastic tiling, of the types the ground's own has (``compile_loops``
-    compiles the same loops with it): making the built-in grass and its tiling took 1.3 s of the
-    command's CPU while its workers made the cycle products."""
+    compiles the same loops with it): making the built-in grass and its tiling took about 1 s of
+    the command's CPU while its workers made the cycle products (docs/accuracy.md, "The warm-up's
+    albedo")."""
     from .albedo import stochastic_tiling
     from .geometry import Grid
 
