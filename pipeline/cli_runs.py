@@ -288,14 +288,16 @@ class _Progress:
 
     def __init__(self, stream):
         self.stream, self.tty = stream, stream.isatty()
-        self.stage = None
+        self.stage = self.ended = None
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         now = time.monotonic()
         if stage != self.stage:
             self.stage, self.first, self.logged, self.mark = stage, done, None, None
-        if not total or (done == self.first and done == total):
-            return
+        if not total or (done == self.first and done == total) or (done == total and self.ended == stage):
+            return  # nothing to do, or the stage's end already said
+        if done == total:
+            self.ended = stage
         if self.mark is None and done > self.first:  # the stage's first item done: the rate counts
             self.mark = (now, done)  # from here, without the workers' start and the loops' compiling
         rate = 0.0

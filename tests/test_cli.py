@@ -471,3 +471,13 @@ def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
         progress("cycle", done, 10)
     lines = stream.getvalue().split("\r")
     assert "left" not in lines[2] and lines[3].rstrip("\x1b[K").endswith("2/10, 0:08 left"), lines
+
+
+@pytest.mark.parametrize("tty", [True, False])
+def test_a_stages_end_is_said_once(tty):
+    """The video's encoder says 240/240 while it finishes the file and again once it has: one line."""
+    stream = _Stream(tty)
+    progress = _Progress(stream)
+    for done in (0, 120, 240, 240):
+        progress("video", done, 240)
+    assert stream.getvalue().count("240/240") == 1, stream.getvalue()
