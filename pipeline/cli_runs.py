@@ -50,7 +50,7 @@ def run_check(args) -> int:
           f"{width} x {height} px, a cycle of {config.canopy.cycle}, "
           f"{len(plan.layers)} canopy layer{'s' if len(plan.layers) > 1 else ''}; "
           f"config hash {config.digest()}")
-    for line in _framing_lines(plan):
+    for line in _framing_lines(plan, config):
         print(line)
     for line in _eclipse_lines(config):
         print(line)
@@ -129,20 +129,26 @@ def _light_lines(plan) -> list[str]:
     return lines
 
 
-def _framing_lines(plan) -> list[str]:
-    """The resolved windows and camera, each marked (placed) where the plan placed it."""
+def _framing_lines(plan, config) -> list[str]:
+    """The resolved windows and camera, each marked (placed) where the plan placed it, and a window
+    that the config gave and the plan laid on whole pixels with the config's numbers beside it."""
     import numpy as np
 
-    def mark(key):
-        return " (placed)" if key in plan.auto else ""
+    def box(values):
+        return "[" + ", ".join(f"{v:.2f}" for v in values) + "]"
 
-    def box(grid):
-        return "[" + ", ".join(f"{v:.2f}" for v in grid.extent) + "]"
+    def mark(key, grid=None, given=None):
+        if key in plan.auto:
+            return " (placed)"
+        if given is not None and box(given) != box(grid.extent):  # a difference the line shows
+            return f" (the config's {box(given)} on whole pixels)"
+        return ""
 
-    lines = [f"  ground.window: {box(plan.window)} m at {plan.window.pixel:g} m{mark('ground.window')}"]
+    lines = [f"  ground.window: {box(plan.window.extent)} m at {plan.window.pixel:g} m"
+             f"{mark('ground.window', plan.window, config.ground.window)}"]
     if plan.sun_window is not None:
-        lines.append(f"  ground.sun_window: {box(plan.sun_window)} m at {plan.sun_window.pixel:.4g} m"
-                     f"{mark('ground.sun_window')}")
+        lines.append(f"  ground.sun_window: {box(plan.sun_window.extent)} m at {plan.sun_window.pixel:.4g} m"
+                     f"{mark('ground.sun_window', plan.sun_window, config.ground.sun_window)}")
     view = plan.camera
     walk = ""
     if plan.follow is not None:  # camera.follow: the camera above is the middle shading frame's

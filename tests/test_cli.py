@@ -481,3 +481,15 @@ def test_a_stages_end_is_said_once(tty):
     for done in (0, 120, 240, 240):
         progress("video", done, 240)
     assert stream.getvalue().count("240/240") == 1, stream.getvalue()
+
+
+def test_check_shows_a_window_laid_on_whole_pixels_beside_the_configs(tmp_path, capsys):
+    """A window that is no whole number of pixels is laid on whole ones: ``check`` prints the
+    window used and, beside it, the config's; a window of whole pixels is printed alone."""
+    config = write_config(tmp_path, {**TINY, "ground": {**TINY["ground"], "window": [-4, -4, 4, 4.03]}})
+    assert main(["check", str(config)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "ground.window:" in x)
+    assert line.endswith("(the config's [-4.00, -4.00, 4.00, 4.03] on whole pixels)"), line
+    assert main(["check", str(write_config(tmp_path, TINY, "whole.yaml"))]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "ground.window:" in x)
+    assert line.endswith("[-4.00, -4.00, 4.00, 4.00] m at 0.05 m"), line
