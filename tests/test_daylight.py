@@ -83,6 +83,7 @@ def test_clear_daylight_is_ineichen_in_illuminance():
     ((32.78, -96.80), datetime(2024, 4, 8, 18, 30, tzinfo=timezone.utc)),  # Dallas, April
     ((40.42, -3.70), datetime(2026, 8, 12, 18, 0, tzinfo=timezone.utc)),   # Madrid, August
 ])
+@pytest.mark.filterwarnings("ignore:DatetimeIndex.dayofyear")  # pandas 3 on pvlib's own call (the reference)
 def test_linke_turbidity_is_the_climatology(site, when):
     want = clearsky.lookup_linke_turbidity(pd.DatetimeIndex([when]), *site).iloc[0]
     got = linke_turbidity(when, np.radians(site[0]), np.radians(site[1]))
@@ -90,6 +91,7 @@ def test_linke_turbidity_is_the_climatology(site, when):
     assert 1.5 < got < 7.0
 
 
+@pytest.mark.filterwarnings("ignore:DatetimeIndex.dayofyear")  # pandas 3 on pvlib's own call (the reference)
 def test_turbidity_auto_reads_the_climatology_of_the_site_and_month(tmp_path):
     write_inputs(tmp_path)
     config = base_config()
