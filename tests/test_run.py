@@ -34,7 +34,9 @@ TINY = {
     "sky": {"sun": {"elevation": 60.0, "azimuth": 180.0},
             "moon": {"offset_start": [0.4, 0.1], "offset_end": [0.2, 0.05]},
             "clouds": {"cover": 0.4, "scale": 300.0}},
-    "ground": {"window": [-4, -4, 4, 4], "pixel": 0.05, "sun_window": [-1, -1, 1, 1]},
+    # a 512^2 image albedo: the built-in grass (texture and tiling) costs each process of a run about 1 s
+    "ground": {"window": [-4, -4, 4, 4], "pixel": 0.05, "sun_window": [-1, -1, 1, 1],
+               "albedo": str(ROOT / "configs" / "assets" / "sand.png"), "albedo_size": 2.0},
     "camera": {"resolution": [96, 64]},
     "render": {"sun_cells": 8},
     "animation": {"frames": 8, "fps": 12},
