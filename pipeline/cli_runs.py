@@ -286,11 +286,15 @@ def _preview_line(full, quick) -> str:
 
 class _Progress:
     """A run's progress on a stream: on a terminal one line redrawn in place (stage, a bar,
-    count, time left), else a plain log line every 10 s and at the end of each stage. The time
+    count, time left), else a plain log line at the start and end of each stage, every
+    LOG_EVERY seconds, and where a quarter of the stage is passed (at most one a QUARTER_GAP
+    seconds: a 10 s preview says 0, 30, 60, 90 and 120 of 120, not 0 and 120). The time
     left is estimated from the rate since the stage's first item was done, once a second one
     is (the first carries the workers' start and, after an install, the loops' compiling)."""
 
     LABELS = {"cycle": "cycle products", "frames": "frames", "video": "video"}
+    LOG_EVERY = 10.0  # [s]
+    QUARTER_GAP = 2.0  # [s]
 
     def __init__(self, stream):
         self.stream, self.tty = stream, stream.isatty()
@@ -317,8 +321,9 @@ class _Progress:
             self.stream.write(f"\r{label:<15} [{'#' * filled}{'.' * (24 - filled)}] "
                               f"{done}/{total}{left}\033[K{end}")
             self.stream.flush()
-        elif done == total or self.logged is None or now - self.logged >= 10.0:
-            self.logged = now
+        elif (done == total or self.logged is None or now - self.logged[0] >= self.LOG_EVERY
+              or (4 * done // total > 4 * self.logged[1] // total and now - self.logged[0] >= self.QUARTER_GAP)):
+            self.logged = (now, done)
             self.stream.write(f"sunshade: {label} {done}/{total}{left}\n")
             self.stream.flush()
 

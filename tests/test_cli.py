@@ -1,4 +1,5 @@
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -471,6 +472,29 @@ def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
         progress("cycle", done, 10)
     lines = stream.getvalue().split("\r")
     assert "left" not in lines[2] and lines[3].rstrip("\x1b[K").endswith("2/10, 0:08 left"), lines
+
+
+def test_log_lines_mark_each_quarter_of_a_short_stage(monkeypatch):
+    """Off a terminal a 10 s preview of 120 frames (one every 1/12 s) says each quarter, not only
+    its start and end; a quarter passed within QUARTER_GAP of the last line waits for the next."""
+    import pipeline.cli_runs as cli_runs
+
+    now = [0.0]
+    monkeypatch.setattr(cli_runs.time, "monotonic", lambda: now[0])
+    stream = _Stream(False)
+    progress = _Progress(stream)
+    for done in range(121):
+        now[0] = done / 12.0
+        progress("frames", done, 120)
+    counts = re.findall(r"(\d+/\d+)", stream.getvalue())
+    assert counts == ["0/120", "30/120", "60/120", "90/120", "120/120"], counts
+    stream = _Stream(False)
+    progress = _Progress(stream)
+    for done in range(9):  # a quarter every second: lines 2 s apart at least
+        now[0] = float(done)
+        progress("cycle", done, 8)
+    counts = re.findall(r"(\d+/\d+)", stream.getvalue())
+    assert counts == ["0/8", "2/8", "4/8", "6/8", "8/8"], counts
 
 
 @pytest.mark.parametrize("tty", [True, False])
