@@ -14,7 +14,10 @@ rfft2 + irfft2 round trip of the same moment and the load average. Two measures 
 the round trips at each layer's fine and coarse FFT shapes (below), and the frame's own FFT calls,
 recorded as it makes them and made again bare (the same functions, shapes and threads on random
 values: with a sun window a layer's coarse grid is correlated twice, the sky and the sun beyond the
-window; an eclipse's sky adds its own).
+window; an eclipse's sky adds its own). Beside them, the medians of the frame's stages (the ground
+raster, the camera's resampling of ground and sky, haze and compositing) and the camera stage
+over the frame's own FFT calls: where that alone passes 4, no saving in the ground raster brings
+the frame within 4 of its FFTs.
 
 Default grove (bench_cycle.CONFIG) with drifting clouds, the camera placed by default, 1280 x
 720; or the first frames of ``--config`` as it stands (its cycle products in ``--cache``).
@@ -117,6 +120,10 @@ def fft_calls_seconds(calls, repeats=3) -> float:
     return total
 
 
+STAGES = ("ground", "camera", "composite")
+"""``render_frame``'s stages, as its ``timings`` name them (the table's medians of each)."""
+
+
 def timed(f) -> float:
     """Seconds ``f()`` takes. [s]"""
     started = time.perf_counter()
@@ -132,8 +139,8 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
     print(f"load average {os.getloadavg()[0]:.1f}; bare rfft2 + irfft2 of one float32 2048^2 plane "
           f"({threads} workers, best of 5): {trip * 1e3:.1f} ms", flush=True)
     print("| config | camera | frame, median [ms] | bare FFT work [ms] | frame / bare FFT | its FFT calls [ms] "
-          "| frame / its FFT calls | load |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| frame / its FFT calls | ground, camera, composite [ms] | camera / its FFT calls | load |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         config = load(path)
         plan = plan_run(config)
@@ -142,16 +149,19 @@ def table(paths, cache_root: Path, frames: int, threads: int) -> None:
                     cycle_frames={f % config.canopy.cycle for f in range(frames + 1)})
         plan = with_exposures(plan, range(frames + 1))  # a run meters its frames once, before them
         render_frame(plan, 0, store=store, workers=threads)  # loads, compiles: not measured
-        each, bares, own = [], [], []
+        each, bares, own, stages = [], [], [], []
         for i in range(frames):  # each frame's bare FFT work timed just after it, under the same load
-            calls = frame_fft_calls(lambda i=i: each.append(
-                timed(lambda: render_frame(plan, i + 1, store=store, workers=threads))))
+            stages.append({})
+            calls = frame_fft_calls(lambda i=i: each.append(timed(lambda: render_frame(
+                plan, i + 1, store=store, workers=threads, timings=stages[-1]))))
             bares.append(bare_fft_seconds(plan, threads))
             own.append(fft_calls_seconds(calls))
         whole, best, bare, mine = float(np.median(each)), min(each), float(np.median(bares)), float(np.median(own))
+        ground, view, composite = (float(np.median([s.get(k, 0.0) for s in stages])) for k in STAGES)
         print(f"| {Path(path).stem} | {plan.camera.width} x {plan.camera.height} | {whole * 1e3:.0f} "
               f"(best {best * 1e3:.0f}) | {bare * 1e3:.0f} | {whole / bare:.1f} (best {best / bare:.1f}) | "
               f"{mine * 1e3:.0f} ({len(calls)} calls) | {whole / mine:.1f} (best {best / mine:.1f}) | "
+              f"{ground * 1e3:.0f}, {view * 1e3:.0f}, {composite * 1e3:.0f} | {view / mine:.1f} | "
               f"{os.getloadavg()[0]:.1f} |", flush=True)
 
 
