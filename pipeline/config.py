@@ -97,6 +97,7 @@ def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames:
 
 
 def _parse(root: _Section, path: Path, named_frames: bool = True) -> Config:
+    root.known_first()
     animation = _parse_animation(root.section("animation"))
     ground = _parse_ground(root.section("ground"))
     canopy = _parse_canopy(root.section("canopy"), ground)

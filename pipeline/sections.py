@@ -176,10 +176,20 @@ class _Section:
         return path
 
     def done(self):
-        unknown = [k for k in self.data if k not in self.taken]
+        self._fail_unknown(self.taken)
+
+    def known_first(self):
+        """``done``'s check before any value is read, for a section whose keys are all known
+        beforehand (the top level): a misspelled section is said first, not after an error in
+        the values of another (a config copied away from the files it names)."""
+        self._fail_unknown(set(_VALID_KEYS[self.path]))
+
+    def _fail_unknown(self, known):
+        """Fail naming the first key not in ``known``."""
+        unknown = [k for k in self.data if k not in known]
         if unknown:
             pattern = re.sub(r"\[\d+\]", "[]", self.path)
-            valid = ", ".join(sorted(self.taken | set(_VALID_KEYS.get(pattern, ()))))
+            valid = ", ".join(sorted(known | set(_VALID_KEYS.get(pattern, ()))))
             self.fail(str(unknown[0]), f"unknown key (valid here: {valid})")
 
 

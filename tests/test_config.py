@@ -132,6 +132,17 @@ def test_an_unknown_key_lists_every_valid_key_of_its_section(tmp_path, section, 
     assert set(text.split("valid here: ")[1].rstrip(")").split(", ")) == keys
 
 
+def test_a_misspelled_section_is_said_before_the_errors_of_other_sections(tmp_path):
+    """A config copied away from the files it names, with a section misspelled: the misspelling
+    is said first (it was said only once the missing file was mended)."""
+    config = base_config()
+    config["ground"]["albedo"] = "assets/sand.png"  # not beside the copy
+    config["camra"] = config.pop("camera", {})
+    assert "camra: unknown key (valid here: animation, camera, canopy" in refusal(config, tmp_path)
+    del config["camra"]
+    assert "ground.albedo: no such file" in refusal(config, tmp_path)
+
+
 def test_a_config_named_with_dots_or_spaces_gets_a_valid_output_name(tmp_path):
     write_inputs(tmp_path)
     for name, expected in (("my.scene.yaml", "my_scene"), ("my eclipse.yaml", "my_eclipse")):
