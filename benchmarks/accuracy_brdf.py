@@ -37,14 +37,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import brdf as R  # noqa: E402
-from pipeline import brdf_bands, brdf_camera  # noqa: E402
-from pipeline import shadow  # noqa: E402
-from pipeline.settings import BrdfConfig  # noqa: E402
-from pipeline.geometry import Grid  # noqa: E402
-from pipeline.sky import ProceduralSky  # noqa: E402
-from pipeline.sun_disc import SunDisc  # noqa: E402
-from pipeline.vocabulary import BRDF_PRESETS  # noqa: E402
+from pipeline.camera import brdf_view as brdf_camera
+from pipeline.config.settings import BrdfConfig
+from pipeline.config.vocabulary import BRDF_PRESETS
+from pipeline.core.geometry import Grid
+from pipeline.ground import brdf as R
+from pipeline.ground import (
+    brdf_bands,
+    shadow,
+)
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import SunDisc
 
 N, STEP = 40, 4
 CASES = (  # sun azimuth, elevation [deg]; camera position [m]
@@ -81,7 +84,8 @@ def main() -> None:
 
 def open_ground() -> None:
     """Open ground: rendered radiance against the quadrature at five pixels (see the module's text)."""
-    from pipeline import camera as cam, texture
+    from pipeline.camera import pinhole as cam
+    from pipeline.texture import mipmap as texture
 
     def constant(value):
         value = np.asarray(value, np.float32).reshape(-1)
@@ -96,7 +100,7 @@ def open_ground() -> None:
     views = brdf_camera.view_vectors(view)
     dirs = R.cell_directions(raster.grid).reshape(-1, 3)
     e = raster.weighted.reshape(3, -1).astype(np.float64)
-    rows, _ = cam._ground_rows(view)
+    rows, _ = cam.rows_seeing_ground(view)
     picks = [(rows[-1], 24), (rows[-1], 2), (rows[len(rows) // 2], 40), (rows[len(rows) // 4], 10), (rows[2], 30)]
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)
@@ -121,11 +125,12 @@ def config_case(path: str, samples: int) -> None:
     """The bands against a per-pixel brute force on a config's frame 0 (see the module's text)."""
     import tempfile
 
-    from pipeline import cache, camera
-    from pipeline.cycle import cycle_item
-    from pipeline.ground import render_ground
-    from pipeline.plan import plan_run
-    from pipeline.resolve import load
+    from pipeline.cache import store as cache
+    from pipeline.camera import pinhole as camera
+    from pipeline.stages.cycle import cycle_item
+    from pipeline.stages.ground import render_ground
+    from pipeline.stages.plan import plan_run
+    from pipeline.stages.resolve import load
 
     plan = plan_run(load(path))
     brdf, view, layer = plan.ground.brdf, plan.camera, plan.layers[0]
@@ -136,7 +141,7 @@ def config_case(path: str, samples: int) -> None:
         item = cycle_item(plan, 0, 0, store, workers=2)
         raster = ground.coarse_sky[2][0]
         views = brdf_camera.view_vectors(view)
-        fp, _ = camera._view_footprints(view)
+        fp, _ = camera.view_footprints(view)
         r, c = plan.window.raster_from_ground(fp.x, fp.y)
         inside = np.flatnonzero((r >= 0) & (c >= 0) & (r <= plan.window.shape[0] - 1) & (c <= plan.window.shape[1] - 1))
         chosen = inside[np.linspace(0, len(inside) - 1, samples).astype(int)]
@@ -185,7 +190,7 @@ def config_case(path: str, samples: int) -> None:
 def _frame_terms(plan, sky, store, bands, ground) -> list:
     """The bands' terms as ``frame.brdf_background`` makes them: the colour bands in every channel,
     the others on the channels' sum."""
-    from pipeline.ground import sky_view_terms
+    from pipeline.stages.ground import sky_view_terms
 
     directions, colours = bands.directions(), list(bands.colours)
     others = [b for b in range(bands.count) if b not in colours]
@@ -234,7 +239,7 @@ def window_cases() -> None:
                                                brdf_bands.sky_ratio(brdf, raster, bands, flat)).reshape(3, N, N)
                 cells.append(f"{bands.count}: {np.max(np.abs(banded[sel] / brute[sel] - 1)):.4f}")
             turn = np.degrees(np.ptp(np.unwrap(np.arctan2(flat[:, 0], flat[:, 1]))))
-            print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {str(camera):16s} {turn:5.0f}        "
+            print(f"{name:6s}  {azimuth:3.0f}/{elevation:2.0f}     {camera!s:16s} {turn:5.0f}        "
                   f"{lambert:.3f}    " + "  ".join(f"{cell:9s}" for cell in cells), flush=True)
 
 

@@ -20,8 +20,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.clouds import CloudLayer  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.sky.clouds import CloudLayer
+from pipeline.stages.resolve import load
 
 FOCAL = 772.0  # grove.yaml's camera [px]
 

@@ -41,9 +41,9 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 def table() -> None:
     from test_sky import hemisphere_irradiance, reference_daylight
 
-    from pipeline.sky import ProceduralSky
-    from pipeline.sun_disc import SunDisc
-    from pipeline.sun_kernel import sun_irradiance
+    from pipeline.sky.procedural import ProceduralSky
+    from pipeline.sky.sun_disc import SunDisc
+    from pipeline.sky.sun_kernel import sun_irradiance
 
     elevations = (5.0, 15.0, 30.0, 60.0, 90.0)
     print("| turbidity | sun elevation | direct horizontal, ratio | diffuse horizontal, ratio | diffuse klx (ref) |")
@@ -78,8 +78,8 @@ PEREZ_1993 = {
 def cie_types() -> None:
     from pvlib import atmosphere
 
-    from pipeline.clearsky import cie_relative_luminance
-    from pipeline.daylight import clear_daylight, perez_efficacy
+    from pipeline.sky.clearsky import cie_relative_luminance
+    from pipeline.sky.daylight import clear_daylight, perez_efficacy
 
     n_z, n_a = 90, 180
     zenith = (np.arange(n_z) + 0.5) * (np.pi / 2 / n_z)
@@ -112,9 +112,9 @@ def cie_types() -> None:
 
 
 def configs() -> None:
-    from pipeline.lighting import reference_lighting
-    from pipeline.plan import plan_run
-    from pipeline.resolve import load
+    from pipeline.stages.lighting import reference_lighting
+    from pipeline.stages.plan import plan_run
+    from pipeline.stages.resolve import load
 
     print("| config | sun elevation | direct horizontal klx | diffuse klx | (sun + sky) / sky |")
     print("|---|---|---|---|---|")

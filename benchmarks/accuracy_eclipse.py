@@ -32,14 +32,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import eclipse, ephemeris, io  # noqa: E402
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.scene import load_sky  # noqa: E402
-from pipeline.scene import scene_at  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
-from pipeline.equirect import EquirectSky  # noqa: E402
-from pipeline.sun_disc import MoonDisc, SunDisc  # noqa: E402
-from pipeline.sun_kernel import sun_irradiance  # noqa: E402
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky import eclipse, ephemeris
+from pipeline.sky.equirect import EquirectSky
+from pipeline.sky.sun_disc import MoonDisc, SunDisc
+from pipeline.sky.sun_kernel import sun_irradiance
+from pipeline.stages.resolve import load
+from pipeline.stages.scene import (
+    load_sky,
+    scene_at,
+)
 
 Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 TOTALITY = ROOT / "configs" / "eclipse-2024-dallas-totality.yaml"
@@ -65,7 +68,7 @@ def light_curve(step: int) -> None:
     print(f"1. light curve of {TOTALITY.relative_to(ROOT)} (open ground, sky + sun)")
     print(" frame  UTC        S         b     lux        log10  (log scale, 1 mark = 1/4 decade)")
     for frame in range(0, config.animation.frames, step):
-        lux, s, b, sky = open_ground(config, frame)
+        lux, s, b, _sky = open_ground(config, frame)
         when = scene_at(config, frame).when
         bar = "#" * max(0, int(round(4 * (np.log10(lux) + 1))))
         print(f" {frame:5d}  {when:%H:%M:%S}  {s:.2e}  {b:4.2f}  {lux:9.3g}  {np.log10(lux):6.2f}  {bar}")

@@ -12,8 +12,8 @@ exposure"), with the scenes of tests/test_framing.py:
 """
 
 import importlib.util
-import sys
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -23,13 +23,14 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import camera, composite  # noqa: E402
-from pipeline.cache import Cache  # noqa: E402
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.frame import render_frame  # noqa: E402
-from pipeline.scene import load_sky  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache.store import Cache
+from pipeline.camera import composite
+from pipeline.camera import pinhole as camera
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.stages.frame import render_frame
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
+from pipeline.stages.scene import load_sky
 
 spec = importlib.util.spec_from_file_location("test_framing", ROOT / "tests" / "test_framing.py")
 scenes = importlib.util.module_from_spec(spec)

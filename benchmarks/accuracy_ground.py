@@ -19,11 +19,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import canopy, io, shadow  # noqa: E402
-from pipeline.geometry import Grid  # noqa: E402
-from pipeline.equirect import EquirectSky  # noqa: E402
-from pipeline.sky import UniformSky  # noqa: E402
-from reference import image_transmittance, monte_carlo_irradiance  # noqa: E402
+from reference import image_transmittance, monte_carlo_irradiance
+
+from pipeline.canopy import masks as canopy
+from pipeline.core import io
+from pipeline.core.geometry import Grid
+from pipeline.ground import shadow
+from pipeline.sky.base import UniformSky
+from pipeline.sky.equirect import EquirectSky
 
 
 def gradient_sky(azimuth, zenith):
@@ -61,7 +64,7 @@ def main():
     print(f"{args.points} ground pixels x {2 * half_rays} rays each, stratified, jittered over the pixel")
     print(f"{'sky':>10} {'ours ms':>8} {'rel. RMS':>9} {'MC noise':>9} {'max rel':>8}")
     for name, sky, radiance in (
-        ("uniform", UniformSky(np.ones(3)), lambda az, zen: np.ones(np.shape(az) + (3,))),
+        ("uniform", UniformSky(np.ones(3)), lambda az, zen: np.ones((*np.shape(az), 3))),
         ("gradient", EquirectSky(equirect(gradient_sky)), gradient_sky),
     ):
         start = time.perf_counter()

@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import argparse
 import copy
-import sys
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -44,14 +44,15 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import camera, io  # noqa: E402
-from pipeline.cache import Cache  # noqa: E402
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.frame import render_frame  # noqa: E402
-from pipeline.framing import AIM_ROW, crown_centre  # noqa: E402
-from pipeline.geometry import sky_plane_from_direction  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache.store import Cache
+from pipeline.camera import pinhole as camera
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.core.geometry import sky_plane_from_direction
+from pipeline.stages.frame import render_frame
+from pipeline.stages.framing import AIM_ROW, crown_centre
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 FIXED = [(elevation, float(azimuth)) for elevation in (30.0, 12.0, 5.0) for azimuth in range(0, 360, 30)]
 SITES = {
@@ -155,7 +156,7 @@ def report(args, folder: Path) -> None:
             result = render_frame(plan, f, store=store)
             seconds = time.perf_counter() - start
             if args.images:
-                from pipeline import composite
+                from pipeline.camera import composite
 
                 args.images.mkdir(parents=True, exist_ok=True)
                 io.write_png(args.images / f"{path.stem}-{f}.png",
@@ -168,8 +169,8 @@ def report(args, folder: Path) -> None:
             window = [round(v, 1) for v in plan.window.extent]
             fine = None if seen.sun_window is None else [round(v, 1) for v in seen.sun_window.extent]
             print(f" {name:16s}  {f:5d}  {np.degrees(sun.elevation):9.1f}  {np.degrees(sun.azimuth):8.1f}  "
-                  f"{ratio(result):6.2f}  {most:4.2f}  {str(tuple(round(v, 1) for v in seen.camera.position)):21s}  "
-                  f"{np.degrees(seen.camera.yaw):9.0f}  {str(window):31s}  {str(fine):30s}  {seconds:4.0f}",
+                  f"{ratio(result):6.2f}  {most:4.2f}  {tuple(round(v, 1) for v in seen.camera.position)!s:21s}  "
+                  f"{np.degrees(seen.camera.yaw):9.0f}  {window!s:31s}  {fine!s:30s}  {seconds:4.0f}",
                   flush=True)
 
 

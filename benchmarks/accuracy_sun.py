@@ -37,17 +37,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import cache, ephemeris, io  # noqa: E402
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.sky import ProceduralSky  # noqa: E402
-from pipeline.sun_disc import LIMB_DARKENING, SunDisc  # noqa: E402
-from pipeline.ground import render_ground  # noqa: E402
-from pipeline.scene import load_sky  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.scene import scene_at  # noqa: E402
-from pipeline.config import parse_config  # noqa: E402
-from pipeline.resolve import resolve  # noqa: E402
-from reference import (  # noqa: E402
+import test_sun
+from reference import (
     angle_between,
     image_transmittance,
     monte_carlo_irradiance,
@@ -57,7 +48,21 @@ from reference import (  # noqa: E402
     sun_radiance_function,
     tangent_frame,
 )
-import test_sun  # noqa: E402  (the pinhole helpers)
+
+from pipeline.cache import store as cache
+from pipeline.config.parse import parse_config
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky import ephemeris
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import LIMB_DARKENING, SunDisc
+from pipeline.stages.ground import render_ground
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import resolve
+from pipeline.stages.scene import (
+    load_sky,
+    scene_at,
+)
 
 HEIGHT, ELEVATION, AZIMUTH, MOON = 8.0, 60.0, 200.0, (0.2, 0.1)
 TILE, TEXELS, REPEAT = 6.0, 1200, 3
@@ -168,7 +173,7 @@ def crescent_check(folder, store):
     full, ecl = full[0][..., 1], ecl[0][..., 1]  # green
     x, y = test_sun.centres(grid)
     sun = config.sky.sun
-    centre, right, up = tangent_frame(sun.azimuth, sun.elevation)
+    centre, right, _up = tangent_frame(sun.azimuth, sun.elevation)
     moon = offset_direction(sun.azimuth, sun.elevation, np.radians(dx), 0.0)
     R = config_e.sky.moon.radius
     points = np.stack([x.ravel(), y.ravel()], 1)

@@ -28,12 +28,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.colour import REC709_LUMINANCE, XYZ_TO_REC709  # noqa: E402
-from pipeline.clearsky import relative_sky  # noqa: E402
-from pipeline.daylight import (clear_daylight, sky_daylight, twilight_illuminance,  # noqa: E402
-                               usno_illuminance)
-from pipeline.sky import ProceduralSky  # noqa: E402
-from pipeline.sun_disc import SunDisc  # noqa: E402
+from pipeline.core.colour import REC709_LUMINANCE, XYZ_TO_REC709
+from pipeline.sky.clearsky import relative_sky
+from pipeline.sky.daylight import clear_daylight, sky_daylight, twilight_illuminance, usno_illuminance
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import SunDisc
 
 TURBIDITIES = (2.0, 3.0, 4.5)
 

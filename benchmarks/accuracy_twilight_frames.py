@@ -23,13 +23,14 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import daylight, io  # noqa: E402
-from pipeline.cache import Cache  # noqa: E402
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.scene import sun_lights, sun_shades  # noqa: E402
-from pipeline.ground import render_ground  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache.store import Cache
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky import daylight
+from pipeline.stages.ground import render_ground
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
+from pipeline.stages.scene import sun_lights, sun_shades
 
 
 def config(folder: Path) -> Path:

@@ -22,9 +22,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-import yaml  # noqa: E402
-from scenes import base_config, write_inputs  # noqa: E402
-from test_hostile import CASES, NOT_UTF8, PEAK, a_png_header, unwritable_folder  # noqa: E402
+import yaml
+from scenes import base_config, write_inputs
+from test_hostile import CASES, NOT_UTF8, PEAK, a_png_header, unwritable_folder
 
 
 def not_utf8_folder(folder: Path) -> list[str]:

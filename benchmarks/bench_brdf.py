@@ -29,12 +29,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import brdf as reflect  # noqa: E402
-from pipeline import brdf_bands, brdf_camera  # noqa: E402
-from pipeline import cache, camera  # noqa: E402
-from pipeline.frame import render_frame  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.camera import brdf_view as brdf_camera
+from pipeline.camera import pinhole as camera
+from pipeline.ground import brdf as reflect
+from pipeline.ground import brdf_bands
+from pipeline.stages.frame import render_frame
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def main() -> None:
@@ -89,9 +91,9 @@ def hot_spot(plan, frame: int, results) -> None:
           + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
           + " deg by sectors at " + ", ".join(f"{np.degrees(t):+.1f}" for t in bands.turns)
           + f" deg of azimuth; bound of the blend's error under shading over sampled pixels {bands.error:.4f}")
-    rows, _ = camera._ground_rows(view)
+    rows, _ = camera.rows_seeing_ground(view)
     ratio = (results["brdf"].radiance[rows] / np.maximum(results["lambert"].radiance[rows], 1e-12))[..., 1].reshape(-1)
-    fp, _ = camera._view_footprints(view)
+    fp, _ = camera.view_footprints(view)
     ground = results["lambert"].ground
     r, c = ground.grid.raster_from_ground(fp.x, fp.y)
     inside = (r >= 0) & (c >= 0) & (r <= ground.grid.shape[0] - 1) & (c <= ground.grid.shape[1] - 1)

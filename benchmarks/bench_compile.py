@@ -32,11 +32,11 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     from numba.core import event
 
-    from pipeline import cache
-    from pipeline.cycle import cycle_item
-    from pipeline.frame import compile_loops
-    from pipeline.plan import plan_run
-    from pipeline.resolve import load
+    from pipeline.cache import store as cache
+    from pipeline.stages.cycle import cycle_item
+    from pipeline.stages.frame import compile_loops
+    from pipeline.stages.plan import plan_run
+    from pipeline.stages.resolve import load
 
     seconds, stack = {}, []
 

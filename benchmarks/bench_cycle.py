@@ -22,11 +22,11 @@ import scipy.fft as sfft
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import cache  # noqa: E402
-from pipeline.cycle import cycle_params, cycle_phase, layer_masks  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.config import parse_config  # noqa: E402
-from pipeline.resolve import resolve  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.config.parse import parse_config
+from pipeline.stages.cycle import cycle_params, cycle_phase, layer_masks
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import resolve
 
 CONFIG = {
     "canopy": {"height": 8.0, "layout": "isolated",
@@ -71,7 +71,7 @@ def main() -> None:
               f"{layer.sun.mask.shape} -> FFT {layer.sun.fft_shape}")
         fft = bare_fft_seconds(layer.coarse.fft_shape) + bare_fft_seconds(layer.sun.fft_shape)
         t = time.perf_counter()
-        coarse, fine = layer_masks(plan, 0, 0)
+        _coarse, _fine = layer_masks(plan, 0, 0)
         masks = time.perf_counter() - t
         print(f"one cycle frame, one process: masks {masks:.2f} s; bare rfft2 of both {fft * 1e3:.0f} ms")
 

@@ -43,20 +43,27 @@ from scipy import fft as sfft
 from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from bench_cycle import CONFIG  # noqa: E402
-from bench_sun import median_seconds, round_trip_seconds  # noqa: E402
+import reference
+from bench_cycle import CONFIG
+from bench_sun import median_seconds, round_trip_seconds
 
-from pipeline import cache, camera, composite, foreground, grove_geometry, io  # noqa: E402
-from pipeline.cycle import cycle_phase  # noqa: E402
-from pipeline.frame import foreground_layer, irradiance_maps, render_frame  # noqa: E402
-from pipeline.ground import render_ground  # noqa: E402
-from pipeline.inputs import grove_of, ground_albedo  # noqa: E402
-from pipeline.lighting import reference_lighting, with_exposures  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.config import parse_config  # noqa: E402
-from pipeline.resolve import load, resolve  # noqa: E402
-from pipeline.run import frame_attributes  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.camera import composite
+from pipeline.camera import pinhole as camera
+from pipeline.canopy import grove as grove_geometry
+from pipeline.config.parse import parse_config
+from pipeline.core import io
+from pipeline.foreground import trees as foreground
+from pipeline.run.render import frame_attributes
+from pipeline.stages.cycle import cycle_phase
+from pipeline.stages.frame import foreground_layer, irradiance_maps, render_frame
+from pipeline.stages.ground import render_ground
+from pipeline.stages.inputs import ground_albedo, grove_of
+from pipeline.stages.lighting import reference_lighting, with_exposures
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load, resolve
 
 
 def bilinear_baseline(view: camera.Camera, repeats=3) -> float:
@@ -210,7 +217,7 @@ def main() -> None:
             background, distance = backgrounds[i]
             rays = camera.pixel_rays(view)
             rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-            t, sky_haze, atmosphere = composite.aerial_perspective(
+            t, sky_haze, atmosphere = reference.aerial_perspective(
                 distance, rays, length=config.sky.haze, sun_direction=light.sun_direction,
                 sun_irradiance=light.sun_irradiance, sky_irradiance=light.sky_irradiance)
             fg = foreground_layer(plan, i, store, light)

@@ -46,14 +46,14 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="profile the timed frames' rendering")
     args = parser.parse_args()
     sys.path.insert(0, str(Path(args.code).resolve()))
-    from pipeline import cache
-    from pipeline.cycle import cycle_phase
-    from pipeline.frame import render_frame
-    from pipeline.lighting import with_exposures
-    from pipeline.plan import plan_run
-    from pipeline.resolve import load
-    from pipeline.run import _write_task
-    from pipeline.runfolder import frame_files
+    from pipeline.cache import store as cache
+    from pipeline.run.folder import frame_files
+    from pipeline.run.render import _write_task
+    from pipeline.stages.cycle import cycle_phase
+    from pipeline.stages.frame import render_frame
+    from pipeline.stages.lighting import with_exposures
+    from pipeline.stages.plan import plan_run
+    from pipeline.stages.resolve import load
 
     root = Path(args.cache or tempfile.mkdtemp(prefix="sunshade-bench-"))
     paths = args.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.yaml"))

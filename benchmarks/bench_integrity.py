@@ -37,15 +37,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import cache, cache_store  # noqa: E402
-from pipeline.run import _frame_task  # noqa: E402
-from pipeline.frameindex import file_digest  # noqa: E402
-from pipeline.runfolder import parse_frames  # noqa: E402
-from pipeline.cycle import cycle_phase  # noqa: E402
-from pipeline.frame import render_frame  # noqa: E402
-from pipeline.cores import default_workers  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache import items as cache_store
+from pipeline.cache import store as cache
+from pipeline.core.cores import default_workers
+from pipeline.run.folder import parse_frames
+from pipeline.run.index import file_digest
+from pipeline.run.render import _frame_task
+from pipeline.stages.cycle import cycle_phase
+from pipeline.stages.frame import render_frame
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def seconds(call) -> float:
@@ -107,7 +108,7 @@ def frame_digests(config, frames, repeat) -> None:
     for _ in range(repeat):
         for frame in frames:
             start = time.perf_counter()
-            _, timings, entry, _ = _frame_task(config, plan, frame, root, config.digest(), default_workers())
+            _, _timings, entry, _ = _frame_task(config, plan, frame, root, config.digest(), default_workers())
             totals.append(time.perf_counter() - start)
             paths = [folder / entry["files"][k]["name"] for k in ("exr", "png")]
             digests.append(seconds(lambda: [file_digest(p) for p in paths]))

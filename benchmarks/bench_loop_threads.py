@@ -24,11 +24,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import cache, frame  # noqa: E402
-from pipeline.cycle import cycle_phase  # noqa: E402
-from pipeline.lighting import with_exposures  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.stages import frame
+from pipeline.stages.cycle import cycle_phase
+from pipeline.stages.lighting import with_exposures
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def main() -> None:

@@ -26,13 +26,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline import grove_geometry, rasteriser, shadow  # noqa: E402
-from pipeline.preview import preview  # noqa: E402
-from pipeline.cycle import layer_masks  # noqa: E402
-from pipeline.inputs import grove_of  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
-from test_canopy import reference_rasterize  # noqa: E402
+from test_canopy import reference_rasterize
+
+from pipeline.canopy import grove as grove_geometry
+from pipeline.canopy import rasteriser
+from pipeline.config.preview import preview
+from pipeline.ground import shadow
+from pipeline.stages.cycle import layer_masks
+from pipeline.stages.inputs import grove_of
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def cycle_frame(config, plan, frame):
@@ -114,8 +117,9 @@ def opencv_mask(shapes, grid, sides=24, shift=4):
 
 
 def compare_opencv(config, plan) -> None:
-    from pipeline.geometry import Grid
     from test_canopy import random_leaves
+
+    from pipeline.core.geometry import Grid
 
     grove, flutter = grove_of(config.canopy)
     lp = plan.layers[0]

@@ -22,12 +22,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import cache, io  # noqa: E402
-from pipeline.frame import render_frame  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
-from pipeline.run import exr_layers, frame_attributes  # noqa: E402
-from pipeline.vocabulary import PASSES  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.config.vocabulary import PASSES
+from pipeline.core import io
+from pipeline.run.render import exr_layers, frame_attributes
+from pipeline.stages.frame import render_frame
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def main() -> None:

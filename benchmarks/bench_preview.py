@@ -33,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.resolve import load  # noqa: E402
+from pipeline.stages.resolve import load
 
 
 def command(config: Path, work: Path, *extra: str) -> list[str]:
@@ -68,7 +68,7 @@ def preview_run(config: Path, code: Path, work: Path) -> tuple[float, float, flo
             first = time.perf_counter() - started
         time.sleep(0.05)
     total = time.perf_counter() - started
-    stdout, stderr = process.communicate()
+    _stdout, stderr = process.communicate()
     if process.returncode:
         raise SystemExit(f"{config}: {stderr}")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -35,10 +35,10 @@ import scipy.fft
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.runfolder import parse_frames  # noqa: E402
-from pipeline.cores import default_workers  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.resolve import load  # noqa: E402
+from pipeline.core.cores import default_workers
+from pipeline.run.folder import parse_frames
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 
 def sunshade(*args) -> float:

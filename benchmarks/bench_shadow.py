@@ -41,9 +41,10 @@ import scipy.fft as sfft
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import geometry, shadow  # noqa: E402
-from pipeline.geometry import Grid  # noqa: E402
-from pipeline.sky import UniformSky  # noqa: E402
+from pipeline.core import geometry
+from pipeline.core.geometry import Grid
+from pipeline.ground import shadow
+from pipeline.sky.base import UniformSky
 
 PIXEL = 0.05  # [m]
 HEIGHT = 8.0  # [m]
@@ -80,7 +81,7 @@ def time_interleaved(functions, repeats: int) -> list[float]:
 
 def bare_fft(shape: tuple[int, int], workers: int):
     """The FFT work of one ground raster: rfft2 of (3, *shape) float32 and irfft2 back."""
-    x = np.random.default_rng(1).random((3,) + tuple(shape), dtype=np.float32)
+    x = np.random.default_rng(1).random((3, *tuple(shape)), dtype=np.float32)
 
     def run():
         spectrum = sfft.rfft2(x, axes=(-2, -1), workers=workers)
@@ -153,7 +154,7 @@ def _check_dtypes(spectrum, raster):
 
 
 def _check_output(g, shape):
-    if g.dtype != np.float32 or g.shape != (3,) + tuple(shape):
+    if g.dtype != np.float32 or g.shape != (3, *tuple(shape)):
         raise RuntimeError(f"ground raster is {g.dtype} {g.shape}, expected float32 (3, {shape})")
 
 

@@ -23,22 +23,25 @@ import scipy.fft as sfft
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_cycle import CONFIG  # noqa: E402
+from bench_cycle import CONFIG
 
-from pipeline import cache, shadow  # noqa: E402
-from pipeline.cycle import cycle_item, cycle_phase  # noqa: E402
-from pipeline.ground import render_ground  # noqa: E402
-from pipeline.scene import load_sky  # noqa: E402
-from pipeline.plan import plan_run  # noqa: E402
-from pipeline.scene import scene_at  # noqa: E402
-from pipeline.config import parse_config  # noqa: E402
-from pipeline.resolve import resolve  # noqa: E402
-from pipeline.sun_kernel import sun_kernel  # noqa: E402
+from pipeline.cache import store as cache
+from pipeline.config.parse import parse_config
+from pipeline.ground import shadow
+from pipeline.sky.sun_kernel import sun_kernel
+from pipeline.stages.cycle import cycle_item, cycle_phase
+from pipeline.stages.ground import render_ground
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import resolve
+from pipeline.stages.scene import (
+    load_sky,
+    scene_at,
+)
 
 
 def round_trip_seconds(shape, workers, repeats=3) -> float:
     """Best time of rfft2 + irfft2 of a (3, *shape) float32 stack. [s]"""
-    a = np.random.default_rng(0).random((3,) + tuple(shape), dtype=np.float32)
+    a = np.random.default_rng(0).random((3, *tuple(shape)), dtype=np.float32)
     best = np.inf
     for _ in range(repeats):
         t = time.perf_counter()

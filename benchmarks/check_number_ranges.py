@@ -23,10 +23,10 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from scenes import set_key, tiny_grove, write_inputs  # noqa: E402
+from scenes import set_key, tiny_grove, write_inputs
 
-from pipeline.cli import main  # noqa: E402
-from pipeline.vocabulary import NUMBER_RANGES  # noqa: E402
+from pipeline.cli.main import main
+from pipeline.config.vocabulary import NUMBER_RANGES
 
 LISTS = {"ground.window": 4, "ground.sun_window": 4, "canopy.center": 2, "sky.clouds.wind": 2,
          "camera.position": 3, "camera.look_at": 3, "sky.moon.offset_start": 2, "sky.moon.offset_end": 2}

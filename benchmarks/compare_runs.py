@@ -18,7 +18,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import io  # noqa: E402
+from pipeline.core import io
 
 
 def main() -> int:

@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline import io  # noqa: E402
+from pipeline.core import io
 
 COMMANDS = (("mask", "--frame", "3", "-o", "mask.exr"),
             ("ground", "--frame", "5", "--threads", "2", "--cache", "cache", "-o", "ground.exr"),

@@ -34,10 +34,10 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.colour import REC709_LUMINANCE  # noqa: E402
-from pipeline.composite import display_sky  # noqa: E402
-from pipeline.sky import ProceduralSky  # noqa: E402
-from pipeline.sun_disc import SunDisc  # noqa: E402
+from pipeline.camera.composite import display_sky
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import SunDisc
 
 ELEVATIONS = (10.0, 2.0, -1.0, -3.0, -5.0)
 WIDTH = 768

@@ -1,5 +1,4 @@
 import pytest
-
 from scenes import write_inputs
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.sky.scattering import haze_transmittance, henyey_greenstein
+
 
 def direct_sum(sky, sky_start, mask, mask_start, window_shape, outside_value):
     """g[k] = sum_i e[i] m[k + i], the paper's eq. 2, by brute force (O(n^4)).
@@ -21,7 +23,7 @@ def direct_sum(sky, sky_start, mask, mask_start, window_shape, outside_value):
     """
     channels, sr, sc = sky.shape
     mr, mc = mask.shape
-    out = np.zeros((channels,) + tuple(window_shape))
+    out = np.zeros((channels, *tuple(window_shape)))
     for kr in range(window_shape[0]):
         for kc in range(window_shape[1]):
             acc = np.zeros(channels)
@@ -243,7 +245,7 @@ def pinhole_irradiance(points, *, height, hole_points, hole_area, radiance):
     out = []
     for lo in range(0, len(points), 64):  # bounded memory
         d = hole[None, :, :] - points[lo : lo + 64, None, :]
-        v = np.concatenate([d, np.full(d.shape[:2] + (1,), float(height))], axis=-1)
+        v = np.concatenate([d, np.full((*d.shape[:2], 1), float(height))], axis=-1)
         norm = np.linalg.norm(v, axis=-1)
         w = v / norm[..., None]
         cos4 = w[..., 2] ** 4
@@ -275,3 +277,48 @@ def monte_carlo_sun(points, *, height, transmittance, radiance, sun_direction, r
         weight = transmittance(tx, ty) * w[:, 2] * d_omega
         out.append(weight @ radiance(w))
     return np.array(out)
+
+
+def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float, sun_direction,
+                       sun_irradiance, sky_irradiance, albedo: float = 0.9, g: float = 0.6):
+    """A homogeneous haze between the camera and the ground (single scattering, no shadows).
+
+    The ground seen through it is T B + sky haze, and the sun-lit haze is the paper's atmosphere,
+    added times S (``composite_frame``). Sky light is taken as scattered evenly: radiance
+    albedo E_sky / (2 pi) per unit of optical depth.
+
+    Parameters
+    ----------
+    distance : numpy.ndarray
+        (rows, cols) distance to the ground, inf where the sky is seen (the sky model already holds
+        its haze) [m].
+    view : numpy.ndarray
+        (rows, cols, 3) unit directions from the camera [1].
+    length : float
+        Extinction length, so a thing at distance d keeps exp(-d / length) of its radiance [m].
+    sun_direction : array_like
+        (3,) unit vector towards the sun [1].
+    sun_irradiance : array_like
+        (3,) normal irradiance of the clear sun [klx].
+    sky_irradiance : array_like
+        (3,) horizontal irradiance of the clear sky [klx].
+    albedo : float, optional
+        Single-scattering albedo of the haze [1].
+    g : float, optional
+        Its Henyey-Greenstein asymmetry [1].
+
+    Returns
+    -------
+    transmittance : numpy.ndarray
+        (rows, cols) float32 T [1].
+    sky_haze : numpy.ndarray
+        (rows, cols, 3) float32 sky-lit haze [kcd/m^2].
+    sun_haze : numpy.ndarray
+        (rows, cols, 3) float32 sun-lit haze [kcd/m^2].
+    """
+    transmittance = haze_transmittance(distance, length).astype(np.float64)
+    veil = (1.0 - transmittance)[..., None]
+    phase = henyey_greenstein(np.asarray(view, dtype=np.float64) @ np.asarray(sun_direction), g)
+    sun_haze = veil * (albedo * phase)[..., None] * np.asarray(sun_irradiance)
+    sky_haze = veil * (albedo / (2.0 * np.pi)) * np.asarray(sky_irradiance)
+    return (transmittance.astype(np.float32), sky_haze.astype(np.float32), sun_haze.astype(np.float32))

@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pipeline import io
-from pipeline.cli import main
-from pipeline.config import parse_config
-from pipeline.plan import plan_run
-from pipeline.resolve import resolve
+from pipeline.cli.main import main
+from pipeline.config.parse import parse_config
+from pipeline.core import io
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 """The repository."""

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
-from pipeline import albedo, camera, texture
-from pipeline.albedo import grass_albedo, stochastic_tiling
+from pipeline.camera import pinhole as camera
+from pipeline.texture import albedo
+from pipeline.texture import mipmap as texture
+from pipeline.texture.albedo import grass_albedo, stochastic_tiling
 
 
 def test_grass_albedo_is_a_plausible_albedo_on_its_grid():
@@ -89,12 +91,12 @@ def test_stochastic_tiling_keeps_the_tiles_histogram_and_mean_at_every_scale():
         np.testing.assert_allclose(laid.std(axis=0), plain.std(axis=0), rtol=0.25, atol=1e-4)
 
 
-def _view_footprints(width=320, height=180):
+def view_footprints(width=320, height=180):
     """The ground footprints of a camera 1.7 m up looking 30 degrees down: near pixels a few
     millimetres across, far ones metres long, up to the horizon."""
     view = camera.Camera.look_at((0.3, -2.0, 1.7), (1.0, 3.0, 0.0), vertical_fov=np.radians(60.0),
                                  width=width, height=height)
-    rows, part = camera._ground_rows(view)
+    rows, part = camera.rows_seeing_ground(view)
     *ellipses, _ = camera._row_footprints(view, rows, part)
     return texture.Footprints(*ellipses)
 
@@ -104,7 +106,7 @@ def test_compiled_tiling_matches_the_array_version(monkeypatch):
     code, kept as the reference), every read taken and with reads under SKIP_WEIGHT left out
     alike: the same albedo within float32 rounding."""
     _, tiling = _tiled(size_px=128, period=2.0)
-    fp = _view_footprints()
+    fp = view_footprints()
     for skip in (0.0, albedo.SKIP_WEIGHT):
         monkeypatch.setattr(albedo, "SKIP_WEIGHT", skip)
         got = tiling.sample(fp, lod_bias=texture.LOD_BIAS)
@@ -118,7 +120,7 @@ def test_skipping_light_reads_changes_the_albedo_by_little():
     instead of three, and the albedo moves by under 4 % of its mean anywhere (measured 2.9 %)
     and by 0.1 % RMS (measured 0.06 %)."""
     _, tiling = _tiled(size_px=128, period=2.0)
-    fp = _view_footprints()
+    fp = view_footprints()
     _, w = tiling.weights(fp.x, fp.y)
     w = w**albedo.BLEND_SHARPNESS
     w /= w.sum(axis=0)

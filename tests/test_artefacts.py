@@ -7,16 +7,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
-from pipeline import cache, camera as cameras, foreground, grove_geometry, io, tree_detail
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.cycle import foreground_item
-from pipeline.foregrounds import tree_box
-from pipeline.frame import render_frame
-from pipeline.inputs import grove_of
-from pipeline.plan import plan_run
-
 from scenes import config_of
+
+from pipeline.cache import store as cache
+from pipeline.camera import pinhole as cameras
+from pipeline.canopy import grove as grove_geometry
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.foreground import tree_detail
+from pipeline.foreground import trees as foreground
+from pipeline.foreground.models import tree_box
+from pipeline.stages.cycle import foreground_item
+from pipeline.stages.frame import render_frame
+from pipeline.stages.inputs import grove_of
+from pipeline.stages.plan import plan_run
 
 
 def _config(tmp_path, config):
@@ -82,7 +86,7 @@ def test_a_periodic_forest_stands_on_every_tile_in_view():
     leaves = grove_geometry.leaves_at(grove, grove_geometry.FlutterParams(cycle=2), 0)
     foot = grove.bases[0, :2]
     view = cameras.Camera((foot[0] + 0.6, foot[1] - 3.0, 1.5), 0.0, 0.0, np.radians(40.0), 200, 120)
-    copies, wood, leaf_index, wood_index = tree_detail.periodic_copies(
+    copies, wood, _leaf_index, _wood_index = tree_detail.periodic_copies(
         leaves, grove.wood, view, period=tile, center=(0.0, 0.0), haze=400.0)
     assert len(wood.radius) > 10 * len(grove.wood.radius)
     passes = foreground.tree_passes(copies, wood, view, sun_direction=[0.0, 0.6, 0.8], sun_irradiance=1.0,

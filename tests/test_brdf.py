@@ -5,18 +5,17 @@ config's errors, the sun's term per pixel and the sky's view bands against a bru
 import numpy as np
 import pytest
 
-from pipeline import brdf as R
-from pipeline import brdf_bands, brdf_camera
-from pipeline import camera as cam
-from pipeline import shadow
-from pipeline import texture
-from pipeline.settings import BrdfConfig
-from pipeline.errors import ConfigError
-from pipeline.geometry import Grid
-from pipeline.sky import ProceduralSky
-from pipeline.sun_disc import SunDisc
-from pipeline.vocabulary import BRDF_PRESETS
-
+from pipeline.camera import brdf_view as brdf_camera
+from pipeline.camera import pinhole as cam
+from pipeline.config.settings import BrdfConfig
+from pipeline.config.vocabulary import BRDF_PRESETS
+from pipeline.core.errors import ConfigError
+from pipeline.core.geometry import Grid
+from pipeline.ground import brdf as R
+from pipeline.ground import brdf_bands, shadow
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import SunDisc
+from pipeline.texture import mipmap as texture
 from tests.scenes import config_of, tiny_grove
 
 PRESETS = {name: BrdfConfig(m, tuple(p.items()), name) for name, (m, p) in BRDF_PRESETS.items()}
@@ -90,13 +89,13 @@ def test_config_brdf_keys(tmp_path):
     assert config_of(grass, tmp_path).ground.brdf == PRESETS["grass"]
     bad = tiny_grove()
     bad["ground"]["brdf"] = "velvet"
-    with pytest.raises(ConfigError, match="ground.brdf"):
+    with pytest.raises(ConfigError, match=r"ground\.brdf"):
         config_of(bad, tmp_path)
     bad["ground"]["brdf"] = {"model": "rpv", "rho0": 0.1, "k": 2.5, "theta": -0.1}
     with pytest.raises(ConfigError, match=r"ground\.brdf\.k.*physical range"):
         config_of(bad, tmp_path)
     bad["ground"]["brdf"] = {"model": "phong"}
-    with pytest.raises(ConfigError, match="ground.brdf.model"):
+    with pytest.raises(ConfigError, match=r"ground\.brdf\.model"):
         config_of(bad, tmp_path)
     ok = tiny_grove()
     ok["ground"]["brdf"] = {"model": "rpv", "rho0": 0.1, "k": 0.8, "theta": -0.1}
@@ -143,7 +142,7 @@ def test_open_ground_equals_a_quadrature_for_five_view_directions():
                                  sky_maps=(_constant(np.concatenate(np.atleast_1d(*band_sky))),),
                                  bands=bands, sun_direction=sky.sun_direction,
                                  raster=raster)
-    rows, _ = cam._ground_rows(view)
+    rows, _ = cam.rows_seeing_ground(view)
     picks = [(rows[-1], 24), (rows[-1], 2), (rows[len(rows) // 2], 40), (rows[len(rows) // 4], 10), (rows[2], 30)]
     assert len({tuple(np.round(views[(r - rows[0]) * view.width + c], 3)) for r, c in picks}) == 5
     for r, c in picks:
@@ -326,13 +325,13 @@ def test_the_shape_lattice_against_every_cell():
 def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
     """The light passes split a Lambertian ground's light: with ground.brdf they are refused,
     in the config and on the frame command's --passes, before any work."""
-    from pipeline.cli import main
-    from pipeline.config import parse_config
-
     from scenes import tiny_grove, write_config
 
+    from pipeline.cli.main import main
+    from pipeline.config.parse import parse_config
+
     config = tiny_grove(**{"ground.brdf": "grass"})
-    with pytest.raises(ConfigError, match="output.passes: the light passes are not made with a ground.brdf"):
+    with pytest.raises(ConfigError, match=r"output\.passes: the light passes are not made with a ground\.brdf"):
         parse_config({**config, "output": {"passes": ["sun"]}}, tmp_path)
     path = write_config(tmp_path, config)
     assert main(["frame", str(path), "--passes", "sun", "-o", str(tmp_path / "f.exr")]) == 2
@@ -341,7 +340,7 @@ def test_light_passes_with_a_reflectance_are_refused_naming_the_key(tmp_path):
 
 def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     """sky_ratio's per-pixel bilinear read of its lattice: the compiled loop against numpy."""
-    from pipeline import _array_loops
+    from pipeline.kernels import arrays as _array_loops
 
     rng = np.random.default_rng(5)
     lattice = 6
@@ -364,7 +363,7 @@ def test_relative_sky_is_read_bilinearly_at_the_footprint_centres_and_is_1_beyon
     gx, gy = np.broadcast_arrays(gx, gy)
     field = np.stack([0.5 + 0.05 * gx, 0.6 - 0.03 * gy, 0.7 + 0.01 * (gx + gy)], axis=-1).astype(np.float32)
     read = brdf_camera._relative_at_pixels(view, field, grid)
-    fp, _ = cam._view_footprints(view)
+    fp, _ = cam.view_footprints(view)
     x0, y0, x1, y1 = grid.extent
     inside = (fp.x > x0 + 0.1) & (fp.x < x1 - 0.1) & (fp.y > y0 + 0.1) & (fp.y < y1 - 0.1)
     far = (fp.x < x0 - 0.2) | (fp.x > x1 + 0.2) | (fp.y < y0 - 0.2) | (fp.y > y1 + 0.2)

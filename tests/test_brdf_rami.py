@@ -7,8 +7,8 @@ forward direction: 180 degrees is the sun's side (the hot spot)."""
 import numpy as np
 import pytest
 
-from pipeline.brdf import reflectance_factor
-from pipeline.settings import BrdfConfig
+from pipeline.config.settings import BrdfConfig
+from pipeline.ground.brdf import reflectance_factor
 
 VIEW_ZENITHS = (0, 15, 30, 45, 60, 75)  # degrees
 RELATIVE_AZIMUTHS = (0, 30, 60, 90, 120, 150, 180)  # degrees, 180 on the sun's side

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.cache import ENV_VAR, Cache, cache_dir, parse_size
-from pipeline.cache_keys import CODE_VERSION, MAX_PARAM_ARRAY_SIZE, key_of
-from pipeline.cache_store import CacheWarning
-from pipeline.cli import main
-from pipeline.geometry import Grid
+from pipeline.cache.items import CacheWarning
+from pipeline.cache.keys import CODE_VERSION, MAX_PARAM_ARRAY_SIZE, key_of
+from pipeline.cache.store import ENV_VAR, Cache, cache_dir, parse_size
+from pipeline.cli.main import main
+from pipeline.core.geometry import Grid
 
 PARAMS = {"frame": 3, "height": 10.0, "grid": Grid((0.0, 64.0), 0.25, (256, 256)),
           "sun": (0.3, 1.1)}
@@ -197,7 +197,7 @@ def test_flipped_byte_found_by_verify_and_recomputed_with_verify(tmp_path):
     data[-5] ^= 0x10
     npy.write_bytes(bytes(data))
 
-    (item, problem), = cache.verify()
+    (_item, problem), = cache.verify()
     assert "checksum" in problem and "spectrum.npy" in problem
     out = cache.get_or_compute("mask", PARAMS, compute, verify=True)
     assert compute.calls == 2
@@ -218,7 +218,7 @@ def test_missing_meta_is_treated_as_absent(tmp_path):
     cache, compute = Cache(tmp_path), Counter()
     cache.get_or_compute("mask", PARAMS, compute)
     (item_of(cache) / "meta.json").unlink()
-    (item, problem), = cache.verify()
+    (_item, problem), = cache.verify()
     assert "meta.json" in problem
     with pytest.warns(CacheWarning, match="meta.json is missing"):
         assert cache.get("mask", PARAMS) is None  # and removed, to be computed again
@@ -408,7 +408,7 @@ def test_damaged_meta_json_that_still_parses_is_found(tmp_path):
     meta = json.loads(meta_path.read_text())
     meta["arrays"]["spectrum"]["shape"] = [33, 64]  # valid JSON, wrong content
     meta_path.write_text(json.dumps(meta, indent=1))
-    (item, problem), = cache.verify()
+    (_item, problem), = cache.verify()
     assert problem == "meta.json: checksum mismatch (corrupted)"
     with pytest.warns(CacheWarning, match="meta.json: checksum mismatch"):
         out = cache.get_or_compute("mask", PARAMS, compute)
@@ -431,7 +431,7 @@ def test_header_damage_in_an_item_of_the_previous_version_is_one_line(tmp_path):
     at = data.index(b"'shape'")
     data[at:at + 12] = b"'shape': ((("
     npy.write_bytes(bytes(data))
-    (item, problem), = cache.verify()
+    (_item, problem), = cache.verify()
     assert problem.startswith("unreadable: TokenError") and "\n" not in problem
     with pytest.warns(CacheWarning, match="TokenError"):
         out = cache.get_or_compute("mask", PARAMS, compute)

@@ -9,14 +9,25 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from pipeline import camera, cores, texture
-from pipeline.camera import (Camera, background, ground_hits, ground_view, image_rays, pixel_rays, project_points,
-                             sky_view)
-from pipeline.texture import LOD_BIAS, MAX_TAPS, footprints, mipmap, sample_footprint, sample_footprints
-from pipeline.geometry import Grid
-from pipeline.equirect import EquirectSky
-from pipeline.sky import ProceduralSky, UniformSky
-from pipeline.sun_disc import SunDisc
+from pipeline.camera import pinhole as camera
+from pipeline.camera.pinhole import (
+    Camera,
+    background,
+    ground_hits,
+    ground_view,
+    image_rays,
+    pixel_rays,
+    project_points,
+    sky_view,
+)
+from pipeline.core import cores
+from pipeline.core.geometry import Grid
+from pipeline.sky.base import UniformSky
+from pipeline.sky.equirect import EquirectSky
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import SunDisc
+from pipeline.texture import mipmap as texture
+from pipeline.texture.mipmap import LOD_BIAS, MAX_TAPS, footprints, mipmap, sample_footprint, sample_footprints
 
 ONE = Grid((0.0, 1.0), 1.0, (1, 1))
 
@@ -66,7 +77,7 @@ def supersampled_ground(camera: Camera, texture: np.ndarray, grid: Grid, n: int)
 @pytest.mark.parametrize("shape", [(16, 16), (27, 45), (1, 7)])
 def test_constant_levels_keep_the_integral(shape):
     rng = np.random.default_rng(1)
-    raster = rng.random(shape + (3,)).astype(np.float32)
+    raster = rng.random((*shape, 3)).astype(np.float32)
     grid = Grid((3.0, -2.0), 0.25, shape)
     value = np.array([0.2, 0.5, 0.9], dtype=np.float32)
     mip = mipmap(raster, grid, outside="constant", value=value)
@@ -83,7 +94,7 @@ def test_constant_levels_keep_the_integral(shape):
 @pytest.mark.parametrize("value", [0.3, np.nan])
 def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
     # the compiled halving (_filter.halve_level) against the numpy levels it replaced
-    raster = np.random.default_rng(3).random(shape + (3,)).astype(np.float32) * 7.0
+    raster = np.random.default_rng(3).random((*shape, 3)).astype(np.float32) * 7.0
     value = np.full(3, value, dtype=np.float32)
     mip = mipmap(raster, Grid((0.0, 0.0), 0.5, shape), outside="constant", value=value)
     levels = texture._constant_levels(raster, value)
@@ -98,7 +109,7 @@ def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
                                                ((30, 40), (21.5, 13.25))])
 def test_periodic_levels_keep_the_mean(shape, period_px):
     rng = np.random.default_rng(2)
-    raster = rng.random(shape + (2,)).astype(np.float32)
+    raster = rng.random((*shape, 2)).astype(np.float32)
     grid = Grid((0.0, 0.0), 0.1, shape)
     mip = mipmap(raster, grid, outside="periodic", period=(period_px[0] * 0.1, period_px[1] * 0.1))
     # the fundamental cell is the raster's south-west corner, fractional texels weighted by area
@@ -251,7 +262,7 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
     # every level, blended or not, one tap or many, near and across the raster's edges (or
     # periods), far beyond it, and degenerate footprints
     rng = np.random.default_rng(8)
-    raster = rng.random(shape + (channels,)).astype(np.float32)
+    raster = rng.random((*shape, channels)).astype(np.float32)
     grid = Grid((-1.3, 0.9), 0.05, shape)
     x_min, y_min, x_max, y_max = grid.extent
     if outside == "constant":
@@ -278,7 +289,7 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
 ])
 @pytest.mark.parametrize("threads", [1, 3])
 def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels, threads, monkeypatch):
-    """texture._filtered (numba, footprint by footprint) against texture._filtered_arrays (numpy,
+    """texture.filtered_read (numba, footprint by footprint) against texture.filtered_arrays (numpy,
     grouped by level), the reference it replaces: the same float32 arithmetic in the same order
     gives the same bits, for every level, blend and tap count, far points, degenerate
     footprints and a NaN outside value (the finer rasters of a chain); in one thread or shared
@@ -287,7 +298,7 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
     with cores.loop_threads(threads):
         texture._TAPS.clear()
         rng = np.random.default_rng(21)
-        raster = rng.random(shape + (channels,)).astype(np.float32)
+        raster = rng.random((*shape, channels)).astype(np.float32)
         grid = Grid((-1.3, 0.9), 0.05, shape)
         x_min, y_min, x_max, y_max = grid.extent
         if outside == "constant":
@@ -306,37 +317,37 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
         jac[300:310] = 0.0
         fp = footprints(x, y, jac)
         for bias in (LOD_BIAS, 0.0, 1.3):
-            want = texture._filtered_arrays(mip, fp, bias)
+            want = texture.filtered_arrays(mip, fp, bias)
             for _ in range(3):  # three channels: the second and third read from the kept tap table
-                got = texture._filtered(mip, fp, bias)
+                got = texture.filtered_read(mip, fp, bias)
                 assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
                 np.testing.assert_array_equal(got, want)
-        assert np.isnan(texture._filtered(mip, fp, LOD_BIAS)).any() == (outside == "constant")
+        assert np.isnan(texture.filtered_read(mip, fp, LOD_BIAS)).any() == (outside == "constant")
         # another frame's raster on the same grid: the kept taps read its texels
         other = mipmap(raster[::-1] * 2.0, grid, outside=outside, value=mip.value, period=mip.period)
-        np.testing.assert_array_equal(texture._filtered(other, fp, LOD_BIAS),
-                                      texture._filtered_arrays(other, fp, LOD_BIAS))
+        np.testing.assert_array_equal(texture.filtered_read(other, fp, LOD_BIAS),
+                                      texture.filtered_arrays(other, fp, LOD_BIAS))
 
 
 def test_a_still_cameras_tap_table_is_kept_from_the_second_read():
-    """texture._filtered keeps where a still camera's taps fall (kept.kept_at) only once the same
+    """texture.filtered_read keeps where a still camera's taps fall (kept.kept_at) only once the same
     footprints and levels are read a second time, and reads from it afterwards."""
     rng = np.random.default_rng(5)
     grid = Grid((0.0, 1.0), 0.05, (20, 20))
     mip = mipmap(rng.random((20, 20, 3)).astype(np.float32), grid, outside="periodic", period=(1.0, 1.0))
     fp = footprints(rng.uniform(0, 1, 50), rng.uniform(0, 1, 50), rng.normal(0, 0.05, (50, 2, 2)))
     texture._TAPS.clear()
-    texture._filtered(mip, fp, LOD_BIAS)
+    texture.filtered_read(mip, fp, LOD_BIAS)
     assert [entry[1] for entry in texture._TAPS.values()] == [None]
-    texture._filtered(mip, fp, LOD_BIAS)
+    texture.filtered_read(mip, fp, LOD_BIAS)
     (start, first, fc, fr), = [entry[1] for entry in texture._TAPS.values()]
     assert start[0] == 0 and start[-1] == len(first) == len(fc) == len(fr) >= 50
 
 
 def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
-    """camera._filtered_chain reads the footprints whose read of the fine map is not finite from the
+    """camera.filtered_chain reads the footprints whose read of the fine map is not finite from the
     coarse one: a still camera's are the same each frame, kept as the same arrays (camera._SUBSETS)
-    so that texture._filtered keeps their taps as well; every frame's read has the array version's bits."""
+    so that texture.filtered_read keeps their taps as well; every frame's read has the array version's bits."""
     rng = np.random.default_rng(8)
     fine = mipmap(rng.random((24, 30, 3)).astype(np.float32), Grid((-0.6, -0.4), 0.04, (24, 30)),
                   outside="constant", value=np.full(3, np.nan))
@@ -345,15 +356,15 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
     n = 2000
     fp = footprints(rng.uniform(-1.4, 1.4, n), rng.uniform(-1.4, 1.4, n),
                     rng.normal(0.0, 1.0, (n, 2, 2)) * np.exp(rng.uniform(np.log(0.005), np.log(0.5), n))[:, None, None])
-    want = texture._filtered_arrays(fine, fp, LOD_BIAS)
+    want = texture.filtered_arrays(fine, fp, LOD_BIAS)
     missing = np.flatnonzero(~np.isfinite(want).all(axis=0))
     subset = texture.Footprints(*(a[missing] for a in (fp.x, fp.y, fp.major, fp.minor, fp.ex, fp.ey)))
-    want[:, missing] = texture._filtered_arrays(coarse, subset, LOD_BIAS)
+    want[:, missing] = texture.filtered_arrays(coarse, subset, LOD_BIAS)
     assert 200 < len(missing) < n - 200
     camera._SUBSETS.clear()
     texture._TAPS.clear()
     for _ in range(4):  # the subset kept from the second frame, its taps from the fourth
-        np.testing.assert_array_equal(camera._filtered_chain((fine, coarse), fp), want)
+        np.testing.assert_array_equal(camera.filtered_chain((fine, coarse), fp), want)
     tables = [entry[1] for entry in texture._TAPS.values()]
     assert len(tables) == 2 and all(table is not None for table in tables)  # the fine read's and the subset's
 
@@ -365,8 +376,8 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
 ])
 def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
     """camera._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
-    and _footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
-    rows, part = camera._ground_rows(view)
+    and footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
+    rows, part = camera.rows_seeing_ground(view)
     got = camera._row_footprints(view, rows, part)
     want = camera._row_footprints_arrays(view, rows, part)
     assert len(got) == len(want) == 7 and len(got[0]) == len(rows) * view.width > 0
@@ -387,7 +398,7 @@ def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
 
 
 def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
-    """texture._filter_choice (numba) against _filter_choice_arrays (numpy), the reference it
+    """texture.filter_choice (numba) against filter_choice_arrays (numpy), the reference it
     replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
     long, and zero, NaN and infinite widths."""
     rng = np.random.default_rng(5)
@@ -398,8 +409,8 @@ def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
     major[:100], minor[100:200], minor[200:300] = 0.0, 0.0, np.inf
     major[300:400], minor[400:500], major[500:600] = np.nan, np.nan, np.inf
     for bias in (LOD_BIAS, 0.0, 0.7):
-        got = texture._filter_choice(mip, bias, major, minor)
-        want = texture._filter_choice_arrays(mip, bias, major.copy(), minor.copy())
+        got = texture.filter_choice(mip, bias, major, minor)
+        want = texture.filter_choice_arrays(mip, bias, major.copy(), minor.copy())
         for g, w in zip(got, want):
             assert g.dtype == w.dtype
             np.testing.assert_array_equal(g, w)
@@ -419,7 +430,7 @@ def test_ground_view_reads_the_albedo_once_per_view():
 
         def sample(self, fp, *, lod_bias):
             Counting.calls += 1
-            return texture._filtered(tile, fp, lod_bias)
+            return texture.filtered_read(tile, fp, lod_bias)
 
     albedo = Counting()
     view = Camera.look_at((0.0, 0.0, 1.7), (0.0, 3.0, 0.0), vertical_fov=1.0, width=48, height=32)
@@ -492,7 +503,7 @@ def test_straight_down_view_reproduces_the_raster():
 
 def test_ground_jacobian_matches_finite_differences():
     camera = Camera((1.0, -2.0, 1.7), 0.7, np.radians(-25), np.radians(50), 64, 48)
-    x, y, jac, distance, fraction = ground_hits(camera)
+    x, _y, jac, distance, fraction = ground_hits(camera)
     v, u = np.mgrid[0:48, 0:64] + 0.5
 
     def hit(uu, vv):
@@ -634,7 +645,7 @@ def test_procedural_sky_matches_its_model():
 
 
 def reference_footprint_axes(dxdu, dxdv, dydu, dydv):
-    """The numpy arithmetic that texture._footprint_axes compiles (its former body)."""
+    """The numpy arithmetic that texture.footprint_axes compiles (its former body)."""
     a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
     b = dxdu * dydu + dxdv * dydv
     c = dydu * dydu + dydv * dydv
@@ -679,7 +690,7 @@ def test_footprint_axes_are_the_numpy_arithmetic_bit_for_bit():
     entries[:, :100] = 0.0  # a point
     entries[:, 100:200] = [[1.0], [0.0], [0.0], [1.0]]  # round
     entries[:, 200:300] *= 1e160  # moments overflow
-    got = texture._footprint_axes(*entries)
+    got = texture.footprint_axes(*entries)
     with np.errstate(all="ignore"):
         want = reference_footprint_axes(*(e.copy() for e in entries))
     for g, w in zip(got, want):

@@ -1,14 +1,30 @@
 import numpy as np
 import pytest
-
-from pipeline.canopy import occlusion_on_lattice, tile_on_lattice, transmittance_from_image
-from pipeline.grove_geometry import (FlutterParams, GroveParams, Leaves, Shapes, Wood, grove_bounds, grow_grove,
-                                     layer_index, leaves_at, project, shapes_bounds)
-from pipeline.rasteriser import (_capsule_pieces, _ellipses, _translates, coverage_fragments, grove_mask,
-                                 rasterize_transmittance)
-from pipeline.geometry import Grid
-
 from reference import image_transmittance
+
+from pipeline.canopy.grove import (
+    FlutterParams,
+    GroveParams,
+    Leaves,
+    Shapes,
+    Wood,
+    grove_bounds,
+    grow_grove,
+    layer_index,
+    leaves_at,
+    project,
+    shapes_bounds,
+)
+from pipeline.canopy.masks import occlusion_on_lattice, tile_on_lattice, transmittance_from_image
+from pipeline.canopy.rasteriser import (
+    _capsule_pieces,
+    _ellipses,
+    _translates,
+    coverage_fragments,
+    grove_mask,
+    rasterize_transmittance,
+)
+from pipeline.core.geometry import Grid
 
 
 def supersampled(f, grid, n=64):
@@ -113,7 +129,7 @@ def box_pixels(shapes, grid):
     half = np.sqrt(shapes.axis_a**2 + shapes.axis_b**2)
     low = np.concatenate([shapes.center - half, np.minimum(shapes.start, shapes.end) - shapes.radius[:, None]])
     high = np.concatenate([shapes.center + half, np.maximum(shapes.start, shapes.end) + shapes.radius[:, None]])
-    x0, y0, x1, y1 = grid.extent
+    x0, _y0, _x1, y1 = grid.extent
     out = np.zeros(grid.shape, bool)
     for (xa, ya), (xb, yb) in zip(low, high):
         c0, c1 = int(np.floor((xa - x0) / grid.pixel)), int(np.ceil((xb - x0) / grid.pixel))

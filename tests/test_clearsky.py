@@ -4,9 +4,14 @@ Preetham's shape and colour."""
 import numpy as np
 import pytest
 
-from pipeline.clearsky import (CIE_TYPES, cie_relative_luminance, preetham_relative, relative_sky,
-                               zenith_chromaticity)
-from pipeline.colour import REC709_LUMINANCE
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky.clearsky import (
+    CIE_TYPES,
+    cie_relative_luminance,
+    preetham_relative,
+    relative_sky,
+    zenith_chromaticity,
+)
 
 # ISO 15469:2004 / CIE S 011/E:2003, Table 1 (gradation groups I-VI: a, b), Table 2 (indicatrix
 # groups 1-6: c, d, e) and Table 3 (type: gradation, indicatrix), typed in from the standard.
@@ -83,13 +88,13 @@ CIE_TABLE_XY = {5003.0: (0.34567, 0.35850), 6504.0: (0.31271, 0.32902), 7504.0: 
 
 @pytest.mark.parametrize("cct", sorted(CIE_TABLE_XY))
 def test_daylight_chromaticity_matches_the_cie_table(cct):
-    from pipeline.clearsky import daylight_chromaticity
+    from pipeline.sky.clearsky import daylight_chromaticity
 
     assert np.allclose(daylight_chromaticity(cct), CIE_TABLE_XY[cct], atol=2e-4)
 
 
 def _xy(rgb):
-    from pipeline.colour import XYZ_TO_REC709
+    from pipeline.core.colour import XYZ_TO_REC709
 
     X, Y, Z = np.linalg.solve(XYZ_TO_REC709, np.asarray(rgb, dtype=np.float64))
     return np.array([X, Y]) / (X + Y + Z)
@@ -105,8 +110,8 @@ def _distance_to_segment(p, a, b):
 def test_overcast_and_intermediate_skies_are_d65_to_d75(cie_type):
     """The whole sky's light (its horizontal irradiance, sun left out) lies within 0.01 in xy of the
     segment from D65 to D75 of the CIE table; the clear type 12 stays bluer, Preetham's."""
-    from pipeline.sky import ProceduralSky
-    from pipeline.sun_disc import SunDisc
+    from pipeline.sky.procedural import ProceduralSky
+    from pipeline.sky.sun_disc import SunDisc
 
     for elevation in (10.0, 40.0):
         sky = ProceduralSky(3.0, SunDisc(np.radians(200.0), np.radians(elevation)), cie_type=cie_type)

@@ -2,20 +2,19 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 from datetime import timedelta
+from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-
-from pipeline import io
-from pipeline.cache import Cache
-from pipeline.cli import main
-from pipeline.cli_runs import _Progress
-
 from scenes import assert_refused, base_config, set_key, write_config
 from test_run import TINY
+
+from pipeline.cache.store import Cache
+from pipeline.cli.main import main
+from pipeline.cli.runs import _Progress
+from pipeline.core import io
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -446,8 +445,8 @@ def test_cache_list_into_a_closed_pipe_and_a_missing_cache_folder(tmp_path):
 def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
     from dataclasses import replace as swap
 
-    from pipeline.cli_runs import _eclipse_lines
-    from pipeline.resolve import load
+    from pipeline.cli.runs import _eclipse_lines
+    from pipeline.stages.resolve import load
 
     config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
     lines = _eclipse_lines(config)
@@ -462,7 +461,7 @@ def test_check_tells_the_eclipse_at_the_site_and_a_span_that_misses_it():
 def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
     """The first item of a stage carries the workers' start (and after an install the loops'
     compiling): 20 s for it, then one a second, 8 to go, is 8 s left, not 80."""
-    import pipeline.cli_runs as cli_runs
+    import pipeline.cli.runs as cli_runs
 
     clock = iter([0.0, 20.0, 21.0])
     monkeypatch.setattr(cli_runs.time, "monotonic", lambda: next(clock))
@@ -477,7 +476,7 @@ def test_time_left_leaves_out_the_slow_first_item(monkeypatch):
 def test_log_lines_mark_each_quarter_of_a_short_stage(monkeypatch):
     """Off a terminal a 10 s preview of 120 frames (one every 1/12 s) says each quarter, not only
     its start and end; a quarter passed within QUARTER_GAP of the last line waits for the next."""
-    import pipeline.cli_runs as cli_runs
+    import pipeline.cli.runs as cli_runs
 
     now = [0.0]
     monkeypatch.setattr(cli_runs.time, "monotonic", lambda: now[0])

@@ -2,12 +2,18 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import _array_loops, _tiling, cloud_noise, clouds, cores
-from pipeline.albedo import SECOND_KEY, unit_hash, vertex_keys
-from pipeline.cloud_noise import _knots, fractal_noise
-from pipeline.cloud_transfer import (delta_eddington_transmittance, single_scattering_flux_transmittance,
-                                     two_stream_diffuse_transmittance)
-from pipeline.clouds import CloudLayer
+from pipeline.core import cores
+from pipeline.kernels import arrays as _array_loops
+from pipeline.kernels import tiling as _tiling
+from pipeline.sky import cloud_noise, clouds
+from pipeline.sky.cloud_noise import coverage_knots, fractal_noise
+from pipeline.sky.cloud_transfer import (
+    delta_eddington_transmittance,
+    single_scattering_flux_transmittance,
+    two_stream_diffuse_transmittance,
+)
+from pipeline.sky.clouds import CloudLayer
+from pipeline.texture.albedo import SECOND_KEY, unit_hash, vertex_keys
 
 SUN = np.array([80.0, 78.0, 75.0])  # normal irradiance above the cloud [klx]
 SKY = np.array([14.0, 17.0, 22.0])  # clear-sky horizontal irradiance [klx]
@@ -112,7 +118,7 @@ def test_full_cover_is_a_uniform_overcast():
     cl = layer(cover=1.0, thickness=12.0)
     s = sky_points(32)
     np.testing.assert_array_equal(cl.optical_depth(s, 5.0), 12.0)
-    cos_theta = 1.0 / np.linalg.norm(np.concatenate([s, np.ones(s.shape[:-1] + (1,))], -1), axis=-1)
+    cos_theta = 1.0 / np.linalg.norm(np.concatenate([s, np.ones((*s.shape[:-1], 1))], -1), axis=-1)
     np.testing.assert_allclose(cl.transmittance(s, 5.0), np.exp(-12.0 / cos_theta), rtol=1e-12)
     rad = cl.radiance(s, 5.0, sun_s=direction_at(40, 200), sun_irradiance=SUN, sky_irradiance=SKY)
     assert (rad > 0).all()
@@ -127,7 +133,7 @@ def test_seed_determinism():
     s = sky_points(64)
     a = layer(seed=11).optical_depth(s, 4.0)
     cloud_noise._noise.cache_clear()
-    cloud_noise._knots.cache_clear()
+    cloud_noise.coverage_knots.cache_clear()
     b = layer(seed=11).optical_depth(s, 4.0)
     np.testing.assert_array_equal(a, b)
     c = layer(seed=12).optical_depth(s, 4.0)
@@ -367,7 +373,7 @@ def test_a_footprints_coverage_is_the_mean_coverage_within_it(texels_across):
     box = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2)
     reference = layer.coverage(s[:, None, :] + box[None], 0.0).mean(axis=1)
     filtered = layer.coverage(s, 0.0, footprint=width)
-    values, levels = _knots(*layer._noise_key(), layer.cover, layer.softness)
+    values, levels = coverage_knots(*layer._noise_key(), layer.cover, layer.softness)
     hard = np.interp(layer.field(s, 0.0, footprint=width), values, levels)
     rms = np.sqrt(np.mean((filtered - reference) ** 2))
     assert rms < 0.11
@@ -581,17 +587,17 @@ def test_the_compiled_mean_coverage_is_the_array_quadrature_to_the_bit(threads, 
     hit exactly, NaN and zero spreads; in one thread or three (cores.in_shares)."""
     monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)
     with cores.loop_threads(threads):
-        from pipeline.cloud_noise import _knots, _lost_variance
+        from pipeline.sky.cloud_noise import coverage_knots, lost_variance
 
         rng = np.random.default_rng(8)
         cl = layer(texels=64, seed=2)
-        values, levels = _knots(*cl._noise_key(), cl.cover, cl.softness)
+        values, levels = coverage_knots(*cl._noise_key(), cl.cover, cl.softness)
         s = rng.normal(0, 1, (3000, 2))
         footprint = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (3000, 2)))
         footprint[:50] = 0.0
         field = cl.field(s, 17.0, footprint)
         along, across = cl._widths((3000,), footprint)
-        spread = np.sqrt(_lost_variance(cl._noise_key(), along, across))
+        spread = np.sqrt(lost_variance(cl._noise_key(), along, across))
         nodes, weights = np.polynomial.hermite_e.hermegauss(8)
         want = np.zeros(3000)
         for z, w in zip(nodes, weights / weights.sum()):

@@ -2,11 +2,13 @@
 
 import numpy as np
 import pytest
+import reference
 from scipy import integrate
 
-from pipeline import composite
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.composite import display, white_balance
+from pipeline.camera import composite
+from pipeline.camera.composite import display, white_balance
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky import scattering
 
 
 @pytest.fixture
@@ -52,13 +54,13 @@ def test_sun_fraction_zero_and_one_give_the_two_passes(images):
 
 def test_henyey_greenstein_is_normalised_and_forward():
     for g in (0.0, 0.6, 0.85):
-        total, _ = integrate.quad(lambda mu: 2 * np.pi * composite.henyey_greenstein(mu, g), -1, 1)
+        total, _ = integrate.quad(lambda mu: 2 * np.pi * scattering.henyey_greenstein(mu, g), -1, 1)
         assert total == pytest.approx(1.0, rel=1e-6)
-    assert composite.henyey_greenstein(1.0, 0.6) > 10 * composite.henyey_greenstein(-1.0, 0.6)
+    assert scattering.henyey_greenstein(1.0, 0.6) > 10 * scattering.henyey_greenstein(-1.0, 0.6)
     mu = np.linspace(-1.0, 1.0, 9)
     exact = (1 - 0.6**2) / (4 * np.pi * (1 + 0.6**2 - 2 * 0.6 * mu) ** 1.5)
-    np.testing.assert_allclose(composite.henyey_greenstein(mu, 0.6), exact, rtol=1e-14)
-    single = composite.henyey_greenstein(mu.astype(np.float32), 0.6)  # float32 in, float32 out (clouds)
+    np.testing.assert_allclose(scattering.henyey_greenstein(mu, 0.6), exact, rtol=1e-14)
+    single = scattering.henyey_greenstein(mu.astype(np.float32), 0.6)  # float32 in, float32 out (clouds)
     assert single.dtype == np.float32
     np.testing.assert_allclose(single, exact, rtol=1e-6)
 
@@ -67,12 +69,12 @@ def test_aerial_perspective_follows_beer_lambert_and_spares_the_sky():
     distance = np.array([[0.0, 1000.0, np.inf]])
     view = np.array([[[0.0, 1.0, 0.0]] * 3])
     sun_dir = np.array([0.0, 0.0, 1.0])
-    t, sky_haze, sun_haze = composite.aerial_perspective(
+    t, sky_haze, sun_haze = reference.aerial_perspective(
         distance, view, length=2000.0, sun_direction=sun_dir, sun_irradiance=np.array([100.0] * 3),
         sky_irradiance=np.array([20.0] * 3), albedo=0.9, g=0.6)
     np.testing.assert_allclose(t[0], [1.0, np.exp(-0.5), 1.0], rtol=1e-6)
     veil = 1 - np.exp(-0.5)
-    np.testing.assert_allclose(sun_haze[0, 1], veil * 0.9 * composite.henyey_greenstein(0.0, 0.6) * 100, rtol=1e-5)
+    np.testing.assert_allclose(sun_haze[0, 1], veil * 0.9 * scattering.henyey_greenstein(0.0, 0.6) * 100, rtol=1e-5)
     np.testing.assert_allclose(sky_haze[0, 1], veil * 0.9 * 20 / (2 * np.pi), rtol=1e-5)
     assert not sun_haze[0, [0, 2]].any() and not sky_haze[0, [0, 2]].any()
 

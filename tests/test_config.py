@@ -5,15 +5,15 @@ the names a config may give."""
 from pathlib import Path
 
 import pytest
-
-from pipeline import clearsky, sky
-from pipeline.config import load_config, parse_config
-from pipeline.errors import ConfigError
-from pipeline.plan import plan_run
-from pipeline.resolve import resolve
-from pipeline.vocabulary import CIE_TYPE_RANGE, SKY_MODELS
-
 from scenes import base_config, set_key, write_config, write_inputs
+
+from pipeline.config.parse import load_config, parse_config
+from pipeline.config.vocabulary import CIE_TYPE_RANGE, SKY_MODELS
+from pipeline.core.errors import ConfigError
+from pipeline.sky import base as sky
+from pipeline.sky import clearsky
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -180,8 +180,8 @@ def test_a_sky_model_is_one_module_and_one_registry_line(tmp_path):
     "Models plug in"): its key is read and checked by the registry's entry, another model's key
     is refused naming its owners, and its frame is the uniform sky's of the same radiance, to
     the bit."""
-    from pipeline.cache import Cache
-    from pipeline.frame import render_frame
+    from pipeline.cache.store import Cache
+    from pipeline.stages.frame import render_frame
 
     write_inputs(tmp_path)
     sky_of = {"camera": {"resolution": [32, 18]}}

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline import io
-from pipeline.cli import main
-from pipeline.config import load_config
-from pipeline.preview import PREVIEW_CYCLE, preview
+from pipeline.cli.main import main
+from pipeline.config.parse import load_config
+from pipeline.config.preview import PREVIEW_CYCLE, preview
+from pipeline.core import io
 
 CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
 

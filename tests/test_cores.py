@@ -5,7 +5,7 @@ import threading
 import numpy as np
 import pytest
 
-from pipeline import cores
+from pipeline.core import cores
 
 
 def _shares_of(count, threads, monkeypatch, smallest=10):

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
-from pipeline import cache, io
-from pipeline.cycle import config_item_keys, cycle_phase, record_config_items, recorded_configs
-from pipeline.foregrounds import cut_to_trees, tree_box
-from pipeline.ground import render_ground
-
 from scenes import plan_of, tiny_grove
+
+from pipeline.cache import store as cache
+from pipeline.core import io
+from pipeline.foreground.models import cut_to_trees, tree_box
+from pipeline.stages.cycle import config_item_keys, cycle_phase, record_config_items, recorded_configs
+from pipeline.stages.ground import render_ground
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -101,7 +101,7 @@ def test_a_config_recorded_twice_keeps_its_longest_cycle(tmp_path):
 _COMPILING = """
 import json, os, sys, time
 sys.path.insert(0, sys.argv[1])
-from pipeline.cores import compiled_once
+from pipeline.core.cores import compiled_once
 import loops
 open(os.path.join(sys.argv[1], "ready-" + sys.argv[2]), "w").close()
 while len([n for n in os.listdir(sys.argv[1]) if n.startswith("ready-")]) < 2:  # both start at once

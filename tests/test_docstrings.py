@@ -11,8 +11,9 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 
-MODULES_WITH_ALL = sorted(path.stem for path in PACKAGE.glob("*.py") if path.stem != "__init__")
-"""Every module of pipeline/ names its public names."""
+MODULES_WITH_ALL = sorted(path.relative_to(PACKAGE).with_suffix("").as_posix() for path in PACKAGE.rglob("*.py")
+                          if path.stem not in ("__init__", "__main__"))
+"""Every module of pipeline/ and its subpackages (as ``sky/eclipse``) names its public names."""
 
 SELF = {"self", "cls"}
 
@@ -109,7 +110,7 @@ def problems(name: str) -> list[str]:
     return found
 
 
-MODULES = sorted(path.stem for path in PACKAGE.glob("*.py") if path.stem != "__init__")
+MODULES = MODULES_WITH_ALL
 DOCUMENTED = [name for name in MODULES if all_names(tree_of(name)) is not None]
 
 

@@ -2,23 +2,23 @@
 references: the ephemeris at a displaced site, quadrature of the corona's profile, the
 published totality sky (docs/method.md, "The eclipse sky")."""
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from functools import lru_cache
 
 import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import eclipse, ephemeris
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.geometry import direction_vector
-from pipeline.equirect import EquirectSky
-from pipeline.sky import ProceduralSky
-from pipeline.sun_disc import MoonDisc, SunDisc
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.core.geometry import direction_vector
+from pipeline.sky import eclipse, ephemeris
+from pipeline.sky.equirect import EquirectSky
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import MoonDisc, SunDisc
 
 DALLAS = ephemeris.Site.from_degrees(32.78, -96.80, 140.0)
-C2 = datetime(2024, 4, 8, 18, 40, 37, 848000, tzinfo=timezone.utc)  # contact_times at DALLAS
-C3 = datetime(2024, 4, 8, 18, 44, 31, 680000, tzinfo=timezone.utc)
+C2 = datetime(2024, 4, 8, 18, 40, 37, 848000, tzinfo=UTC)  # contact_times at DALLAS
+C3 = datetime(2024, 4, 8, 18, 44, 31, 680000, tzinfo=UTC)
 Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 
 
@@ -89,12 +89,12 @@ def test_the_corona_in_the_raster_and_the_equirect_keeps_its_light():
     assert sky._deep == 1.0 and sky.sun_fraction() == 0.0
     expected = sky.corona_irradiance  # as drawn: out to CORONA_REACH solar radii, with no edge
     # cells of the sky raster near the sun, without the sky: the corona alone
-    from pipeline.geometry import sky_grid
+    from pipeline.core.geometry import sky_grid
 
     q = 2e-3
     centre = sky.sun_point / q
     grid = sky_grid((int(-centre[1]) - 60, int(centre[0]) - 60), (120, 120), q)
-    idx, cells = sky._corona_cells(grid)
+    _idx, cells = sky._corona_cells(grid)
     assert cells.sum(axis=1) == pytest.approx(expected, rel=0.015)  # 8 x 8 samples of the steep inner corona
     image = np.zeros((256, 512, 3))
     sky._deposit(image, sky.corona_radiance, eclipse.CORONA_REACH * sky.sun.angular_radius,
@@ -125,7 +125,7 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
     # open ground (sun times S plus the sky) every 5 s through second and third contact; the
     # moon placed about the mid-totality sun at its true offset from the sun of the moment, so
     # that the clear sky's shape is computed once (the sun moves 0.03 degrees in 2 minutes)
-    from pipeline.geometry import offset_direction
+    from pipeline.core.geometry import offset_direction
 
     fixed = totality().sun
 
@@ -153,8 +153,8 @@ def test_the_totality_config_brings_totality_up_to_dusk_not_black():
     # day's is exposed at 2^stops
     from pathlib import Path
 
-    from pipeline import composite
-    from pipeline.resolve import load
+    from pipeline.camera import composite
+    from pipeline.stages.resolve import load
 
     config = load(Path(__file__).resolve().parents[1] / "configs" / "eclipse-2024-dallas-totality.yaml")
     auto = config.camera.auto_exposure
@@ -178,7 +178,7 @@ def test_the_crescents_are_reversed_after_third_contact():
     # the lit sliver of the sun (its kernel's centroid from the disc's centre) lies on the far
     # side 20 s after C3 from where it was 20 s before C2 (131 degrees round at Dallas, off the
     # centre line: the moon's path misses the sun's centre): the pinhole images turn round
-    from pipeline.sun_kernel import sun_kernel
+    from pipeline.sky.sun_kernel import sun_kernel
 
     def sliver(when):
         sky = dallas_sky(when)

@@ -3,15 +3,22 @@ the circle-overlap area against a dense grid, properties and bad input."""
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import numpy as np
 import pytest
 
-from pipeline.ephemeris import (BodyPosition, Site, contact_times, moon_offset_from_sun, obscured_fraction,
-                                separation, sun_and_moon)
+from pipeline.sky.ephemeris import (
+    BodyPosition,
+    Site,
+    contact_times,
+    moon_offset_from_sun,
+    obscured_fraction,
+    separation,
+    sun_and_moon,
+)
 
-UTC = timezone.utc
+UTC = UTC
 CDT = timezone(timedelta(hours=-5))
 
 DALLAS = Site.from_degrees(32.7767, -96.7970)
@@ -349,7 +356,7 @@ def test_site_from_degrees():
 
 
 def test_circumstances_of_a_total_an_annular_and_no_eclipse():
-    from pipeline.ephemeris import circumstances
+    from pipeline.sky.ephemeris import circumstances
 
     # Dallas 2024: the span holds only totality; the whole eclipse is found around it
     total = circumstances(DALLAS, utc(2024, 4, 8, 18, 41), utc(2024, 4, 8, 18, 42))

@@ -3,9 +3,9 @@ import threading
 
 import pytest
 
-from pipeline import errors
-from pipeline.errors import BadInput, ConfigError, RunError
-from pipeline.io import ImageError
+from pipeline.core import errors
+from pipeline.core.errors import BadInput, ConfigError, RunError
+from pipeline.core.io import ImageError
 
 EXAMPLES = [
     ConfigError("cfg.yaml:3: canopy.height", "must be above 0 (got -1)"),
@@ -56,7 +56,7 @@ def test_portable_sends_an_unpicklable_failure_back_as_a_worker_error():
 
 
 def test_portable_passes_picklable_failures_and_results_through():
-    with pytest.raises(ConfigError, match="sky.alpha"):
+    with pytest.raises(ConfigError, match=r"sky\.alpha"):
         errors.portable(lambda: (_ for _ in ()).throw(ConfigError("f: sky.alpha", "bad")))()
     with pytest.raises(OSError) as caught:
         errors.portable(open)("/nonexistent/folder/file")

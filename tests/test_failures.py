@@ -11,7 +11,6 @@ import sys
 import time
 
 import pytest
-
 from test_run import TINY, assert_same_files, contents, run_to_end, sunshade, write_config
 
 SHORT = {**TINY, "animation": {"frames": 3, "fps": 12}}

@@ -11,10 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline import composite, figures, io
-from pipeline.cli import main
-from pipeline.geometry import I0
-from pipeline.plan import plan_run
+from pipeline.camera import composite
+from pipeline.cli import figures
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.geometry import I0
+from pipeline.stages.plan import plan_run
 
 
 @pytest.fixture(scope="module")

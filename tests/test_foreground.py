@@ -1,14 +1,23 @@
 import numpy as np
 import pytest
 
-from pipeline import _raster, foreground, grove_geometry
-from pipeline.camera import Camera, project_points
-from pipeline.foreground import (LEAF_REFLECTANCE, LEAF_TRANSMITTANCE, leaf_sun_visibility, sky_exposure,
-                                 stem_visibility, sun_visibility, tree_passes)
-from pipeline.foreground_passes import ForegroundPasses, check_passes_size, read_passes
-from pipeline.grove_geometry import Leaves, Wood
-from pipeline.tree_detail import TIP_TAPER, taper_wood
-from pipeline.io import ImageError, write_exr
+from pipeline.camera.pinhole import Camera, project_points
+from pipeline.canopy import grove as grove_geometry
+from pipeline.canopy.grove import Leaves, Wood
+from pipeline.core.io import ImageError, write_exr
+from pipeline.foreground import trees as foreground
+from pipeline.foreground.passes import ForegroundPasses, check_passes_size, read_passes
+from pipeline.foreground.tree_detail import TIP_TAPER, taper_wood
+from pipeline.foreground.trees import (
+    LEAF_REFLECTANCE,
+    LEAF_TRANSMITTANCE,
+    leaf_sun_visibility,
+    sky_exposure,
+    stem_visibility,
+    sun_visibility,
+    tree_passes,
+)
+from pipeline.kernels import raster as _raster
 
 E_SUN = np.array([90.0, 85.0, 80.0])  # [klx]
 E_SKY = np.array([10.0, 12.0, 16.0])  # [klx]
@@ -44,7 +53,7 @@ def test_a_disc_facing_the_camera_covers_its_projected_area_where_projected():
     # a plane parallel to the image projects exactly: a circle of radius focal r / depth
     expected = np.pi * (camera.focal * radius / center[1]) ** 2
     assert passes.alpha.sum() == pytest.approx(expected, rel=0.01)
-    u, v, depth = project_points(camera, center)
+    u, v, _depth = project_points(camera, center)
     rows, cols = np.mgrid[0:60, 0:80] + 0.5
     total = passes.alpha.sum()
     assert np.sum(passes.alpha * cols) / total == pytest.approx(u, abs=0.02)
@@ -247,7 +256,7 @@ def test_read_passes_round_trip_and_errors(tmp_path):
     assert np.array_equal(passes.sun, sun) and np.array_equal(passes.alpha, alpha)
     assert np.array_equal(passes.sky, np.repeat(sky, 3, axis=2))
     check_passes_size(passes, north_camera(9, 6))
-    with pytest.raises(ValueError, match="9 x 6 .* 8 x 6"):
+    with pytest.raises(ValueError, match=r"9 x 6 .* 8 x 6"):
         check_passes_size(passes, north_camera(8, 6))
     write_exr(tmp_path / "grey_alpha.exr", alpha[..., None])
     assert np.array_equal(read_passes(tmp_path / "sun.exr", tmp_path / "sky.exr",

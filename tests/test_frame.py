@@ -3,12 +3,12 @@ import sys
 
 import numpy as np
 import pytest
-
-from pipeline import cache, io
-from pipeline.frame import _apply_haze, render_frame
-from pipeline.ground import blend_band
-
 from scenes import ROOT, plan_of, tiny_grove
+
+from pipeline.cache import store as cache
+from pipeline.core import io
+from pipeline.stages.frame import _apply_haze, render_frame
+from pipeline.stages.ground import blend_band
 
 
 def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
@@ -38,8 +38,9 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
     code = (
         "import sys; sys.path.insert(0, 'tests')\n"
         "from pathlib import Path\n"
-        "from pipeline import _array_loops, _filter, _tiling, cache\n"
-        "from pipeline.frame import compile_loops, render_frame\n"
+        "from pipeline.cache import store as cache\n"
+        "from pipeline.kernels import arrays as _array_loops, filter as _filter, tiling as _tiling\n"
+        "from pipeline.stages.frame import compile_loops, render_frame\n"
         "from scenes import plan_of, tiny_grove\n"
         "folder = Path(sys.argv[1])\n"
         "plan = plan_of(tiny_grove(**{'sky.clouds': {'cover': 0.4, 'scale': 300.0}}), folder)\n"

@@ -8,17 +8,20 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline import camera, composite, ephemeris, io
-from pipeline.cache import Cache
-from pipeline.cli import main
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.frame import render_frame
-from pipeline.framing import framing_warnings, seen_ground
-from pipeline.geometry import sky_plane_from_direction
-from pipeline.lighting import auto_exposures, meter, reference_lighting, with_exposures
-from pipeline.plan import plan_run
-from pipeline.scene import scene_at
-from pipeline.resolve import load
+from pipeline.cache.store import Cache
+from pipeline.camera import composite
+from pipeline.camera import pinhole as camera
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.core.geometry import sky_plane_from_direction
+from pipeline.sky import ephemeris
+from pipeline.stages.frame import render_frame
+from pipeline.stages.framing import framing_warnings, seen_ground
+from pipeline.stages.lighting import auto_exposures, meter, reference_lighting, with_exposures
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
+from pipeline.stages.scene import scene_at
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -321,8 +324,8 @@ def test_a_span_from_sunset_into_civil_twilight_renders_every_frame(tmp_path):
     renders; the open ground's light, the ground raster's total, is the clear sky's global
     horizontal illuminance of ``daylight.sky_daylight`` (diffuse + direct normal x sin(h), the
     USNO curve below the horizon), and the ground's light falls monotonically with no NaN."""
-    from pipeline import daylight
-    from pipeline.ground import render_ground
+    from pipeline.sky import daylight
+    from pipeline.stages.ground import render_ground
 
     config = site_config(40.42, -3.70, "2026-08-13T18:55:00Z")
     config["sky"]["time"]["end"] = "2026-08-13T19:40:00Z"
@@ -386,7 +389,7 @@ def test_the_nearest_ground_shows_the_dappled_shade_at_a_sun_of_30_degrees(tmp_p
 def test_a_sunset_is_not_marked_as_a_contact_in_the_light_curve():
     """S falls to 0 at sunset as at second contact: the report's contacts leave the set frames
     out, so a twilight run marks none, and an eclipse's are still found (hand-made tables)."""
-    from pipeline.report import contacts
+    from pipeline.run.report import contacts
 
     def table(rows):
         return [{"time_s": i / 24, "S": s, "sun_elevation_deg": h} for i, (s, h) in enumerate(rows)]

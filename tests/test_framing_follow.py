@@ -5,19 +5,21 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from pipeline import camera, cycle, io
-from pipeline.cache import Cache
-from pipeline.cache_keys import key_of
-from pipeline.cli import main
-from pipeline.frame import render_frame
-from pipeline.framing import crown_centre, seen_ground, shadow_extents
-from pipeline.geometry import sky_plane_from_direction
-from pipeline.ground import render_ground
-from pipeline.plan import plan_run
-from pipeline.resolve import load
-from pipeline.scene import shading_scenes
 from test_framing import site_config, write
+
+from pipeline.cache.keys import key_of
+from pipeline.cache.store import Cache
+from pipeline.camera import pinhole as camera
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.geometry import sky_plane_from_direction
+from pipeline.stages import cycle
+from pipeline.stages.frame import render_frame
+from pipeline.stages.framing import crown_centre, seen_ground, shadow_extents
+from pipeline.stages.ground import render_ground
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
+from pipeline.stages.scene import shading_scenes
 
 FEW_PIXELS = 3.0
 """The most a following camera lets the shadow's own points jump from one frame to the next. [pixel]"""

@@ -2,9 +2,21 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline.geometry import (I0, Grid, cos4_antiderivative, direction_from_sky_plane, direction_vector,
-                               fold, lattice_offset, normalized, projected_solid_angle, sky_grid, sky_offset,
-                               sky_plane_from_direction, tangent_axes)
+from pipeline.core.geometry import (
+    I0,
+    Grid,
+    cos4_antiderivative,
+    direction_from_sky_plane,
+    direction_vector,
+    fold,
+    lattice_offset,
+    normalized,
+    projected_solid_angle,
+    sky_grid,
+    sky_offset,
+    sky_plane_from_direction,
+    tangent_axes,
+)
 
 
 def test_grid_is_north_up_with_pixel_centres():
@@ -81,7 +93,7 @@ def test_fold_accumulates_modulo_the_period():
     e = rng.random((2, 11, 7))
     start, period = (-5, -3), (4, 3)
     folded = fold(e, start, period)
-    expected = np.zeros((2,) + period)
+    expected = np.zeros((2, *period))
     for r in range(11):
         for c in range(7):
             expected[:, (start[0] + r) % 4, (start[1] + c) % 3] += e[:, r, c]
@@ -121,7 +133,7 @@ def test_normalized_scales_to_unit_length_and_leaves_zero_alone():
 def test_length3_is_numpys_norm_to_the_bit():
     """length3 gives np.linalg.norm(v, axis=-1)'s bits on vectors of every scale (numpy sums the
     squares of a last axis of three left to right; summed the other way, many lengths differ)."""
-    from pipeline.geometry import length3
+    from pipeline.core.geometry import length3
 
     rng = np.random.default_rng(3)
     v = rng.standard_normal((400_000, 3)) * np.exp(rng.uniform(-30, 30, (400_000, 3)))

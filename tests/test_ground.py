@@ -1,11 +1,10 @@
 import numpy as np
 import pytest
-
-from pipeline import cache
-from pipeline.ground import render_ground
-from pipeline.shadow import resample_bilinear
-
 from scenes import plan_of, tiny_grove
+
+from pipeline.cache import store as cache
+from pipeline.ground.shadow import resample_bilinear
+from pipeline.stages.ground import render_ground
 
 
 @pytest.mark.parametrize("layout", ["isolated", "periodic"])

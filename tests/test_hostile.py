@@ -11,13 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
-from pipeline import io, paths
-from pipeline.cli import main
-from pipeline.config import MAX_FRAMES
-from pipeline.yamlsafe import MAX_CONFIG_BYTES, MAX_YAML_DEPTH
-
 from scenes import ROOT, base_config, write_config
+
+from pipeline.cli.main import main
+from pipeline.config.parse import MAX_FRAMES
+from pipeline.config.yamlsafe import MAX_CONFIG_BYTES, MAX_YAML_DEPTH
+from pipeline.core import io, paths
 
 MOST_MEMORY = 300e6
 """The most a refused input may take (issue 16). [byte]"""
@@ -217,7 +216,7 @@ def test_any_remaining_os_error_is_one_line_naming_the_path(inputs, capfd):
 
 
 def test_debug_shows_the_traceback_and_still_ends_with_the_line(inputs, capfd):
-    folder, out = inputs
+    folder, _out = inputs
     config = write_config(folder, {**base_config(), "animation": {"frames": 0}})
     assert main(["--debug", "check", str(config)]) == 2
     err = capfd.readouterr().err
@@ -238,7 +237,7 @@ def test_what_once_hung_or_took_gigabytes_ends_small(inputs, name):
     config = folder / "config.yaml"
     config.write_bytes(text)
     for command in (["check", config], ["render", config, "--output", out / "run", "--cache", out / "cache"]):
-        code, err, seconds, peak = run_peak(command, folder)
+        code, err, _seconds, peak = run_peak(command, folder)
         assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
         assert peak < MOST_MEMORY, f"{name}: {peak / 1e6:.0f} MB"
         assert tree(out) == []
@@ -268,7 +267,7 @@ def run_peak(args, cwd):
                                         ("c" * 300 + ".yaml", "bad config path: the name"),
                                         ("~no-such-user-x/c.yaml", "bad config path: cannot resolve")])
 def test_a_bad_config_path_is_one_line(inputs, capfd, name, words):
-    folder, out = inputs
+    _folder, out = inputs
     for argv in (["check", name], ["render", name, "--output", str(out / "run")]):
         assert main(argv) == 2
         err = capfd.readouterr().err.strip()
@@ -345,8 +344,9 @@ def test_degenerate_images_work_as_albedo_mask_and_sky(inputs, capfd, shape):
 
 
 def test_stochastic_tiling_of_one_texel_is_that_texel():
-    from pipeline import albedo, texture
-    from pipeline.geometry import Grid
+    from pipeline.core.geometry import Grid
+    from pipeline.texture import albedo
+    from pipeline.texture import mipmap as texture
 
     texel = np.array([[[0.2, 0.3, 0.4]]], np.float32)
     tiling = albedo.stochastic_tiling(texture.mipmap(texel, Grid((0.0, 1.0), 1.0, (1, 1)), outside="periodic",
@@ -383,7 +383,7 @@ def test_a_cache_that_cannot_be_written_is_found_before_any_work(inputs, capfd, 
 
 
 def test_an_image_bomb_ends_small(inputs):
-    folder, out = inputs
+    folder, _out = inputs
     a_png_header(folder / "mask.png", 30_000, 30_000)
     config = write_config(folder, base_config())
     code, err, _, peak = run_peak(["check", config], folder)
@@ -392,7 +392,7 @@ def test_an_image_bomb_ends_small(inputs):
 
 
 def test_a_long_message_is_cut_in_the_middle_with_its_length(inputs, capfd):
-    folder, out = inputs
+    folder, _out = inputs
     name = "/".join(["d" * 200] * 15) + "/leaves-%04d.png"  # 3000 characters in names the system allows
     config = write_config(folder, YAML_TEXT.replace("mask: mask.png", f"mask: {name}"))
     assert main(["check", str(config)]) == 2

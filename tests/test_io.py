@@ -4,7 +4,7 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 
-from pipeline import io
+from pipeline.core import io
 
 
 @pytest.mark.parametrize("half", [False, True])
@@ -55,7 +55,7 @@ def test_gif_round_trip(tmp_path):
 
 
 def test_bad_video_format_or_no_frames_writes_nothing(tmp_path):
-    with pytest.raises(io.ImageError, match="valid: .mp4, .gif"):
+    with pytest.raises(io.ImageError, match=r"valid: \.mp4, \.gif"):
         io.write_video(tmp_path / "v.avi", _frames(2, (8, 8)), fps=24)
     with pytest.raises(io.ImageError, match="no frames"):
         io.write_video(tmp_path / "v.mp4", [], fps=24)

@@ -8,13 +8,15 @@ import shutil
 import numpy as np
 import pytest
 import yaml
-
-from pipeline import cache, camera, io
-from pipeline.cli import main
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.frame import render_frame
-from pipeline.sun_kernel import sun_irradiance
 from scenes import assert_refused, config_of, plan_of, tiny_grove, write_config
+
+from pipeline.cache import store as cache
+from pipeline.camera import pinhole as camera
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.sky.sun_kernel import sun_irradiance
+from pipeline.stages.frame import render_frame
 
 ALL = ("sun", "sky", "alpha", "illuminance", "depth")
 

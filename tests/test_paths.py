@@ -2,7 +2,7 @@ import os
 
 import pytest
 
-from pipeline import paths
+from pipeline.core import paths
 
 
 @pytest.mark.parametrize("text,words", [

@@ -1,12 +1,10 @@
 import numpy as np
 import pytest
-
-from pipeline import ephemeris
-from pipeline.scene import scene_at
-
-from pipeline.geometry import offset_direction
-
 from scenes import config_of, tiny_grove
+
+from pipeline.core.geometry import offset_direction
+from pipeline.sky import ephemeris
+from pipeline.stages.scene import scene_at
 
 
 @pytest.mark.parametrize("azimuth,elevation", [(180.0, 60.0), (95.0, 20.0), (300.0, 75.0)])

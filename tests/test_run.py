@@ -15,15 +15,15 @@ import imageio.v2 as imageio
 import pytest
 import yaml
 
-from pipeline import io
-from pipeline.cache_store import CacheWarning
-from pipeline.cli import main
-from pipeline.errors import RunError
-from pipeline.plan import plan_run
-from pipeline.resolve import load
-from pipeline.cache import Cache
-from pipeline.run import _frame_task, _frames_here
-from pipeline.runfolder import frame_files, parse_frames
+from pipeline.cache.items import CacheWarning
+from pipeline.cache.store import Cache
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.errors import RunError
+from pipeline.run.folder import frame_files, parse_frames
+from pipeline.run.render import _frame_task, _frames_here
+from pipeline.stages.plan import plan_run
+from pipeline.stages.resolve import load
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,7 +90,7 @@ def reference(tmp_path_factory):
 def test_a_run_writes_every_frame_the_video_and_run_json(reference):
     config, files = reference
     names = [f"tiny.{i:04d}.{ext}" for i in range(8) for ext in ("exr", "png")]
-    assert sorted(files) == sorted(names + ["tiny.mp4"])
+    assert sorted(files) == sorted([*names, "tiny.mp4"])
     folder = config.parent / "run"
     record = json.loads((folder / "run.json").read_text())
     assert record["config_hash"] == io.read_attributes(folder / "tiny.0003.exr", ["sunshade:config_hash"])[
@@ -120,7 +120,7 @@ def test_the_video_made_while_rendering_is_the_one_made_from_the_pngs(reference,
 
 
 def test_a_second_run_has_nothing_to_do(reference, capsys):
-    config, files = reference
+    config, _files = reference
     folder = config.parent / "run"
     before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.suffix != ".json"}
     assert main(["render", str(config), "--output", str(folder), "--cache", str(config.parent / "cache")]) == 0
@@ -151,9 +151,9 @@ def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
     run_to_end("render", config, "--output", run, "--cache", cache, "--jobs", "1")  # no workers to start
     record = json.loads((run / "run.json").read_text())
     assert record["config"]["sky"]["turbidity"] > 1 and record["source_hash"] != record["config_hash"]
-    code = ("import sys; from pipeline.cli import main; main(sys.argv[1:]); "
+    code = ("import sys; from pipeline.cli.main import main; main(sys.argv[1:]); "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy', 'pvlib')"
-            " or m in ('pipeline.ephemeris', 'pipeline.plan')))")
+            " or m in ('pipeline.sky.ephemeris', 'pipeline.stages.plan')))")
     again = subprocess.run([sys.executable, "-c", code, "render", str(config), "--output", str(run),
                             "--cache", str(cache)], capture_output=True, text=True, check=True, cwd=ROOT).stdout
     assert "0 frames rendered, 2 already done" in again and again.strip().endswith("[]"), again
@@ -235,7 +235,7 @@ def test_a_changed_config_renders_again_only_what_it_changes(reference, tmp_path
 
 
 def test_preview_is_small_and_apart(reference, tmp_path):
-    config, files = reference
+    config, _files = reference
     run_to_end("render", config, "--preview", "--frames", "0-1", "--output", tmp_path / "run",
                "--cache", tmp_path / "cache", "--jobs", "1")
     image = io.read_image(tmp_path / "run" / "preview" / "tiny.0000.png")
@@ -257,7 +257,7 @@ def test_a_second_render_in_the_same_folder_is_refused(reference, tmp_path):
     run.mkdir()
     with filelock.FileLock(run / ".sunshade.lock"):
         process = sunshade("render", config, "--output", run, "--cache", tmp_path / "cache")
-        out, err = process.communicate(timeout=60)
+        _out, err = process.communicate(timeout=60)
     assert process.returncode == 2 and "another sunshade render" in err
     assert not list(run.glob("tiny.*"))
 
@@ -437,7 +437,7 @@ def test_flipped_bits_in_every_kind_of_cache_item_never_reach_a_frame(finished, 
 def test_an_index_that_is_a_folder_stops_the_run_before_any_work(reference, tmp_path, capsys):
     config, _ = reference
     (tmp_path / "run" / "index.json").mkdir(parents=True)
-    code, out, err = render_in_process(config, tmp_path / "run", tmp_path / "cache", capsys)
+    code, _out, err = render_in_process(config, tmp_path / "run", tmp_path / "cache", capsys)
     assert code == 2 and err.strip().endswith("index.json: is a folder, not a file")
     assert len(err.strip().splitlines()) == 1 and not list((tmp_path / "run").glob("tiny.*"))
 
@@ -451,7 +451,7 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     (tmp_path / "out").mkdir()
     (item,) = [i for i in items_of_frame(run, 4) if i.startswith("foreground")]
     flip(npy_of(cache, item, "sky.npy"), -17)
-    frame, _, entry, caught, codes = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
+    frame, _, entry, caught, _codes = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
     assert frame == 4 and [category for category, _ in caught] == [CacheWarning]
     assert f"cache item {item[:23]} was damaged (sky.npy: checksum mismatch" in caught[0][1]
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
@@ -504,7 +504,7 @@ def test_an_unreachable_scheduler_writes_nothing(tmp_path):
     config = write_config(tmp_path)
     process = sunshade("render", config, "--scheduler", "tcp://127.0.0.1:9", "--output",
                        tmp_path / "run", "--cache", tmp_path / "cache")
-    out, err = process.communicate(timeout=120)
+    _out, err = process.communicate(timeout=120)
     assert process.returncode == 2 and "cannot reach the scheduler" in err
     assert not (tmp_path / "run").exists()
 
@@ -528,7 +528,7 @@ def test_check_says_the_disk_a_run_needs(reference, capsys):
 
 HOLD = """
 import sys
-from pipeline.cache import Cache
+from pipeline.cache.store import Cache
 with Cache(sys.argv[1]).in_use(set(sys.argv[2:])):
     print("holding", flush=True)
     sys.stdin.read()
@@ -542,7 +542,7 @@ def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_ru
     one) holds in use, older though it is; the command says what went in one line."""
     import numpy as np
 
-    from pipeline.cycle import config_item_keys
+    from pipeline.stages.cycle import config_item_keys
 
     config, run, cache = write_config(tmp_path, {**TINY, "output": {"video": "none", "report": False}}), \
         tmp_path / "run", tmp_path / "cache"
@@ -579,7 +579,7 @@ def test_a_run_over_the_cache_budget_ends_under_it_keeping_its_own_and_a_live_ru
 def test_index_entries_encoded_once_give_the_same_bytes(tmp_path):
     """write_index with the texts of entries already encoded writes the bytes of encoding the whole
     index (json.dumps), and an entry replaced with its text removed is encoded again."""
-    from pipeline.frameindex import INDEX_FORMAT, write_index
+    from pipeline.run.index import INDEX_FORMAT, write_index
 
     index = {"3": {"files": {"exr": {"bytes": 10}}, "items": ["a", "b"]}, "0": {"record": {"light": 1.5e-7}}}
     encoded = {}

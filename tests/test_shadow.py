@@ -1,14 +1,13 @@
 import numpy as np
 import pytest
+from reference import direct_sum, equirect_patch, image_transmittance, monte_carlo_irradiance, monte_carlo_patch
 
-from pipeline import canopy, shadow
-from pipeline.geometry import Grid, fold, sky_grid, sky_offset
-from pipeline.equirect import EquirectSky
-from pipeline.sky import UniformSky
-from pipeline.sky_raster import SkyRaster
-
-from reference import (direct_sum, equirect_patch, image_transmittance, monte_carlo_irradiance,
-                       monte_carlo_patch)
+from pipeline.canopy import masks as canopy
+from pipeline.core.geometry import Grid, fold, sky_grid, sky_offset
+from pipeline.ground import shadow
+from pipeline.sky.base import UniformSky
+from pipeline.sky.equirect import EquirectSky
+from pipeline.sky.raster import SkyRaster
 
 
 def random_case(rng, channels):
@@ -45,7 +44,7 @@ def test_isolated_fft_equals_direct_sum(channels):
         g = shadow.ground_isolated(sky, shadow.occlusion_spectrum(1 - mask, plan), plan)
         reference = direct_sum(e, (-half, -half), mask, start, window.shape, 1.0)
         reference += outside[:, None, None]
-        assert g.dtype == np.float32 and g.shape == (channels,) + window.shape
+        assert g.dtype == np.float32 and g.shape == (channels, *window.shape)
         assert np.abs(g - reference).max() <= 1e-5 * reference.max()
 
 
@@ -137,7 +136,7 @@ def test_low_sun_in_the_east_throws_the_shadow_west_in_world_coordinates():
     assert abs(shadow_x - mc_x) < p
     assert abs(shadow_x - expected) < p
     # and north-south: a patch in the south throws the shadow north
-    image_s, az_s, zen_s = equirect_patch(1024, 512, azimuth=(np.radians(178), np.radians(182)),
+    image_s, _az_s, zen_s = equirect_patch(1024, 512, azimuth=(np.radians(178), np.radians(182)),
                                           zenith=(np.radians(43), np.radians(47)), radiance=100.0)
     window_ns = Grid.from_window((-4, -4, 4, 12), p)
     g = ground_from_hdri(image_s, mask, center=(0, 0), size=(2, 2), height=h, window=window_ns)
@@ -171,7 +170,7 @@ def test_leafy_canopy_matches_world_monte_carlo_within_one_percent(sky_name):
         mask[(xx - cx) ** 2 + (yy - cy) ** 2 < r * r] *= 0.3
     window = Grid.from_window((-20, -20, 20, 20), p)
     if sky_name == "uniform":
-        radiance = lambda az, zen: np.ones(np.shape(az) + (1,))  # noqa: E731
+        radiance = lambda az, zen: np.ones((*np.shape(az), 1))  # noqa: E731
         image = np.ones((256, 512, 3), np.float32)
     else:
         radiance = smooth_gradient_sky
@@ -202,7 +201,7 @@ def test_sky_rasterized_folded_equals_the_folded_raster(model):
         rng.random((64, 128, 3)).astype(np.float32))
     full = sky.raster(plan.sky)
     folded = sky.raster(plan.sky, fold_period=plan.tile_shape)
-    assert folded.weighted.shape == (3,) + plan.tile_shape
+    assert folded.weighted.shape == (3, *plan.tile_shape)
     expected = fold(full.weighted, sky_offset(plan.sky), plan.tile_shape)
     assert np.allclose(folded.weighted, expected, rtol=1e-5, atol=1e-7 * expected.max())
     assert folded.irradiance == pytest.approx(full.irradiance, rel=1e-6)
@@ -227,7 +226,7 @@ def test_sun_kernel_correlation_equals_direct_sum():
     for _ in range(4):
         start = (int(rng.integers(lo[0], hi[0] - 2)), int(rng.integers(lo[1], hi[1] - 2)))
         shape = (int(rng.integers(1, hi[0] - start[0] + 2)), int(rng.integers(1, hi[1] - start[1] + 2)))
-        e = rng.random((3,) + shape).astype(np.float32)
+        e = rng.random((3, *shape)).astype(np.float32)
         kernel = SkyRaster(sky_grid(start, shape, p / h), e, np.zeros(3))
         g = shadow.ground_sun(kernel, spectrum, plan)
         # the mask grid's pixel [0, 0] sits at lattice offset lo from the window's
@@ -284,10 +283,11 @@ def test_coarser_isolated_is_the_block_mean_mask_and_the_correlation_at_its_cell
     """The coarse spectrum is that of the occlusion averaged over blocks (to float rounding); with
     the sky summed over the same blocks, the ground at the coarse cells is the full-resolution
     ground there, smoothed over less than a block (a smooth sky: 0.1%)."""
-    import scipy.fft as sfft
     from dataclasses import replace
 
-    from pipeline.sky_raster import coarser
+    import scipy.fft as sfft
+
+    from pipeline.sky.raster import coarser
 
     rng = np.random.default_rng(1)
     window, canopy_grid = Grid((west, 5.0), 0.25, (42, 39)), Grid((-2.0, 2.0), 0.25, (16, 16))

@@ -5,20 +5,21 @@ import pytest
 import yaml
 from ladybug.skymodel import estimate_illuminance_from_irradiance
 from pvlib import atmosphere, clearsky
+from reference import equirect_patch, unit_vector
 from scipy.integrate import quad
 
-from pipeline import _array_loops, io
-from pipeline.cli import main
-from pipeline.colour import REC709_LUMINANCE
-from pipeline.constants import SUN_ANGULAR_RADIUS
-from pipeline.ephemeris import obscured_fraction
-from pipeline.geometry import I0, projected_solid_angle, sky_grid, sky_offset, sky_plane_from_direction
-from pipeline.equirect import EquirectSky, cut_sun
-from pipeline.sky import ProceduralSky, Sky, UniformSky
-from pipeline.sun_disc import MoonDisc, SunDisc, sun_disc_radiance
-from pipeline.sun_kernel import sun_irradiance, sun_kernel, unshadowed
-
-from reference import equirect_patch, unit_vector
+from pipeline.cli.main import main
+from pipeline.core import io
+from pipeline.core.colour import REC709_LUMINANCE
+from pipeline.core.constants import SUN_ANGULAR_RADIUS
+from pipeline.core.geometry import I0, projected_solid_angle, sky_grid, sky_offset, sky_plane_from_direction
+from pipeline.kernels import arrays as _array_loops
+from pipeline.sky.base import Sky, UniformSky
+from pipeline.sky.ephemeris import obscured_fraction
+from pipeline.sky.equirect import EquirectSky, cut_sun
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import MoonDisc, SunDisc, sun_disc_radiance
+from pipeline.sky.sun_kernel import sun_irradiance, sun_kernel, unshadowed
 
 
 def square(half, q):
@@ -74,7 +75,7 @@ def test_small_bright_sun_keeps_its_energy_and_direction():
 
 
 def test_rotation_turns_the_sky_towards_the_east():
-    image, az, zen = equirect_patch(256, 128, azimuth=(-0.05, 0.05), zenith=(0.5, 0.6), radiance=100.0)
+    image, _az, _zen = equirect_patch(256, 128, azimuth=(-0.05, 0.05), zenith=(0.5, 0.6), radiance=100.0)
     grid = square(200, 0.005)
     north = EquirectSky(image).raster(grid)
     turned = EquirectSky(image, rotation=np.radians(90.0)).raster(grid)
@@ -297,7 +298,7 @@ def test_procedural_raster_total_outside_and_folding():
     full = sky.sky_irradiance
     for grid in (square(300, np.tan(np.radians(70.0)) / 300), sky_grid((40, -80), (50, 70), 0.01)):
         raster = sky.raster(grid)
-        assert raster.weighted.dtype == np.float32 and raster.weighted.shape == (3,) + grid.shape
+        assert raster.weighted.dtype == np.float32 and raster.weighted.shape == (3, *grid.shape)
         assert raster.irradiance == pytest.approx(full, rel=1e-3)
         # outside, independently: a fine midpoint rule over the hemisphere, less the grid's rectangle
         theta = (np.arange(1500) + 0.5) * (np.pi / 2 / 1500)
@@ -347,7 +348,7 @@ class Overcast:
 
     def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, footprint=None):
         self.calls.append((np.array(sun_s), np.array(sun_irradiance), np.array(sky_irradiance), time))
-        return np.full(np.shape(s)[:-1] + (3,), self.glow)
+        return np.full((*np.shape(s)[:-1], 3), self.glow)
 
 
 class TwoCalls:
@@ -359,7 +360,7 @@ class TwoCalls:
 def test_clouds_sampled_once_by_shade_give_what_the_two_calls_give():
     """The sky samples a layer with ``shade`` once where the protocol's two calls sampled it
     twice: the same raster and radiance, to the bit, with and without a footprint."""
-    from pipeline.clouds import CloudLayer
+    from pipeline.sky.clouds import CloudLayer
 
     layer = CloudLayer(cover=0.5, scale=400.0, altitude=1500.0, wind=(9.0, -4.0), thickness=8.0, seed=3,
                        texels=256)
@@ -635,7 +636,7 @@ def test_a_still_sky_keeps_its_raster_and_its_shape_at_a_cameras_points():
     has asked for it (a sky that moves asks once per key: nothing kept); another sun or a moon makes
     its own, and a sky with clouds keeps none. The clear sky's shape at read-only points (a still
     camera's) is kept the same way, and equals it computed at writable ones."""
-    from pipeline.sky_raster import KEPT_RASTERS
+    from pipeline.sky.raster import KEPT_RASTERS
 
     grid = square(30, 0.01)
     first = sun_sky(50.0)
@@ -673,7 +674,7 @@ class _ConstantClouds:
         return np.full(np.shape(s)[:-1], 0.5)
 
     def radiance(self, s, time, **light):
-        return np.zeros(np.shape(s)[:-1] + (3,), dtype=np.float32)
+        return np.zeros((*np.shape(s)[:-1], 3), dtype=np.float32)
 
 
 def test_an_hdri_keeps_a_still_cameras_view():
@@ -681,7 +682,7 @@ def test_an_hdri_keeps_a_still_cameras_view():
     that asks for it, read-only, and equals the lookup at the same directions given writable."""
     hdri = EquirectSky(sun_sky(40.0).equirect(64))
     w = np.stack(np.meshgrid(np.linspace(-0.9, 0.9, 9), np.linspace(-0.5, 0.5, 4)), axis=-1)
-    w = np.concatenate([w, np.full(w.shape[:-1] + (1,), 0.3)], axis=-1)
+    w = np.concatenate([w, np.full((*w.shape[:-1], 1), 0.3)], axis=-1)
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
     still = w.copy()
     still.flags.writeable = False

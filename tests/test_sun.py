@@ -14,20 +14,30 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from pipeline import cache, ephemeris, io
-from pipeline.ground import render_ground
-from pipeline.scene import load_sky
-from pipeline.plan import plan_run
-from pipeline.scene import scene_at
-from pipeline.sky import ProceduralSky
-from pipeline.sun_disc import LIMB_DARKENING, SunDisc
-from pipeline.sun_kernel import sun_irradiance
-
-from reference import (angle_between, disc_directions, image_transmittance, limb_darkened_profile,
-                       monte_carlo_irradiance, monte_carlo_sun, offset_direction, pinhole_irradiance,
-                       pinhole_spot_moments, sun_radiance_function, tangent_frame)
+from reference import (
+    angle_between,
+    disc_directions,
+    image_transmittance,
+    limb_darkened_profile,
+    monte_carlo_irradiance,
+    monte_carlo_sun,
+    offset_direction,
+    pinhole_irradiance,
+    pinhole_spot_moments,
+    sun_radiance_function,
+    tangent_frame,
+)
 from scenes import config_of
+
+from pipeline.cache import store as cache
+from pipeline.core import io
+from pipeline.sky import ephemeris
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import LIMB_DARKENING, SunDisc
+from pipeline.sky.sun_kernel import sun_irradiance
+from pipeline.stages.ground import render_ground
+from pipeline.stages.plan import plan_run
+from pipeline.stages.scene import load_sky, scene_at
 
 HEIGHT = 8.0
 """Canopy height of every case. [m]"""
@@ -192,7 +202,7 @@ def test_eclipse_crescent_through_a_pinhole_matches_a_world_coordinate_estimator
     full, eclipse = full[0], eclipse[0]
     x, y = centres(grid)
     sun = config.sky.sun
-    centre, right, up = tangent_frame(sun.azimuth, sun.elevation)
+    centre, right, _up = tangent_frame(sun.azimuth, sun.elevation)
     moon_radius = config_e.sky.moon.radius
     moon = offset_direction(sun.azimuth, sun.elevation, np.radians(dx), 0.0)
     # the light source: the pipeline's sun radiance value, geometry of our own
@@ -203,7 +213,7 @@ def test_eclipse_crescent_through_a_pinhole_matches_a_world_coordinate_estimator
     brute, brute_full = (
         pinhole_irradiance(points, height=HEIGHT, hole_points=hole_points(), hole_area=HOLE_SIDE**2,
                            radiance=sun_radiance_function(centre, sun.radius, centre_radiance, u, *m))
-        .reshape(grid.shape + (3,))
+        .reshape((*grid.shape, 3))
         for m in ((moon, moon_radius), ()))
     separation = angle_between(moon, centre)
     lit_area = 1.0 - ephemeris.obscured_fraction(separation, sun.radius, moon_radius)
@@ -237,7 +247,7 @@ def test_sun_fraction_follows_the_moon_frame_by_frame(tmp_path, store):
     luminance, ``sun_fraction()`` of the frame's sky."""
     case = dict(elevation=50.0, azimuth=160.0, half=0.12)
     frames = 7
-    g, grid, config = spot(tmp_path, store, moon=((-0.6, 0.05), (0.0, 0.05)), frames=frames,
+    g, _grid, config = spot(tmp_path, store, moon=((-0.6, 0.05), (0.0, 0.05)), frames=frames,
                            name="slide", **case)
     full, _, _ = spot(tmp_path, store, name="clear", **case)
     measured = g.sum(axis=(1, 2)) / full[0].sum(axis=(0, 1))  # (frames, 3)
@@ -361,7 +371,7 @@ def test_opaque_canopy_stops_the_sun_and_its_edge_casts_the_penumbra(tmp_path, s
 def test_pinhole_image_axes_match_traced_rays(elevation):
     """The ellipse a pinhole casts, from its closed form, against the disc's limb rays traced to
     the ground (20,000 of them); at 2 to 10 degrees it is 6 to 30 times longer than wide."""
-    from pipeline.geometry import direction_vector, pinhole_image_axes, tangent_axes
+    from pipeline.core.geometry import direction_vector, pinhole_image_axes, tangent_axes
 
     h, r, height = np.radians(elevation), np.radians(0.2666), 7.0
     _, e1, e2 = tangent_axes(0.0, h)
@@ -378,8 +388,8 @@ def test_sun_kernel_at_5_degrees_is_the_pinhole_ellipse():
     """The renderer's sun kernel (the pinhole image of a unit height on the sky plane) of a
     uniform disc at 5 degrees: its chords through the ellipse's centre, from each cell's
     coverage (its value over L cos^4(theta) q^2), are the pinhole geometry's axes to 0.2%."""
-    from pipeline.geometry import pinhole_image_axes
-    from pipeline.sun_kernel import sun_kernel
+    from pipeline.core.geometry import pinhole_image_axes
+    from pipeline.sky.sun_kernel import sun_kernel
 
     h, r = np.radians(5.0), np.radians(0.2666)
     sky = ProceduralSky(3.0, SunDisc(0.0, h, r, (0.0, 0.0, 0.0)))
@@ -398,10 +408,10 @@ def test_sun_kernel_at_5_degrees_is_the_pinhole_ellipse():
 
 
 def test_the_disc_samples_are_those_of_the_ramp_and_radiance_everywhere():
-    """sun_disc._disc_samples computes the limbs' ramp only near the limbs and the radiance only
+    """sun_disc.disc_samples computes the limbs' ramp only near the limbs and the radiance only
     where the cover is above 0: the same bits as the whole expressions at every sample (a sun cut by
     a moon, samples inside, on and beyond both limbs, footprints up to ``widest``, a NaN)."""
-    from pipeline.sun_disc import MoonDisc, _angle, _disc_samples, direction_vector, sun_disc_radiance
+    from pipeline.sky.sun_disc import MoonDisc, angle_to, direction_vector, disc_samples, sun_disc_radiance
 
     rng = np.random.default_rng(12)
     sun = SunDisc(azimuth=2.0, elevation=0.3, angular_radius=0.0047)
@@ -420,8 +430,8 @@ def test_the_disc_samples_are_those_of_the_ramp_and_radiance_everywhere():
     def footprint(where_from, rho, near=None):
         return spacing if near is None else spacing[near]
 
-    got = _disc_samples(w, footprint, widest, sun, direction, np.ones(3), moon)
-    rho, rho_m = _angle(w, direction), _angle(w, centre)
+    got = disc_samples(w, footprint, widest, sun, direction, np.ones(3), moon)
+    rho, rho_m = angle_to(w, direction), angle_to(w, centre)
     cover = np.clip(0.5 - (rho - sun.angular_radius) / spacing, 0.0, 1.0)
     cover *= np.clip(0.5 + (rho_m - moon.angular_radius) / spacing, 0.0, 1.0)
     want = sun_disc_radiance(np.minimum(rho, sun.angular_radius), angular_radius=sun.angular_radius,

@@ -4,9 +4,9 @@ brute-force integral of the continuous atmosphere, Hulburt's ozone, and the colo
 import numpy as np
 import pytest
 
-from pipeline import twilight
-from pipeline.colour import REC709_LUMINANCE, XYZ_TO_REC709
-from pipeline.eclipse import AEROSOL_ASYMMETRY, EARTH_RADIUS, RGB_WAVELENGTHS, vertical_optical_depths
+from pipeline.core.colour import REC709_LUMINANCE, XYZ_TO_REC709
+from pipeline.sky import twilight
+from pipeline.sky.eclipse import AEROSOL_ASYMMETRY, EARTH_RADIUS, RGB_WAVELENGTHS, vertical_optical_depths
 
 
 def brute_force(elevation, azimuth, sun_elevation, turbidity, n_view=1500, n_sun=800):
@@ -94,7 +94,7 @@ def xy(rgb):
 
 def sky_colour(elevation, azimuth, sun, cie_type=12):
     """The relative sky's linear Rec.709 (3,) at a direction (degrees, azimuth from the sun's)."""
-    from pipeline.clearsky import relative_sky
+    from pipeline.sky.clearsky import relative_sky
 
     e, a, h = np.radians([elevation, azimuth, sun])
     view = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
@@ -107,7 +107,7 @@ def test_twilight_sky_blue_zenith_warm_horizon_under_the_sun_and_the_earth_s_sha
     still warm, and opposite the sun, at -3 degrees, the Earth's shadow (5 degrees up) less warm
     than the band above it (12 degrees: the Belt of Venus), which is warmer than the zenith; the
     luminance is the CIE shape's."""
-    from pipeline.clearsky import cie_relative_luminance
+    from pipeline.sky.clearsky import cie_relative_luminance
 
     assert xy(sky_colour(90.0, 0.0, -5.0))[0] < xy(sky_colour(90.0, 0.0, 0.0))[0] - 0.015
     assert xy(sky_colour(2.0, 0.0, -5.0))[0] > 0.4

@@ -1,0 +1,3 @@
+"""The canopy: mask images, the procedural grove and its flutter, the anti-aliased rasteriser.
+
+May import: core, kernels."""

@@ -1,0 +1,207 @@
+"""The ``sunshade`` command: its command line (every command's arguments in one place), the exit codes and the
+one-line errors. The commands are in ``cli_runs`` (check, render, report, figures, cache) and ``cli_pictures``
+(ground, frame, mask, sky), the flags they share checked in ``cli_flags``; ``cli``, ``cli_runs`` and
+``cli_pictures`` are the only modules that print.
+
+Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing written),
+1 an unexpected failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import inspect
+import sys
+import traceback
+
+from pipeline import __version__
+from pipeline.cli.pictures import run_frame, run_ground, run_mask, run_sky
+from pipeline.cli.runs import run_cache, run_check, run_figures, run_render, run_report
+from pipeline.config.vocabulary import PASSES
+from pipeline.core.cores import CLUSTER_TIMEOUT
+from pipeline.core.errors import SunshadeError, WorkerError, one_line, one_line_warnings
+
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "main"]
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILURE = 1
+
+
+def main(argv=None) -> int:
+    """The ``sunshade`` command: parse the arguments and run the command they name.
+
+    Parameters
+    ----------
+    argv : list of str or None
+        The arguments; None for ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit code: 0 done, ``EXIT_FAILURE`` a failure, ``EXIT_BAD_INPUT`` bad input (one line
+        naming the key, flag or file, nothing written).
+    """
+    one_line_warnings()
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        return _fail(str(exc), EXIT_BAD_INPUT)
+    try:
+        return args.run(args)
+    except SunshadeError as exc:
+        return _fail(str(exc), EXIT_BAD_INPUT, args.debug)
+    except MemoryError:
+        return _fail("not enough memory for this config; raise ground.pixel, or lower sky.alpha "
+                     "or the canopy size", EXIT_BAD_INPUT, args.debug)
+    except OSError as exc:
+        return _fail(_os_error_line(exc), EXIT_BAD_INPUT, args.debug)
+    except KeyboardInterrupt:
+        print("sunshade: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: one line, the traceback only under --debug
+        what = str(exc) if isinstance(exc, WorkerError) else f"{type(exc).__name__}: {exc}"
+        return _fail(f"internal error ({what}); run again with --debug for the traceback, and "
+                     "please report it", EXIT_FAILURE, args.debug)
+
+
+def _fail(line: str, code: int, debug: bool = False) -> int:
+    """Print ``line`` (the traceback before it under --debug); return ``code``."""
+    if debug:
+        traceback.print_exc()
+        details = getattr(sys.exception(), "details", "")
+        if details:
+            print(f"the worker's traceback:\n{details}", file=sys.stderr, end="")
+    print(f"sunshade: error: {one_line(line)}", file=sys.stderr)
+    return code
+
+
+def _os_error_line(exc: OSError) -> str:
+    """One line for a failed file operation, naming the path where the error has one."""
+    names = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    hint = ""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        hint = "; make room and run the same command again (done work is kept)"
+    return f"{' -> '.join(names)}: {reason}{hint}" if names else f"{reason}{hint}"
+
+
+class _UsageError(Exception):
+    """A command line argparse refused: its one-line message."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors that name the flag (and the command to ask for help)."""
+
+    def error(self, message):
+        raise _UsageError(f"{message} (see {self.prog} --help)")
+
+
+def _parser():
+    parser = _Parser(
+        prog="sunshade",
+        description="Sunlight and skylight through leaves (Max 1991, 'Unified sun and sky "
+        "illumination for shadows under trees').",
+    )
+    parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
+    parser.add_argument("--version", action="version", version=f"sunshade {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    # the options several commands share, each written once
+    config = _shared("config", help="YAML config file")
+    store = _shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
+    budget = _shared("--cache-size", default=None, metavar="SIZE", help="the cache's budget, e.g. 20G: "
+                     "at the end of a render the least recently used items no live run uses are "
+                     "removed down to it (default $SUNSHADE_CACHE_SIZE, else 20G)")
+    threads = _shared("--threads", type=int, default=None, help="FFT threads (default: all cores)")
+    png = _shared("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
+    moment = _shared("--frame", type=int, default=0, help="output frame (default 0): the sun, moon "
+                     "and clouds of that moment, the canopy at frame mod cycle")
+    picture = _shared("-o", "--output", required=True, help="output PNG or EXR file")
+    debug = _shared("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+
+    def command(run, parents):
+        """The subcommand run by ``run`` (``run_NAME``), its help the first paragraph of the
+        function's docstring, its description the rest up to its Parameters."""
+        text = inspect.cleandoc(run.__doc__).partition("\n\nParameters\n")[0]
+        help, _, description = text.partition("\n\n")
+        sub = commands.add_parser(run.__name__.removeprefix("run_"), parents=[*parents, debug],
+                                  help=help, description=description)
+        sub.set_defaults(run=run)
+        return sub
+
+    render = command(run_render, [config, store, budget])
+    render.add_argument("--frames", default=None, help="frames to render, e.g. 0-47,100 "
+                        "(default: all)")
+    render.add_argument("--jobs", type=int, default=None, help="frames rendered at once, each in "
+                        "its own process (default: render.jobs, else one per core)")
+    render.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                        help="run the tasks on this dask.distributed scheduler (the cache and "
+                        "the output folder must be on a file system every worker shares)")
+    render.add_argument("--cluster-timeout", type=float, default=None, metavar="SECONDS",
+                        help="with --scheduler: end the run (resumably) once the cluster has had "
+                        f"no scheduler or no workers this long (default {CLUSTER_TIMEOUT:g})")
+    render.add_argument("--output", default=None, help="output folder (default: output.folder)")
+    render.add_argument("--force", action="store_true", help="render the frames and the video "
+                        "again even if done")
+    render.add_argument("--preview", action="store_true", help="small and fast, for a first "
+                        "look: a quarter of the resolution, coarser rasters, in FOLDER/preview")
+    render.add_argument("--verify", action="store_true", help="render nothing: report the "
+                        "frames whose files are damaged or not made by this config (exit code "
+                        "1 if any), reading every frame and the cache items they were made from")
+
+    command(run_check, [config, budget])
+
+    ground = command(run_ground, [config, moment, png, threads, store])
+    ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
+                        "(tone-mapped) file")
+
+    frame = command(run_frame, [config, moment, picture, threads, store])
+    frame.add_argument("--half", action="store_true", help="EXR: half floats instead of float32")
+    frame.add_argument("--passes", nargs="?", const=",".join(PASSES), default=None, metavar="NAMES",
+                       help="EXR: also the light passes as layers, comma-separated names of "
+                       f"{', '.join(PASSES)} (default with the flag alone: all; without it: "
+                       "output.passes)")
+
+    mask = command(run_mask, [config, picture])
+    mask.add_argument("--frame", type=int, default=0, help="cycle frame (default 0)")
+    mask.add_argument("--layer", type=int, default=0, help="canopy layer (default 0)")
+    mask.add_argument("--fine", action="store_true", help="the fine mask of the sun window")
+
+    sky = command(run_sky, [config, moment, png])
+    sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
+    sky.add_argument("--passes", nargs="?", const="sun,sky", default=None, metavar="NAMES",
+                     help="EXR: also the sun disc and the sky without it as layers sun and sky "
+                     "(names: sun, sky; default with the flag alone: both; without it: those of "
+                     "output.passes)")
+    sky.add_argument("-o", "--output", required=True, help="output EXR (radiance) or PNG "
+                     "(tone-mapped) file")
+
+    report = command(run_report, [])
+    report.add_argument("folder", help="a run's folder (output.folder), done, going or killed")
+
+    figures = command(run_figures, [store])
+    figures.add_argument("--output", default="figures", help="folder (default ./figures)")
+    figures.add_argument("--preview", action="store_true", help="small and fast")
+
+    cache = command(run_cache, [store])
+    cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
+    cache.add_argument("config", nargs="?", default=None, help="list: only this config's items; "
+                       "prune: remove only its items (all, or down to --max-size)")
+    cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
+    cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
+    return parser
+
+
+DEBUG_HELP = "on an error, print the traceback too (for a bug report)"
+
+
+def _shared(*flags, **options) -> argparse.ArgumentParser:
+    """A parent parser (for ``parents=``) holding one argument shared by several commands."""
+    parent = argparse.ArgumentParser(add_help=False)
+    parent.add_argument(*flags, **options)
+    return parent
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,276 @@
+"""The sky models a config may name, each a class that the registry ``vocabulary.SKIES`` makes
+from the config's ``sky`` section: where the sun and moon are at a frame, the frame's sky
+(``sky.Sky``), the clear light of the run and the files the model reads (docs/design.md,
+"Models plug in")."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Protocol
+
+import numpy as np
+
+from pipeline.config.parse import MAX_RADIANCE
+from pipeline.config.settings import SkyConfig
+from pipeline.core import io
+from pipeline.core.geometry import offset_direction
+from pipeline.sky import ephemeris, equirect, sun_disc
+from pipeline.sky import procedural as skylib
+from pipeline.sky.base import Sky, UniformSky
+from pipeline.sky.clouds import CloudLayer
+from pipeline.sky.eclipse import METER_TABLE
+
+__all__ = ["SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
+
+
+class SkyModel(Protocol):
+    """What the stages ask of a config's sky. A class of this shape, its module and one line in
+    ``vocabulary.SKIES`` add a sky model (docs/design.md, "Models plug in")."""
+
+    config: SkyConfig
+
+    def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
+        """The UTC time, sun and moon of the frame at ``fraction`` of the animation.
+
+        Parameters
+        ----------
+        fraction : float
+            The frame's place in the animation, 0 the first frame, 1 the last [1].
+
+        Returns
+        -------
+        when : datetime or None
+            The UTC time, or None (no site and time).
+        sun : sun_disc.SunDisc or None
+            The sun's disc (azimuth, elevation, angular radius [rad]), or None for a sky without a sun.
+        moon : sun_disc.MoonDisc or None
+            The moon's disc [rad], or None.
+        """
+
+    def at(self, scene, *, metering: bool = False) -> Sky:
+        """The sky at a frame's scene.
+
+        Parameters
+        ----------
+        scene : scene.Scene or None
+            The frame's scene; None for a sky without a sun.
+        metering : bool
+            For an exposure meter, which reads the whole sky's light only (a model may make it coarser).
+
+        Returns
+        -------
+        sky.Sky
+            The sky's radiance [kcd/m^2] by direction and its sun.
+        """
+
+    def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray | None, np.ndarray]:
+        """The light of the clear, uneclipsed sky with ``sun``: the run's reference light
+        (``lighting.reference_lighting``).
+
+        Parameters
+        ----------
+        sun : sun_disc.SunDisc or None
+            The sun, or None without a sun.
+
+        Returns
+        -------
+        sun_irradiance : ndarray, shape (3,), or None
+            The sun's normal irradiance, or None without a sun [klx].
+        sky_irradiance : ndarray, shape (3,)
+            The sky's horizontal irradiance [klx].
+        """
+
+    def check(self) -> None:
+        """Read and check the files the model needs.
+
+        Raises
+        ------
+        io.ImageError
+            Naming the file.
+        """
+
+
+@dataclass(frozen=True)
+class ProceduralModel:
+    """The procedural sky (``cie``, ``preetham``): absolute clear-sky daylight in the CIE or
+    Preetham shape, the sun and moon from the ephemeris or the config's angles, clouds, the
+    eclipse (docs/method.md, "The procedural sky"). Its methods are ``SkyModel``'s.
+
+    Parameters
+    ----------
+    config : SkyConfig
+        The config's resolved ``sky`` section (``resolve``: turbidity looked up).
+    """
+
+    config: SkyConfig
+
+    def discs(self, fraction: float):
+        """The sun and moon from the ephemeris at the time ``fraction`` through ``sky.time``, or
+        the config's sun with the moon slid from ``offset_start`` to ``offset_end``."""
+        sky = self.config
+        if sky.site is not None:
+            site = sky.site
+            when = site.start + (site.end - site.start) * fraction
+            sun, moon = ephemeris.sun_and_moon(ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
+            return (when, sun_disc.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                    sun_disc.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+        s = sky.sun
+        moon = None
+        if sky.moon is not None:
+            m = sky.moon
+            dx, dy = (a + (b - a) * fraction for a, b in zip(m.offset_start, m.offset_end))
+            azimuth, elevation = offset_direction(s.azimuth, s.elevation, dx, dy)
+            moon = sun_disc.MoonDisc(azimuth, elevation, m.radius)
+        return None, sun_disc.SunDisc(s.azimuth, s.elevation, s.radius), moon
+
+    def at(self, scene, *, metering: bool = False):
+        """The clear sky with the scene's sun, moon, clouds and eclipse; ``metering``: a deep
+        eclipse's line-of-sight table is the coarser ``eclipse.METER_TABLE``."""
+        clouds = None
+        if self.config.clouds is not None:
+            c = self.config.clouds
+            clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
+                                wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
+        detail = {"eclipse_table": METER_TABLE} if metering else {}
+        return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
+
+    def clear_light(self, sun):
+        """The clear sky's (no clouds, no moon) with ``sun``."""
+        clear = clear_sky(self.config, sun)
+        return clear.sun_normal_irradiance, clear.clear_sky_irradiance
+
+    def check(self) -> None:
+        """Nothing to read."""
+
+
+class ConstantSky:
+    """A sky of one radiance in every direction and no sun, its radiance (3,) [kcd/m^2] given by
+    a subclass. Its methods are ``SkyModel``'s."""
+
+    config: SkyConfig
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """The sky's radiance (3,) in each linear Rec.709 channel [kcd/m^2]."""
+        raise NotImplementedError
+
+    def discs(self, fraction: float):
+        """No time, no sun, no moon."""
+        return None, None, None
+
+    def at(self, scene, *, metering: bool = False):
+        """The radiance in every direction."""
+        return UniformSky(self.radiance)
+
+    def clear_light(self, sun):
+        """No sun; the sky's horizontal irradiance pi L."""
+        return None, np.pi * self.radiance
+
+    def check(self) -> None:
+        """Nothing to read."""
+
+
+@dataclass(frozen=True)
+class UniformModel(ConstantSky):
+    """The uniform sky: ``sky.radiance`` [kcd/m^2] in every direction, no sun.
+
+    Parameters
+    ----------
+    config : SkyConfig
+        The config's ``sky`` section.
+    """
+
+    config: SkyConfig
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """``sky.radiance`` (3,) [kcd/m^2]."""
+        return np.asarray(self.config.radiance, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class HdriModel:
+    """An equirectangular image of the sky (``sky.hdri``), its sun cut out into a disc. Its
+    methods are ``SkyModel``'s.
+
+    Parameters
+    ----------
+    config : SkyConfig
+        The config's ``sky`` section.
+    """
+
+    config: SkyConfig
+
+    def discs(self, fraction: float):
+        """No time; the image's sun; no moon."""
+        return None, load_hdri(self.config).sun, None
+
+    def at(self, scene, *, metering: bool = False):
+        """The image (``load_hdri``)."""
+        return load_hdri(self.config)
+
+    def clear_light(self, sun):
+        """The image's sun (None without one) and its sky's horizontal irradiance."""
+        hdri = load_hdri(self.config)
+        if hdri.sun is None:
+            return None, hdri.image_irradiance()
+        return np.asarray(hdri.sun_normal_irradiance, dtype=np.float64), hdri.image_irradiance()
+
+    def check(self) -> None:
+        """Read and check the image (``load_hdri``)."""
+        load_hdri(self.config)
+
+
+def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> skylib.ProceduralSky:
+    """The procedural sky of a config with ``sun``.
+
+    Parameters
+    ----------
+    sky : SkyConfig
+        A procedural sky's resolved config section.
+    sun : sun_disc.SunDisc
+        The sun.
+    **state
+        ``moon``, ``clouds``, ``time`` [s], ``eclipse_table``: as ``sky.ProceduralSky`` takes them.
+
+    Returns
+    -------
+    sky.ProceduralSky
+        Radiance [kcd/m^2] by direction, the sun's and sky's light [klx].
+    """
+    return skylib.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
+                                cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
+                                **state)
+
+
+@functools.lru_cache(maxsize=4)
+def load_hdri(sky: SkyConfig) -> equirect.EquirectSky:
+    """An HDRI sky read, checked (negative radiance taken as 0) and its sun cut out, once per
+    process (the plan needs its sun, every frame its image).
+
+    Parameters
+    ----------
+    sky : SkyConfig
+        A config's ``sky`` section with ``model: hdri``.
+
+    Returns
+    -------
+    equirect.EquirectSky
+        Radiance [kcd/m^2] by direction, its sun a disc.
+
+    Raises
+    ------
+    io.ImageError
+        Naming the file, when it cannot be read or holds NaN, infinite or too large values.
+    """
+    image = io.read_image(sky.hdri)
+    if image.shape[2] < 3:
+        image = np.repeat(image[..., :1], 3, axis=2)
+    image = image[..., :3]
+    if not np.all(np.isfinite(image)):
+        raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
+    if image.max() > MAX_RADIANCE:
+        raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
+    return equirect.cut_sun(equirect.EquirectSky(np.maximum(image, 0.0), sky.rotation))

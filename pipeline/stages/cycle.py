@@ -1,0 +1,455 @@
+"""The cycle stage: the products of each cycle frame (every canopy layer's mask spectra, the
+built-in trees' foreground passes), their cache keys, and the cycle phase that computes the
+missing ones in parallel (Max 1991, section 4; docs/method.md, "Cycle products and the
+cache"). Every function takes the RunPlan."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+from dataclasses import asdict
+
+import joblib
+import numpy as np
+
+from pipeline.cache import keys as cache_keys
+from pipeline.cache import store as cache
+from pipeline.canopy import grove as grove_geometry
+from pipeline.canopy import masks as canopy
+from pipeline.canopy import rasteriser
+from pipeline.config.parse import FRAME_BYTES_PER_PIXEL
+from pipeline.core.cores import compiled_once, end_if_orphaned
+from pipeline.core.errors import portable
+from pipeline.foreground import models as foregrounds
+from pipeline.foreground import tree_detail
+from pipeline.foreground import trees as foreground
+from pipeline.ground import shadow
+from pipeline.stages.inputs import grove_of, load_mask
+from pipeline.stages.plan import RunPlan
+
+__all__ = ["layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
+           "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item",
+           "foreground_views"]
+
+
+def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
+    """Transmittance masks of one canopy plane at one cycle frame.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    layer_index : int
+        The canopy plane, an index of ``plan.layers``.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    coarse : ndarray, shape (rows, cols)
+        Transmittance [1] on the plane's coarse grid (``LayerPlan.canopy``).
+    fine : ndarray, shape (rows, cols), or None
+        Transmittance [1] on its fine sun mask grid, or None without a sun kernel.
+    """
+    c = plan.canopy
+    layer, lp = c.layers[layer_index], plan.layers[layer_index]
+    periodic = c.layout == "periodic"
+    grids = [lp.canopy] + ([lp.sun.mask] if lp.sun else [])
+    if c.trees is None:
+        image = load_mask(layer, cycle_frame)
+        masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
+                                              grid=g, periodic=periodic) for g in grids]
+    else:
+        grove, flutter = grove_of(c)
+        heights = tuple(l.height for l in c.layers)
+        leaf_layer, wood_layer = grove_geometry.layer_index(grove, heights)
+        shapes = grove_geometry.project(
+            grove_geometry.leaves_at(grove, flutter, cycle_frame), grove.wood,
+            sun=np.array(plan.projection), plane_height=layer.height,
+        ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
+        period = layer.size if periodic else None
+        masks = [rasteriser.rasterize_transmittance(shapes, g, period=period) for g in grids]
+    return masks[0], (masks[1] if lp.sun else None)
+
+
+def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
+    """Everything a layer's cycle products at ``cycle_frame`` depend on: their cache key's params.
+
+    See docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache".
+
+    Parameters
+    ----------
+    plan, layer_index, cycle_frame
+        As in ``layer_masks``.
+
+    Returns
+    -------
+    dict
+        JSON-able params (``cache_keys.key_of``): the mask file's digest or the trees, the grids, the
+        projection.
+    """
+    c = plan.canopy
+    lp = plan.layers[layer_index]
+    if c.trees is None:
+        source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
+    else:
+        source = {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+                  "heights": [l.height for l in c.layers]}
+    layer = c.layers[layer_index]
+    return {
+        "source": source, "layout": c.layout, "layer": layer_index, "height": layer.height,
+        "center": layer.center, "size": layer.size, "frame": cycle_frame,
+        "projection": plan.projection, "canopy": asdict(lp.canopy),
+        "fft": getattr(lp.coarse, "fft_shape", None),
+        "sun": None if lp.sun is None else {"mask": asdict(lp.sun.mask), "fft": lp.sun.fft_shape},
+    }
+
+
+@functools.lru_cache(maxsize=64)
+def _file_digest(path) -> str:
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
+               *, workers: int = 1) -> dict:
+    """A layer's cached cycle products at ``cycle_frame``, computed on a miss.
+
+    Parameters
+    ----------
+    plan, layer_index, cycle_frame
+        The layer and the frame, as in ``layer_masks``.
+    store : cache.Cache
+        The cache.
+    workers : int
+        FFT threads for a miss.
+
+    Returns
+    -------
+    dict
+        ``coarse`` (the occlusion or tile spectrum, complex64), ``mean`` (mean transmittance of a
+        tile (1,) [1]), ``fine`` (the fine mask spectrum, complex64, when there is a sun kernel).
+        Memory-mapped, read-only.
+    """
+    lp = plan.layers[layer_index]
+
+    def compute():
+        coarse, fine = layer_masks(plan, layer_index, cycle_frame)
+        if isinstance(lp.coarse, shadow.IsolatedPlan):
+            spectrum = shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=workers)
+        else:
+            spectrum = shadow.transmittance_spectrum(coarse, workers=workers)
+        item = {"coarse": spectrum.astype(np.complex64),
+                "mean": np.array([coarse.mean(dtype=np.float64)])}
+        if fine is not None:
+            item["fine"] = shadow.fine_mask_spectrum(fine, lp.sun, workers=workers).astype(np.complex64)
+        return item
+
+    return store.get_or_compute("spectra", cycle_params(plan, layer_index, cycle_frame), compute)
+
+
+def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
+                workers: int = 1, progress=None, cycle_frames=None, command: int | None = None) -> int:
+    """Every cycle product for every cycle frame, computing the missing ones in parallel.
+
+    Each layer's spectra and the foreground passes of built-in trees: those already stored are
+    checked here, the missing ones computed in parallel over cycle frames by joblib processes
+    (the backend is joblib's current one, Dask included).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    store : cache.Cache
+        The cache.
+    jobs : int
+        Parallel joblib processes (at most one per missing item).
+    workers : int
+        FFT threads of each process.
+    progress : callable or None
+        ``progress(done, total)``, called as items finish [items].
+    cycle_frames : iterable of int or None
+        The cycle frames to make; None for all.
+    command : int or None
+        The PID whose worker processes end when it is gone (``cores.end_if_orphaned``).
+
+    Returns
+    -------
+    int
+        The number of items computed.
+    """
+    frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
+    tasks = [(plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
+    tasks += [(view, None, frame) for view, frame in foreground_views(plan, frames)]
+    missing = [task for task in tasks if store.get(*_product_key(*task)) is None]
+    done = len(tasks) - len(missing)
+    if progress:
+        progress(done, len(tasks))
+    if not missing:
+        return 0
+    computed = 0
+    results = joblib.Parallel(n_jobs=min(jobs, len(missing)), return_as="generator")(
+        joblib.delayed(_cycle_task)(view, layer, frame, str(store.root), workers, command)
+        for view, layer, frame in missing)
+    for misses in results:
+        computed += misses
+        done += 1
+        if progress:
+            progress(done, len(tasks))
+    return computed
+
+
+def _product_key(plan, layer, frame):
+    """(kind, params) of a cycle product: a layer's spectra, or the foreground (layer None)."""
+    if layer is None:
+        return "foreground", foreground_params(plan, frame)
+    return "spectra", cycle_params(plan, layer, frame)
+
+
+def foreground_views(plan: RunPlan, cycle_frames) -> list[tuple[RunPlan, int]]:
+    """The built-in trees' passes a run needs: per item, the plan of a frame that uses it and its cycle frame.
+
+    One per cycle frame; with a camera that follows the shadow, one per camera and cycle frame
+    (``RunPlan.at``: the passes are drawn for the frame's own camera, docs/method.md, "Framing").
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    cycle_frames : iterable of int
+        The cycle frames wanted.
+
+    Returns
+    -------
+    list of (plan.RunPlan, int)
+        Empty when the foreground has no cycle products of its own.
+    """
+    if not plan.foreground.cached:
+        return []
+    wanted = set(cycle_frames)
+    if plan.follow is None:
+        return [(plan, frame) for frame in sorted(wanted)]
+    views = {}
+    for frame in range(plan.frames):
+        cycle_frame = frame % plan.canopy.cycle
+        if cycle_frame in wanted:
+            view = plan.at(frame)
+            views.setdefault(cache_keys.key_of("foreground", foreground_params(view, cycle_frame)),
+                             (view, cycle_frame))
+    return list(views.values())
+
+
+def disk_needed(plan: RunPlan) -> tuple[float, float]:
+    """The disk a whole run writes.
+
+    The frames at FRAME_BYTES_PER_PIXEL, and the most the cycle products take: per layer and cycle
+    frame the coarse spectrum (complex64 half spectrum of its FFT, or of one tile) and the fine one
+    at their exact sizes, per cycle frame the built-in trees' passes (sun, sky: 3 float32, alpha
+    and haze: 1) over the whole frame (they are stored cut to the pixels the trees touch:
+    ``foregrounds.cut_to_trees``).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan: its frames, camera, layers and cycle.
+
+    Returns
+    -------
+    frames : float
+        The frames' bytes [B].
+    cache : float
+        The cycle products' bytes, at most [B].
+    """
+    width, height = plan.camera.width, plan.camera.height
+    frames = plan.frames * width * height * FRAME_BYTES_PER_PIXEL[plan.output.half]
+    per_frame = 0
+    for lp in plan.layers:
+        rows, cols = getattr(lp.coarse, "fft_shape", None) or lp.coarse.tile_shape
+        per_frame += rows * (cols // 2 + 1) * 8
+        if lp.sun is not None:
+            rows, cols = lp.sun.fft_shape
+            per_frame += rows * (cols // 2 + 1) * 8
+    trees = len(foreground_views(plan, range(plan.canopy.cycle))) * 8 * 4 * width * height
+    return float(frames), float(per_frame * plan.canopy.cycle + trees)  # trees: float32 sun, sky, alpha, haze
+
+
+CONFIG_INDEX = ".configs"
+"""Folder in the cache root where each config that rendered records the keys of its cycle
+products (``record_config_items``), so that ``sunshade cache list`` can name them."""
+
+
+def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
+    """Every cycle product a config's run needs.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan: its layers, foreground and cycle.
+
+    Returns
+    -------
+    dict of str to tuple
+        Cache key -> (kind, cycle frame).
+    """
+    products = [(plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
+    products += [(view, None, frame) for view, frame in foreground_views(plan, range(plan.canopy.cycle))]
+    keys = {}
+    for view, layer, frame in products:
+        kind, params = _product_key(view, layer, frame)
+        keys[cache_keys.key_of(kind, params)] = (kind, frame)
+    return keys
+
+
+def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
+    """Record in the cache which items are this config's, written atomically.
+
+    ``CONFIG_INDEX``/<hash of its path>.json: its name, path and keys, those of earlier versions
+    of it (a preview's among them) kept, and the longest cycle among them.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan (its source names the config).
+    store : cache.Cache
+        The cache.
+    """
+    folder = store.root / CONFIG_INDEX
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{hashlib.sha256(str(plan.source).encode()).hexdigest()[:16]}.json"
+    try:
+        earlier = json.loads(path.read_text())
+        keys, cycle = set(earlier.get("keys", [])), int(earlier.get("cycle", 0))
+    except (OSError, ValueError, AttributeError, TypeError):
+        keys, cycle = set(), 0
+    keys |= set(config_item_keys(plan))
+    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    temporary.write_text(json.dumps({"name": plan.output.name, "config": str(plan.source),
+                                     "cycle": max(cycle, plan.canopy.cycle), "keys": sorted(keys)}))
+    temporary.replace(path)
+
+
+def recorded_configs(store: cache.Cache) -> list[dict]:
+    """The configs recorded in a cache (``record_config_items``).
+
+    Parameters
+    ----------
+    store : cache.Cache
+        The cache.
+
+    Returns
+    -------
+    list of dict
+        Each {name, config, cycle, keys}, by name (then path); unreadable records left out.
+    """
+    found = []
+    for path in sorted((store.root / CONFIG_INDEX).glob("*.json")):
+        try:
+            entry = json.loads(path.read_text())
+            found.append({"name": str(entry["name"]), "config": str(entry["config"]),
+                          "cycle": int(entry.get("cycle", 0)), "keys": set(entry["keys"])})
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return sorted(found, key=lambda entry: (entry["name"], entry["config"]))
+
+
+@portable
+def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
+    end_if_orphaned(command)
+    store = cache.Cache(root)
+    from pipeline.kernels import raster as _raster  # numba costs 0.3 s to import: a worker needs it anyway
+
+    with compiled_once(_raster.shapes):  # after an install, one worker compiles the rasteriser
+        if layer is None:
+            foreground_item(plan, frame, store)
+        else:
+            cycle_item(plan, layer, frame, store, workers=workers)
+    return store.misses
+
+
+def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
+    """Everything the built-in trees' passes at ``cycle_frame`` depend on: their cache key's params.
+
+    Not the light's strength or colour, since they are stored per unit irradiance.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    cycle_frame : int
+        The flutter cycle's frame.
+
+    Returns
+    -------
+    dict
+        JSON-able params (``cache_keys.key_of``).
+    """
+    c = plan.canopy
+    return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
+            "heights": [layer.height for layer in c.layers], "layout": c.layout,
+            "center": c.layers[0].center, "size": c.layers[0].size,
+            "camera": asdict(plan.camera),
+            "frame": cycle_frame, "sun": None if plan.sun_window is None else plan.projection,
+            "haze": plan.haze,
+            "wood": {"tip": tree_detail.TIP_TAPER, "piece": tree_detail.TAPER_PIECE,  # the stems' cones and bark
+                     "furrows": tree_detail.BARK_FURROWS, "contrast": tree_detail.BARK_CONTRAST,
+                     "probe": foreground.STEM_PROBE},
+            "stored": "cut to the trees",  # cut_to_trees
+            "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
+                "detail": tree_detail.LEAF_PIXELS, "reach": tree_detail.HAZE_REACH,
+                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
+
+
+def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
+    """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance.
+
+    The shading is linear in each channel's light, so a frame scales them by the run's Lighting.
+
+    Parameters
+    ----------
+    plan, cycle_frame
+        As in ``foreground_params``.
+    store : cache.Cache
+        The cache.
+
+    Returns
+    -------
+    dict
+        ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
+        a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols) [1], ``haze``
+        (rows, cols) [1], all cut to the box of the pixels the trees touch
+        (``foregrounds.cut_to_trees``; ``box``). Memory-mapped, read-only.
+    """
+    c = plan.canopy
+
+    def compute():
+        grove, flutter = grove_of(c)
+        leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
+        wood, owner = tree_detail.taper_wood(grove.wood)
+        has_sun = plan.sun_window is not None
+        sun_point = np.asarray(plan.projection)
+        leaf_visibility = wood_visibility = None
+        if has_sun:
+            leaf_visibility, wood_visibility = foreground.stem_visibility(leaves, wood, sun_point=sun_point)
+        view = plan.camera
+        if c.layout == "periodic":  # the tile's trees on every tile in view
+            layer = c.layers[0]
+            leaves, wood, leaf_index, wood_index = tree_detail.periodic_copies(
+                leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
+                seed=c.trees.seed, coarse_wood=grove.wood)
+            if has_sun:  # a straight capsule gets the mean visibility of its pieces
+                pieces = np.bincount(owner, minlength=len(grove.wood.radius))
+                capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
+                leaf_visibility = leaf_visibility[leaf_index]
+                wood_visibility = np.concatenate([wood_visibility, capsule])[wood_index]
+        direction = np.append(sun_point, 1.0) / np.linalg.norm(np.append(sun_point, 1.0))
+        passes = foreground.tree_passes(
+            leaves, wood, view, sun_direction=direction,
+            sun_irradiance=np.ones(3) if has_sun else np.zeros(3), sky_irradiance=np.ones(3),
+            leaf_sun_visibility=leaf_visibility, wood_sun_visibility=wood_visibility, haze=plan.haze)
+        item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
+        if passes.haze is not None:
+            item["haze"] = passes.haze
+        return foregrounds.cut_to_trees(item)
+
+    return store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute)

@@ -1,0 +1,186 @@
+"""The run's light: the clear, uneclipsed sun and sky that light the foreground passes and set
+the exposure, the incident-light meter and the auto exposure (docs/method.md). Part of the plan
+stage: each function takes the RunPlan."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import astuple, dataclass, replace
+
+import numpy as np
+
+from pipeline.camera import composite
+from pipeline.stages.plan import RunPlan
+from pipeline.stages.scene import Scene
+
+__all__ = ["Lighting", "reference_lighting", "EXPOSURE_MEMORY", "exposure_frames", "auto_exposures",
+           "with_exposures", "meter"]
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """The clear, uneclipsed light of a run, fixed for all its frames: what the foreground
+    passes are lit by and the exposure is set from.
+
+    Attributes
+    ----------
+    sun_direction : ndarray, shape (3,), or None
+        Unit vector towards the sun [1], or None without a sun.
+    sun_irradiance : ndarray, shape (3,)
+        The sun's normal irradiance [klx].
+    sky_irradiance : ndarray, shape (3,)
+        Horizontal irradiance of the sky alone [klx].
+    """
+
+    sun_direction: np.ndarray | None
+    sun_irradiance: np.ndarray
+    sky_irradiance: np.ndarray
+
+    @property
+    def unshadowed(self) -> np.ndarray:
+        """Horizontal irradiance of sun and sky together.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            Irradiance [klx].
+        """
+        if self.sun_direction is None:
+            return self.sky_irradiance
+        return self.sky_irradiance + self.sun_irradiance * self.sun_direction[2]
+
+
+@functools.lru_cache(maxsize=8)
+def reference_lighting(plan: RunPlan) -> Lighting:
+    """The run's Lighting: the clear sky of the config with its sun at the projection direction.
+
+    The middle frame's sun, no clouds and no moon. Made once per plan (every frame asks for it).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Returns
+    -------
+    Lighting
+        The reference light [klx]; its arrays are read-only.
+    """
+    return Lighting(*(None if a is None else _read_only(a) for a in astuple(_reference_lighting(plan))))
+
+
+def _read_only(values) -> np.ndarray:
+    copy = np.array(values)
+    copy.setflags(write=False)
+    return copy
+
+
+def _reference_lighting(plan: RunPlan) -> Lighting:
+    s = np.append(plan.projection, 1.0)
+    middle = plan.scenes[plan.frames // 2].sun
+    sun, sky = plan.sky.clear_light(middle)
+    if sun is None:
+        return Lighting(None, np.zeros(3), sky)
+    return Lighting(s / np.linalg.norm(s), sun, sky)
+
+
+EXPOSURE_MEMORY = 14.0
+"""Auto exposure forgets the light of frames more than this many time constants back (their
+weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]"""
+
+
+def exposure_frames(plan: RunPlan, frame: int) -> range:
+    """The frames whose light the auto exposure of ``frame`` remembers.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan, with an auto exposure.
+    frame : int
+        Output frame index.
+
+    Returns
+    -------
+    range
+        From ``EXPOSURE_MEMORY`` time constants back (at least frame 0) to ``frame``.
+    """
+    memory = int(np.ceil(EXPOSURE_MEMORY * plan.exposure.auto.time_constant * plan.exposure.fps))
+    return range(max(0, frame - memory), frame + 1)
+
+
+def auto_exposures(plan: RunPlan, frames=None) -> dict[int, float]:
+    """The exposure of frames with ``camera.exposure: auto``.
+
+    Each frame's meter reading is the open ground's light (``meter``), followed through
+    ``composite.auto_exposure``'s first-order lag and limits from the first frame it remembers
+    (``exposure_frames``), so a frame's exposure is the same whichever frames are rendered.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan, with an auto exposure.
+    frames : iterable of int or None
+        Output frame indices; None for all.
+
+    Returns
+    -------
+    dict of int to float
+        Per frame, its exposure [m^2/kcd].
+    """
+    light = reference_lighting(plan)
+    frames = range(plan.frames) if frames is None else frames
+    windows = {frame: exposure_frames(plan, frame) for frame in frames}
+    readings = {f: meter(plan, plan.scenes[f], light) for f in sorted(set().union(*windows.values()))}
+    e = plan.exposure
+    return {frame: float(composite.auto_exposure(
+                [readings[f] for f in window], reference=light.unshadowed,
+                frame_time=1.0 / e.fps, time_constant=e.auto.time_constant,
+                limits=e.auto.limits, stops=e.stops)[-1])
+            for frame, window in windows.items()}
+
+
+def with_exposures(plan: RunPlan, frames=None) -> RunPlan:
+    """The plan with the auto exposure of ``frames``, metered once for a whole run.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    frames : iterable of int or None
+        Output frame indices; None for all.
+
+    Returns
+    -------
+    plan.RunPlan
+        The plan, its ``exposures`` per frame [m^2/kcd] (None for the frames not asked); the plan
+        itself with a fixed exposure.
+    """
+    if plan.exposure.auto is None:
+        return plan
+    exposures = auto_exposures(plan, frames)
+    return replace(plan, exposures=tuple(exposures.get(f) for f in range(plan.frames)))
+
+
+def meter(plan: RunPlan, scene: Scene, light: Lighting) -> np.ndarray:
+    """What an incident-light meter on the open ground reads at a frame.
+
+    The sky's horizontal irradiance now (clouds and the moon dim it) plus the clear sun's times S.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+    scene : scene.Scene
+        The frame's scene.
+    light : Lighting
+        The run's reference light (``reference_lighting``).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Horizontal irradiance [klx].
+    """
+    sky = plan.sky.at(scene, metering=True)
+    if light.sun_direction is None:
+        return light.unshadowed
+    return np.asarray(sky.sky_irradiance) + float(sky.sun_fraction()) * np.asarray(sky.undimmed_sun_irradiance())
