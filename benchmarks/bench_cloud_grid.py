@@ -1,5 +1,5 @@
-"""The clouds' field read on a grid (``_tiling.cloud_grid``, as a ground's sky raster reads it)
-against the same points read one by one (``_tiling.cloud_field``), paired in one process.
+"""The clouds' field read on a grid (``kernels.tiling.cloud_grid``, as a ground's sky raster reads it)
+against the same points read one by one (``kernels.tiling.cloud_field``), paired in one process.
 
     python benchmarks/bench_cloud_grid.py [CONFIG ...] [--side 1024] [--repeats 7]
 

@@ -1,6 +1,6 @@
 """Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
 pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
-over the view (``frame._apply_haze``), the procedural sky raster's rows (``sky.ProceduralSky.raster``) and the
+over the view (``frame._apply_haze``), the procedural sky raster's rows (``procedural.ProceduralSky.raster``) and the
 ground reflectance's lattice read (``brdf_bands.sky_ratio``), a frame's display codes
 (``composite.display_codes``, around numpy's power) and the clouds' ``np.interp`` tables
 (``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float32 operation
@@ -18,7 +18,8 @@ __all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "expos
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
+def resample_separable(raster: np.ndarray, row_at: np.ndarray, row_weight: np.ndarray, col_at: np.ndarray,
+                       col_weight: np.ndarray, out: np.ndarray) -> None:
     """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel.
 
     R and C are given by the columns they read and their weights, k per row: each output value is
@@ -61,7 +62,7 @@ def resample_separable(raster, row_at, row_weight, col_at, col_weight, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def haze_over(background, transmittance, veil, horizon):
+def haze_over(background: np.ndarray, transmittance: np.ndarray, veil: np.ndarray, horizon: np.ndarray) -> None:
     """``frame.render_frame``'s haze, in place: the background becomes ``T B + (1 - T) L_horizon + 0``.
 
     In the float32 operations and order of the array version (``B *= T; B += veil * L; B + 0``, the
@@ -87,8 +88,9 @@ def haze_over(background, transmittance, veil, horizon):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow, weights, out):
-    """Rows ``first`` to ``first + count`` of ``sky.ProceduralSky.raster``'s weighted raster.
+def sky_rows(along: np.ndarray, row_at: np.ndarray, row_frac: np.ndarray, first: int, count: int, clouded: bool,
+             transmittance: np.ndarray, glow: np.ndarray, weights: np.ndarray, out: np.ndarray) -> None:
+    """Rows ``first`` to ``first + count`` of ``procedural.ProceduralSky.raster``'s weighted raster.
 
     The clear sky interpolated between node rows ``row_at`` and ``row_at + 1`` by ``row_frac``,
     where ``clouded`` times the clouds' transmittance clipped to [0, 1] and plus their ``glow``,
@@ -131,8 +133,8 @@ def sky_rows(along, row_at, row_frac, first, count, clouded, transmittance, glow
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def lattice_read(flat, corner, taps, lattice, out):
-    """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (``brdf_bands._lattice_read_arrays``).
+def lattice_read(flat: np.ndarray, corner: np.ndarray, taps: np.ndarray, lattice: int, out: np.ndarray) -> None:
+    """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (tests/reference.py's ``lattice_read_arrays``).
 
     Point p takes the four values from flat index corner[p] (its first corner), + 1, + lattice,
     + lattice + 1 with weights taps[:, p], summed in that order in float32.
@@ -165,7 +167,7 @@ _SRGB = tuple(np.float32(c) for c in (0.0031308, 12.92, 1.055, 0.055, 255.0, 0.5
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def exposed_display(radiance, gain, filmic, out):
+def exposed_display(radiance: np.ndarray, gain: np.ndarray, filmic: bool, out: np.ndarray) -> None:
     """``composite.display`` up to the sRGB power: exposed, ACES-filmic if ``filmic``, clipped.
 
     ``x = max(L g, 0)`` then ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14)`` clipped to [0, 1]
@@ -195,7 +197,7 @@ def exposed_display(radiance, gain, filmic, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def display_codes(linear, powered, half_dither, out):
+def display_codes(linear: np.ndarray, powered: np.ndarray, half_dither: np.ndarray, out: np.ndarray) -> None:
     """``composite.srgb_encode`` from its power on, then ``io.write_png``'s 8-bit codes.
 
     ``12.92 x`` where ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``; clipped to [0, 1],
@@ -238,7 +240,8 @@ def _interval(points, x):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def scattering_weights(tau, nodes, tables, sun_weight, sky_weight):
+def scattering_weights(tau: np.ndarray, nodes: np.ndarray, tables: np.ndarray, sun_weight: np.ndarray,
+                       sky_weight: np.ndarray) -> None:
     """The multiple-scattering weights of ``clouds.CloudLayer.radiance``: ``np.interp`` of two tables at
     optical depths ``tau``, operation for operation (the node at or below tau by bisection, the ends
     held, the interval's slope times the distance from its first node plus its first value, and where
@@ -291,7 +294,8 @@ def scattering_weights(tau, nodes, tables, sun_weight, sky_weight):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def hermite_mean(field, spread, nodes, weights, values, levels, out):
+def hermite_mean(field: np.ndarray, spread: np.ndarray, nodes: np.ndarray, weights: np.ndarray, values: np.ndarray,
+                 levels: np.ndarray, out: np.ndarray) -> None:
     """``clouds.CloudLayer.coverage``'s mean over a footprint: ``out`` gets ``sum_k weights[k]
     interp(field + nodes[k] spread, values, levels)``, summed from 0 in the order of the nodes, each
     interpolation that of ``np.interp`` operation for operation (as ``scattering_weights``'s), so the

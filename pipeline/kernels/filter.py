@@ -1,14 +1,14 @@
-"""Compiled loops of the camera's anisotropic filtering: the filtered reads of a mip map (``texture._filtered``),
-the footprints of the ground's pixels (``camera._row_footprints``, ``texture._footprint_axes``), the choice of taps
-and level (``texture._filter_choice``) and the mip levels halved in place (``texture._constant_mipmap``). Each does
+"""Compiled loops of the camera's anisotropic filtering: the filtered reads of a mip map (``mipmap.filtered_read``),
+the footprints of the ground's pixels (``pinhole._row_footprints``, ``mipmap.footprint_axes``), the choice of taps
+and level (``mipmap.filter_choice``) and the mip levels halved in place (``mipmap._constant_mipmap``). Each does
 what its array version does, float32 operation for float32 operation in the same order, and the tests hold it to
 that version's bits.
 
-The filtering's method is the one documented in ``texture.sample_footprint`` and ``albedo``:
+The filtering's method is the one documented in ``mipmap.sample_footprint`` and ``albedo``:
 these loops do it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
-and the same order of operations as the array version (``texture._tap_mean``, ``_bilinear``), so
+and the same order of operations as the array version (tests/reference.py's ``_tap_mean``, ``_bilinear``), so
 that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
-The tap counts, levels and blends come from ``texture._filter_choice`` (``filter_choice``), computed once
+The tap counts, levels and blends come from ``mipmap.filter_choice`` (here ``filter_choice``), computed once
 for all the reads that share a footprint. A still camera reads each frame's raster at the same places:
 ``tap_table`` finds them once and ``filtered3_at`` reads there (the same bits; docs/accuracy.md, "A still
 camera's taps"). Imported lazily: numba costs 0.3 s to import.
@@ -27,7 +27,7 @@ __all__ = ["filtered", "tap_table", "filtered3_at", "footprint_axes", "row_footp
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _first_texel(channels, offset, rows, cols, periodic, col, row):
-    """``texture._first_texel`` of one point: the flat index of channel 0 of the first of the four
+    """tests/reference.py's ``_first_texel`` of one point: the flat index of channel 0 of the first of the four
     texels of a bilinear sample at texel coordinates (col, row), and the fractions (fc, fr)
     float32 beyond it."""
     if not periodic:
@@ -37,7 +37,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
     fc = np.float32(col - c0f)
     fr = np.float32(row - r0f)
     c0, r0 = int(c0f), int(r0f)
-    if periodic:  # a mask for a power of two, as camera._wrap: no division
+    if periodic:  # a mask for a power of two, as tests/reference.py's _wrap: no division
         c0 = c0 & (cols - 1) if cols & (cols - 1) == 0 else c0 % cols
         r0 = r0 & (rows - 1) if rows & (rows - 1) == 0 else r0 % rows
     return ((r0 * (cols + 2) + c0) + offset + cols + 3) * channels, fc, fr
@@ -46,7 +46,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _bilinear(flat, first, channels, step, k, fc, fr):
     """Channel ``k`` of the bilinear sample whose first texel is ``first`` (``_first_texel``),
-    ``step`` the flat stride of a stored row: ``texture._bilinear``'s float32 arithmetic, each
+    ``step`` the flat stride of a stored row: tests/reference.py's ``_bilinear`` float32 arithmetic, each
     corner read as ``flat[o:].take(first, mode="clip")``."""
     size = flat.shape[0]
     if first >= 0 and first + step + 2 * channels <= size:  # always, but for NaN coordinates
@@ -77,7 +77,7 @@ def _bilinear(flat, first, channels, step, k, fc, fr):
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _coords(x0, y0, px, py, sx, sy, dx, dy):
-    """``texture._texel_coords`` of one point and step."""
+    """tests/reference.py's ``_texel_coords`` of one point and step."""
     col = (sx - x0) * (1.0 / px) - 0.5
     row = (y0 - sy) * (1.0 / py) - 0.5
     dcol = dx * (1.0 / px)
@@ -90,13 +90,15 @@ def _coords(x0, y0, px, py, sx, sy, dx, dy):
     return col, row, dcol, drow
 
 
-def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
-             level, blend, out):
-    """``texture._filtered``: each read's mean into ``out``.
+def filtered(flat: np.ndarray, channels: int, offsets: np.ndarray, shapes: np.ndarray, origins: np.ndarray,
+             pixels: np.ndarray, periodic: bool, x: np.ndarray, y: np.ndarray, footprint: np.ndarray,
+             major: np.ndarray, ex: np.ndarray, ey: np.ndarray, taps: np.ndarray, level: np.ndarray,
+             blend: np.ndarray, out: np.ndarray) -> None:
+    """``mipmap.filtered_read``: each read's mean into ``out``.
 
     Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint j = footprint[r]
     (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples
-    (``texture._tap_mean``, the same float32 arithmetic in the same order), in level level[j]
+    (tests/reference.py's ``_tap_mean``, the same float32 arithmetic in the same order), in level level[j]
     blended by blend[j] towards the next when > 0. The body is written out in full for three
     channels (a helper function that returns the three means, even inlined, ran three times
     slower) and channel by channel otherwise, in two compiled loops (``_filtered3`` and
@@ -106,8 +108,8 @@ def filtered(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, f
     Parameters
     ----------
     flat : numpy.ndarray
-        (texels x channels,) float32, every level of the mip map flat (``texture.MipMap.texels``),
-        each level stored with its border of one texel (``texture._level_tables``).
+        (texels x channels,) float32, every level of the mip map flat (``mipmap.MipMap.texels``),
+        each level stored with its border of one texel (``mipmap.level_tables``).
     channels : int
         Channels per texel.
     offsets : numpy.ndarray
@@ -168,6 +170,31 @@ def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major,
             step, stepb, nf)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _blend3(s0, s1, s2, u0, u1, u2, t):
+    """The three channels of a tap read at two mip levels, blended by t (float32 in, float32 out)."""
+    s0 += (u0 - s0) * t
+    s1 += (u1 - s1) * t
+    s2 += (u2 - s2) * t
+    return s0, s1, s2
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _add_tap3(i, t0, t1, t2, s0, s1, s2):
+    """The running sum of a pixel's taps after tap i (the first tap starts it, as the loops did)."""
+    if i == 0:
+        return s0, s1, s2
+    return t0 + s0, t1 + s1, t2 + s2
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _store_mean3(out, r, t0, t1, t2, nf):
+    """Row r of out (3, n) set to the taps' sums over their count nf."""
+    out[0, r] = t0 / nf
+    out[1, r] = t1 / nf
+    out[2, r] = t2 / nf
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
                level, blend, out, start, stop):
@@ -186,18 +213,9 @@ def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y,
                 u0, u1, u2 = _bilinear3(flat, offb, rowsb, colsb, periodic, colb, rowb, stepb)
                 colb += dcolb
                 rowb += drowb
-                s0 += (u0 - s0) * t
-                s1 += (u1 - s1) * t
-                s2 += (u2 - s2) * t
-            if i == 0:
-                t0, t1, t2 = s0, s1, s2
-            else:
-                t0 += s0
-                t1 += s1
-                t2 += s2
-        out[0, r] = t0 / nf
-        out[1, r] = t1 / nf
-        out[2, r] = t2 / nf
+                s0, s1, s2 = _blend3(s0, s1, s2, u0, u1, u2, t)
+            t0, t1, t2 = _add_tap3(i, t0, t1, t2, s0, s1, s2)
+        _store_mean3(out, r, t0, t1, t2, nf)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -234,7 +252,10 @@ def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodi
             out[k, r] /= nf
 
 
-def tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend):
+def tap_table(channels: int, offsets: np.ndarray, shapes: np.ndarray, origins: np.ndarray, pixels: np.ndarray,
+              periodic: bool, x: np.ndarray, y: np.ndarray, major: np.ndarray, ex: np.ndarray, ey: np.ndarray,
+              taps: np.ndarray, level: np.ndarray,
+              blend: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Where ``filtered``'s taps fall for read r = footprint r, for ``filtered3_at``: each tap's first
     texel and fractions (``_first_texel``), the same float64 steps along the major axis in the same
     order, and after each tap its sample in the next level when blended.
@@ -286,7 +307,9 @@ def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footp
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out, begin, end):
+def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: np.ndarray, blend: np.ndarray,
+                 start: np.ndarray, first: np.ndarray, fc: np.ndarray, fr: np.ndarray, out: np.ndarray, begin: int,
+                 end: int) -> None:
     """``_filtered3`` of read r = footprint r, its samples where ``tap_table`` found them: the same
     float32 arithmetic in the same order, the same bits (a still camera reads the same places of
     each frame's raster, so the places are found once). Its blend and sums are written out as
@@ -322,18 +345,9 @@ def filtered3_at(flat, shapes, taps, level, blend, start, first, fc, fr, out, be
                 u0, u1, u2 = (_bilinear(flat, f, 3, stepb, 0, c, w), _bilinear(flat, f, 3, stepb, 1, c, w),
                               _bilinear(flat, f, 3, stepb, 2, c, w))
                 k += 1
-                s0 += (u0 - s0) * t
-                s1 += (u1 - s1) * t
-                s2 += (u2 - s2) * t
-            if i == 0:
-                t0, t1, t2 = s0, s1, s2
-            else:
-                t0 += s0
-                t1 += s1
-                t2 += s2
-        out[0, r] = t0 / nf
-        out[1, r] = t1 / nf
-        out[2, r] = t2 / nf
+                s0, s1, s2 = _blend3(s0, s1, s2, u0, u1, u2, t)
+            t0, t1, t2 = _add_tap3(i, t0, t1, t2, s0, s1, s2)
+        _store_mean3(out, r, t0, t1, t2, nf)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -346,7 +360,7 @@ def _bilinear3(flat, off, rows, cols, periodic, col, row, step):
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _axes(dxdu, dxdv, dydu, dydv):
-    """``texture._footprint_axes`` of one Jacobian, the same float64 operations in the same order:
+    """``mipmap.footprint_axes`` of one Jacobian, the same float64 operations in the same order:
     (major, minor, ex, ey)."""
     a = dxdu * dxdu + dxdv * dxdv
     b = dxdu * dydu + dxdv * dydv
@@ -382,8 +396,9 @@ def _axes(dxdu, dxdv, dydu, dydv):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def footprint_axes(dxdu, dxdv, dydu, dydv):
-    """``_axes`` (``texture._footprint_axes``) of every Jacobian.
+def footprint_axes(dxdu: np.ndarray, dxdv: np.ndarray, dydu: np.ndarray,
+                   dydv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``_axes`` (``mipmap.footprint_axes``) of every Jacobian.
 
     Parameters
     ----------
@@ -405,9 +420,11 @@ def footprint_axes(dxdu, dxdv, dydu, dydv):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def row_footprints(rows, part, width, height, focal, position, right, up, forward, min_downward,
-                   x, y, major, minor, ex, ey, distance):
-    """``camera._row_footprints`` (``_row_hits`` and ``_footprint_axes``) pixel by pixel.
+def row_footprints(rows: np.ndarray, part: np.ndarray, width: int, height: int, focal: float, position: np.ndarray,
+                   right: np.ndarray, up: np.ndarray, forward: np.ndarray, min_downward: float, x: np.ndarray,
+                   y: np.ndarray, major: np.ndarray, minor: np.ndarray, ex: np.ndarray, ey: np.ndarray,
+                   distance: np.ndarray) -> None:
+    """``pinhole._row_footprints`` (``_row_hits`` and ``mipmap.footprint_axes``) pixel by pixel.
 
     The same float64 operations in the same order as the array version.
 
@@ -426,7 +443,7 @@ def row_footprints(rows, part, width, height, focal, position, right, up, forwar
     right, up, forward : numpy.ndarray
         (3,) float64, the camera's unit axes [1].
     min_downward : float
-        The least downward slope of a ray (``camera.MIN_DOWNWARD``) [1].
+        The least downward slope of a ray (``pinhole.MIN_DOWNWARD``) [1].
     x, y : numpy.ndarray
         (r width,) float64, written: the ground points seen [m].
     major, minor : numpy.ndarray
@@ -467,8 +484,9 @@ def row_footprints(rows, part, width, height, focal, position, right, up, forwar
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, blend):
-    """``texture._filter_choice`` footprint by footprint, the same float64 operations.
+def filter_choice(texel: float, lod_bias: float, count: int, max_taps: int, major: np.ndarray, minor: np.ndarray,
+                  taps: np.ndarray, level: np.ndarray, blend: np.ndarray) -> None:
+    """``mipmap.filter_choice`` footprint by footprint, the same float64 operations.
 
     Parameters
     ----------
@@ -479,7 +497,7 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
     count : int
         The mip map's levels.
     max_taps : int
-        The most taps a footprint takes (``texture.MAX_TAPS``).
+        The most taps a footprint takes (``mipmap.MAX_TAPS``).
     major, minor : numpy.ndarray
         (n,) float64, the footprints' box widths [m].
     taps : numpy.ndarray
@@ -528,8 +546,8 @@ def filter_choice(texel, lod_bias, count, max_taps, major, minor, taps, level, b
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def halve_level(texels, source, rows, cols, target):
-    """``texture._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
+def halve_level(texels: np.ndarray, source: int, rows: int, cols: int, target: int) -> None:
+    """``mipmap._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
 
     Pairs of rows first, then pairs of columns, each sum halved in float32. An odd size's missing row
     or column is the border's value, as the padding of the array version.
@@ -537,7 +555,7 @@ def halve_level(texels, source, rows, cols, target):
     Parameters
     ----------
     texels : numpy.ndarray
-        (texels, channels) float32, a mip map's texels (``texture.MipMap.texels``); the level at
+        (texels, channels) float32, a mip map's texels (``mipmap.MipMap.texels``); the level at
         ``target`` is written.
     source : int
         The stored level's first texel (with its border of the outside value) [texel].

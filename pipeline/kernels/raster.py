@@ -24,7 +24,7 @@ __all__ = [
 
 
 @njit(cache=True, nogil=True)
-def box_pixels(center, half, index, rows, cols):
+def box_pixels(center: np.ndarray, half: np.ndarray, index: np.ndarray, rows: int, cols: int) -> int:
     """How many pixels the boxes hold within the raster.
 
     Parameters
@@ -56,7 +56,9 @@ def box_pixels(center, half, index, rows, cols):
 
 
 @njit(cache=True, nogil=True)
-def in_order(order, center, half, prm, feature, thickness, owner):
+def in_order(order: np.ndarray, center: np.ndarray, half: np.ndarray, prm: np.ndarray, feature: np.ndarray,
+             thickness: np.ndarray, owner: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The shapes' arrays taken in the order ``order`` (prm as float32).
 
     The kernels then read them one after another, not at random (docs/accuracy.md, "The leaf
@@ -104,7 +106,7 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 @njit(cache=True, nogil=True, error_model="numpy")
 def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
-    b = min(|nx|, |ny|): the CDF of a trapezoid (rasteriser._square_cdf, branch-free). One division:
+    b = min(|nx|, |ny|): the CDF of a trapezoid (tests/test_canopy.py's _square_cdf, branch-free). One division:
     the branch's denominator, a or 2 a b + 1e-12, is chosen first (the same bits as 1 / a and
     1 / (2 a b + 1e-12) computed apart)."""
     s = abs(t)
@@ -200,7 +202,7 @@ def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
     """The box of a shape centred at (cx, cy) with half-size (hx, hy) [pixel], clipped to the
-    raster, as rasteriser._boxes chooses it: (col, row, width, height, k sub-samples per axis,
+    raster, as tests/test_canopy.py's _reference_scatter chooses it: (col, row, width, height, k sub-samples per axis,
     thin, thickness in sub-samples or -1 when not thin); width 0 when it misses the raster."""
     x0 = min(max(math.floor(cx - hx), 0.0), float(cols))
     y0 = min(max(math.floor(cy - hy), 0.0), float(rows))
@@ -235,7 +237,9 @@ def _next_box(ii, center, half, index, feature, thickness, most, transmittance, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def shapes(capsule, center, half, index, prm, feature, thickness, most, transmittance, fragments, owner, count):
+def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarray, prm: np.ndarray,
+           feature: np.ndarray, thickness: np.ndarray, most: int, transmittance: np.ndarray,
+           fragments: tuple[np.ndarray, np.ndarray, np.ndarray], owner: np.ndarray, count: int) -> int:
     """Every ellipse's or capsule piece's coverage c of every pixel of its box, into the transmittance or
     as fragments.
 
@@ -360,8 +364,10 @@ def _turn(v, k, c, s, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase, omega, swing, twist):
-    """grove_geometry.leaves_at in one pass over the leaves.
+def flutter(center: np.ndarray, axis_u: np.ndarray, axis_v: np.ndarray, pivot: np.ndarray, swing_axis: np.ndarray,
+            swing_phase: np.ndarray, twist_phase: np.ndarray, omega: float, swing: float,
+            twist: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """grove.leaves_at in one pass over the leaves.
 
     Parameters
     ----------
@@ -405,8 +411,8 @@ def flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def onto(points, sx, sy, offset):
-    """grove_geometry.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
+def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
+    """grove.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
 
     numpy's operations, in order.
 
@@ -433,7 +439,8 @@ def onto(points, sx, sy, offset):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
+def ellipse_params(center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, origin_x: float, origin_y: float,
+                   pixel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """rasteriser._ellipses in one pass: ellipses in the pixel units of a grid.
 
     Parameters
@@ -473,9 +480,11 @@ def ellipse_params(center, axis_a, axis_b, origin_x, origin_y, pixel):
 
 
 @njit(cache=True, nogil=True)
-def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n_up, n_rel, nearest, farthest,
-                   leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky):
-    """``foreground.tree_passes``'s leaf fragments (those whose ``shape`` is under ``leaves``).
+def leaf_fragments(flat: np.ndarray, shape: np.ndarray, leaves: int, cols: int, rows: int, focal: float,
+                   n_forward: np.ndarray, n_right: np.ndarray, n_up: np.ndarray, n_rel: np.ndarray,
+                   nearest: np.ndarray, farthest: np.ndarray, leaf_sky: np.ndarray, leaf_sun: np.ndarray,
+                   frag_depth: np.ndarray, frag_sun: np.ndarray, frag_sky: np.ndarray) -> None:
+    """``trees.tree_passes``'s leaf fragments (those whose ``shape`` is under ``leaves``).
 
     Fragment by fragment with the float64 operations of its array version in their order: the depth
     where the pixel's ray meets the leaf's plane, ``n_rel / (n . ray)`` with n . ray kept from 0
@@ -525,8 +534,9 @@ def leaf_fragments(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n
 
 
 @njit(cache=True, nogil=True)
-def scatter_light(flat, weight, frag_sun, frag_sky, pixels):
-    """``foreground.tree_passes``'s sun and sky images: each fragment's light times its weight added to its pixel.
+def scatter_light(flat: np.ndarray, weight: np.ndarray, frag_sun: np.ndarray, frag_sky: np.ndarray,
+                  pixels: int) -> tuple[np.ndarray, np.ndarray]:
+    """``trees.tree_passes``'s sun and sky images: each fragment's light times its weight added to its pixel.
 
     Fragment after fragment from 0: the sums, in the order, of
     ``np.bincount(flat, weights=weight * light[:, c])`` per channel.
@@ -558,8 +568,10 @@ def scatter_light(flat, weight, frag_sun, frag_sky, pixels):
 
 
 @njit(cache=True, nogil=True)
-def leaf_heights(shape, leaves, px, py, cx, cy, slope_x, slope_y, h_center, reach, height):
-    """``foreground._visibility``'s leaf fragments (those whose ``shape`` is under ``leaves``).
+def leaf_heights(shape: np.ndarray, leaves: int, px: np.ndarray, py: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                 slope_x: np.ndarray, slope_y: np.ndarray, h_center: np.ndarray, reach: np.ndarray,
+                 height: np.ndarray) -> None:
+    """``trees._visibility``'s leaf fragments (those whose ``shape`` is under ``leaves``).
 
     The height towards the light of the leaf's plane over the fragment's point, its rise from the
     centre along the plane's slopes clamped to [-reach, reach] of the leaf, with the float64

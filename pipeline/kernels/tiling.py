@@ -59,7 +59,9 @@ def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def tiling_reads(x, y, cell, seed, skip, period_x, period_y, weight, read_x, read_y, read_pixel, read_weight):
+def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: float, period_x: float, period_y: float,
+                 weight: np.ndarray, read_x: np.ndarray, read_y: np.ndarray, read_pixel: np.ndarray,
+                 read_weight: np.ndarray) -> int:
     """The reads of ``albedo.StochasticTiling.sample``, footprint by footprint in vertex order.
 
     Per footprint j the lattice triangle's three vertices and weights (``weights``) raised to the
@@ -172,7 +174,9 @@ def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, looku
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def tiling_lookup(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+def tiling_lookup(values: np.ndarray, read_pixel: np.ndarray, read_weight: np.ndarray, weight: np.ndarray,
+                  level: np.ndarray, blend: np.ndarray, lookups: np.ndarray, center: np.ndarray, basis: np.ndarray,
+                  out: np.ndarray) -> None:
     """The rest of ``albedo.StochasticTiling.sample``: the reads' means blended into the albedo.
 
     The reads' means, footprint by footprint (``tiling_reads``' order), are summed by weight into
@@ -350,9 +354,91 @@ def _copy_shift(copy_row, copy_col, seed_key, side0):
     return _unit_hash(key) * side0, _unit_hash(key ^ _SECOND_KEY) * side0
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _remembered_shift(copy_row, copy_col, seed_key, side0, last_row, last_col, last_shift_row, last_shift_col):
+    """The copy (copy_row, copy_col) of the tile and its shift (rows, cols) [texel of level 0]
+    (``_copy_shift``), as (copy_row, copy_col, shift_row, shift_col): the last copy hashed and its
+    shift (last_row, last_col, last_shift_row, last_shift_col) when it is that copy, not hashed again."""
+    if copy_row == last_row and copy_col == last_col:  # as the last read's
+        return last_row, last_col, last_shift_row, last_shift_col
+    shift_row, shift_col = _copy_shift(copy_row, copy_col, seed_key, side0)
+    return copy_row, copy_col, shift_row, shift_col
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _tap_point(rows, cols, major, ex, ey, i, t, n_taps, direct):
+    """Tap t of n_taps of sample i (``cloud_field``): (row, col) [texel of level 0], the sample's
+    point itself when ``direct``, else spaced along (ex[i], ey[i]) over major[i] about it."""
+    if direct:
+        return rows[i], cols[i]
+    step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
+    return rows[i] + -ey[i] * step, cols[i] + ex[i] * step
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out,
-                tile_blend, seed, base_row, base_col):
+def _field_samples(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out, tile_blend, seed,
+                   base_row, base_col):
+    """``cloud_field``'s loop over samples and taps. The levels are read here, not in a helper:
+    numba inlining the reads one call deeper made the loop 1.5 to 2 times slower."""
+    n_levels = sides.shape[0]
+    side0 = sides[0]
+    band = tile_blend * side0
+    seed_key = _seed_key(seed)
+    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
+    shares = np.empty((2, 2))  # per axis: their smoothstep weights
+    last_row = last_col = 0  # the last copy hashed, and its shift
+    last_shift_row = last_shift_col = 0.0
+    scales = np.empty(n_levels)  # 2^level, exactly
+    for level in range(n_levels):
+        scales[level] = 2.0**level
+    for i in range(rows.shape[0]):
+        n_taps = 1 if direct else taps[i]
+        k = 0 if direct else k0[i]
+        upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
+        total = 0.0
+        for t in range(n_taps):
+            tap_row, tap_col = _tap_point(rows, cols, major, ex, ey, i, t, n_taps, direct)
+            count_row, copies[0, 0], copies[0, 1], shares[0, 0], shares[0, 1] = _copies_at(
+                tap_row, side0, band, base_row)
+            count_col, copies[1, 0], copies[1, 1], shares[1, 0], shares[1, 1] = _copies_at(
+                tap_col, side0, band, base_col)
+            weighted = 0.0
+            squares = 0.0
+            for cr in range(count_row):
+                for cc in range(count_col):
+                    last_row, last_col, last_shift_row, last_shift_col = _remembered_shift(
+                        copies[0, cr], copies[1, cc], seed_key, side0, last_row, last_col, last_shift_row,
+                        last_shift_col)
+                    w = shares[0, cr] * shares[1, cc]
+                    at_row = tap_row + last_shift_row
+                    at_col = tap_col + last_shift_col
+                    finer = 0.0
+                    for level in range(k, k + 2 if upper else k + 1):
+                        row_at, col_at = at_row, at_col
+                        if not direct:  # texel centres of the level
+                            row_at = (row_at + 0.5) / scales[level] - 0.5
+                            col_at = (col_at + 0.5) / scales[level] - 0.5
+                        if level == 0:
+                            value = _cubic_read(flat, offsets[0], sides[0], row_at, col_at)
+                        else:
+                            value = _linear_read(flat, offsets[level], sides[level], row_at, col_at)
+                        if level == k:
+                            finer = value
+                        else:
+                            value = finer + blend[i] * (value - finer)
+                    weighted += w * value
+                    squares += w * w
+            if count_row * count_col > 1:
+                value = weighted / math.sqrt(squares)
+            total += value / n_taps if not direct else value
+        out[i] = total
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def cloud_field(flat: np.ndarray, offsets: np.ndarray, sides: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                direct: bool, taps: np.ndarray, k0: np.ndarray, blend: np.ndarray, major: np.ndarray,
+                ex: np.ndarray, ey: np.ndarray, out: np.ndarray, tile_blend: float, seed: int, base_row: int,
+                base_col: int) -> np.ndarray:
     """The reads of ``clouds.CloudLayer.field`` in one loop over samples and taps.
 
     The plane is laid with copies of the tile, each but copy (0, 0) shifted by (rows, cols),
@@ -371,7 +457,7 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     Parameters
     ----------
     flat : numpy.ndarray
-        Every level of the noise in one flat float64 array (``cloud_noise._packed``) [1].
+        Every level of the noise in one flat float64 array (``cloud_noise.packed_levels``) [1].
     offsets : numpy.ndarray
         (levels,) intp, each level's first value in ``flat``.
     sides : numpy.ndarray
@@ -407,71 +493,86 @@ def cloud_field(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major
     numpy.ndarray
         ``out``.
     """
-    n_levels = sides.shape[0]
-    side0 = sides[0]
-    band = tile_blend * side0
-    seed_key = _seed_key(seed)
-    copies = np.empty((2, 2), dtype=np.int64)  # per axis: the copies read, lower first
-    shares = np.empty((2, 2))  # per axis: their smoothstep weights
-    last_row = last_col = 0  # the last copy hashed, and its shift
-    last_shift_row = last_shift_col = 0.0
-    scales = np.empty(n_levels)  # 2^level, exactly
-    for level in range(n_levels):
-        scales[level] = 2.0**level
-    for i in range(rows.shape[0]):
-        n_taps = 1 if direct else taps[i]
-        k = 0 if direct else k0[i]
-        upper = (not direct) and blend[i] > 0 and k + 1 < n_levels
-        total = 0.0
-        for t in range(n_taps):
-            if direct:
-                tap_row, tap_col = rows[i], cols[i]
-            else:
-                step = ((t + 0.5) / n_taps - 0.5) * major[i]  # [texel] from the centre
-                tap_row = rows[i] + -ey[i] * step
-                tap_col = cols[i] + ex[i] * step
-            count_row, copies[0, 0], copies[0, 1], shares[0, 0], shares[0, 1] = _copies_at(
-                tap_row, side0, band, base_row)
-            count_col, copies[1, 0], copies[1, 1], shares[1, 0], shares[1, 1] = _copies_at(
-                tap_col, side0, band, base_col)
-            weighted = 0.0
-            squares = 0.0
-            for cr in range(count_row):
-                for cc in range(count_col):
-                    if copies[0, cr] == last_row and copies[1, cc] == last_col:  # as the last read's
-                        shift_row, shift_col = last_shift_row, last_shift_col
-                    else:
-                        shift_row, shift_col = _copy_shift(copies[0, cr], copies[1, cc], seed_key, side0)
-                        last_row, last_col = copies[0, cr], copies[1, cc]
-                        last_shift_row, last_shift_col = shift_row, shift_col
-                    w = shares[0, cr] * shares[1, cc]
-                    at_row = tap_row + shift_row
-                    at_col = tap_col + shift_col
-                    finer = 0.0
-                    for level in range(k, k + 2 if upper else k + 1):
-                        row_at, col_at = at_row, at_col
-                        if not direct:  # texel centres of the level
-                            row_at = (row_at + 0.5) / scales[level] - 0.5
-                            col_at = (col_at + 0.5) / scales[level] - 0.5
-                        if level == 0:
-                            value = _cubic_read(flat, offsets[0], sides[0], row_at, col_at)
-                        else:
-                            value = _linear_read(flat, offsets[level], sides[level], row_at, col_at)
-                        if level == k:
-                            finer = value
-                        else:
-                            value = finer + blend[i] * (value - finer)
-                    weighted += w * value
-                    squares += w * w
-            if count_row * count_col > 1:
-                value = weighted / math.sqrt(squares)
-            total += value / n_taps if not direct else value
-        out[i] = total
+    _field_samples(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out, tile_blend, seed,
+                   base_row, base_col)
     return out
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _column_copies(cols, side0, band, base_col):
+    """Per column of ``cloud_grid``: (how many copies of the tile it reads, 1 or 2 (n_cols,); the
+    copies, lower first (n_cols, 2); their smoothstep shares (n_cols, 2) [1]) (``_copies_at``)."""
+    n_cols = cols.shape[0]
+    col_count = np.empty(n_cols, dtype=np.int64)
+    col_copy = np.empty((n_cols, 2), dtype=np.int64)
+    col_share = np.empty((n_cols, 2))
+    for j in range(n_cols):
+        col_count[j], col_copy[j, 0], col_copy[j, 1], col_share[j, 0], col_share[j, 1] = _copies_at(
+            cols[j], side0, band, base_col)
+    return col_count, col_copy, col_share
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def cloud_grid(flat, offsets, sides, rows, cols, start, stop, out, tile_blend, seed, base_row, base_col):
+def _column_taps(copy_row, cr, first_copy, cols, col_count, col_copy, seed_key, side0, shift_rows, col_ok, col_at,
+                 col_w):
+    """For row copy ``copy_row`` (the row's cr-th, 0 or 1) of ``cloud_grid``: the shift's row part
+    [texel of level 0] per column copy from ``first_copy`` into shift_rows[cr], and each column's
+    taps (``_cubic_axis``) per column copy into col_ok[cr], col_at[cr], col_w[cr]."""
+    for cc in range(shift_rows.shape[1]):
+        shift_rows[cr, cc] = _copy_shift(copy_row, first_copy + cc, seed_key, side0)[0]
+    for j in range(cols.shape[0]):
+        for cc in range(col_count[j]):
+            shift_col = _copy_shift(copy_row, col_copy[j, cc], seed_key, side0)[1]
+            (col_ok[cr, j, cc], col_at[cr, j, cc, 0], col_at[cr, j, cc, 1], col_at[cr, j, cc, 2],
+             col_at[cr, j, cc, 3], col_w[cr, j, cc, 0], col_w[cr, j, cc, 1], col_w[cr, j, cc, 2],
+             col_w[cr, j, cc, 3]) = _cubic_axis(cols[j] + shift_col, side0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _row_taps(row, count_row, shift_rows, side0, row_ok, row_at, row_w):
+    """The taps (``_cubic_axis``) of a row of ``cloud_grid`` at lattice row ``row`` [texel of level
+    0], per row copy (``count_row`` of them) and column copy, into row_ok, row_at, row_w."""
+    for cr in range(count_row):
+        for cc in range(shift_rows.shape[1]):
+            (row_ok[cr, cc], row_at[cr, cc, 0], row_at[cr, cc, 1], row_at[cr, cc, 2], row_at[cr, cc, 3],
+             row_w[cr, cc, 0], row_w[cr, cc, 1], row_w[cr, cc, 2], row_w[cr, cc, 3]) = _cubic_axis(
+                row + shift_rows[cr, cc], side0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _grid_row(flat, base, side0, count_row, share_lower, share_upper, col_count, col_copy, col_share, first_copy,
+              row_ok, row_at, row_w, col_ok, col_at, col_w, out, at, j_start, j_stop):
+    """Columns j_start to j_stop - 1 of one row of ``cloud_grid`` into out[at + j]: per sample the
+    read of the copy of the tile it lies in, or the variance-preserving blend of the copies about it
+    [1], from the row's taps (``_row_taps``) and the columns' (``_column_taps``)."""
+    for j in range(j_start, j_stop):
+        weighted = 0.0
+        squares = 0.0
+        value = 0.0
+        for cr in range(count_row):
+            for cc in range(col_count[j]):
+                w = (share_lower if cr == 0 else share_upper) * col_share[j, cc]
+                k = col_copy[j, cc] - first_copy
+                value = 0.0
+                if row_ok[cr, k] and col_ok[cr, j, cc]:
+                    value = _cubic_sum(flat, base, side0, row_at[cr, k, 0], row_at[cr, k, 1], row_at[cr, k, 2],
+                                       row_at[cr, k, 3], row_w[cr, k, 0], row_w[cr, k, 1], row_w[cr, k, 2],
+                                       row_w[cr, k, 3], col_at[cr, j, cc, 0], col_at[cr, j, cc, 1],
+                                       col_at[cr, j, cc, 2], col_at[cr, j, cc, 3], col_w[cr, j, cc, 0],
+                                       col_w[cr, j, cc, 1], col_w[cr, j, cc, 2], col_w[cr, j, cc, 3])
+                weighted += w * value
+                squares += w * w
+        if count_row * col_count[j] > 1:
+            value = weighted / math.sqrt(squares)
+        total = 0.0
+        total += value
+        out[at + j] = total
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def cloud_grid(flat: np.ndarray, offsets: np.ndarray, sides: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+               start: int, stop: int, out: np.ndarray, tile_blend: float, seed: int, base_row: int,
+               base_col: int) -> np.ndarray:
     """``cloud_field``'s direct reads (level 0, no footprint) of a grid: the sample of row i and
     column j at lattice coordinates (rows[i], cols[j]), written to ``out[i x len(cols) + j]`` for
     start <= i x len(cols) + j < stop, bit for bit as ``cloud_field`` reads it. A row's copies of
@@ -505,12 +606,7 @@ def cloud_grid(flat, offsets, sides, rows, cols, start, stop, out, tile_blend, s
     side0, base = sides[0], offsets[0]
     band = tile_blend * side0
     seed_key = _seed_key(seed)
-    col_count = np.empty(n_cols, dtype=np.int64)
-    col_copy = np.empty((n_cols, 2), dtype=np.int64)
-    col_share = np.empty((n_cols, 2))
-    for j in range(n_cols):
-        col_count[j], col_copy[j, 0], col_copy[j, 1], col_share[j, 0], col_share[j, 1] = _copies_at(
-            cols[j], side0, band, base_col)
+    col_count, col_copy, col_share = _column_copies(cols, side0, band, base_col)
     first_copy = col_copy[:, 0].min()
     spread = col_copy[:, 1].max() - first_copy + 1  # the column copies met
     # per row copy (of the row's two) and column copy: the shift's row part and the row's taps
@@ -527,41 +623,11 @@ def cloud_grid(flat, offsets, sides, rows, cols, start, stop, out, tile_blend, s
         count_row, lower, upper, share_lower, share_upper = _copies_at(rows[i], side0, band, base_row)
         if count_row != made[0] or lower != made[1] or (count_row == 2 and upper != made[2]):
             for cr in range(count_row):
-                copy_row = lower if cr == 0 else upper
-                for cc in range(spread):
-                    shift_rows[cr, cc] = _copy_shift(copy_row, first_copy + cc, seed_key, side0)[0]
-                for j in range(n_cols):
-                    for cc in range(col_count[j]):
-                        shift_col = _copy_shift(copy_row, col_copy[j, cc], seed_key, side0)[1]
-                        (col_ok[cr, j, cc], col_at[cr, j, cc, 0], col_at[cr, j, cc, 1], col_at[cr, j, cc, 2],
-                         col_at[cr, j, cc, 3], col_w[cr, j, cc, 0], col_w[cr, j, cc, 1], col_w[cr, j, cc, 2],
-                         col_w[cr, j, cc, 3]) = _cubic_axis(cols[j] + shift_col, side0)
+                _column_taps(lower if cr == 0 else upper, cr, first_copy, cols, col_count, col_copy, seed_key, side0,
+                             shift_rows, col_ok, col_at, col_w)
             made[0], made[1], made[2] = count_row, lower, upper
-        for cr in range(count_row):
-            for cc in range(spread):
-                (row_ok[cr, cc], row_at[cr, cc, 0], row_at[cr, cc, 1], row_at[cr, cc, 2], row_at[cr, cc, 3],
-                 row_w[cr, cc, 0], row_w[cr, cc, 1], row_w[cr, cc, 2], row_w[cr, cc, 3]) = _cubic_axis(
-                    rows[i] + shift_rows[cr, cc], side0)
-        for j in range(max(start - i * n_cols, 0), min(stop - i * n_cols, n_cols)):
-            weighted = 0.0
-            squares = 0.0
-            value = 0.0
-            for cr in range(count_row):
-                for cc in range(col_count[j]):
-                    w = (share_lower if cr == 0 else share_upper) * col_share[j, cc]
-                    k = col_copy[j, cc] - first_copy
-                    value = 0.0
-                    if row_ok[cr, k] and col_ok[cr, j, cc]:
-                        value = _cubic_sum(flat, base, side0, row_at[cr, k, 0], row_at[cr, k, 1], row_at[cr, k, 2],
-                                           row_at[cr, k, 3], row_w[cr, k, 0], row_w[cr, k, 1], row_w[cr, k, 2],
-                                           row_w[cr, k, 3], col_at[cr, j, cc, 0], col_at[cr, j, cc, 1],
-                                           col_at[cr, j, cc, 2], col_at[cr, j, cc, 3], col_w[cr, j, cc, 0],
-                                           col_w[cr, j, cc, 1], col_w[cr, j, cc, 2], col_w[cr, j, cc, 3])
-                    weighted += w * value
-                    squares += w * w
-            if count_row * col_count[j] > 1:
-                value = weighted / math.sqrt(squares)
-            total = 0.0
-            total += value
-            out[i * n_cols + j] = total
+        _row_taps(rows[i], count_row, shift_rows, side0, row_ok, row_at, row_w)
+        _grid_row(flat, base, side0, count_row, share_lower, share_upper, col_count, col_copy, col_share, first_copy,
+                  row_ok, row_at, row_w, col_ok, col_at, col_w, out, i * n_cols, max(start - i * n_cols, 0),
+                  min(stop - i * n_cols, n_cols))
     return out

@@ -23,11 +23,13 @@ contact times against published local circumstances are measured in docs/accurac
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 
 import ephem
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.constants import SUN_ANGULAR_RADIUS
 from pipeline.core.geometry import direction_vector, tangent_axes
@@ -224,7 +226,7 @@ def separation(sun: BodyPosition, moon: BodyPosition) -> float:
     return float(out) if out.ndim == 0 else out
 
 
-def obscured_fraction(separation, sun_radius, moon_radius):
+def obscured_fraction(separation: ArrayLike, sun_radius: ArrayLike, moon_radius: ArrayLike) -> float | np.ndarray:
     """Fraction of the sun's disc area covered by the moon's disc, in [0, 1].
 
     Exact area of the lens where two circles of radii r (sun) and R (moon) with centres d apart
@@ -370,17 +372,40 @@ def contact_times(
         If ``end`` is not after ``start``, ``step`` or ``tolerance`` is not positive, or a datetime
         is naive.
     """
-    from scipy.optimize import brentq, minimize_scalar  # 0.3 s to import: only when asked
+    start_utc = _utc(start, "start")
+    span = _search_span(start_utc, _utc(end, "end"), step, tolerance)
+    gaps = _contact_gaps(_Sky(site), _ephem_date(start_utc))
+    times = np.append(np.arange(0.0, span, step), span)
+    sampled = np.array([gaps(t) for t in times])  # (n, 2): external, internal
 
-    start_utc, end_utc = _utc(start, "start"), _utc(end, "end")
+    result: dict[str, datetime | None] = dict.fromkeys(_CONTACTS)
+    for column, (first, last) in enumerate((("C1", "C4"), ("C2", "C3"))):
+
+        def gap(t: float, column: int = column) -> float:
+            return gaps(t)[column]
+
+        before, after = _contact_roots(gap, times, sampled[:, column], tolerance)
+        if before is not None:
+            result[first] = start_utc + timedelta(seconds=before)
+        if after is not None:
+            result[last] = start_utc + timedelta(seconds=after)
+    return result
+
+
+def _search_span(start_utc: datetime, end_utc: datetime, step: float, tolerance: float) -> float:
+    """``contact_times``' window start_utc..end_utc checked with its ``step`` and ``tolerance`` [s]:
+    its length [s]; ValueError when it is empty or ``step`` or ``tolerance`` is not positive."""
     span = (end_utc - start_utc).total_seconds()
     if not span > 0:
         raise ValueError(f"end ({end_utc.isoformat()}) must be after start ({start_utc.isoformat()})")
     if not (step > 0 and tolerance > 0):
         raise ValueError("step and tolerance must be positive [s]")
+    return span
 
-    sky = _Sky(site)
-    date0 = _ephem_date(start_utc)
+
+def _contact_gaps(sky: _Sky, date0: float) -> Callable[[float], tuple[float, float]]:
+    """The function of t [s] after ephem date ``date0`` [day] whose roots are the contacts
+    (``contact_times``): (d - (r_sun + r_moon), d - |r_moon - r_sun|) [rad], external then internal."""
 
     def gaps(t: float) -> tuple[float, float]:
         sun, moon = sky.at(date0 + t / _SECONDS_PER_DAY)
@@ -390,39 +415,47 @@ def contact_times(
             d - abs(moon.angular_radius - sun.angular_radius),
         )
 
-    times = np.append(np.arange(0.0, span, step), span)
-    sampled = np.array([gaps(t) for t in times])  # (n, 2): external, internal
+    return gaps
 
-    result: dict[str, datetime | None] = dict.fromkeys(_CONTACTS)
-    for column, (first, last) in enumerate((("C1", "C4"), ("C2", "C3"))):
 
-        def gap(t, column=column):
-            return gaps(t)[column]
+def _closest_approach(gap: Callable[[float], float], times: np.ndarray, values: np.ndarray,
+                      tolerance: float) -> tuple[float, float]:
+    """The minimum (t [s], gap(t) [rad]) of ``gap``, sampled as ``values`` at ``times``: the least
+    sample's, or where a bounded Brent search between its neighbours finds a lower one to
+    ``tolerance`` [s] (so a totality shorter than the sampling is still found)."""
+    from scipy.optimize import minimize_scalar  # 0.3 s to import: only when asked
 
-        values = sampled[:, column]
-        i = int(np.argmin(values))
-        lo, hi = times[max(i - 1, 0)], times[min(i + 1, len(times) - 1)]
-        t_min, g_min = times[i], values[i]
-        if hi > lo:
-            found = minimize_scalar(gap, bounds=(lo, hi), method="bounded", options={"xatol": tolerance})
-            if found.fun < g_min:
-                t_min, g_min = float(found.x), float(found.fun)
-        if not g_min < 0:
-            continue
-        # Before the minimum: the last sample still outside the contact brackets the root.
-        before = np.flatnonzero((times < t_min) & (values > 0))
-        if before.size:
-            j = before[-1]
-            right = min(times[j + 1], t_min)
-            root = brentq(gap, times[j], right, xtol=tolerance)
-            result[first] = start_utc + timedelta(seconds=root)
-        after = np.flatnonzero((times > t_min) & (values > 0))
-        if after.size:
-            j = after[0]
-            left = max(times[j - 1], t_min)
-            root = brentq(gap, left, times[j], xtol=tolerance)
-            result[last] = start_utc + timedelta(seconds=root)
-    return result
+    i = int(np.argmin(values))
+    lo, hi = times[max(i - 1, 0)], times[min(i + 1, len(times) - 1)]
+    t_min, g_min = times[i], values[i]
+    if hi > lo:
+        found = minimize_scalar(gap, bounds=(lo, hi), method="bounded", options={"xatol": tolerance})
+        if found.fun < g_min:
+            t_min, g_min = float(found.x), float(found.fun)
+    return t_min, g_min
+
+
+def _contact_roots(gap: Callable[[float], float], times: np.ndarray, values: np.ndarray,
+                   tolerance: float) -> tuple[float | None, float | None]:
+    """The roots of ``gap`` (sampled as ``values`` at ``times`` [s]) on either side of its minimum,
+    to ``tolerance`` [s] by Brent's method: (before, after) [s], either None where the samples
+    bracket no root on that side, both None when the minimum is not below 0."""
+    from scipy.optimize import brentq  # 0.3 s to import: only when asked
+
+    t_min, g_min = _closest_approach(gap, times, values, tolerance)
+    if not g_min < 0:
+        return None, None
+    before = after = None
+    # Before the minimum: the last sample still outside the contact brackets the root.
+    outside = np.flatnonzero((times < t_min) & (values > 0))
+    if outside.size:
+        j = outside[-1]
+        before = brentq(gap, times[j], min(times[j + 1], t_min), xtol=tolerance)
+    outside = np.flatnonzero((times > t_min) & (values > 0))
+    if outside.size:
+        j = outside[0]
+        after = brentq(gap, max(times[j - 1], t_min), times[j], xtol=tolerance)
+    return before, after
 
 
 @dataclass(frozen=True)
@@ -479,16 +512,16 @@ def circumstances(site: Site, start: datetime, end: datetime, *, margin: float =
     contacts = contact_times(site, lo, hi)
     first = contacts["C1"] or (lo if contacts["C4"] else None)
     last = contacts["C4"] or (hi if contacts["C1"] else None)
-    if first is None:
+    if first is None or last is None:  # last is set whenever first is
         return Circumstances(contacts, None, 0.0, None, None)
     sky = _Sky(site)
     span = (last - first).total_seconds()
     times = np.append(np.arange(0.0, span, step), span)
     date0 = _ephem_date(first)
-    fractions = []
+    fractions: list[float] = []
     for t in times:
         sun, moon = sky.at(date0 + t / _SECONDS_PER_DAY)
-        fractions.append(obscured_fraction(separation(sun, moon), sun.angular_radius, moon.angular_radius))
+        fractions.append(float(obscured_fraction(separation(sun, moon), sun.angular_radius, moon.angular_radius)))
     k = int(np.argmax(fractions))
     maximum, obscuration = first + timedelta(seconds=float(times[k])), float(fractions[k])
     kind, central = "partial", None

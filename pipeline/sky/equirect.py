@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
 from pipeline.core.colour import REC709_LUMINANCE
@@ -28,7 +29,7 @@ __all__ = ["EquirectSky", "cut_sun", "equirect_lookup"]
 
 @dataclass(frozen=True)
 class EquirectSky:
-    """A sky from an equirectangular image (HDRI), texels taken as piecewise constant; a ``sky.Sky``.
+    """A sky from an equirectangular image (HDRI), texels taken as piecewise constant; a ``base.Sky``.
 
     Parameters
     ----------
@@ -62,6 +63,8 @@ class EquirectSky:
     @cached_property
     def sun_direction(self) -> np.ndarray:
         """Unit vector towards the cut sun's centre (with a sun only). [1]"""
+        if self.sun is None:
+            raise AttributeError("EquirectSky.sun_direction: the sky has no cut sun (cut_sun)")
         return direction_vector(self.sun.azimuth, self.sun.elevation)
 
     def sun_irradiance(self) -> np.ndarray:
@@ -103,7 +106,7 @@ class EquirectSky:
         """Horizontal irradiance (3,) of the image, without the cut sun: ``image_irradiance()``. [radiance x sr]"""
         return self.image_irradiance()
 
-    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+    def view_radiance(self, w: np.ndarray, s: np.ndarray, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """The image's radiance without the cut sun along view directions.
 
         Parameters
@@ -112,7 +115,7 @@ class EquirectSky:
             (..., 3) unit vectors [1]; ``rotation`` is applied, rows held to the upper half
             (``equirect_lookup``).
         s, footprint :
-            Unused (the ``sky.Sky`` interface).
+            Unused (the ``base.Sky`` interface).
 
         Returns
         -------
@@ -144,7 +147,7 @@ class EquirectSky:
         rows = len(weight)
         return np.einsum("r,rcn->n", weight, self.image[:rows].astype(np.float64))
 
-    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+    def raster(self, grid: Grid, *, fold_period: tuple[int, int] | None = None) -> SkyRaster:
         """The image on a sky-plane grid, area-averaged so that every texel keeps its energy (``_raster``).
 
         Kept on this sky for the next call with the same grid and fold (read-only: a still image
@@ -159,7 +162,7 @@ class EquirectSky:
 
         Returns
         -------
-        sky_raster.SkyRaster
+        sky.raster.SkyRaster
             The weighted sky, ``outside`` the image's light off the grid [radiance x sr].
         """
         key = (grid, None if fold_period is None else tuple(int(n) for n in fold_period))
@@ -281,14 +284,66 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
         return sky
     height, width, _ = sky.image.shape
     theta0, theta1 = _row_bounds(height)
-    rows = len(theta0)
-    luminance = sky.image[:rows].astype(np.float64) @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
+    luminance = sky.image[: len(theta0)].astype(np.float64) @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
     peak_row, peak_col = np.unravel_index(np.argmax(luminance), luminance.shape)
     peak, level = luminance[peak_row, peak_col], np.median(luminance)
     if not peak > 0 or peak < contrast * level:
         return sky
+    texels = _sun_texels(luminance, int(peak_row), int(peak_col), max(np.sqrt(peak * level), 1e-3 * peak), margin,
+                         ring)
+    core = _texel_directions(texels.core_rows, texels.core_cols, sky.image.shape, sky.rotation)
+    peak_direction = _texel_directions(peak_row, peak_col, sky.image.shape, sky.rotation)
+    if angle_to(core, peak_direction).max() > max(max_radius, 2.0 * np.pi / height):
+        return sky
+    background = np.median(sky.image[texels.ring_rows, texels.ring_cols], axis=0).astype(sky.image.dtype)
+    excess = sky.image[texels.rows, texels.cols].astype(np.float64) - background  # what the image loses, exactly
+    horizontal = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
+    energy = np.einsum("k,kn->n", horizontal[texels.rows], excess)
+    if not np.all(energy > 0):
+        return sky
+    solid = (np.cos(theta0) - np.cos(theta1)) * (2.0 * np.pi / width)
+    direction = _excess_direction(sky, texels, excess, solid)
+    elevation = float(np.arcsin(np.clip(direction[2], -1.0, 1.0)))
+    if elevation < max(min_elevation, 2.0 * angular_radius):
+        return sky
+    image = sky.image.copy()
+    image[texels.rows, texels.cols] = background
+    sun = SunDisc(float(np.arctan2(direction[0], direction[1]) % (2.0 * np.pi)), elevation,
+                  angular_radius, tuple(limb_darkening))
+    return EquirectSky(image, sky.rotation, sun, energy / direction[2])
+
+
+@dataclass(frozen=True)
+class _SunTexels:
+    """The texels of an HDRI's sun (``cut_sun``), as row and column indices into the image.
+
+    Attributes
+    ----------
+    core_rows, core_cols : numpy.ndarray
+        (n,) the core: the bright texels connected to the peak.
+    rows, cols : numpy.ndarray
+        (m,) the region: the core grown by the margin, the texels the sun is taken from.
+    ring_rows, ring_cols : numpy.ndarray
+        (k,) the ring around the region, whose median is the background.
+    """
+
+    core_rows: np.ndarray
+    core_cols: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    ring_rows: np.ndarray
+    ring_cols: np.ndarray
+
+
+def _sun_texels(luminance: np.ndarray, peak_row: int, peak_col: int, threshold: float, margin: int,
+                ring: int) -> _SunTexels:
+    """``cut_sun``'s texels of the sun about the peak (peak_row, peak_col) of ``luminance`` (the
+    rows above the horizon) [1]: the core, those brighter than ``threshold`` connected to the peak
+    (8-neighbours, the image turned so that the peak lies mid-width), grown by ``margin`` into the
+    region, and the ``ring`` texels around it [texels]."""
+    width = luminance.shape[1]
     shift = width // 2 - peak_col  # the peak mid-image, the seam opposite: no region crosses it
-    bright = np.roll(luminance, shift, axis=1) > max(np.sqrt(peak * level), 1e-3 * peak)
+    bright = np.roll(luminance, shift, axis=1) > threshold
     square = np.ones((3, 3), dtype=bool)
     labels, _ = ndimage.label(bright, structure=square)
     core = labels == labels[peak_row, width // 2]
@@ -298,35 +353,29 @@ def cut_sun(sky: EquirectSky, *, contrast: float = 50.0, margin: int = 1, ring: 
     r_idx, c_idx = np.nonzero(region)
     r_ring, c_ring = np.nonzero(around)
     c_core, c_idx, c_ring = ((c - shift) % width for c in (c_core, c_idx, c_ring))
+    return _SunTexels(r_core, c_core, r_idx, c_idx, r_ring, c_ring)
 
-    def unit(r, c):
-        theta = (r + 0.5) * (np.pi / height)
-        phi = ((c + 0.5) / width - 0.5) * 2.0 * np.pi + sky.rotation
-        return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
 
-    if angle_to(unit(r_core, c_core), unit(peak_row, peak_col)).max() > max(max_radius, 2.0 * np.pi / height):
-        return sky
-    background = np.median(sky.image[r_ring, c_ring], axis=0).astype(sky.image.dtype)
-    excess = sky.image[r_idx, c_idx].astype(np.float64) - background  # what the image loses, exactly
-    horizontal = 0.5 * (np.sin(theta1) ** 2 - np.sin(theta0) ** 2) * (2.0 * np.pi / width)
-    solid = (np.cos(theta0) - np.cos(theta1)) * (2.0 * np.pi / width)
-    energy = np.einsum("k,kn->n", horizontal[r_idx], excess)
-    if not np.all(energy > 0):
-        return sky
-    weight = np.maximum(excess @ np.asarray(REC709_LUMINANCE, dtype=np.float64), 0.0) * solid[r_idx]
-    direction = weight @ unit(r_idx, c_idx)
+def _texel_directions(rows: ArrayLike, cols: ArrayLike, shape: tuple[int, ...], rotation: float) -> np.ndarray:
+    """Unit vectors (..., 3) [1] towards the centres of texels (rows, cols) of an equirectangular
+    image of ``shape`` (height, width, ...) turned by ``rotation`` [rad] (``cut_sun``)."""
+    height, width = shape[0], shape[1]
+    theta = (np.asarray(rows) + 0.5) * (np.pi / height)
+    phi = ((np.asarray(cols) + 0.5) / width - 0.5) * 2.0 * np.pi + rotation
+    return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
+
+
+def _excess_direction(sky: EquirectSky, texels: _SunTexels, excess: np.ndarray, solid: np.ndarray) -> np.ndarray:
+    """The unit vector (3,) [1] towards the cut sun (``cut_sun``): the mean of the region's texel
+    centres weighted by their excess luminance (``excess`` (m, 3) [radiance]) times their solid
+    angle (``solid`` per row [sr]), ``rotation`` included."""
+    weight = np.maximum(excess @ np.asarray(REC709_LUMINANCE, dtype=np.float64), 0.0) * solid[texels.rows]
+    direction = weight @ _texel_directions(texels.rows, texels.cols, sky.image.shape, sky.rotation)
     direction /= np.linalg.norm(direction)
-    elevation = float(np.arcsin(np.clip(direction[2], -1.0, 1.0)))
-    if elevation < max(min_elevation, 2.0 * angular_radius):
-        return sky
-    image = sky.image.copy()
-    image[r_idx, c_idx] = background
-    sun = SunDisc(float(np.arctan2(direction[0], direction[1]) % (2.0 * np.pi)), elevation,
-                  angular_radius, tuple(limb_darkening))
-    return EquirectSky(image, sky.rotation, sun, energy / direction[2])
+    return direction
 
 
-def equirect_lookup(image, w, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
+def equirect_lookup(image: ArrayLike, w: ArrayLike, *, rotation: float = 0.0, sky_only: bool = False) -> np.ndarray:
     """Bilinear samples of an equirectangular image in given directions.
 
     The image's convention is that of docs/method.md, "Conventions": top row at the zenith, centre
