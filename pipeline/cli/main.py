@@ -1,7 +1,7 @@
 """The ``sunshade`` command: its command line (every command's arguments in one place), the exit codes and the
-one-line errors. The commands are in ``cli_runs`` (check, render, report, figures, cache) and ``cli_pictures``
-(ground, frame, mask, sky), the flags they share checked in ``cli_flags``; ``cli``, ``cli_runs`` and
-``cli_pictures`` are the only modules that print.
+one-line errors. The commands are in ``runs`` (check, render, report, figures, cache) and ``pictures``
+(ground, frame, mask, sky), the flags they share checked in ``flags``; ``main``, ``runs`` and
+``pictures`` are the only modules that print.
 
 Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing written),
 1 an unexpected failure.
@@ -14,6 +14,9 @@ import errno
 import inspect
 import sys
 import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, NoReturn
 
 from pipeline import __version__
 from pipeline.cli.pictures import run_frame, run_ground, run_mask, run_sky
@@ -28,7 +31,7 @@ EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """The ``sunshade`` command: parse the arguments and run the command they name.
 
     Parameters
@@ -94,11 +97,12 @@ class _UsageError(Exception):
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors that name the flag (and the command to ask for help)."""
 
-    def error(self, message):
+    def error(self, message: str) -> NoReturn:
         raise _UsageError(f"{message} (see {self.prog} --help)")
 
 
-def _parser():
+def _parser() -> _Parser:
+    """The command line: the top's flags, then each command with its arguments, in the order of the help."""
     parser = _Parser(
         prog="sunshade",
         description="Sunlight and skylight through leaves (Max 1991, 'Unified sun and sky "
@@ -107,30 +111,60 @@ def _parser():
     parser.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     parser.add_argument("--version", action="version", version=f"sunshade {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    # the options several commands share, each written once
-    config = _shared("config", help="YAML config file")
-    store = _shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)")
-    budget = _shared("--cache-size", default=None, metavar="SIZE", help="the cache's budget, e.g. 20G: "
-                     "at the end of a render the least recently used items no live run uses are "
-                     "removed down to it (default $SUNSHADE_CACHE_SIZE, else 20G)")
-    threads = _shared("--threads", type=int, default=None, help="FFT threads (default: all cores)")
-    png = _shared("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR")
-    moment = _shared("--frame", type=int, default=0, help="output frame (default 0): the sun, moon "
-                     "and clouds of that moment, the canopy at frame mod cycle")
-    picture = _shared("-o", "--output", required=True, help="output PNG or EXR file")
-    debug = _shared("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+    shared = _shared_options()
+    _add_render(commands, shared)
+    _command(commands, run_check, [shared.config, shared.budget], shared)
+    _add_pictures(commands, shared)
+    _add_upkeep(commands, shared)
+    return parser
 
-    def command(run, parents):
-        """The subcommand run by ``run`` (``run_NAME``), its help the first paragraph of the
-        function's docstring, its description the rest up to its Parameters."""
-        text = inspect.cleandoc(run.__doc__).partition("\n\nParameters\n")[0]
-        help, _, description = text.partition("\n\n")
-        sub = commands.add_parser(run.__name__.removeprefix("run_"), parents=[*parents, debug],
-                                  help=help, description=description)
-        sub.set_defaults(run=run)
-        return sub
 
-    render = command(run_render, [config, store, budget])
+@dataclass(frozen=True)
+class _Shared:
+    """The options several commands share, each written once: a parent parser (for ``parents=``) each."""
+
+    config: _Parser  # the YAML config file
+    store: _Parser  # --cache
+    budget: _Parser  # --cache-size
+    threads: _Parser  # --threads
+    png: _Parser  # --png
+    moment: _Parser  # --frame, an output frame
+    picture: _Parser  # -o/--output, a picture file
+    debug: _Parser  # --debug, which every command takes
+
+
+def _shared_options() -> _Shared:
+    """The parent parsers of the options several commands share."""
+    return _Shared(
+        config=_shared("config", help="YAML config file"),
+        store=_shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)"),
+        budget=_shared("--cache-size", default=None, metavar="SIZE", help="the cache's budget, e.g. 20G: "
+                       "at the end of a render the least recently used items no live run uses are "
+                       "removed down to it (default $SUNSHADE_CACHE_SIZE, else 20G)"),
+        threads=_shared("--threads", type=int, default=None, help="FFT threads (default: all cores)"),
+        png=_shared("--png", action="store_true", help="also write a tone-mapped PNG beside the EXR"),
+        moment=_shared("--frame", type=int, default=0, help="output frame (default 0): the sun, moon "
+                       "and clouds of that moment, the canopy at frame mod cycle"),
+        picture=_shared("-o", "--output", required=True, help="output PNG or EXR file"),
+        debug=_shared("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP),
+    )
+
+
+def _command(commands: argparse._SubParsersAction[_Parser], run: Callable[[argparse.Namespace], int],
+             parents: list[_Parser], shared: _Shared) -> _Parser:
+    """The subcommand run by ``run`` (``run_NAME``), its help the first paragraph of the function's
+    docstring, its description the rest up to its Parameters; it takes ``parents`` and --debug."""
+    text = inspect.cleandoc(run.__doc__ or "").partition("\n\nParameters\n")[0]
+    help, _, description = text.partition("\n\n")
+    sub = commands.add_parser(run.__name__.removeprefix("run_"), parents=[*parents, shared.debug],
+                              help=help, description=description)
+    sub.set_defaults(run=run)
+    return sub
+
+
+def _add_render(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
+    """The ``render`` command and its arguments."""
+    render = _command(commands, run_render, [shared.config, shared.store, shared.budget], shared)
     render.add_argument("--frames", default=None, help="frames to render, e.g. 0-47,100 "
                         "(default: all)")
     render.add_argument("--jobs", type=int, default=None, help="frames rendered at once, each in "
@@ -150,25 +184,28 @@ def _parser():
                         "frames whose files are damaged or not made by this config (exit code "
                         "1 if any), reading every frame and the cache items they were made from")
 
-    command(run_check, [config, budget])
 
-    ground = command(run_ground, [config, moment, png, threads, store])
+def _add_pictures(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
+    """The commands that write one picture (``ground``, ``frame``, ``mask``, ``sky``) and their arguments."""
+    ground = _command(commands, run_ground, [shared.config, shared.moment, shared.png, shared.threads,
+                                             shared.store], shared)
     ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
                         "(tone-mapped) file")
 
-    frame = command(run_frame, [config, moment, picture, threads, store])
+    frame = _command(commands, run_frame, [shared.config, shared.moment, shared.picture, shared.threads,
+                                           shared.store], shared)
     frame.add_argument("--half", action="store_true", help="EXR: half floats instead of float32")
     frame.add_argument("--passes", nargs="?", const=",".join(PASSES), default=None, metavar="NAMES",
                        help="EXR: also the light passes as layers, comma-separated names of "
                        f"{', '.join(PASSES)} (default with the flag alone: all; without it: "
                        "output.passes)")
 
-    mask = command(run_mask, [config, picture])
+    mask = _command(commands, run_mask, [shared.config, shared.picture], shared)
     mask.add_argument("--frame", type=int, default=0, help="cycle frame (default 0)")
     mask.add_argument("--layer", type=int, default=0, help="canopy layer (default 0)")
     mask.add_argument("--fine", action="store_true", help="the fine mask of the sun window")
 
-    sky = command(run_sky, [config, moment, png])
+    sky = _command(commands, run_sky, [shared.config, shared.moment, shared.png], shared)
     sky.add_argument("--width", type=int, default=2048, help="image width in pixels (default 2048)")
     sky.add_argument("--passes", nargs="?", const="sun,sky", default=None, metavar="NAMES",
                      help="EXR: also the sun disc and the sky without it as layers sun and sky "
@@ -177,28 +214,30 @@ def _parser():
     sky.add_argument("-o", "--output", required=True, help="output EXR (radiance) or PNG "
                      "(tone-mapped) file")
 
-    report = command(run_report, [])
+
+def _add_upkeep(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
+    """The commands that look after runs and the cache (``report``, ``figures``, ``cache``) and their arguments."""
+    report = _command(commands, run_report, [], shared)
     report.add_argument("folder", help="a run's folder (output.folder), done, going or killed")
 
-    figures = command(run_figures, [store])
+    figures = _command(commands, run_figures, [shared.store], shared)
     figures.add_argument("--output", default="figures", help="folder (default ./figures)")
     figures.add_argument("--preview", action="store_true", help="small and fast")
 
-    cache = command(run_cache, [store])
+    cache = _command(commands, run_cache, [shared.store], shared)
     cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
     cache.add_argument("config", nargs="?", default=None, help="list: only this config's items; "
                        "prune: remove only its items (all, or down to --max-size)")
     cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
     cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
-    return parser
 
 
 DEBUG_HELP = "on an error, print the traceback too (for a bug report)"
 
 
-def _shared(*flags, **options) -> argparse.ArgumentParser:
+def _shared(*flags: str, **options: Any) -> _Parser:
     """A parent parser (for ``parents=``) holding one argument shared by several commands."""
-    parent = argparse.ArgumentParser(add_help=False)
+    parent = _Parser(add_help=False)
     parent.add_argument(*flags, **options)
     return parent
 

@@ -4,6 +4,7 @@ against the camera, or read from files (docs/method.md, "The foreground passes")
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +45,7 @@ class ForegroundPasses:
     alpha: np.ndarray
     haze: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if np.ndim(self.alpha) != 2:
             raise ValueError(f"alpha must be (rows, cols), got shape {np.shape(self.alpha)}")
         rows, cols = np.shape(self.alpha)
@@ -66,7 +67,7 @@ def check_passes_size(passes: ForegroundPasses, camera: Camera) -> None:
     ----------
     passes : ForegroundPasses
         The passes.
-    camera : camera.Camera
+    camera : pinhole.Camera
         The camera whose image they go in: (height, width) [pixel].
     """
     rows, cols = passes.shape
@@ -75,7 +76,8 @@ def check_passes_size(passes: ForegroundPasses, camera: Camera) -> None:
                          f"is {camera.width} x {camera.height}")
 
 
-def read_passes(sun_path, sky_path, alpha_path) -> ForegroundPasses:
+def read_passes(sun_path: str | os.PathLike[str], sky_path: str | os.PathLike[str],
+                alpha_path: str | os.PathLike[str]) -> ForegroundPasses:
     """Foreground passes from image files (EXR, premultiplied, scene-linear).
 
     Parameters
@@ -97,7 +99,7 @@ def read_passes(sun_path, sky_path, alpha_path) -> ForegroundPasses:
         Naming the file: unreadable, non-finite values, alpha outside [0, 1] (beyond 1e-3) or a size
         that differs from the sun pass's.
     """
-    images = []
+    images: list[np.ndarray] = []
     for path in (sun_path, sky_path, alpha_path):
         image = read_image(path)
         if not np.all(np.isfinite(image)):

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.camera.pinhole import Camera
 from pipeline.canopy.grove import Leaves, Wood
@@ -23,7 +24,7 @@ BARK_CONTRAST = 0.25
 between the furrows' floors and ridges. [1]"""
 
 
-def bark_pattern(normal, axis, height, radius_px) -> np.ndarray:
+def bark_pattern(normal: np.ndarray, axis: ArrayLike, height: np.ndarray, radius_px: ArrayLike) -> np.ndarray:
     """Factor on the bark's reflectance at wood fragments: vertical furrows round the stem.
 
     The furrows wander a little with height, mean 1 (so the stem's mean reflectance stays
@@ -81,12 +82,12 @@ def taper_wood(wood: Wood) -> tuple[Wood, np.ndarray]:
 
     Parameters
     ----------
-    wood : grove_geometry.Wood
+    wood : grove.Wood
         The capsules: ends (M, 3) and radii (M,) [m].
 
     Returns
     -------
-    pieces : grove_geometry.Wood
+    pieces : grove.Wood
         The pieces: ends (k, 3) and radii (k,) [m].
     owner : numpy.ndarray
         (k,) int64, the capsule each piece comes from.
@@ -158,21 +159,21 @@ with the straight capsules (``coarse_wood``) instead of the tapered pieces: a jo
 width is then under half a pixel, and 40 pieces a trunk would cost more than the leaves. [pixel]"""
 
 
-def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, center, haze: float,
-                    seed: int = 0, coarse_wood: Wood | None = None):
+def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period: float, center: ArrayLike, haze: float,
+                    seed: int = 0, coarse_wood: Wood | None = None) -> tuple[Leaves, Wood, np.ndarray, np.ndarray]:
     """The shapes of one tile of a periodic forest copied over every tile the camera sees.
 
-    Every shape is wrapped into the tile, as ``grove_geometry.grow_grove`` makes them; the copies are those
+    Every shape is wrapped into the tile, as ``grove.grow_grove`` makes them; the copies are those
     whose bounds (the tile and its crowns) lie within reach (HAZE_REACH haze lengths, at most
     MAX_FOREST_REACH) and inside the view's cone, far leaves simplified as LEAF_PIXELS says.
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
+    leaves : grove.Leaves
         The tile's leaves [m].
-    wood : grove_geometry.Wood
+    wood : grove.Wood
         The tile's wood [m].
-    camera : camera.Camera
+    camera : pinhole.Camera
         The pinhole camera.
     period : float
         The tile's side [m].
@@ -182,15 +183,15 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
         Extinction length of the air (0: none, MAX_FOREST_REACH) [m].
     seed : int, optional
         Seed of the leaves' choice (default_rng([seed, 3])).
-    coarse_wood : grove_geometry.Wood, optional
+    coarse_wood : grove.Wood, optional
         The stems as fewer, straight capsules, drawn instead of ``wood`` in the copies that
         STEM_DETAIL_PIXELS allows (None: ``wood`` everywhere) [m].
 
     Returns
     -------
-    leaves : grove_geometry.Leaves
+    leaves : grove.Leaves
         The copied leaves [m].
-    wood : grove_geometry.Wood
+    wood : grove.Wood
         The copied stems [m].
     leaf_index : numpy.ndarray
         (N',) int64, the leaf of the tile that each is a copy of (for its per-shape values: sun
@@ -199,20 +200,30 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
         (M',) int64, the same for the stems, those of ``coarse_wood`` numbered after those of
         ``wood``.
     """
-    period = float(period)
     reach = min(HAZE_REACH * haze if haze > 0 else MAX_FOREST_REACH, MAX_FOREST_REACH)
+    shift, nearest = _tiles_in_view(leaves, wood, camera, float(period), np.asarray(center, dtype=np.float64), reach)
+    copied_leaves, leaf_index = _copied_leaves(leaves, camera, shift, nearest, seed)
+    copied_wood, wood_index = _copied_wood(wood, coarse_wood, camera, shift, nearest)
+    return copied_leaves, copied_wood, leaf_index, wood_index
+
+
+def _tiles_in_view(leaves: Leaves, wood: Wood, camera: Camera, period: float, center: np.ndarray,
+                   reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """The copies of the tile centred at ``center`` (2,) [m] whose bounds come within ``reach`` [m] of
+    the camera inside the view's cone: the shift (k, 2) [m] of each from the tile, and the distance
+    (k,) from the camera to its bounds (at least 1e-9) [m]."""
     position = np.asarray(camera.position, dtype=np.float64)
     everything = np.concatenate([leaves.center, wood.start, wood.end])
     low, high = everything.min(axis=0), everything.max(axis=0)
     # half-width of the tile's shapes
     margin = float(np.max(np.maximum(np.abs(low[:2] - center), np.abs(high[:2] - center))))
     radius = np.sqrt(2.0) * margin + float(np.max(wood.radius, initial=0.0))
-    _right, _up, forward = camera.basis
+    forward = camera.basis[2]
     half_diagonal = np.arctan(0.5 * np.hypot(camera.width, camera.height) / camera.focal)
     count = int(np.ceil((reach + radius) / period))
     i, j = np.meshgrid(np.arange(-count, count + 1), np.arange(-count, count + 1), indexing="ij")
     shift = np.column_stack([i.ravel(), j.ravel()]) * period
-    centres = np.asarray(center, dtype=np.float64) + shift
+    centres = center + shift
     middle = np.column_stack([centres, np.full(len(centres), 0.5 * (low[2] + high[2]))])
     bound = np.hypot(radius, 0.5 * (high[2] - low[2]))
     to = middle - position
@@ -222,7 +233,15 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
     inside = distance <= bound
     widen = np.arcsin(np.clip(bound / np.maximum(distance, 1e-12), 0.0, 1.0))
     seen = inside | ((distance - bound <= reach) & (angle - widen <= half_diagonal))
-    shift = shift[seen]
+    return shift[seen], np.maximum(distance[seen] - bound, 1e-9)
+
+
+def _copied_leaves(leaves: Leaves, camera: Camera, shift: np.ndarray, nearest: np.ndarray,
+                   seed: int) -> tuple[Leaves, np.ndarray]:
+    """The tile's leaves in the copies shifted by ``shift`` (k, 2) [m], whose bounds are ``nearest``
+    (k,) [m] from the camera, simplified as LEAF_PIXELS says; and the (N',) int64 leaf of the tile
+    each is a copy of. Each leaf draws a number in [0, 1), each copy a turn of them."""
+    position = np.asarray(camera.position, dtype=np.float64)
     rng = np.random.default_rng([seed, 3])
     draw = rng.random(len(leaves.center))
     tile_draw = rng.random(len(shift))
@@ -230,17 +249,9 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
     full_detail = camera.focal * length / LEAF_PIXELS  # [m]
     by_draw = np.argsort(draw)
     sorted_draw = draw[by_draw]
-    nearest = np.maximum(distance[seen] - bound, 1e-9)
     centers, axes_u, axes_v, leaf_index = [], [], [], []
     for offset, turn, near in zip(shift, tile_draw, nearest):
-        # the leaves a copy could keep: (draw + turn) mod 1 below the share at its nearest point
-        most = min(1.0, (full_detail / near) ** 2)
-        if most >= 1.0:
-            candidates = by_draw
-        else:
-            lo, hi = 1.0 - turn, 1.0 - turn + most
-            candidates = np.concatenate([by_draw[np.searchsorted(sorted_draw, lo):np.searchsorted(sorted_draw, hi)],
-                                         by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
+        candidates = _leaf_candidates(by_draw, sorted_draw, turn, min(1.0, (full_detail / near) ** 2))
         c = leaves.center[candidates] + np.array([offset[0], offset[1], 0.0])
         d = np.linalg.norm(c - position, axis=1)
         keep_share = np.minimum(1.0, (full_detail / np.maximum(d, 1e-9)) ** 2)
@@ -252,6 +263,25 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
         axes_u.append(leaves.axis_u[kept] * grow)
         axes_v.append(leaves.axis_v[kept] * grow)
         leaf_index.append(kept)
+    return Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), np.concatenate(leaf_index)
+
+
+def _leaf_candidates(by_draw: np.ndarray, sorted_draw: np.ndarray, turn: float, most: float) -> np.ndarray:
+    """The leaves a copy could keep: those whose (draw + turn) mod 1 lies below ``most``, the share
+    kept at the copy's nearest point [1]; ``by_draw`` the leaves in the order of their draws,
+    ``sorted_draw`` the draws in that order."""
+    if most >= 1.0:
+        return by_draw
+    lo, hi = 1.0 - turn, 1.0 - turn + most
+    return np.concatenate([by_draw[np.searchsorted(sorted_draw, lo):np.searchsorted(sorted_draw, hi)],
+                           by_draw[:np.searchsorted(sorted_draw, hi - 1.0)]])
+
+
+def _copied_wood(wood: Wood, coarse_wood: Wood | None, camera: Camera, shift: np.ndarray,
+                 nearest: np.ndarray) -> tuple[Wood, np.ndarray]:
+    """The tile's stems in the copies shifted by ``shift`` (k, 2) [m], those of ``coarse_wood`` where
+    STEM_DETAIL_PIXELS allows at ``nearest`` (k,) [m]; and the (M',) int64 stem each is a copy of,
+    those of ``coarse_wood`` numbered after those of ``wood``."""
     sources = [wood] if coarse_wood is None else [wood, coarse_wood]
     every = Wood(*(np.concatenate([getattr(w, f) for w in sources]) for f in ("start", "end", "radius")))
     fine = np.arange(len(wood.radius))
@@ -260,6 +290,4 @@ def periodic_copies(leaves: Leaves, wood: Wood, camera: Camera, *, period, cente
     wood_index = np.concatenate([coarse if far else fine for far in thin] or [np.zeros(0, np.int64)])
     moved = np.repeat(np.column_stack([shift, np.zeros(len(shift))]),
                       [len(coarse) if far else len(fine) for far in thin], axis=0)
-    copies = Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index])
-    return (Leaves(np.concatenate(centers), np.concatenate(axes_u), np.concatenate(axes_v)), copies,
-            np.concatenate(leaf_index), wood_index)
+    return Wood(every.start[wood_index] + moved, every.end[wood_index] + moved, every.radius[wood_index]), wood_index

@@ -7,7 +7,10 @@ visibility: docs/method.md, "The foreground passes".
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.camera.pinhole import Camera, project_points
 from pipeline.canopy.grove import Leaves, Shapes, Wood
@@ -17,7 +20,7 @@ from pipeline.foreground.passes import ForegroundPasses
 from pipeline.foreground.tree_detail import bark_pattern
 
 __all__ = ["LEAF_REFLECTANCE", "LEAF_TRANSMITTANCE", "BARK_REFLECTANCE", "sun_visibility", "leaf_sun_visibility",
-           "sky_exposure", "tree_passes", "STEM_PROBE", "stem_visibility"]
+           "sky_exposure", "TreeOptics", "TREE_OPTICS", "tree_passes", "STEM_PROBE", "stem_visibility"]
 
 LEAF_REFLECTANCE = (0.06, 0.12, 0.03)
 """Default hemispherical reflectance of a green leaf, linear Rec.709 RGB. [1]"""
@@ -35,7 +38,8 @@ _MAX_PIECES = 256  # most pieces one capsule is cut into
 # ---------------------------------------------------------------------------------------------
 
 
-def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel: float | None = None):
+def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point: ArrayLike,
+                   pixel: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Fraction of each leaf's and each capsule's area that the shapes nearer the sun let the sun reach.
 
     The sun is taken as a point (penumbra ignored). Partial pixels are treated as independent
@@ -44,9 +48,9 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
+    leaves : grove.Leaves
         The leaves: centres and semi-axes (N, 3) [m].
-    wood : grove_geometry.Wood, optional
+    wood : grove.Wood, optional
         The wood's capsules: ends (M, 3) and radii (M,) [m]; None: no wood.
     sun_point : tuple of (float, float)
         (sx, sy) the sun's sky-plane point (wx / wz, wy / wz) [1] (a tangent).
@@ -62,11 +66,12 @@ def sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point, pixel
     wood : numpy.ndarray
         (M,) float64 visibility in [0, 1] [1].
     """
-    s = np.array([sun_point[0], sun_point[1], 1.0], dtype=np.float64)
+    point = np.asarray(sun_point, dtype=np.float64)
+    s = np.array([point[0], point[1], 1.0], dtype=np.float64)
     return _visibility(leaves, _no_wood() if wood is None else wood, s / np.linalg.norm(s), pixel)
 
 
-def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
+def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point: ArrayLike,
                         pixel: float | None = None) -> np.ndarray:
     """The leaves' part of ``sun_visibility``.
 
@@ -84,7 +89,7 @@ def leaf_sun_visibility(leaves: Leaves, wood: Wood | None = None, *, sun_point,
 
 
 def sky_exposure(leaves: Leaves, wood: Wood | None = None, *, pixel: float | None = None, rings: int = 2,
-                 per_ring: int = 6):
+                 per_ring: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """Fraction of the open sky's horizontal irradiance that reaches each leaf and capsule past the others.
 
     The visibility of ``sun_visibility`` averaged over sky directions with weight cos(theta) (a
@@ -161,10 +166,11 @@ def _visibility(leaves: Leaves, wood: Wood, s, pixel):
     h_center, h_u, h_v = leaves.center @ s, leaves.axis_u @ s, leaves.axis_v @ s
     slope_x, slope_y = _plane_slope(shapes.axis_a, shapes.axis_b, h_u, h_v)
     # leaf fragments: h_center + clip(rise, -reach, reach) per fragment, compiled
-    from pipeline.kernels import raster as _raster
+    from pipeline.kernels import raster
 
-    _raster.leaf_heights(shape, n_leaves, px, py, *(np.ascontiguousarray(shapes.center[:, k]) for k in (0, 1)),
-                         slope_x, slope_y, h_center, np.hypot(h_u, h_v), height)
+    raster.leaf_heights(shape, n_leaves, px, py, np.ascontiguousarray(shapes.center[:, 0]),
+                         np.ascontiguousarray(shapes.center[:, 1]), slope_x, slope_y, h_center, np.hypot(h_u, h_v),
+                         height)
     j = shape[~is_leaf] - n_leaves
     a0, a1 = shapes.start[j], shapes.end[j]
     t = _along(np.column_stack([px[~is_leaf], py[~is_leaf]]) - a0, a1 - a0)
@@ -221,21 +227,43 @@ def _no_wood() -> Wood:
 # ---------------------------------------------------------------------------------------------
 
 
-def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direction, sun_irradiance,
-                sky_irradiance, leaf_sun_visibility=None, wood_sun_visibility=None,
-                leaf_sky_exposure=0.7, wood_sky_exposure=0.6,
-                leaf_reflectance=LEAF_REFLECTANCE, leaf_transmittance=LEAF_TRANSMITTANCE,
-                bark_reflectance=BARK_REFLECTANCE, near: float = 0.1,
+@dataclass(frozen=True)
+class TreeOptics:
+    """The optical properties of the trees' leaves and bark in ``tree_passes``.
+
+    Attributes
+    ----------
+    leaf_reflectance : float or tuple of float
+        Hemispherical reflectance of a leaf, one number (grey) or linear Rec.709 RGB [1].
+    leaf_transmittance : float or tuple of float
+        Hemispherical transmittance of a leaf, likewise [1].
+    bark_reflectance : float or tuple of float
+        Mean reflectance of bark, likewise (``bark_pattern`` furrows it) [1].
+    """
+
+    leaf_reflectance: float | tuple[float, float, float] = LEAF_REFLECTANCE
+    leaf_transmittance: float | tuple[float, float, float] = LEAF_TRANSMITTANCE
+    bark_reflectance: float | tuple[float, float, float] = BARK_REFLECTANCE
+
+
+TREE_OPTICS = TreeOptics()
+"""The default optics of ``tree_passes``: LEAF_REFLECTANCE, LEAF_TRANSMITTANCE and BARK_REFLECTANCE. [1]"""
+
+
+def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direction: ArrayLike,
+                sun_irradiance: ArrayLike, sky_irradiance: ArrayLike, leaf_sun_visibility: ArrayLike | None = None,
+                wood_sun_visibility: ArrayLike | None = None, leaf_sky_exposure: ArrayLike = 0.7,
+                wood_sky_exposure: ArrayLike = 0.6, optics: TreeOptics = TREE_OPTICS, near: float = 0.1,
                 ground_height: float | None = 0.0, haze: float = 0.0) -> ForegroundPasses:
     """The foreground passes of leaves and wood seen by ``camera`` (see the module docstring).
 
     Parameters
     ----------
-    leaves : grove_geometry.Leaves
-        The grove's leaves at one cycle frame (``grove_geometry.leaves_at``) [m].
-    wood : grove_geometry.Wood or None
+    leaves : grove.Leaves
+        The grove's leaves at one cycle frame (``grove.leaves_at``) [m].
+    wood : grove.Wood or None
         Its wood (``grove.wood``) [m]; None: no wood.
-    camera : camera.Camera
+    camera : pinhole.Camera
         The pinhole camera.
     sun_direction : array_like
         (3,) unit vector towards the sun [1]; at or below the horizon (z <= 0), or with a zero
@@ -250,8 +278,8 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     leaf_sky_exposure, wood_sky_exposure : float or numpy.ndarray, optional
         Scalar or (N,), (M,): the share of the open sky that reaches each shape (``sky_exposure``
         computes them) [1].
-    leaf_reflectance, leaf_transmittance, bark_reflectance : array_like, optional
-        (3,) linear RGB [1].
+    optics : TreeOptics, optional
+        The leaves' reflectance and transmittance and the bark's reflectance, each (3,) linear RGB [1].
     near : float, optional
         Shapes nearer the pinhole than this are clipped (wood) or dropped (leaves) [m].
     ground_height : float or None, optional
@@ -274,7 +302,37 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         ground, or a reflectance, irradiance, visibility or exposure of the wrong shape or range.
     """
     wood = _no_wood() if wood is None else wood
-    n_leaves, n_wood = len(leaves.center), len(wood.radius)
+    s = _checked_view(sun_direction, camera, near, ground_height)
+    light = _checked_light(leaves, wood, s, sun_irradiance=sun_irradiance, sky_irradiance=sky_irradiance,
+                           optics=optics, leaf_sun_visibility=leaf_sun_visibility,
+                           wood_sun_visibility=wood_sun_visibility, leaf_sky_exposure=leaf_sky_exposure,
+                           wood_sky_exposure=wood_sky_exposure)
+    seen = _seen_leaves(leaves, camera, near)
+    pieces = _seen_wood(wood, camera, near)
+    fragments, shape = _fragments(camera, seen, pieces)
+    _shade_leaf_fragments(fragments, shape, camera, seen, *_leaf_light(seen, light))
+    _shade_wood_fragments(fragments, shape, len(seen.kept), camera, pieces, light)
+    return _composite(fragments, camera, ground_height, haze)
+
+
+@dataclass(frozen=True)
+class _Light:
+    """The light on the trees and their materials, checked (``_checked_light``); RGB linear Rec.709."""
+
+    sun_direction: np.ndarray  # (3,) unit vector towards the sun [1]
+    sun: np.ndarray  # (3,) normal irradiance of the sun, zero when it has set or is dark [klx]
+    sky: np.ndarray  # (3,) horizontal irradiance of the sky [klx]
+    reflectance: np.ndarray  # (3,) a leaf's [1]
+    transmittance: np.ndarray  # (3,) a leaf's [1]
+    bark: np.ndarray  # (3,) the bark's mean reflectance [1]
+    leaf_sun_visibility: np.ndarray  # (N,) the share of the sun that reaches each leaf [1]
+    wood_sun_visibility: np.ndarray  # (M,) and each capsule [1]
+    leaf_sky_exposure: np.ndarray  # (N,) the share of the open sky that reaches each leaf [1]
+    wood_sky_exposure: np.ndarray  # (M,) and each capsule [1]
+
+
+def _checked_view(sun_direction: ArrayLike, camera: Camera, near: float, ground_height: float | None) -> np.ndarray:
+    """The sun's direction (3,) float64 [1], once it, ``near`` and the camera's height are checked."""
     s = np.asarray(sun_direction, dtype=np.float64).reshape(3)
     if not np.isclose(np.linalg.norm(s), 1.0, atol=1e-6):
         raise ValueError(f"sun_direction must be a unit vector, got length {np.linalg.norm(s):.6g}")
@@ -283,11 +341,21 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     if ground_height is not None and not camera.position[2] > ground_height:
         raise ValueError(f"the camera (z = {camera.position[2]} m) must be above the ground "
                          f"(z = {ground_height} m)")
+    return s
+
+
+def _checked_light(leaves: Leaves, wood: Wood, s: np.ndarray, *, sun_irradiance: ArrayLike,
+                   sky_irradiance: ArrayLike, optics: TreeOptics, leaf_sun_visibility: ArrayLike | None,
+                   wood_sun_visibility: ArrayLike | None, leaf_sky_exposure: ArrayLike,
+                   wood_sky_exposure: ArrayLike) -> _Light:
+    """``tree_passes``'s light and optics checked, as arrays; the sun's visibility computed when not
+    given, and zero (with the sun's irradiance) when the sun has set (``s`` z <= 0) or is dark."""
+    n_leaves, n_wood = len(leaves.center), len(wood.radius)
     e_sun = _rgb(sun_irradiance, "sun_irradiance")
     e_sky = _rgb(sky_irradiance, "sky_irradiance")
-    rho, tau, bark = (_rgb(v, name) for v, name in ((leaf_reflectance, "leaf_reflectance"),
-                                                   (leaf_transmittance, "leaf_transmittance"),
-                                                   (bark_reflectance, "bark_reflectance")))
+    rho, tau, bark = (_rgb(v, name) for v, name in ((optics.leaf_reflectance, "leaf_reflectance"),
+                                                   (optics.leaf_transmittance, "leaf_transmittance"),
+                                                   (optics.bark_reflectance, "bark_reflectance")))
     leaf_vis, wood_vis = (None if value is None else _per_shape(value, n, name) for value, n, name in (
         (leaf_sun_visibility, n_leaves, "leaf_sun_visibility"),
         (wood_sun_visibility, n_wood, "wood_sun_visibility")))
@@ -297,16 +365,32 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
         leaf_v, wood_v = sun_visibility(leaves, wood, sun_point=s[:2] / s[2])
         leaf_vis = leaf_v if leaf_vis is None else leaf_vis
         wood_vis = wood_v if wood_vis is None else wood_vis
-    leaf_exposure = _per_shape(leaf_sky_exposure, n_leaves, "leaf_sky_exposure")
-    wood_exposure = _per_shape(wood_sky_exposure, n_wood, "wood_sky_exposure")
+    return _Light(s, e_sun, e_sky, rho, tau, bark, leaf_vis, wood_vis,
+                  _per_shape(leaf_sky_exposure, n_leaves, "leaf_sky_exposure"),
+                  _per_shape(wood_sky_exposure, n_wood, "wood_sky_exposure"))
 
-    rows, cols = camera.height, camera.width
+
+@dataclass(frozen=True)
+class _SeenLeaves:
+    """The leaves beyond the near plane, projected into the image (``_seen_leaves``)."""
+
+    kept: np.ndarray  # (n,) int64, the index of each among all the leaves
+    rel: np.ndarray  # (n, 3) its centre less the pinhole [m]
+    depth: np.ndarray  # (n,) its centre's depth along the camera's forward [m]
+    reach: np.ndarray  # (n,) how far it reaches in depth either side of its centre [m]
+    u: np.ndarray  # (n,) its centre in the image [pixel]
+    v: np.ndarray
+    du: np.ndarray  # (n, 2) its semi-axes in the image [pixel]
+    dv: np.ndarray
+    normal: np.ndarray  # (n, 3) its unit normal, either face [1]
+
+
+def _seen_leaves(leaves: Leaves, camera: Camera, near: float) -> _SeenLeaves:
+    """The leaves wholly beyond ``near`` [m] in depth (the others dropped), projected (centre and
+    the Jacobian of the projection)."""
     right, up, forward = camera.basis
-    origin = np.asarray(camera.position, dtype=np.float64)
     focal = camera.focal
-
-    # leaves: cull, project (centre and Jacobian), shade per leaf
-    rel = leaves.center - origin
+    rel = leaves.center - np.asarray(camera.position, dtype=np.float64)
     depth = rel @ forward
     reach = np.hypot(leaves.axis_u @ forward, leaves.axis_v @ forward)
     kept = np.flatnonzero(depth - reach > near)
@@ -316,93 +400,190 @@ def tree_passes(leaves: Leaves, wood: Wood | None, camera: Camera, *, sun_direct
     du = _image_vector(axis_u, rel, depth, right, up, forward, focal)
     dv = _image_vector(axis_v, rel, depth, right, up, forward, focal)
     normal = normalized(np.cross(axis_u, axis_v))
-    facing = np.where(np.sum(rel * normal, axis=1) > 0, -1.0, 1.0)  # the face towards the viewer
-    normal_seen = normal * facing[:, None]
-    cos_sun = normal_seen @ s
+    return _SeenLeaves(kept, rel, depth, reach, u, v, du, dv, normal)
+
+
+def _leaf_light(seen: _SeenLeaves, light: _Light) -> tuple[np.ndarray, np.ndarray]:
+    """Radiance (n, 3) [klx / sr] of each seen leaf's face towards the viewer: lit by the sky alone,
+    and by the sun alone (reflected, or transmitted from the sun behind it)."""
+    facing = np.where(np.sum(seen.rel * seen.normal, axis=1) > 0, -1.0, 1.0)  # the face towards the viewer
+    normal_seen = seen.normal * facing[:, None]
+    cos_sun = normal_seen @ light.sun_direction
     sky_view = 0.5 * (1 + normal_seen[:, 2])
-    leaf_sky = (leaf_exposure[kept, None] * e_sky / np.pi) * (rho * sky_view[:, None]
-                                                              + tau * (1 - sky_view[:, None]))
-    leaf_sun = (leaf_vis[kept] * np.abs(cos_sun))[:, None] * e_sun / np.pi * np.where(
+    rho, tau = light.reflectance, light.transmittance
+    leaf_sky = (light.leaf_sky_exposure[seen.kept, None] * light.sky / np.pi) * (rho * sky_view[:, None]
+                                                                                 + tau * (1 - sky_view[:, None]))
+    leaf_sun = (light.leaf_sun_visibility[seen.kept] * np.abs(cos_sun))[:, None] * light.sun / np.pi * np.where(
         (cos_sun > 0)[:, None], rho, tau)
+    return leaf_sky, leaf_sun
 
-    # wood: clip at the near plane, cut where the depth varies, project
-    piece = _wood_pieces(wood, origin, forward, near)
-    p0, p1, radius, owner = piece
-    rel0, rel1 = p0 - origin, p1 - origin
-    z0, z1 = rel0 @ forward, rel1 @ forward
+
+@dataclass(frozen=True)
+class _SeenWood:
+    """The wood's pieces beyond the near plane, projected into the image (``_seen_wood``)."""
+
+    start: np.ndarray  # (k, 3) the ends of each piece's axis [m]
+    end: np.ndarray
+    radius: np.ndarray  # (k,) its radius [m]
+    owner: np.ndarray  # (k,) int64, the capsule it is cut from
+    depth_start: np.ndarray  # (k,) the depths of its ends along the camera's forward [m]
+    depth_end: np.ndarray
+    u0: np.ndarray  # (k,) its ends (u0, v0), (u1, v1) in the image [pixel]
+    v0: np.ndarray
+    u1: np.ndarray
+    v1: np.ndarray
+    radius_px: np.ndarray  # (k,) its radius in the image [pixel]
+
+
+def _seen_wood(wood: Wood, camera: Camera, near: float) -> _SeenWood:
+    """The wood clipped at ``near`` [m], cut where its depth varies (``_wood_pieces``), projected."""
+    origin = np.asarray(camera.position, dtype=np.float64)
+    forward = camera.basis[2]
+    p0, p1, radius, owner = _wood_pieces(wood, origin, forward, near)
+    z0, z1 = (p0 - origin) @ forward, (p1 - origin) @ forward
     (u0, v0, _), (u1, v1, _) = project_points(camera, p0), project_points(camera, p1)
-    radius_px = focal * radius / np.sqrt(z0 * z1)
+    return _SeenWood(p0, p1, radius, owner, z0, z1, u0, v0, u1, v1, camera.focal * radius / np.sqrt(z0 * z1))
 
+
+@dataclass(frozen=True)
+class _Fragments:
+    """The trees' fragments in the image, one per shape and pixel it covers (``_fragments``); the
+    shading fills in ``depth``, ``sun`` and ``sky``."""
+
+    flat: np.ndarray  # (n,) int64, the pixel row * cols + col
+    coverage: np.ndarray  # (n,) float32, the share of the pixel the shape covers [1]
+    u: np.ndarray  # (n,) the pixel's centre in the image [pixel]
+    v: np.ndarray
+    depth: np.ndarray  # (n,) the depth of the shape's surface along the camera's forward [m]
+    sun: np.ndarray  # (n, 3) its radiance lit by the sun and the sky [klx / sr]
+    sky: np.ndarray  # (n, 3) lit by the sky alone [klx / sr]
+    def cut(self, keep: np.ndarray) -> _Fragments:
+        """The fragments where the (n,) bool ``keep`` is true."""
+        return _Fragments(*(getattr(self, f.name)[keep] for f in fields(self)))
+
+
+def _fragments(camera: Camera, leaves: _SeenLeaves, wood: _SeenWood) -> tuple[_Fragments, np.ndarray]:
+    """The fragments of the seen leaves and wood, not yet shaded, and the (n,) int64 shape of each
+    (leaf i is shape i, wood piece j shape ``len(leaves.kept) + j``)."""
+    rows, cols = camera.height, camera.width
     image = Grid((0.0, 0.0), 1.0, (rows, cols))  # plane point (u, -v) is image point (u, v)
-    shapes = Shapes(np.column_stack([u, -v]), np.column_stack([du[:, 0], -du[:, 1]]),
-                    np.column_stack([dv[:, 0], -dv[:, 1]]), np.column_stack([u0, -v0]),
-                    np.column_stack([u1, -v1]), radius_px)
+    shapes = Shapes(np.column_stack([leaves.u, -leaves.v]), np.column_stack([leaves.du[:, 0], -leaves.du[:, 1]]),
+                    np.column_stack([leaves.dv[:, 0], -leaves.dv[:, 1]]), np.column_stack([wood.u0, -wood.v0]),
+                    np.column_stack([wood.u1, -wood.v1]), wood.radius_px)
     flat, coverage, shape = coverage_fragments(shapes, image)
     row, col = np.divmod(flat, cols)
-    pu, pv = col + 0.5, row + 0.5
-    is_leaf = shape < len(kept)
-    frag_depth = np.empty(len(flat))
-    frag_sun = np.empty((len(flat), 3))
-    frag_sky = np.empty((len(flat), 3))
+    fragments = _Fragments(flat, coverage, col + 0.5, row + 0.5, np.empty(len(flat)), np.empty((len(flat), 3)),
+                           np.empty((len(flat), 3)))
+    return fragments, shape
 
-    # leaf fragments: depth of the leaf's plane along the pixel's ray (n . ray, the ray at unit
-    # depth), clamped to the leaf; compiled, the operations of _leaf_fragments_arrays
-    from pipeline.kernels import raster as _raster
 
-    n_forward, n_right, n_up, n_rel = normal @ forward, normal @ right, normal @ up, np.sum(normal * rel, axis=1)
-    _raster.leaf_fragments(flat, shape, len(kept), cols, rows, float(focal), n_forward, n_right, n_up, n_rel,
-                           depth - reach, depth + reach, leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky)
+def _shade_leaf_fragments(fragments: _Fragments, shape: np.ndarray, camera: Camera, leaves: _SeenLeaves,
+                          leaf_sky: np.ndarray, leaf_sun: np.ndarray) -> None:
+    """Fill in the depth and light of the leaf fragments: the depth of the leaf's plane along the
+    pixel's ray (n . ray, the ray at unit depth), clamped to the leaf; compiled, the operations of
+    ``_leaf_fragments_arrays``."""
+    from pipeline.kernels import raster
 
-    # wood fragments: the cylinder's front surface and normal at the pixel
-    j = shape[~is_leaf] - len(kept)
-    if len(j):
-        a0 = np.column_stack([u0, v0])[j]
-        a1 = np.column_stack([u1, v1])[j]
-        offset = np.column_stack([pu[~is_leaf], pv[~is_leaf]]) - a0
-        t = _along(offset, a1 - a0)
-        axis_z = 1.0 / ((1 - t) / z0[j] + t / z1[j])  # 1 / depth is affine on the image
-        side = _wood_side(p0, p1, origin, right, up, forward, focal)
-        perp = normalized(np.column_stack([-(v1 - v0), u1 - u0]) + np.array([1e-12, 0.0]))[j]
-        lateral = np.clip(np.sum((offset - t[:, None] * (a1 - a0)) * perp, axis=1) / radius_px[j], -1, 1)
-        facing_part = np.sqrt(1 - lateral**2)
-        frag_depth[~is_leaf] = axis_z - radius[j] * facing_part
-        toward, sideways = side
-        n_w = facing_part[:, None] * toward[j] + lateral[:, None] * sideways[j]
-        k = owner[j]
-        axis_z = p0[j, 2] + t * (p1[j, 2] - p0[j, 2])  # height of the fragment's axis point [m]
-        furrows = bark_pattern(n_w, p1[j] - p0[j], axis_z, radius_px[j])[:, None] * bark
-        sky_w = (wood_exposure[k] * 0.5 * (1 + n_w[:, 2]))[:, None] * furrows * e_sky / np.pi
-        sun_w = (wood_vis[k] * np.maximum(n_w @ s, 0.0))[:, None] * furrows * e_sun / np.pi
-        frag_sky[~is_leaf] = sky_w
-        frag_sun[~is_leaf] = sky_w + sun_w
+    right, up, forward = camera.basis
+    normal = leaves.normal
+    n_forward, n_right, n_up, n_rel = normal @ forward, normal @ right, normal @ up, np.sum(normal * leaves.rel, axis=1)
+    raster.leaf_fragments(fragments.flat, shape, len(leaves.kept), camera.width, camera.height, float(camera.focal),
+                           n_forward, n_right, n_up, n_rel, leaves.depth - leaves.reach, leaves.depth + leaves.reach,
+                           leaf_sky, leaf_sun, fragments.depth, fragments.sun, fragments.sky)
 
+
+def _shade_wood_fragments(fragments: _Fragments, shape: np.ndarray, n_leaves: int, camera: Camera,
+                          wood: _SeenWood, light: _Light) -> None:
+    """Fill in the depth and light of the wood fragments (shapes from ``n_leaves`` on)."""
+    is_wood = shape >= n_leaves
+    j = shape[is_wood] - n_leaves
+    if not len(j):
+        return
+    t, normal, depth = _wood_surface(fragments.u[is_wood], fragments.v[is_wood], j, camera, wood)
+    fragments.depth[is_wood] = depth
+    sky, sun = _wood_light(normal, t, j, wood, light)
+    fragments.sky[is_wood] = sky
+    fragments.sun[is_wood] = sky + sun
+
+
+def _wood_surface(pu: np.ndarray, pv: np.ndarray, j: np.ndarray, camera: Camera,
+                  wood: _SeenWood) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The front surface of wood pieces ``j`` (n,) at image points (pu, pv) (n,) [pixel]: the
+    parameter t in [0, 1] along the piece's axis of the nearest axis point [1], the surface's unit
+    normal (n, 3) [1] and its depth (n,) [m]."""
+    right, up, forward = camera.basis
+    origin = np.asarray(camera.position, dtype=np.float64)
+    a0 = np.column_stack([wood.u0, wood.v0])[j]
+    a1 = np.column_stack([wood.u1, wood.v1])[j]
+    offset = np.column_stack([pu, pv]) - a0
+    t = _along(offset, a1 - a0)
+    axis_depth = 1.0 / ((1 - t) / wood.depth_start[j] + t / wood.depth_end[j])  # 1 / depth is affine on the image
+    toward, sideways = _wood_side(wood.start, wood.end, origin, right, up, forward, camera.focal)
+    perp = normalized(np.column_stack([-(wood.v1 - wood.v0), wood.u1 - wood.u0]) + np.array([1e-12, 0.0]))[j]
+    lateral = np.clip(np.sum((offset - t[:, None] * (a1 - a0)) * perp, axis=1) / wood.radius_px[j], -1, 1)
+    facing_part = np.sqrt(1 - lateral**2)
+    normal = facing_part[:, None] * toward[j] + lateral[:, None] * sideways[j]
+    return t, normal, axis_depth - wood.radius[j] * facing_part
+
+
+def _wood_light(normal: np.ndarray, t: np.ndarray, j: np.ndarray, wood: _SeenWood,
+                light: _Light) -> tuple[np.ndarray, np.ndarray]:
+    """Radiance (n, 3) [klx / sr] of the bark (``bark_pattern``) of wood pieces ``j`` at the axis
+    parameters ``t`` with surface normals ``normal``: lit by the sky alone, and by the sun alone."""
+    k = wood.owner[j]
+    p0, p1 = wood.start, wood.end
+    axis_z = p0[j, 2] + t * (p1[j, 2] - p0[j, 2])  # height of the fragment's axis point [m]
+    furrows = bark_pattern(normal, p1[j] - p0[j], axis_z, wood.radius_px[j])[:, None] * light.bark
+    sky = (light.wood_sky_exposure[k] * 0.5 * (1 + normal[:, 2]))[:, None] * furrows * light.sky / np.pi
+    sun = ((light.wood_sun_visibility[k] * np.maximum(normal @ light.sun_direction, 0.0))[:, None] * furrows
+           * light.sun / np.pi)
+    return sky, sun
+
+
+def _composite(fragments: _Fragments, camera: Camera, ground_height: float | None, haze: float) -> ForegroundPasses:
+    """The passes: the fragments above the ground composited front to back, veiled by the haze."""
+    from pipeline.kernels import raster
+
+    rows, cols = camera.height, camera.width
     if ground_height is not None:
-        ray_z = forward[2] + ((pu - 0.5 * cols) / focal) * right[2] + ((0.5 * rows - pv) / focal) * up[2]
-        above = origin[2] + frag_depth * ray_z >= ground_height
-        flat, coverage, frag_depth, frag_sun, frag_sky = (
-            x[above] for x in (flat, coverage, frag_depth, frag_sun, frag_sky))
-    weight = _front_to_back(flat, frag_depth, coverage)
-    haze_image = None
+        fragments = fragments.cut(_above_ground(fragments, camera, ground_height))
+    weight = _front_to_back(fragments.flat, fragments.depth, fragments.coverage)
+    frag_sun, frag_sky, haze_image = fragments.sun, fragments.sky, None
     if haze > 0:
-        ray = np.sqrt(1.0 + ((pu - 0.5 * cols) / focal) ** 2 + ((0.5 * rows - pv) / focal) ** 2)
-        if ground_height is not None:
-            ray = ray[above]
-        transmittance = np.exp(-frag_depth * ray / haze)  # frag_depth is along forward
+        transmittance = _haze_transmittance(fragments, camera, haze)
         frag_sun = frag_sun * transmittance[:, None]
         frag_sky = frag_sky * transmittance[:, None]
-        haze_image = np.bincount(flat, weights=weight * (1.0 - transmittance),
+        haze_image = np.bincount(fragments.flat, weights=weight * (1.0 - transmittance),
                                  minlength=rows * cols).reshape(rows, cols).astype(np.float32)
-    optical = np.bincount(flat, weights=-np.log1p(-coverage.astype(np.float64)), minlength=rows * cols)
+    optical = np.bincount(fragments.flat, weights=-np.log1p(-fragments.coverage.astype(np.float64)),
+                          minlength=rows * cols)
     alpha = -np.expm1(-optical).reshape(rows, cols)
-    sun_image, sky_image = (image.reshape(rows, cols, 3) for image in _raster.scatter_light(
-        flat, weight, np.ascontiguousarray(frag_sun), np.ascontiguousarray(frag_sky), rows * cols))
+    sun_image, sky_image = (image.reshape(rows, cols, 3) for image in raster.scatter_light(
+        fragments.flat, weight, np.ascontiguousarray(frag_sun), np.ascontiguousarray(frag_sky), rows * cols))
     return ForegroundPasses(sun_image.astype(np.float32), sky_image.astype(np.float32),
                             alpha.astype(np.float32), haze_image)
 
 
+def _above_ground(fragments: _Fragments, camera: Camera, ground_height: float) -> np.ndarray:
+    """(n,) bool: whether each fragment's surface, along its pixel centre's ray, is not below the
+    ground plane z = ``ground_height`` [m]."""
+    right, up, forward = camera.basis
+    rows, cols, focal = camera.height, camera.width, camera.focal
+    ray_z = forward[2] + ((fragments.u - 0.5 * cols) / focal) * right[2] + ((0.5 * rows - fragments.v) / focal) * up[2]
+    return np.asarray(camera.position, dtype=np.float64)[2] + fragments.depth * ray_z >= ground_height
+
+
+def _haze_transmittance(fragments: _Fragments, camera: Camera, haze: float) -> np.ndarray:
+    """(n,) the share T = exp(-distance / haze) of each fragment's light that the air lets through
+    to the camera, haze the extinction length [m] (``depth`` is along forward)."""
+    rows, cols, focal = camera.height, camera.width, camera.focal
+    ray = np.sqrt(1.0 + ((fragments.u - 0.5 * cols) / focal) ** 2 + ((0.5 * rows - fragments.v) / focal) ** 2)
+    return np.exp(-fragments.depth * ray / haze)
+
+
 def _leaf_fragments_arrays(flat, shape, leaves, cols, rows, focal, n_forward, n_right, n_up, n_rel, nearest,
                            farthest, leaf_sky, leaf_sun, frag_depth, frag_sun, frag_sky) -> None:
-    """``_raster.leaf_fragments`` on arrays: its reference (tests/test_foreground.py)."""
+    """``kernels.raster.leaf_fragments`` on arrays: its reference (tests/test_foreground.py)."""
     row, col = np.divmod(flat, cols)
     pu, pv = col + 0.5, row + 0.5
     is_leaf = shape < leaves
@@ -419,7 +600,8 @@ STEM_PROBE = 1e-3
 """Radius of the stems' axis lines, as a share of their radius, in ``stem_visibility``. [1]"""
 
 
-def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | None = None):
+def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point: ArrayLike,
+                    pixel: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``sun_visibility`` of the leaves and of the pieces of the wood (``taper_wood``), in one pass.
 
     Each piece is probed along its axis by a line STEM_PROBE of its radius thick: so the pieces of
@@ -432,7 +614,7 @@ def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | No
     ----------
     leaves, sun_point, pixel
         As in ``sun_visibility``.
-    stems : grove_geometry.Wood
+    stems : grove.Wood
         The wood's pieces (``taper_wood``): ends (K, 3) and radii (K,) [m].
 
     Returns
@@ -446,7 +628,7 @@ def stem_visibility(leaves: Leaves, stems: Wood, *, sun_point, pixel: float | No
     return sun_visibility(leaves, probes, sun_point=sun_point, pixel=pixel)
 
 
-def _rgb(value, name) -> np.ndarray:
+def _rgb(value: ArrayLike, name: str) -> np.ndarray:
     value = np.asarray(value, dtype=np.float64)
     if value.shape not in ((), (3,)):
         raise ValueError(f"{name} must be a number or 3 numbers (RGB), got shape {value.shape}")
@@ -455,7 +637,7 @@ def _rgb(value, name) -> np.ndarray:
     return np.broadcast_to(value, (3,)).copy()
 
 
-def _per_shape(value, n, name) -> np.ndarray:
+def _per_shape(value: ArrayLike, n: int, name: str) -> np.ndarray:
     value = np.asarray(value, dtype=np.float64)
     if value.ndim == 0:
         value = np.full(n, float(value))
