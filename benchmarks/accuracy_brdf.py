@@ -5,7 +5,7 @@ force, under a leafy canopy, for several views, suns and band tolerances.
 
 First, open ground (no canopy) as tests/test_brdf.py has it: a 48 x 32 camera 1.7 m up with a
 70-degree field looking down the sun's rays, the CIE clear sky (sun at 30 degrees) on a 96 x 96
-raster to 76 degrees; the rendered radiance (``brdf_camera.ground_radiance`` over constant rasters)
+raster to 76 degrees; the rendered radiance (``brdf_view.ground_radiance`` over constant rasters)
 against sum_i f_r(V, L_i) e_i + f_r(V, L_sun) E_sun at five pixels' own views.
 
 A 24 x 24 random leaf mask (60% leaves, 0.25 m pixels, 4 m up) over a 40 x 40 ground window
@@ -139,17 +139,17 @@ def config_case(path: str, samples: int) -> None:
         sky = plan.sky.at(plan.scenes[0])
         ground = render_ground(plan, 0, store=store, workers=2, sky=sky, coarse_sky=True)
         item = cycle_item(plan, 0, 0, store, workers=2)
-        raster = ground.coarse_sky[2][0]
+        raster = ground.coarse_sky.rasters[0]
         views = brdf_camera.view_vectors(view)
         fp, _ = camera.view_footprints(view)
         r, c = plan.window.raster_from_ground(fp.x, fp.y)
         inside = np.flatnonzero((r >= 0) & (c >= 0) & (r <= plan.window.shape[0] - 1) & (c <= plan.window.shape[1] - 1))
         chosen = inside[np.linspace(0, len(inside) - 1, samples).astype(int)]
         cells = np.round(r[chosen]).astype(int), np.round(c[chosen]).astype(int)
-        brute = np.stack([shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, views[k]), item["coarse"],
+        brute = np.stack([shadow.ground_isolated(brdf_bands.weighted_raster(raster, brdf, views[k]), item.coarse,
                                                  layer.coarse, workers=2)[:, i, j]
                           for k, i, j in zip(chosen, *cells)], axis=1)
-        lambert = ground.coarse_sky[0][cells].T
+        lambert = ground.coarse_sky.irradiance[cells].T
         print(f"{path}: {samples} ground cells, view zeniths "
               f"{np.degrees(np.arccos(views[chosen, 2])).min():.0f}-"
               f"{np.degrees(np.arccos(views[chosen, 2])).max():.0f} deg; "
@@ -177,7 +177,7 @@ def config_case(path: str, samples: int) -> None:
                 # of shadow.coarser_isolated) and taken at the cells themselves (no bilinear read)
                 full = [shadow.ground_isolated(
                     brdf_bands.weighted_raster(raster, brdf, d, summed=k not in bands.colours),
-                    item["coarse"], layer.coarse, workers=2)[(slice(None), *cells)]
+                    item.coarse, layer.coarse, workers=2)[(slice(None), *cells)]
                     for k, d in enumerate(bands.directions())]
                 alone = brdf_bands.banded_sky(bands, np.stack([full[c] for c in bands.colours]),
                                               np.stack([f.sum(axis=0) for f in full]), weights, ratio)
@@ -190,13 +190,14 @@ def config_case(path: str, samples: int) -> None:
 def _frame_terms(plan, sky, store, bands, ground) -> list:
     """The bands' terms as ``frame.brdf_background`` makes them: the colour bands in every channel,
     the others on the channels' sum."""
-    from pipeline.stages.ground import sky_view_terms
+    from pipeline.stages.ground import FrameContext, sky_view_terms
 
+    context = FrameContext.of(plan, 0, store=store, workers=2, sky=sky)
     directions, colours = bands.directions(), list(bands.colours)
     others = [b for b in range(bands.count) if b not in colours]
-    made = dict(zip(colours, sky_view_terms(plan, 0, sky, store, 2, directions[colours], ground)))
+    made = dict(zip(colours, sky_view_terms(context, directions[colours], ground)))
     if others:
-        made.update(zip(others, sky_view_terms(plan, 0, sky, store, 2, directions[others], ground, colour=-1)))
+        made.update(zip(others, sky_view_terms(context, directions[others], ground, colour=-1)))
     return [made[b] for b in range(bands.count)]
 
 

@@ -88,7 +88,7 @@ def main() -> None:
         kernels = [sun_kernel(s, q) for s in skies]
 
         def fine(i):
-            shadow.ground_sun(kernels[i], items[i]["fine"], layer.sun, workers=args.threads)
+            shadow.ground_sun(kernels[i], items[i].fine, layer.sun, workers=args.threads)
 
         def kernel(i):
             sun_kernel(skies[i], q)

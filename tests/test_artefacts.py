@@ -16,7 +16,6 @@ from pipeline.core import io
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.foreground import tree_detail
 from pipeline.foreground import trees as foreground
-from pipeline.foreground.models import tree_box
 from pipeline.stages.cycle import foreground_item
 from pipeline.stages.frame import render_frame
 from pipeline.stages.inputs import grove_of
@@ -79,7 +78,7 @@ def test_the_horizon_has_no_line_brighter_or_darker_than_the_sky_and_ground_besi
 def test_a_periodic_forest_stands_on_every_tile_in_view():
     """One tree in a 10 m tile, the camera looking along a row of tiles: the trunk of every
     copy out to 60 m covers the image where the copy's trunk projects (independently, by
-    camera.project_points), and the gaps between the copies' trunks stay open."""
+    pinhole.project_points), and the gaps between the copies' trunks stay open."""
     tile = 10.0
     grove = grove_geometry.grow_grove(grove_geometry.GroveParams(count=1, seed=4, crown_radius=2.0, leaves_per_tree=200,
                                                  height=6.0, layout="periodic", tile=tile))
@@ -149,7 +148,7 @@ def test_forest_yaml_has_its_trees_on_the_tiles_around_the_camera(tmp_path):
     plan = plan_run(config)
     item = foreground_item(plan, 0, cache.Cache(tmp_path / "c"))
     alpha = np.zeros((plan.camera.height, plan.camera.width), np.float32)
-    alpha[tree_box(item)] = item["alpha"]
+    alpha[item.region] = item.alpha
     grove, _ = grove_of(config.canopy)
     view = plan.camera
     tile = config.canopy.layers[0].size[0]

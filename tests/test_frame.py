@@ -25,7 +25,7 @@ def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
     ground = result.ground.irradiance
     assert ground.shape == (50, 50, 3)
     if result.ground.outer:  # within the blend band the fine raster gives way to the coarse one
-        ground = blend_band(ground, result.ground.grid, *result.ground.outer)
+        ground = blend_band(ground, result.ground.grid, result.ground.outer.irradiance, result.ground.outer.grid)
     np.testing.assert_allclose(result.radiance, ground / np.pi, rtol=2e-3)
     assert result.sun_fraction == pytest.approx(1.0)
 
@@ -33,8 +33,8 @@ def test_a_camera_looking_straight_down_sees_the_ground_raster(tmp_path):
 def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path):
     """``compile_loops`` (a render's command runs it while its workers make the cycle
     products) compiles every loop of the frame phase with the types a frame passes: in a
-    fresh process, rendering a frame after it compiles nothing more in ``pipeline._filter``, ``_tiling`` or
-    ``_array_loops``."""
+    fresh process, rendering a frame after it compiles nothing more in ``pipeline.kernels``' ``filter``, ``tiling`` or
+    ``arrays``."""
     code = (
         "import sys; sys.path.insert(0, 'tests')\n"
         "from pathlib import Path\n"

@@ -17,7 +17,7 @@ def test_outer_raster_with_a_coarse_sun_matches_the_fine_one(tmp_path, layout):
         changes.update({"canopy.layout": "periodic", "canopy.size": [3.0, 3.0]})
     result = render_ground(plan_of(tiny_grove(**changes), tmp_path), 0, store=cache.Cache(tmp_path / "c"),
                            outer=True)
-    outer, grid = result.outer
+    outer, grid = result.outer.irradiance, result.outer.grid
     assert grid.shape == (60, 60) and result.grid.pixel == 0.04
     on_fine = np.moveaxis(resample_bilinear(np.moveaxis(outer, -1, 0), grid, result.grid), 0, -1)
     blocks = lambda a: a[:60, :60].reshape(6, 10, 6, 10, 3).mean(axis=(1, 3))  # noqa: E731

@@ -4,6 +4,7 @@ frame's foreground as one named record (docs/design.md, "Models plug in")."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -13,8 +14,8 @@ from pipeline.camera.pinhole import Camera
 from pipeline.config.settings import ForegroundConfig
 from pipeline.foreground.passes import imported_passes
 
-__all__ = ["ForegroundLayer", "ForegroundModel", "TreesForeground", "ImportedForeground", "NoForeground",
-           "cut_to_trees", "tree_box"]
+__all__ = ["ForegroundLayer", "StoredTreePasses", "ForegroundModel", "TreesForeground", "ImportedForeground",
+           "NoForeground", "cut_to_trees", "tree_box"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,51 @@ class ForegroundLayer:
     haze: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class StoredTreePasses:
+    """The built-in trees' passes of one cycle frame as the cache holds them
+    (``cycle.foreground_item``): per unit light, cut to the box of the pixels the trees touch
+    (``cut_to_trees``), memory-mapped and read-only.
+
+    Attributes
+    ----------
+    sun : numpy.ndarray
+        (rows, cols, 3) the sun's term for a normal irradiance of 1 in each channel [1/sr].
+    sky : numpy.ndarray
+        (rows, cols, 3) the sky's term for a horizontal irradiance of 1 in each channel [1/sr].
+    alpha : numpy.ndarray
+        (rows, cols) coverage [1].
+    region : tuple of slice
+        The (rows, cols) slices of the frame the passes cover (``tree_box``).
+    haze : numpy.ndarray or None
+        (rows, cols) the share of the horizon's light veiling each pixel of the trees [1], or
+        None without haze.
+    """
+
+    sun: np.ndarray
+    sky: np.ndarray
+    alpha: np.ndarray
+    region: tuple[slice, slice]
+    haze: np.ndarray | None = None
+
+    @classmethod
+    def from_item(cls, item: Mapping[str, np.ndarray]) -> StoredTreePasses:
+        """The passes of a cache item.
+
+        Parameters
+        ----------
+        item : mapping of str to ndarray
+            The item's arrays, as ``cut_to_trees`` gives them: ``sun``, ``sky``, ``alpha``,
+            ``box`` and maybe ``haze``.
+
+        Returns
+        -------
+        StoredTreePasses
+            The same arrays, named; ``box`` as the region it covers.
+        """
+        return cls(item["sun"], item["sky"], item["alpha"], tree_box(item), item.get("haze"))
+
+
 class ForegroundModel(Protocol):
     """What the stages ask of a config's foreground. A class of this shape, its module and one
     line in ``vocabulary.FOREGROUNDS`` add a foreground model."""
@@ -51,8 +97,8 @@ class ForegroundModel(Protocol):
     """Whether its passes are cycle products, stored per unit light: those of the built-in trees,
     which ``cycle.foreground_item`` renders (docs/design.md, "Models plug in")."""
 
-    def layer(self, cycle_frame: int, *, view: Camera, item: dict | None, sun_irradiance: np.ndarray,
-              sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: float) -> ForegroundLayer | None:
+    def layer(self, cycle_frame: int, *, view: Camera, item: StoredTreePasses | None, sun_irradiance: np.ndarray,
+              sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: np.ndarray) -> ForegroundLayer | None:
         """The foreground at a cycle frame, lit by the frame's light.
 
         Parameters
@@ -61,7 +107,7 @@ class ForegroundModel(Protocol):
             The flutter cycle's frame.
         view : Camera
             The run's camera.
-        item : dict or None
+        item : StoredTreePasses or None
             Its cycle product when ``cached`` (per unit light), else None.
         sun_irradiance : ndarray, shape (3,)
             The sun's normal irradiance [klx].
@@ -69,8 +115,8 @@ class ForegroundModel(Protocol):
             The sky's horizontal irradiance [klx].
         sun_down : ndarray, shape (3,)
             The sun's horizontal irradiance [klx].
-        bounce : float
-            The share of the ground's light that reaches the trees' undersides [1].
+        bounce : ndarray, shape (3,)
+            The share of the ground's light that reaches the trees' undersides, per channel [1].
 
         Returns
         -------
@@ -109,28 +155,36 @@ class TreesForeground:
     config: ForegroundConfig
     cached = True
 
-    def layer(self, cycle_frame, *, view, item, sun_irradiance, sky_irradiance, sun_down, bounce):
+    def layer(self, cycle_frame: int, *, view: Camera, item: StoredTreePasses | None, sun_irradiance: np.ndarray,
+              sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: np.ndarray) -> ForegroundLayer:
         """See ``ForegroundModel.layer``.
 
         Parameters
         ----------
         cycle_frame, view, sun_irradiance, sky_irradiance, sun_down, bounce
             As in ``ForegroundModel.layer``.
-        item : dict or None
-            The cycle product: ``sun``, ``sky`` (per unit light), ``alpha``, ``box``, maybe ``haze``.
+        item : StoredTreePasses or None
+            The cycle product, per unit light.
 
         Returns
         -------
         ForegroundLayer
             The trees lit [kcd/m^2], cut to their box (``tree_box``).
+
+        Raises
+        ------
+        ValueError
+            Without the cycle product.
         """
+        if item is None:
+            raise ValueError("the built-in trees are lit from their cycle product (cycle.foreground_item)")
         # light bounced off the ground reaches the trees' undersides as more diffuse light: half
         # the ground's radiosity, its sun part following S with the sun pass
-        sky = item["sky"] * (sky_irradiance * (1.0 + bounce)).astype(np.float32)
-        sun = item["sun"] * sun_irradiance.astype(np.float32) + item["sky"] * (bounce * sun_down).astype(np.float32)
-        return ForegroundLayer(sky + sun, sky, item["alpha"], tree_box(item), item.get("haze"))
+        sky = item.sky * (sky_irradiance * (1.0 + bounce)).astype(np.float32)
+        sun = item.sun * sun_irradiance.astype(np.float32) + item.sky * (bounce * sun_down).astype(np.float32)
+        return ForegroundLayer(sky + sun, sky, item.alpha, item.region, item.haze)
 
-    def check(self, view, cycle):
+    def check(self, view: Camera, cycle: int) -> None:
         """See ``ForegroundModel.check``: nothing to read, the trees are rendered here.
 
         Parameters
@@ -155,14 +209,15 @@ class ImportedForeground:
     config: ForegroundConfig
     cached = False
 
-    def layer(self, cycle_frame, *, view, item, sun_irradiance, sky_irradiance, sun_down, bounce):
+    def layer(self, cycle_frame: int, *, view: Camera, item: StoredTreePasses | None, sun_irradiance: np.ndarray,
+              sky_irradiance: np.ndarray, sun_down: np.ndarray, bounce: np.ndarray) -> ForegroundLayer:
         """See ``ForegroundModel.layer``: the passes read (``passes.imported_passes``).
 
         Parameters
         ----------
         cycle_frame, view
             As in ``ForegroundModel.layer``.
-        item : dict or None
+        item : StoredTreePasses or None
             The cycle product (None: not cached).
         sun_irradiance, sky_irradiance, sun_down, bounce
             Not used: the passes are lit.
@@ -175,7 +230,7 @@ class ImportedForeground:
         passes = imported_passes(self.config, view, cycle_frame)
         return ForegroundLayer(passes.sun, passes.sky, passes.alpha, (slice(None), slice(None)))
 
-    def check(self, view, cycle):
+    def check(self, view: Camera, cycle: int) -> None:
         """See ``ForegroundModel.check``: each cycle frame's passes read.
 
         Parameters
@@ -200,7 +255,7 @@ class NoForeground:
     config: ForegroundConfig
     cached = False
 
-    def layer(self, cycle_frame, **light):
+    def layer(self, cycle_frame: int, **light: object) -> None:
         """See ``ForegroundModel.layer``.
 
         Parameters
@@ -217,7 +272,7 @@ class NoForeground:
         """
         return None
 
-    def check(self, view, cycle):
+    def check(self, view: Camera, cycle: int) -> None:
         """See ``ForegroundModel.check``: nothing to read.
 
         Parameters
@@ -228,7 +283,7 @@ class NoForeground:
         pass
 
 
-def cut_to_trees(passes: dict) -> dict:
+def cut_to_trees(passes: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Full-frame passes cut to the box of the pixels where any of them is not 0: outside it a
     frame is its background, so nothing is lost, and a grove that fills a tenth of the picture
     is stored in about a tenth of the bytes.
@@ -252,7 +307,7 @@ def cut_to_trees(passes: dict) -> dict:
     return {**cut, "box": np.array(box, dtype=np.int64)}
 
 
-def tree_box(item: dict) -> tuple[slice, slice]:
+def tree_box(item: Mapping[str, np.ndarray]) -> tuple[slice, slice]:
     """The part of the frame that passes cut by ``cut_to_trees`` cover.
 
     Parameters

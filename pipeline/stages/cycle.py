@@ -9,7 +9,9 @@ import functools
 import hashlib
 import json
 import os
-from dataclasses import asdict
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import joblib
 import numpy as np
@@ -22,19 +24,55 @@ from pipeline.canopy import rasteriser
 from pipeline.config.parse import FRAME_BYTES_PER_PIXEL
 from pipeline.core.cores import compiled_once, end_if_orphaned
 from pipeline.core.errors import portable
-from pipeline.foreground import models as foregrounds
-from pipeline.foreground import tree_detail
+from pipeline.foreground import models, tree_detail
 from pipeline.foreground import trees as foreground
 from pipeline.ground import shadow
 from pipeline.stages.inputs import grove_of, load_mask
 from pipeline.stages.plan import RunPlan
 
-__all__ = ["layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
+__all__ = ["LayerSpectra", "layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
            "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item",
            "foreground_views"]
 
 
-def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
+@dataclass(frozen=True)
+class LayerSpectra:
+    """A canopy layer's cycle products at one cycle frame, as ``cycle_item`` reads them from the
+    cache (whose item keeps the arrays ``coarse``, ``mean`` and ``fine``, memory-mapped, read-only).
+
+    Attributes
+    ----------
+    coarse : ndarray, complex64
+        The occlusion spectrum of an isolated layer (``shadow.occlusion_spectrum``), or the
+        transmittance spectrum of a periodic layer's tile (``shadow.transmittance_spectrum``) [1].
+    mean : float
+        The mean transmittance of the layer's coarse mask (of a tile) [1].
+    fine : ndarray, complex64, or None
+        The fine mask's spectrum (``shadow.fine_mask_spectrum``), None without a sun kernel [1].
+    """
+
+    coarse: np.ndarray
+    mean: float
+    fine: np.ndarray | None = None
+
+    @classmethod
+    def from_item(cls, item: Mapping[str, np.ndarray]) -> LayerSpectra:
+        """The spectra of a cache item.
+
+        Parameters
+        ----------
+        item : mapping of str to ndarray
+            The item's arrays: ``coarse``, ``mean`` (1,) [1] and, with a sun kernel, ``fine``.
+
+        Returns
+        -------
+        LayerSpectra
+            The same arrays, named; ``mean`` as a float [1].
+        """
+        return cls(item["coarse"], float(item["mean"][0]), item.get("fine"))
+
+
+def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> tuple[np.ndarray, np.ndarray | None]:
     """Transmittance masks of one canopy plane at one cycle frame.
 
     Parameters
@@ -74,7 +112,7 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int):
     return masks[0], (masks[1] if lp.sun else None)
 
 
-def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
+def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict[str, Any]:
     """Everything a layer's cycle products at ``cycle_frame`` depend on: their cache key's params.
 
     See docs/runs.md, "Resume"; docs/method.md, "Cycle products and the cache".
@@ -87,11 +125,12 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
     Returns
     -------
     dict
-        JSON-able params (``cache_keys.key_of``): the mask file's digest or the trees, the grids, the
+        JSON-able params (``keys.key_of``): the mask file's digest or the trees, the grids, the
         projection.
     """
     c = plan.canopy
     lp = plan.layers[layer_index]
+    source: dict[str, Any]
     if c.trees is None:
         source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
     else:
@@ -108,33 +147,33 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict:
 
 
 @functools.lru_cache(maxsize=64)
-def _file_digest(path) -> str:
+def _file_digest(path: str) -> str:
     return hashlib.sha256(open(path, "rb").read()).hexdigest()
 
 
 def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
-               *, workers: int = 1) -> dict:
+               *, workers: int = 1) -> LayerSpectra:
     """A layer's cached cycle products at ``cycle_frame``, computed on a miss.
 
     Parameters
     ----------
     plan, layer_index, cycle_frame
         The layer and the frame, as in ``layer_masks``.
-    store : cache.Cache
+    store : store.Cache
         The cache.
     workers : int
         FFT threads for a miss.
 
     Returns
     -------
-    dict
-        ``coarse`` (the occlusion or tile spectrum, complex64), ``mean`` (mean transmittance of a
-        tile (1,) [1]), ``fine`` (the fine mask spectrum, complex64, when there is a sun kernel).
-        Memory-mapped, read-only.
+    LayerSpectra
+        The coarse spectrum (the occlusion or tile spectrum, complex64), the mean transmittance
+        [1] and the fine mask spectrum (complex64, when there is a sun kernel). Memory-mapped,
+        read-only; the cache's item keeps them as ``coarse``, ``mean`` (1,) and ``fine``.
     """
     lp = plan.layers[layer_index]
 
-    def compute():
+    def compute() -> dict[str, np.ndarray]:
         coarse, fine = layer_masks(plan, layer_index, cycle_frame)
         if isinstance(lp.coarse, shadow.IsolatedPlan):
             spectrum = shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=workers)
@@ -142,15 +181,17 @@ def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.C
             spectrum = shadow.transmittance_spectrum(coarse, workers=workers)
         item = {"coarse": spectrum.astype(np.complex64),
                 "mean": np.array([coarse.mean(dtype=np.float64)])}
-        if fine is not None:
+        if fine is not None and lp.sun is not None:  # a fine mask is made for a sun plan alone (layer_masks)
             item["fine"] = shadow.fine_mask_spectrum(fine, lp.sun, workers=workers).astype(np.complex64)
         return item
 
-    return store.get_or_compute("spectra", cycle_params(plan, layer_index, cycle_frame), compute)
+    return LayerSpectra.from_item(store.get_or_compute("spectra", cycle_params(plan, layer_index, cycle_frame),
+                                                       compute))
 
 
-def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
-                workers: int = 1, progress=None, cycle_frames=None, command: int | None = None) -> int:
+def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: int = 1,
+                progress: Callable[[int, int], object] | None = None, cycle_frames: Iterable[int] | None = None,
+                command: int | None = None) -> int:
     """Every cycle product for every cycle frame, computing the missing ones in parallel.
 
     Each layer's spectra and the foreground passes of built-in trees: those already stored are
@@ -161,7 +202,7 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
     ----------
     plan : plan.RunPlan
         The run's plan.
-    store : cache.Cache
+    store : store.Cache
         The cache.
     jobs : int
         Parallel joblib processes (at most one per missing item).
@@ -180,7 +221,8 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
         The number of items computed.
     """
     frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
-    tasks = [(plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
+    tasks: list[tuple[RunPlan, int | None, int]] = [
+        (plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
     tasks += [(view, None, frame) for view, frame in foreground_views(plan, frames)]
     missing = [task for task in tasks if store.get(*_product_key(*task)) is None]
     done = len(tasks) - len(missing)
@@ -200,14 +242,14 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1,
     return computed
 
 
-def _product_key(plan, layer, frame):
+def _product_key(plan: RunPlan, layer: int | None, frame: int) -> tuple[str, dict[str, Any]]:
     """(kind, params) of a cycle product: a layer's spectra, or the foreground (layer None)."""
     if layer is None:
         return "foreground", foreground_params(plan, frame)
     return "spectra", cycle_params(plan, layer, frame)
 
 
-def foreground_views(plan: RunPlan, cycle_frames) -> list[tuple[RunPlan, int]]:
+def foreground_views(plan: RunPlan, cycle_frames: Iterable[int]) -> list[tuple[RunPlan, int]]:
     """The built-in trees' passes a run needs: per item, the plan of a frame that uses it and its cycle frame.
 
     One per cycle frame; with a camera that follows the shadow, one per camera and cycle frame
@@ -230,7 +272,7 @@ def foreground_views(plan: RunPlan, cycle_frames) -> list[tuple[RunPlan, int]]:
     wanted = set(cycle_frames)
     if plan.follow is None:
         return [(plan, frame) for frame in sorted(wanted)]
-    views = {}
+    views: dict[str, tuple[RunPlan, int]] = {}
     for frame in range(plan.frames):
         cycle_frame = frame % plan.canopy.cycle
         if cycle_frame in wanted:
@@ -247,7 +289,7 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
     frame the coarse spectrum (complex64 half spectrum of its FFT, or of one tile) and the fine one
     at their exact sizes, per cycle frame the built-in trees' passes (sun, sky: 3 float32, alpha
     and haze: 1) over the whole frame (they are stored cut to the pixels the trees touch:
-    ``foregrounds.cut_to_trees``).
+    ``foreground.models.cut_to_trees``).
 
     Parameters
     ----------
@@ -265,7 +307,8 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
     frames = plan.frames * width * height * FRAME_BYTES_PER_PIXEL[plan.output.half]
     per_frame = 0
     for lp in plan.layers:
-        rows, cols = getattr(lp.coarse, "fft_shape", None) or lp.coarse.tile_shape
+        coarse = lp.coarse
+        rows, cols = coarse.fft_shape if isinstance(coarse, shadow.IsolatedPlan) else coarse.tile_shape
         per_frame += rows * (cols // 2 + 1) * 8
         if lp.sun is not None:
             rows, cols = lp.sun.fft_shape
@@ -292,7 +335,8 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     dict of str to tuple
         Cache key -> (kind, cycle frame).
     """
-    products = [(plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
+    products: list[tuple[RunPlan, int | None, int]] = [
+        (plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
     products += [(view, None, frame) for view, frame in foreground_views(plan, range(plan.canopy.cycle))]
     keys = {}
     for view, layer, frame in products:
@@ -311,7 +355,7 @@ def record_config_items(plan: RunPlan, store: cache.Cache) -> None:
     ----------
     plan : plan.RunPlan
         The run's plan (its source names the config).
-    store : cache.Cache
+    store : store.Cache
         The cache.
     """
     folder = store.root / CONFIG_INDEX
@@ -334,7 +378,7 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
 
     Parameters
     ----------
-    store : cache.Cache
+    store : store.Cache
         The cache.
 
     Returns
@@ -354,12 +398,13 @@ def recorded_configs(store: cache.Cache) -> list[dict]:
 
 
 @portable
-def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
+def _cycle_task(plan: RunPlan, layer: int | None, frame: int, root: str, workers: int,
+                command: int | None = None) -> int:
     end_if_orphaned(command)
     store = cache.Cache(root)
-    from pipeline.kernels import raster as _raster  # numba costs 0.3 s to import: a worker needs it anyway
+    from pipeline.kernels import raster  # numba costs 0.3 s to import: a worker needs it anyway
 
-    with compiled_once(_raster.shapes):  # after an install, one worker compiles the rasteriser
+    with compiled_once(raster.shapes):  # after an install, one worker compiles the rasteriser
         if layer is None:
             foreground_item(plan, frame, store)
         else:
@@ -367,7 +412,7 @@ def _cycle_task(plan, layer, frame, root, workers, command=None) -> int:
     return store.misses
 
 
-def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
+def foreground_params(plan: RunPlan, cycle_frame: int) -> dict[str, Any]:
     """Everything the built-in trees' passes at ``cycle_frame`` depend on: their cache key's params.
 
     Not the light's strength or colour, since they are stored per unit irradiance.
@@ -382,9 +427,16 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
     Returns
     -------
     dict
-        JSON-able params (``cache_keys.key_of``).
+        JSON-able params (``keys.key_of``).
+
+    Raises
+    ------
+    ValueError
+        For a canopy without built-in trees.
     """
     c = plan.canopy
+    if c.trees is None:
+        raise ValueError("the foreground's cycle products are the built-in trees' (canopy.trees)")
     return {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
             "heights": [layer.height for layer in c.layers], "layout": c.layout,
             "center": c.layers[0].center, "size": c.layers[0].size,
@@ -400,7 +452,7 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict:
                 "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
 
 
-def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict:
+def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> models.StoredTreePasses:
     """The built-in trees' foreground passes at ``cycle_frame``, cached, per unit irradiance.
 
     The shading is linear in each channel's light, so a frame scales them by the run's Lighting.
@@ -409,20 +461,22 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
     ----------
     plan, cycle_frame
         As in ``foreground_params``.
-    store : cache.Cache
+    store : store.Cache
         The cache.
 
     Returns
     -------
-    dict
-        ``sun`` the sun's term for a normal irradiance of 1 in each channel, ``sky`` the sky's for
-        a horizontal irradiance of 1 (rows, cols, 3) [1/sr], ``alpha`` (rows, cols) [1], ``haze``
-        (rows, cols) [1], all cut to the box of the pixels the trees touch
-        (``foregrounds.cut_to_trees``; ``box``). Memory-mapped, read-only.
+    foreground.models.StoredTreePasses
+        The sun's term for a normal irradiance of 1 in each channel, the sky's for a horizontal
+        irradiance of 1 [1/sr], the coverage and the haze's share [1], all cut to the box of the
+        pixels the trees touch (``foreground.models.cut_to_trees``). Memory-mapped, read-only; the
+        cache's item keeps them as ``sun``, ``sky``, ``alpha``, ``box`` and maybe ``haze``.
     """
-    c = plan.canopy
+    c, trees = plan.canopy, plan.canopy.trees
+    if trees is None:
+        raise ValueError("the foreground's cycle products are the built-in trees' (canopy.trees)")
 
-    def compute():
+    def compute() -> dict[str, np.ndarray]:
         grove, flutter = grove_of(c)
         leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
         wood, owner = tree_detail.taper_wood(grove.wood)
@@ -436,8 +490,9 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
             layer = c.layers[0]
             leaves, wood, leaf_index, wood_index = tree_detail.periodic_copies(
                 leaves, wood, view, period=layer.size[0], center=layer.center, haze=plan.haze,
-                seed=c.trees.seed, coarse_wood=grove.wood)
-            if has_sun:  # a straight capsule gets the mean visibility of its pieces
+                seed=trees.seed, coarse_wood=grove.wood)
+            if leaf_visibility is not None and wood_visibility is not None:  # with a sun
+                # a straight capsule gets the mean visibility of its pieces
                 pieces = np.bincount(owner, minlength=len(grove.wood.radius))
                 capsule = np.bincount(owner, weights=wood_visibility, minlength=len(pieces)) / np.maximum(pieces, 1)
                 leaf_visibility = leaf_visibility[leaf_index]
@@ -450,6 +505,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> dict
         item = {"sun": passes.sun - passes.sky, "sky": passes.sky, "alpha": passes.alpha}
         if passes.haze is not None:
             item["haze"] = passes.haze
-        return foregrounds.cut_to_trees(item)
+        return models.cut_to_trees(item)
 
-    return store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute)
+    return models.StoredTreePasses.from_item(
+        store.get_or_compute("foreground", foreground_params(plan, cycle_frame), compute))

@@ -1,26 +1,154 @@
 """The ground stage: the irradiance on the ground under one frame's sky, the correlation of the
 sky raster with each canopy layer's cached spectrum at the coarse scale and of the sun kernel
 with the fine mask spectrum on the sun window (Max 1991, Fig. 7 and section 3; docs/method.md,
-"Two scales"). Takes the RunPlan, the frame's sky and the cache."""
+"Two scales"). Takes one frame's ``FrameContext`` (the plan at the frame, its sky and the cache),
+which the frame stage makes once per frame."""
 
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from pipeline.cache import store as cache
+from pipeline.config.settings import BrdfConfig
 from pipeline.core.cores import default_workers
 from pipeline.core.geometry import Grid, sky_grid, sky_offset
 from pipeline.ground import brdf_bands, shadow
+from pipeline.sky.base import Sky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_kernel import sun_irradiance, sun_kernel
-from pipeline.stages.cycle import cycle_item
+from pipeline.stages.cycle import LayerSpectra, cycle_item
 from pipeline.stages.plan import LayerPlan, RunPlan
-from pipeline.stages.scene import sun_lights, sun_shades
+from pipeline.stages.scene import Scene, sun_lights, sun_shades
 
-__all__ = ["GroundResult", "render_ground", "sky_view_terms", "BLEND_BAND_PIXELS", "BLEND_BAND_SHARE", "blend_band"]
+if TYPE_CHECKING:
+    from pipeline.sky.equirect import EquirectSky
+    from pipeline.sky.procedural import ProceduralSky
+
+__all__ = ["FrameContext", "GroundRaster", "CoarseSky", "GroundResult", "LayerGround", "render_ground",
+           "ground_of_frame", "sky_view_terms", "BLEND_BAND_PIXELS", "BLEND_BAND_SHARE", "blend_band"]
+
+
+@dataclass(frozen=True, eq=False)
+class FrameContext:
+    """What the stages of one output frame share, made once per frame (``FrameContext.of``): the
+    frame stage makes it and hands it to the ground stage, so that neither makes it again.
+
+    Attributes
+    ----------
+    plan : RunPlan
+        The plan as this frame sees it (``RunPlan.at``: a following camera's view and sun window,
+        docs/method.md, "Framing").
+    frame : int
+        The output frame index.
+    scene : Scene
+        The frame's sun and moon.
+    sky : base.Sky
+        The frame's sky [kcd/m^2 for a procedural sky].
+    store : store.Cache
+        Where the cycle products come from (computed on a miss).
+    workers : int
+        FFT threads [1].
+    """
+
+    plan: RunPlan
+    frame: int
+    scene: Scene
+    sky: Sky
+    store: cache.Cache
+    workers: int
+
+    @classmethod
+    def of(cls, plan: RunPlan, frame: int, *, store: cache.Cache | None = None, workers: int | None = None,
+           sky: Sky | None = None) -> FrameContext:
+        """The context of an output frame.
+
+        Parameters
+        ----------
+        plan : RunPlan
+            The run's plan (or the frame's, ``RunPlan.at`` gives it back unchanged).
+        frame : int
+            Output frame index.
+        store : store.Cache or None
+            Where the cycle products come from; None: the default cache.
+        workers : int or None
+            FFT threads; None: ``cores.default_workers``.
+        sky : base.Sky or None
+            The frame's sky, loaded when not given.
+
+        Returns
+        -------
+        FrameContext
+            The frame's plan, scene, sky, cache and threads.
+        """
+        plan = plan.at(frame)  # a following camera's sun window (docs/method.md, "Framing")
+        scene = plan.scenes[frame]
+        return cls(plan, frame, scene, sky or plan.sky.at(scene), store or cache.Cache(cache.cache_dir(None)),
+                   workers or default_workers())
+
+    @property
+    def cycle_frame(self) -> int:
+        """The flutter cycle's frame of this output frame.
+
+        Returns
+        -------
+        int
+            ``frame`` modulo the cycle [frame].
+        """
+        return self.frame % self.plan.canopy.cycle
+
+    @cached_property
+    def spectra(self) -> tuple[LayerSpectra, ...]:
+        """Every canopy layer's cycle products at this frame's cycle frame, read once (computed on a miss).
+
+        Returns
+        -------
+        tuple of cycle.LayerSpectra
+            One per ``plan.layers``, in order.
+        """
+        return tuple(cycle_item(self.plan, index, self.cycle_frame, self.store, workers=self.workers)
+                     for index in range(len(self.plan.layers)))
+
+
+@dataclass(frozen=True)
+class GroundRaster:
+    """A ground raster on its grid.
+
+    Attributes
+    ----------
+    irradiance : ndarray, shape (rows, cols, channels), float32
+        Irradiance [radiance x sr: klx for a sky in kcd/m^2].
+    grid : Grid
+        Its ground grid [m].
+    """
+
+    irradiance: np.ndarray
+    grid: Grid
+
+
+@dataclass(frozen=True)
+class CoarseSky:
+    """The sky's own share of a frame's ground on the coarse window, kept for a ground
+    reflectance's sky term (``sky_view_terms``, ``brdf_bands.weighted_raster``).
+
+    Attributes
+    ----------
+    irradiance : ndarray, shape (rows, cols, 3), float32
+        The ground lit by the sky alone, the layers combined [radiance x sr].
+    unshadowed : ndarray, shape (3,), float64
+        Its open-sky total [radiance x sr].
+    rasters : tuple of SkyRaster
+        Each layer's sky raster as it was correlated (a periodic layer's folded by its tile)
+        [radiance x sr].
+    """
+
+    irradiance: np.ndarray
+    unshadowed: np.ndarray
+    rasters: tuple[SkyRaster, ...]
 
 
 @dataclass(frozen=True)
@@ -38,23 +166,24 @@ class GroundResult:
     exact : bool
         Whether every ray that meets the canopy lies inside the sky square (else light from beyond
         it was taken as unshadowed).
-    outer : tuple or None
-        (raster (rows, cols, 3) [klx], its Grid): the coarse raster of the whole window with the sun
-        at the coarse cell, where the sun window does not cover it (``render_ground(outer=True)``);
-        else None.
+    outer : GroundRaster or None
+        The coarse raster of the whole window with the sun at the coarse cell [klx], where the
+        sun window does not cover it (``render_ground(outer=True)``); else None.
     sky_part : GroundResult or None
         The same ground lit by the sky alone, without the sun kernel (a GroundResult whose sky_part
         is None), when ``render_ground`` was asked for ``parts``, else None.
-    coarse_sky : tuple or None
-        The sky's own share on the coarse window (below), else None.
+    coarse_sky : CoarseSky or None
+        With ``render_ground(coarse_sky=True)``: the sky's own share on the coarse window, for a
+        ground reflectance's sky term; else None.
     """
 
     irradiance: np.ndarray
     grid: Grid
     unshadowed: np.ndarray
     exact: bool
-    outer: tuple[np.ndarray, Grid] | None = None
+    outer: GroundRaster | None = None
     sky_part: GroundResult | None = None
+    coarse_sky: CoarseSky | None = None
 
     def sun_part(self) -> GroundResult:
         """The ground's light from the sun alone: this ground less its ``sky_part``.
@@ -66,24 +195,64 @@ class GroundResult:
         -------
         GroundResult
             The sun's part [radiance x sr], without ``sky_part``.
+
+        Raises
+        ------
+        ValueError
+            For a ground made without its ``sky_part``.
         """
         sky = self.sky_part
-        outer = None if self.outer is None else (self.outer[0] - sky.outer[0], self.outer[1])
+        if sky is None:
+            raise ValueError("the ground was made without its sky part (render_ground(parts=True))")
+        outer = None
+        if self.outer is not None and sky.outer is not None:
+            outer = GroundRaster(self.outer.irradiance - sky.outer.irradiance, self.outer.grid)
         return GroundResult(self.irradiance - sky.irradiance, self.grid,
                             np.asarray(self.unshadowed) - np.asarray(sky.unshadowed), self.exact, outer)
-    coarse_sky: tuple | None = None
-    """With ``render_ground(coarse_sky=True)``: (sky-only ground (rows, cols, 3) on the coarse
-    window [radiance x sr], its open-sky total (3,), each layer's sky raster as correlated),
-    for a ground reflectance's sky term (``sky_view_terms``, ``brdf_bands.weighted_raster``)."""
+
+
+@dataclass(frozen=True)
+class LayerGround:
+    """One canopy layer's ground under a frame's sky, before ``ground_of_frame`` combines the
+    layers by the paper's product rule.
+
+    Attributes
+    ----------
+    irradiance : ndarray, shape (3, rows, cols), float32
+        The light through the layer, sky and sun, on the sun window's grid where the layer has a
+        sun plan, else on the window's [radiance x sr].
+    unshadowed : ndarray, shape (3,), float64
+        Its open-sky total [radiance x sr].
+    exact : bool
+        Whether every ray that meets the layer lies inside its sky square.
+    sky_raster : SkyRaster
+        The sky raster correlated with the layer's coarse spectrum (a periodic layer's folded by
+        its tile) [radiance x sr]; its ``irradiance`` is the sky's open-sky total.
+    sky_ground : ndarray, shape (3, rows, cols), float32
+        The sky's light through the layer on the window [radiance x sr] (not written to
+        afterwards).
+    outer : ndarray, shape (3, rows, cols), float32, or None
+        When asked for: ``sky_ground`` with the sun's light at the coarse cell [radiance x sr].
+    sky_part : ndarray, shape (3, rows, cols), float32, or None
+        When asked for: the sky's light alone on ``irradiance``'s grid [radiance x sr].
+    """
+
+    irradiance: np.ndarray
+    unshadowed: np.ndarray
+    exact: bool
+    sky_raster: SkyRaster
+    sky_ground: np.ndarray
+    outer: np.ndarray | None = None
+    sky_part: np.ndarray | None = None
 
 
 def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = None,
-                  workers: int | None = None, sky=None, outer: bool = False,
+                  workers: int | None = None, sky: Sky | None = None, outer: bool = False,
                   parts: bool = False, coarse_sky: bool = False) -> GroundResult:
     """Ground irradiance at an output frame, every canopy layer under the sky.
 
     The coarse sky raster, and the fine sun kernel where the sky has a sun; layers combined by the
-    paper's product rule.
+    paper's product rule (``ground_of_frame`` of the frame's ``FrameContext``).
 
     Parameters
     ----------
@@ -91,12 +260,35 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
         The run's plan.
     frame : int
         Output frame index.
-    store : cache.Cache or None
+    store : store.Cache or None
         Where the cycle products come from (computed on a miss); None: the default cache.
     workers : int or None
         FFT threads; None: ``cores.default_workers``.
-    sky : sky.Sky or None
+    sky : base.Sky or None
         The frame's sky, loaded when not given.
+    outer, parts, coarse_sky : bool
+        As in ``ground_of_frame``.
+
+    Returns
+    -------
+    GroundResult
+        On the sun window's grid, or the window's without a sun [radiance x sr].
+    """
+    context = FrameContext.of(plan, frame, store=store, workers=workers, sky=sky)
+    return ground_of_frame(context, outer=outer, parts=parts, coarse_sky=coarse_sky)
+
+
+def ground_of_frame(context: FrameContext, *, outer: bool = False, parts: bool = False,
+                    coarse_sky: bool = False) -> GroundResult:
+    """Ground irradiance at one frame, every canopy layer under its sky.
+
+    The coarse sky raster, and the fine sun kernel where the sky has a sun; layers combined by the
+    paper's product rule.
+
+    Parameters
+    ----------
+    context : FrameContext
+        The frame: its plan, sky, cycle products and threads.
     outer : bool
         Also the coarse raster of the whole window with the sun at the coarse cell (the paper's
         single scale), where the sun window does not cover it: what a camera sees beyond the sun
@@ -114,45 +306,41 @@ def render_ground(plan: RunPlan, frame: int = 0, *, store: cache.Cache | None = 
     GroundResult
         On the sun window's grid, or the window's without a sun [radiance x sr].
     """
-    plan = plan.at(frame)  # a following camera's sun window (docs/method.md, "Framing")
-    workers = workers or default_workers()
-    store = store or cache.Cache(cache.cache_dir(None))
-    sky = sky or plan.sky.at(plan.scenes[frame])
-    cycle_frame = frame % plan.canopy.cycle
+    plan = context.plan
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
-    grounds, outers, totals, exact, skies, coarse_skies = [], [], [], True, [], []
-    for index, layer_plan in enumerate(plan.layers):
-        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
-        g, total, layer_exact, g_outer, sky_only = _ground_of_layer(
-            sky, layer_plan, item, plan, workers, outer, parts, coarse_skies if coarse_sky else None)
-        grounds.append(g)
-        outers.append(g_outer)
-        totals.append(total)
-        skies.append(sky_only)
-        exact &= layer_exact
-    combined = shadow.combine_layers(grounds, totals[0])
+    layers = [_ground_of_layer(context, lp, spectra, outer=outer, parts=parts)
+              for lp, spectra in zip(plan.layers, context.spectra)]
+    exact = True
+    for layer in layers:
+        exact &= layer.exact
+    total = layers[0].unshadowed
     grid = plan.sun_window or plan.window
-    around = None
-    if outer:
-        around = (np.moveaxis(shadow.combine_layers(outers, totals[0]), 0, -1), plan.window)
+    around = GroundRaster(_combined([g.outer for g in layers], total), plan.window) if outer else None
     sky_part = None
     if parts:
-        sky_total = skies[0][1]
+        sky_total = layers[0].sky_raster.irradiance
         sky_around = None
         if outer:
-            sky_around = (np.moveaxis(shadow.combine_layers([s[2] for s in skies], sky_total), 0, -1), plan.window)
-        sky_part = GroundResult(np.moveaxis(shadow.combine_layers([s[0] for s in skies], sky_total), 0, -1),
-                                grid, sky_total, exact, sky_around)
+            sky_around = GroundRaster(_combined([g.sky_ground for g in layers], sky_total), plan.window)
+        sky_part = GroundResult(_combined([g.sky_part for g in layers], sky_total), grid, sky_total, exact,
+                                sky_around)
     kept = None
-    if coarse_sky:  # (coarse sky-only ground, raster) per layer
-        sky_total = coarse_skies[0][1].irradiance
-        kept = (np.moveaxis(shadow.combine_layers([g for g, _ in coarse_skies], sky_total), 0, -1), sky_total,
-                tuple(r for _, r in coarse_skies))
-    return GroundResult(np.moveaxis(combined, 0, -1), grid, totals[0], exact, around, sky_part, kept)
+    if coarse_sky:
+        sky_total = layers[0].sky_raster.irradiance
+        kept = CoarseSky(_combined([g.sky_ground for g in layers], sky_total), sky_total,
+                         tuple(g.sky_raster for g in layers))
+    return GroundResult(_combined([g.irradiance for g in layers], total), grid, total, exact, around, sky_part,
+                        kept)
 
 
-def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: int, views,
-                   ground: GroundResult, *, colour: int | None = None) -> list:
+def _combined(grounds: list, unshadowed: np.ndarray) -> np.ndarray:
+    """The layers' rasters (channels, rows, cols) combined by the paper's product rule
+    (``shadow.combine_layers``), as (rows, cols, channels)."""
+    return np.moveaxis(shadow.combine_layers(grounds, unshadowed), 0, -1)
+
+
+def sky_view_terms(context: FrameContext, views: np.ndarray, ground: GroundResult, *,
+                   colour: int | None = None) -> list[GroundResult]:
     """The sky's ground rasters under the canopy, one per view, the sky weighted by the BRDF's shape.
 
     Every channel for the view ``colour`` (all of them when None), the channels' sum (one channel)
@@ -161,14 +349,8 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
 
     Parameters
     ----------
-    plan, frame
-        As in ``render_ground``.
-    sky : sky.Sky
-        The frame's sky.
-    store : cache.Cache
-        The cache of the cycle products.
-    workers : int
-        FFT threads.
+    context : FrameContext
+        The frame: its plan (with a ground reflectance), sky, cycle products and threads.
     views : ndarray, shape (B, 3)
         View directions [1].
     ground : GroundResult
@@ -182,37 +364,58 @@ def sky_view_terms(plan: RunPlan, frame: int, sky, store: cache.Cache, workers: 
     list of GroundResult
         Per view, on the coarse window, or under an isolated canopy on cells
         ``brdf_bands.band_factor`` times as wide (``shadow.coarser_isolated``) [radiance x sr].
+
+    Raises
+    ------
+    ValueError
+        Without a ground reflectance, or for a ground made without its ``coarse_sky``.
     """
-    brdf = plan.ground.brdf
-    cycle_frame = frame % plan.canopy.cycle
+    plan, workers = context.plan, context.workers
+    brdf, kept = plan.ground.brdf, ground.coarse_sky
+    if brdf is None or kept is None:
+        raise ValueError("the sky's view terms need ground.brdf and the ground's coarse_sky")
     factor = brdf_bands.band_factor(plan)
-    grounds, total, grid = [], None, plan.window
-    for index, lp in enumerate(plan.layers):
-        item = cycle_item(plan, index, cycle_frame, store, workers=workers)
+    grounds, grid = [], plan.window
+    views_of_first: list[SkyRaster] = []
+    channels: list[SkyRaster] = []
+    for index, (lp, spectra) in enumerate(zip(plan.layers, context.spectra)):
         coarse = lp.coarse
-        periodic = isinstance(coarse, shadow.PeriodicPlan)
-        raw = sky.raster(coarse.sky) if periodic else ground.coarse_sky[2][index]
-        spectrum, layer_grid = item["coarse"], plan.window
-        if factor > 1:  # the bands at a coarser pixel: the sky's term is smooth (brdf_bands.band_factor)
-            coarse, spectrum, layer_grid = shadow.coarser_isolated(spectrum, coarse, factor, plan.window)
-            grid = layer_grid if index == 0 else grid
-        # every view's weighted raster as channels of one: one correlation call for all
-        rasters = [brdf_bands.weighted_raster(raw, brdf, v, fold_period=coarse.tile_shape if periodic else None,
-                                              summed=colour is not None and t != colour, factor=factor)
-                   for t, v in enumerate(views)]
-        raster = SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
-                                      np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
-        if periodic:
-            g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+        if isinstance(coarse, shadow.PeriodicPlan):
+            rasters = _view_rasters(context.sky.raster(coarse.sky), brdf, views, colour, factor, coarse.tile_shape)
+            raster = _as_channels(rasters)
+            g = shadow.ground_periodic(raster, spectra.coarse, coarse, spectra.mean, workers=workers)
         else:
+            spectrum, layer_grid = spectra.coarse, plan.window
+            if factor > 1:  # the bands at a coarser pixel: the sky's term is smooth (brdf_bands.band_factor)
+                coarse, spectrum, layer_grid = shadow.coarser_isolated(spectrum, coarse, factor, plan.window)
+                grid = layer_grid if index == 0 else grid
+            rasters = _view_rasters(kept.rasters[index], brdf, views, colour, factor, None)
+            raster = _as_channels(rasters)
             g = shadow.ground_isolated(raster, spectrum, coarse, workers=workers)
             g = g if layer_grid == grid else shadow.resample_bilinear(g, layer_grid, grid)
         grounds.append(g)
-        if total is None:
-            total, split = raster.irradiance, np.cumsum([len(r.weighted) for r in rasters])[:-1]
-    combined = np.moveaxis(shadow.combine_layers(grounds, total), 0, -1)
+        channels.append(raster)
+        views_of_first = views_of_first or rasters
+    total = channels[0].irradiance
+    split = np.cumsum([len(r.weighted) for r in views_of_first])[:-1]
+    combined = _combined(grounds, total)
     return [GroundResult(g, grid, t, True)
             for g, t in zip(np.split(combined, split, axis=-1), np.split(total, split))]
+
+
+def _view_rasters(raw: SkyRaster, brdf: BrdfConfig, views: np.ndarray, colour: int | None, factor: int,
+                  fold_period: tuple[int, int] | None) -> list[SkyRaster]:
+    """``raw`` weighted by the BRDF's shape for every view (``brdf_bands.weighted_raster``): every
+    channel for the view ``colour`` (all when None), the channels' sum for the others."""
+    return [brdf_bands.weighted_raster(raw, brdf, v, fold_period=fold_period,
+                                       summed=colour is not None and t != colour, factor=factor)
+            for t, v in enumerate(views)]
+
+
+def _as_channels(rasters: list[SkyRaster]) -> SkyRaster:
+    """Every view's weighted raster as the channels of one: one correlation call for all."""
+    return SkyRaster(rasters[0].grid, np.concatenate([r.weighted for r in rasters]),
+                     np.concatenate([np.asarray(r.outside, dtype=np.float64) for r in rasters]))
 
 
 def _covers(inner: Grid, outer: Grid) -> bool:
@@ -222,63 +425,72 @@ def _covers(inner: Grid, outer: Grid) -> bool:
     return a[0] <= b[0] + tol and a[1] <= b[1] + tol and a[2] >= b[2] - tol and a[3] >= b[3] - tol
 
 
-def _ground_of_layer(sky, lp: LayerPlan, item, plan: RunPlan, workers, outer=False, parts=False, keep=None):
-    """(ground raster, unshadowed total, exact, outer raster or None, sky part or None) of one
-    layer: the coarse sky light, plus the fine sun kernel on the sun window; with ``outer``
-    also the coarse raster with the sun kernel at the coarse cell; with ``parts`` the sky part
-    (raster, total, outer raster or None): the same rasters before the sun's light is added.
-    ``keep``, a list: appends (the coarse sky light, its sky raster), neither written to
-    afterwards (a ground reflectance's sky term)."""
+def _ground_of_layer(context: FrameContext, lp: LayerPlan, spectra: LayerSpectra, *, outer: bool,
+                     parts: bool) -> LayerGround:
+    """One layer's ground: the coarse sky light, plus the sun (``_with_sun``). ``outer``: also
+    the coarse raster with the sun at the coarse cell; ``parts``: the sky part, the same raster
+    before the sun's light is added."""
+    sky, plan, workers = context.sky, context.plan, context.workers
     coarse = lp.coarse
     if isinstance(coarse, shadow.IsolatedPlan):
         grid = coarse.sky or sky_grid((0, 0), (1, 1), plan.window.pixel / lp.height)
         raster = sky.raster(grid)  # a 1 x 1 stand-in when no ray reaches the canopy
-        g = shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+        g = shadow.ground_isolated(raster, spectra.coarse, coarse, workers=workers)
         exact = coarse.exact
     else:
         raster = sky.raster(coarse.sky, fold_period=coarse.tile_shape)
-        g = shadow.ground_periodic(raster, item["coarse"], coarse, float(item["mean"][0]),
-                                   workers=workers)
+        g = shadow.ground_periodic(raster, spectra.coarse, coarse, spectra.mean, workers=workers)
         exact = True
-    total = raster.irradiance
-    if keep is not None:
-        keep.append((g, raster))
-    g_outer = None
-    sky_only = (g, total, g) if parts else None
+    sky_light = LayerGround(g, raster.irradiance, exact, raster, g, sky_part=g if parts else None)
+    return _with_sun(context, lp, spectra, sky_light, outer=outer, parts=parts)
+
+
+def _with_sun(context: FrameContext, lp: LayerPlan, spectra: LayerSpectra, sky_light: LayerGround, *,
+              outer: bool, parts: bool) -> LayerGround:
+    """The layer's sky light ``sky_light`` with the sun's: the fine sun kernel on the sun window,
+    or the open sun's light unshadowed; ``sky_light`` itself without either."""
+    sky, plan, workers = context.sky, context.plan, context.workers
+    g, total = sky_light.irradiance, sky_light.unshadowed
     sun = getattr(sky, "sun", None)
     if lp.sun is not None and sun_shades(sun):
-        if outer:
-            g_outer = g + _coarse_sun(sky, lp, item, plan, workers)
-        kernel = sun_kernel(sky, plan.sun_window.pixel / lp.height)
+        # a layer with a sun plan has a sun window and a fine spectrum (plan.LayerPlan, cycle.cycle_item)
+        assert plan.sun_window is not None and spectra.fine is not None
+        g_outer = g + _coarse_sun(context, lp, spectra) if outer else None
+        kernel = sun_kernel(_sun_sky(sky), plan.sun_window.pixel / lp.height)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
-        if parts:
-            sky_only = (g.copy(), total, sky_only[2])
-        g += shadow.ground_sun(kernel, item["fine"], lp.sun, workers=workers)
+        sky_part = g.copy() if parts else None
+        g += shadow.ground_sun(kernel, spectra.fine, lp.sun, workers=workers)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
-        return g, total, exact, g_outer, sky_only
+        return replace(sky_light, irradiance=g, unshadowed=total, outer=g_outer, sky_part=sky_part)
     # a sun under scene.SHADOW_FLOOR throws the canopy's shadow beyond the window: its light
     # reaches the window unshadowed; set (twilight), it gives none: the sky alone lights it
     if lp.sun is None and not sun_lights(sun):
-        return g, total, exact, g_outer, sky_only
-    light = np.asarray(sun_irradiance(sky), dtype=np.float64) if sun_lights(sun) else np.zeros(3)
-    if outer:
-        g_outer = g + light.astype(g.dtype)[:, None, None]
+        return sky_light
+    light = np.asarray(sun_irradiance(_sun_sky(sky)), dtype=np.float64) if sun_lights(sun) else np.zeros(3)
+    g_outer = g + light.astype(g.dtype)[:, None, None] if outer else None
     if lp.sun is not None:
+        assert plan.sun_window is not None  # a layer with a sun plan has a sun window (plan.LayerPlan)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
-    if parts:
-        sky_only = (g.copy(), total, sky_only[2])
+    sky_part = g.copy() if parts else None
     g = g + light.astype(g.dtype)[:, None, None]
-    return g, total + light, exact, g_outer, sky_only
+    return replace(sky_light, irradiance=g, unshadowed=total + light, outer=g_outer, sky_part=sky_part)
 
 
-def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
+def _sun_sky(sky: Sky) -> ProceduralSky | EquirectSky:
+    """``sky`` as ``sun_kernel`` takes it: a sky whose sun lights the ground (``scene.sun_lights``,
+    ``sun_shades``) is one with a sun disc, a procedural sky or an HDRI's."""
+    return cast("ProceduralSky | EquirectSky", sky)
+
+
+def _coarse_sun(context: FrameContext, lp: LayerPlan, spectra: LayerSpectra) -> np.ndarray:
     """The sun's light through one layer on the coarse window (channels, rows, cols): its
     kernel at the coarse sky cell, correlated like the sky. [klx]"""
-    kernel = sun_kernel(sky, plan.window.pixel / lp.height)
+    sky, plan, workers = context.sky, context.plan, context.workers
+    kernel = sun_kernel(_sun_sky(sky), plan.window.pixel / lp.height)
     coarse = lp.coarse
     if isinstance(coarse, shadow.PeriodicPlan):
         return shadow.ground_periodic(SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
-                                      item["coarse"], coarse, float(item["mean"][0]), workers=workers)
+                                      spectra.coarse, coarse, spectra.mean, workers=workers)
     weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
     if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
         dr, dc = np.subtract(sky_offset(kernel.grid), sky_offset(coarse.sky))
@@ -288,13 +500,12 @@ def _coarse_sun(sky, lp: LayerPlan, item, plan: RunPlan, workers):
         if r1 > r0 and c1 > c0:
             weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
     outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
-    raster = SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel),
-                                  weighted, outside)
-    return shadow.ground_isolated(raster, item["coarse"], coarse, workers=workers)
+    raster = SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel), weighted, outside)
+    return shadow.ground_isolated(raster, spectra.coarse, coarse, workers=workers)
 
 
 # ---------------------------------------------------------------------------------------------
-# The finished frame: camera, foreground, compositing (Max 1991, Figs. 10 and 13)
+# The fine ground given way to the coarse one at the sun window's edge
 # ---------------------------------------------------------------------------------------------
 
 
