@@ -12,7 +12,7 @@ and the SHA-256 of their radiance. Frames in one process are where what a still 
 one frame to the next (docs/accuracy.md, "What a still sky keeps") is used, so equal digests from
 two trees show that keeping it changes no pixel. ``--code TREE`` imports ``pipeline`` from TREE
 (e.g. a ``git worktree add`` of an older commit); the configs are read from this checkout.
-``--write`` also writes each frame's files as a run writes them (``run._write_task``: the EXR,
+``--write`` also writes each frame's files as a run writes them (``render._write_task``: the EXR,
 the display codes and the PNG, and their stamps for index.json) into a fresh folder, and gives
 that CPU apart, with the SHA-256 of the PNGs' bytes. ``--profile`` runs the timed frames' rendering
 under cProfile and prints its 15 costliest functions by their own time (the CPU figure then
@@ -48,7 +48,7 @@ def main() -> None:
     sys.path.insert(0, str(Path(args.code).resolve()))
     from pipeline.cache import store as cache
     from pipeline.run.folder import frame_files
-    from pipeline.run.render import _write_task
+    from pipeline.run.render import _RenderedFrame, _write_task
     from pipeline.stages.cycle import cycle_phase
     from pipeline.stages.frame import render_frame
     from pipeline.stages.lighting import with_exposures
@@ -80,7 +80,7 @@ def main() -> None:
             digest.update(result.radiance.tobytes())
             if args.write:
                 cpu = time.process_time()
-                _write_task(config, (frame, result, {}, {}, []), "bench", False)
+                _write_task(config, _RenderedFrame(frame, result, {}, {}, ()), "bench", False)
                 writing += time.process_time() - cpu
                 written.update(frame_files(config, frame)[1].read_bytes())
         print(f"{Path(path).stem}: {rendering / len(frames) * 1e3:.0f} ms of CPU a frame (frames 1-{args.frames}), "

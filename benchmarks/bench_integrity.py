@@ -7,7 +7,7 @@ digest of each frame written, and a resume that checks the frames it skips.
 1. Cache checks (issue 16). In one process, with the cycle products of the frames in a fresh
    cache: each frame rendered (``frame.render_frame``) with its cache items already checked
    in this process (the baseline: sizes, headers and a stat, what every later read costs) and
-   with ``cache_store.forget_verified()`` before it (every item's CRC-32 computed again: the worst
+   with ``items.forget_verified()`` before it (every item's CRC-32 computed again: the worst
    case; a run checks each item once per worker process, so once per ``cycle`` frames), the
    two alternated ``--repeat`` times, in turn first; beside them the checksums alone of the
    items a frame reads. Medians over frames and repeats.
@@ -108,7 +108,7 @@ def frame_digests(config, frames, repeat) -> None:
     for _ in range(repeat):
         for frame in frames:
             start = time.perf_counter()
-            _, _timings, entry, _ = _frame_task(config, plan, frame, root, config.digest(), default_workers())
+            entry = _frame_task(config, plan, frame, root, config.digest(), default_workers()).entry
             totals.append(time.perf_counter() - start)
             paths = [folder / entry["files"][k]["name"] for k in ("exr", "png")]
             digests.append(seconds(lambda: [file_digest(p) for p in paths]))

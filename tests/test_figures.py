@@ -1,4 +1,4 @@
-"""Tests of pipeline.figures: the whole preview set is written, every PNG is readable and shows
+"""Tests of pipeline.cli.figures: the whole preview set is written, every PNG is readable and shows
 what its figure should (Max 1991, Figs. 4 to 7, 10 to 13, 16 and S(t)); the I0 quadrature
 against the closed form and the paper's 0.90 at 70 degrees; the scenes stand without configs/."""
 

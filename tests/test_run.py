@@ -451,7 +451,8 @@ def test_damage_found_in_a_worker_comes_back_as_warnings_and_in_the_index_entry(
     (tmp_path / "out").mkdir()
     (item,) = [i for i in items_of_frame(run, 4) if i.startswith("foreground")]
     flip(npy_of(cache, item, "sky.npy"), -17)
-    frame, _, entry, caught, _codes = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
+    written = _frame_task(config, plan_run(config), 4, str(cache), config.digest(), 1)
+    frame, entry, caught = written.frame, written.entry, written.caught
     assert frame == 4 and [category for category, _ in caught] == [CacheWarning]
     assert f"cache item {item[:23]} was damaged (sky.npy: checksum mismatch" in caught[0][1]
     assert entry["items"][item]["sky.npy"][0] == items_of_frame(run, 4)[item]["sky.npy"][0]
@@ -468,7 +469,7 @@ def test_with_one_job_a_frame_rendered_before_a_failure_is_written_and_yielded(f
     config = replace(config, output=replace(config.output, folder=tmp_path / "out"))
     (tmp_path / "out").mkdir()
     frames = _frames_here(config, plan_run(config), Cache(cache), [5, 3, 99], config.digest(), 1, False)
-    assert [next(frames)[0], next(frames)[0]] == [5, 3]
+    assert [next(frames).frame, next(frames).frame] == [5, 3]
     with pytest.raises(IndexError):
         next(frames)
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [

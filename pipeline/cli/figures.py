@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -30,14 +31,18 @@ from pipeline.config.settings import Config
 from pipeline.core import io
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.core.geometry import I0, Grid, projected_solid_angle
-from pipeline.sky import ephemeris
-from pipeline.sky import procedural as sky_models
+from pipeline.sky import ephemeris, procedural
 from pipeline.sky.sun_kernel import sun_kernel
 from pipeline.stages.cycle import layer_masks
 from pipeline.stages.frame import FrameResult, render_frame
 from pipeline.stages.plan import RunPlan, plan_run
 from pipeline.stages.resolve import resolve
 from pipeline.stages.scene import load_sky, scene_at
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from numpy.typing import ArrayLike
 
 FIGURES = (
     ("fig04-mask.png",
@@ -144,8 +149,9 @@ LAWN = {"sky": {"sun": {"elevation": 25.0, "azimuth": 295.0}, "clouds": None},
 preset, the camera looking down so that the antisolar point (25 degrees below the horizon) is
 in the picture; no trees in front (their passes do not show the ground's reflectance)."""
 
-SCENES = {"grove": GROVE, "point-sun": (GROVE, POINT_SUN), "crescents": CRESCENTS, "dallas-2024": DALLAS_2024,
-          "lawn": (GROVE, LAWN)}
+SCENES: dict[str, str | tuple[str, dict[str, Any]]] = {
+    "grove": GROVE, "point-sun": (GROVE, POINT_SUN), "crescents": CRESCENTS, "dallas-2024": DALLAS_2024,
+    "lawn": (GROVE, LAWN)}
 """Each scene the figures use, by name: its YAML text, or (text, changes to it)."""
 
 _PREVIEW_GROVE = {
@@ -153,7 +159,7 @@ _PREVIEW_GROVE = {
     "ground": {"pixel": 0.1, "sun_pixel": 0.04},
     "camera": {"resolution": [320, 180]},
 }
-PREVIEW = {
+PREVIEW: dict[str, dict[str, Any]] = {
     "grove": _PREVIEW_GROVE,
     "point-sun": _PREVIEW_GROVE,
     "lawn": _PREVIEW_GROVE,
@@ -185,14 +191,15 @@ def scene_config(name: str, *, preview: bool = False) -> Config:
     settings.Config
         The resolved config.
     """
-    text, changes = SCENES[name] if isinstance(SCENES[name], tuple) else (SCENES[name], {})
+    scene = SCENES[name]
+    text, changes = scene if isinstance(scene, tuple) else (scene, {})
     data = _merged(yaml.safe_load(text), changes)
     if preview:
         data = _merged(data, PREVIEW.get(name, {}))
     return resolve(parse_config(data, Path("."), name=name))
 
 
-def _merged(base: dict, changes: dict) -> dict:
+def _merged(base: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
     """``base`` with ``changes`` merged in, mapping by mapping, a key whose change is None
     removed (neither is mutated)."""
     out = copy.deepcopy(base)
@@ -211,7 +218,7 @@ def _merged(base: dict, changes: dict) -> dict:
 # ---------------------------------------------------------------------------------------------
 
 
-def sky_plane_image(sky: sky_models.ProceduralSky, *, alpha: float, size: int) -> np.ndarray:
+def sky_plane_image(sky: procedural.ProceduralSky, *, alpha: float, size: int) -> np.ndarray:
     """The sky on the sky plane z = 1 (Max 1991, Fig. 5).
 
     Over the square |s|_inf <= tan(alpha), north up, east to the right (the rasters' layout, as if
@@ -220,7 +227,7 @@ def sky_plane_image(sky: sky_models.ProceduralSky, *, alpha: float, size: int) -
 
     Parameters
     ----------
-    sky : sky.ProceduralSky
+    sky : procedural.ProceduralSky
         The sky.
     alpha : float
         Half-angle of the sky square [rad].
@@ -254,14 +261,14 @@ def _add_at_offset(target: np.ndarray, block: np.ndarray, block_grid: Grid, grid
         target[a0:a1, b0:b1] += block[a0 - r0:a1 - r0, b0 - c0:b1 - c0]
 
 
-def weighted_sky_raster(sky: sky_models.ProceduralSky, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+def weighted_sky_raster(sky: procedural.ProceduralSky, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """The weighted sky raster e = e_sky + e_sun (Max 1991, Fig. 6) on a sky-plane grid.
 
     A cell holds the integral of L cos^4(theta) dA over it.
 
     Parameters
     ----------
-    sky : sky.ProceduralSky
+    sky : procedural.ProceduralSky
         The sky.
     grid : Grid
         The sky-plane grid (the grid an IsolatedPlan correlates) [tan].
@@ -340,7 +347,7 @@ def sky_display(radiance: np.ndarray) -> np.ndarray:
     return composite.srgb_encode(exposed / (1.0 + exposed))
 
 
-def i0_quadrature(alpha, *, points: int = 64) -> np.ndarray:
+def i0_quadrature(alpha: ArrayLike, *, points: int = 64) -> np.ndarray:
     """I0(alpha) [sr] by quadrature over the hemisphere, independently of the closed form
     (Max 1991, error analysis and Fig. 16): the directions inside the sky square of half-angle
     alpha [rad] are, at azimuth phi, those with tan(theta) <= tan(alpha) / max(|cos phi|,
@@ -424,9 +431,13 @@ def sun_fraction_curve(config: Config) -> tuple[list[datetime], np.ndarray, np.n
     times, fraction, area = [], [], []
     for frame in range(config.animation.frames):
         scene = scene_at(config, frame)
+        if scene.sun is None or scene.moon is None or scene.when is None:
+            raise ValueError(f"{config.path}: S(t) needs a sky with a site and time (sky.site, sky.time)")
         fraction.append(load_sky(config.sky, scene).sun_fraction())
-        d = ephemeris.separation(scene.sun, scene.moon)
-        area.append(1.0 - ephemeris.obscured_fraction(d, scene.sun.angular_radius, scene.moon.angular_radius))
+        sun, moon = (ephemeris.BodyPosition(disc.azimuth, disc.elevation, disc.angular_radius)
+                     for disc in (scene.sun, scene.moon))
+        d = ephemeris.separation(sun, moon)
+        area.append(1.0 - ephemeris.obscured_fraction(d, sun.angular_radius, moon.angular_radius))
         times.append(scene.when)
     return times, np.array(fraction), np.array(area)
 
@@ -454,6 +465,8 @@ def sun_fraction_plot(config: Config, *, title: str, width: int = 960, height: i
 
     times, fraction, area = sun_fraction_curve(config)
     site = config.sky.site
+    if site is None:
+        raise ValueError(f"{config.path}: S(t) needs a sky with a site and time (sky.site, sky.time)")
     contacts = ephemeris.contact_times(ephemeris.Site(site.latitude, site.longitude, site.elevation),
                                        site.start, site.end)
     figure, axes = _figure(width, height)
@@ -503,7 +516,7 @@ class _Scenes:
 
     store: cache.Cache
     preview: bool
-    _configs: dict = field(default_factory=dict)
+    _configs: dict[str, Config] = field(default_factory=dict)
 
     def config(self, name: str) -> Config:
         if name not in self._configs:
@@ -515,8 +528,11 @@ class _Scenes:
         return plan_run(self.config("grove"))
 
     @cached_property
-    def grove_sky(self):
-        return self.grove_plan.sky.at(self.grove_plan.scenes[0])
+    def grove_sky(self) -> procedural.ProceduralSky:
+        sky = self.grove_plan.sky.at(self.grove_plan.scenes[0])
+        if not isinstance(sky, procedural.ProceduralSky):  # the grove's sky is a CIE sky
+            raise TypeError(f"the grove's sky is a {type(sky).__name__}, not a procedural sky")
+        return sky
 
     @cached_property
     def grove_frame(self) -> FrameResult:
@@ -544,7 +560,10 @@ def _fig_sky(scenes: _Scenes) -> np.ndarray:
 def _fig_sky_raster(scenes: _Scenes) -> np.ndarray:
     """Fig. 6: the weighted raster of the grove's upper layer, log scale from the brightest sky
     cell (the sun, far brighter, is white) down to the dimmest."""
-    e_sky, e_sun = weighted_sky_raster(scenes.grove_sky, scenes.grove_plan.layers[0].coarse.sky)
+    grid = scenes.grove_plan.layers[0].coarse.sky
+    if grid is None:  # the grove's canopy is within the sky square's reach
+        raise ValueError("no sky offset of the grove's upper layer reaches its canopy")
+    e_sky, e_sun = weighted_sky_raster(scenes.grove_sky, grid)
     brightest = float((e_sky @ REC709_LUMINANCE).max())
     return log_display(e_sky + e_sun, top=brightest)
 
@@ -553,7 +572,7 @@ def _fig_ground(scenes: _Scenes) -> np.ndarray:
     """Fig. 7: the grove's whole ground window (the coarse raster with the sun at the coarse
     cell, the paper's single scale), or the two-scale raster where the sun window covers it."""
     ground = scenes.grove_frame.ground
-    raster = ground.outer[0] if ground.outer is not None else ground.irradiance
+    raster = ground.outer.irradiance if ground.outer is not None else ground.irradiance
     return composite.display_ground(raster, ground.unshadowed)
 
 
@@ -623,7 +642,8 @@ _MAKERS = {
 }
 
 
-def write_figures(folder: Path, *, store: cache.Cache, preview: bool = False, progress=None) -> list[Path]:
+def write_figures(folder: Path, *, store: cache.Cache, preview: bool = False,
+                  progress: Callable[[str, int, int], None] | None = None) -> list[Path]:
     """Write every PNG of FIGURES into ``folder``, in order, each atomically (``io.write_png``).
 
     Prints nothing.
@@ -632,7 +652,7 @@ def write_figures(folder: Path, *, store: cache.Cache, preview: bool = False, pr
     ----------
     folder : pathlib.Path
         Where; it must exist.
-    store : cache.Cache
+    store : store.Cache
         Holds the cycle products (masks' spectra, foreground passes) the renders share.
     preview : bool
         Make the scenes small (seconds, not minutes).

@@ -13,7 +13,11 @@ from pipeline.core import paths
 from pipeline.core.errors import BadInput
 
 if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Sequence
+
     from pipeline.cache.store import Cache
+    from pipeline.config.settings import Config
 
 __all__ = ["OUTPUT_SUFFIXES", "flag_path", "open_store", "budget_flag", "checked_output", "config_of", "check_threads",
            "check_frame", "passes_flag"]
@@ -23,7 +27,7 @@ OUTPUT_SUFFIXES = (".png", ".exr")
 """What ``-o`` may name: a display-referred PNG or a scene-linear EXR."""
 
 
-def flag_path(flag: str, value) -> Path:
+def flag_path(flag: str, value: str | os.PathLike[str]) -> Path:
     """The path a flag (or an environment variable) gives, checked by ``paths.problem``;
     raises BadInput naming the flag.
 
@@ -44,7 +48,7 @@ def flag_path(flag: str, value) -> Path:
     return Path(value)
 
 
-def open_store(explicit, *, writing: bool = True) -> Cache:
+def open_store(explicit: str | None, *, writing: bool = True) -> Cache:
     """The cache at --cache, else $SUNSHADE_CACHE, else ./cache, its path checked first, and
     (``writing``) that it can be written, before any work (docs/runs.md, "Errors").
 
@@ -77,7 +81,7 @@ def open_store(explicit, *, writing: bool = True) -> Cache:
     return store
 
 
-def budget_flag(args) -> int:
+def budget_flag(args: argparse.Namespace) -> int:
     """The cache's budget of --cache-size, else $SUNSHADE_CACHE_SIZE, else 20 GiB [B]; raises
     BadInput naming the flag or variable.
 
@@ -99,7 +103,7 @@ def budget_flag(args) -> int:
         raise BadInput(f"{'--cache-size' if args.cache_size is not None else '$' + BUDGET_ENV_VAR}: {exc}") from None
 
 
-def checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
+def checked_output(path: str, suffixes: tuple[str, ...] = OUTPUT_SUFFIXES) -> Path:
     """The output file of -o: one of ``suffixes``, not a folder, in a folder that can be written; raises BadInput
     naming it.
 
@@ -128,16 +132,16 @@ def checked_output(path: str, suffixes=OUTPUT_SUFFIXES) -> Path:
     return out
 
 
-def config_of(args, *, named_frames: bool = True, resolved: bool = True):
+def config_of(args: argparse.Namespace, *, named_frames: bool = True, resolved: bool = True) -> Config:
     """The config of ``args.config`` read, validated and (``resolved``) resolved: every
-    command's one loader (``named_frames``: see config.load_config).
+    command's one loader (``named_frames``: see parse.load_config).
 
     Parameters
     ----------
     args : argparse.Namespace
         The command line, parsed (its ``config``).
     named_frames : bool
-        Passed to ``config.load_config``.
+        Passed to ``parse.load_config``.
     resolved : bool
         Resolve it (``resolve.resolve``).
 
@@ -153,7 +157,7 @@ def config_of(args, *, named_frames: bool = True, resolved: bool = True):
     return resolve(config) if resolved else config
 
 
-def check_threads(args) -> None:
+def check_threads(args: argparse.Namespace) -> None:
     """Raises BadInput unless --threads, where given, is at least 1.
 
     Parameters
@@ -183,7 +187,7 @@ def check_frame(frame: int, count: int, flag: str, key: str) -> None:
         raise BadInput(f"{flag} {frame} is outside 0..{count - 1} ({key} is {count})")
 
 
-def passes_flag(value, valid) -> tuple[str, ...] | None:
+def passes_flag(value: str | None, valid: Sequence[str]) -> tuple[str, ...] | None:
     """The pass names of a ``--passes NAMES`` flag, in ``vocabulary.PASSES``' order (None: no
     flag); an unknown name is a one-line error naming the flag.
 

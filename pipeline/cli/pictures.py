@@ -7,12 +7,19 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-import types
+from typing import TYPE_CHECKING, Any
 
 from pipeline import __version__
 from pipeline.cli.flags import check_frame, check_threads, checked_output, config_of, open_store, passes_flag
 from pipeline.config.vocabulary import PASSES
 from pipeline.core.errors import BadInput
+
+if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Callable
+    from pathlib import Path
+
+    import numpy as np
 
 __all__ = ["run_ground", "run_frame", "run_mask", "run_sky"]
 
@@ -20,7 +27,7 @@ SKY_PASSES = ("sun", "sky")
 """The light passes ``sunshade sky`` writes (the others need a ground and a camera)."""
 
 
-def run_ground(args) -> int:
+def run_ground(args: argparse.Namespace) -> int:
     """write the ground irradiance under a canopy mask and a sky
 
     Write the ground irradiance (RGB float32, linear, radiance x sr) over ground.window at
@@ -77,7 +84,7 @@ def run_ground(args) -> int:
     return 0
 
 
-def run_frame(args) -> int:
+def run_frame(args: argparse.Namespace) -> int:
     """render one finished frame: ground and sky in the camera, trees in front
 
     Render one finished frame (Max 1991, Fig. 10): the ground raster and the sky resampled
@@ -135,7 +142,7 @@ def run_frame(args) -> int:
     return 0
 
 
-def run_mask(args) -> int:
+def run_mask(args: argparse.Namespace) -> int:
     """write the canopy mask of a cycle frame (Max 1991, Fig. 4)
 
     Write the transmittance mask (1 = open sky) of one canopy layer at one cycle frame, the
@@ -167,7 +174,9 @@ def run_mask(args) -> int:
         raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: cie, preetham or hdri)")
     started = time.perf_counter()
     coarse, fine = layer_masks(plan, args.layer, args.frame)
-    mask, grid = (fine, layer.sun.mask) if args.fine else (coarse, layer.canopy)
+    mask, grid = coarse, layer.canopy
+    if args.fine and layer.sun is not None and fine is not None:  # a sun makes its fine mask (checked above)
+        mask, grid = fine, layer.sun.mask
     elapsed = time.perf_counter() - started
     if suffix == ".exr":
         io.write_exr(output, mask[..., None], {"sunshade:window": grid.extent,
@@ -182,7 +191,7 @@ def run_mask(args) -> int:
     return 0
 
 
-def run_sky(args) -> int:
+def run_sky(args: argparse.Namespace) -> int:
     """write the sky of a frame as an equirectangular EXR
 
     Write the sky (sun, moon, clouds) of a frame as linear RGB radiance, equirectangular:
@@ -217,7 +226,11 @@ def run_sky(args) -> int:
     if not hasattr(sky, "equirect"):
         raise BadInput(f"{args.config}: sunshade sky writes the cie and preetham skies (sky.model is "
                        f"{config.sky.model}; an hdri sky is its image)")
-    image, parts = sky.equirect(args.width, parts=True) if passes else (sky.equirect(args.width), None)
+    parts: dict[str, np.ndarray] = {}
+    if passes:
+        image, parts = sky.equirect(args.width, parts=True)
+    else:
+        image = sky.equirect(args.width)
     attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),
                   "sunshade:version": __version__}
     if scene.sun is not None:
@@ -226,12 +239,11 @@ def run_sky(args) -> int:
     layers = None
     if passes:  # as a frame's: the standard attributes and the layers (docs/runs.md)
         from pipeline.run.render import LAYER_CHANNELS, standard_attributes
-        from pipeline.stages.frame import open_ground_light
+        from pipeline.stages.lighting import open_ground_light
 
         light = open_ground_light(sky, 1.0, None)
         attributes.update(standard_attributes(
-            dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes)),
-            types.SimpleNamespace(scene=scene, light=light)))
+            dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes)), scene, light))
         attributes.pop("sunshade:camera_ev100", None)  # no camera here
         layers = {LAYER_CHANNELS[name]: (parts[name], "float") for name in passes}
     written = _write(exr, png, image, attributes, lambda: display_sky(image), layers=layers)
@@ -239,7 +251,7 @@ def run_sky(args) -> int:
     return 0
 
 
-def _exr_and_png(args) -> tuple:
+def _exr_and_png(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
     """The files of -o and --png (ground, sky): (the EXR or None, the PNG or None); a PNG beside an EXR with
     --png, of the EXR's name. Raises BadInput as ``checked_output``."""
     output = checked_output(args.output)
@@ -248,7 +260,9 @@ def _exr_and_png(args) -> tuple:
     return exr, png
 
 
-def _write(exr, png, image, attributes: dict, shown, layers=None) -> list:
+def _write(exr: Path | None, png: Path | None, image: np.ndarray, attributes: dict[str, Any],
+           shown: Callable[[], np.ndarray],
+           layers: dict[tuple[str, ...], tuple[np.ndarray, str]] | None = None) -> list[Path]:
     """Write ``image`` with its attributes (and layers) to ``exr`` and ``shown()``, the display picture, to
     ``png``, where each is not None; the files written, in that order."""
     from pipeline.core import io

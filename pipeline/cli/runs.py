@@ -8,19 +8,25 @@ from __future__ import annotations
 import os
 import sys
 import time
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, TextIO
 
 from pipeline.cli.flags import budget_flag, config_of, flag_path, open_store
 from pipeline.core import paths
 from pipeline.core.errors import BadInput
 
 if TYPE_CHECKING:
-    from pipeline.cache.store import Cache
+    import argparse
+    from collections.abc import Iterable
+
+    from pipeline.cache.store import Cache, CacheItem
+    from pipeline.config.settings import Config
+    from pipeline.run.record import RunSummary
+    from pipeline.stages.plan import RunPlan
 
 __all__ = ["run_check", "run_render", "run_report", "run_figures", "run_cache"]
 
 
-def run_check(args) -> int:
+def run_check(args: argparse.Namespace) -> int:
     """check a config and every file it names, and do nothing else
 
     Read and check a config and every input file it names (masks, HDRI, albedo, foreground
@@ -66,7 +72,7 @@ def run_check(args) -> int:
     return 0
 
 
-def _eclipse_lines(config) -> list[str]:
+def _eclipse_lines(config: Config) -> list[str]:
     """The eclipse at a site-and-time config's place: contacts, greatest obscuration, the
     duration of totality or annularity, and whether the time span sees it."""
     site = config.sky.site if config.sky.model != "hdri" else None
@@ -99,14 +105,14 @@ def _eclipse_lines(config) -> list[str]:
     return lines
 
 
-def _light_lines(plan) -> list[str]:
+def _light_lines(plan: RunPlan) -> list[str]:
     """A procedural sky's light on open ground at the first, middle and last frames: how far a sun
     fleck can stand above open shade ((sun + sky) / sky), and the frames whose sun gives no direct
     light (set, or not wholly up)."""
     import numpy as np
 
     from pipeline.sky.models import ProceduralModel
-    from pipeline.stages.frame import open_ground_light
+    from pipeline.stages.lighting import open_ground_light
     from pipeline.stages.scene import sun_lights
 
     if not isinstance(plan.sky, ProceduralModel):
@@ -129,7 +135,7 @@ def _light_lines(plan) -> list[str]:
     return lines
 
 
-def _framing_lines(plan, config) -> list[str]:
+def _framing_lines(plan: RunPlan, config: Config) -> list[str]:
     """The resolved windows and camera, each marked (placed) where the plan placed it, and a window
     that the config gave and the plan laid on whole pixels with the config's numbers beside it."""
     import numpy as np
@@ -159,14 +165,14 @@ def _framing_lines(plan, config) -> list[str]:
     return lines
 
 
-def _warn(config, plan) -> None:
+def _warn(config: Config, plan: RunPlan) -> None:
     from pipeline.stages.framing import framing_warnings
 
     for line in framing_warnings(config, plan):
         print(f"sunshade: warning: {line}", file=sys.stderr)
 
 
-def run_render(args) -> int:
+def run_render(args: argparse.Namespace) -> int:
     """render a config's animation: frames, video and run.json, resumably
 
     Render the animation of a config into output.folder (default renders/NAME): the cycle
@@ -241,8 +247,9 @@ def run_render(args) -> int:
     return 0
 
 
-def _render_run(config, store, frames, args, source_hash, budget):
-    """``run.render_run`` of the command's frames; the folders it made are removed if it fails
+def _render_run(config: Config, store: Cache, frames: tuple[int, ...] | None, args: argparse.Namespace,
+                source_hash: str, budget: int) -> RunSummary:
+    """``render.render_run`` of the command's frames; the folders it made are removed if it fails
     and leaves them empty."""
     from pipeline.run.folder import missing_folders, remove_if_empty
     from pipeline.run.render import render_run
@@ -259,7 +266,7 @@ def _render_run(config, store, frames, args, source_hash, budget):
         raise
 
 
-def _verify_run(config, store) -> int:
+def _verify_run(config: Config, store: Cache) -> int:
     from pipeline.run.folder import frame_files
     from pipeline.run.index import verify_run
 
@@ -274,7 +281,7 @@ def _verify_run(config, store) -> int:
     return 1 if checked.damaged or checked.foreign else 0
 
 
-def _preview_line(full, quick) -> str:
+def _preview_line(full: Config, quick: Config) -> str:
     """One line: what a preview changed from the full render."""
     changes = [f"{quick.camera.resolution[0]} x {quick.camera.resolution[1]} px",
                f"ground pixels {quick.ground.pixel:g} m (full: {full.ground.pixel:g})",
@@ -296,9 +303,13 @@ class _Progress:
     LOG_EVERY = 10.0  # [s]
     QUARTER_GAP = 2.0  # [s]
 
-    def __init__(self, stream):
+    def __init__(self, stream: TextIO):
         self.stream, self.tty = stream, stream.isatty()
-        self.stage = self.ended = None
+        self.stage: str | None = None  # the stage now, and the last whose end was said
+        self.ended: str | None = None
+        self.first = 0  # the stage's count when first said
+        self.logged: tuple[float, int] | None = None  # (time [s], count) of the last log line
+        self.mark: tuple[float, int] | None = None  # (time [s], count) from which the rate counts
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         now = time.monotonic()
@@ -334,7 +345,7 @@ def _clock(seconds: float) -> str:
         else f"{seconds // 60}:{seconds % 60:02d}"
 
 
-def run_report(args) -> int:
+def run_report(args: argparse.Namespace) -> int:
     """write a run's light curve, contact sheet and light.csv into its folder
 
     Write light.csv (the open ground's light per done frame: lux from the sun and the sky, S,
@@ -364,7 +375,7 @@ def run_report(args) -> int:
     return 0
 
 
-def run_figures(args) -> int:
+def run_figures(args: argparse.Namespace) -> int:
     """reproduce the paper's figures as PNGs
 
     Reproduce the figures of Max (1991) as PNGs: the mask (Fig. 4), the sky (5), the
@@ -400,7 +411,7 @@ def run_figures(args) -> int:
     return 0
 
 
-def run_cache(args) -> int:
+def run_cache(args: argparse.Namespace) -> int:
     """look after the on-disk cache of cycle products
 
     The cache folder is --cache, else $SUNSHADE_CACHE, else ./cache.
@@ -450,21 +461,23 @@ def run_cache(args) -> int:
         count = len(store.list())
         broken = store.verify(remove=args.remove)
         strays = store.strays(remove=args.remove)
-        removed = " (removed)" if args.remove else ""
-        lines = [f"{item.kind} {item.key[:16]}: {problem}{removed}" for item, problem in broken]
-        lines += [f"{path}: {problem}{removed}" for path, problem in strays]
+        said = " (removed)" if args.remove else ""
+        lines = [f"{item.kind} {item.key[:16]}: {problem}{said}" for item, problem in broken]
+        lines += [f"{path}: {problem}{said}" for path, problem in strays]
         stray_count = f", {len(strays)} entr{'y' if len(strays) == 1 else 'ies'} not an item" if strays else ""
         _print_lines([*lines, f"{len(broken)} broken of {count} items{stray_count}"])
         return 1 if (broken or strays) and not args.remove else 0
     if mine is not None:
         removed = _prune_items(store, mine, limit)
-    else:
-        removed = store.clear() if args.action == "clear" else store.prune(limit)
+    elif limit is not None:  # cache prune --max-size
+        removed = store.prune(limit)
+    else:  # cache clear (a prune without --max-size or CONFIG is refused above)
+        removed = store.clear()
     print(f"removed {len(removed)} items, {_size(sum(i.bytes for i in removed))}")
     return 0
 
 
-def _cache_listing(store: Cache, config_file, mine) -> list[str]:
+def _cache_listing(store: Cache, config_file: str | None, mine: dict[str, tuple[str, int]] | None) -> list[str]:
     """The cache's items grouped by the config that made them (as recorded by its renders), with
     their size and cycle frames; items of no recorded config grouped by kind. With a config:
     its items only."""
@@ -485,10 +498,10 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
         for item in own:
             left.pop(item.key, None)
         kinds = ", ".join(f"{sum(i.kind == k for i in own)} {k}" for k in sorted({i.kind for i in own}))
-        frames = {item.params.get("frame") for item in own if item.params}
+        seen = {item.params.get("frame") for item in own if item.params}
         used = max(item.last_used for item in own)
         lines.append(f"{entry['name']:<24} {_size(sum(i.bytes for i in own)):>10}  {len(own)} items "
-                     f"({kinds}), cycle frames {len(frames)} of {entry['cycle']}, last used "
+                     f"({kinds}), cycle frames {len(seen)} of {entry['cycle']}, last used "
                      f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(used))}  {entry['config']}")
     for kind in sorted({item.kind for item in left.values()}):
         own = [item for item in left.values() if item.kind == kind]
@@ -498,7 +511,7 @@ def _cache_listing(store: Cache, config_file, mine) -> list[str]:
     return lines
 
 
-def _prune_items(store: Cache, mine, limit):
+def _prune_items(store: Cache, mine: dict[str, tuple[str, int]], limit: int | None) -> list[CacheItem]:
     """Remove a config's items, least recently used first, until they total at most ``limit``
     bytes (None: all of them)."""
     from pipeline.cache.items import remove_tree
@@ -514,7 +527,7 @@ def _prune_items(store: Cache, mine, limit):
     return removed
 
 
-def _print_lines(lines) -> int:
+def _print_lines(lines: Iterable[str]) -> int:
     """Print lines to stdout; a reader that stops early (``| head``) ends it quietly."""
     try:
         for line in lines:
@@ -526,8 +539,10 @@ def _print_lines(lines) -> int:
     return 0
 
 
-def _size(n: int) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
+def _size(n: float) -> str:
+    """``n`` bytes [B] as a line shows them: in B, KiB, MiB or GiB."""
+    for unit in ("B", "KiB", "MiB"):
+        if n < 1024:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
+    return f"{n:.1f} GiB"

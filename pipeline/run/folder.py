@@ -2,7 +2,7 @@
 and the folder made, checked and cleaned before and after a render (docs/runs.md, "The run folder").
 
 Nothing here imports numpy or a stage, so that a resume with nothing to do is decided in a
-fraction of a second (``runrecord.nothing_to_do``).
+fraction of a second (``record.nothing_to_do``).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def parse_frames(text: str, count: int) -> tuple[int, ...]:
     RunError
         Naming the bad part.
     """
-    frames = set()
+    frames: set[int] = set()
     for part in text.split(","):
         part = part.strip()
         try:
@@ -72,7 +72,7 @@ def frame_files(config: Config, frame: int) -> tuple[Path, Path]:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
     frame : int
         The frame's index.
@@ -92,7 +92,7 @@ def video_file(config: Config) -> Path | None:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
 
     Returns
@@ -197,14 +197,15 @@ def check_outputs(config: Config) -> None:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
     """
     folder = config.output.folder
     if problem := paths.problem(folder):
         raise RunError(f"{folder}: {problem}")
     check_folder(folder)
-    names = {RUN_FILE, LOCK_FILE} | ({video_file(config).name} if video_file(config) else set())
+    video = video_file(config)
+    names = {RUN_FILE, LOCK_FILE} | ({video.name} if video is not None else set())
     for path in (*frame_files(config, config.animation.frames - 1), *(folder / n for n in names)):
         if problem := paths.problem(path):
             raise RunError(f"{path}: {problem}")

@@ -2,7 +2,7 @@
 BLAKE2b digest) recorded as it is written, and compared, with the cache items the frame was made from,
 when a run resumes or verifies (docs/runs.md, "Resume").
 
-Nothing here imports numpy or a stage (``runrecord.nothing_to_do`` decides a resume from it).
+Nothing here imports numpy or a stage (``record.nothing_to_do`` decides a resume from it).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ class FrameWarning(UserWarning):
     """A frame found damaged, or made from a cache item found damaged since: rendered again."""
 
 
-def file_digest(path) -> str:
+def file_digest(path: str | os.PathLike[str]) -> str:
     """BLAKE2b (16 bytes, hex) of a file's bytes.
 
     Parameters
@@ -137,16 +137,16 @@ def check_frames(config: Config, digest: str, store: Cache, index: dict, *,
 
     A file whose size, inode and times are as recorded is taken as written (nothing is read);
     otherwise, or with ``full``, its BLAKE2b digest is compared. Each cache item a done frame
-    was made from is looked at the same way (``cache.Cache.recheck``; fully with ``full``).
+    was made from is looked at the same way (``store.Cache.recheck``; fully with ``full``).
     Entries whose files or items were read and found as recorded get their new stamps in ``index``.
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
     digest : str
         The resolved config's hash (``Config.digest``).
-    store : cache.Cache
+    store : store.Cache
         The cache the frames were made from.
     index : dict
         {frame as text: entry} of index.json (``read_index``); updated in place.
@@ -205,9 +205,9 @@ def verify_run(config: Config, *, store: Cache) -> FrameCheck:
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
-    store : cache.Cache
+    store : store.Cache
         The cache the frames were made from.
 
     Returns

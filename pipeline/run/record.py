@@ -3,7 +3,7 @@ timings, the frames and the video), and the resume that finds nothing to do and 
 record there (docs/runs.md, "The run folder", "Resume").
 
 Nothing here imports numpy or a stage, so that a resume with nothing to do is decided in a
-fraction of a second (``nothing_to_do``); ``run`` renders what is left.
+fraction of a second (``nothing_to_do``); ``render`` renders what is left.
 """
 
 from __future__ import annotations
@@ -16,15 +16,21 @@ import warnings
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import filelock
 
 from pipeline import __version__
-from pipeline.cache.store import Cache
+from pipeline.cache.store import Cache, CacheItem
 from pipeline.config.parse import Config
 from pipeline.core.cores import jobs_and_threads
 from pipeline.run.folder import LOCK_FILE, RUN_FILE, video_file
 from pipeline.run.index import check_frames, read_index
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+
+    from pipeline.stages.plan import RunPlan
 
 __all__ = ["MAX_RUNS", "VERSIONED", "current_video", "read_run_file", "resolved_config", "write_run_file",
            "RunSummary", "nothing_to_do"]
@@ -42,7 +48,7 @@ def current_video(config: Config, digest: str, previous: dict, *, force: bool = 
     Parameters
     ----------
     config, digest
-        As in ``frameindex.check_frames``.
+        As in ``index.check_frames``.
     previous : dict
         The previous run.json (empty when there is none).
     force : bool, optional
@@ -80,14 +86,14 @@ def read_run_file(folder: Path) -> dict:
         return {}
 
 
-def resolved_config(config: Config, plan) -> dict:
+def resolved_config(config: Config, plan: RunPlan) -> dict[str, Any]:
     """The config as run, so that run.json says what was rendered.
 
     With the ground windows and the camera the plan placed where the config left them out.
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
     plan : plan.RunPlan
         The run's plan (its windows, camera and ``auto``).
@@ -113,8 +119,9 @@ def resolved_config(config: Config, plan) -> dict:
     return values
 
 
-def write_run_file(config, resolved: dict, digest, records, video, timings, *, jobs, threads, scheduler,
-                   rendered, source_hash=None):
+def write_run_file(config: Config, resolved: dict[str, Any], digest: str, records: dict[int, dict[str, Any] | None],
+                   video: dict[str, Any] | None, timings: dict[str, Any], *, jobs: int, threads: int,
+                   scheduler: str | None, rendered: Sequence[int], source_hash: str | None = None) -> None:
     """run.json, written atomically.
 
     It holds the resolved config (windows and camera as placed: ``resolved_config``) and its hash,
@@ -126,7 +133,7 @@ def write_run_file(config, resolved: dict, digest, records, video, timings, *, j
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config.
     resolved : dict
         The config as run (``resolved_config``).
@@ -202,17 +209,17 @@ class RunSummary:
     rendered: tuple[int, ...]
     skipped: tuple[int, ...]
     video: Path | None
-    timings: dict
-    pruned: tuple = ()
+    timings: dict[str, Any]
+    pruned: tuple[CacheItem, ...] = ()
     """The cache items the cache's budget removed at the end of the run (``Cache.prune``)."""
 
 
-def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, scheduler=None,
-                  source_hash: str | None = None) -> RunSummary | None:
+def nothing_to_do(config: Config, store: Cache, frames: Iterable[int] | None = None, *, jobs: int | None = None,
+                  scheduler: str | None = None, source_hash: str | None = None) -> RunSummary | None:
     """A resume with nothing to do, decided from the files' stamps alone (no numpy, no plan).
 
     When every frame of ``frames`` is done for this config (``check_frames``, nothing found damaged)
-    and the video is made or not due yet, the run is recorded in run.json as ``run.render_run``
+    and the video is made or not due yet, the run is recorded in run.json as ``render.render_run``
     records a render that found everything done, and its RunSummary returned.
 
     ``config`` may be the config as written, not resolved, with its ``source_hash``
@@ -221,9 +228,9 @@ def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, sched
 
     Parameters
     ----------
-    config : config.Config
+    config : settings.Config
         The run's config, resolved or as written (with ``source_hash``).
-    store : cache.Cache
+    store : store.Cache
         The cache the frames were made from.
     frames : iterable of int, optional
         The frames asked for; default all.
@@ -238,15 +245,15 @@ def nothing_to_do(config: Config, store: Cache, frames=None, *, jobs=None, sched
     -------
     RunSummary or None
         What the run did; None when there is anything else to do or to say (work, damage, a busy
-        folder, no run.json of this config yet): ``run.render_run`` then does it.
+        folder, no run.json of this config yet): ``render.render_run`` then does it.
     """
     started = time.perf_counter()
     folder = config.output.folder
     previous = read_run_file(folder)
-    digest = config.digest()
+    digest: str | None = config.digest()
     if source_hash is not None and previous.get("source_hash") == source_hash:
         digest = previous.get("config_hash")
-    if previous.get("config_hash") != digest or "config" not in previous:
+    if digest is None or previous.get("config_hash") != digest or "config" not in previous:
         return None
     count = config.animation.frames
     frames = tuple(range(count)) if frames is None else tuple(frames)

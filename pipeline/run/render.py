@@ -5,7 +5,7 @@ The folder holds ``NAME.0000.exr`` (scene-linear) and ``NAME.0000.png`` (display
 temporary name and renamed into place, the PNG after the EXR, both carrying the config's hash.
 When a frame's files are written, ``index.json`` records the config hash, the BLAKE2b digest,
 size, inode and times of each file, and the cache items the frame was made from (their
-checksums and files' identities; ``cache.Cache.served``). A frame is done when its entry has
+checksums and files' identities; ``store.Cache.served``). A frame is done when its entry has
 the hash of the config being run, both files are as recorded and its cache items have not been
 found damaged since (docs/runs.md, Resume). A re-run skips done frames and the cached cycle
 products, so a run killed at any point and run again ends with the same bytes.
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import functools
 import json
 import logging
 import os
@@ -26,6 +27,9 @@ import threading
 import time
 import warnings
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import filelock
 import joblib
@@ -40,12 +44,23 @@ from pipeline.core.cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threa
 from pipeline.core.errors import RunError, SunshadeError, portable
 from pipeline.run.folder import INDEX_FILE, LOCK_FILE, frame_files, make_folder, remove_temporaries, video_file
 from pipeline.run.index import FrameWarning, check_frames, file_stamp, read_index, write_index
-from pipeline.run.record import RunSummary, current_video, read_run_file, resolved_config, write_run_file
+from pipeline.run.record import RunSummary, read_run_file, resolved_config, write_run_file
+from pipeline.run.video import VideoStream, encode_video
 from pipeline.stages.cycle import config_item_keys, cycle_phase, record_config_items
-from pipeline.stages.frame import compile_loops, render_frame
+from pipeline.stages.frame import FrameResult, compile_loops, render_frame
 from pipeline.stages.framing import framing_warnings
 from pipeline.stages.lighting import with_exposures
 from pipeline.stages.plan import RunPlan, check_inputs
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable, Iterator
+
+    from distributed import Client
+
+    from pipeline.stages.scene import Scene
+
+    Progress = Callable[[str, int, int], None]
+    Timings = dict[str, float | dict[str, float]]
 
 __all__ = ["frame_record", "frame_attributes", "REC709_CHROMATICITIES", "LAYER_CHANNELS", "standard_attributes",
            "exr_layers", "render_run"]
@@ -56,7 +71,7 @@ _RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
            "sunshade:exposure": "exposure"}
 
 
-def frame_record(config: Config, frame: int, digest: str) -> dict | None:
+def frame_record(config: Config, frame: int, digest: str) -> dict[str, Any] | None:
     """What a done frame's EXR says of itself.
 
     Parameters
@@ -93,7 +108,7 @@ def frame_record(config: Config, frame: int, digest: str) -> dict | None:
     return {"file": exr.stem, **record}
 
 
-def frame_attributes(config: Config, result, digest: str) -> dict:
+def frame_attributes(config: Config, result: FrameResult, digest: str) -> dict[str, Any]:
     """Metadata of a finished frame: what made it, and the sun and moon of that moment.
 
     Parameters
@@ -110,8 +125,13 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
     dict
         EXR attributes under ``sunshade:`` (hash, version, frame, S [1], exposure [m^2/kcd], sun and
         moon (azimuth, elevation) [deg], UTC time), and ``standard_attributes`` with light passes.
+
+    Raises
+    ------
+    ValueError
+        With light passes, for a frame without its open ground's light (``FrameResult.light``).
     """
-    attributes = {
+    attributes: dict[str, Any] = {
         "sunshade:config_hash": digest,
         "sunshade:version": __version__,
         "sunshade:frame": int(result.scene.frame),
@@ -125,7 +145,9 @@ def frame_attributes(config: Config, result, digest: str) -> dict:
     if result.scene.when is not None:
         attributes["sunshade:time_utc"] = result.scene.when.isoformat()
     if config.output.passes:  # only then: a frame without passes keeps its bytes
-        attributes.update(standard_attributes(config, result))
+        if result.light is None:
+            raise ValueError(f"frame {result.scene.frame}: light passes without the open ground's light")
+        attributes.update(standard_attributes(config, result.scene, result.light))
     return attributes
 
 
@@ -138,34 +160,36 @@ LAYER_CHANNELS = {"sun": ("sun.R", "sun.G", "sun.B"), "sky": ("sky.R", "sky.G", 
 """The EXR channels of each light pass, in the multi-layer convention (layer.channel)."""
 
 
-def standard_attributes(config: Config, result) -> dict:
+def standard_attributes(config: Config, scene: Scene, light: dict[str, Any]) -> dict[str, Any]:
     """The EXR header of a frame with light passes (docs/runs.md, "Light passes"): OpenEXR's
     standard ``chromaticities``; for a site and time its ``latitude``, ``longitude`` [degrees]
     and ``altitude`` [m], and ``capDate`` (OpenImageIO's ``DateTime``, the frame's UTC time from
     the config, not the clock) with ``utcOffset`` 0 [s]; and under ``sunshade:`` the open
-    ground's light (``frame.open_ground_light``) [lx, EV].
+    ground's light (``lighting.open_ground_light``) [lx, EV].
 
     Parameters
     ----------
     config : settings.Config
         The config.
-    result : frame.FrameResult
-        The finished frame, with its ``light``.
+    scene : scene.Scene
+        The frame's moment (its UTC time).
+    light : dict
+        The open ground's light (``FrameResult.light``): ``sun_lux`` and ``sky_lux`` [lx],
+        ``white_balance`` [1], ``ev100`` and ``camera_ev100`` [EV] (each may be None).
 
     Returns
     -------
     dict
         EXR attribute name -> value.
     """
-    attributes = {"chromaticities": REC709_CHROMATICITIES}
+    attributes: dict[str, Any] = {"chromaticities": REC709_CHROMATICITIES}
     site = config.sky.site
     if site is not None:
         attributes.update({"latitude": float(np.degrees(site.latitude)),
                            "longitude": float(np.degrees(site.longitude)),
                            "altitude": float(site.elevation), "utcOffset": 0.0})
-    if result.scene.when is not None:
-        attributes["DateTime"] = result.scene.when.strftime("%Y:%m:%d %H:%M:%S")
-    light = result.light
+    if scene.when is not None:
+        attributes["DateTime"] = scene.when.strftime("%Y:%m:%d %H:%M:%S")
     attributes.update({"sunshade:sun_lux": light["sun_lux"], "sunshade:sky_lux": light["sky_lux"],
                        "sunshade:open_ground_lux": light["sun_lux"] + light["sky_lux"],
                        "sunshade:white_balance": tuple(light["white_balance"]),
@@ -176,7 +200,7 @@ def standard_attributes(config: Config, result) -> dict:
     return attributes
 
 
-def exr_layers(result, half: bool) -> dict | None:
+def exr_layers(result: FrameResult, half: bool) -> dict[tuple[str, ...], tuple[np.ndarray, str]] | None:
     """``io.write_exr``'s layers of a frame's light passes.
 
     RGB passes in the beauty's format, single channels in float32 (lux pass half's 65504; depth is
@@ -202,8 +226,9 @@ def exr_layers(result, half: bool) -> dict | None:
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress=None, warn=None, cluster_timeout: float | None = None,
-               source_hash: str | None = None, budget: int | None = None) -> RunSummary:
+               progress: Progress | None = None, warn: Callable[[str], None] | None = None,
+               cluster_timeout: float | None = None, source_hash: str | None = None,
+               budget: int | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -214,7 +239,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         The resolved config.
     frames : tuple of int or None
         Output frame indices; None for all.
-    store : cache.Cache
+    store : store.Cache
         The cache of the cycle products.
     jobs : int or None
         Processes at once (default ``render.jobs``, else one per core); each gets cores // jobs FFT
@@ -231,7 +256,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         How long a lost cluster is waited for (default CLUSTER_TIMEOUT) [s].
     source_hash : str or None
         The hash of the config as written (``resolve.source_digest``), recorded in run.json for the
-        next resume (``runrecord.nothing_to_do``).
+        next resume (``record.nothing_to_do``).
     budget : int or None
         The cache's budget [B]: at the end the least recently used items that neither this run nor
         another live one uses are removed until the items total at most this (None: none removed;
@@ -239,7 +264,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
 
     Returns
     -------
-    runrecord.RunSummary
+    record.RunSummary
         What the run did.
 
     Raises
@@ -248,129 +273,243 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         Before any work.
     """
     started = time.perf_counter()
-    timings = {}
+    run, plan = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
+    lock = _lock(run.folder)
+    mine = set(config_item_keys(plan))
+    timings: Timings = {}
+    try:
+        with contextlib.ExitStack() as held:  # the steps' threads joined, then ``mine`` let go
+            held.enter_context(run.store.in_use(mine))  # no other run's budget removes them meanwhile
+            found = _check_folder(run, force=force)
+            timings["check"] = time.perf_counter() - started
+            stream: VideoStream | None = None
+            if found.todo:
+                plan = with_exposures(plan, found.todo)
+                with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
+                    _cycles(run, plan, found.todo, held, timings)
+                    stream = _frames(run, plan, found, timings)
+            video: dict[str, Any] | None
+            if stream:
+                video = stream.finish(progress, timings)
+            else:
+                video = encode_video(config, run.digest, found.records, found.previous, force=found.remake_video,
+                                     progress=progress, timings=timings)
+            timings["total"] = time.perf_counter() - started
+            _record(run, plan, found, video, timings, source_hash)
+            pruned = tuple(run.store.prune(budget, keep=mine)) if budget is not None else ()
+    finally:
+        lock.release()
+    return RunSummary(tuple(found.todo), tuple(f for f in run.frames if f not in set(found.todo)),
+                      video_file(config) if video else None, timings, pruned)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """What the steps of one ``render_run`` share: ``config``, ``store`` (its root absolute: workers
+    elsewhere resolve no relative path), ``folder`` (made), ``digest`` (the config's hash), the
+    ``frames`` asked for, ``jobs`` (processes at once) of ``threads`` (FFT threads) each, the
+    ``scheduler``'s address (None: local processes), ``command`` (the process whose local workers
+    end with it, ``cores.end_if_orphaned``; None on a cluster) and ``progress``."""
+
+    config: Config
+    store: cache.Cache
+    folder: Path
+    digest: str
+    frames: tuple[int, ...]
+    jobs: int
+    threads: int
+    scheduler: str | None
+    command: int | None
+    progress: Progress | None
+
+
+@dataclass(frozen=True)
+class _Found:
+    """What the folder's check found (``_check_folder``): ``index`` ({frame as text: entry} of
+    index.json) and ``records`` ({frame: its record, None when not done}, every frame of the
+    animation), both updated as frames are written; ``todo`` (the frames to render, in the order
+    asked); ``previous`` (the last run.json, empty when none); ``remake_video`` (make the video
+    again even if current: ``force``, or a frame found damaged)."""
+
+    index: dict[str, Any]
+    records: dict[int, dict[str, Any] | None]
+    todo: list[int]
+    previous: dict[str, Any]
+    remake_video: bool
+
+
+def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
+          scheduler: str | None, progress: Progress | None,
+          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan]:
+    """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
+    the scheduler reached, the folder made: what the later steps share."""
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
-    for line in framing_warnings(config, plan) if warn else ():
-        warn(line)
+    if warn is not None:
+        for line in framing_warnings(config, plan):
+            warn(line)
     digest = config.digest()
-    frames = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
+    asked = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
     if scheduler:
         _reach(scheduler)  # an unreachable scheduler fails before anything is written
     folder = make_folder(config.output.folder)
     jobs, threads = jobs_and_threads(jobs or config.render.jobs, scheduler)
+    command = None if scheduler else os.getpid()  # whose local workers end with it
+    return _Run(config, store, folder, digest, asked, jobs, threads, scheduler, command, progress), plan
+
+
+def _lock(folder: Path) -> filelock.FileLock:
+    """The folder's lock, held; RunError where another render holds it."""
     lock = filelock.FileLock(folder / LOCK_FILE, timeout=0)
     try:
         lock.acquire()
     except filelock.Timeout:
         raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
-    compiling = None  # the thread of compile_loops, if started
-    mine = set(config_item_keys(plan))
-    held = contextlib.ExitStack()
+    return lock
+
+
+def _check_folder(run: _Run, *, force: bool) -> _Found:
+    """The folder's frames checked (docs/runs.md, "Resume"): a killed run's temporary files
+    removed, each damaged frame said (a FrameWarning at ``render_run``'s caller), index.json
+    written again where the check changed it; which frames are done, which to render."""
+    folder, config = run.folder, run.config
+    remove_temporaries(folder)
+    if (folder / INDEX_FILE).is_dir():
+        raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
+    index = read_index(folder)
+    before = json.dumps(index, sort_keys=True)
+    checked = check_frames(config, run.digest, run.store, index)
+    for frame, problem in sorted(checked.damaged.items()):
+        action = "rendering it again" if force or frame in run.frames else "not done"
+        warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; {action}",
+                      FrameWarning, stacklevel=3)
+    if json.dumps(index, sort_keys=True) != before:
+        write_index(folder, index)
+    records = {f: (checked.done[f]["record"] if f in checked.done else None)
+               for f in range(config.animation.frames)}
+    todo = [f for f in run.frames if force or records[f] is None]
+    return _Found(index, records, todo, read_run_file(folder), force or bool(checked.damaged))
+
+
+def _cycles(run: _Run, plan: RunPlan, todo: list[int], held: contextlib.ExitStack, timings: Timings) -> None:
+    """The cycle products the ``todo`` frames need (``cycle.cycle_phase``), then recorded as the
+    config's; with local processes the frames' loops compiled meanwhile, here, once, by a thread
+    that ``held`` joins as it closes."""
+    mark = time.perf_counter()
+    if run.jobs > 1 and not run.scheduler:  # the frames' loops compiled meanwhile, here, once
+        compiling = threading.Thread(target=_compile_frame_loops, args=(plan,), daemon=True)
+        compiling.start()
+        held.callback(compiling.join)  # never left writing numba's cache as the command ends
+    cycle_phase(plan, run.store, jobs=run.jobs, workers=run.threads, command=run.command,
+                cycle_frames={f % run.config.canopy.cycle for f in todo},
+                progress=functools.partial(run.progress, "cycle") if run.progress else None)
+    timings["cycle"] = time.perf_counter() - mark
+    record_config_items(plan, run.store)
+
+
+def _frames(run: _Run, plan: RunPlan, found: _Found, timings: Timings) -> VideoStream | None:
+    """Render and write the ``found.todo`` frames (``_frame_phase``), each recorded in index.json
+    as it lands and its worker's warnings said here, once (at ``render_run``'s caller); the
+    video encoded meanwhile where it can be (``VideoStream``), returned to be finished."""
+    mark = time.perf_counter()
+    stages: dict[str, float] = {}
+    timings["frame_stages"] = stages
+    encoded: dict[str, str] = {}  # each index entry's JSON, as write_index made it
+    stream = VideoStream.start(run.config, run.digest, found.records, found.todo, found.previous,
+                               force=found.remake_video, in_process=run.jobs == 1 and not run.scheduler)
+    if run.config.output.report:  # its drawing library imported meanwhile, not after the frames
+        from pipeline.run.report import import_drawing
+
+        threading.Thread(target=import_drawing, name="sunshade-report", daemon=True).start()
     try:
-        held.enter_context(store.in_use(mine))  # no other run's budget removes them meanwhile
-        remove_temporaries(folder)
-        if (folder / INDEX_FILE).is_dir():
-            raise RunError(f"{folder / INDEX_FILE}: is a folder, not a file")
-        index = read_index(folder)
-        before = json.dumps(index, sort_keys=True)
-        checked = check_frames(config, digest, store, index)
-        for frame, problem in sorted(checked.damaged.items()):
-            action = "rendering it again" if force or frame in frames else "not done"
-            warnings.warn(f"{frame_files(config, frame)[0].stem}: {problem}; {action}",
-                          FrameWarning, stacklevel=2)
-        if json.dumps(index, sort_keys=True) != before:
-            write_index(folder, index)
-        records = {f: (checked.done[f]["record"] if f in checked.done else None)
-                   for f in range(config.animation.frames)}
-        todo = [f for f in frames if force or records[f] is None]
-        previous, remake_video, stream = read_run_file(folder), force or bool(checked.damaged), None
-        timings["check"] = time.perf_counter() - started
-        if todo:
-            plan = with_exposures(plan, todo)
-            with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
-                mark = time.perf_counter()
-                command = None if scheduler else os.getpid()  # whose local workers end with it
-                if jobs > 1 and not scheduler:  # the frames' loops compiled meanwhile, here, once
-                    compiling = threading.Thread(target=_compile_frame_loops, args=(plan,), daemon=True)
-                    compiling.start()
-                cycle_phase(plan, store, jobs=jobs, workers=threads, command=command,
-                            cycle_frames={f % config.canopy.cycle for f in todo},
-                            progress=progress and (lambda done, total: progress("cycle", done, total)))
-                timings["cycle"] = time.perf_counter() - mark
-                record_config_items(plan, store)
-                mark = time.perf_counter()
-                stages = timings["frame_stages"] = {}
-                encoded = {}  # each index entry's JSON, as write_index made it
-                stream = _VideoStream.start(config, digest, records, todo, previous, force=remake_video,
-                                            in_process=jobs == 1 and not scheduler)
-                if config.output.report:  # its drawing library imported meanwhile, not after the frames
-                    from pipeline.run.report import import_drawing
-
-                    threading.Thread(target=import_drawing, name="sunshade-report", daemon=True).start()
-                try:
-                    for frame, seconds, entry, caught, codes in _frame_phase(
-                            config, plan, store, todo, digest, jobs=jobs, threads=threads, command=command,
-                            progress=progress, codes=stream is not None):
-                        for category, text in caught:  # raised in a worker: said here, once
-                            warnings.warn(text, category, stacklevel=2)
-                        index[str(frame)] = entry
-                        encoded.pop(str(frame), None)
-                        write_index(folder, index, encoded)
-                        records[frame] = entry["record"]
-                        for stage, value in seconds.items():
-                            stages[stage] = stages.get(stage, 0.0) + value
-                        if stream:
-                            stream.add(frame, codes)
-                except BaseException:
-                    if stream:
-                        stream.abort()
-                    raise
-                timings["frames"] = time.perf_counter() - mark
+        for written in _frame_phase(run, plan, found.todo, codes=stream is not None):
+            for category, text in written.caught:  # raised in a worker: said here, once
+                warnings.warn(text, category, stacklevel=3)
+            found.index[str(written.frame)] = written.entry
+            encoded.pop(str(written.frame), None)
+            write_index(run.folder, found.index, encoded)
+            found.records[written.frame] = written.entry["record"]
+            for stage, value in written.seconds.items():
+                stages[stage] = stages.get(stage, 0.0) + value
+            if stream and written.codes is not None:
+                stream.add(written.frame, written.codes)
+    except BaseException:
         if stream:
-            video = stream.finish(progress, timings)
-        else:
-            video = _video(config, digest, records, previous, progress, timings, force=remake_video)
-        timings["total"] = time.perf_counter() - started
-        write_run_file(config, resolved_config(config, plan), digest, records, video, timings, jobs=jobs,
-                       threads=threads, scheduler=scheduler, rendered=todo, source_hash=source_hash)
-        if todo and config.output.report:  # the light curve and contact sheet (docs/runs.md, "The report")
-            from pipeline.run.report import write_report
-
-            try:
-                write_report(folder)
-            except Exception as exc:
-                warnings.warn(f"{folder}: the report was not written ({exc}); `sunshade report {folder}` "
-                              "writes it", FrameWarning, stacklevel=2)
-        pruned = tuple(store.prune(budget, keep=mine)) if budget is not None else ()
-    finally:
-        if compiling is not None:  # never left writing numba's cache as the command ends
-            compiling.join()
-        held.close()
-        lock.release()
-    return RunSummary(tuple(todo), tuple(f for f in frames if f not in set(todo)),
-                      video_file(config) if video else None, timings, pruned)
+            stream.abort()
+        raise
+    timings["frames"] = time.perf_counter() - mark
+    return stream
 
 
-def _frame_phase(config, plan, store, todo, digest, *, jobs, threads, progress, command=None, codes=False):
-    """Render the ``todo`` frames in parallel; yields what ``_frame_task`` returns as each
-    frame is written. With one job the frames render here, one after another, and each frame's
-    files are written by a thread while the next frame renders (``_frames_here``)."""
-    if progress:
-        progress("frames", 0, len(todo))
-    if jobs == 1 and command is not None:
-        results = _frames_here(config, plan, store, todo, digest, threads, codes)
+def _record(run: _Run, plan: RunPlan, found: _Found, video: dict[str, Any] | None, timings: Timings,
+            source_hash: str | None) -> None:
+    """run.json, then, where the config asks for it and frames were rendered, the report (the
+    light curve and contact sheet: docs/runs.md, "The report"; one that fails is a FrameWarning
+    at ``render_run``'s caller)."""
+    config = run.config
+    write_run_file(config, resolved_config(config, plan), run.digest, found.records, video, timings,
+                   jobs=run.jobs, threads=run.threads, scheduler=run.scheduler, rendered=found.todo,
+                   source_hash=source_hash)
+    if found.todo and config.output.report:
+        from pipeline.run.report import write_report
+
+        try:
+            write_report(run.folder)
+        except Exception as exc:
+            warnings.warn(f"{run.folder}: the report was not written ({exc}); `sunshade report {run.folder}` "
+                          "writes it", FrameWarning, stacklevel=3)
+
+
+@dataclass(frozen=True)
+class _RenderedFrame:
+    """A frame rendered, its files not yet written (``_render_task``): ``frame`` (output frame
+    index), ``result``, ``seconds`` ({stage: seconds [s]}), ``served`` (the cache items it was made
+    from, ``store.Cache.served``) and ``caught`` (the warnings raised meanwhile, as (category, text))."""
+
+    frame: int
+    result: FrameResult
+    seconds: dict[str, float]
+    served: dict[str, Any]
+    caught: tuple[tuple[type[Warning], str], ...]
+
+
+@dataclass(frozen=True)
+class _WrittenFrame:
+    """A frame whose EXR and PNG are written, as the frame phase yields it (``_frame_task``):
+    ``frame`` (output frame index), ``seconds`` ({stage: seconds [s]}, writing and digesting
+    included), ``entry`` (its index.json entry), ``caught`` (the warnings raised meanwhile, as
+    (category, text): a worker's are said by the process that runs the command) and ``codes``
+    (the PNG's 8-bit codes (rows, cols, 3) [0..255] for the video encoded meanwhile,
+    ``VideoStream``; None unless asked)."""
+
+    frame: int
+    seconds: dict[str, float]
+    entry: dict[str, Any]
+    caught: tuple[tuple[type[Warning], str], ...]
+    codes: np.ndarray | None
+
+
+def _frame_phase(run: _Run, plan: RunPlan, todo: list[int], *, codes: bool) -> Iterator[_WrittenFrame]:
+    """Render the ``todo`` frames in parallel; yields each as its files are written. With one
+    local job the frames render here, one after another, and each frame's files are written by
+    a thread while the next frame renders (``_frames_here``)."""
+    if run.progress:
+        run.progress("frames", 0, len(todo))
+    results: Iterable[_WrittenFrame]
+    if run.jobs == 1 and run.command is not None:
+        results = _frames_here(run.config, plan, run.store, todo, run.digest, run.threads, codes)
     else:
-        tasks = (joblib.delayed(_frame_task)(config, plan, frame, str(store.root), digest, threads, command, codes)
-                 for frame in todo)
-        results = joblib.Parallel(n_jobs=min(jobs, len(todo)), return_as="generator_unordered")(tasks)
+        tasks = (joblib.delayed(_frame_task)(run.config, plan, frame, str(run.store.root), run.digest, run.threads,
+                                             run.command, codes) for frame in todo)
+        results = joblib.Parallel(n_jobs=min(run.jobs, len(todo)), return_as="generator_unordered")(tasks)
     for done, result in enumerate(results, 1):
         yield result
-        if progress:
-            progress("frames", done, len(todo))
+        if run.progress:
+            run.progress("frames", done, len(todo))
 
 
-def _frames_here(config, plan, store, todo, digest, threads, codes):
+def _frames_here(config: Config, plan: RunPlan, store: cache.Cache, todo: list[int], digest: str, threads: int,
+                 codes: bool) -> Iterator[_WrittenFrame]:
     """``_frame_task`` over ``todo`` in this process, its writing overlapped with the next
     frame's rendering: a thread writes frame k's EXR and PNG while frame k + 1 renders, so the
     writing costs no wall time where a core is free (docs/runs.md, "Writing"). Yields each
@@ -395,11 +534,9 @@ def _frames_here(config, plan, store, todo, digest, threads, codes):
 
 @portable
 def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: str, threads: int,
-                command: int | None = None, codes: bool = False):
-    """Render one frame and write its EXR, then its PNG. Returns (frame, stage seconds [s],
-    its index.json entry, the warnings raised meanwhile as (category, text), the PNG's 8-bit
-    codes if ``codes`` else None): a worker's warnings are said by the process that runs the
-    command, and the codes go to the video it encodes meanwhile (``_VideoStream``)."""
+                command: int | None = None, codes: bool = False) -> _WrittenFrame:
+    """Render one frame and write its EXR, then its PNG, with the PNG's 8-bit codes if ``codes``
+    (for the video the command's process encodes meanwhile, ``VideoStream``)."""
     end_if_orphaned(command)
     return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
 
@@ -412,19 +549,19 @@ def _compile_frame_loops(plan: RunPlan) -> None:
         display_codes(np.zeros((2, 2, 3), dtype=np.float32), exposure=1.0)
 
 
-def _render_task(plan: RunPlan, frame: int, root: str, threads: int):
-    """Render one frame: (frame, its ``FrameResult``, stage seconds [s], the cache items it
-    was made from (``cache.Cache.served``), the warnings raised meanwhile as (category, text))."""
-    timings, store = {}, cache.Cache(root)
+def _render_task(plan: RunPlan, frame: int, root: str, threads: int) -> _RenderedFrame:
+    """Render one frame, the warnings raised meanwhile caught."""
+    timings: dict[str, float] = {}
+    store = cache.Cache(root)
     with warnings.catch_warnings(record=True) as caught:
         result = render_frame(plan, frame, store=store, workers=threads, timings=timings)
-    return frame, result, timings, dict(store.served), [(w.category, str(w.message)) for w in caught]
+    return _RenderedFrame(frame, result, timings, dict(store.served),
+                          tuple((w.category, str(w.message)) for w in caught))
 
 
-def _write_task(config: Config, rendered, digest: str, codes: bool):
-    """Write a frame that ``_render_task`` rendered: its EXR, then its PNG. Returns what
-    ``_frame_task`` returns."""
-    frame, result, timings, served, caught = rendered
+def _write_task(config: Config, rendered: _RenderedFrame, digest: str, codes: bool) -> _WrittenFrame:
+    """Write a frame that ``_render_task`` rendered: its EXR, then its PNG."""
+    frame, result, timings = rendered.frame, rendered.result, rendered.seconds
     mark = time.perf_counter()
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
@@ -436,129 +573,18 @@ def _write_task(config: Config, rendered, digest: str, codes: bool):
     written = io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()
+    record = frame_record(config, frame, digest)
+    if record is not None and result.light is not None:  # the report's light curve
+        record["light"] = {"time_s": float(result.scene.time), "exposure": float(result.exposure), **result.light}
     entry = {"config_hash": digest, "files": {"exr": file_stamp(exr), "png": file_stamp(png)},
-             "items": served, "record": frame_record(config, frame, digest)}
-    if entry["record"] is not None and result.light is not None:  # the report's light curve
-        entry["record"]["light"] = {"time_s": float(result.scene.time), "exposure": float(result.exposure),
-                                    **result.light}
+             "items": rendered.served, "record": record}
     timings["digest"] = time.perf_counter() - mark
-    return frame, timings, entry, caught, written if codes else None
+    return _WrittenFrame(frame, timings, entry, rendered.caught, written if codes else None)
 
-
-def _video(config: Config, digest: str, records: dict, previous: dict, progress, timings, *,
-           force) -> dict | None:
-    """Encode the video from the PNG frames once every frame of the animation is done
-    (``records`` has them all), unless the ``previous`` run.json says the video on disk is of
-    this config. Returns its run.json entry."""
-    path = video_file(config)
-    if path is None:
-        return None
-    made = current_video(config, digest, previous, force=force)
-    if made is not None:
-        return made
-    if any(record is None for record in records.values()):
-        return None
-    mark = time.perf_counter()
-    count = config.animation.frames
-
-    def pictures():
-        for frame in range(count):
-            yield io.read_codes(frame_files(config, frame)[1])
-            if progress:
-                progress("video", frame + 1, count)
-
-    io.write_video(path, pictures(), fps=config.animation.fps)
-    timings["video"] = time.perf_counter() - mark
-    return _video_entry(config, digest)
-
-
-def _video_entry(config: Config, digest: str) -> dict:
-    """run.json's entry of the video just written."""
-    path = video_file(config)
-    return {"file": path.name, "config_hash": digest, "frames": config.animation.frames,
-            "bytes": path.stat().st_size}
-
-
-class _VideoStream:
-    """The video encoded while the frames are rendered, when this run ends with every frame
-    done (docs/runs.md, "The video"): a thread hands the encoder each frame's codes in order as
-    soon as it and every frame before it are done, those rendered now as their workers return
-    them (``add``), those done before read from their PNGs; the same frames in the same order
-    as ``_video`` reads, so the same bytes. The encoder writes under a temporary name: a run
-    that fails or is killed leaves no video."""
-
-    def __init__(self, config: Config, digest: str, fresh):
-        self.config, self.digest, self.fresh = config, digest, set(fresh)
-        self.arrived, self.fed, self.aborted, self.error = {}, 0, False, None
-        self.ready = threading.Condition()
-        self.thread = threading.Thread(target=self._encode, name="sunshade-video", daemon=True)
-        self.thread.start()
-
-    @classmethod
-    def start(cls, config: Config, digest: str, records: dict, todo, previous: dict, *, force, in_process):
-        """A stream if the run makes a video and ends with every frame done, else None; None
-        too when the frames render ``in_process``: the encoder is a forked process, and a fork
-        while this process's FFT threads take work ends the FFT ("Work item submitted after
-        shutdown": scipy's pocketfft stops its thread pool at every fork), so the video is
-        then encoded after the frames."""
-        fresh = set(todo)
-        if (in_process or video_file(config) is None
-                or current_video(config, digest, previous, force=force) is not None
-                or any(records[f] is None and f not in fresh for f in range(config.animation.frames))):
-            return None
-        return cls(config, digest, fresh)
-
-    def add(self, frame: int, codes: np.ndarray) -> None:
-        if not self.thread.is_alive():  # the encoder failed: finish() says why; keep nothing
-            return
-        with self.ready:
-            self.arrived[frame] = codes
-            self.ready.notify()
-
-    def abort(self) -> None:
-        """Stop the encoder and leave no video."""
-        with self.ready:
-            self.aborted = True
-            self.ready.notify()
-        self.thread.join()
-
-    def finish(self, progress, timings) -> dict:
-        """Wait for the encoder (its progress said as ``video``); the video's run.json entry."""
-        mark, count = time.perf_counter(), self.config.animation.frames
-        while self.thread.is_alive():
-            if progress:
-                progress("video", self.fed, count)
-            self.thread.join(0.25)
-        if self.error is not None:
-            raise self.error
-        if progress:
-            progress("video", count, count)
-        timings["video"] = time.perf_counter() - mark
-        return _video_entry(self.config, self.digest)
-
-    def _pictures(self):
-        for frame in range(self.config.animation.frames):
-            if frame in self.fresh:
-                with self.ready:
-                    while frame not in self.arrived and not self.aborted:
-                        self.ready.wait()
-                    if self.aborted:
-                        raise RunError("the video was abandoned with its run")
-                    codes = self.arrived.pop(frame)
-            else:
-                codes = io.read_codes(frame_files(self.config, frame)[1])
-            yield codes
-            self.fed = frame + 1
-
-    def _encode(self) -> None:
-        try:
-            io.write_video(video_file(self.config), self._pictures(), fps=self.config.animation.fps)
-        except BaseException as error:  # said by finish(), in the command's thread
-            self.error = error
 
 
 @contextlib.contextmanager
-def _backend(scheduler: str | None, timeout: float = CLUSTER_TIMEOUT):
+def _backend(scheduler: str | None, timeout: float = CLUSTER_TIMEOUT) -> Iterator[None]:
     """joblib's Dask backend on the cluster at ``scheduler`` for the block; local processes
     without one. A worker process that dies, or a cluster lost for ``timeout`` seconds [s]
     (``_Watchdog``), ends the block with a RunError saying how to resume."""
@@ -604,20 +630,21 @@ class _Watchdog:
     workers or no scheduler, it records why in ``lost`` and closes the client, which cancels
     the tasks the run waits on."""
 
-    def __init__(self, client, timeout: float):
-        self.client, self.timeout, self.lost = client, timeout, None
+    def __init__(self, client: Client, timeout: float):
+        self.client, self.timeout = client, timeout
+        self.lost: str | None = None
         self.stop = threading.Event()
 
-    def __enter__(self):
+    def __enter__(self) -> _Watchdog:
         self.thread = threading.Thread(target=self._watch, name="sunshade-watchdog", daemon=True)
         self.thread.start()
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.stop.set()
         self.thread.join()
 
-    def _watch(self):
+    def _watch(self) -> None:
         since = time.monotonic()
         while not self.stop.wait(0.5):
             try:

@@ -13,9 +13,13 @@ import itertools
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from pipeline.core.errors import RunError
 from pipeline.run.folder import INDEX_FILE, RUN_FILE
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
 
 __all__ = ["CSV_FILE", "CURVE_FILE", "SHEET_FILE", "SHEET_FRAMES", "COLUMNS", "SET_SUN", "frame_records", "rows",
            "write_csv", "contacts", "import_drawing", "write_light_curve", "write_contact_sheet", "write_report"]
@@ -34,7 +38,7 @@ meter reads of it and the light the camera's exposure is set for [EV100]; that e
 [m^2/kcd]; the white balance's gains [1]."""
 
 
-def frame_records(folder: Path) -> list[dict]:
+def frame_records(folder: Path | str) -> list[dict[str, Any]]:
     """The done frames' records of a run folder, by frame.
 
     run.json's when it was written after index.json (a render ended there: the same records, in a
@@ -81,7 +85,7 @@ def frame_records(folder: Path) -> list[dict]:
     return sorted((r for r in records if isinstance(r, dict) and "frame" in r), key=lambda r: r["frame"])
 
 
-def rows(records) -> list[dict]:
+def rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """light.csv's rows (``COLUMNS``) of frame records.
 
     A value a record lacks is empty (frames rendered before the light was recorded).
@@ -111,7 +115,7 @@ def rows(records) -> list[dict]:
     return out
 
 
-def write_csv(folder: Path, table) -> Path:
+def write_csv(folder: Path | str, table: Iterable[dict[str, Any]]) -> Path:
     """light.csv in ``folder`` (comma-separated, a header row; written atomically).
 
     Parameters
@@ -142,7 +146,7 @@ SET_SUN = 0.3
 and gives no direct light (docs/method.md, "Twilight and a sun at the horizon"). [deg]"""
 
 
-def contacts(table) -> list[tuple[str, float]]:
+def contacts(table: Iterable[dict[str, Any]]) -> list[tuple[str, float]]:
     """An eclipse's contacts as seen in S: only those the frames show.
 
     C1 is the first frame with S below 1 after one at 1, C2 the first with S at 0, C3 the last at
@@ -186,7 +190,8 @@ def import_drawing() -> None:
         from matplotlib.figure import Figure  # noqa: F401
 
 
-def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = None) -> Path | None:
+def write_light_curve(folder: Path | str, table: Iterable[dict[str, Any]], *, eclipse: bool,
+                      name: str | None = None) -> Path | None:
     """light-curve.png: the open ground's illuminance and S against film time.
 
     The illuminance from the sun, the sky and both on a log axis [lx] with the light the camera's
@@ -261,7 +266,8 @@ def write_light_curve(folder: Path, table, *, eclipse: bool, name: str | None = 
     return path
 
 
-def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, width: int = 240) -> Path | None:
+def write_contact_sheet(folder: Path | str, records: Iterable[dict[str, Any]], *, count: int = SHEET_FRAMES,
+                        width: int = 240) -> Path | None:
     """contact-sheet.png: the done frames' PNGs, evenly spread, in rows of four.
 
     Each thumbnail is labelled with its frame number and S.
@@ -316,7 +322,7 @@ def write_contact_sheet(folder: Path, records, *, count: int = SHEET_FRAMES, wid
     return path
 
 
-def write_report(folder: Path) -> list[Path]:
+def write_report(folder: Path | str) -> list[Path]:
     """light.csv, light-curve.png and contact-sheet.png of the run in ``folder`` (docs/runs.md, "The report").
 
     Made from its done frames (``frame_records``).
