@@ -5,7 +5,7 @@
 The shipped 20 m canopy (configs/assets/leaves.png) at 8 m, isolated, ground pixel 0.05 m, under
 a uniform sky and under a smooth gradient sky. The reference traces cosine-weighted rays from
 ground points jittered over each chosen pixel, through the canopy image placed in the world
-(tests/reference.py; it shares no code with pipeline.shadow). Prints the relative RMS
+(tests/reference.py; it shares no code with pipeline.ground.shadow). Prints the relative RMS
 difference, RMS(ours - reference) / mean(reference), and the Monte Carlo noise of that figure.
 """
 

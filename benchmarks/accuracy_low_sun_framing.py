@@ -2,7 +2,7 @@
 docs/accuracy.md, "Framing at a low sun").
 
 The scene is configs/eclipse-2024-dallas.yaml with its camera and windows removed (the plan
-places them: pipeline/framing.py) and a flat albedo (0.5 grey, so the luminance is the light):
+places them: pipeline/stages/framing.py) and a flat albedo (0.5 grey, so the luminance is the light):
 one crown 12 m high, 6 m in radius, 160 000 leaves; one flutter frame, a 160 x 90 image, 6 cells
 across the sun. Per case, the ratio of the 95th to the 5th percentile of the luminance in the
 image's bottom third (the ground nearest the camera), beside the most that flat, level ground

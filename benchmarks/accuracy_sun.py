@@ -7,10 +7,10 @@ The scene: a seeded canopy of random elliptic leaves (6 cm to 12 cm, about 11% o
 its gaps are pinholes for the sun) in an 18 m x 18 m mask image (a 6 m tile of 5 mm texels,
 repeated 3 x 3) at h = 8 m; the procedural sky, turbidity 3, the sun at 60 degrees elevation,
 azimuth 200, the moon 0.2 degrees right of it and 0.1 up (S = 0.48). It is rendered through
-``ground.render_ground`` from a YAML config (the sun resolved on a 1 m fine window, 16 cells
+``stages.ground.render_ground`` from a YAML config (the sun resolved on a 1 m fine window, 16 cells
 across the disc, 4.65 mm pixels; the sky on 20 mm pixels).
 
-The reference (tests/reference.py; no code from pipeline.shadow, no rasters) traces rays from
+The reference (tests/reference.py; no code from pipeline.ground.shadow, no rasters) traces rays from
 points stratified over each of ``--points`` fine ground pixels picked at random: the sun by
 stratified sampling of its disc on the tangent plane (4 x 4 positions per pixel, each with its own
 (n/4)^2 disc strata, so the canopy points x + h s stay stratified; the limb-darkened radiance cut

@@ -1,15 +1,20 @@
-"""Independent references for the tests: a direct sum and a world-coordinate Monte Carlo estimator.
+"""Independent references for the tests: a direct sum and a world-coordinate Monte Carlo estimator,
+and the numpy references of the compiled loops (the mip map's filtering, the albedo's tiling).
 
-Nothing here imports ``pipeline.shadow``: the Monte Carlo estimator traces rays from ground
+Nothing here imports ``pipeline.ground.shadow``: the Monte Carlo estimator traces rays from ground
 points in metres through a canopy image placed in the world, so it checks orientation, scale
 and units, not only the FFT.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from pipeline.sky.scattering import haze_transmittance, henyey_greenstein
+from pipeline.texture.albedo import BLEND_SHARPNESS, LOOKUP_BINS, StochasticTiling
+from pipeline.texture.mipmap import MAX_TAPS, Footprints, MipMap
 
 
 def direct_sum(sky, sky_start, mask, mask_start, window_shape, outside_value):
@@ -322,3 +327,297 @@ def aerial_perspective(distance: np.ndarray, view: np.ndarray, *, length: float,
     sun_haze = veil * (albedo * phase)[..., None] * np.asarray(sun_irradiance)
     sky_haze = veil * (albedo / (2.0 * np.pi)) * np.asarray(sky_irradiance)
     return (transmittance.astype(np.float32), sky_haze.astype(np.float32), sun_haze.astype(np.float32))
+
+
+# ---------------------------------------------------------------------------------------------
+# The compiled loops' numpy references (pipeline/kernels): the tests hold each loop to its
+# reference bit for bit, the same float32 operations in the same order.
+
+
+def lattice_read_arrays(flat, corner, taps, lattice):
+    """``kernels.arrays.lattice_read`` with whole arrays (numpy): its reference, ``brdf_bands.sky_ratio``'s
+    bilinear read of its lattice. (channels, n) float32"""
+    out = flat[:, corner] * taps[0]
+    out += flat[:, corner + 1] * taps[1]
+    out += flat[:, corner + lattice] * taps[2]
+    out += flat[:, corner + lattice + 1] * taps[3]
+    return out
+
+
+_CHUNK = 16384
+"""Footprints filtered together: the working arrays of one tap stay in the processor's cache."""
+
+
+_BLOCK = 32768
+"""Footprints a block in the per-footprint steps (``_in_blocks``)."""
+
+
+def _in_blocks(function, *arrays, size: int):
+    """``function(*arrays)`` for a function that works item by item along the arrays' first
+    axis and returns a tuple of arrays: applied to blocks of ``size`` items and the results
+    joined, so that its temporaries stay small (in the processor's cache, and no fresh pages)."""
+    starts = range(0, max(len(arrays[0]), 1), size)  # one empty block for empty arrays
+    parts = [function(*(a[i : i + size] for a in arrays)) for i in starts]
+    return tuple(np.concatenate(results) for results in zip(*parts))
+
+
+def filtered_arrays(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
+    """``mipmap.filtered_read`` with whole arrays (numpy), the reference of the compiled loops.
+
+    The footprints are grouped by level (and whether they blend two) and sorted by tap count
+    within a group; each run of up to _CHUNK footprints of a group is filtered at once, tap by
+    tap (``_tap_mean``). Footprints that read only the outside value ("constant") form a group
+    of their own, which needs no samples.
+    """
+    n = len(fp)
+    if n == 0:
+        return np.zeros((mip.channels, 0), dtype=np.float32)
+    taps, level, blend = _in_blocks(functools.partial(filter_choice_arrays, mip, lod_bias), fp.major, fp.minor,
+                                    size=_BLOCK)
+    group = 2 * level + (blend > 0)
+    if mip.outside == "constant":
+        beyond, = _in_blocks(lambda *arrays: (_beyond(mip, *arrays),), fp.x, fp.y, fp.major, fp.ex, fp.ey,
+                             taps, level + (blend > 0), size=_BLOCK)
+        group[beyond] = _BEYOND
+    key = group * (MAX_TAPS + 1) + (MAX_TAPS - taps)  # int16: under 64 levels of 17 tap counts
+    order = np.argsort(key, kind="stable")  # a radix sort
+    group, taps = group.take(order), taps.take(order)
+    starts = np.flatnonzero(np.diff(group, prepend=group[0] - 1))
+    mean = np.empty((mip.channels, n), dtype=np.float32)
+    for a, b in zip(starts, np.append(starts[1:], n)):
+        if group[a] == _BEYOND:
+            mean[:, a:b] = _outside_means(mip).take(taps[a:b], axis=1)
+            continue
+        k, blended = divmod(int(group[a]), 2)
+        for c in range(a, b, _CHUNK):
+            s = slice(c, min(c + _CHUNK, b))
+            chosen = order[s]
+            t = blend.take(chosen) if blended else None
+            x, y, major, ex, ey = (u.take(chosen) for u in (fp.x, fp.y, fp.major, fp.ex, fp.ey))
+            mean[:, s] = _tap_mean(mip, k, t, x, y, major, ex, ey, taps[s])
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(n)
+    return mean.take(inverse, axis=1)
+
+
+_BEYOND = -1
+"""The group of the footprints that read only the outside value (``_beyond``)."""
+
+
+def _beyond(mip: MipMap, x, y, major, ex, ey, taps, level) -> np.ndarray:
+    """Whether each footprint (n,) bool (``Footprints``' fields x, y, major, ex, ey) of ``taps``
+    taps has them all beyond one edge of the raster in its coarsest level read, ``level`` (n,)
+    int, by half a texel more than the border: every trilinear sample of it reads the outside
+    value alone (in the finer level too, whose texels are smaller and whose border is nearer).
+    Mode "constant"."""
+    (x0, y0), (rows, cols) = mip.origins[0], np.asarray(mip.shapes, dtype=np.float64).T
+    px, py = np.asarray(mip.pixels, dtype=np.float64).T
+    # the edges [m] a tap must lie beyond, level by level: a texel out from the raster
+    west, east = (x0 - px).take(level), (x0 + (cols + 1) * px).take(level)
+    north, south = (y0 + py).take(level), (y0 - (rows + 1) * py).take(level)
+    reach = (0.5 - 0.5 / taps) * major  # from the centre to the farthest tap [m]
+    across, along = np.abs(reach * ex), np.abs(reach * ey)
+    with np.errstate(invalid="ignore"):
+        return (x + across <= west) | (x - across >= east) | (y - along >= north) | (y + along <= south)
+
+
+def _outside_means(mip: MipMap) -> np.ndarray:
+    """(channels, MAX_TAPS + 1) float32: column n is what ``_tap_mean`` makes of n samples of
+    the outside value: their float32 sum, in order, over n (column 0 unused)."""
+    table = np.zeros((mip.channels, MAX_TAPS + 1), dtype=np.float32)
+    total = np.zeros(mip.channels, dtype=np.float32)
+    for n in range(1, MAX_TAPS + 1):
+        total += mip.value
+        table[:, n] = total / np.float32(n)
+    return table
+
+
+def filter_choice_arrays(mip: MipMap, lod_bias: float, major, minor):
+    """``mipmap.filter_choice`` with whole arrays (numpy), the reference of the compiled loop."""
+    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS, copy=False)
+        ratio -= 1e-3
+        np.ceil(ratio, out=ratio)
+        taps = np.clip(ratio, 1, MAX_TAPS, out=ratio).astype(np.int8)
+        lod = major / taps
+        np.maximum(minor, lod, out=lod)
+        lod /= texel
+        np.log2(lod, out=lod)
+        lod += lod_bias
+    lod = np.clip(np.nan_to_num(lod, nan=0.0, copy=False), 0.0, mip.count - 1, out=lod)
+    floor = np.floor(lod)
+    k = floor.astype(np.int16)
+    t = np.subtract(lod, floor, out=lod)
+    done = t > 1.0 - 1e-6  # all in the next level
+    k[done] += 1
+    t[done | (t < 1e-6)] = 0.0
+    return taps, k, t.astype(np.float32)
+
+
+def _tap_mean(mip: MipMap, level: int, t, x, y, major, ex, ey, taps) -> np.ndarray:
+    """Means (channels, m) float32 over each footprint's taps of its trilinear samples.
+
+    level : the finer level read; t : (m,) float32 blend towards level + 1, or None for level
+        alone. [level, 1]
+    x, y, major, ex, ey : (m,) the footprints' ellipses (``Footprints``). [m, m, 1]
+    taps : (m,) tap counts, in decreasing order.
+    The taps of footprint j lie at (x, y) + ((i + 0.5) / taps - 0.5) major (ex, ey), i < taps[j].
+    """
+    spacing = major / taps  # [m]
+    first = (0.5 - 0.5 * taps) * spacing  # the first tap's offset along the major axis [m]
+    start = (x + first * ex, y + first * ey, spacing * ex, spacing * ey)  # the first tap, the step [m]
+    finer = _texel_coords(mip, level, *start)
+    coarser = None if t is None else _texel_coords(mip, level + 1, *start)
+    descending = -taps
+    for i in range(int(taps[0])):
+        m = int(np.searchsorted(descending, -i, side="left"))  # footprints with more than i taps
+        col, row, dcol, drow = (u[:m] for u in finer)
+        sample = _bilinear(mip, level, col, row)
+        col += dcol
+        row += drow
+        if coarser is not None:
+            col, row, dcol, drow = (u[:m] for u in coarser)
+            upper = _bilinear(mip, level + 1, col, row)
+            col += dcol
+            row += drow
+            upper -= sample
+            upper *= t[:m]
+            sample += upper
+        if i == 0:
+            total = sample
+        else:
+            total[:, :m] += sample
+    total /= taps.astype(np.float32)
+    return total
+
+
+def _texel_coords(mip: MipMap, level: int, x, y, dx, dy):
+    """(col, row) [texel] in level ``level`` of ground points (x, y) [m], texel centres at whole
+    numbers, and (dcol, drow) [texel] of ground steps (dx, dy) [m]; new arrays."""
+    (x0, y0), (px, py) = mip.origins[level], mip.pixels[level]
+    col = (x - x0) * (1.0 / px) - 0.5
+    row = (y0 - y) * (1.0 / py) - 0.5
+    dcol, drow = dx * (1.0 / px), dy * (-1.0 / py)
+    # held where a float has no fraction left, so that no tap's texel overflows an integer
+    for u, limit in ((col, 2.0**52), (row, 2.0**52), (dcol, 2.0**48), (drow, 2.0**48)):
+        np.clip(u, -limit, limit, out=u)
+    return col, row, dcol, drow
+
+
+def _bilinear(mip: MipMap, level: int, col, row) -> np.ndarray:
+    """Bilinear samples (channels, m) float32 of one level at texel coordinates (col, row) (m,)
+    [texel] (``_texel_coords``), the plane beyond the raster as ``mip.outside`` says. The four
+    texels of a sample lie at fixed offsets from the first (``_first_texel``) and are gathered
+    in one ``take``."""
+    first, fc, fr = _first_texel(mip, level, col, row)
+    flat = mip.texels.reshape(-1)
+    gathered = np.empty((4, mip.channels, len(first)), dtype=np.float32)
+    offsets = _corner_offsets(mip.shapes[level][1] + 2, mip.channels)
+    for offset, out in zip(offsets, gathered.reshape(-1, len(first))):
+        flat[offset:].take(first, out=out, mode="clip")  # no index array of all the corners
+    a, b, c, d = gathered  # each (channels, m)
+    b -= a  # the upper row, along the columns
+    b *= fc
+    a += b
+    d -= c  # the lower row
+    d *= fc
+    c += d
+    c -= a  # along the rows
+    c *= fr
+    a += c
+    return a
+
+
+def _first_texel(mip: MipMap, level: int, col, row):
+    """The first of the four texels of bilinear samples at texel coordinates (col, row) (m,)
+    [texel], the one at (floor(row), floor(col)): the index (m,) intp of its channel 0 in the
+    flat texel array, and the fractions (fc, fr) (m,) float32 of (col, row) beyond it [texel].
+
+    The texel is brought into the stored level, border included: held at the border of the
+    outside value ("constant"), or moved by whole periods ("periodic")."""
+    rows, cols = mip.shapes[level]
+    if mip.outside == "constant":
+        col, row = np.clip(col, -1.0, cols), np.clip(row, -1.0, rows)
+    c0, r0 = np.floor(col), np.floor(row)
+    fc = np.empty(len(col), dtype=np.float32)
+    fr = np.empty(len(row), dtype=np.float32)
+    np.subtract(col, c0, out=fc)
+    np.subtract(row, r0, out=fr)
+    c0, r0 = c0.astype(np.intp), r0.astype(np.intp)
+    if mip.outside == "periodic":
+        _wrap(c0, cols)
+        _wrap(r0, rows)
+    r0 *= cols + 2  # stored rows, one texel of border all round
+    r0 += c0
+    r0 += mip.offsets[level] + cols + 3
+    r0 *= mip.channels
+    return r0, fc, fr
+
+
+@functools.lru_cache(maxsize=256)
+def _corner_offsets(stride: int, channels: int) -> tuple:
+    """Offsets in the flat texel array of the four texels of a bilinear sample, (r0, c0),
+    (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1), channel by channel, from channel 0 of the
+    first: 4 channels ints; ``stride`` the stored texels a row."""
+    return tuple(texel * channels + k for texel in (0, 1, stride, stride + 1) for k in range(channels))
+
+
+def _wrap(i: np.ndarray, n: int) -> None:
+    """i modulo n, in place (n > 0); a mask when n is a power of two."""
+    if n & (n - 1):
+        np.remainder(i, n, out=i)
+    else:
+        np.bitwise_and(i, n - 1, out=i)
+
+
+def tiling_sample_arrays(tiling: StochasticTiling, fp: Footprints, *, lod_bias: float,
+                         skip: float = 0.0) -> np.ndarray:
+    """``albedo.StochasticTiling.sample`` with whole arrays (numpy): the reference of the compiled pass.
+
+    Parameters
+    ----------
+    tiling : albedo.StochasticTiling
+        The tiling.
+    fp, lod_bias
+        As for ``sample``.
+    skip : float, optional
+        Reads of sharpened weight under this are left out [1].
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, n) float32 albedo [1].
+    """
+    vertices, w = tiling.weights(fp.x, fp.y)
+    w = w**BLEND_SHARPNESS
+    w /= w.sum(axis=0)
+    offset = tiling.offsets(vertices)
+    g = np.zeros((tiling.channels, len(fp)), dtype=np.float64)
+    for i in range(3):
+        moved = Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
+                                   fp.ex, fp.ey)
+        g += np.where(w[i] < skip, 0.0, w[i]) * filtered_arrays(tiling.gaussian, moved, lod_bias)
+    g /= np.sqrt(np.sum(w * w, axis=0))
+    _, level, blend = filter_choice_arrays(tiling.gaussian, lod_bias, fp.major, fp.minor)
+    level = level.astype(np.intp)
+    upper = np.minimum(level + 1, tiling.gaussian.count - 1)
+    position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
+    low = np.minimum(np.floor(position).astype(np.intp), LOOKUP_BINS - 2)
+    frac = position - low
+    components = np.empty_like(g)
+    for c in range(tiling.channels):
+        def lookup(k):
+            table = tiling.lookups[:, c]
+            return table[k, low[c]] * (1.0 - frac[c]) + table[k, low[c] + 1] * frac[c]
+        components[c] = lookup(level) * (1.0 - blend) + lookup(upper) * blend
+    out = tiling.center[:, None] + _times(components.T, tiling.basis.T).T
+    return np.clip(out, 0.0, None).astype(np.float32)
+
+
+def _times(rows, matrix):
+    """``albedo._times``: rows (n, c) @ matrix (c, c), summed column by column."""
+    out = np.zeros((rows.shape[0], matrix.shape[1]))
+    for i in range(matrix.shape[0]):
+        out += rows[:, i : i + 1] * matrix[i]
+    return out

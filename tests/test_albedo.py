@@ -1,7 +1,8 @@
-"""Tests of pipeline/albedo.py: the procedural grass-and-soil texture."""
+"""Tests of pipeline/texture/albedo.py: the procedural grass-and-soil texture."""
 
 import numpy as np
 import pytest
+import reference
 
 from pipeline.camera import pinhole as camera
 from pipeline.texture import albedo
@@ -102,7 +103,7 @@ def view_footprints(width=320, height=180):
 
 
 def test_compiled_tiling_matches_the_array_version(monkeypatch):
-    """StochasticTiling.sample (compiled, one pass) against sample_arrays (the former numpy
+    """StochasticTiling.sample (compiled, one pass) against reference.tiling_sample_arrays (the former numpy
     code, kept as the reference), every read taken and with reads under SKIP_WEIGHT left out
     alike: the same albedo within float32 rounding."""
     _, tiling = _tiled(size_px=128, period=2.0)
@@ -110,7 +111,7 @@ def test_compiled_tiling_matches_the_array_version(monkeypatch):
     for skip in (0.0, albedo.SKIP_WEIGHT):
         monkeypatch.setattr(albedo, "SKIP_WEIGHT", skip)
         got = tiling.sample(fp, lod_bias=texture.LOD_BIAS)
-        want = tiling.sample_arrays(fp, lod_bias=texture.LOD_BIAS, skip=skip)
+        want = reference.tiling_sample_arrays(tiling, fp, lod_bias=texture.LOD_BIAS, skip=skip)
         assert got.dtype == np.float32 and got.shape == want.shape == (3, len(fp))
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
 
@@ -125,7 +126,7 @@ def test_skipping_light_reads_changes_the_albedo_by_little():
     w = w**albedo.BLEND_SHARPNESS
     w /= w.sum(axis=0)
     assert 1.8 < np.mean(np.sum(w >= albedo.SKIP_WEIGHT, axis=0)) < 2.2
-    every = tiling.sample_arrays(fp, lod_bias=texture.LOD_BIAS, skip=0.0)
+    every = reference.tiling_sample_arrays(tiling, fp, lod_bias=texture.LOD_BIAS, skip=0.0)
     skipped = tiling.sample(fp, lod_bias=texture.LOD_BIAS)
     difference = np.abs(skipped.astype(np.float64) - every)
     assert difference.max() < 0.04 * every.mean()

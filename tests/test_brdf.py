@@ -1,9 +1,10 @@
-"""The ground's reflectance (pipeline/brdf.py, issue 28): the models against formulas written
+"""The ground's reflectance (pipeline/ground/brdf.py, issue 28): the models against formulas written
 with angles, the normalisation against an independent quadrature, the hot spot's side, the
 config's errors, the sun's term per pixel and the sky's view bands against a brute force."""
 
 import numpy as np
 import pytest
+import reference
 
 from pipeline.camera import brdf_view as brdf_camera
 from pipeline.camera import pinhole as cam
@@ -350,7 +351,7 @@ def test_compiled_lattice_read_matches_the_array_version_bit_for_bit():
     assert np.allclose(taps.sum(axis=0), 1.0, atol=1e-6) and corner.max() <= lattice * lattice - lattice - 2
     out = np.empty((3, 50), dtype=np.float32)
     _array_loops.lattice_read(flat, corner, taps, lattice, out)
-    assert np.array_equal(out, brdf_bands._lattice_read_arrays(flat, corner, taps, lattice))
+    assert np.array_equal(out, reference.lattice_read_arrays(flat, corner, taps, lattice))
 
 
 def test_relative_sky_is_read_bilinearly_at_the_footprint_centres_and_is_1_beyond():

@@ -1,4 +1,4 @@
-"""Tests of the cache (pipeline/cache.py, cache_store.py, cache_keys.py): keys, hits and misses, damage and
+"""Tests of the cache (pipeline/cache/: store.py, items.py, keys.py): keys, hits and misses, damage and
 repair, real concurrent processes, prune, sizes. Real files in tmp_path, real processes; no mocks."""
 
 from __future__ import annotations

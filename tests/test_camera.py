@@ -1,4 +1,4 @@
-"""Tests of pipeline/camera.py: mip maps, footprint filtering, the ground and sky views.
+"""Tests of pipeline/camera/pinhole.py and texture/mipmap.py: mip maps, footprint filtering, the ground and sky views.
 
 References are independent of the code under test: ray geometry written out by hand or through
 ``image_rays`` / ``project_points`` (the camera's contract), and brute-force supersampling with
@@ -7,6 +7,7 @@ scipy.ndimage.map_coordinates.
 
 import numpy as np
 import pytest
+import reference
 from scipy import ndimage
 
 from pipeline.camera import pinhole as camera
@@ -93,7 +94,7 @@ def test_constant_levels_keep_the_integral(shape):
 @pytest.mark.parametrize("shape", [(716, 1261), (27, 45), (1, 7), (6, 1)])
 @pytest.mark.parametrize("value", [0.3, np.nan])
 def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
-    # the compiled halving (_filter.halve_level) against the numpy levels it replaced
+    # the compiled halving (kernels.filter.halve_level) against the numpy levels it replaced
     raster = np.random.default_rng(3).random((*shape, 3)).astype(np.float32) * 7.0
     value = np.full(3, value, dtype=np.float32)
     mip = mipmap(raster, Grid((0.0, 0.0), 0.5, shape), outside="constant", value=value)
@@ -289,7 +290,7 @@ def test_sample_footprint_agrees_with_a_direct_reference(outside, shape, channel
 ])
 @pytest.mark.parametrize("threads", [1, 3])
 def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape, channels, threads, monkeypatch):
-    """texture.filtered_read (numba, footprint by footprint) against texture.filtered_arrays (numpy,
+    """mipmap.filtered_read (numba, footprint by footprint) against reference.filtered_arrays (numpy,
     grouped by level), the reference it replaces: the same float32 arithmetic in the same order
     gives the same bits, for every level, blend and tap count, far points, degenerate
     footprints and a NaN outside value (the finer rasters of a chain); in one thread or shared
@@ -317,7 +318,7 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
         jac[300:310] = 0.0
         fp = footprints(x, y, jac)
         for bias in (LOD_BIAS, 0.0, 1.3):
-            want = texture.filtered_arrays(mip, fp, bias)
+            want = reference.filtered_arrays(mip, fp, bias)
             for _ in range(3):  # three channels: the second and third read from the kept tap table
                 got = texture.filtered_read(mip, fp, bias)
                 assert got.dtype == np.float32 and got.shape == want.shape == (channels, n)
@@ -326,11 +327,11 @@ def test_compiled_filtering_matches_the_array_version_bit_for_bit(outside, shape
         # another frame's raster on the same grid: the kept taps read its texels
         other = mipmap(raster[::-1] * 2.0, grid, outside=outside, value=mip.value, period=mip.period)
         np.testing.assert_array_equal(texture.filtered_read(other, fp, LOD_BIAS),
-                                      texture.filtered_arrays(other, fp, LOD_BIAS))
+                                      reference.filtered_arrays(other, fp, LOD_BIAS))
 
 
 def test_a_still_cameras_tap_table_is_kept_from_the_second_read():
-    """texture.filtered_read keeps where a still camera's taps fall (kept.kept_at) only once the same
+    """mipmap.filtered_read keeps where a still camera's taps fall (kept.kept_at) only once the same
     footprints and levels are read a second time, and reads from it afterwards."""
     rng = np.random.default_rng(5)
     grid = Grid((0.0, 1.0), 0.05, (20, 20))
@@ -345,9 +346,9 @@ def test_a_still_cameras_tap_table_is_kept_from_the_second_read():
 
 
 def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
-    """camera.filtered_chain reads the footprints whose read of the fine map is not finite from the
-    coarse one: a still camera's are the same each frame, kept as the same arrays (camera._SUBSETS)
-    so that texture.filtered_read keeps their taps as well; every frame's read has the array version's bits."""
+    """pinhole.filtered_chain reads the footprints whose read of the fine map is not finite from the
+    coarse one: a still camera's are the same each frame, kept as the same arrays (pinhole._SUBSETS)
+    so that mipmap.filtered_read keeps their taps as well; every frame's read has the array version's bits."""
     rng = np.random.default_rng(8)
     fine = mipmap(rng.random((24, 30, 3)).astype(np.float32), Grid((-0.6, -0.4), 0.04, (24, 30)),
                   outside="constant", value=np.full(3, np.nan))
@@ -356,10 +357,10 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
     n = 2000
     fp = footprints(rng.uniform(-1.4, 1.4, n), rng.uniform(-1.4, 1.4, n),
                     rng.normal(0.0, 1.0, (n, 2, 2)) * np.exp(rng.uniform(np.log(0.005), np.log(0.5), n))[:, None, None])
-    want = texture.filtered_arrays(fine, fp, LOD_BIAS)
+    want = reference.filtered_arrays(fine, fp, LOD_BIAS)
     missing = np.flatnonzero(~np.isfinite(want).all(axis=0))
     subset = texture.Footprints(*(a[missing] for a in (fp.x, fp.y, fp.major, fp.minor, fp.ex, fp.ey)))
-    want[:, missing] = texture.filtered_arrays(coarse, subset, LOD_BIAS)
+    want[:, missing] = reference.filtered_arrays(coarse, subset, LOD_BIAS)
     assert 200 < len(missing) < n - 200
     camera._SUBSETS.clear()
     texture._TAPS.clear()
@@ -375,7 +376,7 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
     Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 133, 101),  # level: the horizon inside a row
 ])
 def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
-    """camera._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
+    """pinhole._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
     and footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
     rows, part = camera.rows_seeing_ground(view)
     got = camera._row_footprints(view, rows, part)
@@ -398,7 +399,7 @@ def test_pixel_rays_are_image_rays_through_the_pixel_centres_bit_for_bit():
 
 
 def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
-    """texture.filter_choice (numba) against filter_choice_arrays (numpy), the reference it
+    """mipmap.filter_choice (numba) against filter_choice_arrays (numpy), the reference it
     replaces: tap counts, levels and blends, for footprints from 1e-5 to 1e5 texels, round and
     long, and zero, NaN and infinite widths."""
     rng = np.random.default_rng(5)
@@ -410,7 +411,7 @@ def test_compiled_filter_choice_matches_the_array_version_bit_for_bit():
     major[300:400], minor[400:500], major[500:600] = np.nan, np.nan, np.inf
     for bias in (LOD_BIAS, 0.0, 0.7):
         got = texture.filter_choice(mip, bias, major, minor)
-        want = texture.filter_choice_arrays(mip, bias, major.copy(), minor.copy())
+        want = reference.filter_choice_arrays(mip, bias, major.copy(), minor.copy())
         for g, w in zip(got, want):
             assert g.dtype == w.dtype
             np.testing.assert_array_equal(g, w)
@@ -645,7 +646,7 @@ def test_procedural_sky_matches_its_model():
 
 
 def reference_footprint_axes(dxdu, dxdv, dydu, dydv):
-    """The numpy arithmetic that texture.footprint_axes compiles (its former body)."""
+    """The numpy arithmetic that mipmap.footprint_axes compiles (its former body)."""
     a = dxdu * dxdu + dxdv * dxdv  # J J^T = [[a, b], [b, c]]
     b = dxdu * dydu + dxdv * dydv
     c = dydu * dydu + dydv * dydv

@@ -300,7 +300,7 @@ def test_layers_split_the_grove_by_nearest_plane():
 
 
 # --- the array rasteriser that the compiled one replaced, kept as its reference ------------------
-# (pipeline/canopy.py before the loops moved to pipeline/_raster.py, verbatim but for names; the
+# (the former pipeline/canopy.py before the loops moved to pipeline/kernels/raster.py, verbatim but for names; the
 # shapes' preparation, _ellipses, _capsule_pieces and _translates, is shared)
 
 

@@ -532,7 +532,7 @@ def test_the_compiled_field_is_the_map_coordinates_field_to_the_bit(seed, thread
 
 @pytest.mark.parametrize("seed, threads", [(0, 1), (1, 3)])
 def test_a_grids_field_is_the_map_coordinates_field_to_the_bit(seed, threads, monkeypatch):
-    """A raster's points (x down each column, y along each row; ``_tiling.cloud_grid``) over
+    """A raster's points (x down each column, y along each row; ``kernels.tiling.cloud_grid``) over
     several copies of the tile and their blend bands, with a row and a column at a tile's edge
     and one at x = 0: the bits of the reference at the same points, in one thread or three."""
     monkeypatch.setattr(cores, "SMALLEST_SHARE", 100)

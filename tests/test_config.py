@@ -165,7 +165,7 @@ def test_shipped_example_config_is_valid():
 
 
 def test_the_names_a_config_gives_are_those_the_models_know(tmp_path):
-    """The config's vocabulary (pipeline/vocabulary.py) is what the models act on: every CIE
+    """The config's vocabulary (pipeline/config/vocabulary.py) is what the models act on: every CIE
     type of the range has its coefficients, every sky model a config may name is built."""
     assert set(clearsky.CIE_TYPES) == set(range(CIE_TYPE_RANGE[0], CIE_TYPE_RANGE[1] + 1))
     write_inputs(tmp_path)
@@ -176,7 +176,7 @@ def test_the_names_a_config_gives_are_those_the_models_know(tmp_path):
 
 
 def test_a_sky_model_is_one_module_and_one_registry_line(tmp_path):
-    """The overcast sky (pipeline/sky_overcast.py and its line in vocabulary.SKIES; docs/design.md,
+    """The overcast sky (pipeline/sky/overcast.py and its line in vocabulary.SKIES; docs/design.md,
     "Models plug in"): its key is read and checked by the registry's entry, another model's key
     is refused naming its owners, and its frame is the uniform sky's of the same radiance, to
     the bit."""

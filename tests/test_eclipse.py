@@ -1,4 +1,4 @@
-"""The eclipse sky and the corona (pipeline/eclipse.py, pipeline/sky.py), against independent
+"""The eclipse sky and the corona (pipeline/sky/eclipse.py, pipeline/sky/procedural.py), against independent
 references: the ephemeris at a displaced site, quadrature of the corona's profile, the
 published totality sky (docs/method.md, "The eclipse sky")."""
 

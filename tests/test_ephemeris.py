@@ -1,4 +1,4 @@
-"""Tests of pipeline.ephemeris: published eclipse contact times, an independent solar position,
+"""Tests of pipeline.sky.ephemeris: published eclipse contact times, an independent solar position,
 the circle-overlap area against a dense grid, properties and bad input."""
 
 from __future__ import annotations

@@ -246,7 +246,7 @@ def test_auto_exposure_follows_a_step_with_its_time_constant_and_stops_at_its_li
 
 AUTO_BAND = (0.15, 0.75)
 """Mean display value of the Dallas frames with auto exposure, up to second contact
-(docs/method.md, "Exposure")."""
+(docs/method.md, "Auto exposure")."""
 
 
 def test_auto_exposure_keeps_the_dallas_eclipse_readable_to_second_contact(tmp_path):

@@ -538,7 +538,7 @@ def test_sunshade_sky_integrates_to_the_open_ground_of_sunshade_ground(tmp_path)
     assert ground.reshape(-1, 3).mean(axis=0) @ LUMA == pytest.approx(direct + diffuse, rel=0.01)
 
 
-# --- the one sky interface (sky.Sky) ----------------------------------------------------------
+# --- the one sky interface (base.Sky) ----------------------------------------------------------
 
 
 def protocol_skies():
@@ -592,7 +592,7 @@ def test_sky_protocol_values_keep_each_models_meaning():
 
 @pytest.mark.parametrize("clouded", [False, True])
 def test_the_compiled_sky_rows_have_the_bits_of_the_array_operations(clouded):
-    # _array_loops.sky_rows against the numpy operations ProceduralSky.raster made before it
+    # kernels.arrays.sky_rows against the numpy operations ProceduralSky.raster made before it
     rng = np.random.default_rng(7)
     rows, cols, nodes = 23, 31, 4
     along = rng.random((3, nodes, cols), dtype=np.float32) * 5.0

@@ -1,6 +1,6 @@
 """The two-scale sun (docs/method.md, "Two scales for the sun"), validated end to end in world coordinates.
 
-Every test renders through ``ground.render_ground`` from a YAML config and a mask image, and
+Every test renders through ``stages.ground.render_ground`` from a YAML config and a mask image, and
 compares with references in ``tests/reference.py`` that trace light in metres and radians (no
 rasters, kernels or FFTs): the pinhole image of the sun (an ellipse, The Physics Teacher 61, 716
 (2023)), the crescents of an eclipse, the sun fraction over frames, and energy.

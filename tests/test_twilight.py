@@ -1,4 +1,4 @@
-"""The twilight sky's colour (pipeline/twilight.py): the layered single-scattering model against a
+"""The twilight sky's colour (pipeline/sky/twilight.py): the layered single-scattering model against a
 brute-force integral of the continuous atmosphere, Hulburt's ozone, and the colours it gives the sky."""
 
 import numpy as np

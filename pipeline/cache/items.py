@@ -103,13 +103,13 @@ class BrokenItem(Exception):
 class ItemStore:
     """Items by kind and parameters under one root folder: read back checked, else computed and written.
 
-    Cheap to create and to pickle (joblib workers). ``cache.Cache`` adds what concerns the store as a
+    Cheap to create and to pickle (joblib workers). ``store.Cache`` adds what concerns the store as a
     whole: its listing, full checks, clearing and budget.
 
     Parameters
     ----------
     root : str or os.PathLike
-        The cache folder, usually ``cache.cache_dir(...)``; created on first write.
+        The cache folder, usually ``store.cache_dir(...)``; created on first write.
 
     Attributes
     ----------

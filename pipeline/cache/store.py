@@ -1,5 +1,5 @@
 """The cache as a whole: where it is and its budget, and ``Cache``, the store of items
-(``cache_store.ItemStore``) with its listing, full checks, clearing, pruning to the budget and the
+(``items.ItemStore``) with its listing, full checks, clearing, pruning to the budget and the
 keys live runs use (docs/runs.md, "The cache on disk" and "The cache's budget").
 
 numpy is imported only where a size may be a numpy integer, so that checking a run's items by
@@ -8,14 +8,17 @@ their files' stamps (a resume with nothing to do) starts without it.
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import json
 import os
 import re
 import secrets
 import shutil
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from filelock import FileLock, Timeout
 
@@ -155,13 +158,13 @@ class CacheItem:
     bytes: int
     created: float | None
     last_used: float
-    params: dict | None = None
+    params: dict[str, Any] | None = None
 
 
 class Cache(ItemStore):
     """The store under one root folder. Cheap to create and to pickle (joblib workers).
 
-    Items are read, computed and written as ``cache_store.ItemStore`` does; a Cache also lists, checks,
+    Items are read, computed and written as ``items.ItemStore`` does; a Cache also lists, checks,
     clears and prunes them, and names those a run uses.
 
     Parameters
@@ -172,7 +175,7 @@ class Cache(ItemStore):
     Attributes
     ----------
     root, hits, misses, repaired, served
-        As in ``cache_store.ItemStore``.
+        As in ``items.ItemStore``.
     """
 
     # -- maintenance -------------------------------------------------------------------
@@ -237,7 +240,7 @@ class Cache(ItemStore):
         return [self._info(kind, key, path) for what, kind, key, path in self._walk()
                 if what == "item"]
 
-    def strays(self, *, remove: bool = False) -> list[tuple[Path, str]]:
+    def strays(self, *, remove: bool = False) -> builtins.list[tuple[Path, str]]:
         """Every entry inside a kind's folder that is not an item, nor a temporary folder.
 
         Parameters
@@ -261,7 +264,7 @@ class Cache(ItemStore):
                     path.unlink(missing_ok=True)
         return found
 
-    def verify(self, *, remove: bool = False) -> list[tuple[CacheItem, str]]:
+    def verify(self, *, remove: bool = False) -> builtins.list[tuple[CacheItem, str]]:
         """Check every item fully (sizes, headers, CRC-32 of all files and of meta.json).
 
         Reads the whole cache; ``strays`` lists what is not an item.
@@ -320,7 +323,7 @@ class Cache(ItemStore):
             if emptied:
                 _rmdir_if_empty(kind_dir)
 
-    def clear(self) -> list[CacheItem]:
+    def clear(self) -> builtins.list[CacheItem]:
         """Remove every item, leftover temporary folder and free lock file.
 
         Files in the root that are not the cache's (e.g. FFTW wisdom) are kept.
@@ -348,7 +351,7 @@ class Cache(ItemStore):
         self._remove_empty_folders()
         return removed
 
-    def prune(self, max_bytes: int, *, keep=frozenset()) -> list[CacheItem]:
+    def prune(self, max_bytes: int, *, keep: Collection[str] = frozenset()) -> builtins.list[CacheItem]:
         """Remove leftover temporary folders, then the least recently used items down to a budget.
 
         Never an item whose key is in ``keep`` or in use by a live run (``in_use``).
@@ -389,7 +392,7 @@ class Cache(ItemStore):
         return removed
 
     @contextlib.contextmanager
-    def in_use(self, keys):
+    def in_use(self, keys: Iterable[str]) -> Iterator[None]:
         """For the block, name ``keys`` as in use by this process.
 
         A list in ``RUNS`` and a lock held beside it, which ``keys_in_use`` of any other process reads,

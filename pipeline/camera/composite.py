@@ -4,6 +4,7 @@ exposure and the display transforms (sRGB, filmic). EXR output stays scene-linea
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import DISPLAYS, WHITE_BALANCES
 from pipeline.core import io
@@ -40,7 +41,7 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return x.reshape(shape)
 
 
-def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25) -> np.ndarray:
+def display_ground(irradiance: np.ndarray, unshadowed: ArrayLike, *, white: float = 1.25) -> np.ndarray:
     """Display-referred sRGB picture of a ground irradiance raster.
 
     The open-sky irradiance maps to ``1 / white`` of full scale, grey-balanced by its luminance,
@@ -60,8 +61,7 @@ def display_ground(irradiance: np.ndarray, unshadowed: np.ndarray, *, white=1.25
     numpy.ndarray
         (rows, cols, 3) float32 sRGB code values in [0, 1] [1].
     """
-    unshadowed = np.asarray(unshadowed, dtype=np.float64)
-    luminance = float(unshadowed @ REC709_LUMINANCE)
+    luminance = float(np.asarray(unshadowed, dtype=np.float64) @ REC709_LUMINANCE)
     scale = 1.0 / (white * luminance) if luminance > 0 else 1.0
     return srgb_encode(np.asarray(irradiance, dtype=np.float32) * np.float32(scale))
 
@@ -90,7 +90,7 @@ def display_sky(radiance: np.ndarray) -> np.ndarray:
     return srgb_encode(exposed / (1.0 + exposed))
 
 
-def white_balance(setting: str, *, sun_irradiance, sky_irradiance) -> np.ndarray:
+def white_balance(setting: str, *, sun_irradiance: ArrayLike, sky_irradiance: ArrayLike) -> np.ndarray:
     """Per-channel gains of a von Kries white balance.
 
     The chosen light comes out grey, its luminance kept; a light with a channel not above 0 gets
@@ -198,7 +198,7 @@ def aces_filmic(x: np.ndarray) -> np.ndarray:
 
 
 def display(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
-            balance=None) -> np.ndarray:
+            balance: ArrayLike | None = None) -> np.ndarray:
     """sRGB display values in [0, 1] of scene-linear radiance, exposed and white-balanced.
 
     Parameters
@@ -237,7 +237,7 @@ def _check_display(transform: str) -> None:
 
 
 def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
-                  balance=None) -> np.ndarray:
+                  balance: ArrayLike | None = None) -> np.ndarray:
     """The 8-bit codes ``io.write_png`` writes of ``display(radiance, ...)``, bit for bit, in
     two compiled passes around numpy's power (docs/runs.md, "Writing").
 
@@ -257,22 +257,22 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
         As ``display``.
     """
     _check_display(transform)
-    from pipeline.kernels import arrays as _array_loops  # numba costs 0.3 s to import: only where frames are written
+    from pipeline.kernels import arrays  # numba costs 0.3 s to import: only where frames are written
 
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
     gain = np.array(np.broadcast_to(np.float32(exposure) if balance is None  # a copy: one compiled signature
                                     else (np.asarray(balance) * exposure).astype(np.float32), 3), dtype=np.float32)
     linear = np.empty_like(radiance)
-    _array_loops.exposed_display(radiance, gain, transform == "filmic", linear)
+    arrays.exposed_display(radiance, gain, transform == "filmic", linear)
     # numpy's power, as srgb_encode takes it (its vector loops may differ from a compiled powf in
     # the last bit), over an array of the same shape
     powered = np.power(linear, np.float32(1.0 / 2.4))
     codes = np.empty(radiance.shape, dtype=np.uint8)
-    _array_loops.display_codes(linear, powered, io.half_dither(radiance.shape), codes)
+    arrays.display_codes(linear, powered, io.half_dither(radiance.shape), codes)
     return codes
 
 
-def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
+def exposure_for(unshadowed: ArrayLike, *, stops: float = 0.0) -> float:
     """The exposure at which a white Lambertian ground under the open clear sky and sun is 1, times 2^stops.
 
     Fixed for a whole run, so an eclipse or a cloud darkens the picture as it darkens the day.
@@ -293,8 +293,8 @@ def exposure_for(unshadowed, *, stops: float = 0.0) -> float:
     return float(2.0**stops * np.pi / luminance) if luminance > 0 else float(2.0**stops)
 
 
-def auto_exposure(readings, *, reference, frame_time: float, time_constant: float,
-                  limits, stops: float = 0.0) -> np.ndarray:
+def auto_exposure(readings: ArrayLike, *, reference: ArrayLike, frame_time: float, time_constant: float,
+                  limits: tuple[float, float], stops: float = 0.0) -> np.ndarray:
     """Exposure per frame that follows the scene's light like a camera's auto exposure.
 
     Each frame's meter reading is followed in log (stops) through a first-order lag, the first

@@ -8,7 +8,7 @@ with yaw 0 has north at the top of its image, as the ground rasters do.
 
 Below the rays, the perspective view of the ground and the sky (the background of the frame):
 ``ground_hits`` and ``ground_view`` (the Lambertian ground, its anti-aliased horizon and
-distances; the ground rasters read over each pixel's footprint through ``texture``),
+distances; the ground rasters read over each pixel's footprint through ``mipmap``),
 ``sky_view``, ``horizon_sky`` and ``background``.
 
 Why one module: the pixels' rays, where they meet the ground and the sky plane, and the
@@ -18,12 +18,19 @@ horizon's coverage are one geometry, made once per camera for the frames of a ru
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.kept import kept_at
-from pipeline.texture import mipmap as texture
+from pipeline.texture import mipmap
+
+if TYPE_CHECKING:
+    from pipeline.sky.base import Sky
+    from pipeline.texture.albedo import StochasticTiling
 
 __all__ = ["MIN_DOWNWARD", "MIN_UPWARD", "Camera", "background", "ground_distance",
            "ground_fraction_rows", "ground_hits", "ground_irradiance", "ground_view", "horizon_sky", "image_rays",
@@ -55,7 +62,7 @@ class Camera:
     width: int
     height: int
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (0.0 < self.vertical_fov < np.pi):
             raise ValueError(f"vertical_fov must lie in (0, pi) rad, got {self.vertical_fov}")
         if not (-np.pi / 2 <= self.pitch <= np.pi / 2):
@@ -64,7 +71,8 @@ class Camera:
             raise ValueError(f"image size must be positive, got {self.width} x {self.height}")
 
     @classmethod
-    def look_at(cls, position, target, *, vertical_fov: float, width: int, height: int) -> Camera:
+    def look_at(cls, position: ArrayLike, target: ArrayLike, *, vertical_fov: float, width: int,
+                height: int) -> Camera:
         """The camera at ``position`` looking at ``target`` (level, no roll).
 
         Parameters
@@ -81,12 +89,13 @@ class Camera:
         Camera
             Its yaw and pitch those of ``target - position``.
         """
-        d = np.asarray(target, dtype=np.float64) - np.asarray(position, dtype=np.float64)
+        origin = np.asarray(position, dtype=np.float64)
+        d = np.asarray(target, dtype=np.float64) - origin
         if not np.any(d):
             raise ValueError("target and position coincide")
         yaw = float(np.arctan2(d[0], d[1]) % (2 * np.pi))
         pitch = float(np.arctan2(d[2], np.hypot(d[0], d[1])))
-        return cls(tuple(float(v) for v in position), yaw, pitch, vertical_fov, width, height)
+        return cls((float(origin[0]), float(origin[1]), float(origin[2])), yaw, pitch, vertical_fov, width, height)
 
     @property
     def focal(self) -> float:
@@ -104,7 +113,7 @@ class Camera:
         return right, np.cross(right, forward), forward
 
 
-def image_rays(camera: Camera, u, v) -> np.ndarray:
+def image_rays(camera: Camera, u: ArrayLike, v: ArrayLike) -> np.ndarray:
     """World directions through image points.
 
     Parameters
@@ -148,7 +157,7 @@ def pixel_rays(camera: Camera) -> np.ndarray:
     return out
 
 
-def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def project_points(camera: Camera, points: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where world points land in the image.
 
     Parameters
@@ -181,7 +190,7 @@ def project_points(camera: Camera, points) -> tuple[np.ndarray, np.ndarray, np.n
 #
 # Ground rasters are minified far from the camera, so they are read over each pixel's footprint
 # on the ground (the parallelogram spanned by the columns of the Jacobian d(x, y)/d(u, v) of its
-# ray's hit point), through the mip maps and the anisotropic filter of ``texture``.
+# ray's hit point), through the mip maps and the anisotropic filter of ``mipmap``.
 # ---------------------------------------------------------------------------------------------
 
 MIN_DOWNWARD = 1e-9
@@ -221,7 +230,7 @@ def ground_fraction_rows(camera: Camera) -> np.ndarray:
     return np.where(top <= 0, np.where(bottom < 0, 1.0, 0.0), np.where(bottom < 0, partial, 0.0))
 
 
-def ground_hits(camera: Camera):
+def ground_hits(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Where each pixel's ground part meets the ground plane z = 0, and its footprint there.
 
     Parameters
@@ -265,7 +274,7 @@ def ground_hits(camera: Camera):
     return x, y, jacobian, distance, coverage
 
 
-def rows_seeing_ground(camera: Camera):
+def rows_seeing_ground(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """The image rows that see ground, (r,) int, every pixel of which sees it, and their
     fractions below the horizon (r,) float64 [1]; checks that the camera is above the ground."""
     height_m = float(camera.position[2])
@@ -276,7 +285,7 @@ def rows_seeing_ground(camera: Camera):
     return rows, fraction[rows]
 
 
-def _row_hits(camera: Camera, rows, part):
+def _row_hits(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """``ground_hits`` for some image rows (r,) int that see ground, of fractions ``part`` (r,)
     below the horizon [1], without the full-image arrays: x, y [m], the Jacobian's entries
     dx/du, dx/dv, dy/du, dy/dv [m per pixel] and distance [m], each (r, width) float64."""
@@ -302,18 +311,19 @@ def _row_hits(camera: Camera, rows, part):
     return x, y, jacobian[0, 0], jacobian[0, 1], jacobian[1, 0], jacobian[1, 1], distance
 
 
-def ground_view(camera: Camera, *, irradiance, albedo: texture.MipMap):
+def ground_view(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap],
+                albedo: mipmap.MipMap | StochasticTiling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The Lambertian ground z = 0 in the camera's image: radiance = albedo E / pi.
 
     Parameters
     ----------
     camera : Camera
         The pinhole camera, above the ground (position z > 0). [m]
-    irradiance : texture.MipMap or sequence of texture.MipMap
+    irradiance : mipmap.MipMap or sequence of mipmap.MipMap
         The ground irradiance E (channels 3, or 1 for grey), or a sequence of maps, finest
         first: each but the last holds NaN beyond its raster ("constant" with value NaN), and a
         footprint that reaches NaN is read from the next. [radiance x sr]
-    albedo : texture.MipMap or albedo.StochasticTiling
+    albedo : mipmap.MipMap or albedo.StochasticTiling
         The ground's albedo (channels 3 or 1), or a laying of one with a
         ``sample(footprints, lod_bias=)`` method. [1]
 
@@ -322,7 +332,7 @@ def ground_view(camera: Camera, *, irradiance, albedo: texture.MipMap):
     radiance : numpy.ndarray
         (height, width, 3) float32: albedo E / pi over the pixel's ground part, with albedo and
         E each averaged over its ground footprint (``ground_hits``,
-        ``texture.sample_footprint``); 0 where no ground is seen. [radiance]
+        ``mipmap.sample_footprint``); 0 where no ground is seen. [radiance]
     ground_fraction : numpy.ndarray
         (height, width) float32: the fraction of the pixel below the horizon, the anti-aliased
         horizon; read-only, made once per camera. [1]
@@ -345,14 +355,14 @@ def ground_view(camera: Camera, *, irradiance, albedo: texture.MipMap):
     return radiance, ground_fractions(camera)[0], ground_distance(camera)
 
 
-def ground_irradiance(camera: Camera, *, irradiance) -> np.ndarray:
+def ground_irradiance(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap]) -> np.ndarray:
     """The ground's horizontal irradiance E that each pixel sees, without the albedo.
 
     Parameters
     ----------
     camera : Camera
         The pinhole camera, above the ground (position z > 0). [m]
-    irradiance : texture.MipMap or sequence of texture.MipMap
+    irradiance : mipmap.MipMap or sequence of mipmap.MipMap
         The ground irradiance, as ``ground_view`` takes it. [radiance x sr]
 
     Returns
@@ -369,7 +379,7 @@ def ground_irradiance(camera: Camera, *, irradiance) -> np.ndarray:
     return out
 
 
-def _seen_irradiance(camera: Camera, irradiance):
+def _seen_irradiance(camera: Camera, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap]):
     """(the image rows that see ground, E (channels, pixels) float32 over their footprints or
     None without such rows): ``ground_view``'s and ``ground_irradiance``'s read of the
     irradiance MipMaps (a MipMap or a sequence, finest first). [radiance x sr]"""
@@ -419,55 +429,55 @@ def ground_distance(camera: Camera) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def view_footprints(camera: Camera):
+def view_footprints(camera: Camera) -> tuple[mipmap.Footprints, np.ndarray]:
     """``ground_view``'s Footprints of the pixels of the image rows that see ground, rows
     first, and their distances (n,) float32 [m] (``_row_footprints``): made once for the
     frames of a run, whose camera stands still. Not to be written to (left writable: numba
     compiles read-only arrays as another type)."""
     rows, part = rows_seeing_ground(camera)
     *ellipses, distance = _row_footprints(camera, rows, part)
-    return texture.Footprints(*ellipses), distance
+    return mipmap.Footprints(*ellipses), distance
 
 
 @functools.lru_cache(maxsize=2)
-def albedo_in_view(camera: Camera, albedo) -> np.ndarray:
+def albedo_in_view(camera: Camera, albedo: mipmap.MipMap | StochasticTiling) -> np.ndarray:
     """The albedo (channels, n) float32 (read-only) of the ground pixels of ``camera``'s view
     (``view_footprints``), for a MipMap or a laying with ``sample``. It depends on the view
     and the albedo alone, so the frames of a run, whose camera stands still, read it once (the
     lru_cache holds the albedo, so its id is not reused)."""
     fp, _ = view_footprints(camera)
-    if isinstance(albedo, texture.MipMap):
-        rho = texture.filtered_read(albedo, fp, texture.LOD_BIAS)
+    if isinstance(albedo, mipmap.MipMap):
+        rho = mipmap.filtered_read(albedo, fp, mipmap.LOD_BIAS)
     else:
-        rho = albedo.sample(fp, lod_bias=texture.LOD_BIAS)
+        rho = albedo.sample(fp, lod_bias=mipmap.LOD_BIAS)
     rho.flags.writeable = False
     return rho
 
 
-def filtered_chain(maps, fp: texture.Footprints) -> np.ndarray:
+def filtered_chain(maps: Sequence[mipmap.MipMap], fp: mipmap.Footprints) -> np.ndarray:
     """(channels, n) samples of the first of ``maps`` whose footprint stays finite; the footprints
     read from a later map are a still camera's same arrays each frame, so that their taps are kept
     (docs/accuracy.md, "The far ground's taps")."""
-    values = texture.filtered_read(maps[0], fp, texture.LOD_BIAS)
+    values = mipmap.filtered_read(maps[0], fp, mipmap.LOD_BIAS)
     for mip in maps[1:]:
         missing = np.flatnonzero(~np.isfinite(values).all(axis=0))
         if not len(missing):
             break
-        arrays = tuple(getattr(fp, f.name) for f in fields(texture.Footprints))
-        subset = kept_at(_SUBSETS, missing.tobytes(), arrays, lambda: texture.Footprints(*(a[missing] for a in arrays)),
+        arrays = tuple(getattr(fp, f.name) for f in fields(mipmap.Footprints))
+        subset = kept_at(_SUBSETS, missing.tobytes(), arrays, lambda: mipmap.Footprints(*(a[missing] for a in arrays)),
                          read_only=False)  # to numba's loops, as they are
-        values[:, missing] = texture.filtered_read(mip, subset, texture.LOD_BIAS)
+        values[:, missing] = mipmap.filtered_read(mip, subset, mipmap.LOD_BIAS)
     return values
 
 
 _SUBSETS: dict = {}  # filtered_chain's footprints beyond a map: a still camera's are the same each frame,
-# kept as the same arrays so that texture.filtered_read keeps their taps too
+# kept as the same arrays so that mipmap.filtered_read keeps their taps too
 
 
-def _row_footprints(camera: Camera, rows, part):
+def _row_footprints(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """The ``Footprints`` fields and the distances of the pixels of some image rows that see
     ground (``_row_hits``), each (r width,) float64 (the distances float32): compiled
-    (``_filter.row_footprints``), the operations of ``_row_footprints_arrays``."""
+    (``kernels.filter.row_footprints``), the operations of ``_row_footprints_arrays``."""
     from pipeline.kernels import filter as _filter
 
     n = len(rows) * camera.width
@@ -481,20 +491,20 @@ def _row_footprints(camera: Camera, rows, part):
     return x, y, major, minor, ex, ey, distance
 
 
-def _row_footprints_arrays(camera: Camera, rows, part):
+def _row_footprints_arrays(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """``_row_footprints`` with whole arrays (numpy), the reference of the compiled loop."""
     x, y, *jacobian, distance = (u.ravel() for u in _row_hits(camera, rows, part))
-    return (x, y, *texture.footprint_axes(*jacobian), distance.astype(np.float32))
+    return (x, y, *mipmap.footprint_axes(*jacobian), distance.astype(np.float32))
 
 
-def sky_view(camera: Camera, sky) -> np.ndarray:
+def sky_view(camera: Camera, sky: Sky) -> np.ndarray:
     """The sky's radiance in the camera's image, without the sun disc.
 
     Parameters
     ----------
     camera : Camera
         The pinhole camera.
-    sky : sky.Sky
+    sky : base.Sky
         Asked for its ``view_radiance`` along each pixel's unit vector w, at sky-plane points
         s = (wx / wz, wy / wz) [tan] with wz / |w| held at MIN_UPWARD or more, with a pixel's
         width on the sky plane along the radius and across as the footprint.
@@ -531,7 +541,7 @@ def _sky_rays(camera: Camera):
     return rows, w, s, footprint
 
 
-def horizon_sky(camera: Camera, sky) -> np.ndarray:
+def horizon_sky(camera: Camera, sky: Sky) -> np.ndarray:
     """The sky's radiance just above the horizon in each image column.
 
     The radiance of an endless column of haze seen level (the sky model holds its haze), which
@@ -541,7 +551,7 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
     ----------
     camera : Camera
         The pinhole camera.
-    sky : sky.Sky
+    sky : base.Sky
         As ``sky_view`` takes it.
 
     Returns
@@ -565,16 +575,18 @@ def horizon_sky(camera: Camera, sky) -> np.ndarray:
     return np.asarray(sky.view_radiance(w, s, 1.0 / (camera.focal * MIN_UPWARD**2)), dtype=np.float32)
 
 
-def background(camera: Camera, *, irradiance, albedo: texture.MipMap, sky, seen_sky=None):
+def background(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap],
+               albedo: mipmap.MipMap | StochasticTiling, sky: Sky,
+               seen_sky: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The background B of the composite: ground and sky blended by the horizon's coverage.
 
     Parameters
     ----------
     camera, irradiance
         As in ``ground_irradiance``.
-    albedo : texture.MipMap or albedo.StochasticTiling
+    albedo : mipmap.MipMap or albedo.StochasticTiling
         The ground's albedo, as ``ground_view`` takes it. [1]
-    sky : sky.Sky
+    sky : base.Sky
         As ``sky_view`` takes it.
     seen_sky : numpy.ndarray, optional
         The sky's ``sky_view`` made before (not changed), so that a frame's light passes read

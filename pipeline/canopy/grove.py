@@ -8,9 +8,11 @@ grove and its masks").
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.geometry import normalized
 
@@ -171,7 +173,7 @@ class Shapes:
     end: np.ndarray
     radius: np.ndarray
 
-    def subset(self, leaves=slice(None), wood=slice(None)) -> Shapes:
+    def subset(self, leaves: np.ndarray | slice = slice(None), wood: np.ndarray | slice = slice(None)) -> Shapes:
         """The ellipses selected by ``leaves`` and capsules selected by ``wood``.
 
         A boolean mask that selects everything keeps the arrays themselves (a single canopy plane's layer
@@ -211,7 +213,7 @@ class Wood:
     radius: np.ndarray
 
 
-def _every(select, n: int):
+def _every(select: np.ndarray | slice, n: int) -> np.ndarray | slice:
     """``select``, or slice(None) where it is a boolean mask (n,) that is true everywhere."""
     if isinstance(select, np.ndarray) and select.dtype == bool and select.shape == (n,) and select.all():
         return slice(None)
@@ -243,8 +245,8 @@ def grow_grove(params: GroveParams = GroveParams()) -> Grove:
     p = params
     if p.layout not in ("isolated", "periodic"):
         raise ValueError(f"layout must be 'isolated' or 'periodic', not {p.layout!r}")
-    if p.layout == "periodic" and not p.tile:
-        raise ValueError("a periodic grove needs a tile period [m]")
+    if p.layout == "periodic":
+        _tile(p)
     bases = _tree_bases(p)
     trees = [_grow_tree(np.random.default_rng([p.seed, 1, i]), base, p) for i, base in enumerate(bases)]
     cat = lambda k: np.concatenate([t[k] for t in trees])  # noqa: E731
@@ -263,6 +265,13 @@ def grow_grove(params: GroveParams = GroveParams()) -> Grove:
     )
 
 
+def _tile(p: GroveParams) -> float:
+    """The tile period of a periodic grove [m]; ValueError without one."""
+    if not p.tile:
+        raise ValueError("a periodic grove needs a tile period [m]")
+    return p.tile
+
+
 def _tree_bases(p: GroveParams) -> np.ndarray:
     """Trunk feet (count, 2) [m], at least a crown radius apart where space allows."""
     rng = np.random.default_rng([p.seed, 0])
@@ -271,8 +280,9 @@ def _tree_bases(p: GroveParams) -> np.ndarray:
     for i in range(p.count):
         for _attempt in range(100):
             if p.layout == "periodic":
-                xy = np.asarray(p.center) + (rng.random(2) - 0.5) * p.tile
-                near = np.abs((xy - bases[:i] + p.tile / 2) % p.tile - p.tile / 2)
+                tile = _tile(p)
+                xy = np.asarray(p.center) + (rng.random(2) - 0.5) * tile
+                near = np.abs((xy - bases[:i] + tile / 2) % tile - tile / 2)
             else:
                 radius, angle = spread * np.sqrt(rng.random()), 2 * np.pi * rng.random()
                 xy = np.asarray(p.center) + radius * np.array([np.cos(angle), np.sin(angle)])
@@ -283,7 +293,7 @@ def _tree_bases(p: GroveParams) -> np.ndarray:
     return bases
 
 
-def _grow_tree(rng, base, p: GroveParams) -> dict:
+def _grow_tree(rng: np.random.Generator, base: np.ndarray, p: GroveParams) -> dict[str, np.ndarray]:
     """Wood and leaves of one tree standing at ``base`` (x, y) [m], as a dict of arrays."""
     R, h = p.crown_radius, p.height
     half = R * rng.uniform(0.9, 1.1, 2)
@@ -325,11 +335,12 @@ def _grow_tree(rng, base, p: GroveParams) -> dict:
                 end=np.concatenate(end), radius=np.concatenate(radius))
 
 
-def _wrap(points, p: GroveParams):
+def _wrap(points: np.ndarray, p: GroveParams) -> tuple[np.ndarray, np.ndarray]:
     """Points (n, 3) [m] moved by whole tiles into the tile around p.center; returns them and the shift."""
-    low = np.asarray(p.center) - p.tile / 2
+    tile = _tile(p)
+    low = np.asarray(p.center) - tile / 2
     shift = np.zeros_like(points)
-    shift[:, :2] = -np.floor((points[:, :2] - low) / p.tile) * p.tile
+    shift[:, :2] = -np.floor((points[:, :2] - low) / tile) * tile
     return points + shift, shift
 
 
@@ -338,7 +349,7 @@ def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
 
     Each twists about its length axis by twist sin(2 pi frame / cycle + twist_phase), then swings about
     its horizontal axis through its stem by swing sin(2 pi frame / cycle + swing_phase). The frame is
-    reduced modulo ``cycle`` first. (Compiled: pipeline/_raster.py, ``flutter``.)
+    reduced modulo ``cycle`` first. (Compiled: pipeline/kernels/raster.py, ``flutter``.)
 
     Parameters
     ----------
@@ -354,17 +365,18 @@ def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
     Leaves
         The leaves at ``frame`` [m].
     """
-    from pipeline.kernels import raster as _raster
+    from pipeline.kernels import raster
 
     omega = 2 * np.pi * np.mod(frame, flutter.cycle) / flutter.cycle
     leaves = grove.leaves
-    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (
-        leaves.center, leaves.axis_u, leaves.axis_v, grove.pivot, grove.swing_axis, grove.swing_phase,
-        grove.twist_phase)]
-    return Leaves(*_raster.flutter(*arrays, float(omega), float(flutter.swing), float(flutter.twist)))
+    center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase = (
+        np.ascontiguousarray(a, dtype=np.float64) for a in (leaves.center, leaves.axis_u, leaves.axis_v, grove.pivot,
+                                                             grove.swing_axis, grove.swing_phase, grove.twist_phase))
+    return Leaves(*raster.flutter(center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase,
+                                   float(omega), float(flutter.swing), float(flutter.twist)))
 
 
-def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: float) -> Shapes:
+def project(leaves: Leaves, wood: Wood | None = None, *, sun: ArrayLike, plane_height: float) -> Shapes:
     """Leaves and wood projected along the sun onto the canopy plane z = plane_height.
 
     A point P lands at P_xy - (P_z - plane_height) s. Leaves stay exact ellipses. A wood capsule
@@ -388,12 +400,13 @@ def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: floa
     Shapes
         The shapes on the canopy plane [m].
     """
-    from pipeline.kernels import raster as _raster
+    from pipeline.kernels import raster
 
     s = np.asarray(sun, dtype=np.float64)
 
-    def onto(points, offset=plane_height):  # P_xy - (P_z - offset) s, compiled, the same bits
-        return _raster.onto(np.ascontiguousarray(points, dtype=np.float64), float(s[0]), float(s[1]), float(offset))
+    def onto(points: np.ndarray, offset: float = plane_height) -> np.ndarray:
+        # P_xy - (P_z - offset) s, compiled, the same bits
+        return raster.onto(np.ascontiguousarray(points, dtype=np.float64), float(s[0]), float(s[1]), float(offset))
 
     if wood is None:
         wood = Wood(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
@@ -404,7 +417,7 @@ def project(leaves: Leaves, wood: Wood | None = None, *, sun, plane_height: floa
                   onto(wood.start), onto(wood.end), wood.radius * stretch)
 
 
-def layer_index(grove: Grove, heights) -> tuple[np.ndarray, np.ndarray]:
+def layer_index(grove: Grove, heights: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """Index of the nearest canopy plane for every leaf (by its rest centre) and wood segment (by its midpoint).
 
     Parameters
@@ -421,8 +434,8 @@ def layer_index(grove: Grove, heights) -> tuple[np.ndarray, np.ndarray]:
     wood_layer : numpy.ndarray
         (M,) int.
     """
-    heights = np.asarray(heights, dtype=np.float64)
-    nearest = lambda z: np.argmin(np.abs(z[:, None] - heights[None, :]), axis=1)  # noqa: E731
+    planes = np.asarray(heights, dtype=np.float64)
+    nearest = lambda z: np.argmin(np.abs(z[:, None] - planes[None, :]), axis=1)  # noqa: E731
     wood_z = 0.5 * (grove.wood.start[:, 2] + grove.wood.end[:, 2])
     return nearest(grove.leaves.center[:, 2]), nearest(wood_z)
 
@@ -448,7 +461,8 @@ def shapes_bounds(shapes: Shapes) -> tuple[float, float, float, float]:
     return (*low.min(axis=0), *high.max(axis=0))
 
 
-def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun, plane_height: float):
+def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun: ArrayLike,
+                 plane_height: float) -> tuple[float, float, float, float]:
     """The rectangle of the projected grove for every flutter frame.
 
     A leaf's points stay within |U| + sqrt(|U|^2 + |V|^2) of its stem however it turns, and a

@@ -3,13 +3,14 @@
 A mask image is linear transparency (1 = open sky), north-up, covering ``size`` [m] around
 ``center`` [m]; its texels are taken as piecewise constant, so resampling by exact overlap
 areas (a box filter) is exact for any ratio of texel to ground pixel. A drawn grove's masks are
-made by ``grove_geometry.py`` (the grove, its flutter, its projection) and ``rasteriser.py``.
+made by ``grove.py`` (the grove, its flutter, its projection) and ``rasteriser.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sparse
+from numpy.typing import ArrayLike
 
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.core.geometry import Grid
@@ -56,7 +57,8 @@ def transmittance_from_image(image: np.ndarray) -> np.ndarray:
     return np.clip(mask, 0.0, 1.0)
 
 
-def lattice_grid(center, size, lattice: Grid, *, periodic: bool = False) -> Grid:
+def lattice_grid(center: tuple[float, float], size: tuple[float, float], lattice: Grid, *,
+                 periodic: bool = False) -> Grid:
     """The grid of ``lattice``'s pixels for a canopy area ``size`` around ``center``.
 
     The whole cells it touches (isolated), or one period of whole cells starting at the cell of its
@@ -91,7 +93,8 @@ def lattice_grid(center, size, lattice: Grid, *, periodic: bool = False) -> Grid
     return Grid((lattice.origin[0] + col_lo * p, lattice.origin[1] - row_lo * p), p, (n_rows, n_cols))
 
 
-def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: bool = False):
+def transmittance_on_grid(transmittance: ArrayLike, *, center: tuple[float, float], size: tuple[float, float],
+                          grid: Grid, periodic: bool = False) -> np.ndarray:
     """A mask image area-averaged onto every pixel of ``grid`` (any pixel, any position).
 
     Exact overlap areas of its texels, open sky (1) beyond an isolated image, the image repeating
@@ -122,7 +125,8 @@ def transmittance_on_grid(transmittance, *, center, size, grid: Grid, periodic: 
     return 1.0 - _apply(rows, cols, occlusion)
 
 
-def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
+def occlusion_on_lattice(transmittance: ArrayLike, *, center: tuple[float, float], size: tuple[float, float],
+                         lattice: Grid) -> tuple[np.ndarray, Grid]:
     """Occlusion ``1 - m`` of an isolated canopy, area-averaged onto the cells of ``lattice`` that the mask touches.
 
     Parameters
@@ -143,7 +147,8 @@ def occlusion_on_lattice(transmittance, *, center, size, lattice: Grid):
     return 1.0 - transmittance_on_grid(transmittance, center=center, size=size, grid=grid), grid
 
 
-def tile_on_lattice(transmittance, *, center, size, lattice: Grid):
+def tile_on_lattice(transmittance: ArrayLike, *, center: tuple[float, float], size: tuple[float, float],
+                    lattice: Grid) -> tuple[np.ndarray, Grid]:
     """Transmittance of one period of a periodic canopy, area-averaged onto ``lattice``'s pixels.
 
     Parameters

@@ -1,13 +1,14 @@
 """The anti-aliased rasteriser: opaque shapes on a canopy plane drawn as a transmittance mask or as fragments.
 
-``rasterize_transmittance`` draws ``grove_geometry.Shapes`` as a transmittance mask, ``coverage_fragments``
+``rasterize_transmittance`` draws ``grove.Shapes`` as a transmittance mask, ``coverage_fragments``
 gives the coverage of every pixel by every shape, and ``grove_mask`` draws a grove at one
-flutter frame (``_raster.py`` holds the compiled kernels).
+flutter frame (``kernels/raster.py`` holds the compiled kernels).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.canopy.grove import FlutterParams, Grove, Shapes, leaves_at, project
 from pipeline.core.geometry import Grid
@@ -27,7 +28,7 @@ __all__ = ["rasterize_transmittance", "coverage_fragments", "grove_mask"]
 _CHUNK = 1 << 17  # a box of more than 16 _CHUNK samples gets fewer per pixel [count]
 
 
-def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.ndarray:
+def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period: tuple[float, float] | None = None) -> np.ndarray:
     """Transmittance of opaque ``shapes`` on ``grid``: 1 = open sky.
 
     Each shape covers a fraction c_i of a pixel's area (box filter; see the comment above for the
@@ -36,7 +37,7 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
     and two disjoint shapes each covering half a pixel give 0.25, not 0 (a pixel-scale
     statistical choice: overlaps of shapes are not resolved below a pixel).
 
-    The loops over shapes and their pixels are compiled (``pipeline/_raster.py``, numba), with
+    The loops over shapes and their pixels are compiled (``pipeline/kernels/raster.py``, numba), with
     the coverages of ``coverage_fragments`` to float32 rounding (docs/accuracy.md).
 
     Parameters
@@ -57,10 +58,10 @@ def rasterize_transmittance(shapes: Shapes, grid: Grid, *, period=None) -> np.nd
     return _compiled(shapes, grid, period, emit=False)
 
 
-def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
-    """The compiled rasteriser (pipeline/_raster.py): the transmittance, or with ``emit`` the
+def _compiled(shapes: Shapes, grid: Grid, period: tuple[float, float] | None, *, emit: bool):
+    """The compiled rasteriser (pipeline/kernels/raster.py): the transmittance, or with ``emit`` the
     fragments of ``coverage_fragments``."""
-    from pipeline.kernels import raster as _raster
+    from pipeline.kernels import raster
 
     rows, cols = grid.shape
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
@@ -72,24 +73,26 @@ def _compiled(shapes: Shapes, grid: Grid, period, *, emit: bool):
         if period_px is None:
             # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
             order = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
-            center, half, params, feature, thickness, owner = _raster.in_order(
+            center, half, params, feature, thickness, owner = raster.in_order(
                 order, center, half, params, feature, thickness, owner)
             index = np.arange(len(order))
         else:
             index, center = _translates(center, half, period_px, grid.shape)
             params = params.astype(np.float32)
         parts.append((capsule, center, half, index, params, feature, thickness, owner + offset))
-    size = sum(_raster.box_pixels(*part[1:4], rows, cols) for part in parts) if emit else 0
+    size = sum(raster.box_pixels(part[1], part[2], part[3], rows, cols) for part in parts) if emit else 0
     fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
     transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
-    for capsule, *arrays, owner in parts:
-        count = _raster.shapes(capsule, *arrays, 16 * _CHUNK, transmittance, fragments, owner, count)
+    for capsule, center, half, index, params, feature, thickness, owner in parts:
+        count = raster.shapes(capsule, center, half, index, params, feature, thickness, 16 * _CHUNK, transmittance,
+                               fragments, owner, count)
     if emit:
         return tuple(f[:count] for f in fragments)
     return transmittance.astype(np.float32)
 
 
-def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
+def coverage_fragments(shapes: Shapes, grid: Grid, *,
+                       period: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every pixel that every shape covers on ``grid``, as fragments (one per shape and pixel).
 
     The coverages are those that ``rasterize_transmittance`` multiplies: for each fragment the
@@ -114,8 +117,9 @@ def coverage_fragments(shapes: Shapes, grid: Grid, *, period=None):
     return _compiled(shapes, grid, period, emit=True)
 
 
-def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_height: float, grid: Grid,
-               period=None, select=None) -> np.ndarray:
+def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun: ArrayLike, plane_height: float, grid: Grid,
+               period: tuple[float, float] | None = None,
+               select: tuple[np.ndarray | slice, np.ndarray | slice] | None = None) -> np.ndarray:
     """Transmittance mask of the grove at ``frame`` on the canopy plane z = ``plane_height``.
 
     Parameters
@@ -141,16 +145,24 @@ def grove_mask(grove: Grove, flutter: FlutterParams, frame: int, *, sun, plane_h
     -------
     numpy.ndarray
         (rows, cols) float32 transmittance [1].
+
+    Raises
+    ------
+    ValueError
+        For a periodic grove without a tile period.
     """
     if period is None and grove.params.layout == "periodic":
-        period = (grove.params.tile, grove.params.tile)
+        tile = grove.params.tile
+        if tile is None:
+            raise ValueError("a periodic grove needs a tile period [m]")
+        period = (tile, tile)
     shapes = project(leaves_at(grove, flutter, frame), grove.wood, sun=sun, plane_height=plane_height)
     if select is not None:
         shapes = shapes.subset(*select)
     return rasterize_transmittance(shapes, grid, period=period)
 
 
-def _pixels(points, grid: Grid):
+def _pixels(points: np.ndarray, grid: Grid) -> np.ndarray:
     """Plane points (n, 2) [m] to continuous raster coordinates (u along columns, v along rows)
     [pixel], pixel (row, col) covering [col, col + 1) x [row, row + 1)."""
     return np.column_stack([points[:, 0] - grid.origin[0], grid.origin[1] - points[:, 1]]) / grid.pixel
@@ -158,11 +170,13 @@ def _pixels(points, grid: Grid):
 
 def _ellipses(shapes: Shapes, grid: Grid):
     """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
-    feature size B, thickness 2B, each ellipse's index. (Compiled: _raster.ellipse_params.)"""
-    from pipeline.kernels import raster as _raster
+    feature size B, thickness 2B, each ellipse's index. (Compiled: kernels.raster.ellipse_params.)"""
+    from pipeline.kernels import raster
 
-    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (shapes.center, shapes.axis_a, shapes.axis_b)]
-    return (*_raster.ellipse_params(*arrays, float(grid.origin[0]), float(grid.origin[1]), float(grid.pixel)),
+    center, axis_a, axis_b = (np.ascontiguousarray(a, dtype=np.float64)
+                              for a in (shapes.center, shapes.axis_a, shapes.axis_b))
+    return (*raster.ellipse_params(center, axis_a, axis_b, float(grid.origin[0]), float(grid.origin[1]),
+                                    float(grid.pixel)),
             np.arange(len(shapes.center)))
 
 

@@ -5,14 +5,16 @@ the key path (and the YAML line where there is one) and is raised before any wor
 File paths are relative to the folder of the config file. The YAML is read by ``yamlsafe``,
 its mappings key by key by ``sections.Section``, into the values of ``settings``; this module
 holds the parsers, each section's checks and the limits they enforce. It imports no physics
-(docs/design.md, "What each stage may import").
+(docs/design.md, "What each package may import").
 """
 
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
+from typing import Any
 
 from pipeline.config.sections import Section, is_number, kind_of
 from pipeline.config.settings import (
@@ -69,7 +71,7 @@ VIDEOS = ("mp4", "gif", "none")
 """The video formats of ``output.video``."""
 
 
-def load_config(path, *, named_frames: bool = True) -> Config:
+def load_config(path: str | os.PathLike[str], *, named_frames: bool = True) -> Config:
     """Read and validate a YAML config file.
 
     Parameters
@@ -98,7 +100,8 @@ def load_config(path, *, named_frames: bool = True) -> Config:
     return _parse(root, path, named_frames)
 
 
-def parse_config(mapping: dict, base_dir, *, name: str = "config", named_frames: bool = True) -> Config:
+def parse_config(mapping: dict[str, Any], base_dir: str | os.PathLike[str], *, name: str = "config",
+                 named_frames: bool = True) -> Config:
     """Validate a config given as a mapping, as if read from ``base_dir/NAME.yaml``.
 
     Parameters
@@ -184,10 +187,11 @@ def size_text(count: float) -> str:
     str
         Three significant digits and a decimal unit, e.g. '3.2 GB'.
     """
-    for unit in ("B", "kB", "MB", "GB", "TB"):
-        if count < 1000 or unit == "TB":
+    for unit in ("B", "kB", "MB", "GB"):
+        if count < 1000:
             return f"{count:.3g} {unit}"
         count /= 1000
+    return f"{count:.3g} TB"
 
 
 def default_name(path: Path) -> str:
@@ -265,7 +269,7 @@ def _parse_animation(s: Section) -> AnimationConfig:
     return AnimationConfig(frames, fps)
 
 
-def _parse_window(s: Section, name, default):
+def _parse_window(s: Section, name: str, default: Any) -> tuple[float, float, float, float]:
     window = s.numbers(name, 4, default)
     if not (window[2] > window[0] and window[3] > window[1]):
         s.fail(name, f"must be [x_min, y_min, x_max, y_max] with max above min (got {list(window)})")
@@ -381,7 +385,8 @@ def _parse_flutter(s: Section) -> FlutterConfig:
     return flutter
 
 
-def _parse_layer(s: Section, base: dict, ground: GroundConfig, layout: str, *, images, mask_required):
+def _parse_layer(s: Section, base: dict[str, Any], ground: GroundConfig, layout: str, *, images: bool,
+                 mask_required: bool) -> dict[str, Any]:
     """One canopy plane's keys, each defaulting to ``base``'s; its rasters checked for size."""
     if images and (s.has("mask") or mask_required):
         mask = s.mask_files("mask")
@@ -482,8 +487,8 @@ def _parse_procedural(s: Section, model: str) -> dict:
         if s.has("moon"):
             ms = s.section("moon")
             moon = MoonConfig(
-                offset_start=tuple(math.radians(v) for v in ms.numbers("offset_start", 2)),
-                offset_end=tuple(math.radians(v) for v in ms.numbers("offset_end", 2)),
+                offset_start=_radians_pair(ms.numbers("offset_start", 2)),
+                offset_end=_radians_pair(ms.numbers("offset_end", 2)),
                 radius=math.radians(ms.number("radius", MOON_RADIUS_DEG, above=0.0, below=5.0)),
             )
             ms.done()
@@ -502,6 +507,11 @@ def _parse_procedural(s: Section, model: str) -> dict:
     skylight = s.number("skylight", SkyConfig.skylight, at_least=0.0, below=100.0)
     return {"turbidity": turbidity, "sun": sun, "site": site, "moon": moon, "clouds": clouds,
             "skylight": skylight, "cie_type": cie_type, "turbidity_auto": auto}
+
+
+def _radians_pair(degrees: tuple[float, float]) -> tuple[float, float]:
+    """Both angles of a pair in radians, each by ``math.radians``."""
+    return math.radians(degrees[0]), math.radians(degrees[1])
 
 
 def _parse_site(s: Section, t: Section) -> SiteConfig:
@@ -560,7 +570,7 @@ def _parse_camera(s: Section) -> CameraConfig:
     return camera
 
 
-def _parse_exposure(s: Section):
+def _parse_exposure(s: Section) -> tuple[float, AutoExposureConfig | None]:
     """camera.exposure: stops (fixed), ``auto``, or ``{mode: auto, stops, time_constant,
     limits}``. Returns (stops, AutoExposureConfig or None)."""
     value = s.raw("exposure", CameraConfig.exposure)

@@ -3,15 +3,17 @@
 ``Section`` takes a mapping's keys one by one (numbers with their limits and
 ``vocabulary.NUMBER_RANGES``, lists, choices, times in UTC, files relative to the config's
 folder), then reports the keys nobody took with those ``_VALID_KEYS`` allows; every error names
-the key path and its YAML line. Only ``config``'s parsers use it: it has no public names.
+the key path and its YAML line. Only ``parse``'s parsers use it: it has no public names.
 """
 
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Collection
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any, Literal, NoReturn, overload
 
 from pipeline.config.vocabulary import NUMBER_RANGES, SKIES, TIME_RANGE
 from pipeline.config.yamlsafe import KeyContext
@@ -27,21 +29,23 @@ _MISSING = object()
 class Section:
     """A mapping being read: takes keys one by one, then reports the keys nobody took."""
 
-    def __init__(self, data, path: str, ctx: KeyContext):
+    def __init__(self, data: object, path: str, ctx: KeyContext) -> None:
         if not isinstance(data, dict):
             raise ConfigError(ctx.where(path), f"must be a mapping of keys, not {kind_of(data)}")
-        self.data, self.path, self.ctx, self.taken = data, path, ctx, set()
+        self.data: dict[Any, Any] = data
+        self.path, self.ctx = path, ctx
+        self.taken: set[str] = set()
 
-    def key(self, name):
+    def key(self, name: str) -> str:
         return f"{self.path}.{name}" if self.path else name
 
-    def fail(self, name, message):
+    def fail(self, name: str, message: str) -> NoReturn:
         raise ConfigError(self.ctx.where(self.key(name)), message)
 
-    def has(self, name):
+    def has(self, name: str) -> bool:
         return name in self.data
 
-    def raw(self, name, default=_MISSING):
+    def raw(self, name: str, default: Any = _MISSING) -> Any:
         self.taken.add(name)
         if name not in self.data:
             if default is _MISSING:
@@ -49,11 +53,12 @@ class Section:
             return default
         return self.data[name]
 
-    def section(self, name, default=_MISSING):
+    def section(self, name: str, default: Any = _MISSING) -> Section:
         value = self.raw(name, {} if default is _MISSING else default)
         return Section(value, self.key(name), self.ctx)
 
-    def number(self, name, default=_MISSING, *, above=None, at_least=None, below=None):
+    def number(self, name: str, default: Any = _MISSING, *, above: float | None = None,
+               at_least: float | None = None, below: float | None = None) -> float:
         value = self.raw(name, default)
         if not is_number(value):
             self.fail(name, f"must be a number, not {kind_of(value)}")
@@ -69,7 +74,7 @@ class Section:
         self.in_range(name, value)
         return value
 
-    def in_range(self, name, value):
+    def in_range(self, name: str, value: float) -> None:
         """Fail naming the key and its range if ``value`` lies outside NUMBER_RANGES."""
         limits = NUMBER_RANGES.get(re.sub(r"\[\d+\]", "[]", self.key(name)))
         if limits is not None and not limits[0] <= value <= limits[1]:
@@ -77,7 +82,15 @@ class Section:
                                  for v in (*limits[:2], value))
             self.fail(name, f"must lie in [{least}, {most}]{' ' + limits[2] if limits[2] else ''} (got {got})")
 
-    def numbers(self, name, count, default=_MISSING):
+    @overload
+    def numbers(self, name: str, count: Literal[2], default: Any = ...) -> tuple[float, float]: ...
+    @overload
+    def numbers(self, name: str, count: Literal[3], default: Any = ...) -> tuple[float, float, float]: ...
+    @overload
+    def numbers(self, name: str, count: Literal[4], default: Any = ...) -> tuple[float, float, float, float]: ...
+    @overload
+    def numbers(self, name: str, count: int, default: Any = ...) -> tuple[float, ...]: ...
+    def numbers(self, name: str, count: int, default: Any = _MISSING) -> tuple[float, ...]:
         value = self.raw(name, default)
         if not (isinstance(value, (list, tuple)) and len(value) == count):
             self.fail(name, f"must be a list of {count} numbers, not {kind_of(value)}")
@@ -87,7 +100,7 @@ class Section:
             self.in_range(name, float(item))
         return tuple(float(v) for v in value)
 
-    def integer(self, name, default=_MISSING, *, at_least=None):
+    def integer(self, name: str, default: Any = _MISSING, *, at_least: int | None = None) -> int:
         value = self.raw(name, default)
         if not (is_number(value) and float(value).is_integer()):
             self.fail(name, f"must be a whole number, not {kind_of(value)}")
@@ -96,7 +109,7 @@ class Section:
         self.in_range(name, value)
         return int(value)
 
-    def utc(self, name):
+    def utc(self, name: str) -> datetime:
         value = self.raw(name)
         if isinstance(value, str):
             try:
@@ -117,7 +130,7 @@ class Section:
                       f"offset applied (got {value.isoformat()})")
         return utc
 
-    def mask_files(self, name):
+    def mask_files(self, name: str) -> tuple[Path, ...]:
         """One image, or a numbered sequence ``leaves.%04d.png`` from frame 0 (or 1) on."""
         value = self.raw(name)
         if not isinstance(value, str) or "%" not in value:
@@ -135,12 +148,12 @@ class Section:
         first = next((i for i, n in enumerate(names) if n.is_file()), None)
         if first is None:
             self.fail(name, f"no such files: {paths.shown(names[0])} or {paths.shown(names[1])}")
-        frames = []
+        frames: list[Path] = []
         while Path(str(pattern) % (first + len(frames))).is_file():
             frames.append(Path(str(pattern) % (first + len(frames))))
         return tuple(frames)
 
-    def choice(self, name, choices, default=_MISSING):
+    def choice(self, name: str, choices: Collection[str], default: Any = _MISSING) -> str:
         value = self.raw(name, default)
         if value not in choices:
             read = " (YAML reads yes, no, on and off as true and false: quote the word)" if isinstance(
@@ -148,7 +161,7 @@ class Section:
             self.fail(name, f"unknown value {value!r}{read}; valid: {', '.join(choices)}")
         return value
 
-    def file(self, name):
+    def file(self, name: str) -> Path:
         value = self.raw(name)
         if not isinstance(value, str) or not value:
             self.fail(name, f"must be a file name, not {kind_of(value)}")
@@ -163,28 +176,28 @@ class Section:
             self.fail(name, f"cannot read {path} ({exc.strerror})")
         return path
 
-    def check_path(self, name, value):
+    def check_path(self, name: str, value: object) -> None:
         """Fail naming the key if ``value`` cannot be a path (see ``paths.problem``)."""
         if problem := paths.problem(value):
             self.fail(name, problem)
 
-    def resolved(self, name, value) -> Path:
+    def resolved(self, name: str, value: str) -> Path:
         """``value`` relative to the config's folder, made absolute, the whole path checked
         (the folder too may hold bytes that are not UTF-8)."""
         path = (self.ctx.path.parent / value).resolve()
         self.check_path(name, path)
         return path
 
-    def done(self):
+    def done(self) -> None:
         self._fail_unknown(self.taken)
 
-    def known_first(self):
+    def known_first(self) -> None:
         """``done``'s check before any value is read, for a section whose keys are all known
         beforehand (the top level): a misspelled section is said first, not after an error in
         the values of another (a config copied away from the files it names)."""
         self._fail_unknown(set(_VALID_KEYS[self.path]))
 
-    def _fail_unknown(self, known):
+    def _fail_unknown(self, known: set[str]) -> None:
         """Fail naming the first key not in ``known``."""
         unknown = [k for k in self.data if k not in known]
         if unknown:
@@ -219,13 +232,13 @@ _VALID_KEYS = {
 what an unknown-key error lists."""
 
 
-def is_number(value) -> bool:
+def is_number(value: object) -> bool:
     """An int or float (not a bool); an int too big for a float is not one."""
     return isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)
                                         and abs(value) < 10**300)
 
 
-def kind_of(value) -> str:
+def kind_of(value: object) -> str:
     if value is None:
         return "nothing"
     text = {dict: "a mapping", list: "a list", str: f"the text {value!r}", bool: f"{value}"}.get(

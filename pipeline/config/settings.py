@@ -1,6 +1,6 @@
 """The config's typed values: frozen dataclasses, one per section, with their defaults.
 
-What ``config.parse_config`` and ``config.load_config`` return, checked already. Angles are
+What ``parse.parse_config`` and ``parse.load_config`` return, checked already. Angles are
 radians and lengths metres here (degrees in the YAML); file paths are absolute. ``Config.digest``
 hashes every value that shapes a frame's bytes: the frames and the cache's keys carry it
 (docs/runs.md, "Resume").
@@ -50,7 +50,7 @@ class CanopyLayer:
 
 @dataclass(frozen=True)
 class TreesConfig:
-    """A seeded procedural grove (``grove_geometry.GroveParams``).
+    """A seeded procedural grove (``grove.GroveParams``).
 
     Attributes
     ----------
@@ -101,7 +101,7 @@ class CanopyConfig:
     Attributes
     ----------
     layout : str
-        'isolated' or 'periodic' (``config.LAYOUTS``).
+        'isolated' or 'periodic' (``parse.LAYOUTS``).
     layers : tuple of CanopyLayer
         The canopy planes.
     trees : TreesConfig or None
@@ -444,7 +444,7 @@ class OutputConfig:
     folder : Path
         Their folder (given relative to the current folder; default ``renders/NAME``).
     video : str
-        A name in ``config.VIDEOS``.
+        A name in ``parse.VIDEOS``.
     half : bool
         EXR frames in half floats (else float32).
     passes : tuple of str

@@ -1,6 +1,6 @@
-"""The names and ranges a config may give: one home for the parser (``config``) and for the
+"""The names and ranges a config may give: one home for the parser (``parse``) and for the
 models that act on them. Plain values and the model registries, which import their models only
-when asked for one, so that ``config`` reads them without importing a physics module."""
+when asked for one, so that the config package reads them without importing a physics module."""
 
 from pipeline.config.registry import Model, Registry
 
@@ -23,7 +23,7 @@ SKIES = Registry(
     Model("overcast", "sky.overcast:OvercastModel", numbers={"luminance": (1.0, 0.0, 1e30, "kcd/m^2")}),
 )
 """Every sky model a config may name (sky.model; 'procedural' is read as 'cie'), the keys of
-``sky`` that only it takes and its class (``skies.SkyModel``; docs/design.md, "Models plug in")."""
+``sky`` that only it takes and its class (``sky.models.SkyModel``; docs/design.md, "Models plug in")."""
 
 SKY_MODELS = SKIES.names
 
@@ -34,7 +34,7 @@ FOREGROUNDS = Registry(
     Model("none", "foreground.models:NoForeground"),
 )
 """The foreground models (foreground.model): the built-in trees, passes read from files, none
-(``foregrounds.ForegroundModel``)."""
+(``foreground.models.ForegroundModel``)."""
 
 CIE_TYPE_RANGE = (1, 15)
 """The CIE standard general skies (ISO 15469:2004), numbered from first to last. [1]"""

@@ -7,8 +7,10 @@ in a mapping; each limit is checked before anything big is built (docs/runs.md, 
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -26,7 +28,7 @@ MAX_YAML_DEPTH = 32
 _TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
 
 
-def load_yaml(path):
+def load_yaml(path: str | os.PathLike[str]) -> tuple[yaml.Node | None, Any]:
     """Read a YAML file, the one place YAML is read, within the limits of this module.
 
     Parameters
@@ -121,7 +123,7 @@ class KeyContext:
     messages that name them."""
 
     path: Path
-    lines: dict
+    lines: dict[str, int]
 
     def where(self, key: str) -> str:
         line = self.lines.get(key)
@@ -129,10 +131,10 @@ class KeyContext:
         return f"{location}: {key}" if key else location
 
 
-def key_lines(node, prefix, lines, path):
+def key_lines(node: yaml.Node | None, prefix: str, lines: dict[str, int], path: str | os.PathLike[str]) -> None:
     """Record the YAML line of every key path; reject duplicate keys."""
     if isinstance(node, yaml.MappingNode):
-        seen = set()
+        seen: set[str] = set()
         for key_node, value_node in node.value:
             key = f"{prefix}.{key_node.value}" if prefix else str(key_node.value)
             if key in seen:

@@ -1,6 +1,6 @@
 """Physical constants shared by several modules, as plain floats.
 
-Only ``math`` is imported here, so that ``config`` can read these without importing a physics
+Only ``math`` is imported here, so that ``parse`` can read these without importing a physics
 module. Each value has one home: the modules that need it import it from here.
 """
 

@@ -9,6 +9,8 @@ import contextvars
 import os
 import threading
 import time
+from collections.abc import Callable, Iterator
+from typing import Any
 
 __all__ = ["MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
            "default_workers", "jobs_and_threads", "loop_threads", "in_shares", "SHARES_PER_THREAD", "SMALLEST_SHARE",
@@ -97,11 +99,12 @@ SMALLEST_SHARE = 16384
 """Fewest items worth a share of their own (``in_shares``): below it a thread costs more than it
 saves. [items]"""
 _LOOP_THREADS = contextvars.ContextVar("sunshade_loop_threads", default=1)
-_pools: dict = {}  # (process, threads): the executor of in_shares
+# (process, threads): the executor of in_shares
+_pools: dict[tuple[int, int], concurrent.futures.ThreadPoolExecutor] = {}
 
 
 @contextlib.contextmanager
-def loop_threads(count: int):
+def loop_threads(count: int) -> Iterator[None]:
     """Within the ``with`` (in this thread), ``in_shares`` runs loops in ``count`` threads, as
     scipy.fft's ``workers`` runs the FFTs: a frame's compiled loops then use the cores its FFTs use
     (``frame.render_frame``; a run of one frame per core gives each frame one thread, the loops
@@ -111,6 +114,11 @@ def loop_threads(count: int):
     ----------
     count : int
         Threads [count].
+
+    Yields
+    ------
+    None
+        While the block runs.
     """
     token = _LOOP_THREADS.set(max(1, int(count)))
     try:
@@ -119,7 +127,7 @@ def loop_threads(count: int):
         _LOOP_THREADS.reset(token)
 
 
-def in_shares(count: int, loop) -> None:
+def in_shares(count: int, loop: Callable[[int, int], object]) -> None:
     """``loop(start, stop)`` over items [0, count), cut into shares run in the threads of
     ``loop_threads`` (SHARES_PER_THREAD shares each, none under SMALLEST_SHARE items); in this
     thread alone outside one, or for few items. Each item's result is the same whichever share
@@ -171,7 +179,7 @@ def end_if_orphaned(command: int | None) -> None:
 
 ORPHAN_CHECK = 1.0
 """How often a worker process looks whether its command is still there. [s]"""
-_watched = None
+_watched: int | None = None
 
 
 def _watch(command: int) -> None:
@@ -184,7 +192,7 @@ _ran_loops: set[str] = set()  # the compiled loops this process has run (compile
 
 
 @contextlib.contextmanager
-def compiled_once(loop):
+def compiled_once(loop: Any) -> Iterator[None]:
     """Hold off the machine's other processes while this one first runs a compiled loop that numba's
     cache on disk lacks, so that one process compiles it and the others load it from that cache.
 
@@ -197,6 +205,11 @@ def compiled_once(loop):
     ----------
     loop : numba dispatcher
         A function compiled with ``cache=True`` that the work inside the ``with`` runs first.
+
+    Yields
+    ------
+    None
+        While the block runs.
     """
     name = f"{loop.py_func.__module__}.{loop.py_func.__qualname__}"
     lock = None

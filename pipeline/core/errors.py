@@ -8,16 +8,22 @@ worker task come back as a WorkerError rather than break the process pool (docs/
 from __future__ import annotations
 
 import functools
+import os
 import pickle
 import sys
 import traceback
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 from pipeline.core.paths import SHOWN_MAX, shown
 
 __all__ = ["LINE_MAX", "SunshadeError", "ConfigError", "ImageError", "RunError", "BadInput", "WorkerError",
            "one_line", "one_line_warnings", "portable"]
+
+_Parameters = ParamSpec("_Parameters")
+_Result = TypeVar("_Result")
 
 LINE_MAX = 1000
 """Longest line an error or warning shows; past it the line is cut in the middle. [character]"""
@@ -68,7 +74,7 @@ class ImageError(SunshadeError, ValueError):
         What is wrong with it; the error's line is ``f"{path}: {message}"``.
     """
 
-    def __init__(self, path, message: str):
+    def __init__(self, path: str | os.PathLike[str], message: str) -> None:
         super().__init__(f"{path}: {message}")
         self.path = Path(path)
 
@@ -135,7 +141,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"sunshade: warning: {one_line(message)}", file=file or sys.stderr)
 
 
-def portable(task):
+def portable(task: Callable[_Parameters, _Result]) -> Callable[_Parameters, _Result]:
     """``task`` made safe to run in another process.
 
     An exception that does not survive pickling is raised as a WorkerError (its type, message and
@@ -154,7 +160,7 @@ def portable(task):
     """
 
     @functools.wraps(task)
-    def run(*args, **kwargs):
+    def run(*args: _Parameters.args, **kwargs: _Parameters.kwargs) -> _Result:
         one_line_warnings()
         try:
             return task(*args, **kwargs)

@@ -14,9 +14,12 @@ The sky plane is ``z = 1``: a direction ``w`` maps to ``s = (wx / wz, wy / wz)``
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "Grid", "lattice_offset", "sky_grid", "sky_offset", "fold", "wrapped_spans", "direction_vector", "tangent_axes",
@@ -47,7 +50,7 @@ class Grid:
     shape: tuple[int, int]
 
     @classmethod
-    def from_window(cls, window, pixel: float) -> Grid:
+    def from_window(cls, window: Iterable[float], pixel: float) -> Grid:
         """The grid of pixel ``pixel`` whose north-west corner is that of ``window``.
 
         Its size is the window's rounded to whole pixels (at least one pixel each way).
@@ -82,7 +85,11 @@ class Grid:
         rows, cols = self.shape
         return (x0, y0 - rows * self.pixel, x0 + cols * self.pixel, y0)
 
-    def ground_from_raster(self, row, col):
+    @overload
+    def ground_from_raster(self, row: float, col: float) -> tuple[float, float]: ...
+    @overload
+    def ground_from_raster(self, row: ArrayLike, col: ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
+    def ground_from_raster(self, row: ArrayLike, col: ArrayLike) -> tuple[float | np.ndarray, float | np.ndarray]:
         """Plane coordinates of fractional raster indices; integers give pixel centres.
 
         Parameters
@@ -100,7 +107,11 @@ class Grid:
         y = self.origin[1] - (np.asarray(row, dtype=np.float64) + 0.5) * self.pixel
         return x, y
 
-    def raster_from_ground(self, x, y):
+    @overload
+    def raster_from_ground(self, x: float, y: float) -> tuple[float, float]: ...
+    @overload
+    def raster_from_ground(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
+    def raster_from_ground(self, x: ArrayLike, y: ArrayLike) -> tuple[float | np.ndarray, float | np.ndarray]:
         """Fractional raster indices of plane coordinates; inverse of ``ground_from_raster``.
 
         Parameters
@@ -212,7 +223,7 @@ def fold(weighted: np.ndarray, start: tuple[int, int], period: tuple[int, int]) 
     return out
 
 
-def wrapped_spans(start: int, length: int, period: int):
+def wrapped_spans(start: int, length: int, period: int) -> list[tuple[slice, slice]]:
     """Runs of ``u -> (start + u) mod period`` for u in [0, length).
 
     They are the pieces a wrapped copy or fold moves in one go.
@@ -240,7 +251,7 @@ def wrapped_spans(start: int, length: int, period: int):
     return spans
 
 
-def direction_vector(azimuth, elevation) -> np.ndarray:
+def direction_vector(azimuth: ArrayLike, elevation: ArrayLike) -> np.ndarray:
     """Unit vector(s) of the direction(s) at an azimuth and an elevation.
 
     Parameters
@@ -261,7 +272,7 @@ def direction_vector(azimuth, elevation) -> np.ndarray:
     return np.stack([ce * np.sin(azimuth), ce * np.cos(azimuth), np.sin(elevation)], axis=-1)
 
 
-def tangent_axes(azimuth: float, elevation: float):
+def tangent_axes(azimuth: float, elevation: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The frame of the sky at a direction (azimuth a, elevation h).
 
     s = ``direction_vector(a, h)``; e_az = (cos a, -sin a, 0) is the direction of increasing
@@ -287,7 +298,7 @@ def tangent_axes(azimuth: float, elevation: float):
     return direction_vector(a, h), e_az, e_el
 
 
-def normalized(v) -> np.ndarray:
+def normalized(v: np.ndarray) -> np.ndarray:
     """Vectors scaled to unit length along the last axis (a zero vector stays 0).
 
     Parameters
@@ -303,7 +314,7 @@ def normalized(v) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
 
 
-def length3(v) -> np.ndarray:
+def length3(v: ArrayLike) -> np.ndarray:
     """The lengths of 3-vectors: ``np.linalg.norm(v, axis=-1)``, the same bits in less than half the
     time (numpy reduces a last axis of three as (x^2 + y^2) + z^2, as here; a test holds the two
     together): the sun kernel measures millions of angles a frame under a moving sun.
@@ -323,7 +334,8 @@ def length3(v) -> np.ndarray:
     return np.sqrt(x * x + y * y + z * z)
 
 
-def sky_plane_from_direction(azimuth, zenith):
+def sky_plane_from_direction(azimuth: float | np.ndarray,
+                             zenith: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
     """Sky-plane point s = tan(zenith) * (sin(azimuth), cos(azimuth)) of a direction (Max 1991, Fig. 2).
 
     Parameters
@@ -342,7 +354,8 @@ def sky_plane_from_direction(azimuth, zenith):
     return t * np.sin(azimuth), t * np.cos(azimuth)
 
 
-def direction_from_sky_plane(sx, sy):
+def direction_from_sky_plane(sx: float | np.ndarray,
+                             sy: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
     """The direction through a sky-plane point; inverse of ``sky_plane_from_direction``.
 
     Parameters
@@ -362,7 +375,7 @@ def direction_from_sky_plane(sx, sy):
     return azimuth, zenith
 
 
-def cos4_antiderivative(x, y):
+def cos4_antiderivative(x: ArrayLike, y: ArrayLike) -> np.ndarray:
     """F(x, y) with d2F/dx dy = 1 / (1 + x^2 + y^2)^2 = cos^4(theta), F(0, y) = F(x, 0) = 0.
 
     The integral of cos^4(theta) dA over a sky-plane rectangle is the projected solid angle
@@ -409,7 +422,7 @@ def projected_solid_angle(grid: Grid) -> np.ndarray:
     return f[:-1, 1:] - f[:-1, :-1] - f[1:, 1:] + f[1:, :-1]
 
 
-def sky_square_irradiance(alpha) -> np.ndarray:
+def sky_square_irradiance(alpha: float | np.ndarray) -> float | np.ndarray:
     """I0(alpha) = 4 sin(alpha) atan(sin(alpha)): projected solid angle of the sky square.
 
     The irradiance under a sky of radiance 1 restricted to the square (Max 1991, section
@@ -468,7 +481,7 @@ def pinhole_image_axes(height: float, elevation: float, angular_radius: float) -
     return float(length), float(width)
 
 
-def offset_direction(azimuth, elevation, dx, dy):
+def offset_direction(azimuth: float, elevation: float, dx: float, dy: float) -> tuple[float, float]:
     """The direction at gnomonic offset (dx to the right, dy up) from (azimuth, elevation): the
     inverse of ``ephemeris.moon_offset_from_sun``.
 

@@ -13,7 +13,9 @@ import os
 import struct
 import sys
 import zlib
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
@@ -29,7 +31,7 @@ a larger image (a decompression bomb, a mistaken file) is refused before any pix
 A 16384 x 8192 RGB HDRI holds 4.0e8. [1]"""
 
 
-def read_image(path) -> np.ndarray:
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Pixels of an image file as float32, values as stored.
 
     Integer formats are scaled to [0, 1] (8- and 16-bit PNG); no colour conversion is done and
@@ -55,7 +57,7 @@ def read_image(path) -> np.ndarray:
     return _read(path, "float").astype(np.float32, copy=False)
 
 
-def read_codes(path) -> np.ndarray:
+def read_codes(path: str | os.PathLike[str]) -> np.ndarray:
     """The 8-bit codes of an 8-bit image file (a frame's PNG), without a float round trip.
 
     Parameters
@@ -107,7 +109,7 @@ def _read(path, kind: str) -> np.ndarray:
     return pixels
 
 
-def read_layers(path) -> dict[str, np.ndarray]:
+def read_layers(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """The channels of an image file by name (``"R"``, ``"sun.R"``, ``"illuminance.Y"``).
 
     Parameters
@@ -137,7 +139,7 @@ def read_layers(path) -> dict[str, np.ndarray]:
     return {name: pixels[..., i] for i, name in enumerate(names)}
 
 
-def read_attributes(path, names) -> dict:
+def read_attributes(path: str | os.PathLike[str], names: Iterable[str]) -> dict[str, Any]:
     """The named metadata attributes of an image file.
 
     Parameters
@@ -169,7 +171,7 @@ def read_attributes(path, names) -> dict:
 
 
 @contextlib.contextmanager
-def _quiet_stderr():
+def _quiet_stderr() -> Iterator[None]:
     """Silence file descriptor 2 for the block: libpng prints its own error lines there, and
     the error reaches the user once, as an ImageError naming the file."""
     sys.stderr.flush()
@@ -184,8 +186,8 @@ def _quiet_stderr():
         os.close(saved)
 
 
-def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=False,
-              layers: dict | None = None) -> None:
+def write_exr(path: str | os.PathLike[str], pixels: np.ndarray, attributes: dict[str, Any] | None = None, *,
+              half: bool = False, layers: dict[tuple[str, ...], tuple[np.ndarray, str]] | None = None) -> None:
     """Write scene-linear pixels as an EXR (float32 or half), PIZ-compressed (lossless), atomically.
 
     Written through the OpenEXR bindings: a 1280 x 720 half RGB frame in 33 ms of CPU, where
@@ -224,7 +226,7 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
     planes = [(names, pixels, half)]
     for layer_names, (layer, kind) in (layers or {}).items():
         planes.append((layer_names, np.asarray(layer, dtype=np.float32).reshape(rows, cols, -1), kind == "half"))
-    stored = {}
+    stored: dict[str, np.ndarray] = {}
     with np.errstate(over="ignore"):  # beyond 65504 a half is inf, as OpenEXR's own conversion
         for plane_names, plane, in_half in planes:
             # channel by channel, converted in one pass: (channels, rows, cols), C order
@@ -257,7 +259,7 @@ def write_exr(path, pixels: np.ndarray, attributes: dict | None = None, *, half=
             temporary.unlink()
 
 
-def write_png(path, pixels: np.ndarray, attributes: dict | None = None) -> np.ndarray:
+def write_png(path: str | os.PathLike[str], pixels: np.ndarray, attributes: dict[str, Any] | None = None) -> np.ndarray:
     """Write display-referred pixels as an 8-bit PNG, atomically.
 
     A fixed-seed dither of one code value breaks the banding of smooth gradients
@@ -349,7 +351,7 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
 
 
 @functools.lru_cache(maxsize=4)
-def half_dither(shape) -> np.ndarray:
+def half_dither(shape: tuple[int, ...]) -> np.ndarray:
     """Half the fixed-seed dither of ``write_png``: the difference of two uniform fields of
     seeds 0 and 1, halved; made once per frame size (read-only).
 
@@ -374,7 +376,7 @@ VIDEO_FORMATS = (".mp4", ".gif")
 """The video files ``write_video`` writes, by suffix."""
 
 
-def write_video(path, frames, *, fps: float) -> int:
+def write_video(path: str | os.PathLike[str], frames: Iterable[np.ndarray], *, fps: float) -> int:
     """Write display-referred frames as a video, atomically.
 
     ``.mp4``: H.264 in yuv420p, which browsers play; frames of odd width or height are padded

@@ -4,17 +4,27 @@ still camera's rays and footprints) for the same key, kept from the second time 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    import numpy as np
+
 __all__ = ["POINTS_KEPT", "kept_at"]
+
+_Result = TypeVar("_Result")
 
 POINTS_KEPT = 2
 """How many (key, points) one ``kept_at`` store keeps: a frame's camera, and a second view."""
 
 
-def kept_at(kept: dict, key, points, compute, *, read_only: bool = True, first=None):
+def kept_at(kept: dict[Any, Any], key: Hashable, points: np.ndarray | tuple[np.ndarray, ...],
+            compute: Callable[[], _Result], *, read_only: bool = True,
+            first: Callable[[], _Result] | None = None) -> _Result:
     """What ``compute()`` gives at read-only ``points`` for ``key``, kept in ``kept`` from the second
     time the same key and the same arrays (not others at reused addresses) are asked for, for the last
     ``POINTS_KEPT`` of them, read-only: a sky that moves asks once per key, and arrays kept for nothing
-    are fresh memory to fill in the next frame (as ``sky_raster.kept_raster``'s ``again``).
+    are fresh memory to fill in the next frame (as ``sky.raster.kept_raster``'s ``again``).
 
     Parameters
     ----------
@@ -48,7 +58,8 @@ def kept_at(kept: dict, key, points, compute, *, read_only: bool = True, first=N
         return found[1]
     result = compute() if seen or first is None else first()
     if seen and read_only:
-        for array in result if isinstance(result, tuple) else (result,):
+        arrays_made: tuple[Any, ...] = result if isinstance(result, tuple) else (result,)
+        for array in arrays_made:
             array.setflags(write=False)
     while len(kept) >= POINTS_KEPT:
         kept.pop(next(iter(kept)))

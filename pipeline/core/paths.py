@@ -21,7 +21,7 @@ SHOWN_MAX = 120
 """Longest path or name a message shows whole; a longer one is cut in the middle. [character]"""
 
 
-def problem(text) -> str | None:
+def problem(text: object) -> str | None:
     """What keeps ``text`` from being a usable path, in a few words, or None if nothing.
 
     The whole path is checked as it will be used (made absolute against the working folder):
@@ -70,7 +70,7 @@ def problem(text) -> str | None:
     return None
 
 
-def shown(text, most: int = SHOWN_MAX) -> str:
+def shown(text: str | bytes | os.PathLike[str] | os.PathLike[bytes], most: int = SHOWN_MAX) -> str:
     """``text`` (a path, a name, bytes) as a message shows it.
 
     Bytes that are not UTF-8 come out as ``\\xe9``, a NUL as ``\\0``, and past ``most`` characters

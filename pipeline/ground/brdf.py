@@ -1,7 +1,7 @@
 """The ground's reflectance f_r(V, L) (Max 1991, eq. 1 and the paragraph after it; docs/method.md,
 "The ground's reflectance"): the models (RPV, RossThick-LiSparse-Reciprocal), their albedos and
 their shape normalised to the albedo texture. The sky's view bands are ``brdf_bands``'s, the
-frame's ground seen through them ``brdf_camera``'s. ``lambert`` never comes here: its frames keep
+frame's ground seen through them ``brdf_view``'s. ``lambert`` never comes here: its frames keep
 the camera's own path.
 
 Directions are unit vectors (..., 3) in world axes pointing away from the ground: ``v`` towards
@@ -15,6 +15,7 @@ import functools
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import REFLECTANCES
 
@@ -26,6 +27,7 @@ __all__ = [
 
 if TYPE_CHECKING:
     from pipeline.config.settings import BrdfConfig  # model and parameters: any value with those two fields
+    from pipeline.core.geometry import Grid
 
 VIEW_ZENITH_LIMIT = np.radians(85.0)
 """The view zenith angle the models are read at, at most: a bowl-shaped RPV (k < 1) grows
@@ -36,12 +38,12 @@ QUADRATURE = (32, 64)
 quadratures (directional and white-sky reflectance). [count]"""
 
 
-def reflectance_factor(brdf: BrdfConfig, v, l) -> np.ndarray:
+def reflectance_factor(brdf: BrdfConfig, v: ArrayLike, l: ArrayLike) -> np.ndarray:
     """The bidirectional reflectance factor pi f_r(v, l) of the model.
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
     v : numpy.ndarray
         (..., 3) unit vectors towards the viewer, above the ground [1].
@@ -60,8 +62,8 @@ def reflectance_factor(brdf: BrdfConfig, v, l) -> np.ndarray:
     """
     if brdf.model not in REFLECTANCES:
         raise ValueError(f"no such reflectance model: {brdf.model!r}")
-    v, l = np.asarray(v, dtype=np.float64), np.asarray(l, dtype=np.float64)
-    return REFLECTANCES.load(brdf.model).factor(v, l, **dict(brdf.parameters))
+    model: type[Reflectance] = REFLECTANCES.load(brdf.model)  # a class of the Protocol's shape
+    return model.factor(np.asarray(v, dtype=np.float64), np.asarray(l, dtype=np.float64), **dict(brdf.parameters))
 
 
 def _slopes(v, l):
@@ -130,7 +132,7 @@ class Lambert:
     """The paper's constant reflectance: pi f_r = 1 (its frames take the camera's own path)."""
 
     @staticmethod
-    def factor(v, l):
+    def factor(v: np.ndarray, l: np.ndarray) -> np.ndarray:
         """1 for every pair of directions."""
         return np.ones(np.broadcast_shapes(np.shape(v), np.shape(l))[:-1])
 
@@ -161,14 +163,14 @@ def _hemisphere():
     return dirs, w
 
 
-def directional_reflectance(brdf: BrdfConfig, l) -> np.ndarray:
+def directional_reflectance(brdf: BrdfConfig, l: ArrayLike) -> np.ndarray:
     """The directional-hemispherical reflectance (black-sky albedo) of light from ``l``.
 
     (1 / pi) integral of pi f_r cos(theta_v) d_omega_v.
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
     l : numpy.ndarray
         (..., 3) unit vector(s) towards the light [1].
@@ -179,8 +181,8 @@ def directional_reflectance(brdf: BrdfConfig, l) -> np.ndarray:
         (...) float64 [1].
     """
     dirs, w = _hemisphere()
-    l = np.asarray(l, dtype=np.float64)
-    brf = reflectance_factor(brdf, dirs[(None,) * (l.ndim - 1)], l[..., None, :])
+    light = np.asarray(l, dtype=np.float64)
+    brf = reflectance_factor(brdf, dirs[(None,) * (light.ndim - 1)], light[..., None, :])
     return brf @ w / np.pi
 
 
@@ -192,7 +194,7 @@ def white_sky_albedo(brdf: BrdfConfig) -> float:
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
 
     Returns
@@ -204,7 +206,7 @@ def white_sky_albedo(brdf: BrdfConfig) -> float:
     return float(directional_reflectance(brdf, dirs[:: QUADRATURE[1]]) @ w[:: QUADRATURE[1]] * QUADRATURE[1] / np.pi)
 
 
-def shape(brdf: BrdfConfig, v, l) -> np.ndarray:
+def shape(brdf: BrdfConfig, v: ArrayLike, l: ArrayLike) -> np.ndarray:
     """The model's shape pi f_r(v, l) / A, A its white-sky albedo.
 
     The factor on the albedo texture's rho / pi, so that under a uniform sky the ground reflects the
@@ -213,7 +215,7 @@ def shape(brdf: BrdfConfig, v, l) -> np.ndarray:
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
     v : numpy.ndarray
         (..., 3) unit vectors towards the viewer [1].
@@ -228,7 +230,7 @@ def shape(brdf: BrdfConfig, v, l) -> np.ndarray:
     return reflectance_factor(brdf, clamp_view(v), l) / white_sky_albedo(brdf)
 
 
-def clamp_view(v) -> np.ndarray:
+def clamp_view(v: ArrayLike) -> np.ndarray:
     """Unit vectors with their zenith angle held to VIEW_ZENITH_LIMIT at most.
 
     Parameters
@@ -241,17 +243,17 @@ def clamp_view(v) -> np.ndarray:
     numpy.ndarray
         (..., 3) float64, a new array [1].
     """
-    v = np.array(v, dtype=np.float64)
-    low = v[..., 2] < np.cos(VIEW_ZENITH_LIMIT)
+    held = np.array(v, dtype=np.float64)
+    low = held[..., 2] < np.cos(VIEW_ZENITH_LIMIT)
     if np.any(low):
-        across = np.linalg.norm(v[low, :2], axis=-1, keepdims=True)
-        v[low, :2] *= np.sin(VIEW_ZENITH_LIMIT) / np.maximum(across, 1e-12)
-        v[low, 2] = np.cos(VIEW_ZENITH_LIMIT)
-    return v
+        across = np.linalg.norm(held[low, :2], axis=-1, keepdims=True)
+        held[low, :2] *= np.sin(VIEW_ZENITH_LIMIT) / np.maximum(across, 1e-12)
+        held[low, 2] = np.cos(VIEW_ZENITH_LIMIT)
+    return held
 
 
 @functools.lru_cache(maxsize=4)
-def cell_directions(grid) -> np.ndarray:
+def cell_directions(grid: Grid) -> np.ndarray:
     """Unit vectors towards the centres of a sky-plane grid's cells; the same array for the same
     grid (every view band of a frame weights the same grid).
 

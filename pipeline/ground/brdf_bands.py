@@ -7,10 +7,12 @@ open ground (``sky_ratio``); ``choose_bands`` places the bands. Directions as in
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.geometry import Grid, fold, sky_grid, sky_offset
 from pipeline.ground import shadow
@@ -27,6 +29,7 @@ __all__ = [
 
 if TYPE_CHECKING:
     from pipeline.config.settings import BrdfConfig  # model and parameters: any value with those two fields
+    from pipeline.stages.plan import RunPlan
 
 BAND_TOLERANCE = 0.01
 """Largest bound of the blend's relative error under shading (``shaded_bound``) over the pixels
@@ -41,7 +44,7 @@ BAND_SKY_CELL = 0.05
 correlated under an isolated canopy (``band_factor``). [tan]"""
 
 
-def band_factor(plan) -> int:
+def band_factor(plan: RunPlan) -> int:
     """How many ground cells a side the bands' terms are correlated on, under an isolated canopy.
 
     The sky's term under the leaves changes over the shadow of a whole sky's light, much more
@@ -60,8 +63,8 @@ def band_factor(plan) -> int:
     int
         The factor [1].
     """
-    layers = [lp.coarse for lp in plan.layers]
-    if not all(isinstance(c, IsolatedPlan) for c in layers):
+    layers = [lp.coarse for lp in plan.layers if isinstance(lp.coarse, IsolatedPlan)]
+    if len(layers) < len(plan.layers):
         return 1
 
     def fits(f: int) -> bool:
@@ -146,7 +149,7 @@ class ViewBands:
         turns = len(self.turns)
         return tuple(z * turns + turns // 2 for z in range(len(self.zeniths)))
 
-    def zenith_weights(self, weights) -> np.ndarray:
+    def zenith_weights(self, weights: np.ndarray) -> np.ndarray:
         """The zeniths' hat weights from the bands' weights: summed over the sectors.
 
         Parameters
@@ -173,7 +176,7 @@ class ViewBands:
         z, t = np.meshgrid(np.asarray(self.zeniths), np.asarray(self.turns), indexing="ij")
         return _unit(z.reshape(-1), self.azimuth + t.reshape(-1))
 
-    def weights(self, zenith, azimuth=None) -> np.ndarray:
+    def weights(self, zenith: ArrayLike, azimuth: ArrayLike | None = None) -> np.ndarray:
         """Weights of each band at views; they sum to 1.
 
         Products of hat functions: linear between neighbouring bands' zeniths and between
@@ -204,9 +207,10 @@ class _LastCall:
     are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value."""
 
     def __init__(self, size: int = 1):
-        self.size, self.calls = size, []
+        self.size = size
+        self.calls: list[tuple[tuple, Any]] = []
 
-    def get(self, key: tuple, make):
+    def get(self, key: tuple, make: Callable[[], Any]) -> Any:
         """The result for ``key``: a kept one if ``key`` is a kept call's, else ``make()``."""
         for kept, value in self.calls:
             if len(kept) == len(key) and all(a == b if isinstance(b, (int, float, str, bytes)) else a is b
@@ -271,7 +275,7 @@ _SHAPES = _LastCall(), _LastCall()
 ``_coarsen``'s blocks: the same while the camera and the bands' azimuth stand still."""
 
 
-def shaded_bound(shapes, blend, light) -> np.ndarray:
+def shaded_bound(shapes: np.ndarray, blend: np.ndarray, light: np.ndarray) -> np.ndarray:
     """A bound of the blend's relative error under any canopy, per view.
 
     Under leaves the sky's term is sum_i e_i m_i s(V, L_i), m_i in [0, 1] the light through the
@@ -304,7 +308,7 @@ ROUND_TURN = np.radians(270.0)
 (a camera looking down at ground all round it). [rad]"""
 
 
-def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
+def choose_bands(brdf: BrdfConfig, raster: SkyRaster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
                  most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
     """View bands in zenith and sector, added where the blend is worst under shading.
 
@@ -316,9 +320,9 @@ def choose_bands(brdf: BrdfConfig, raster, views: np.ndarray, *, tolerance: floa
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         As in ``brdf.shape``.
-    raster : sky_raster.SkyRaster
+    raster : sky.raster.SkyRaster
         The sky raster [radiance x sr].
     views : numpy.ndarray
         (n, 3) the pixels' view vectors [1].
@@ -355,7 +359,7 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
         middle += 0.5 * float(turn.min() + turn.max())
         turn = _turn_from(azimuth, middle)
     exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(brdf, pick[:, None, :], dirs[None]))
-    known: dict = {}
+    known: dict[tuple[float, float], np.ndarray] = {}
 
     def shapes_at(bands: ViewBands) -> np.ndarray:
         """s(V_b, L_i) (B, m), each band's made once per call."""
@@ -367,7 +371,7 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
             known.update(zip(missing, made))
         return np.stack([known[k] for k in keys])
 
-    def bound(zeniths, turns) -> ViewBands:
+    def bound(zeniths: list[float], turns: list[float]) -> tuple[ViewBands, int]:
         trial = ViewBands(tuple(zeniths), middle, 0.0, tuple(turns), round_)
         errors = shaded_bound(exact, trial.weights(zenith, azimuth).T @ shapes_at(trial), e)
         worst = int(np.argmax(errors))
@@ -389,8 +393,8 @@ def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) 
     return bands
 
 
-def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int = 16, angles=None,
-              weights=None) -> np.ndarray:
+def sky_ratio(brdf: BrdfConfig, raster: SkyRaster, bands: ViewBands, views: np.ndarray, *, lattice: int = 16,
+              angles: tuple[np.ndarray, np.ndarray] | None = None, weights: np.ndarray | None = None) -> np.ndarray:
     """The factor that makes the banded sky term exact on open ground, per channel and pixel.
 
     The open sky's term at the pixel's own view, sum_i e_i s(V, L_i), over what ``banded_sky`` gives
@@ -412,7 +416,7 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
         Side of the lattice of views [count].
     angles : tuple of numpy.ndarray, optional
         If given, the views' zenith angles and azimuths after ``clamp_view`` ((n,) each,
-        ``_camera_views``) [rad].
+        ``brdf_view.camera_views``) [rad].
     weights : numpy.ndarray, optional
         If given, the bands' weights at the views (B, n) (``ViewBands.weights``) [1].
 
@@ -430,32 +434,23 @@ def sky_ratio(brdf: BrdfConfig, raster, bands: ViewBands, views, *, lattice: int
     lows, spans, corner, taps = _lattice_reads(angles[0], angles[1], bands.azimuth, lattice)
     axes = [low + span * np.linspace(0.0, 1.0, lattice) for low, span in zip(lows, spans)]
 
-    def at_lattice():
+    def at_lattice() -> np.ndarray:
         z, t = np.meshgrid(*axes, indexing="ij")
         return shape(brdf, _unit(z, bands.azimuth + t)[..., None, :], dirs)
     own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
-    from pipeline.kernels import arrays as _array_loops
+    from pipeline.kernels import arrays
 
     flat = np.ascontiguousarray(np.moveaxis(own, -1, 0).reshape(own.shape[-1], -1).astype(np.float32))
     out = np.empty((len(flat), len(corner)), dtype=np.float32)
-    _array_loops.lattice_read(flat, corner, taps, lattice, out)
+    arrays.lattice_read(flat, corner, taps, lattice, out)
     out /= np.maximum(open_sky(bands, weights, at_bands[list(bands.colours)], at_bands.sum(axis=-1)),
                       np.float32(1e-30))
     return out
 
 
-def _lattice_read_arrays(flat, corner, taps, lattice) -> np.ndarray:
-    """``_array_loops.lattice_read`` with whole arrays (numpy): its reference. (channels, n) float32"""
-    out = flat[:, corner] * taps[0]
-    out += flat[:, corner + 1] * taps[1]
-    out += flat[:, corner + lattice] * taps[2]
-    out += flat[:, corner + lattice + 1] * taps[3]
-    return out
-
-
 _READS = _LastCall()
-"""``_lattice_reads``: a camera's views are the same every frame (``_camera_views``)."""
+"""``_lattice_reads``: a camera's views are the same every frame (``brdf_view.camera_views``)."""
 
 
 def _lattice_reads(zenith, azimuth, band_azimuth: float, lattice: int):
@@ -480,7 +475,8 @@ def _lattice_reads_made(zenith, azimuth, band_azimuth: float, lattice: int):
     return lows, spans, i0 * lattice + j0, taps
 
 
-def banded_sky(bands: ViewBands, colours, bands_light, weights, ratio) -> np.ndarray:
+def banded_sky(bands: ViewBands, colours: np.ndarray, bands_light: np.ndarray, weights: np.ndarray,
+               ratio: ArrayLike) -> np.ndarray:
     """The sky's term with the reflectance: r_ch sum_b w_b G_b sum_z u_z E_z,ch / sum_ch E_z,ch.
 
     The bands give how the reflectance modulates the sky's light at the point with the view, the
@@ -517,7 +513,7 @@ def banded_sky(bands: ViewBands, colours, bands_light, weights, ratio) -> np.nda
     return sky
 
 
-def _tint(bands: ViewBands, colours, weights) -> np.ndarray:
+def _tint(bands: ViewBands, colours: ArrayLike, weights: ArrayLike) -> np.ndarray:
     """sum_z u_z E_z,ch / sum_ch E_z,ch (channels, n) float32 for colour bands' terms (Z, channels,
     n) or (Z, channels) (then broadcast over the n views of ``weights``). [1]"""
     by_zenith = bands.zenith_weights(np.asarray(weights, dtype=np.float32))
@@ -529,7 +525,7 @@ def _tint(bands: ViewBands, colours, weights) -> np.ndarray:
     return tint
 
 
-def open_sky(bands: ViewBands, weights, colours_open, bands_open) -> np.ndarray:
+def open_sky(bands: ViewBands, weights: ArrayLike, colours_open: ArrayLike, bands_open: ArrayLike) -> np.ndarray:
     """``banded_sky`` on open ground, before ``sky_ratio``.
 
     sum_b w_b G_b,open sum_z u_z E_z,open / sum_ch E_z,open.
@@ -563,7 +559,7 @@ raster's cells: the shape changes over degrees (its sharpest feature, the hot sp
 1 / (1 + G), is a cone in G, the distance on this same plane)."""
 
 
-def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
+def shape_on_grid(brdf: BrdfConfig, view: ArrayLike, grid: Grid) -> np.ndarray:
     """The shape s(view, L) at the cells of a sky-plane grid.
 
     Exact on a lattice of spacing at most SHAPE_STEP over the grid, bilinear between (the grid's own
@@ -571,7 +567,7 @@ def shape_on_grid(brdf: BrdfConfig, view, grid) -> np.ndarray:
 
     Parameters
     ----------
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
     view : numpy.ndarray
         (3,) unit view vector [1].
@@ -615,19 +611,19 @@ _RING = _LastCall()
 """``_ring``: the bands of a frame weight the same raster's outside."""
 
 
-def summed_blocks(raster, factor: int):
-    """``sky_raster.coarser``, made once for the bands of a frame (the raster itself for 1).
+def summed_blocks(raster: SkyRaster, factor: int) -> SkyRaster:
+    """``sky.raster.coarser``, made once for the bands of a frame (the raster itself for 1).
 
     Parameters
     ----------
-    raster : sky_raster.SkyRaster
+    raster : sky.raster.SkyRaster
         The sky raster [radiance x sr].
     factor : int
         Cells a side per block (``band_factor``) [1].
 
     Returns
     -------
-    sky_raster.SkyRaster
+    sky.raster.SkyRaster
         [radiance x sr]; not to be written: the same object serves the frame's bands (its key
         is the raster's identity).
     """
@@ -649,7 +645,8 @@ def _ring(raster):
     return _RING.get((raster,), made)
 
 
-def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed: bool = False, factor: int = 1):
+def weighted_raster(raster: SkyRaster, brdf: BrdfConfig, view: ArrayLike, *, fold_period: tuple[int, int] | None = None,
+                    summed: bool = False, factor: int = 1) -> SkyRaster:
     """The sky raster with each cell's light times the shape s(view, L_cell).
 
     Max's f_r(V, L) on the sky raster, before the correlation (``shape_on_grid``), folded after the
@@ -658,9 +655,9 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
 
     Parameters
     ----------
-    raster : sky_raster.SkyRaster
+    raster : sky.raster.SkyRaster
         The sky raster [radiance x sr].
-    brdf : config.BrdfConfig
+    brdf : settings.BrdfConfig
         The model and its parameters (any value with those two fields).
     view : numpy.ndarray
         (3,) unit view vector [1].
@@ -669,13 +666,13 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
     summed : bool, optional
         One channel, the channels' sum weighted (the view bands').
     factor : int, optional
-        The raster's cells summed in blocks of ``factor`` x ``factor`` first (``sky_raster.coarser``,
+        The raster's cells summed in blocks of ``factor`` x ``factor`` first (``sky.raster.coarser``,
         for ``shadow.coarser_isolated``) and weighted at the blocks; the outside still by the
         raster's own ring [1].
 
     Returns
     -------
-    sky_raster.SkyRaster
+    sky.raster.SkyRaster
         The weighted raster, float32 [radiance x sr].
     """
     cells = summed_blocks(raster, factor)
@@ -695,5 +692,5 @@ def weighted_raster(raster, brdf: BrdfConfig, view, *, fold_period=None, summed:
     grid = cells.grid
     if fold_period is not None:
         weighted = fold(weighted, sky_offset(grid), fold_period)
-        grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
+        grid = sky_grid((0, 0), (fold_period[0], fold_period[1]), grid.pixel)
     return SkyRaster(grid, weighted.astype(np.float32), outside * edge)

@@ -33,12 +33,14 @@ offsets fixed above and its index bookkeeping; apart, each would restate the sig
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.fft as sfft
 import scipy.sparse as sparse
+from numpy.typing import ArrayLike
 
 from pipeline.core.geometry import Grid, fold, lattice_offset, sky_grid, sky_offset, wrapped_spans
 
@@ -128,7 +130,10 @@ def plan_isolated(window: Grid, canopy: Grid, *, height: float, alpha: float) ->
     q = window.pixel / height
     half = sky_half_cells(height, window.pixel, alpha)
     canopy_start = lattice_offset(canopy, window)
-    sky_start, sky_shape, fft_shape, start = [], [], [], []
+    sky_start: list[int] = []
+    sky_shape: list[int] = []
+    fft_shape: list[int] = []
+    start: list[int] = []
     exact = True
     for axis in range(2):
         n_win, n_can, c0 = window.shape[axis], canopy.shape[axis], canopy_start[axis]
@@ -144,13 +149,19 @@ def plan_isolated(window: Grid, canopy: Grid, *, height: float, alpha: float) ->
         fft_shape.append(sfft.next_fast_len(length, real=True))
         start.append(d_lo)
     reaches = all(n > 0 for n in sky_shape)
-    sky = sky_grid(tuple(sky_start), tuple(sky_shape), q) if reaches else None
+    sky = sky_grid(_pair(sky_start), _pair(sky_shape), q) if reaches else None
     return IsolatedPlan(
-        window.shape, canopy_start, canopy.shape, sky, tuple(fft_shape), tuple(start), exact
+        window.shape, canopy_start, canopy.shape, sky, _pair(fft_shape), _pair(start), exact
     )
 
 
-def occlusion_spectrum(occlusion: np.ndarray, plan: IsolatedPlan, *, workers: int = 1):
+def _pair(values: Iterable[int]) -> tuple[int, int]:
+    """The two (rows, cols) of ``values`` as a tuple."""
+    rows, cols = values
+    return rows, cols
+
+
+def occlusion_spectrum(occlusion: np.ndarray, plan: IsolatedPlan, *, workers: int = 1) -> np.ndarray:
     """rfft2 of the occlusion raster ``o = 1 - m``, zero-padded to the plan.
 
     As two passes, the rows' rfft then the columns' FFT, so that the rows of padding (about
@@ -176,14 +187,14 @@ def occlusion_spectrum(occlusion: np.ndarray, plan: IsolatedPlan, *, workers: in
     return sfft.fft(rows, n=plan.fft_shape[0], axis=-2, workers=workers, overwrite_x=True)
 
 
-def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: int = 1):
+def ground_isolated(sky: SkyRaster, spectrum: np.ndarray, plan: IsolatedPlan, *, workers: int = 1) -> np.ndarray:
     """Ground irradiance under an isolated canopy layer.
 
     g = total - (e correlated with o): exact for the discrete sum, no periodic copies.
 
     Parameters
     ----------
-    sky : sky_raster.SkyRaster
+    sky : sky.raster.SkyRaster
         The weighted sky raster on ``plan.sky`` [radiance x sr].
     spectrum : numpy.ndarray
         ``occlusion_spectrum`` of the layer.
@@ -203,7 +214,8 @@ def ground_isolated(sky: SkyRaster, spectrum, plan: IsolatedPlan, *, workers: in
     return np.subtract(total, g, out=g)
 
 
-def coarser_isolated(spectrum, plan: IsolatedPlan, factor: int, window: Grid):
+def coarser_isolated(spectrum: np.ndarray, plan: IsolatedPlan, factor: int,
+                     window: Grid) -> tuple[IsolatedPlan, np.ndarray, Grid]:
     """An isolated layer's plan and occlusion spectrum at ``factor`` times the ground pixel.
 
     The occlusion averaged over blocks of ``factor`` x ``factor`` cells, by its spectrum (each
@@ -228,7 +240,7 @@ def coarser_isolated(spectrum, plan: IsolatedPlan, factor: int, window: Grid):
     -------
     coarse_plan : IsolatedPlan
         For ``ground_isolated`` with the sky raster summed in blocks of ``factor`` cells
-        (``sky_raster.coarser``).
+        (``sky.raster.coarser``).
     coarse_spectrum : numpy.ndarray
         complex64 (fft rows / factor, fft cols / (2 factor) + 1).
     grid : Grid
@@ -245,11 +257,11 @@ def coarser_isolated(spectrum, plan: IsolatedPlan, factor: int, window: Grid):
     coarse = (whole * h1[None, :].astype(np.complex64)).reshape(m0, f, n1 // f).mean(axis=1)
     coarse = np.ascontiguousarray(coarse[:, : n1 // (2 * f) + 1], dtype=np.complex64)
     first = [(-s) % f for s in plan.start]  # window index of the first coarse centre
-    shape = tuple((n - 1 - i) // f + 1 for n, i in zip(plan.window_shape, first))
-    start = tuple((i + s) // f for i, s in zip(first, plan.start))
+    shape = _pair((n - 1 - i) // f + 1 for n, i in zip(plan.window_shape, first))
+    start = _pair((i + s) // f for i, s in zip(first, plan.start))
     coarse_plan = replace(plan, window_shape=shape, fft_shape=(n0 // f, n1 // f), start=start,
                           sky=None if plan.sky is None else replace(plan.sky, pixel=f * plan.sky.pixel,
-                                                                    shape=tuple(-(-n // f) for n in plan.sky.shape)))
+                                                                    shape=_pair(-(-n // f) for n in plan.sky.shape)))
     origin = (window.origin[0] + (first[1] + 0.5 - 0.5 * f) * window.pixel,
               window.origin[1] - (first[0] + 0.5 - 0.5 * f) * window.pixel)
     return coarse_plan, coarse, Grid(origin, f * window.pixel, shape)
@@ -309,7 +321,7 @@ def plan_periodic(window: Grid, tile: Grid, *, height: float, alpha: float) -> P
     return PeriodicPlan(window.shape, lattice_offset(tile, window), tile.shape, sky)
 
 
-def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1):
+def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1) -> np.ndarray:
     """rfft2 of a periodic tile's transmittance ``m``.
 
     Parameters
@@ -329,8 +341,8 @@ def transmittance_spectrum(transmittance: np.ndarray, *, workers: int = 1):
 
 
 def ground_periodic(
-    sky: SkyRaster, spectrum, plan: PeriodicPlan, mean_transmittance: float, *, workers: int = 1
-):
+    sky: SkyRaster, spectrum: np.ndarray, plan: PeriodicPlan, mean_transmittance: float, *, workers: int = 1
+) -> np.ndarray:
     """Ground irradiance under a periodic canopy tile.
 
     The sky square is folded onto one tile (unless the raster comes folded already, made with
@@ -389,7 +401,7 @@ class SunPlan:
     fft_shape: tuple[int, int]
 
 
-def sun_offset_range(centres, *, reach: float, q: float):
+def sun_offset_range(centres: ArrayLike, *, reach: float, q: float) -> tuple[tuple[int, int], tuple[int, int]]:
     """The fine sky offsets that cover a sun disc at each of several centres, with two cells to spare.
 
     Parameters
@@ -406,16 +418,16 @@ def sun_offset_range(centres, *, reach: float, q: float):
     lo, hi : tuple of (int, int)
         The offsets (dr, dc), inclusive [cell].
     """
-    centres = np.atleast_2d(np.asarray(centres, dtype=np.float64))
-    rows = -centres[:, 1] / q
-    cols = centres[:, 0] / q
+    points = np.atleast_2d(np.asarray(centres, dtype=np.float64))
+    rows = -points[:, 1] / q
+    cols = points[:, 0] / q
     span = reach / q + 2.0
     lo = (int(np.floor(rows.min() - span)), int(np.floor(cols.min() - span)))
     hi = (int(np.ceil(rows.max() + span)), int(np.ceil(cols.max() + span)))
     return lo, hi
 
 
-def plan_sun(window: Grid, *, offset_lo, offset_hi) -> SunPlan:
+def plan_sun(window: Grid, *, offset_lo: tuple[int, int], offset_hi: tuple[int, int]) -> SunPlan:
     """Plan the fine sun correlation of ``window`` for kernels inside the offsets ``offset_lo``..``offset_hi``.
 
     Parameters
@@ -432,13 +444,13 @@ def plan_sun(window: Grid, *, offset_lo, offset_hi) -> SunPlan:
     """
     p = window.pixel
     extra = tuple(hi - lo for lo, hi in zip(offset_lo, offset_hi))
-    shape = tuple(n + e for n, e in zip(window.shape, extra))
+    shape = _pair(n + e for n, e in zip(window.shape, extra))
     origin = (window.origin[0] + offset_lo[1] * p, window.origin[1] - offset_lo[0] * p)
-    fft_shape = tuple(sfft.next_fast_len(n, real=True) for n in shape)
-    return SunPlan(window.shape, tuple(offset_lo), tuple(offset_hi), Grid(origin, p, shape), fft_shape)
+    fft_shape = _pair(sfft.next_fast_len(n, real=True) for n in shape)
+    return SunPlan(window.shape, _pair(offset_lo), _pair(offset_hi), Grid(origin, p, shape), fft_shape)
 
 
-def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int = 1):
+def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int = 1) -> np.ndarray:
     """rfft2 of the fine mask ``m`` on ``plan.mask``, zero-padded to the plan; the padding is never read.
 
     Parameters
@@ -464,14 +476,14 @@ def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int
     return sfft.rfft2(m, s=plan.fft_shape, axes=(-2, -1), workers=workers)
 
 
-def ground_sun(kernel: SkyRaster, spectrum, plan: SunPlan, *, workers: int = 1):
+def ground_sun(kernel: SkyRaster, spectrum: np.ndarray, plan: SunPlan, *, workers: int = 1) -> np.ndarray:
     """Ground irradiance of the sun kernel through the fine mask.
 
     Exact for the discrete sum: every ray from the window through the kernel meets the fine mask.
 
     Parameters
     ----------
-    kernel : sky_raster.SkyRaster
+    kernel : sky.raster.SkyRaster
         The sun disc on a fine sky grid (``sky_grid(start, shape, q)``, q = fine pixel / height);
         it must lie inside the plan's offsets [radiance x sr].
     spectrum : numpy.ndarray
@@ -506,7 +518,7 @@ def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarra
     """``raster`` on ``grid`` sampled bilinearly at the pixel centres of ``target``, edges held.
 
     The coarse sky light under the fine sun window. Separable: a sparse interpolation matrix per
-    axis, ``R @ raster @ C.T``, applied by a compiled loop (``_array_loops.resample_separable``) with the
+    axis, ``R @ raster @ C.T``, applied by a compiled loop (``kernels.arrays.resample_separable``) with the
     float32 arithmetic of scipy's sparse products, which tests/test_shadow.py holds it to.
 
     Parameters
@@ -523,20 +535,20 @@ def resample_bilinear(raster: np.ndarray, grid: Grid, target: Grid) -> np.ndarra
     numpy.ndarray
         (channels, target rows, target cols) float32, in the units of ``raster``.
     """
-    from pipeline.kernels import arrays as _array_loops
+    from pipeline.kernels import arrays
 
     out = np.empty(raster.shape[:-2] + target.shape, dtype=np.float32)
     image = np.ascontiguousarray(raster, dtype=np.float32).reshape(-1, *grid.shape)
-    _array_loops.resample_separable(image, *_interpolations(grid, target), out.reshape(-1, *target.shape))
+    arrays.resample_separable(image, *_interpolations(grid, target), out.reshape(-1, *target.shape))
     return out
 
 
 @functools.lru_cache(maxsize=8)
-def _interpolations(grid: Grid, target: Grid) -> tuple:
-    """``interpolation_matrices`` as the rows and weights that ``_array_loops.resample_separable``
+def _interpolations(grid: Grid, target: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``interpolation_matrices`` as the rows and weights that ``kernels.arrays.resample_separable``
     reads: (row_at, row_weight, col_at, col_weight), each (n, k), in the matrices' stored order.
     They depend on the grids alone, so the frames of a run make them once. Read-only."""
-    tables = []
+    tables: list[np.ndarray] = []
     for matrix in interpolation_matrices(grid, target):
         k = matrix.nnz // matrix.shape[0]  # the same in every row (_interpolation)
         assert np.array_equal(matrix.indptr, np.arange(matrix.shape[0] + 1) * k)
@@ -544,10 +556,11 @@ def _interpolations(grid: Grid, target: Grid) -> tuple:
                    matrix.data.astype(np.float32, copy=False).reshape(-1, k)]
     for table in tables:
         table.flags.writeable = False
-    return tuple(tables)
+    row_at, row_weight, col_at, col_weight = tables
+    return row_at, row_weight, col_at, col_weight
 
 
-def interpolation_matrices(grid: Grid, target: Grid):
+def interpolation_matrices(grid: Grid, target: Grid) -> tuple[sparse.csr_matrix, sparse.csr_matrix]:
     """``resample_bilinear``'s sparse matrices R and C along rows and columns.
 
     Parameters
@@ -569,7 +582,7 @@ def interpolation_matrices(grid: Grid, target: Grid):
     return _interpolation(r, grid.shape[0]), _interpolation(c, grid.shape[1])
 
 
-def _interpolation(u, n: int):
+def _interpolation(u: np.ndarray, n: int) -> sparse.csr_matrix:
     """Sparse (len(u), n) matrix of linear interpolation at fractional indices ``u``, held at
     the ends."""
     u = np.clip(u, 0, n - 1)
@@ -581,7 +594,7 @@ def _interpolation(u, n: int):
                               np.concatenate([u0, u1]))), shape=(len(u), n))
 
 
-def combine_layers(grounds, unshadowed):
+def combine_layers(grounds: Iterable[np.ndarray], unshadowed: ArrayLike) -> np.ndarray:
     """Several canopy layers, assumed uncorrelated: the product of the layers' ground rasters over ``I0^(n - 1)``.
 
     Max 1991, "Extensions to multiple shadow casting planes".
@@ -598,10 +611,10 @@ def combine_layers(grounds, unshadowed):
     numpy.ndarray
         (channels, rows, cols) [radiance x sr].
     """
-    grounds = list(grounds)
+    layers = list(grounds)
     i0 = np.asarray(unshadowed, dtype=np.float32)[:, None, None]
-    out = grounds[0].copy()
-    for g in grounds[1:]:
+    out = layers[0].copy()
+    for g in layers[1:]:
         out *= np.divide(g, i0, out=np.zeros_like(g), where=i0 > 0)  # a dark channel stays 0
     return out
 

@@ -34,10 +34,15 @@ class Sky(Protocol):
         (3,) the sky's irradiance without the sun disc (clouds and the moon included).
     """
 
-    sun: SunDisc | None
-    sky_irradiance: np.ndarray
+    @property
+    def sun(self) -> SunDisc | None:
+        """The disc drawn by ``sun_kernel.sun_kernel``, None without one (read-only)."""
 
-    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+    @property
+    def sky_irradiance(self) -> np.ndarray:
+        """(3,) the sky's irradiance without the sun disc (read-only)."""
+
+    def raster(self, grid: Grid, *, fold_period: tuple[int, int] | None = None) -> SkyRaster:
         """The weighted sky on a sky-plane ``grid`` [tan], folded modulo ``fold_period`` (rows, cols) if given."""
 
     def sun_fraction(self) -> float:
@@ -47,7 +52,7 @@ class Sky(Protocol):
         """(3,) the sun's irradiance before the moon and clouds dim it (an HDRI's: as photographed); zeros
         without a sun."""
 
-    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+    def view_radiance(self, w: np.ndarray, s: np.ndarray, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """(..., 3) the sky's radiance without the sun disc along unit vectors w (..., 3) with sky-plane
         points s (..., 2) [tan] (the camera holds wz at MIN_UPWARD or more), each standing for a sky-plane
         width ``footprint`` [tan] (None, scalar, (...) or (..., 2): along the radius and across) over which
@@ -84,7 +89,7 @@ class UniformSky:
         """Zeros (3,): no sun. [radiance x sr]"""
         return np.zeros(3)
 
-    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+    def view_radiance(self, w: np.ndarray, s: np.ndarray, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """The sky's radiance along view directions: the same along every one.
 
         Parameters
@@ -102,7 +107,7 @@ class UniformSky:
         radiance = np.asarray(self.radiance, dtype=np.float32)
         return np.broadcast_to(radiance, np.shape(w)[:-1] + radiance.shape).copy()
 
-    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+    def raster(self, grid: Grid, *, fold_period: tuple[int, int] | None = None) -> SkyRaster:
         """Exact cell integrals of the uniform sky on a sky-plane grid.
 
         Parameters
@@ -114,14 +119,15 @@ class UniformSky:
 
         Returns
         -------
-        sky_raster.SkyRaster
+        sky.raster.SkyRaster
             The weighted sky [radiance x sr].
         """
         radiance = np.asarray(self.radiance, dtype=np.float64)
         weights = projected_solid_angle(grid)
         if fold_period is not None:
             weights = fold(weights[None], sky_offset(grid), fold_period)[0]
-            grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
+            period_rows, period_cols = fold_period
+            grid = sky_grid((0, 0), (period_rows, period_cols), grid.pixel)
         weighted = (radiance[:, None, None] * weights[None]).astype(np.float32)
         outside = radiance * np.pi - weighted.sum(axis=(1, 2), dtype=np.float64)
         return SkyRaster(grid, weighted, outside)

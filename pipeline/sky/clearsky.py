@@ -3,7 +3,7 @@
 Relative luminance from the CIE standard general sky (ISO 15469:2004 / CIE S 011/E:2003, 15 types)
 or from Preetham, Shirley & Smits (1999); chromaticity from Preetham's model for the clear types and
 from the CIE daylight locus (D series, CIE 15) for the overcast and intermediate ones. The shapes carry no
-absolute level: ``sky.ProceduralSky`` scales them to the diffuse illuminance of ``daylight``
+absolute level: ``procedural.ProceduralSky`` scales them to the diffuse illuminance of ``daylight``
 (docs/method.md, "The procedural sky": daylight in absolute units). Angles in radians; directions by the cosine of
 their zenith angle and their angle ``gamma`` from the sun.
 """
@@ -11,6 +11,7 @@ their zenith angle and their angle ``gamma`` from the sun.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS
 from pipeline.core.colour import REC709_LUMINANCE, XYZ_TO_REC709
@@ -92,7 +93,7 @@ _ZENITH_Y = np.array(
 )
 
 
-def cie_relative_luminance(cos_zenith, gamma, *, sun_zenith: float, cie_type: int) -> np.ndarray:
+def cie_relative_luminance(cos_zenith: ArrayLike, gamma: ArrayLike, *, sun_zenith: float, cie_type: int) -> np.ndarray:
     """Luminance over zenith luminance of a CIE standard general sky (ISO 15469:2004, eqs. 1-4).
 
     L / Lz = f(gamma) phi(Z) / (f(Zs) phi(0)), gradation phi(Z) = 1 + a exp(b / cos Z) (1 at the
@@ -169,7 +170,7 @@ def _perez(c, inv_cos, gamma, cos_gamma):
     return (1.0 + A * np.exp(B * inv_cos)) * (1.0 + C * np.exp(D * gamma) + E * cos_gamma * cos_gamma)
 
 
-def preetham_relative(cos_zenith, gamma, *, turbidity: float, sun_zenith: float) -> np.ndarray:
+def preetham_relative(cos_zenith: ArrayLike, gamma: ArrayLike, *, turbidity: float, sun_zenith: float) -> np.ndarray:
     """Preetham et al. (1999) eq. 3 for Y, x and y: the zenith values times F(theta, gamma) / F(0, theta_s).
 
     The zenith values are x_z, y_z (``zenith_chromaticity``) and 1 for Y.
@@ -199,7 +200,7 @@ def preetham_relative(cos_zenith, gamma, *, turbidity: float, sun_zenith: float)
     ])
 
 
-def rgb_from_xyY(x, y, Y) -> np.ndarray:
+def rgb_from_xyY(x: np.ndarray | float, y: np.ndarray | float, Y: np.ndarray | float) -> np.ndarray:
     """Linear Rec.709 from CIE xyY; its Rec.709 luminance is Y.
 
     Parameters
@@ -220,7 +221,7 @@ def rgb_from_xyY(x, y, Y) -> np.ndarray:
     return np.stack([M[i, 0] * X + M[i, 1] * Y + M[i, 2] * Z for i in range(3)], axis=-1)
 
 
-def relative_sky(cos_zenith, gamma, *, sun_zenith: float, turbidity: float, shape: str = "cie",
+def relative_sky(cos_zenith: ArrayLike, gamma: ArrayLike, *, sun_zenith: float, turbidity: float, shape: str = "cie",
                  cie_type: int = DEFAULT_CIE_TYPE) -> np.ndarray:
     """The sky's colour and relative luminance: luminance 1 at the zenith.
 

@@ -1,6 +1,6 @@
 """The pattern of a cloud layer (docs/method.md, "The cloud layer"): a periodic fractal noise
 lattice of zero mean and unit variance, its mip levels and their variances, its cubic B-spline
-coefficients packed with the levels for the compiled reads (``_tiling.cloud_field``), and the
+coefficients packed with the levels for the compiled reads (``kernels.tiling.cloud_field``), and the
 knots that turn the noise into coverage: a smoothstep in rank space, so that the coverage is at
 least 1/2 on a fraction ``cover`` of the plane whatever the noise's distribution (``coverage_knots``)."""
 
@@ -33,7 +33,8 @@ def _noise(seed: int, texels: int, period: float, spectral_slope: float):
     return field, ordered
 
 
-def fractal_noise(seed, texels=1024, *, period=16.0, spectral_slope=5.0 / 3.0):
+def fractal_noise(seed: int, texels: int = 1024, *, period: float = 16.0,
+                  spectral_slope: float = 5.0 / 3.0) -> np.ndarray:
     """The periodic fractal noise lattice of a cloud layer (zero mean, unit variance).
 
     Cached: the same arguments return the same array.
@@ -77,7 +78,7 @@ def _level_variances(seed: int, texels: int, period: float, spectral_slope: floa
     return np.array([level.var() for level in _noise_levels(seed, texels, period, spectral_slope)])
 
 
-def lost_variance(key, along, across) -> np.ndarray:
+def lost_variance(key: tuple[int, int, float, float], along: np.ndarray, across: np.ndarray) -> np.ndarray:
     """The variance of the noise within a footprint of widths ``along`` x ``across`` (m,)
     [texel] about its mean: 1 - var(box mean) for a box of the footprint's area, from the mip
     levels' variances (log-linear between them); below 2 texels, the lost variance of a
@@ -103,7 +104,7 @@ def _spline(seed: int, texels: int, period: float, spectral_slope: float) -> np.
 
 @lru_cache(maxsize=8)
 def packed_levels(seed: int, texels: int, period: float, spectral_slope: float) -> tuple:
-    """What ``_tiling.cloud_field`` reads: (every level in one flat float64 array, each level's offset
+    """What ``kernels.tiling.cloud_field`` reads: (every level in one flat float64 array, each level's offset
     in it, each level's side [texel]). Level 0 is the lattice's cubic B-spline coefficients
     (``_spline``), the coarser levels the box-filtered lattice (``_noise_levels``)."""
     levels = (_spline(seed, texels, period, spectral_slope), *_noise_levels(seed, texels, period, spectral_slope)[1:])
@@ -115,7 +116,8 @@ def packed_levels(seed: int, texels: int, period: float, spectral_slope: float) 
 
 
 @lru_cache(maxsize=64)
-def coverage_knots(seed, texels, period, spectral_slope, cover, softness):
+def coverage_knots(seed: int, texels: int, period: float, spectral_slope: float, cover: float,
+                   softness: float) -> tuple[np.ndarray, np.ndarray]:
     """Field values and coverages of the rank-space smoothstep (see the module docstring)."""
     ordered = _noise(seed, texels, period, spectral_slope)[1]
     u0 = 1.0 - cover

@@ -8,12 +8,13 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import special
 
 from pipeline.sky.scattering import henyey_greenstein
 
 __all__ = [
-    "single_scattering_transmission", "single_scattering_flux_transmittance", "delta_eddington_transmittance",
+    "single_scattering_flux_transmittance", "delta_eddington_transmittance",
     "two_stream_diffuse_transmittance", "diffuse_direct_transmittance",
 ]
 
@@ -34,44 +35,14 @@ def _phi(x):
     return -np.expm1(-x) / x
 
 
-def single_scattering_transmission(optical_depth, view_cosine, sun_cosine, phase, *, albedo):
-    """Singly scattered radiance below a slab lit from above, per unit sun normal irradiance.
+def slab_path(tau: np.ndarray, inv_mu: np.ndarray, inv_mu0: float | np.floating) -> np.ndarray:
+    """tau exp(-tau m) phi(tau d), m = min(1/mu, 1/mu0), d = |1/mu0 - 1/mu|: the integral over
+    the depth t in [0, tau] of exp(-t / mu0 - (tau - t) / mu). [dimensionless]
 
     Blinn 1982 ("Light reflection functions for simulation of clouds and dusty surfaces",
-    SIGGRAPH 82), transmitted light of a low-albedo layer:
-    ``L / F = w p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``, evaluated in the form
-    ``w p (tau / mu) exp(-tau min(1/mu, 1/mu0)) phi(tau |1/mu0 - 1/mu|)``, which is exact and
-    stable at ``mu = mu0``.
-
-    Parameters
-    ----------
-    optical_depth : float or numpy.ndarray
-        tau, vertical optical depth of the slab, >= 0 [1].
-    view_cosine : float or numpy.ndarray
-        mu, cosine of the zenith angle of the viewing direction, in (0, 1] [1].
-    sun_cosine : float or numpy.ndarray
-        mu0, cosine of the sun's zenith angle, in (0, 1] [1].
-    phase : float or numpy.ndarray
-        p, phase function at the scattering angle, normalised to 1 over the sphere [1/sr].
-    albedo : float
-        w, single-scattering albedo in [0, 1] [1].
-
-    Arrays broadcast.
-
-    Returns
-    -------
-    numpy.ndarray
-        L / F, float64 of the broadcast shape [1/sr].
-    """
-    tau = np.asarray(optical_depth, dtype=np.float64)
-    inv_mu = 1.0 / np.asarray(view_cosine, dtype=np.float64)
-    inv_mu0 = 1.0 / np.asarray(sun_cosine, dtype=np.float64)
-    return albedo * np.asarray(phase, dtype=np.float64) * inv_mu * slab_path(tau, inv_mu, inv_mu0)
-
-
-def slab_path(tau, inv_mu, inv_mu0):
-    """tau exp(-tau m) phi(tau d), m = min(1/mu, 1/mu0), d = |1/mu0 - 1/mu|: the integral over
-    the depth t in [0, tau] of exp(-t / mu0 - (tau - t) / mu). [dimensionless]"""
+    SIGGRAPH 82): the singly scattered radiance below a low-albedo slab lit from above, per unit
+    sun normal irradiance, is ``L / F = w p mu0 / (mu - mu0) (exp(-tau/mu) - exp(-tau/mu0))``
+    = ``w p (1 / mu) slab_path(tau, 1 / mu, 1 / mu0)``, a form exact and stable at ``mu = mu0``."""
     near = np.minimum(inv_mu, inv_mu0)
     x = np.abs(inv_mu0 - inv_mu)
     x = x * tau
@@ -81,13 +52,14 @@ def slab_path(tau, inv_mu, inv_mu0):
     return result
 
 
-def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry, albedo,
-                                         nodes=_QUAD_NODES):
+def single_scattering_flux_transmittance(optical_depth: ArrayLike, sun_cosine: float, *, asymmetry: float,
+                                         albedo: float, nodes: int = _QUAD_NODES) -> np.ndarray:
     """S1: the singly scattered flux leaving the base of a slab over the sun's flux F mu0.
 
-    The hemispheric integral of ``single_scattering_transmission`` times ``mu`` over the lower
-    hemisphere, by Gauss-Legendre quadrature in zenith (``nodes``) and azimuth (``nodes``);
-    the azimuth integral of the Henyey-Greenstein phase is done once for all depths.
+    The hemispheric integral of Blinn's singly scattered radiance per unit sun normal irradiance
+    (``slab_path``) times ``mu`` over the lower hemisphere, by Gauss-Legendre quadrature in zenith
+    (``nodes``) and azimuth (``nodes``); the azimuth integral of the Henyey-Greenstein phase is
+    done once for all depths.
 
     Parameters
     ----------
@@ -127,7 +99,7 @@ def single_scattering_flux_transmittance(optical_depth, sun_cosine, *, asymmetry
     return s1.reshape(tau.shape)
 
 
-def delta_eddington_transmittance(optical_depth, sun_cosine, *, asymmetry):
+def delta_eddington_transmittance(optical_depth: ArrayLike, sun_cosine: ArrayLike, *, asymmetry: float) -> np.ndarray:
     """Total (direct + diffuse) flux transmittance of a non-absorbing slab under a collimated sun.
 
     Delta-Eddington (Joseph, Wiscombe & Weinman 1976, J. Atmos. Sci. 33, 2452-2459): the forward
@@ -163,7 +135,7 @@ def delta_eddington_transmittance(optical_depth, sun_cosine, *, asymmetry):
     return 1.0 - reflectance
 
 
-def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
+def two_stream_diffuse_transmittance(optical_depth: ArrayLike, *, albedo: float, asymmetry: float) -> np.ndarray:
     """Flux transmittance of a slab under uniform diffuse light, two-stream (hemispheric mean).
 
     ``dF+/dtau = g1 F+ - g2 F-``, ``dF-/dtau = g2 F+ - g1 F-``, ``g1 = 2 - w (1 + g)``,
@@ -195,7 +167,7 @@ def two_stream_diffuse_transmittance(optical_depth, *, albedo, asymmetry):
     return np.exp(-k * tau) / (1.0 + (g1 + k) * r * r * tau * _phi(2.0 * k * tau))
 
 
-def diffuse_direct_transmittance(optical_depth):
+def diffuse_direct_transmittance(optical_depth: ArrayLike) -> np.ndarray:
     """Unscattered fraction of uniform diffuse light through a slab: 2 E3(tau).
 
     Parameters

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.cores import in_shares
 from pipeline.core.kept import kept_at
@@ -39,7 +40,7 @@ _HERMITE_NODES = 8  # Gauss-Hermite nodes of a footprint's mean coverage
 
 TILE_BLEND = 0.125
 """Width of the band about each edge of a copy of the tile, as a fraction of the tile's side, over
-which the copies on both sides blend (``_tiling.cloud_field``). [1]"""
+which the copies on both sides blend (``kernels.tiling.cloud_field``). [1]"""
 
 
 @dataclass(frozen=True)
@@ -134,7 +135,7 @@ class CloudLayer:
     def _noise_key(self):
         return (self.seed, self.texels, self.period, self.spectral_slope)
 
-    def field(self, s, time, footprint=None) -> np.ndarray:
+    def field(self, s: ArrayLike, time: float, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """The noise where directions ``s`` meet the layer at ``time`` (zero mean, unit variance on the lattice).
 
         The lattice is read by cubic B-spline interpolation (Unser, Aldroubi & Eden, "Fast
@@ -149,7 +150,7 @@ class CloudLayer:
         s : numpy.ndarray
             (..., 2) sky-plane points of the directions [tan]. A raster's grid, (rows, cols, 2) with x
             the same down each column and y along each row, is read without a footprint row by row
-            (``_tiling.cloud_grid``), to the same bits.
+            (``kernels.tiling.cloud_grid``), to the same bits.
         time : float
             [s].
         footprint : None, float or numpy.ndarray, optional
@@ -188,8 +189,10 @@ class CloudLayer:
                 flat, offsets, sides, rows[a:b], cols[a:b], True, none, none, unused, unused, unused, unused,
                 out[a:b], *copies))
         else:
+            count, k0, blend, major, ex, ey = taps
             in_shares(len(out), lambda a, b: cloud_field(
-                flat, offsets, sides, rows[a:b], cols[a:b], False, *(t[a:b] for t in taps), out[a:b], *copies))
+                flat, offsets, sides, rows[a:b], cols[a:b], False, count[a:b], k0[a:b], blend[a:b], major[a:b],
+                ex[a:b], ey[a:b], out[a:b], *copies))
         return out.reshape(shape)
 
     def _drift(self, time) -> tuple[float, float]:
@@ -198,13 +201,14 @@ class CloudLayer:
 
     def _drifted_copies(self, time) -> tuple[int, int]:
         """The copy of the tile (row, col) that ``_taps``'s lattice coordinates (0, 0) are the
-        centre of at ``time`` [s]: the drift's whole tiles, negated (``_tiling.cloud_field``)."""
-        return tuple(-int(math.floor(drift / self.texels)) for drift in self._drift(time))
+        centre of at ``time`` [s]: the drift's whole tiles, negated (``kernels.tiling.cloud_field``)."""
+        drift_row, drift_col = self._drift(time)
+        return -int(math.floor(drift_row / self.texels)), -int(math.floor(drift_col / self.texels))
 
     def _taps(self, s, time, footprint=None) -> tuple:
         """Where ``field`` reads the lattice: (the shape of ``s`` (..., 2) [tan] less its last
         axis; the lattice coordinates (row, col) of the samples (2, m) at ``time`` [s] [texel];
-        None without a footprint, else the taps as ``_tiling.cloud_field`` takes them: (count (m,), finer
+        None without a footprint, else the taps as ``kernels.tiling.cloud_field`` takes them: (count (m,), finer
         level k0 (m,), blend towards level k0 + 1 (m,), spread major (m,) [texel], the major
         axis ex, ey (m,) on the lattice))."""
         s = original = np.asarray(s, dtype=np.float64)
@@ -261,7 +265,7 @@ class CloudLayer:
             along = across = np.broadcast_to(width, shape).reshape(-1) * per_texel
         return along, across
 
-    def coverage(self, s, time, footprint=None) -> np.ndarray:
+    def coverage(self, s: ArrayLike, time: float, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """Cloud coverage c in [0, 1] at directions ``s`` at ``time``.
 
         1 in cloud cores, 0 in clear sky; ``c >= 1/2`` on a fraction ``cover`` of the plane. With a
@@ -291,7 +295,7 @@ class CloudLayer:
         field = self.field(s, time, footprint)
         if footprint is None:
             return np.interp(field, values, levels)
-        spread = self._spread(s, footprint).reshape(field.shape)
+        spread: np.ndarray = self._spread(s, footprint).reshape(field.shape)
         nodes, weights = _hermegauss(_HERMITE_NODES)
         out = np.empty(field.shape)
         from pipeline.kernels.arrays import hermite_mean  # numba, imported on first use
@@ -314,7 +318,7 @@ class CloudLayer:
             return kept_at(_kept_spreads, self, (s, footprint), compute, read_only=False)  # to numba
         return compute()
 
-    def optical_depth(self, s, time, footprint=None) -> np.ndarray:
+    def optical_depth(self, s: ArrayLike, time: float, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """Vertical optical depth tau = thickness x coverage where ``s`` meets the layer at ``time``.
 
         Parameters
@@ -330,7 +334,7 @@ class CloudLayer:
         """
         return self.thickness * self.coverage(s, time, footprint)
 
-    def transmittance(self, s, time, footprint=None) -> np.ndarray:
+    def transmittance(self, s: ArrayLike, time: float, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """Direct transmittance exp(-tau / cos(theta)) along directions ``s`` at ``time``.
 
         cos(theta) = 1 / sqrt(1 + |s|^2).
@@ -375,8 +379,9 @@ class CloudLayer:
             m_sky = m_sky * ratio
         return tau, m_sun, m_sky
 
-    def radiance(self, s, time, *, sun_s, sun_irradiance, sky_irradiance,
-                 multiple_scattering=True, tau=None, footprint=None) -> np.ndarray:
+    def radiance(self, s: ArrayLike, time: float, *, sun_s: ArrayLike, sun_irradiance: ArrayLike,
+                 sky_irradiance: ArrayLike, multiple_scattering: bool = True, tau: np.ndarray | None = None,
+                 footprint: float | np.ndarray | None = None) -> np.ndarray:
         """Light the layer scatters towards the observer along directions ``s``.
 
         Parameters
@@ -447,8 +452,9 @@ class CloudLayer:
             np.multiply(sun_weight[..., None], sun_rgb.astype(f32), out=out)
         return out
 
-    def shade(self, s, time, *, sun_s, sun_irradiance, sky_irradiance, multiple_scattering=True,
-              footprint=None):
+    def shade(self, s: ArrayLike, time: float, *, sun_s: ArrayLike, sun_irradiance: ArrayLike,
+              sky_irradiance: ArrayLike, multiple_scattering: bool = True,
+              footprint: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The transmittance and the radiance along ``s``, sampling the pattern once.
 
         ``(transmittance(s, time, footprint), radiance(s, time, ..., footprint=footprint))``.

@@ -2,7 +2,7 @@
 
 The clear-sky irradiance of Ineichen & Perez (2002) from pvlib, turned into illuminance with the
 luminous efficacy model of Perez et al. (1990), and the Linke turbidity climatology of pvlib.
-The sky's angular shape is ``clearsky``'s; ``sky.ProceduralSky`` scales that shape to these
+The sky's angular shape is ``clearsky``'s; ``procedural.ProceduralSky`` scales that shape to these
 levels (docs/method.md, "The procedural sky": daylight in absolute units).
 
 pvlib is imported inside the functions: its import is slow (measured in docs/accuracy.md), and a
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "SOLAR_CONSTANT", "PRECIPITABLE_WATER", "CLEARNESS_BINS", "TWILIGHT_END", "TWILIGHT_BLEND", "Efficacy",
@@ -75,8 +76,9 @@ class Efficacy:
     brightness: np.ndarray
 
 
-def perez_efficacy(sun_zenith, direct_normal, diffuse_horizontal, *, relative_airmass,
-                   extraterrestrial=SOLAR_CONSTANT, precipitable_water=PRECIPITABLE_WATER) -> Efficacy:
+def perez_efficacy(sun_zenith: ArrayLike, direct_normal: ArrayLike, diffuse_horizontal: ArrayLike, *,
+                   relative_airmass: ArrayLike, extraterrestrial: float = SOLAR_CONSTANT,
+                   precipitable_water: float = PRECIPITABLE_WATER) -> Efficacy:
     """Luminous efficacies of the global, direct and diffuse light of a sky.
 
     Perez, Ineichen, Seals, Michalsky & Stewart 1990, "Modeling daylight availability and irradiance
@@ -256,7 +258,7 @@ _USNO_SUN = ((20.0, (3.74, 3.97, -4.07, 1.47)), (5.0, (3.05, 13.28, -45.98, 64.3
              (-12.0, (2.70, 12.17, -431.69, -1899.83)), (-18.0, (13.84, 262.72, 1447.42, 2797.93)))
 
 
-def usno_illuminance(elevation_deg) -> np.ndarray:
+def usno_illuminance(elevation_deg: ArrayLike) -> np.ndarray:
     """Horizontal illuminance of the sun and the clear sky at the mean sun distance.
 
     Janiczek & DeYoung 1987, USNO Circular 171: the curve of its illuminance program, altitude bands
@@ -286,7 +288,7 @@ TWILIGHT_MAX_FALL = 1.0
 capped, the light falls by less than 10% between neighbouring tenths (docs/method.md). [1/deg]"""
 
 
-def twilight_illuminance(elevation_deg) -> np.ndarray:
+def twilight_illuminance(elevation_deg: ArrayLike) -> np.ndarray:
     """The USNO curve with its fall capped: the lowest curve at or above it whose log falls no faster
     than TWILIGHT_MAX_FALL.
 

@@ -35,14 +35,16 @@ Units: radians, metres; the factors are dimensionless. [1]
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.sky.ephemeris import MOON_RADIUS, obscured_fraction
 
 __all__ = [
     "SHARP_LIMIT", "MULTIPLE_SCATTERING", "EARTH_RADIUS", "RAYLEIGH_SCALE_HEIGHT", "AEROSOL_SCALE_HEIGHT",
-    "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS", "METER_TABLE",
+    "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS", "FULL_TABLE", "METER_TABLE",
     "DIFFUSION_LENGTH", "FLOOR_HEIGHT", "MAP_CELLS", "MAP_EXTENT", "CORONA_REACH", "RGB_WAVELENGTHS", "deep_weight",
     "vertical_optical_depths", "point_sun_fraction", "diffused_fraction", "line_of_sight", "EclipseField",
     "floor_colour", "corona_profile", "corona_beyond", "corona_drawn", "corona_drawn_beyond",
@@ -83,6 +85,10 @@ TABLE_ELEVATIONS = 33
 
 TABLE_AZIMUTHS = 72
 """Azimuths of the direction table, 5 degrees apart. [count]"""
+
+FULL_TABLE = (TABLE_ELEVATIONS, TABLE_AZIMUTHS, PATH_NODES)
+"""(elevations, azimuths, path nodes) of the deep eclipse's line-of-sight table (``EclipseField``)
+for a frame's sky. [count]"""
 
 METER_TABLE = (17, 36, 96)
 """(elevations, azimuths, path nodes) of the coarser table an exposure meter reads the deep
@@ -151,7 +157,8 @@ def vertical_optical_depths(turbidity: float) -> tuple[np.ndarray, np.ndarray]:
     return 0.008735 * lam**-4.08, beta * lam**-1.3
 
 
-def point_sun_fraction(points, *, sun_direction, moon_direction, sun_radius, moon_radius):
+def point_sun_fraction(points: ArrayLike, *, sun_direction: ArrayLike, moon_direction: ArrayLike, sun_radius: float,
+                       moon_radius: float) -> np.ndarray:
     """Uneclipsed area fraction of the sun seen from points around the observer.
 
     The moon's centre, at distance D = R_moon / sin(moon_radius) along ``moon_direction`` from the
@@ -178,7 +185,8 @@ def point_sun_fraction(points, *, sun_direction, moon_direction, sun_radius, moo
     unit = moon / reach[..., None]
     sun = np.asarray(sun_direction, dtype=np.float64)
     sep = 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(unit - sun, axis=-1), 0.0, 1.0))
-    return 1.0 - obscured_fraction(sep, np.full(sep.shape, sun_radius), np.arcsin(MOON_RADIUS / reach))
+    covered = obscured_fraction(sep, np.full(sep.shape, sun_radius), np.arcsin(MOON_RADIUS / reach))
+    return cast(np.ndarray, 1.0 - covered)  # arrays in, an array out
 
 
 def _line_nodes(nodes: int = PATH_NODES):
@@ -188,7 +196,8 @@ def _line_nodes(nodes: int = PATH_NODES):
     return PATH_LENGTH * t * t, PATH_LENGTH * 2.0 * t / nodes
 
 
-def diffused_fraction(*, sun_direction, moon_direction, sun_radius, moon_radius):
+def diffused_fraction(*, sun_direction: ArrayLike, moon_direction: ArrayLike, sun_radius: float,
+                      moon_radius: float) -> tuple[np.ndarray, float]:
     """The uneclipsed fraction S on the ground around the observer, diffused sideways.
 
     S on the ground plane, averaged with the kernel exp(-rho / DIFFUSION_LENGTH) /
@@ -239,8 +248,8 @@ def _map_lookup(field, extent, x, y):
             + fr * ((1 - fc) * field[r + 1, c] + fc * field[r + 1, c + 1]))
 
 
-def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon_radius,
-                  turbidity: float, nodes: int = PATH_NODES) -> tuple[np.ndarray, np.ndarray]:
+def line_of_sight(directions: ArrayLike, *, sun_direction: ArrayLike, moon_direction: ArrayLike, sun_radius: float,
+                  moon_radius: float, turbidity: float, nodes: int = PATH_NODES) -> tuple[np.ndarray, np.ndarray]:
     """F and M, per R, G, B channel, along lines of sight.
 
     F(w) = integral beta T S dl / integral beta T dl: the clear-sky-weighted uneclipsed fraction
@@ -288,13 +297,13 @@ def line_of_sight(directions, *, sun_direction, moon_direction, sun_radius, moon
     p_a = (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * c) ** 1.5)
     weight = (k_r * p_r[:, None, None] + k_a * p_a[:, None, None]) * to_observer * from_sun
     points = l[None, :, None] * w[:, None, :]
-    geometry = dict(sun_direction=sun, moon_direction=moon_direction, sun_radius=sun_radius,
-                    moon_radius=moon_radius)
-    s = point_sun_fraction(points, **geometry)
+    s = point_sun_fraction(points, sun_direction=sun, moon_direction=moon_direction, sun_radius=sun_radius,
+                           moon_radius=moon_radius)
     single = np.einsum("nkc,nk->nc", weight, s) / weight.sum(axis=1)
     moon = np.asarray(moon_direction, dtype=np.float64)
     foot = points - (points[..., 2:3] / max(moon[2], 0.05)) * moon
-    field, extent = diffused_fraction(**geometry)
+    field, extent = diffused_fraction(sun_direction=sun, moon_direction=moon_direction, sun_radius=sun_radius,
+                                      moon_radius=moon_radius)
     diffused = _map_lookup(field, extent, foot[..., 0], foot[..., 1])
     multiple = np.einsum("nkc,nk->nc", step * to_observer, diffused)
     return single, multiple
@@ -315,16 +324,18 @@ class EclipseField:
     table: np.ndarray
 
     @classmethod
-    def compute(cls, *, table=(TABLE_ELEVATIONS, TABLE_AZIMUTHS, PATH_NODES), **geometry) -> EclipseField:
-        """The table of ``line_of_sight(..., **geometry)``.
+    def compute(cls, *, sun_direction: ArrayLike, moon_direction: ArrayLike, sun_radius: float,
+                moon_radius: float, turbidity: float,
+                table: tuple[int, int, int] = FULL_TABLE) -> EclipseField:
+        """The table of ``line_of_sight`` for a sun and moon.
 
         Parameters
         ----------
+        sun_direction, moon_direction, sun_radius, moon_radius, turbidity
+            As ``line_of_sight`` takes them.
         table : tuple of (int, int, int), optional
-            Its (elevations, azimuths, path nodes) [count] (METER_TABLE: the meter's coarser one).
-        **geometry
-            ``sun_direction``, ``moon_direction``, ``sun_radius``, ``moon_radius`` and ``turbidity``
-            of ``line_of_sight``.
+            Its (elevations, azimuths, path nodes) [count] (FULL_TABLE; METER_TABLE: the meter's
+            coarser one).
 
         Returns
         -------
@@ -337,11 +348,13 @@ class EclipseField:
         az = np.arange(azimuths) * (2.0 * np.pi / azimuths)
         e, a = np.meshgrid(el, az, indexing="ij")
         w = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1).reshape(-1, 3)
-        f = np.concatenate(line_of_sight(w, nodes=nodes, **geometry), axis=-1)
+        f = np.concatenate(line_of_sight(w, sun_direction=sun_direction, moon_direction=moon_direction,
+                                         sun_radius=sun_radius, moon_radius=moon_radius, turbidity=turbidity,
+                                         nodes=nodes), axis=-1)
         f = f.reshape(elevations, azimuths, 6)
         return cls(np.concatenate([f, f[:, :1]], axis=1))
 
-    def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, w: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """F and M at unit vectors w.
 
         Parameters
@@ -391,7 +404,7 @@ def floor_colour(turbidity: float) -> np.ndarray:
     return np.exp(-(tau - tau[1]))
 
 
-def corona_profile(r) -> np.ndarray:
+def corona_profile(r: ArrayLike) -> np.ndarray:
     """Baumbach's K+F corona, B(r) / B_sun = 1e-6 (0.0532 r^-2.5 + 1.425 r^-7 + 2.565 r^-17).
 
     B_sun the mean radiance of the disc (Allen's Astrophysical Quantities, Cox 2000, sec. 14.8).
@@ -431,7 +444,7 @@ def corona_beyond(r0: float) -> float:
     return 2e-6 * (0.0532 * r0**-0.5 / 0.5 + 1.425 * r0**-5 / 5.0 + 2.565 * r0**-15 / 15.0)
 
 
-def corona_drawn(r) -> np.ndarray:
+def corona_drawn(r: ArrayLike) -> np.ndarray:
     """The corona as drawn, B(r) - B(CORONA_REACH) out to CORONA_REACH and 0 beyond, over B_sun.
 
     ``corona_profile``, made continuous where it ends.

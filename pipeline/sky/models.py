@@ -1,6 +1,6 @@
 """The sky models a config may name, each a class that the registry ``vocabulary.SKIES`` makes
 from the config's ``sky`` section: where the sun and moon are at a frame, the frame's sky
-(``sky.Sky``), the clear light of the run and the files the model reads (docs/design.md,
+(``base.Sky``), the clear light of the run and the files the model reads (docs/design.md,
 "Models plug in")."""
 
 from __future__ import annotations
@@ -16,13 +16,30 @@ from pipeline.config.parse import MAX_RADIANCE
 from pipeline.config.settings import SkyConfig
 from pipeline.core import io
 from pipeline.core.geometry import offset_direction
-from pipeline.sky import ephemeris, equirect, sun_disc
-from pipeline.sky import procedural as skylib
+from pipeline.sky import ephemeris, equirect, procedural, sun_disc
 from pipeline.sky.base import Sky, UniformSky
 from pipeline.sky.clouds import CloudLayer
-from pipeline.sky.eclipse import METER_TABLE
+from pipeline.sky.eclipse import FULL_TABLE, METER_TABLE
 
-__all__ = ["SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky", "load_hdri"]
+__all__ = ["FrameScene", "SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky",
+           "load_hdri"]
+
+
+class FrameScene(Protocol):
+    """What a sky model reads of a frame's scene (``scene.Scene`` has it): the frame's sun and
+    moon (``SkyModel.discs``) and its time."""
+
+    @property
+    def time(self) -> float:
+        """Film time [s]."""
+
+    @property
+    def sun(self) -> sun_disc.SunDisc | None:
+        """The sun's disc, or None (a sky without a sun)."""
+
+    @property
+    def moon(self) -> sun_disc.MoonDisc | None:
+        """The moon's disc, or None."""
 
 
 class SkyModel(Protocol):
@@ -49,19 +66,19 @@ class SkyModel(Protocol):
             The moon's disc [rad], or None.
         """
 
-    def at(self, scene, *, metering: bool = False) -> Sky:
+    def at(self, scene: FrameScene | None, *, metering: bool = False) -> Sky:
         """The sky at a frame's scene.
 
         Parameters
         ----------
-        scene : scene.Scene or None
+        scene : FrameScene or None
             The frame's scene; None for a sky without a sun.
         metering : bool
             For an exposure meter, which reads the whole sky's light only (a model may make it coarser).
 
         Returns
         -------
-        sky.Sky
+        base.Sky
             The sky's radiance [kcd/m^2] by direction and its sun.
         """
 
@@ -106,17 +123,20 @@ class ProceduralModel:
 
     config: SkyConfig
 
-    def discs(self, fraction: float):
+    def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
         """The sun and moon from the ephemeris at the time ``fraction`` through ``sky.time``, or
         the config's sun with the moon slid from ``offset_start`` to ``offset_end``."""
         sky = self.config
         if sky.site is not None:
             site = sky.site
             when = site.start + (site.end - site.start) * fraction
-            sun, moon = ephemeris.sun_and_moon(ephemeris.Site(site.latitude, site.longitude, site.elevation), when)
-            return (when, sun_disc.SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
-                    sun_disc.MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
+            sun_at, moon_at = ephemeris.sun_and_moon(ephemeris.Site(site.latitude, site.longitude, site.elevation),
+                                                     when)
+            return (when, sun_disc.SunDisc(sun_at.azimuth, sun_at.elevation, sun_at.angular_radius),
+                    sun_disc.MoonDisc(moon_at.azimuth, moon_at.elevation, moon_at.angular_radius))
         s = sky.sun
+        if s is None:  # the parser gives a procedural sky a site or a sun
+            raise ValueError("a procedural sky needs sky.sun or sky.site")
         moon = None
         if sky.moon is not None:
             m = sky.moon
@@ -125,19 +145,23 @@ class ProceduralModel:
             moon = sun_disc.MoonDisc(azimuth, elevation, m.radius)
         return None, sun_disc.SunDisc(s.azimuth, s.elevation, s.radius), moon
 
-    def at(self, scene, *, metering: bool = False):
+    def at(self, scene: FrameScene | None, *, metering: bool = False) -> procedural.ProceduralSky:
         """The clear sky with the scene's sun, moon, clouds and eclipse; ``metering``: a deep
         eclipse's line-of-sight table is the coarser ``eclipse.METER_TABLE``."""
+        if scene is None or scene.sun is None:  # a procedural sky's scenes have a sun (``discs``)
+            raise ValueError("a procedural sky needs a scene with a sun")
         clouds = None
         if self.config.clouds is not None:
             c = self.config.clouds
             clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
-                                wind=np.asarray(c.wind), thickness=c.thickness, seed=c.seed)
-        detail = {"eclipse_table": METER_TABLE} if metering else {}
-        return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time, **detail)
+                                wind=c.wind, thickness=c.thickness, seed=c.seed)
+        return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time,
+                         eclipse_table=METER_TABLE if metering else FULL_TABLE)
 
-    def clear_light(self, sun):
+    def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray, np.ndarray]:
         """The clear sky's (no clouds, no moon) with ``sun``."""
+        if sun is None:  # a procedural sky has a sun (``discs``)
+            raise ValueError("a procedural sky needs a sun")
         clear = clear_sky(self.config, sun)
         return clear.sun_normal_irradiance, clear.clear_sky_irradiance
 
@@ -156,15 +180,15 @@ class ConstantSky:
         """The sky's radiance (3,) in each linear Rec.709 channel [kcd/m^2]."""
         raise NotImplementedError
 
-    def discs(self, fraction: float):
+    def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
         """No time, no sun, no moon."""
         return None, None, None
 
-    def at(self, scene, *, metering: bool = False):
+    def at(self, scene: FrameScene | None, *, metering: bool = False) -> UniformSky:
         """The radiance in every direction."""
         return UniformSky(self.radiance)
 
-    def clear_light(self, sun):
+    def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray | None, np.ndarray]:
         """No sun; the sky's horizontal irradiance pi L."""
         return None, np.pi * self.radiance
 
@@ -203,15 +227,15 @@ class HdriModel:
 
     config: SkyConfig
 
-    def discs(self, fraction: float):
+    def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
         """No time; the image's sun; no moon."""
         return None, load_hdri(self.config).sun, None
 
-    def at(self, scene, *, metering: bool = False):
+    def at(self, scene: FrameScene | None, *, metering: bool = False) -> equirect.EquirectSky:
         """The image (``load_hdri``)."""
         return load_hdri(self.config)
 
-    def clear_light(self, sun):
+    def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray | None, np.ndarray]:
         """The image's sun (None without one) and its sky's horizontal irradiance."""
         hdri = load_hdri(self.config)
         if hdri.sun is None:
@@ -223,7 +247,9 @@ class HdriModel:
         load_hdri(self.config)
 
 
-def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> skylib.ProceduralSky:
+def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, *, moon: sun_disc.MoonDisc | None = None,
+              clouds: procedural.Clouds | None = None, time: float = 0.0,
+              eclipse_table: tuple[int, int, int] = FULL_TABLE) -> procedural.ProceduralSky:
     """The procedural sky of a config with ``sun``.
 
     Parameters
@@ -232,17 +258,18 @@ def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, **state) -> skylib.Procedur
         A procedural sky's resolved config section.
     sun : sun_disc.SunDisc
         The sun.
-    **state
-        ``moon``, ``clouds``, ``time`` [s], ``eclipse_table``: as ``sky.ProceduralSky`` takes them.
+    moon, clouds, time, eclipse_table
+        The moon, the clouds, the time [s] and the eclipse's table, as ``procedural.ProceduralSky`` takes
+        them.
 
     Returns
     -------
-    sky.ProceduralSky
+    procedural.ProceduralSky
         Radiance [kcd/m^2] by direction, the sun's and sky's light [klx].
     """
-    return skylib.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
+    return procedural.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
                                 cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
-                                **state)
+                                moon=moon, clouds=clouds, time=time, eclipse_table=eclipse_table)
 
 
 @functools.lru_cache(maxsize=4)
@@ -264,13 +291,18 @@ def load_hdri(sky: SkyConfig) -> equirect.EquirectSky:
     ------
     io.ImageError
         Naming the file, when it cannot be read or holds NaN, infinite or too large values.
+    ValueError
+        For a section without ``hdri`` (the parser requires it of ``model: hdri``).
     """
-    image = io.read_image(sky.hdri)
+    path = sky.hdri
+    if path is None:
+        raise ValueError("an hdri sky needs sky.hdri")
+    image = io.read_image(path)
     if image.shape[2] < 3:
         image = np.repeat(image[..., :1], 3, axis=2)
     image = image[..., :3]
     if not np.all(np.isfinite(image)):
-        raise io.ImageError(sky.hdri, "the sky image holds NaN or infinite values")
+        raise io.ImageError(path, "the sky image holds NaN or infinite values")
     if image.max() > MAX_RADIANCE:
-        raise io.ImageError(sky.hdri, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
+        raise io.ImageError(path, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
     return equirect.cut_sun(equirect.EquirectSky(np.maximum(image, 0.0), sky.rotation))

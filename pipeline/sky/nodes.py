@@ -6,12 +6,18 @@ the clear sky's shape at such nodes and at a still camera's points, kept while t
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.geometry import Grid, projected_solid_angle
 from pipeline.core.kept import kept_at
+
+if TYPE_CHECKING:  # an annotation only: procedural imports this module
+    from pipeline.sky.procedural import ProceduralSky
 
 __all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "solid_angles32", "relative_nodes",
            "relative_at"]
@@ -22,7 +28,7 @@ __all__ = ["gauss_legendre", "lerp_nodes", "outside_nodes", "raster_nodes", "sol
 _leggauss = lru_cache(maxsize=4)(np.polynomial.legendre.leggauss)
 
 
-def gauss_legendre(a, b, n):
+def gauss_legendre(a: ArrayLike, b: ArrayLike, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Nodes and weights of n-point Gauss-Legendre quadrature on [a, b].
 
     Parameters
@@ -44,7 +50,8 @@ def gauss_legendre(a, b, n):
 
 
 @lru_cache(maxsize=8)
-def outside_nodes(extent, n_azimuth=1024, n_zenith=32) -> tuple:
+def outside_nodes(extent: tuple[float, float, float, float] | None, n_azimuth: int = 1024,
+                  n_zenith: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Quadrature of the irradiance of the sky outside a sky-plane rectangle.
 
     For each azimuth (midpoint rule) the ray from the zenith leaves the rectangle at exact zenith
@@ -94,8 +101,8 @@ def outside_nodes(extent, n_azimuth=1024, n_zenith=32) -> tuple:
 
 
 @lru_cache(maxsize=8)
-def raster_nodes(grid: Grid, k: int) -> tuple:
-    """The nodes on which ``sky.ProceduralSky.raster`` evaluates the clear sky. Read-only, cached.
+def raster_nodes(grid: Grid, k: int) -> tuple[np.ndarray]:
+    """The nodes on which ``procedural.ProceduralSky.raster`` evaluates the clear sky. Read-only, cached.
 
     Parameters
     ----------
@@ -135,7 +142,7 @@ def solid_angles32(grid: Grid) -> np.ndarray:
     return weights
 
 
-def lerp_nodes(n: int, k: int):
+def lerp_nodes(n: int, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interpolation nodes every k of n indices, the last one included.
 
     Parameters
@@ -163,13 +170,13 @@ def lerp_nodes(n: int, k: int):
 
 
 @lru_cache(maxsize=16)
-def relative_nodes(clear, nodes, *where) -> np.ndarray:
+def relative_nodes(clear: ProceduralSky, nodes: Callable[..., tuple[np.ndarray, ...]], *where: object) -> np.ndarray:
     """The clear sky's shape at a set of nodes, read-only, cached: the same in every frame while the sun
     stands still.
 
     Parameters
     ----------
-    clear : sky.ProceduralSky
+    clear : procedural.ProceduralSky
         The sky without what does not shape its clear sky (``ProceduralSky._clear_key``).
     nodes : callable
         ``outside_nodes`` or ``raster_nodes``.
@@ -189,15 +196,15 @@ def relative_nodes(clear, nodes, *where) -> np.ndarray:
 _kept_points: dict = {}  # relative_at's: (clear sky, id(points)) -> (points, their relative sky or None)
 
 
-def relative_at(clear, s: np.ndarray) -> np.ndarray:
+def relative_at(clear: ProceduralSky, s: np.ndarray) -> np.ndarray:
     """The clear sky's shape at read-only points, kept (``kept.kept_at``) for the last ``POINTS_KEPT`` skies
-    and points: a camera that stands still (its rays made once, ``camera._sky_rays``) sees the clear
+    and points: a camera that stands still (its rays made once, ``pinhole._sky_rays``) sees the clear
     sky's shape at the same points in every frame while the sun stands still (76 ms of a frame of
     sun-and-shade.yaml).
 
     Parameters
     ----------
-    clear : sky.ProceduralSky
+    clear : procedural.ProceduralSky
         As ``relative_nodes`` takes it.
     s : numpy.ndarray
         (..., 2) read-only sky-plane points [tan].

@@ -1,22 +1,24 @@
-"""The sky models: the ``Sky`` interface the renderer and the camera ask of a sky, the uniform sky
-and the procedural sky (clear sky, sun, moon, clouds, the deep eclipse) with their weighted
-sky-plane rasters ``e`` (Max 1991, eq. 1 and Fig. 6; ``sky_raster``).
+"""The procedural sky (clear sky, sun, moon, clouds, the deep eclipse) with its weighted
+sky-plane rasters ``e`` (Max 1991, eq. 1 and Fig. 6; ``sky.raster``).
 
-The HDRI sky is ``equirect.EquirectSky``; the sun and moon discs are ``sun_disc``'s; the nodes the
-procedural sky is evaluated on are ``sky_nodes``'; the sun's fine kernel and its sum are
+The ``Sky`` interface it implements and the uniform sky are ``base``'s (``base.Sky``,
+``base.UniformSky``); the HDRI sky is ``equirect.EquirectSky``; the sun and moon discs are
+``sun_disc``'s; the nodes the procedural sky is evaluated on are ``nodes``'; the sun's fine kernel and its sum are
 ``sun_kernel``'s, which uses these models (they do not use it).
 
 Why one module: ``ProceduralSky`` is one model of many parts (the clear sky's levels and shape,
 the moon's cut, the clouds, the deep eclipse, its raster and its equirectangular image) that
-share its cached state; the uniform sky and the interface are short.
+share its cached state.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Literal, Protocol, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS, TURBIDITY_RANGE
 from pipeline.core.colour import REC709_LUMINANCE
@@ -42,7 +44,7 @@ from pipeline.sky.nodes import (
 from pipeline.sky.raster import SkyRaster, kept_raster
 from pipeline.sky.sun_disc import MoonDisc, SunDisc, angle_to, disc_samples, sun_colour, sun_disc_radiance
 
-__all__ = ["CLEAR_SKY_NODE_SPACING", "ProceduralSky"]
+__all__ = ["CLEAR_SKY_NODE_SPACING", "Clouds", "ProceduralSky"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -54,7 +56,7 @@ __all__ = ["CLEAR_SKY_NODE_SPACING", "ProceduralSky"]
 # photometric luminance), so irradiances [radiance x sr] come out in klx. Directions: azimuth from
 # north towards east, zenith angle from +z [rad]; sky-plane points s = (wx/wz, wy/wz) [tan].
 #
-# Clouds protocol (implemented in ``pipeline/clouds.py``, used here by duck typing):
+# Clouds protocol (``Clouds``; implemented in ``pipeline/sky/clouds.py``, used here by duck typing):
 #   clouds.transmittance(s (..., 2), time, footprint=None) -> (...) in [0, 1], direct transmittance along s;
 #   clouds.radiance(s (..., 2), time, *, sun_s (2,), sun_irradiance (3,), sky_irradiance (3,), footprint=None)
 #       -> (..., 3) light scattered towards the observer [kcd/m^2], given the sun's sky-plane
@@ -64,6 +66,22 @@ __all__ = ["CLEAR_SKY_NODE_SPACING", "ProceduralSky"]
 #       (transmittance, radiance) as the two above return them, the pattern sampled once.
 #   Sky behind cloud: L_clear(s) T(s) + clouds.radiance(s); the sun is dimmed by T(s_sun).
 # ---------------------------------------------------------------------------------------------
+
+
+class Clouds(Protocol):
+    """What ``ProceduralSky`` asks of its clouds (the comment above; ``clouds.CloudLayer`` has it):
+    ``transmittance`` and ``radiance``, and ``shade``, both at once, where they have it."""
+
+    def transmittance(self, s: np.ndarray, time: float, footprint: float | np.ndarray | None = None) -> np.ndarray:
+        """(...) direct transmittance in [0, 1] along sky-plane points s (..., 2) [tan] at ``time`` [s],
+        filtered over ``footprint`` [tan]. [1]"""
+
+    def radiance(self, s: np.ndarray, time: float, *, sun_s: np.ndarray, sun_irradiance: np.ndarray,
+                 sky_irradiance: np.ndarray, footprint: float | np.ndarray | None = None) -> np.ndarray:
+        """(..., 3) light scattered towards the observer along sky-plane points s (..., 2) [tan] at
+        ``time`` [s], lit by the sun at sky-plane point ``sun_s`` (2,) [tan] of normal irradiance
+        ``sun_irradiance`` (3,) [klx] and by the clear sky of horizontal irradiance
+        ``sky_irradiance`` (3,) [klx]. [kcd/m^2]"""
 
 
 _kept_rasters: dict = {}  # ProceduralSky.raster's without clouds: (the sky at time 0, grid, fold) -> raster
@@ -102,8 +120,8 @@ class ProceduralSky:
         radius gives its distance, so the extraterrestrial irradiance [rad].
     moon : sun_disc.MoonDisc or None
         The new moon that cuts the sun.
-    clouds : object or None
-        An object with the clouds protocol (the module's comment above).
+    clouds : Clouds or None
+        An object with the clouds protocol (``Clouds``, the module's comment above).
     time : float
         Passed to the clouds [s].
     skylight : float
@@ -114,9 +132,10 @@ class ProceduralSky:
         The CIE standard general sky type with shape 'cie', 1..15.
     altitude : float
         Of the site above sea level [m].
-    eclipse_table : tuple
+    eclipse_table : tuple of (int, int, int)
         (elevations, azimuths, path nodes) of a deep eclipse's line-of-sight table
-        (``eclipse.EclipseField``); ``eclipse.METER_TABLE`` for an exposure meter [count].
+        (``eclipse.EclipseField``): ``eclipse.FULL_TABLE``, or ``eclipse.METER_TABLE`` for an
+        exposure meter [count].
 
     Raises
     ------
@@ -127,13 +146,13 @@ class ProceduralSky:
     turbidity: float
     sun: SunDisc
     moon: MoonDisc | None = None
-    clouds: object | None = None
+    clouds: Clouds | None = None
     time: float = 0.0
     skylight: float = 1.0
     shape: str = "cie"
     cie_type: int = DEFAULT_CIE_TYPE
     altitude: float = 0.0
-    eclipse_table: tuple = (eclipse.TABLE_ELEVATIONS, eclipse.TABLE_AZIMUTHS, eclipse.PATH_NODES)
+    eclipse_table: tuple[int, int, int] = eclipse.FULL_TABLE
 
     def __post_init__(self):
         lo, hi = TURBIDITY_RANGE
@@ -244,7 +263,7 @@ class ProceduralSky:
     def _relative_sky(self, s) -> np.ndarray:
         """The clear sky's shape and colour at sky-plane points s (..., 2) [tan]: zenith luminance 1;
         for read-only points (a still camera's rays), kept while the sun stands still
-        (``sky_nodes.relative_at``). [1]"""
+        (``nodes.relative_at``). [1]"""
         if isinstance(s, np.ndarray) and not s.flags.writeable:
             return relative_at(self._clear_key, s)
         return self._shape_at(s)
@@ -273,10 +292,10 @@ class ProceduralSky:
     def zenith_luminance(self) -> float:
         """Luminance of the clear, uneclipsed sky at the zenith: the one that gives the diffuse
         horizontal illuminance of ``daylight`` (skylight and the moon not applied). [kcd/m^2]"""
-        luminance = self._relative_irradiance @ np.asarray(REC709_LUMINANCE, dtype=np.float64)
+        luminance = float(self._relative_irradiance @ np.asarray(REC709_LUMINANCE, dtype=np.float64))
         return self.daylight.diffuse_horizontal_illuminance / luminance
 
-    def clear_radiance(self, s) -> np.ndarray:
+    def clear_radiance(self, s: ArrayLike) -> np.ndarray:
         """The clear sky's radiance, eclipse-dimmed, without the sun disc and the clouds.
 
         Parameters
@@ -310,14 +329,21 @@ class ProceduralSky:
     @cached_property
     def moon_direction(self) -> np.ndarray:
         """Unit vector towards the moon's centre (with a moon). [1]"""
-        return direction_vector(self.moon.azimuth, self.moon.elevation)
+        return direction_vector(self._moon.azimuth, self._moon.elevation)
+
+    @property
+    def _moon(self) -> MoonDisc:
+        """The moon, for what only a sky with a moon asks (the deep eclipse: ``_deep`` above 0)."""
+        if self.moon is None:
+            raise ValueError("the sky has no moon")
+        return self.moon
 
     @cached_property
     def _eclipse_field(self) -> eclipse.EclipseField:
         """F and M of every sky direction at this sun and moon (``eclipse.line_of_sight``)."""
         return eclipse.EclipseField.compute(
             table=self.eclipse_table, sun_direction=self.sun_direction, moon_direction=self.moon_direction,
-            sun_radius=self.sun.angular_radius, moon_radius=self.moon.angular_radius, turbidity=self.turbidity)
+            sun_radius=self.sun.angular_radius, moon_radius=self._moon.angular_radius, turbidity=self.turbidity)
 
     def _dimming_at(self, s) -> np.ndarray:
         """Factor on the clear sky at sky-plane points s (..., 2) [tan]: ``_sky_dimming`` (3,)
@@ -338,7 +364,7 @@ class ProceduralSky:
         deep = f + eclipse.MULTIPLE_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
         return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
 
-    def corona_radiance(self, w) -> np.ndarray:
+    def corona_radiance(self, w: ArrayLike) -> np.ndarray:
         """The corona as drawn (``eclipse.corona_drawn``: Baumbach's profile, ending with no edge
         at ``eclipse.CORONA_REACH`` solar radii) times b, 0 behind the moon.
 
@@ -356,7 +382,7 @@ class ProceduralSky:
         r = self.sun.angular_radius
         mean_disc = self.sun_normal_irradiance / (np.pi * r * r)
         profile = eclipse.corona_drawn(angle_to(w, self.sun_direction) / r)
-        profile = np.where(angle_to(w, self.moon_direction) >= self.moon.angular_radius, profile, 0.0)
+        profile = np.where(angle_to(w, self.moon_direction) >= self._moon.angular_radius, profile, 0.0)
         return (self._deep * profile)[..., None] * mean_disc
 
     @cached_property
@@ -365,7 +391,7 @@ class ProceduralSky:
         sun, ``eclipse.corona_drawn_beyond``), dimmed by the cloud towards the sun. [klx]"""
         if not self._deep:
             return np.zeros(3)
-        beyond = eclipse.corona_drawn_beyond(self.moon.angular_radius / self.sun.angular_radius)
+        beyond = eclipse.corona_drawn_beyond(self._moon.angular_radius / self.sun.angular_radius)
         return (self._deep * beyond * self.sun_cloud_transmittance) * self.undimmed_sun_irradiance()
 
     def _corona_cells(self, grid: Grid):
@@ -387,7 +413,7 @@ class ProceduralSky:
         L = self.corona_radiance(_unit(np.stack([sx, sy], axis=-1))) * self.sun_cloud_transmittance
         return idx, np.einsum("kijc,kij->ck", L, cos4) * (grid.pixel / n) ** 2
 
-    def radiance(self, s, footprint=None) -> np.ndarray:
+    def radiance(self, s: ArrayLike, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """The sky's radiance without the sun disc: L_clear T + cloud glow.
 
         Parameters
@@ -424,7 +450,7 @@ class ProceduralSky:
         return (self.clouds.transmittance(s, self.time, footprint),
                 self.clouds.radiance(s, self.time, footprint=footprint, **self._cloud_light))
 
-    def view_radiance(self, w, s, footprint=None) -> np.ndarray:
+    def view_radiance(self, w: np.ndarray, s: np.ndarray, footprint: float | np.ndarray | None = None) -> np.ndarray:
         """``radiance(s, footprint)`` (..., 3) [kcd/m^2] at the sky-plane points s (..., 2) [tan] of
         the unit vectors w (..., 3), which it does not need (``Sky.view_radiance``)."""
         return self.radiance(s, footprint=footprint)
@@ -455,12 +481,12 @@ class ProceduralSky:
         """Irradiance [klx] of the sky (``radiance``) outside the sky-plane rectangle ``extent``
         (x_min, y_min, x_max, y_max) [tan] (None: the whole hemisphere), by the quadrature of
         ``outside_nodes``; the clear sky's shape at its nodes is computed once for all frames
-        with this clear sky (``sky_nodes.relative_nodes``)."""
+        with this clear sky (``nodes.relative_nodes``)."""
         s, weight = outside_nodes(extent)
         L = relative_nodes(self._clear_key, outside_nodes, extent) * (self.zenith_luminance * self._dimming_at(s))
         return (self._with_clouds(L, s) * weight[..., None]).sum(axis=(0, 1, 2))
 
-    def raster(self, grid: Grid, *, fold_period=None) -> SkyRaster:
+    def raster(self, grid: Grid, *, fold_period: tuple[int, int] | None = None) -> SkyRaster:
         """The sky without the sun disc on a sky-plane grid: radiance at cell centres times the
         exact projected solid angles (Max 1991, eq. 2); ``outside`` by quadrature of the rest of the
         hemisphere (``_outside``).
@@ -479,7 +505,7 @@ class ProceduralSky:
 
         Returns
         -------
-        sky_raster.SkyRaster
+        sky.raster.SkyRaster
             The weighted sky [klx]; without clouds, kept, from the second frame that asks for the same
             sky and grid, for the next (read-only: while the sun stands still every frame gets the same raster;
             a frame of forest.yaml spent 110 ms on its sky raster).
@@ -489,9 +515,9 @@ class ProceduralSky:
         key = (replace(self, time=0.0), grid, None if fold_period is None else tuple(int(n) for n in fold_period))
         return kept_raster(_kept_rasters, key, lambda: self._raster(grid, fold_period), again=True)
 
-    def _raster(self, grid: Grid, fold_period) -> SkyRaster:
+    def _raster(self, grid: Grid, fold_period: tuple[int, int] | None) -> SkyRaster:
         """``raster`` computed. [klx]"""
-        from pipeline.kernels import arrays as _array_loops
+        from pipeline.kernels import arrays
 
         rows, cols = grid.shape
         k = max(1, int(CLEAR_SKY_NODE_SPACING // grid.pixel))
@@ -514,7 +540,7 @@ class ProceduralSky:
                 transmittance, glow = self._cloud_shade(np.stack(np.broadcast_arrays(x, y[part]), axis=-1))
             # compiled: the clear sky between node rows, the clouds' transmittance and glow,
             # the solid angles, as L = lerp; L *= clip(T, 0, 1); L += glow; L * weights
-            _array_loops.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), self.clouds is not None,
+            arrays.sky_rows(along, row_at, row_frac, lo, len(row_at[part]), self.clouds is not None,
                                   np.ascontiguousarray(transmittance, dtype=np.float64),
                                   np.ascontiguousarray(glow, dtype=np.float32), weights, weighted)
         outside = self._outside(grid.extent)
@@ -523,10 +549,20 @@ class ProceduralSky:
             weighted.reshape(3, -1)[:, idx] += corona.astype(np.float32)
         if fold_period is not None:
             weighted = fold(weighted, sky_offset(grid), fold_period)
-            grid = sky_grid((0, 0), tuple(fold_period), grid.pixel)
+            period_rows, period_cols = fold_period
+            grid = sky_grid((0, 0), (period_rows, period_cols), grid.pixel)
         return SkyRaster(grid, weighted, outside)
 
-    def equirect(self, width: int, *, parts: bool = False):
+    @overload
+    def equirect(self, width: int, *, parts: Literal[False] = False) -> np.ndarray: ...
+
+    @overload
+    def equirect(self, width: int, *, parts: Literal[True]) -> tuple[np.ndarray, dict[str, np.ndarray]]: ...
+
+    @overload
+    def equirect(self, width: int, *, parts: bool) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]: ...
+
+    def equirect(self, width: int, *, parts: bool = False) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
         """The sky and its sun as an equirectangular radiance image.
 
         In ``equirect``'s convention (top row at the zenith, centre column north, east at three
@@ -572,10 +608,10 @@ class ProceduralSky:
         if self._deep:  # the corona, more coarsely: it is smooth beyond the limb; not S's light,
             # so in the sky's part
             spacing = min(r / 16.0, np.pi / height / 4.0)
-            for target in (image, sky) if parts else (image,):
+            for target in (image, sky) if sky is not None else (image,):
                 self._deposit(target, lambda w: self.corona_radiance(w) * self.sun_cloud_transmittance,
                               eclipse.CORONA_REACH * r, spacing)
-        if parts:
+        if sky is not None:  # with ``parts``
             return image.astype(np.float32), {"sun": (image - sky).astype(np.float32), "sky": sky.astype(np.float32)}
         return image.astype(np.float32)
 

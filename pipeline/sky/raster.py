@@ -9,6 +9,7 @@ normalising factor: radiance in, irradiance [radiance x sr] out.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -21,7 +22,7 @@ __all__ = ["KEPT_RASTERS", "SkyRaster", "coarser", "kept_raster"]
 
 KEPT_RASTERS = 4
 """Most sky-plane rasters a still sky keeps for the next frames (an ``EquirectSky``; a procedural
-sky without clouds, ``sky.ProceduralSky.raster``): a run asks for one or two per layer. [count]"""
+sky without clouds, ``procedural.ProceduralSky.raster``): a run asks for one or two per layer. [count]"""
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,7 @@ class SkyRaster:
 _SEEN = object()  # a key asked for once, its raster not kept (kept_raster's ``again``)
 
 
-def kept_raster(kept: dict, key, compute, *, again: bool = False) -> SkyRaster:
+def kept_raster(kept: dict, key: tuple, compute: Callable[[], SkyRaster], *, again: bool = False) -> SkyRaster:
     """The raster ``compute()`` makes, kept in ``kept`` under ``key`` for the next call (read-only; at
     most ``KEPT_RASTERS`` keys, the oldest dropped first): a still sky gives every frame of a run the
     same raster. A key that cannot be hashed (a grid given with lists) keeps nothing.
@@ -123,7 +124,7 @@ def coarser(raster: SkyRaster, factor: int) -> SkyRaster:
     return SkyRaster(grid, summed, raster.outside)
 
 
-def grid_footprint(grid: Grid):
+def grid_footprint(grid: Grid) -> tuple[float, float, Callable[[np.ndarray, float], np.ndarray]]:
     """Where a sky-plane grid lies as seen from the zenith, with one cell of margin.
 
     Returns (near, reach, keep_phi): the nearest and farthest distances [tan] of the grid from
@@ -149,7 +150,8 @@ def grid_footprint(grid: Grid):
     return near, reach, keep_phi
 
 
-def bilinear_shares(grid: Grid, sx, sy, wrap=None):
+def bilinear_shares(grid: Grid, sx: np.ndarray, sy: np.ndarray,
+                    wrap: tuple[Sequence[int], Sequence[int]] | None = None) -> tuple[np.ndarray, ...]:
     """Bilinear deposits of sky-plane points (sx, sy) (2-D arrays) on the cells of ``grid``.
 
     Returns the flat cell index, the share (the four shares of a point sum to 1), and the row and
@@ -163,7 +165,8 @@ def bilinear_shares(grid: Grid, sx, sy, wrap=None):
     c0 = np.floor(colf)
     fr, fc = rowf - r0, colf - c0
     r0, c0 = r0.astype(np.int64), c0.astype(np.int64)
-    point_row, point_col = np.indices(sx.shape)
+    indices = np.indices(sx.shape)
+    point_row, point_col = indices[0], indices[1]
     parts = []
     for dr, dc, share in (
         (0, 0, (1 - fr) * (1 - fc)),
@@ -183,7 +186,7 @@ def bilinear_shares(grid: Grid, sx, sy, wrap=None):
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
 
 
-def flush(accum, pending: list) -> None:
+def flush(accum: np.ndarray, pending: list[tuple[np.ndarray, np.ndarray]]) -> None:
     """Add the pending (flat index, values (n, channels)) deposits to ``accum`` and empty the list."""
     if not pending:
         return

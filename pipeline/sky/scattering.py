@@ -5,11 +5,12 @@ the finished frame")."""
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["henyey_greenstein", "haze_transmittance"]
 
 
-def henyey_greenstein(cos_scattering_angle, asymmetry):
+def henyey_greenstein(cos_scattering_angle: ArrayLike, asymmetry: float) -> np.ndarray:
     """Henyey-Greenstein phase function, normalised to 1 over the sphere.
 
     p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos(Theta))^(3/2))  (Henyey & Greenstein 1941,

@@ -7,9 +7,11 @@ sky's units (kcd/m^2 for a procedural sky), normal irradiance [radiance x sr].
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.core.constants import SUN_ANGULAR_RADIUS
@@ -60,7 +62,8 @@ def sun_colour(zenith: float, turbidity: float) -> np.ndarray:
     return transmittance / (transmittance @ np.asarray(REC709_LUMINANCE, dtype=np.float64))
 
 
-def sun_disc_radiance(angular_distance, *, angular_radius: float, normal_irradiance, limb_darkening):
+def sun_disc_radiance(angular_distance: ArrayLike, *, angular_radius: float, normal_irradiance: ArrayLike,
+                      limb_darkening: ArrayLike) -> np.ndarray:
     """Radiance of a limb-darkened disc.
 
     The linear law I(mu) = I(1) (1 - u (1 - mu)), mu = sqrt(1 - (rho / r)^2) (e.g. Cox 2000,
@@ -153,13 +156,14 @@ def _check_disc(disc, name):
         raise ValueError(f"{name} angular_radius must be in (0, 0.1) [rad], got {disc.angular_radius}")
 
 
-def angle_to(w, c):
+def angle_to(w: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Angle [rad] between unit vectors w (..., 3) and c (3,), stable for small angles."""
     return 2.0 * np.arcsin(np.clip(0.5 * length3(w - c), 0.0, 1.0))
 
 
-def disc_samples(w, footprint, widest: float, sun: SunDisc, direction, normal_irradiance,
-                  moon: MoonDisc | None = None):
+def disc_samples(w: np.ndarray, footprint: Callable[[np.ndarray, np.ndarray, np.ndarray], float | np.ndarray],
+                 widest: float, sun: SunDisc, direction: np.ndarray, normal_irradiance: ArrayLike,
+                 moon: MoonDisc | None = None) -> np.ndarray:
     """Radiance (..., 3) of the limb-darkened sun disc at unit vectors w (..., 3), optionally cut
     by a dark moon, the disc edges (sun limb, moon limb) anti-aliased by a linear ramp over
     ``footprint(centre, rho, near)`` [rad]: the sample spacing measured along the angular distance

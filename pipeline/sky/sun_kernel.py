@@ -49,7 +49,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
 
     Parameters
     ----------
-    sky : sky.ProceduralSky or equirect.EquirectSky
+    sky : procedural.ProceduralSky or equirect.EquirectSky
         A procedural sky, or an HDRI with a sun (``equirect.cut_sun``; no moon, no cloud
         dimming); the whole sun disc must be above the horizon.
     q : float
@@ -57,7 +57,7 @@ def sun_kernel(sky: ProceduralSky | EquirectSky, q: float) -> SkyRaster:
 
     Returns
     -------
-    sky_raster.SkyRaster
+    sky.raster.SkyRaster
         The kernel (outside = 0) on ``geometry.sky_grid(start, shape, q)``: the block covers the
         disc with a margin of one cell; ``geometry.sky_offset(kernel.grid)`` is its offset
         ``start``. In the sky's irradiance units ([klx] for a procedural sky); its sum is
@@ -100,7 +100,7 @@ def sun_irradiance(sky: ProceduralSky | EquirectSky) -> np.ndarray:
 
     Parameters
     ----------
-    sky : sky.ProceduralSky or equirect.EquirectSky
+    sky : procedural.ProceduralSky or equirect.EquirectSky
         The sky whose sun it is.
 
     Returns
@@ -124,7 +124,7 @@ def unshadowed(sky: ProceduralSky | EquirectSky) -> np.ndarray:
 
     Parameters
     ----------
-    sky : sky.ProceduralSky or equirect.EquirectSky
+    sky : procedural.ProceduralSky or equirect.EquirectSky
         The sky.
 
     Returns

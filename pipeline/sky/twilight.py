@@ -21,6 +21,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.sky.eclipse import (
@@ -71,7 +72,7 @@ TABLE_AZIMUTHS = 13
 """Azimuths from the sun's, 15 degrees apart from 0 to 180 (the sky is symmetric). [count]"""
 
 
-def _shell_extinction(turbidity: float) -> np.ndarray:
+def _shell_extinction(turbidity: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The extinction coefficients (Rayleigh, aerosol, ozone), each (shells, 3), of the homogeneous
     shells [1/m]: the exact mean of the exponential Rayleigh and aerosol densities over each shell,
     and the ozone tent's mean."""
@@ -98,8 +99,8 @@ def _within(r, mu, radii):
     return np.where(inside, root - r * mu, np.where(crosses, 2.0 * root, 0.0))
 
 
-def single_scattering(view_elevation, view_azimuth, *, sun_elevation: float, turbidity: float,
-                      sub_points: int = 2) -> np.ndarray:
+def single_scattering(view_elevation: ArrayLike, view_azimuth: ArrayLike, *, sun_elevation: float,
+                      turbidity: float, sub_points: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """Singly scattered sunlight reaching the ground observer along lines of sight.
 
     Each line of sight is cut where it crosses the shells' boundaries; in each piece, ``sub_points``
@@ -169,12 +170,13 @@ def _sky_light(view_elevation, view_azimuth, sun_elevation: float, turbidity: fl
     return radiance[:-1] + MULTIPLE_SCATTERING * radiance[-1] * reach[:-1] / reach[-1]
 
 
-def _nodes():
+def _nodes() -> tuple[np.ndarray, np.ndarray]:
     """The table's directions: (elevations, azimuths from the sun's), each (TABLE_ELEVATIONS x TABLE_AZIMUTHS,).
     [rad]"""
     e = np.radians(90.0) * np.linspace(0.0, 1.0, TABLE_ELEVATIONS) ** 2
     phi = np.radians(np.linspace(0.0, 180.0, TABLE_AZIMUTHS))
-    return tuple(a.ravel() for a in np.meshgrid(e, phi, indexing="ij"))
+    elevations, azimuths = np.meshgrid(e, phi, indexing="ij")
+    return elevations.ravel(), azimuths.ravel()
 
 
 @lru_cache(maxsize=4)
@@ -196,7 +198,7 @@ def _table(sun_elevation: float, turbidity: float) -> np.ndarray:
     return ratio
 
 
-def twilight_colour(cos_zenith, gamma, *, sun_elevation: float, turbidity: float) -> np.ndarray:
+def twilight_colour(cos_zenith: ArrayLike, gamma: ArrayLike, *, sun_elevation: float, turbidity: float) -> np.ndarray:
     """The change of the sky's colour from a sun on the horizon to a sun below it.
 
     The ratio, per channel, of ``single_scattering`` at ``sun_elevation`` to its value with the sun

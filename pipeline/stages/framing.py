@@ -4,16 +4,26 @@ where one place would lose it (docs/method.md, "Framing"). Part of the plan stag
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from pipeline.camera import pinhole as camera
+from pipeline.camera import pinhole
+from pipeline.camera.pinhole import Camera
 from pipeline.canopy import grove as grove_geometry
 from pipeline.config.settings import Config
 from pipeline.core.geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
 from pipeline.stages.inputs import grove_of
-from pipeline.stages.scene import shading_scenes, sun_shades
+from pipeline.stages.scene import Scene, shading_scenes, sun_of, sun_shades
+
+if TYPE_CHECKING:
+    from pipeline.stages.plan import RunPlan
+
+Box = tuple[float, float, float, float]
+"""(x_min, y_min, x_max, y_max) of a box on the ground [m]."""
 
 __all__ = ["CAMERA_HEIGHT", "CAMERA_PITCH", "ECLIPSE_PITCH", "CAMERA_TURN", "WINDOW_MARGIN", "AUTO_SUN_PIXELS",
            "AUTO_SUN_MASK", "AUTO_VIEW_SAMPLES", "Framing", "canopy_extent", "crown_centre", "DAPPLE_TRANSMITTANCE",
@@ -55,27 +65,27 @@ class Framing:
         The ground window (x_min, y_min, x_max, y_max) [m].
     sun_window : tuple of float or None
         The sun window, the same way [m]; None: the window.
-    camera : camera.Camera
+    camera : pinhole.Camera
         The camera.
     auto : tuple of str
         Which of ``ground.window``, ``ground.sun_window`` and ``camera`` were placed automatically.
     shadow : tuple of float or None
         (x_min, y_min, x_max, y_max) of where the shadow falls [m]; None: a periodic forest, shadow
         everywhere.
-    follow : tuple of (int, camera.Camera) or None
+    follow : tuple of (int, pinhole.Camera) or None
         With a camera that follows the shadow (``camera.follow``), per shading scene its frame and
         its camera (``camera`` is the middle one's); None: one camera for every frame.
     """
 
-    window: tuple[float, float, float, float]
-    sun_window: tuple[float, float, float, float] | None
-    camera: camera.Camera
+    window: Box
+    sun_window: Box | None
+    camera: Camera
     auto: tuple[str, ...]
-    shadow: tuple[float, float, float, float] | None
-    follow: tuple[tuple[int, camera.Camera], ...] | None = None
+    shadow: Box | None
+    follow: tuple[tuple[int, Camera], ...] | None = None
 
 
-def canopy_extent(config: Config, projection) -> tuple[float, float, float, float]:
+def canopy_extent(config: Config, projection: tuple[float, float]) -> Box:
     """The box of every canopy plane.
 
     The grove's leaves projected along the sun onto each plane over the flutter cycle, or the mask
@@ -93,7 +103,7 @@ def canopy_extent(config: Config, projection) -> tuple[float, float, float, floa
     tuple of float
         (x_min, y_min, x_max, y_max) [m].
     """
-    boxes = []
+    boxes: list[tuple[float, ...]] = []
     for layer in config.canopy.layers:
         if config.canopy.trees is None or config.canopy.layout == "periodic":
             (cx, cy), (w, h) = layer.center, layer.size
@@ -141,7 +151,7 @@ DAPPLE_CELL = 0.25
 """Cell of the leaf-shadow density map that finds it (averaged over 1 m). [m]"""
 
 
-def dappled_point(config: Config, s, transmittance: float = DAPPLE_TRANSMITTANCE) -> np.ndarray:
+def dappled_point(config: Config, s: ArrayLike, transmittance: float = DAPPLE_TRANSMITTANCE) -> np.ndarray:
     """The point on the ground where the sun gets through the grove's leaves in about ``transmittance``.
 
     Each leaf's shadow (its ellipse's area pi |u| |v| times |n . w| / w_z along the sun w) is summed
@@ -188,21 +198,22 @@ def dappled_point(config: Config, s, transmittance: float = DAPPLE_TRANSMITTANCE
     return points[np.argmin(np.linalg.norm(points - middle, axis=1))]
 
 
-def _union(boxes):
-    boxes = np.array(boxes, dtype=np.float64)
-    return (*boxes[:, :2].min(axis=0), *boxes[:, 2:].max(axis=0))
+def _union(boxes: Iterable[Sequence[float | np.ndarray]]) -> Box:
+    corners = np.array(boxes, dtype=np.float64)
+    return (*corners[:, :2].min(axis=0), *corners[:, 2:].max(axis=0))
 
 
-def _grow(box, margin):
+def _grow(box: Sequence[float], margin: float) -> Box:
     return (box[0] - margin, box[1] - margin, box[2] + margin, box[3] + margin)
 
 
-def _intersect(a, b):
+def _intersect(a: Sequence[float], b: Sequence[float]) -> Box | None:
     box = (max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3]))
     return box if box[2] > box[0] and box[3] > box[1] else None
 
 
-def shadow_extents(config: Config, scenes, projection, extent=None) -> list:
+def shadow_extents(config: Config, scenes: Iterable[Scene], projection: tuple[float, float],
+                   extent: Box | None = None) -> list[Box]:
     """Per frame, the box of the ground the canopy's shadow falls on.
 
     A plane point c at height h shades c - h s along the sun's sky-plane point s [tan], so the
@@ -238,7 +249,7 @@ def shadow_extents(config: Config, scenes, projection, extent=None) -> list:
     return boxes
 
 
-def leaf_shadow_extents(config: Config, scenes, projection) -> list:
+def leaf_shadow_extents(config: Config, scenes: Iterable[Scene], projection: tuple[float, float]) -> list[Box]:
     """Per frame, the box of the leaves' shadows alone.
 
     Every 16th leaf's centre, at its own height, along the frame's sun: a low sun's trunk shadow
@@ -263,14 +274,14 @@ def leaf_shadow_extents(config: Config, scenes, projection) -> list:
     grove, _ = grove_of(config.canopy)
     centres = grove.leaves.center[::16]
     boxes = []
-    for scene in scenes:
-        s = np.array(sky_plane_from_direction(scene.sun.azimuth, np.pi / 2 - scene.sun.elevation))
+    for sun in map(sun_of, scenes):
+        s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation))
         shade = centres[:, :2] - centres[:, 2:3] * s
         boxes.append((*shade.min(axis=0), *shade.max(axis=0)))
     return boxes
 
 
-def frame_scene(config: Config, scenes, projection) -> Framing:
+def frame_scene(config: Config, scenes: Sequence[Scene], projection: tuple[float, float]) -> Framing:
     """The windows and the camera of a run, each from the config where it gives them, else
     placed (docs/method.md, "Framing"):
 
@@ -311,7 +322,8 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
     window = ground.window
     if window is None:
         auto.append("ground.window")
-        window = extent if periodic else _grow(_union([extent, shadow_box]), WINDOW_MARGIN * max(heights))
+        window = extent if periodic or shadow_box is None else _grow(_union([extent, shadow_box]),
+                                                                     WINDOW_MARGIN * max(heights))
     # the camera's target: where the middle frame's shade is dappled
     sun = scenes[len(scenes) // 2].sun
     s = np.array(sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)) if sun else np.zeros(2)
@@ -341,9 +353,14 @@ def frame_scene(config: Config, scenes, projection) -> Framing:
             sun_window = _seen_sun_window(config, scenes, view, shadow_box, window)
     if "ground.window" in auto and not periodic:  # only the ground some frame's camera sees
         window = _seen_window([view] if follow is None else [v for _, v in follow], view, sun_window, window)
-    return Framing(tuple(float(v) for v in window),
-                   None if sun_window is None else tuple(float(v) for v in sun_window),
+    return Framing(_floats(window), None if sun_window is None else _floats(sun_window),
                    view, tuple(auto), shadow_box, follow)
+
+
+def _floats(box: Sequence[float]) -> Box:
+    """A box's four numbers as floats [m]."""
+    x_min, y_min, x_max, y_max = (float(v) for v in box)
+    return x_min, y_min, x_max, y_max
 
 
 FOLLOW_SLACK = 0.15
@@ -352,7 +369,7 @@ frame's camera, some frame's target lies further than this share of the image's 
 where that camera sees its own (or outside the image). [1]"""
 
 
-def follow_targets(config: Config, scenes, target) -> np.ndarray:
+def follow_targets(config: Config, scenes: Sequence[Scene], target: ArrayLike) -> np.ndarray:
     """Per scene, the ground point a camera that follows the shadow aims at.
 
     The shadow of the crown's centre along the scene's sun, ``c - h s``, plus the middle scene's
@@ -377,10 +394,11 @@ def follow_targets(config: Config, scenes, target) -> np.ndarray:
         (x, y) [m].
     """
     centre = crown_centre(config)
-    sky = np.array([sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation) for sc in scenes])
+    suns = [sun_of(sc) for sc in scenes]
+    sky = np.array([sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation) for sun in suns])
     middles = centre[:2] - centre[2] * sky
-    azimuth = np.array([sc.sun.azimuth for sc in scenes])
-    elevation = np.array([sc.sun.elevation for sc in scenes])
+    azimuth = np.array([sun.azimuth for sun in suns])
+    elevation = np.array([sun.elevation for sun in suns])
     along = np.column_stack([np.sin(azimuth), np.cos(azimuth)])
     across = np.column_stack([np.cos(azimuth), -np.sin(azimuth)])
     m = len(scenes) // 2
@@ -389,13 +407,13 @@ def follow_targets(config: Config, scenes, target) -> np.ndarray:
     return middles + (stretch / np.sin(elevation))[:, None] * along + (offset @ across[m]) * across
 
 
-def follow_cameras(view: camera.Camera, target, targets) -> list:
+def follow_cameras(view: Camera, target: ArrayLike, targets: ArrayLike) -> list[Camera]:
     """``view`` moved over the ground, its yaw and pitch kept, so that it sees each target where it
     sees ``target``.
 
     Parameters
     ----------
-    view : camera.Camera
+    view : pinhole.Camera
         The camera that looks at ``target``.
     target : array_like, shape (2,)
         Its ground point (x, y) [m].
@@ -404,26 +422,26 @@ def follow_cameras(view: camera.Camera, target, targets) -> list:
 
     Returns
     -------
-    list of camera.Camera
+    list of pinhole.Camera
         One per target.
     """
     moves = np.asarray(targets, dtype=np.float64) - np.asarray(target, dtype=np.float64)
     x, y, z = view.position
-    return [camera.Camera((float(x + dx), float(y + dy), z), view.yaw, view.pitch, view.vertical_fov,
+    return [pinhole.Camera((float(x + dx), float(y + dy), z), view.yaw, view.pitch, view.vertical_fov,
                           view.width, view.height) for dx, dy in moves]
 
 
-def _strays(view: camera.Camera, target, targets) -> bool:
+def _strays(view: Camera, target: ArrayLike, targets: np.ndarray) -> bool:
     """Whether some target lies further than FOLLOW_SLACK of the image's width from where
     ``view`` sees ``target``, or outside the image."""
     points = np.column_stack([np.vstack([target, targets]), np.zeros(len(targets) + 1)])
-    u, v, depth = camera.project_points(view, points)
+    u, v, depth = pinhole.project_points(view, points)
     inside = (depth[1:] > 0) & (u[1:] >= 0) & (u[1:] <= view.width) & (v[1:] >= 0) & (v[1:] <= view.height)
     drift = np.hypot(u[1:] - u[0], v[1:] - v[0]) / view.width
     return bool(np.any(~inside) or np.any(drift > FOLLOW_SLACK))
 
 
-def _eclipsed(scenes) -> bool:
+def _eclipsed(scenes: Iterable[Scene]) -> bool:
     """Whether the moon cuts the sun in some frame."""
     for scene in scenes:
         if scene.sun is None or scene.moon is None:
@@ -435,19 +453,20 @@ def _eclipsed(scenes) -> bool:
     return False
 
 
-def _place_camera(config: Config, target, s, auto, pitch_down: float, aim: float = 0.5) -> camera.Camera:
+def _place_camera(config: Config, target: np.ndarray, s: np.ndarray, auto: list[str], pitch_down: float,
+                  aim: float = 0.5) -> Camera:
     """The config's camera with what it leaves out placed to look at ``target`` [m], by default
     ``pitch_down`` [deg] below the horizon, with the target ``aim`` [1] down the image (0 top,
     1 bottom; AIM_ROW for a target of its own)."""
     c = config.camera
     width, rows = c.resolution
-    if c.position is not None and (c.yaw is not None or c.look_at is not None):
-        if c.yaw is not None:
-            return camera.Camera(tuple(c.position), c.yaw, c.pitch, c.fov, width, rows)
-        return camera.Camera.look_at(c.position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
+    if c.position is not None and c.yaw is not None and c.pitch is not None:  # yaw and pitch come together
+        return pinhole.Camera((c.position[0], c.position[1], c.position[2]), c.yaw, c.pitch, c.fov, width, rows)
+    if c.position is not None and c.look_at is not None:
+        return pinhole.Camera.look_at(c.position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
     auto.append("camera")
     if c.position is not None:
-        return camera.Camera.look_at(c.position, (*target, 0.0), vertical_fov=c.fov, width=width, height=rows)
+        return pinhole.Camera.look_at(c.position, (*target, 0.0), vertical_fov=c.fov, width=width, height=rows)
     if c.look_at is not None:
         target = np.array(c.look_at[:2])
     yaw = c.yaw
@@ -462,8 +481,9 @@ def _place_camera(config: Config, target, s, auto, pitch_down: float, aim: float
         layer.height for layer in config.canopy.layers)
     position = (*(np.asarray(target) - back * np.array([np.sin(yaw), np.cos(yaw)])), CAMERA_HEIGHT)
     if c.look_at is not None:
-        return camera.Camera.look_at(position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
-    return camera.Camera(tuple(float(v) for v in position), float(yaw), float(pitch), c.fov, width, rows)
+        return pinhole.Camera.look_at(position, c.look_at, vertical_fov=c.fov, width=width, height=rows)
+    return pinhole.Camera((float(position[0]), float(position[1]), float(position[2])), float(yaw), float(pitch),
+                         c.fov, width, rows)
 
 
 AIM_ROW = 5.0 / 6.0
@@ -471,12 +491,12 @@ AIM_ROW = 5.0 / 6.0
 middle of the bottom third, the nearest ground, sharpest and least foreshortened. [1]"""
 
 
-def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
+def seen_ground(view: Camera, samples: int = AUTO_VIEW_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
     """The ground points of a grid of rays over the image that meet the ground.
 
     Parameters
     ----------
-    view : camera.Camera
+    view : pinhole.Camera
         The camera.
     samples : int
         Rays per side of the image [1].
@@ -489,20 +509,21 @@ def seen_ground(view: camera.Camera, samples: int = AUTO_VIEW_SAMPLES):
         Their distances from the camera [m].
     """
     u, v = np.meshgrid(np.linspace(0, view.width, samples), np.linspace(0, view.height, samples))
-    rays = camera.image_rays(view, u, v).reshape(-1, 3)
+    rays = pinhole.image_rays(view, u, v).reshape(-1, 3)
     down = rays[:, 2] < -1e-9
     t = -view.position[2] / rays[down, 2]
     points = np.asarray(view.position[:2]) + t[:, None] * rays[down, :2]
     return points, t * np.linalg.norm(rays[down], axis=1)
 
 
-def _seen_sun_window(config: Config, scenes, view, shadow_box, window):
+def _seen_sun_window(config: Config, scenes: Sequence[Scene], view: Camera, shadow_box: Box | None,
+                     window: Box) -> Box | None:
     """The ground the camera sees of the shadow (grown by a pinhole image's length), within the
     window, as near as AUTO_SUN_PIXELS fine pixels allow; if it sees none of the shadow, what
     it sees of the window. [m]"""
     heights = [layer.height for layer in config.canopy.layers]
-    radius = min(sc.sun.angular_radius for sc in scenes)
-    lowest = min(sc.sun.elevation for sc in scenes)
+    radius = min(sun_of(sc).angular_radius for sc in scenes)
+    lowest = min(sun_of(sc).elevation for sc in scenes)
     pixel = config.ground.sun_pixel or min(heights) * 2 * np.tan(radius) / config.render.sun_cells
     # a pinhole image's length [m]: 1 / sin(h) times its width (geometry.pinhole_image_axes)
     image = pinhole_image_axes(max(heights), max(lowest, 2.0 * radius), radius)[0]
@@ -535,7 +556,7 @@ SEEN_MARGIN = 2.0
 filter's reach at the image's far edge). [m]"""
 
 
-def _seen_window(views, middle: camera.Camera, sun_window, window):
+def _seen_window(views: Sequence[Camera], middle: Camera, sun_window: Box | None, window: Box) -> Box:
     """The ground the cameras see over the frames with SEEN_MARGIN to spare, within ``window``,
     and the sun window moved with each camera [m]: the shadow's union over a long span (264 x 86
     m at a 3.7 degree sun) holds far more ground than a camera at eye height sees."""
@@ -552,11 +573,11 @@ def _seen_window(views, middle: camera.Camera, sun_window, window):
     return _union([_intersect(_grow(_union(seen), SEEN_MARGIN), window) or window, *fine])
 
 
-def _pixels(box, pixel) -> float:
+def _pixels(box: Box, pixel: float) -> float:
     return (box[2] - box[0]) * (box[3] - box[1]) / pixel**2
 
 
-def framing_warnings(config: Config, plan) -> list[str]:
+def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
     """One-line warnings of a plan whose picture would show no dappled shadow, or a false one.
 
     The camera sees none of the sun window; the sun is below the canopy's reach, the sky square
@@ -586,7 +607,7 @@ def framing_warnings(config: Config, plan) -> list[str]:
         warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
                         f"its frames will show no sun flecks (leave camera out to place it)")
     reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
-    low = [f for f, scene in enumerate(scenes) if sun_shades(scene.sun) and scene.sun.elevation < reach]
+    low = [f for f, scene in enumerate(scenes) if sun_shades(scene.sun) and sun_of(scene).elevation < reach]
     beyond = 1.0 - float(seen.mean())  # the share of the ground seen where that sun is unshadowed
     if low and plan.sun_window is not None and beyond > 0:
         warnings.append(f"the sun is below the sky square (sky.alpha {np.degrees(config.sky.alpha):g} "
@@ -597,10 +618,13 @@ def framing_warnings(config: Config, plan) -> list[str]:
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
         shading = shading_scenes(scenes)
         boxes = leaf_shadow_extents(config, shading, plan.projection)
-        missed = [sc.frame for sc, box in zip(shading, boxes)
-                  if _intersect(box, plan.at(sc.frame).sun_window.extent) is None]
+        missed = []
+        for sc, box in zip(shading, boxes):
+            moved = plan.at(sc.frame).sun_window  # the frame's own, with a following camera
+            if moved is not None and _intersect(box, moved.extent) is None:
+                missed.append(sc.frame)
         if missed:
-            elevations = [np.degrees(scenes[f].sun.elevation) for f in missed]
+            elevations = [np.degrees(sun_of(scenes[f]).elevation) for f in missed]
             warnings.append(f"the leaves' shadow falls outside {key} in {len(missed)} of "
                             f"{len(scenes)} frames ({frame_ranges(missed)}; the sun at "
                             f"{min(elevations):.1f} to {max(elevations):.1f} degrees): the canopy "
@@ -608,7 +632,7 @@ def framing_warnings(config: Config, plan) -> list[str]:
     return warnings
 
 
-def frame_ranges(frames) -> str:
+def frame_ranges(frames: Sequence[int]) -> str:
     """Frame numbers as ranges, for a message: ``[0, 1, 2, 5]`` -> ``"0-2,5"``.
 
     Parameters
@@ -621,7 +645,8 @@ def frame_ranges(frames) -> str:
     str
         The runs of consecutive frames, comma-separated.
     """
-    parts, start = [], frames[0]
+    parts: list[str] = []
+    start: int | None = frames[0]
     for a, b in zip(frames, [*frames[1:], None]):
         if b != a + 1:
             parts.append(f"{start}" if start == a else f"{start}-{a}")

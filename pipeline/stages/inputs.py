@@ -8,13 +8,11 @@ import functools
 
 import numpy as np
 
-from pipeline.canopy import grove as grove_geometry
-from pipeline.canopy import masks as canopy
+from pipeline.canopy import grove, masks
 from pipeline.config.settings import CanopyConfig, CanopyLayer, GroundConfig
 from pipeline.core import io
 from pipeline.core.geometry import Grid
-from pipeline.texture import albedo as albedos
-from pipeline.texture import mipmap as texture
+from pipeline.texture import albedo, mipmap
 
 __all__ = ["load_mask", "grove_of", "albedo_mipmap", "ground_albedo"]
 
@@ -32,7 +30,7 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
     Returns
     -------
     ndarray, shape (rows, cols)
-        Transmittance [1] (``canopy.transmittance_from_image``).
+        Transmittance [1] (``masks.transmittance_from_image``).
 
     Raises
     ------
@@ -42,13 +40,13 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
     path = layer.mask[frame % len(layer.mask)]
     image = io.read_image(path)
     try:
-        return canopy.transmittance_from_image(image)
+        return masks.transmittance_from_image(image)
     except ValueError as exc:
         raise io.ImageError(path, str(exc)) from None
 
 
 @functools.lru_cache(maxsize=4)
-def grove_of(canopy_config: CanopyConfig):
+def grove_of(canopy_config: CanopyConfig) -> tuple[grove.Grove, grove.FlutterParams]:
     """The grove of a canopy config and its flutter, grown once per process.
 
     Parameters
@@ -58,13 +56,20 @@ def grove_of(canopy_config: CanopyConfig):
 
     Returns
     -------
-    grove : canopy.Grove
+    grove : grove.Grove
         The grove at rest.
-    flutter : canopy.FlutterParams
+    flutter : grove.FlutterParams
         Its flutter: the cycle [frames], swing and twist.
+
+    Raises
+    ------
+    ValueError
+        For a canopy of mask images (no ``trees``).
     """
     trees, layer0 = canopy_config.trees, canopy_config.layers[0]
-    params = grove_geometry.GroveParams(
+    if trees is None:
+        raise ValueError("the canopy has no built-in trees to grow: its planes are mask images")
+    params = grove.GroveParams(
         count=trees.count, seed=trees.seed, crown_radius=trees.crown_radius,
         leaves_per_tree=trees.leaves_per_tree, leaf_length=trees.leaf_length,
         height=max(layer.height for layer in canopy_config.layers),
@@ -72,11 +77,11 @@ def grove_of(canopy_config: CanopyConfig):
         tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
         center=layer0.center, spread=trees.spread)
     f = canopy_config.flutter
-    return grove_geometry.grow_grove(params), grove_geometry.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+    return grove.grow_grove(params), grove.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
 
 
 @functools.lru_cache(maxsize=4)
-def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
+def albedo_mipmap(ground: GroundConfig) -> mipmap.MipMap:
     """The ground's albedo as a periodic MipMap: the procedural grass, or a tileable image.
 
     Parameters
@@ -86,22 +91,22 @@ def albedo_mipmap(ground: GroundConfig) -> texture.MipMap:
 
     Returns
     -------
-    texture.MipMap
+    mipmap.MipMap
         The albedo (rows, cols, 3) [1], periodic over ``albedo_size`` [m].
     """
     if ground.albedo == "grass":
-        image, grid = albedos.grass_albedo(period=ground.albedo_size)
+        image, grid = albedo.grass_albedo(period=ground.albedo_size)
     else:
         image = io.read_image(ground.albedo)
         image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
         rows, cols = image.shape[:2]
         grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
-    return texture.mipmap(image, grid, outside="periodic",
+    return mipmap.mipmap(image, grid, outside="periodic",
                           period=(grid.pixel * grid.shape[1], grid.pixel * grid.shape[0]))
 
 
 @functools.lru_cache(maxsize=4)
-def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
+def ground_albedo(ground: GroundConfig) -> albedo.StochasticTiling:
     """The ground's albedo as the camera reads it.
 
     The tile of ``albedo_mipmap`` laid by stochastic tiling (Heitz & Neyret 2018,
@@ -117,6 +122,6 @@ def ground_albedo(ground: GroundConfig) -> albedos.StochasticTiling:
     albedo.StochasticTiling
         The tiled albedo [1].
     """
-    return albedos.stochastic_tiling(albedo_mipmap(ground))
+    return albedo.stochastic_tiling(albedo_mipmap(ground))
 
 

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
 from pipeline.camera.pinhole import Camera
 from pipeline.canopy import grove as grove_geometry
-from pipeline.canopy import masks as canopy
+from pipeline.canopy import masks
 from pipeline.config.parse import size_text
 from pipeline.config.settings import AutoExposureConfig, CanopyConfig, CanopyLayer, Config, GroundConfig, OutputConfig
 from pipeline.config.vocabulary import FOREGROUNDS, PROCEDURAL_MODELS
@@ -25,14 +25,15 @@ from pipeline.core import io
 from pipeline.core.errors import ConfigError
 from pipeline.core.geometry import Grid, sky_plane_from_direction
 from pipeline.ground import shadow
-from pipeline.stages.framing import AUTO_SUN_MASK, frame_scene
+from pipeline.stages.framing import AUTO_SUN_MASK, Framing, frame_scene
 from pipeline.stages.inputs import albedo_mipmap, grove_of, load_mask
 from pipeline.stages.resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
-from pipeline.stages.scene import Scene, scene_at, shading_scenes, sky_model, sun_shades
+from pipeline.stages.scene import Scene, scene_at, shading_scenes, sky_model, sun_of, sun_shades
 
 if TYPE_CHECKING:
     from pipeline.foreground.models import ForegroundModel
     from pipeline.sky.models import SkyModel
+    from pipeline.sky.sun_disc import SunDisc
 
 __all__ = ["LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
 
@@ -107,7 +108,7 @@ class RunPlan:
         None: a frame then meters the frames its exposure remembers [m^2/kcd].
     scenes : tuple of Scene
         The sky's state at every output frame.
-    sky : skies.SkyModel
+    sky : sky.models.SkyModel
         The sky model (made by ``vocabulary.SKIES``).
     haze : float
         The haze's visibility distance, 0 for none (``sky.haze``) [m].
@@ -115,7 +116,7 @@ class RunPlan:
         The canopy: its planes' masks or the built-in trees, the layout, the flutter cycle.
     ground : GroundConfig
         The ground's albedo and reflectance.
-    foreground : foregrounds.ForegroundModel
+    foreground : foreground.models.ForegroundModel
         The foreground model (made by ``vocabulary.FOREGROUNDS``).
     exposure : ExposurePlan
         How the frames are exposed and shown.
@@ -251,11 +252,12 @@ def plan_run(config: Config) -> RunPlan:
     has_sun = bool(shading)
     projection = (0.0, 0.0)
     if has_sun:
-        middle = scenes[len(scenes) // 2].sun
-        if not sun_shades(middle):  # the middle frame's sun is set: the last one that shades
-            middle = shading[-1].sun if shading[-1].frame < len(scenes) // 2 else shading[0].sun
-        projection = tuple(float(v) for v in sky_plane_from_direction(
-            middle.azimuth, np.pi / 2 - middle.elevation))
+        middle = scenes[len(scenes) // 2]
+        if not sun_shades(middle.sun):  # the middle frame's sun is set: the last one that shades
+            middle = shading[-1] if shading[-1].frame < len(scenes) // 2 else shading[0]
+        sun = sun_of(middle)
+        sx, sy = sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)
+        projection = (float(sx), float(sy))
     heights = [layer.height for layer in config.canopy.layers]
     framing = frame_scene(config, shading or [replace(scenes[0], sun=None)], projection)
     _check_auto_window(config, framing)
@@ -264,10 +266,10 @@ def plan_run(config: Config) -> RunPlan:
                   if has_sun else None)
     shifts = _follow_shifts(framing, sun_window, len(scenes))
     layers = _plan_layers(config, shading, window, sun_window, projection, shifts)
-    if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None:
+    if "ground.sun_window" in framing.auto and config.ground.sun_pixel is None and sun_window is not None:
         # the sun's path over the animation widens the fine mask: keep it within AUTO_SUN_MASK
-        cells = max(np.prod(lp.sun.mask.shape) for lp in layers)
-        if cells > AUTO_SUN_MASK:
+        cells = max(np.prod(lp.sun.mask.shape) for lp in layers if lp.sun is not None)
+        if cells > AUTO_SUN_MASK and framing.sun_window is not None:
             sun_window = Grid.from_window(framing.sun_window, sun_window.pixel * np.sqrt(cells / AUTO_SUN_MASK))
             shifts = _follow_shifts(framing, sun_window, len(scenes))
             layers = _plan_layers(config, shading, window, sun_window, projection, shifts)
@@ -284,12 +286,12 @@ def plan_run(config: Config) -> RunPlan:
     return plan
 
 
-def _nearest(follow, frame: int) -> Camera:
+def _nearest(follow: tuple[tuple[int, Camera], ...], frame: int) -> Camera:
     """The camera of the shading frame nearest ``frame`` (a set sun's frames keep the last)."""
     return min(follow, key=lambda item: abs(item[0] - frame))[1]
 
 
-def _follow_shifts(framing, sun_window: Grid | None, frames: int):
+def _follow_shifts(framing: Framing, sun_window: Grid | None, frames: int) -> list[tuple[int, int]] | None:
     """Per output frame, (rows, cols) of fine pixels the sun window moves with a following camera
     (its ground moves with the camera's foot); None without one."""
     if framing.follow is None or sun_window is None:
@@ -302,7 +304,7 @@ def _follow_shifts(framing, sun_window: Grid | None, frames: int):
     return shifts
 
 
-def _check_auto_window(config: Config, framing) -> None:
+def _check_auto_window(config: Config, framing: Framing) -> None:
     """Refuse an isolated canopy's automatic ground.window whose raster, or (mask images) whose
     transform with the canopy, would pass the limits. Raises ConfigError."""
     if "ground.window" not in framing.auto or config.canopy.layout == "periodic":
@@ -320,24 +322,25 @@ def _check_auto_window(config: Config, framing) -> None:
                               f"{most:.3g}: give ground.window or raise ground.pixel")
 
 
-def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, projection, shifts=None):
+def _plan_layers(config: Config, scenes: list[Scene], window: Grid, sun_window: Grid | None,
+                 projection: tuple[float, float], shifts: list[tuple[int, int]] | None = None) -> list[LayerPlan]:
     """Each canopy plane's LayerPlan: its mask grid, coarse plan and fine sun plan."""
-    has_sun = sun_window is not None
     layers = []
     for layer in config.canopy.layers:
         grid = _canopy_grid(config, layer, window, projection)
+        coarse: shadow.IsolatedPlan | shadow.PeriodicPlan
         if config.canopy.layout == "isolated":
             coarse = shadow.plan_isolated(window, grid, height=layer.height, alpha=config.sky.alpha)
         else:
             coarse = shadow.plan_periodic(window, grid, height=layer.height, alpha=config.sky.alpha)
         sun = None
-        if has_sun:
+        if sun_window is not None:
             q = sun_window.pixel / layer.height
-            centres = np.array([sky_plane_from_direction(sc.sun.azimuth, np.pi / 2 - sc.sun.elevation)
-                                for sc in scenes])
+            centres = np.array([sky_plane_from_direction(disc.azimuth, np.pi / 2 - disc.elevation)
+                                for disc in map(sun_of, scenes)])
             if shifts is not None:  # a sun window moved (dr, dc) reads the mask as the kernel moved so
                 centres = centres + q * np.array([(shifts[sc.frame][1], -shifts[sc.frame][0]) for sc in scenes])
-            reach = max(_sun_reach(sc.sun) for sc in scenes)
+            reach = max(_sun_reach(sun_of(sc)) for sc in scenes)
             lo, hi = shadow.sun_offset_range(np.array(centres), reach=reach, q=q)
             sun = shadow.plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
         layers.append(LayerPlan(layer.height, grid, coarse, sun))
@@ -350,7 +353,7 @@ def _plan_layers(config: Config, scenes, window: Grid, sun_window: Grid | None, 
 def _check_sizes(config: Config, plan: RunPlan) -> None:
     """Refuse a plan whose rasters would pass the stated limits (resolve.MAX_SUN_PIXELS and
     MAX_FFT_CELLS), before any is made, with the memory they would take. Raises ConfigError."""
-    def refuse(key, what, cells, most, advice):
+    def refuse(key: str, what: str, cells: float | np.integer, most: int, advice: str) -> NoReturn:
         raise ConfigError(f"{config.path}: {key}", f"{what} would be {cells:,.0f} cells, about "
                           f"{size_text(cells * BYTES_PER_CELL)}; the most is {most:,.0f}: {advice}")
 
@@ -358,7 +361,7 @@ def _check_sizes(config: Config, plan: RunPlan) -> None:
         refuse("ground.sun_window", "the sun's fine raster", np.prod(plan.sun_window.shape),
                MAX_SUN_PIXELS, "shrink ground.sun_window (or ground.window) or raise ground.pixel")
     for layer in plan.layers:
-        if np.prod(getattr(layer.coarse, "fft_shape", (0, 0))) > MAX_FFT_CELLS:
+        if isinstance(layer.coarse, shadow.IsolatedPlan) and np.prod(layer.coarse.fft_shape) > MAX_FFT_CELLS:
             refuse("ground.window", "the sky light's transform", np.prod(layer.coarse.fft_shape),
                    MAX_FFT_CELLS, "shrink ground.window or the canopy, or raise ground.pixel")
         if layer.sun is not None and np.prod(layer.sun.fft_shape) > MAX_FFT_CELLS:
@@ -367,34 +370,34 @@ def _check_sizes(config: Config, plan: RunPlan) -> None:
                    "shrink ground.sun_window or the time span, or raise ground.sun_pixel")
 
 
-def _sun_reach(sun) -> float:
+def _sun_reach(sun: SunDisc) -> float:
     """How far the sun disc reaches from its centre on the sky plane, with 10% to spare. [tan]"""
     zenith = np.pi / 2 - sun.elevation
     return 1.1 * sun.angular_radius / np.cos(min(zenith + sun.angular_radius, np.radians(89.0))) ** 2
 
 
-def _sun_window(config: Config, scenes, lowest: float, window) -> Grid:
+def _sun_window(config: Config, scenes: list[Scene], lowest: float, window: tuple[float, float, float, float]) -> Grid:
     """The fine ground grid of the sun: ``ground.sun_pixel`` or a pixel small enough for the
     sun disc to span render.sun_cells cells under the lowest canopy plane, unless the window would then
     pass MAX_SUN_PIXELS (the pixel grows) or the pixel would pass ground.pixel."""
     ground = config.ground
     pixel = ground.sun_pixel
     if pixel is None:
-        radius = min(sc.sun.angular_radius for sc in scenes)
+        radius = min(sun_of(sc).angular_radius for sc in scenes)
         pixel = lowest * 2 * np.tan(radius) / config.render.sun_cells
         area = (window[2] - window[0]) * (window[3] - window[1])
         pixel = min(max(pixel, np.sqrt(area / MAX_SUN_PIXELS)), ground.pixel)
     return Grid.from_window(window, pixel)
 
 
-def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection) -> Grid:
+def _canopy_grid(config: Config, layer: CanopyLayer, window: Grid, projection: tuple[float, float]) -> Grid:
     """The coarse mask grid of a layer on the window's lattice: the image's area, or the
     grove's bounds over the whole flutter cycle, or one periodic tile."""
     periodic = config.canopy.layout == "periodic"
     if config.canopy.trees is None or periodic:
-        return canopy.lattice_grid(layer.center, layer.size, window, periodic=periodic)
+        return masks.lattice_grid(layer.center, layer.size, window, periodic=periodic)
     grove, flutter = grove_of(config.canopy)
     bounds = grove_geometry.grove_bounds(grove, flutter, sun=np.array(projection), plane_height=layer.height)
     size = (bounds[2] - bounds[0], bounds[3] - bounds[1])
     center = ((bounds[0] + bounds[2]) / 2, (bounds[1] + bounds[3]) / 2)
-    return canopy.lattice_grid(center, size, window, periodic=False)
+    return masks.lattice_grid(center, size, window, periodic=False)

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 from dataclasses import replace
 
 from pipeline.config.parse import load_config, size_text
-from pipeline.config.settings import Config
+from pipeline.config.settings import Config, SiteConfig
 from pipeline.config.vocabulary import TURBIDITY_RANGE
 from pipeline.core.errors import ConfigError
 
@@ -36,7 +37,7 @@ SUN_SPAN_SAMPLES = 20_000
 """Most moments at which the sun is checked over a site's time span. [count]"""
 
 
-def load(path) -> Config:
+def load(path: str | os.PathLike[str]) -> Config:
     """A config file read, validated and resolved (``resolve``): what every command runs.
 
     Parameters
@@ -92,7 +93,7 @@ def resolve(config: Config) -> Config:
     Parameters
     ----------
     config : settings.Config
-        The config as read (``config.load_config``, ``config.parse_config``).
+        The config as read (``parse.load_config``, ``parse.parse_config``).
 
     Returns
     -------
@@ -107,7 +108,7 @@ def resolve(config: Config) -> Config:
     _check_limits(config)
     sky = config.sky
     if sky.site is not None:
-        _check_sun(config)
+        _check_sun(config, sky.site)
         if sky.turbidity is None:
             lo, hi = TURBIDITY_RANGE
             middle = sky.site.start + (sky.site.end - sky.site.start) / 2
@@ -123,9 +124,9 @@ def _check_limits(config: Config) -> None:
     ground, layout = config.ground, config.canopy.layout
     if ground.window is not None:
         _check_pixels(config, "ground.pixel", ground.window, ground.pixel, MAX_GROUND_PIXELS)
-    if ground.sun_pixel is not None and (ground.sun_window or ground.window):
-        _check_pixels(config, "ground.sun_pixel", ground.sun_window or ground.window, ground.sun_pixel,
-                      MAX_SUN_PIXELS)
+    fine = ground.sun_window or ground.window
+    if ground.sun_pixel is not None and fine:
+        _check_pixels(config, "ground.sun_pixel", fine, ground.sun_pixel, MAX_SUN_PIXELS)
     images = config.canopy.trees is None
     for index, layer in enumerate(config.canopy.layers):
         key = "canopy.size" if len(config.canopy.layers) == 1 else f"canopy.layers[{index}].size"
@@ -152,21 +153,21 @@ def _check_limits(config: Config) -> None:
                                   f"for a {ground.pixel:g} m pixel; lower alpha or raise ground.pixel")
 
 
-def _check_pixels(config: Config, key, window, pixel, most):
+def _check_pixels(config: Config, key: str, window: tuple[float, float, float, float], pixel: float,
+                  most: int) -> None:
     cells = ((window[2] - window[0]) / pixel) * ((window[3] - window[1]) / pixel)
     if cells > most:
         raise ConfigError(config.where(key), f"the window would be {cells:.3g} pixels, about "
                           f"{size_text(cells * BYTES_PER_CELL)} to render; the most is {most:.3g}")
 
 
-def _check_sun(config: Config) -> None:
+def _check_sun(config: Config, site: SiteConfig) -> None:
     """The procedural sky needs the sun at least MIN_SUN_ELEVATION high (at most 6 degrees below
     the horizon) at time.start and time.end and at every frame's moment between (at most
     SUN_SPAN_SAMPLES of them, evenly spread, so a night is never missed): name the first moment
     it is not, with the sun's elevation."""
     from pipeline.sky import ephemeris
 
-    site = config.sky.site
     place = ephemeris.Site(site.latitude, site.longitude, site.elevation)
     least = f"at most {-math.degrees(MIN_SUN_ELEVATION):g} degrees below the horizon (the end of civil twilight)"
     for key, when in (("start", site.start), ("end", site.end)):

@@ -4,6 +4,7 @@ run (docs/design.md, "Stages")."""
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import datetime
 from typing import TYPE_CHECKING
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
     from pipeline.sky.models import SkyModel
 
 __all__ = ["Scene", "scene_at", "sky_model", "load_sky", "SHADOW_FLOOR", "sun_lights", "sun_shades",
-           "shading_scenes"]
+           "shading_scenes", "sun_of"]
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ class Scene:
 
 def scene_at(config: Config, frame: int) -> Scene:
     """Where the sun and moon are at output ``frame``: the sky model's discs
-    (``skies.SkyModel.discs``) at the frame's place in the animation, from 0 at the first frame
+    (``sky.models.SkyModel.discs``) at the frame's place in the animation, from 0 at the first frame
     to 1 at the last (a site's time span spread evenly over the frames).
 
     Parameters
@@ -80,14 +81,14 @@ def sky_model(sky: SkyConfig) -> SkyModel:
 
     Returns
     -------
-    skies.SkyModel
+    sky.models.SkyModel
         The model, cached per ``sky`` (the last 8).
     """
     return SKIES.load(sky.model)(sky)
 
 
 def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = False) -> Sky:
-    """The sky of a config at a frame's scene (``skies.SkyModel.at``).
+    """The sky of a config at a frame's scene (``sky.models.SkyModel.at``).
 
     Parameters
     ----------
@@ -101,7 +102,7 @@ def load_sky(sky: SkyConfig, scene: Scene | None = None, *, metering: bool = Fal
 
     Returns
     -------
-    sky.Sky
+    base.Sky
         The sky's radiance and light at the scene.
 
     Raises
@@ -120,7 +121,7 @@ the plan would make, and a fine mask reaching it would pass the limits (docs/met
 "Twilight and a sun at the horizon"). [rad]"""
 
 
-def sun_lights(sun) -> bool:
+def sun_lights(sun: SunDisc | None) -> bool:
     """Whether a sun disc gives direct light: wholly above the horizon.
 
     As ``sun_kernel.sun_irradiance`` and ``sun_kernel.sun_kernel`` need; a sun between the
@@ -140,7 +141,7 @@ def sun_lights(sun) -> bool:
     return sun is not None and sun.elevation - sun.angular_radius > 1e-3
 
 
-def sun_shades(sun) -> bool:
+def sun_shades(sun: SunDisc | None) -> bool:
     """Whether a sun's light goes through the fine sun kernel and its canopy shadow.
 
     Parameters
@@ -153,10 +154,10 @@ def sun_shades(sun) -> bool:
     bool
         True when it lights the ground (``sun_lights``) and stands at least ``SHADOW_FLOOR`` high.
     """
-    return sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
+    return sun is not None and sun_lights(sun) and sun.elevation >= SHADOW_FLOOR
 
 
-def shading_scenes(scenes) -> list:
+def shading_scenes(scenes: Iterable[Scene]) -> list[Scene]:
     """The scenes whose sun casts the canopy's shadow (``sun_shades``).
 
     Those the windows, the sun window and the fine masks are planned from.
@@ -172,3 +173,26 @@ def shading_scenes(scenes) -> list:
         Those whose sun shades, in their order.
     """
     return [scene for scene in scenes if sun_shades(scene.sun)]
+
+
+def sun_of(scene: Scene) -> SunDisc:
+    """The sun of a scene that has one, as a shading scene has (``shading_scenes``).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a sun.
+
+    Returns
+    -------
+    SunDisc
+        Its sun's disc.
+
+    Raises
+    ------
+    ValueError
+        For a scene without a sun.
+    """
+    if scene.sun is None:
+        raise ValueError(f"frame {scene.frame} has no sun")
+    return scene.sun

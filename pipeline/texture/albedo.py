@@ -9,11 +9,16 @@ channel. [1]
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.fft as sfft
+from numpy.typing import ArrayLike
 
 from pipeline.core.geometry import Grid
+
+if TYPE_CHECKING:
+    from pipeline.texture.mipmap import Footprints, MipMap
 
 __all__ = [
     "GRASS_DARK", "GRASS_LIGHT", "SOIL", "periodic_noise", "grass_albedo", "TILING_CELLS_PER_PERIOD",
@@ -55,7 +60,7 @@ def periodic_noise(rng: np.random.Generator, size_px: int, *, period: float, wav
     return field / max(field.std(), 1e-12)
 
 
-def grass_albedo(*, size_px: int = 1024, period: float = 4.0, seed: int = 0):
+def grass_albedo(*, size_px: int = 1024, period: float = 4.0, seed: int = 0) -> tuple[np.ndarray, Grid]:
     """A tileable grass-and-soil albedo texture.
 
     Patches of soil (about a fifth of the area, some tens of centimetres across) in grass whose shade
@@ -127,7 +132,8 @@ read shows about a third of the tile. [1]"""
 BLEND_SHARPNESS = 4.0
 """Exponent on the barycentric weights, renormalised (Mikkelsen, "Practical Real-Time
 Hex-Tiling", JCGT 11(2), 2022): most of a triangle takes one vertex's read, and only narrow
-bands blend three, where the blend would mix soil into grass. [1]"""
+bands blend three, where the blend would mix soil into grass. The compiled reads
+(``kernels.tiling.tiling_reads``) take it as two squarings: 4 only. [1]"""
 
 SKIP_WEIGHT = 1e-2
 """Sharpened weights under which a vertex's read is left out (``StochasticTiling.sample``):
@@ -145,9 +151,9 @@ class StochasticTiling:
 
     Attributes
     ----------
-    texture : texture.MipMap
+    texture : mipmap.MipMap
         The tile, with outside "periodic" [1].
-    gaussian : texture.MipMap
+    gaussian : mipmap.MipMap
         The tile's Gaussian form (same levels) [1].
     center : numpy.ndarray
         (channels,) the tile's mean [1].
@@ -163,8 +169,8 @@ class StochasticTiling:
         and in every frame).
     """
 
-    texture: object
-    gaussian: object
+    texture: MipMap
+    gaussian: MipMap
     center: np.ndarray
     basis: np.ndarray
     lookups: np.ndarray
@@ -208,7 +214,7 @@ class StochasticTiling:
         """
         return self.texture.level(k)
 
-    def weights(self, x, y):
+    def weights(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The triangles' vertices and barycentric weights at ground points.
 
         Parameters
@@ -240,7 +246,7 @@ class StochasticTiling:
                            np.stack([fa + fb - 1.0, 1.0 - fb, 1.0 - fa]))
         return vertices, weights
 
-    def offsets(self, vertices) -> np.ndarray:
+    def offsets(self, vertices: ArrayLike) -> np.ndarray:
         """Each lattice vertex's offset into the tile, uniform in [0, period).
 
         Parameters
@@ -255,21 +261,22 @@ class StochasticTiling:
         """
         v = np.asarray(vertices, dtype=np.int64)
         key = vertex_keys(v[..., 0], v[..., 1], self.seed)
-        px, py = self.texture.period
+        px, py = _period(self.texture)
         return np.stack([unit_hash(key) * px, unit_hash(key ^ SECOND_KEY) * py], -1)
 
-    def sample(self, fp, *, lod_bias: float) -> np.ndarray:
+    def sample(self, fp: Footprints, *, lod_bias: float) -> np.ndarray:
         """The tiled albedo averaged over ground footprints.
 
-        Compiled (``_tiling``, ``_filter``): the lattice weights and offsets of every footprint, its reads
+        Compiled (``kernels.tiling``, ``kernels.filter``): the lattice weights and offsets of every footprint, its reads
         of weight SKIP_WEIGHT or more (the others left out: their Gaussian term taken as its
         mean, 0; about 1.95 reads a pixel instead of 3), filtered with the footprint's tap
         count and levels, chosen once for its reads, then the blend and the inverse lookups.
-        ``sample_arrays(fp, lod_bias=, skip=SKIP_WEIGHT)`` is the reference (numpy).
+        tests/reference.py's ``tiling_sample_arrays(tiling, fp, lod_bias=, skip=SKIP_WEIGHT)`` is
+        the reference (numpy).
 
         Parameters
         ----------
-        fp : texture.Footprints
+        fp : mipmap.Footprints
             n ground footprints [m].
         lod_bias : float
             Bias of the mip level [1].
@@ -280,80 +287,36 @@ class StochasticTiling:
             (channels, n) float32 albedo [1].
         """
         from pipeline.kernels import filter as _filter
-        from pipeline.kernels import tiling as _tiling
+        from pipeline.kernels import tiling
         from pipeline.texture import mipmap as texture
 
         n = len(fp)
         out = np.empty((self.channels, n), dtype=np.float32)
         if n == 0:
             return out
-        if BLEND_SHARPNESS != 4.0:  # tiling_reads squares twice
-            return self.sample_arrays(fp, lod_bias=lod_bias, skip=SKIP_WEIGHT)
         x, y, major, ex, ey = texture.as_float64(fp.x, fp.y, fp.major, fp.ex, fp.ey)
         weight = np.empty((3, n))
         read_x, read_y, read_weight = (np.empty(3 * n) for _ in range(3))
         read_pixel = np.empty(3 * n, dtype=np.intp)
-        px, py = self.gaussian.period
-        m = _tiling.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
+        px, py = _period(self.gaussian)
+        m = tiling.tiling_reads(x, y, float(self.cell), int(self.seed), float(SKIP_WEIGHT), float(px), float(py),
                                  weight, read_x, read_y, read_pixel, read_weight)
         taps, level, blend = texture.filter_choice(self.gaussian, lod_bias, major, fp.minor)
         values = np.empty((self.channels, m), dtype=np.float32)
         _filter.filtered(*texture.level_tables(self.gaussian), True, read_x[:m], read_y[:m], read_pixel[:m],
                          major, ex, ey, taps, level, blend, values)
-        _tiling.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
+        tiling.tiling_lookup(values, read_pixel[:m], read_weight[:m], weight, level, blend,
                               np.ascontiguousarray(self.lookups, dtype=np.float64),
                               np.ascontiguousarray(self.center, dtype=np.float64),
                               np.ascontiguousarray(self.basis, dtype=np.float64), out)
         return out
 
-    def sample_arrays(self, fp, *, lod_bias: float, skip: float = 0.0) -> np.ndarray:
-        """``sample`` with whole arrays (numpy): the reference of the compiled pass.
 
-        Parameters
-        ----------
-        fp, lod_bias
-            As for ``sample``.
-        skip : float, optional
-            Reads of sharpened weight under this are left out [1].
-
-        Returns
-        -------
-        numpy.ndarray
-            (channels, n) float32 albedo [1].
-        """
-        from pipeline.texture import mipmap as texture
-
-        vertices, w = self.weights(fp.x, fp.y)
-        w = w**BLEND_SHARPNESS
-        w /= w.sum(axis=0)
-        offset = self.offsets(vertices)
-        g = np.zeros((self.channels, len(fp)), dtype=np.float64)
-        for i in range(3):
-            moved = texture.Footprints(fp.x + offset[i, :, 0], fp.y + offset[i, :, 1], fp.major, fp.minor,
-                                       fp.ex, fp.ey)
-            g += np.where(w[i] < skip, 0.0, w[i]) * texture.filtered_arrays(self.gaussian, moved, lod_bias)
-        g /= np.sqrt(np.sum(w * w, axis=0))
-        _, level, blend = texture.filter_choice_arrays(self.gaussian, lod_bias, fp.major, fp.minor)
-        level = level.astype(np.intp)
-        upper = np.minimum(level + 1, self.gaussian.count - 1)
-        position = np.clip((g + 4.0) * (LOOKUP_BINS / 8.0) - 0.5, 0.0, LOOKUP_BINS - 1.0)
-        low = np.minimum(np.floor(position).astype(np.intp), LOOKUP_BINS - 2)
-        frac = position - low
-        components = np.empty_like(g)
-        for c in range(self.channels):
-            def lookup(k):
-                table = self.lookups[:, c]
-                return table[k, low[c]] * (1.0 - frac[c]) + table[k, low[c] + 1] * frac[c]
-            components[c] = lookup(level) * (1.0 - blend) + lookup(upper) * blend
-        out = self.center[:, None] + _times(components.T, self.basis.T).T
-        return np.clip(out, 0.0, None).astype(np.float32)
-
-
-def vertex_keys(va, vb, seed: int) -> np.ndarray:
+def vertex_keys(va: ArrayLike, vb: ArrayLike, seed: int) -> np.ndarray:
     """uint64 hash keys of lattice vertices under ``seed``.
 
     A vertex's offsets are ``unit_hash(key)`` and ``unit_hash(key ^ SECOND_KEY)`` times the period
-    (the stochastic tiling's, and the cloud tile's copies, ``_tiling.cloud_field``).
+    (the stochastic tiling's, and the cloud tile's copies, ``kernels.tiling.cloud_field``).
 
     Parameters
     ----------
@@ -367,9 +330,9 @@ def vertex_keys(va, vb, seed: int) -> np.ndarray:
     numpy.ndarray
         uint64 keys of the broadcast shape.
     """
-    va = np.asarray(va, dtype=np.int64).astype(np.uint64)
-    vb = np.asarray(vb, dtype=np.int64).astype(np.uint64)
-    key = va * np.uint64(0x9E3779B97F4A7C15) ^ vb * np.uint64(0xC2B2AE3D27D4EB4F)
+    a = np.asarray(va, dtype=np.int64).astype(np.uint64)
+    b = np.asarray(vb, dtype=np.int64).astype(np.uint64)
+    key = a * np.uint64(0x9E3779B97F4A7C15) ^ b * np.uint64(0xC2B2AE3D27D4EB4F)
     key ^= np.uint64(seed) * np.uint64(0x165667B19E3779F9)
     return key
 
@@ -398,14 +361,14 @@ def unit_hash(key: np.ndarray) -> np.ndarray:
     return (z >> np.uint64(11)).astype(np.float64) / float(2**53)
 
 
-def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
+def stochastic_tiling(texture: MipMap, *, seed: int = 0) -> StochasticTiling:
     """The Heitz & Neyret tiling of a periodic albedo MipMap.
 
     Its triangles are period / TILING_CELLS_PER_PERIOD a side (the longer period).
 
     Parameters
     ----------
-    texture : texture.MipMap
+    texture : mipmap.MipMap
         From ``texture.mipmap``, outside "periodic" [1].
     seed : int, optional
         Seed of the vertices' offsets.
@@ -439,7 +402,7 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
     quantiles = ndtri((np.arange(len(flat)) + 0.5) / len(flat)).astype(np.float32)
     for c in range(channels):  # Phi^-1 of the rank: a standard Gaussian histogram (ties kept apart)
         gaussian[np.argsort(components[:, c].astype(np.float32)), c] = quantiles
-    px, py = texture.period
+    px, py = _period(texture)
     grid = Grid((0.0, py), px / cols, (rows, cols))
     gauss_map = mipmap(gaussian.reshape(rows, cols, channels), grid,
                        outside="periodic", period=(px, py))
@@ -454,7 +417,7 @@ def stochastic_tiling(texture, *, seed: int = 0) -> StochasticTiling:
                             max(px, py) / TILING_CELLS_PER_PERIOD, seed)
 
 
-def _times(rows, matrix) -> np.ndarray:
+def _times(rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """rows (n, c) @ matrix (c, c), summed column by column (a small matrix product that BLAS,
     for an inner size of 3, does many times slower)."""
     out = np.zeros((rows.shape[0], matrix.shape[1]))
@@ -463,7 +426,7 @@ def _times(rows, matrix) -> np.ndarray:
     return out
 
 
-def _regression(g, y, centres) -> np.ndarray:
+def _regression(g: np.ndarray, y: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """E[y | g] at ``centres``: y's mean in each bin of g, joined linearly across empty bins and
     held beyond the outermost full ones. [units of y]"""
     width = centres[1] - centres[0]
@@ -472,3 +435,10 @@ def _regression(g, y, centres) -> np.ndarray:
     total = np.bincount(index, weights=y, minlength=len(centres))
     full = count > 0
     return np.interp(centres, centres[full], total[full] / count[full])
+
+
+def _period(texture: MipMap) -> tuple[float, float]:
+    """The tiling period (Px, Py) [m] of a periodic MipMap; ValueError for another."""
+    if texture.period is None:
+        raise ValueError("stochastic tiling needs a periodic texture")
+    return texture.period

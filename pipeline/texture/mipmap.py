@@ -4,23 +4,28 @@ A raster on the ground plane (irradiance, albedo, a sky's relative light) is rea
 ``mipmap`` (box-filtered levels, and the rule for the plane beyond the raster: a constant value
 or the raster's periodic tiling); image pixels' ground ``footprints`` are reduced to ellipses and
 averaged over by ``sample_footprint(s)``, as GPU anisotropic filtering does. The compiled loops
-are in ``_filter.py``; each ``_..._arrays`` function here is the numpy reference a test holds them
-to, bit for bit.
+are in ``kernels/filter.py``; their numpy references, which the tests hold them to bit for bit,
+are in tests/reference.py (``filtered_arrays``, ``filter_choice_arrays``).
 
 Why one module: the mip map's stored layout (every level flat, one texel of border all round)
 and the filter that reads it (tap and level choice, trilinear taps, the outside rule) are one
-convention, and each compiled loop sits beside its numpy reference.
+convention.
 """
 
 from __future__ import annotations
 
-import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.core.cores import in_shares
 from pipeline.core.kept import kept_at
+
+if TYPE_CHECKING:
+    from pipeline.core.geometry import Grid
 
 __all__ = ["LOD_BIAS", "MAX_TAPS", "Footprints", "MipMap", "footprints", "mipmap", "sample_footprint",
            "sample_footprints"]
@@ -77,13 +82,13 @@ class MipMap:
     """
 
     texels: np.ndarray
-    shapes: tuple
-    offsets: tuple
-    origins: tuple
-    pixels: tuple
+    shapes: tuple[tuple[int, int], ...]
+    offsets: tuple[int, ...]
+    origins: tuple[tuple[float, float], ...]
+    pixels: tuple[tuple[float, float], ...]
     outside: str
     value: np.ndarray | None = None
-    period: tuple | None = None
+    period: tuple[float, float] | None = None
 
     @property
     def channels(self) -> int:
@@ -121,7 +126,8 @@ class MipMap:
         return view
 
 
-def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) -> MipMap:
+def mipmap(raster: ArrayLike, grid: Grid, *, outside: str = "constant", value: ArrayLike | None = None,
+           period: tuple[float, float] | None = None) -> MipMap:
     """The mip map of a north-up raster on the ground plane, and the rule for the plane beyond it.
 
     Parameters
@@ -185,7 +191,7 @@ def mipmap(raster, grid, *, outside: str = "constant", value=None, period=None) 
     return MipMap(texels, shapes, offsets, origins, pixels, "periodic", None, (px, py))
 
 
-def _stored_levels(shapes, channels: int) -> tuple[np.ndarray, tuple]:
+def _stored_levels(shapes: tuple[tuple[int, int], ...], channels: int) -> tuple[np.ndarray, tuple[int, ...]]:
     """An empty ``MipMap.texels`` for levels of ``shapes`` (rows, cols) stored with their
     borders, one after another, and the offset of each level's first stored texel."""
     sizes = [(rows + 2) * (cols + 2) for rows, cols in shapes]
@@ -193,17 +199,17 @@ def _stored_levels(shapes, channels: int) -> tuple[np.ndarray, tuple]:
     return np.empty((sum(sizes), channels), dtype=np.float32), offsets
 
 
-def _constant_mipmap(a: np.ndarray, grid, value: np.ndarray) -> MipMap:
+def _constant_mipmap(a: np.ndarray, grid: Grid, value: np.ndarray) -> MipMap:
     """``mipmap`` with ``outside="constant"``: the levels of ``_constant_levels``, each made in
-    place in the stored texels from the one before (``_filter.halve_level``, the same float32
+    place in the stored texels from the one before (``kernels.filter.halve_level``, the same float32
     operations in the same order: the border holds the padding's value)."""
     from pipeline.kernels import filter as _filter
 
-    shapes = [tuple(a.shape[:2])]
+    shapes: list[tuple[int, int]] = [(a.shape[0], a.shape[1])]
     while max(shapes[-1]) > 1:
-        shapes.append(tuple((n + 1) // 2 for n in shapes[-1]))
+        shapes.append(((shapes[-1][0] + 1) // 2, (shapes[-1][1] + 1) // 2))
     channels = a.shape[2]
-    texels, offsets = _stored_levels(shapes, channels)
+    texels, offsets = _stored_levels(tuple(shapes), channels)
     for k, ((rows, cols), start) in enumerate(zip(shapes, offsets)):
         stored = texels[start : start + (rows + 2) * (cols + 2)].reshape(rows + 2, cols + 2, channels)
         stored[0], stored[-1], stored[1:-1, 0], stored[1:-1, -1] = value, value, value, value
@@ -211,7 +217,7 @@ def _constant_mipmap(a: np.ndarray, grid, value: np.ndarray) -> MipMap:
             stored[1:-1, 1:-1] = a
         else:
             _filter.halve_level(texels, offsets[k - 1], *shapes[k - 1], start)
-    origins = (tuple(float(v) for v in grid.origin),) * len(shapes)
+    origins = ((float(grid.origin[0]), float(grid.origin[1])),) * len(shapes)
     pixels = tuple((grid.pixel * 2.0**k,) * 2 for k in range(len(shapes)))
     return MipMap(texels, tuple(shapes), offsets, origins, pixels, "constant", value, None)
 
@@ -279,14 +285,12 @@ def _box_resample(a: np.ndarray, axis: int, start: float, length: float, count: 
     return np.moveaxis(out, 0, axis).astype(np.float32)
 
 
-_CHUNK = 16384
-"""Footprints filtered together: the working arrays of one tap stay in the processor's cache."""
-
 _BLOCK = 32768
 """Footprints a block in the per-footprint steps (``_in_blocks``)."""
 
 
-def _in_blocks(function, *arrays, size: int):
+def _in_blocks(function: Callable[..., tuple[np.ndarray, ...]], *arrays: np.ndarray,
+               size: int) -> tuple[np.ndarray, ...]:
     """``function(*arrays)`` for a function that works item by item along the arrays' first
     axis and returns a tuple of arrays: applied to blocks of ``size`` items and the results
     joined, so that its temporaries stay small (in the processor's cache, and no fresh pages)."""
@@ -322,7 +326,7 @@ class Footprints:
         return len(self.x)
 
 
-def footprints(x, y, jacobian) -> Footprints:
+def footprints(x: ArrayLike, y: ArrayLike, jacobian: ArrayLike) -> Footprints:
     """The ellipses of the footprints of image pixels on the ground.
 
     Parameters
@@ -338,16 +342,17 @@ def footprints(x, y, jacobian) -> Footprints:
     Footprints
         Each footprint's ellipse of the same second moments (``sample_footprint``).
     """
-    x = np.asarray(x, dtype=np.float64).ravel()
-    y = np.asarray(y, dtype=np.float64).ravel()
+    xs = np.asarray(x, dtype=np.float64).ravel()
+    ys = np.asarray(y, dtype=np.float64).ravel()
     jac = np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2)
-    if not (len(x) == len(y) == len(jac)):
-        raise ValueError(f"x, y and jacobian disagree in length: {len(x)}, {len(y)}, {len(jac)}")
+    if not (len(xs) == len(ys) == len(jac)):
+        raise ValueError(f"x, y and jacobian disagree in length: {len(xs)}, {len(ys)}, {len(jac)}")
     entries = np.ascontiguousarray(jac.reshape(-1, 4).T)  # dx/du, dx/dv, dy/du, dy/dv
-    return Footprints(x, y, *_in_blocks(footprint_axes, *entries, size=_BLOCK))
+    return Footprints(xs, ys, *_in_blocks(footprint_axes, *entries, size=_BLOCK))
 
 
-def sample_footprint(mip: MipMap, x, y, jacobian, *, lod_bias: float = LOD_BIAS) -> np.ndarray:
+def sample_footprint(mip: MipMap, x: ArrayLike, y: ArrayLike, jacobian: ArrayLike, *,
+                     lod_bias: float = LOD_BIAS) -> np.ndarray:
     """Averages of a mip-mapped raster over the ground footprints of image pixels.
 
     Parameters
@@ -404,7 +409,8 @@ def sample_footprints(mip: MipMap, fp: Footprints, *, lod_bias: float = LOD_BIAS
 
 def filtered_read(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
     """``sample_footprints``, channels first: (channels, n) float32: compiled
-    (``_filter.filtered``), footprint by footprint, with the arithmetic of ``filtered_arrays``."""
+    (``kernels.filter.filtered``), footprint by footprint, with the arithmetic of tests/reference.py's
+    ``filtered_arrays``."""
     n = len(fp)
     if n == 0:
         return np.zeros((mip.channels, 0), dtype=np.float32)
@@ -429,12 +435,12 @@ def filtered_read(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
 _TAPS: dict = {}  # filtered_read's tap tables: a still camera reads each frame's irradiance at the same places
 
 
-def as_float64(*arrays) -> tuple:
+def as_float64(*arrays: ArrayLike) -> tuple[np.ndarray, ...]:
     """The arrays as contiguous float64 (no copy when they are)."""
     return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
 
 
-def level_tables(mip: MipMap) -> tuple:
+def level_tables(mip: MipMap) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What the compiled loops need of a MipMap: the flat texels, the channels, and per level
     the offset (int64), shape (rows, cols) int64, origin (x, y) and texel size (px, py) float64."""
     return (mip.texels.reshape(-1), mip.channels, np.asarray(mip.offsets, dtype=np.int64),
@@ -443,85 +449,15 @@ def level_tables(mip: MipMap) -> tuple:
             np.asarray(mip.pixels, dtype=np.float64).reshape(-1, 2))
 
 
-def filtered_arrays(mip: MipMap, fp: Footprints, lod_bias: float) -> np.ndarray:
-    """``filtered_read`` with whole arrays (numpy), the reference of the compiled loops.
-
-    The footprints are grouped by level (and whether they blend two) and sorted by tap count
-    within a group; each run of up to _CHUNK footprints of a group is filtered at once, tap by
-    tap (``_tap_mean``). Footprints that read only the outside value ("constant") form a group
-    of their own, which needs no samples.
-    """
-    n = len(fp)
-    if n == 0:
-        return np.zeros((mip.channels, 0), dtype=np.float32)
-    taps, level, blend = _in_blocks(functools.partial(filter_choice_arrays, mip, lod_bias), fp.major, fp.minor,
-                                    size=_BLOCK)
-    group = 2 * level + (blend > 0)
-    if mip.outside == "constant":
-        beyond, = _in_blocks(lambda *arrays: (_beyond(mip, *arrays),), fp.x, fp.y, fp.major, fp.ex, fp.ey,
-                             taps, level + (blend > 0), size=_BLOCK)
-        group[beyond] = _BEYOND
-    key = group * (MAX_TAPS + 1) + (MAX_TAPS - taps)  # int16: under 64 levels of 17 tap counts
-    order = np.argsort(key, kind="stable")  # a radix sort
-    group, taps = group.take(order), taps.take(order)
-    starts = np.flatnonzero(np.diff(group, prepend=group[0] - 1))
-    mean = np.empty((mip.channels, n), dtype=np.float32)
-    for a, b in zip(starts, np.append(starts[1:], n)):
-        if group[a] == _BEYOND:
-            mean[:, a:b] = _outside_means(mip).take(taps[a:b], axis=1)
-            continue
-        k, blended = divmod(int(group[a]), 2)
-        for c in range(a, b, _CHUNK):
-            s = slice(c, min(c + _CHUNK, b))
-            chosen = order[s]
-            t = blend.take(chosen) if blended else None
-            x, y, major, ex, ey = (u.take(chosen) for u in (fp.x, fp.y, fp.major, fp.ex, fp.ey))
-            mean[:, s] = _tap_mean(mip, k, t, x, y, major, ex, ey, taps[s])
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(n)
-    return mean.take(inverse, axis=1)
-
-
-_BEYOND = -1
-"""The group of the footprints that read only the outside value (``_beyond``)."""
-
-
-def _beyond(mip: MipMap, x, y, major, ex, ey, taps, level) -> np.ndarray:
-    """Whether each footprint (n,) bool (``Footprints``' fields x, y, major, ex, ey) of ``taps``
-    taps has them all beyond one edge of the raster in its coarsest level read, ``level`` (n,)
-    int, by half a texel more than the border: every trilinear sample of it reads the outside
-    value alone (in the finer level too, whose texels are smaller and whose border is nearer).
-    Mode "constant"."""
-    (x0, y0), (rows, cols) = mip.origins[0], np.asarray(mip.shapes, dtype=np.float64).T
-    px, py = np.asarray(mip.pixels, dtype=np.float64).T
-    # the edges [m] a tap must lie beyond, level by level: a texel out from the raster
-    west, east = (x0 - px).take(level), (x0 + (cols + 1) * px).take(level)
-    north, south = (y0 + py).take(level), (y0 - (rows + 1) * py).take(level)
-    reach = (0.5 - 0.5 / taps) * major  # from the centre to the farthest tap [m]
-    across, along = np.abs(reach * ex), np.abs(reach * ey)
-    with np.errstate(invalid="ignore"):
-        return (x + across <= west) | (x - across >= east) | (y - along >= north) | (y + along <= south)
-
-
-def _outside_means(mip: MipMap) -> np.ndarray:
-    """(channels, MAX_TAPS + 1) float32: column n is what ``_tap_mean`` makes of n samples of
-    the outside value: their float32 sum, in order, over n (column 0 unused)."""
-    table = np.zeros((mip.channels, MAX_TAPS + 1), dtype=np.float32)
-    total = np.zeros(mip.channels, dtype=np.float32)
-    for n in range(1, MAX_TAPS + 1):
-        total += mip.value
-        table[:, n] = total / np.float32(n)
-    return table
-
-
-def filter_choice(mip: MipMap, lod_bias: float, major, minor):
+def filter_choice(mip: MipMap, lod_bias: float, major: np.ndarray,
+                  minor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each footprint's tap count (n,) int8, level k (n,) int16 and blend t (n,) float32 in
     [0, 1) towards level k + 1 (0: level k alone), as ``sample_footprint`` says, from its
-    ellipse's box widths ``major`` and ``minor`` (n,) [m]: compiled (``_filter.filter_choice``),
-    the operations of ``filter_choice_arrays``. The choice depends on the footprints and the
+    ellipse's box widths ``major`` and ``minor`` (n,) [m]: compiled (``kernels.filter.filter_choice``),
+    the operations of tests/reference.py's ``filter_choice_arrays``. The choice depends on the footprints and the
     mip map's finest texel and level count alone, so the frames of a run, whose camera and
     rasters' grids stand still, make it once for the same footprint arrays
-    (``_view_footprints``): the last few choices are kept with those arrays (not to be written
+    (``pinhole.view_footprints``): the last few choices are kept with those arrays (not to be written
     to; left writable, as numba compiles read-only arrays as another type)."""
     texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
     key = (id(major), id(minor), texel, float(lod_bias), mip.count)
@@ -540,7 +476,8 @@ _CHOICES: dict = {}
 minor, (taps, level, blend))."""
 
 
-def _new_filter_choice(texel: float, count: int, lod_bias: float, major, minor):
+def _new_filter_choice(texel: float, count: int, lod_bias: float, major: np.ndarray,
+                       minor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from pipeline.kernels import filter as _filter
 
     major, minor = as_float64(major, minor)
@@ -550,150 +487,12 @@ def _new_filter_choice(texel: float, count: int, lod_bias: float, major, minor):
     return taps, level, blend
 
 
-def filter_choice_arrays(mip: MipMap, lod_bias: float, major, minor):
-    """``filter_choice`` with whole arrays (numpy), the reference of the compiled loop."""
-    texel = float(np.sqrt(mip.pixels[0][0] * mip.pixels[0][1]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.nan_to_num(major / np.maximum(minor, texel), nan=1.0, posinf=MAX_TAPS, copy=False)
-        ratio -= 1e-3
-        np.ceil(ratio, out=ratio)
-        taps = np.clip(ratio, 1, MAX_TAPS, out=ratio).astype(np.int8)
-        lod = major / taps
-        np.maximum(minor, lod, out=lod)
-        lod /= texel
-        np.log2(lod, out=lod)
-        lod += lod_bias
-    lod = np.clip(np.nan_to_num(lod, nan=0.0, copy=False), 0.0, mip.count - 1, out=lod)
-    floor = np.floor(lod)
-    k = floor.astype(np.int16)
-    t = np.subtract(lod, floor, out=lod)
-    done = t > 1.0 - 1e-6  # all in the next level
-    k[done] += 1
-    t[done | (t < 1e-6)] = 0.0
-    return taps, k, t.astype(np.float32)
-
-
-def _tap_mean(mip: MipMap, level: int, t, x, y, major, ex, ey, taps) -> np.ndarray:
-    """Means (channels, m) float32 over each footprint's taps of its trilinear samples.
-
-    level : the finer level read; t : (m,) float32 blend towards level + 1, or None for level
-        alone. [level, 1]
-    x, y, major, ex, ey : (m,) the footprints' ellipses (``Footprints``). [m, m, 1]
-    taps : (m,) tap counts, in decreasing order.
-    The taps of footprint j lie at (x, y) + ((i + 0.5) / taps - 0.5) major (ex, ey), i < taps[j].
-    """
-    spacing = major / taps  # [m]
-    first = (0.5 - 0.5 * taps) * spacing  # the first tap's offset along the major axis [m]
-    start = (x + first * ex, y + first * ey, spacing * ex, spacing * ey)  # the first tap, the step [m]
-    finer = _texel_coords(mip, level, *start)
-    coarser = None if t is None else _texel_coords(mip, level + 1, *start)
-    descending = -taps
-    for i in range(int(taps[0])):
-        m = int(np.searchsorted(descending, -i, side="left"))  # footprints with more than i taps
-        col, row, dcol, drow = (u[:m] for u in finer)
-        sample = _bilinear(mip, level, col, row)
-        col += dcol
-        row += drow
-        if coarser is not None:
-            col, row, dcol, drow = (u[:m] for u in coarser)
-            upper = _bilinear(mip, level + 1, col, row)
-            col += dcol
-            row += drow
-            upper -= sample
-            upper *= t[:m]
-            sample += upper
-        if i == 0:
-            total = sample
-        else:
-            total[:, :m] += sample
-    total /= taps.astype(np.float32)
-    return total
-
-
-def _texel_coords(mip: MipMap, level: int, x, y, dx, dy):
-    """(col, row) [texel] in level ``level`` of ground points (x, y) [m], texel centres at whole
-    numbers, and (dcol, drow) [texel] of ground steps (dx, dy) [m]; new arrays."""
-    (x0, y0), (px, py) = mip.origins[level], mip.pixels[level]
-    col = (x - x0) * (1.0 / px) - 0.5
-    row = (y0 - y) * (1.0 / py) - 0.5
-    dcol, drow = dx * (1.0 / px), dy * (-1.0 / py)
-    # held where a float has no fraction left, so that no tap's texel overflows an integer
-    for u, limit in ((col, 2.0**52), (row, 2.0**52), (dcol, 2.0**48), (drow, 2.0**48)):
-        np.clip(u, -limit, limit, out=u)
-    return col, row, dcol, drow
-
-
-def footprint_axes(dxdu, dxdv, dydu, dydv):
+def footprint_axes(dxdu: ArrayLike, dxdv: ArrayLike, dydu: ArrayLike,
+                   dydv: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Box widths (major, minor) [m] and the major axis's unit vector (ex, ey) [1], each (n,)
     float64, of the ellipse with the second moments of the parallelogram spanned by the columns
     (dxdu, dydu) and (dxdv, dydv) [m per pixel] (each (n,)) of the footprint's Jacobian: J J^T =
-    [[a, b], [b, c]], its larger eigenvalue and eigenvector (``_filter.footprint_axes``)."""
+    [[a, b], [b, c]], its larger eigenvalue and eigenvector (``kernels.filter.footprint_axes``)."""
     from pipeline.kernels import filter as _filter
 
     return _filter.footprint_axes(*(np.ascontiguousarray(v, dtype=np.float64) for v in (dxdu, dxdv, dydu, dydv)))
-
-
-def _bilinear(mip: MipMap, level: int, col, row) -> np.ndarray:
-    """Bilinear samples (channels, m) float32 of one level at texel coordinates (col, row) (m,)
-    [texel] (``_texel_coords``), the plane beyond the raster as ``mip.outside`` says. The four
-    texels of a sample lie at fixed offsets from the first (``_first_texel``) and are gathered
-    in one ``take``."""
-    first, fc, fr = _first_texel(mip, level, col, row)
-    flat = mip.texels.reshape(-1)
-    gathered = np.empty((4, mip.channels, len(first)), dtype=np.float32)
-    offsets = _corner_offsets(mip.shapes[level][1] + 2, mip.channels)
-    for offset, out in zip(offsets, gathered.reshape(-1, len(first))):
-        flat[offset:].take(first, out=out, mode="clip")  # no index array of all the corners
-    a, b, c, d = gathered  # each (channels, m)
-    b -= a  # the upper row, along the columns
-    b *= fc
-    a += b
-    d -= c  # the lower row
-    d *= fc
-    c += d
-    c -= a  # along the rows
-    c *= fr
-    a += c
-    return a
-
-
-def _first_texel(mip: MipMap, level: int, col, row):
-    """The first of the four texels of bilinear samples at texel coordinates (col, row) (m,)
-    [texel], the one at (floor(row), floor(col)): the index (m,) intp of its channel 0 in the
-    flat texel array, and the fractions (fc, fr) (m,) float32 of (col, row) beyond it [texel].
-
-    The texel is brought into the stored level, border included: held at the border of the
-    outside value ("constant"), or moved by whole periods ("periodic")."""
-    rows, cols = mip.shapes[level]
-    if mip.outside == "constant":
-        col, row = np.clip(col, -1.0, cols), np.clip(row, -1.0, rows)
-    c0, r0 = np.floor(col), np.floor(row)
-    fc = np.empty(len(col), dtype=np.float32)
-    fr = np.empty(len(row), dtype=np.float32)
-    np.subtract(col, c0, out=fc)
-    np.subtract(row, r0, out=fr)
-    c0, r0 = c0.astype(np.intp), r0.astype(np.intp)
-    if mip.outside == "periodic":
-        _wrap(c0, cols)
-        _wrap(r0, rows)
-    r0 *= cols + 2  # stored rows, one texel of border all round
-    r0 += c0
-    r0 += mip.offsets[level] + cols + 3
-    r0 *= mip.channels
-    return r0, fc, fr
-
-
-@functools.lru_cache(maxsize=256)
-def _corner_offsets(stride: int, channels: int) -> tuple:
-    """Offsets in the flat texel array of the four texels of a bilinear sample, (r0, c0),
-    (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1), channel by channel, from channel 0 of the
-    first: 4 channels ints; ``stride`` the stored texels a row."""
-    return tuple(texel * channels + k for texel in (0, 1, stride, stride + 1) for k in range(channels))
-
-
-def _wrap(i: np.ndarray, n: int) -> None:
-    """i modulo n, in place (n > 0); a mask when n is a power of two."""
-    if n & (n - 1):
-        np.remainder(i, n, out=i)
-    else:
-        np.bitwise_and(i, n - 1, out=i)
