@@ -93,10 +93,8 @@ class VideoStream:
 
     Parameters
     ----------
-    config : settings.Config
-        The run's config.
-    digest : str
-        The config's hash.
+    config, digest
+        As ``encode_video`` takes them.
     path : pathlib.Path
         The video file.
     fresh : iterable of int

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.camera import composite
+from pipeline.config.settings import AutoExposureConfig
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.sky.base import Sky
 from pipeline.stages.plan import RunPlan
@@ -111,6 +112,13 @@ EXPOSURE_MEMORY = 14.0
 weight is exp(-14) < 1e-6): a frame meters only the frames just before it. [1]"""
 
 
+def _auto_exposure(plan: RunPlan) -> AutoExposureConfig:
+    """The plan's auto exposure; a ValueError for a fixed one."""
+    if plan.exposure.auto is None:
+        raise ValueError("the plan has a fixed exposure (camera.exposure is not auto)")
+    return plan.exposure.auto
+
+
 def exposure_frames(plan: RunPlan, frame: int) -> range:
     """The frames whose light the auto exposure of ``frame`` remembers.
 
@@ -131,9 +139,7 @@ def exposure_frames(plan: RunPlan, frame: int) -> range:
     ValueError
         For a plan without an auto exposure.
     """
-    auto = plan.exposure.auto
-    if auto is None:
-        raise ValueError("the plan has a fixed exposure (camera.exposure is not auto)")
+    auto = _auto_exposure(plan)
     memory = int(np.ceil(EXPOSURE_MEMORY * auto.time_constant * plan.exposure.fps))
     return range(max(0, frame - memory), frame + 1)
 
@@ -162,9 +168,7 @@ def auto_exposures(plan: RunPlan, frames: Iterable[int] | None = None) -> dict[i
     ValueError
         For a plan without an auto exposure.
     """
-    auto = plan.exposure.auto
-    if auto is None:
-        raise ValueError("the plan has a fixed exposure (camera.exposure is not auto)")
+    auto = _auto_exposure(plan)
     light = reference_lighting(plan)
     frames = range(plan.frames) if frames is None else frames
     windows = {frame: exposure_frames(plan, frame) for frame in frames}
