@@ -71,7 +71,7 @@ def main() -> None:
               f"{layer.sun.mask.shape} -> FFT {layer.sun.fft_shape}")
         fft = bare_fft_seconds(layer.coarse.fft_shape) + bare_fft_seconds(layer.sun.fft_shape)
         t = time.perf_counter()
-        _coarse, _fine = layer_masks(plan, 0, 0)
+        layer_masks(plan, 0, 0)
         masks = time.perf_counter() - t
         print(f"one cycle frame, one process: masks {masks:.2f} s; bare rfft2 of both {fft * 1e3:.0f} ms")
 

@@ -42,7 +42,8 @@ def cycle_frame(config, plan, frame):
     """Every layer's masks and spectra at ``frame``; returns the masks."""
     masks = []
     for index, lp in enumerate(plan.layers):
-        coarse, fine = layer_masks(plan, index, frame)
+        made = layer_masks(plan, index, frame)
+        coarse, fine = made.coarse, made.fine
         if isinstance(lp.coarse, shadow.IsolatedPlan):
             shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=1)
         else:

@@ -1,5 +1,6 @@
 """Independent references for the tests: a direct sum and a world-coordinate Monte Carlo estimator,
-and the numpy references of the compiled loops (the mip map's filtering, the albedo's tiling).
+and the numpy references of the compiled loops (the pixels' ground footprints, the mip map's levels
+and filtering, the albedo's tiling).
 
 Nothing here imports ``pipeline.ground.shadow``: the Monte Carlo estimator traces rays from ground
 points in metres through a canopy image placed in the world, so it checks orientation, scale
@@ -12,9 +13,10 @@ import functools
 
 import numpy as np
 
+from pipeline.camera.pinhole import Camera, row_hits
 from pipeline.sky.scattering import haze_transmittance, henyey_greenstein
 from pipeline.texture.albedo import BLEND_SHARPNESS, LOOKUP_BINS, StochasticTiling
-from pipeline.texture.mipmap import MAX_TAPS, Footprints, MipMap
+from pipeline.texture.mipmap import MAX_TAPS, Footprints, MipMap, footprint_axes, pair_mean
 
 
 def direct_sum(sky, sky_start, mask, mask_start, window_shape, outside_value):
@@ -342,6 +344,33 @@ def lattice_read_arrays(flat, corner, taps, lattice):
     out += flat[:, corner + lattice] * taps[2]
     out += flat[:, corner + lattice + 1] * taps[3]
     return out
+
+
+def row_footprints_arrays(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``pinhole._row_footprints`` with whole arrays (numpy), the reference of its compiled loop
+    (``kernels.filter.row_footprints``): x, y [m], major, minor [m], ex, ey [1], each (r width,)
+    float64, and the distances [m] float32, of the pixels of image rows that see ground."""
+    hits = row_hits(camera, rows, part)
+    x, y, dxdu, dxdv, dydu, dydv, distance = (u.ravel() for u in (
+        hits.x, hits.y, hits.dxdu, hits.dxdv, hits.dydu, hits.dydv, hits.distance))
+    return (x, y, *footprint_axes(dxdu, dxdv, dydu, dydv), distance.astype(np.float32))
+
+
+def constant_levels(a: np.ndarray, value: np.ndarray) -> list[np.ndarray]:
+    """Levels of a raster (rows, cols, channels) float32 on a plane of ``value``: pad to even sizes
+    with the value, average 2 x 2 (``pair_mean``); the reference of ``mipmap.mipmap`` with
+    ``outside="constant"`` (its compiled step ``kernels.filter.halve_level``)."""
+    levels = [a]
+    while max(a.shape[:2]) > 1:
+        rows, cols = a.shape[:2]
+        if rows % 2 or cols % 2:
+            padded = np.empty((rows + rows % 2, cols + cols % 2, a.shape[2]), dtype=np.float32)
+            padded[...] = value
+            padded[:rows, :cols] = a
+            a = padded
+        a = pair_mean(pair_mean(a, 0), 1)
+        levels.append(a)
+    return levels
 
 
 _CHUNK = 16384

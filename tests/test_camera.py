@@ -98,7 +98,7 @@ def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
     raster = np.random.default_rng(3).random((*shape, 3)).astype(np.float32) * 7.0
     value = np.full(3, value, dtype=np.float32)
     mip = mipmap(raster, Grid((0.0, 0.0), 0.5, shape), outside="constant", value=value)
-    levels = texture._constant_levels(raster, value)
+    levels = reference.constant_levels(raster, value)
     assert mip.shapes == tuple(level.shape[:2] for level in levels)
     for k, level in enumerate(levels):
         assert mip.level(k).tobytes() == level.tobytes()
@@ -376,11 +376,11 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
     Camera((1.0, 2.0, 3.0), 2.3, 0.02, 1.2, 133, 101),  # level: the horizon inside a row
 ])
 def test_compiled_footprints_match_the_array_version_bit_for_bit(view):
-    """pinhole._row_footprints (numba, pixel by pixel) against _row_footprints_arrays (_row_hits
-    and footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
+    """pinhole._row_footprints (numba, pixel by pixel) against reference.row_footprints_arrays
+    (row_hits and footprint_axes in numpy), the reference it replaces: the same bits, horizon included."""
     rows, part = camera.rows_seeing_ground(view)
     got = camera._row_footprints(view, rows, part)
-    want = camera._row_footprints_arrays(view, rows, part)
+    want = reference.row_footprints_arrays(view, rows, part)
     assert len(got) == len(want) == 7 and len(got[0]) == len(rows) * view.width > 0
     for g, w in zip(got, want):
         assert g.dtype == w.dtype

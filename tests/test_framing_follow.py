@@ -197,7 +197,7 @@ def test_a_following_camera_s_trees_are_made_and_kept_per_camera(tmp_path):
     for f in range(4):
         assert key_of("foreground", cycle.foreground_params(plan.at(f), 0)) in keys
     fixed = replace(plan, follow=None)
-    assert cycle.disk_needed(plan)[1] - cycle.disk_needed(fixed)[1] == pytest.approx(
+    assert cycle.disk_needed(plan).cache_bytes - cycle.disk_needed(fixed).cache_bytes == pytest.approx(
         3 * 8 * 4 * plan.camera.width * plan.camera.height)
 
 

@@ -262,14 +262,14 @@ def ground_hits(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     """
     rows_total, cols_total = camera.height, camera.width
     rows, part = rows_seeing_ground(camera)
-    x_rows, y_rows, *jac_rows, distance_rows = _row_hits(camera, rows, part)
+    hits = row_hits(camera, rows, part)
     x = np.full((rows_total, cols_total), np.nan)
     y = np.full((rows_total, cols_total), np.nan)
     jacobian = np.full((rows_total, cols_total, 2, 2), np.nan)
     distance = np.full((rows_total, cols_total), np.inf)
     coverage = np.broadcast_to(ground_fraction_rows(camera)[:, None], (rows_total, cols_total)).copy()
-    x[rows], y[rows], distance[rows] = x_rows, y_rows, distance_rows
-    for (i, j), entry in zip(((0, 0), (0, 1), (1, 0), (1, 1)), jac_rows):
+    x[rows], y[rows], distance[rows] = hits.x, hits.y, hits.distance
+    for (i, j), entry in zip(((0, 0), (0, 1), (1, 0), (1, 1)), (hits.dxdu, hits.dxdv, hits.dydu, hits.dydv)):
         jacobian[rows, :, i, j] = entry
     return x, y, jacobian, distance, coverage
 
@@ -285,10 +285,48 @@ def rows_seeing_ground(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     return rows, fraction[rows]
 
 
-def _row_hits(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
-    """``ground_hits`` for some image rows (r,) int that see ground, of fractions ``part`` (r,)
-    below the horizon [1], without the full-image arrays: x, y [m], the Jacobian's entries
-    dx/du, dx/dv, dy/du, dy/dv [m per pixel] and distance [m], each (r, width) float64."""
+@dataclass(frozen=True)
+class RowHits:
+    """``ground_hits`` for some image rows (``row_hits``), each (r, width) float64.
+
+    Attributes
+    ----------
+    x, y : numpy.ndarray
+        The ground point seen at the centre of each pixel's ground part [m].
+    dxdu, dxdv, dydu, dydv : numpy.ndarray
+        The footprint's Jacobian d(x, y)/d(u, v), its v column times the ground part's height
+        [m per pixel].
+    distance : numpy.ndarray
+        From the pinhole to the ground point, along the ray [m].
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    dxdu: np.ndarray
+    dxdv: np.ndarray
+    dydu: np.ndarray
+    dydv: np.ndarray
+    distance: np.ndarray
+
+
+def row_hits(camera: Camera, rows: np.ndarray, part: np.ndarray) -> RowHits:
+    """``ground_hits`` for some image rows that see ground, without the full-image arrays.
+
+    Parameters
+    ----------
+    camera : Camera
+        The pinhole camera, above the ground [m].
+    rows : numpy.ndarray
+        (r,) int, image rows every pixel of which sees ground (``rows_seeing_ground``).
+    part : numpy.ndarray
+        (r,) float64, their fractions below the horizon [1].
+
+    Returns
+    -------
+    RowHits
+        The ground points [m], the Jacobian's entries [m per pixel] and the distances [m], each
+        (r, width) float64.
+    """
     height_m = float(camera.position[2])
     part = part[:, None]
     v = rows[:, None] + 1.0 - 0.5 * part
@@ -308,7 +346,7 @@ def _row_hits(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.nd
         jacobian[0, j] = t * (dw[0] - wx * slope) * scale
         jacobian[1, j] = t * (dw[1] - wy * slope) * scale
     distance = t * np.sqrt(wx * wx + wy * wy + w_z * w_z)
-    return x, y, jacobian[0, 0], jacobian[0, 1], jacobian[1, 0], jacobian[1, 1], distance
+    return RowHits(x, y, jacobian[0, 0], jacobian[0, 1], jacobian[1, 0], jacobian[1, 1], distance)
 
 
 def ground_view(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap],
@@ -476,8 +514,9 @@ _SUBSETS: dict = {}  # filtered_chain's footprints beyond a map: a still camera'
 
 def _row_footprints(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """The ``Footprints`` fields and the distances of the pixels of some image rows that see
-    ground (``_row_hits``), each (r width,) float64 (the distances float32): compiled
-    (``kernels.filter.row_footprints``), the operations of ``_row_footprints_arrays``."""
+    ground (``row_hits``), each (r width,) float64 (the distances float32): compiled
+    (``kernels.filter.row_footprints``), the operations of its numpy reference
+    (tests/reference.py, ``row_footprints_arrays``)."""
     from pipeline.kernels import filter as _filter
 
     n = len(rows) * camera.width
@@ -489,12 +528,6 @@ def _row_footprints(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple
                            np.asarray(camera.position, dtype=np.float64), right, up, forward, MIN_DOWNWARD,
                            x, y, major, minor, ex, ey, distance)
     return x, y, major, minor, ex, ey, distance
-
-
-def _row_footprints_arrays(camera: Camera, rows: np.ndarray, part: np.ndarray) -> tuple[np.ndarray, ...]:
-    """``_row_footprints`` with whole arrays (numpy), the reference of the compiled loop."""
-    x, y, *jacobian, distance = (u.ravel() for u in _row_hits(camera, rows, part))
-    return (x, y, *mipmap.footprint_axes(*jacobian), distance.astype(np.float32))
 
 
 def sky_view(camera: Camera, sky: Sky) -> np.ndarray:

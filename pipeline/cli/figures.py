@@ -546,8 +546,7 @@ class _Scenes:
 
 def _fig_mask(scenes: _Scenes) -> np.ndarray:
     """Fig. 4: the grove's upper layer's coarse mask at cycle frame 0, grey."""
-    coarse, _ = layer_masks(scenes.grove_plan, 0, 0)
-    return coarse[..., None]
+    return layer_masks(scenes.grove_plan, 0, 0).coarse[..., None]
 
 
 def _fig_sky(scenes: _Scenes) -> np.ndarray:

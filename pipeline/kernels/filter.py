@@ -424,7 +424,7 @@ def row_footprints(rows: np.ndarray, part: np.ndarray, width: int, height: int, 
                    right: np.ndarray, up: np.ndarray, forward: np.ndarray, min_downward: float, x: np.ndarray,
                    y: np.ndarray, major: np.ndarray, minor: np.ndarray, ex: np.ndarray, ey: np.ndarray,
                    distance: np.ndarray) -> None:
-    """``pinhole._row_footprints`` (``_row_hits`` and ``mipmap.footprint_axes``) pixel by pixel.
+    """``pinhole._row_footprints`` (``row_hits`` and ``mipmap.footprint_axes``) pixel by pixel.
 
     The same float64 operations in the same order as the array version.
 
@@ -547,7 +547,8 @@ def filter_choice(texel: float, lod_bias: float, count: int, max_taps: int, majo
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def halve_level(texels: np.ndarray, source: int, rows: int, cols: int, target: int) -> None:
-    """``mipmap._constant_levels``'s step: one level averaged 2 x 2 into the next, in place.
+    """One step of the constant mip map's levels (``mipmap._constant_mipmap``; its numpy reference
+    tests/reference.py, ``constant_levels``): one level averaged 2 x 2 into the next, in place.
 
     Pairs of rows first, then pairs of columns, each sum halved in float32. An odd size's missing row
     or column is the border's value, as the padding of the array version.

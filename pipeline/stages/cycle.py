@@ -30,9 +30,9 @@ from pipeline.ground import shadow
 from pipeline.stages.inputs import grove_of, load_mask
 from pipeline.stages.plan import RunPlan
 
-__all__ = ["LayerSpectra", "layer_masks", "cycle_params", "cycle_item", "cycle_phase", "disk_needed", "CONFIG_INDEX",
-           "config_item_keys", "record_config_items", "recorded_configs", "foreground_params", "foreground_item",
-           "foreground_views"]
+__all__ = ["LayerSpectra", "LayerMasks", "layer_masks", "cycle_params", "cycle_item", "cycle_phase", "DiskNeed",
+           "disk_needed", "CONFIG_INDEX", "config_item_keys", "record_config_items", "recorded_configs",
+           "foreground_params", "foreground_item", "ForegroundView", "foreground_views"]
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,57 @@ class LayerSpectra:
         return cls(item["coarse"], float(item["mean"][0]), item.get("fine"))
 
 
-def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> tuple[np.ndarray, np.ndarray | None]:
+@dataclass(frozen=True)
+class LayerMasks:
+    """A canopy plane's transmittance masks at one cycle frame (``layer_masks``).
+
+    Attributes
+    ----------
+    coarse : ndarray, shape (rows, cols), float32
+        Transmittance [1] on the plane's coarse grid (``LayerPlan.canopy``).
+    fine : ndarray, shape (rows, cols), float32, or None
+        Transmittance [1] on its fine sun mask grid (``LayerPlan.sun.mask``), None without a sun
+        kernel.
+    """
+
+    coarse: np.ndarray
+    fine: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class DiskNeed:
+    """The disk a whole run writes (``disk_needed``).
+
+    Attributes
+    ----------
+    frame_bytes : float
+        The frames' bytes [B].
+    cache_bytes : float
+        The cycle products' bytes, at most [B].
+    """
+
+    frame_bytes: float
+    cache_bytes: float
+
+
+@dataclass(frozen=True)
+class ForegroundView:
+    """One of the built-in trees' cached foreground items that a run needs (``foreground_views``).
+
+    Attributes
+    ----------
+    plan : plan.RunPlan
+        The plan of an output frame that uses the item: the run's plan, or with a camera that
+        follows the shadow, the frame's own (``RunPlan.at``).
+    cycle_frame : int
+        The flutter cycle's frame of the item [frame].
+    """
+
+    plan: RunPlan
+    cycle_frame: int
+
+
+def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> LayerMasks:
     """Transmittance masks of one canopy plane at one cycle frame.
 
     Parameters
@@ -86,10 +136,9 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> tuple[np.n
 
     Returns
     -------
-    coarse : ndarray, shape (rows, cols)
-        Transmittance [1] on the plane's coarse grid (``LayerPlan.canopy``).
-    fine : ndarray, shape (rows, cols), or None
-        Transmittance [1] on its fine sun mask grid, or None without a sun kernel.
+    LayerMasks
+        The coarse mask's transmittance [1] on the plane's coarse grid (``LayerPlan.canopy``), and
+        the fine one's on its sun mask grid, None without a sun kernel.
     """
     c = plan.canopy
     layer, lp = c.layers[layer_index], plan.layers[layer_index]
@@ -109,7 +158,7 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> tuple[np.n
         ).subset(leaves=leaf_layer == layer_index, wood=wood_layer == layer_index)
         period = layer.size if periodic else None
         masks = [rasteriser.rasterize_transmittance(shapes, g, period=period) for g in grids]
-    return masks[0], (masks[1] if lp.sun else None)
+    return LayerMasks(masks[0], masks[1] if lp.sun else None)
 
 
 def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict[str, Any]:
@@ -174,7 +223,8 @@ def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.C
     lp = plan.layers[layer_index]
 
     def compute() -> dict[str, np.ndarray]:
-        coarse, fine = layer_masks(plan, layer_index, cycle_frame)
+        masks = layer_masks(plan, layer_index, cycle_frame)
+        coarse, fine = masks.coarse, masks.fine
         if isinstance(lp.coarse, shadow.IsolatedPlan):
             spectrum = shadow.occlusion_spectrum(1.0 - coarse, lp.coarse, workers=workers)
         else:
@@ -223,7 +273,7 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: in
     frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
     tasks: list[tuple[RunPlan, int | None, int]] = [
         (plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
-    tasks += [(view, None, frame) for view, frame in foreground_views(plan, frames)]
+    tasks += [(view.plan, None, view.cycle_frame) for view in foreground_views(plan, frames)]
     missing = [task for task in tasks if store.get(*_product_key(*task)) is None]
     done = len(tasks) - len(missing)
     if progress:
@@ -249,7 +299,7 @@ def _product_key(plan: RunPlan, layer: int | None, frame: int) -> tuple[str, dic
     return "spectra", cycle_params(plan, layer, frame)
 
 
-def foreground_views(plan: RunPlan, cycle_frames: Iterable[int]) -> list[tuple[RunPlan, int]]:
+def foreground_views(plan: RunPlan, cycle_frames: Iterable[int]) -> list[ForegroundView]:
     """The built-in trees' passes a run needs: per item, the plan of a frame that uses it and its cycle frame.
 
     One per cycle frame; with a camera that follows the shadow, one per camera and cycle frame
@@ -264,25 +314,25 @@ def foreground_views(plan: RunPlan, cycle_frames: Iterable[int]) -> list[tuple[R
 
     Returns
     -------
-    list of (plan.RunPlan, int)
-        Empty when the foreground has no cycle products of its own.
+    list of ForegroundView
+        Each item's plan and cycle frame; empty when the foreground has no cycle products of its own.
     """
     if not plan.foreground.cached:
         return []
     wanted = set(cycle_frames)
     if plan.follow is None:
-        return [(plan, frame) for frame in sorted(wanted)]
-    views: dict[str, tuple[RunPlan, int]] = {}
+        return [ForegroundView(plan, frame) for frame in sorted(wanted)]
+    views: dict[str, ForegroundView] = {}
     for frame in range(plan.frames):
         cycle_frame = frame % plan.canopy.cycle
         if cycle_frame in wanted:
             view = plan.at(frame)
             views.setdefault(cache_keys.key_of("foreground", foreground_params(view, cycle_frame)),
-                             (view, cycle_frame))
+                             ForegroundView(view, cycle_frame))
     return list(views.values())
 
 
-def disk_needed(plan: RunPlan) -> tuple[float, float]:
+def disk_needed(plan: RunPlan) -> DiskNeed:
     """The disk a whole run writes.
 
     The frames at FRAME_BYTES_PER_PIXEL, and the most the cycle products take: per layer and cycle
@@ -298,10 +348,8 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
 
     Returns
     -------
-    frames : float
-        The frames' bytes [B].
-    cache : float
-        The cycle products' bytes, at most [B].
+    DiskNeed
+        The frames' bytes and, at most, the cycle products' [B].
     """
     width, height = plan.camera.width, plan.camera.height
     frames = plan.frames * width * height * FRAME_BYTES_PER_PIXEL[plan.output.half]
@@ -314,7 +362,7 @@ def disk_needed(plan: RunPlan) -> tuple[float, float]:
             rows, cols = lp.sun.fft_shape
             per_frame += rows * (cols // 2 + 1) * 8
     trees = len(foreground_views(plan, range(plan.canopy.cycle))) * 8 * 4 * width * height
-    return float(frames), float(per_frame * plan.canopy.cycle + trees)  # trees: float32 sun, sky, alpha, haze
+    return DiskNeed(float(frames), float(per_frame * plan.canopy.cycle + trees))  # trees: float32 sun, sky, alpha, haze
 
 
 CONFIG_INDEX = ".configs"
@@ -337,7 +385,7 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     """
     products: list[tuple[RunPlan, int | None, int]] = [
         (plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
-    products += [(view, None, frame) for view, frame in foreground_views(plan, range(plan.canopy.cycle))]
+    products += [(view.plan, None, view.cycle_frame) for view in foreground_views(plan, range(plan.canopy.cycle))]
     keys = {}
     for view, layer, frame in products:
         kind, params = _product_key(view, layer, frame)

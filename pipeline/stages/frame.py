@@ -128,8 +128,11 @@ class FrameResult:
     light : dict or None
         The open ground's light (``lighting.open_ground_light``).
     layers : dict
-        The light passes asked for, {name: (rows, cols, channels) float32} (``light_layers``),
-        empty when none were.
+        The light passes asked for, {name: (rows, cols, channels) float32} (``light_layers``;
+        ``sun``, ``sky`` [kcd/m^2], ``alpha`` [1], ``illuminance`` [lx], ``depth`` [m]), in the
+        order asked, empty when none were. A mapping, not a record: which passes it holds is the
+        config's choice (``output.passes``, a subset of ``vocabulary.PASSES``), and each is
+        written as an EXR layer of its name.
     """
 
     radiance: np.ndarray

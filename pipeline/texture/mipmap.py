@@ -200,9 +200,10 @@ def _stored_levels(shapes: tuple[tuple[int, int], ...], channels: int) -> tuple[
 
 
 def _constant_mipmap(a: np.ndarray, grid: Grid, value: np.ndarray) -> MipMap:
-    """``mipmap`` with ``outside="constant"``: the levels of ``_constant_levels``, each made in
-    place in the stored texels from the one before (``kernels.filter.halve_level``, the same float32
-    operations in the same order: the border holds the padding's value)."""
+    """``mipmap`` with ``outside="constant"``: levels of the raster on a plane of ``value``, each
+    made in place in the stored texels from the one before (``kernels.filter.halve_level``): the
+    bits of the numpy reference (tests/reference.py, ``constant_levels``: pad to even sizes with
+    the value, ``pair_mean`` along rows then columns), the border holding the padding's value."""
     from pipeline.kernels import filter as _filter
 
     shapes: list[tuple[int, int]] = [(a.shape[0], a.shape[1])]
@@ -220,22 +221,6 @@ def _constant_mipmap(a: np.ndarray, grid: Grid, value: np.ndarray) -> MipMap:
     origins = ((float(grid.origin[0]), float(grid.origin[1])),) * len(shapes)
     pixels = tuple((grid.pixel * 2.0**k,) * 2 for k in range(len(shapes)))
     return MipMap(texels, tuple(shapes), offsets, origins, pixels, "constant", value, None)
-
-
-def _constant_levels(a: np.ndarray, value: np.ndarray) -> list:
-    """Levels of a raster on a plane of ``value``: pad to even sizes with the value, average 2 x 2
-    (the reference of ``_constant_mipmap``, which tests/test_camera.py holds to the same bits)."""
-    levels = [a]
-    while max(a.shape[:2]) > 1:
-        rows, cols = a.shape[:2]
-        if rows % 2 or cols % 2:
-            padded = np.empty((rows + rows % 2, cols + cols % 2, a.shape[2]), dtype=np.float32)
-            padded[...] = value
-            padded[:rows, :cols] = a
-            a = padded
-        a = _pair_mean(_pair_mean(a, 0), 1)
-        levels.append(a)
-    return levels
 
 
 def _periodic_levels(a: np.ndarray, lx: float, ly: float) -> list:
@@ -257,13 +242,26 @@ def _periodic_levels(a: np.ndarray, lx: float, ly: float) -> list:
         for axis in (0, 1):
             n = a.shape[axis]
             if n > 1:
-                a = _pair_mean(a, axis) if n % 2 == 0 else _box_resample(a, axis, 0.0, float(n), (n + 1) // 2)
+                a = pair_mean(a, axis) if n % 2 == 0 else _box_resample(a, axis, 0.0, float(n), (n + 1) // 2)
         levels.append(a)
     return levels
 
 
-def _pair_mean(a: np.ndarray, axis: int) -> np.ndarray:
-    """Mean of neighbouring pairs along ``axis`` (even length)."""
+def pair_mean(a: np.ndarray, axis: int) -> np.ndarray:
+    """Mean of neighbouring pairs along an axis: one halving step of the mip map's levels.
+
+    Parameters
+    ----------
+    a : numpy.ndarray
+        A raster (rows, cols, channels), of even length along ``axis`` [any unit].
+    axis : int
+        The axis halved.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32, half as long along ``axis``: each pair summed in float32, then halved [as ``a``].
+    """
     even = a[(slice(None),) * axis + (slice(0, None, 2),)]
     odd = a[(slice(None),) * axis + (slice(1, None, 2),)]
     out = np.add(even, odd, dtype=np.float32)
