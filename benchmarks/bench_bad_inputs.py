@@ -2,8 +2,9 @@
 as real processes, and the inputs of issue 33 that are files or flags (a folder name that is not
 UTF-8, an image bomb, a cache that cannot be written, a scheduler address, an --output that is
 not UTF-8): exit code, wall time, peak resident memory and stderr lines, beside a bare
-``python -c "import pipeline.cli"`` (the start-up every command pays). Target (issues 16 and
-33): exit 2, one line, nothing written, within 3 s and 300 MB.
+``python -c "import pipeline.cli.main"`` (the start-up every command pays). Target (issues 16 and
+33): exit 2, one line, nothing written, within 3 s and 300 MB. Issue 50 adds input images with a
+NaN or infinite texel and a mask path that is a named pipe or a device.
 
     python benchmarks/bench_bad_inputs.py
 
@@ -13,6 +14,7 @@ forked child's peak from the process it was forked from.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -22,9 +24,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
+import numpy as np
 import yaml
 from scenes import base_config, write_inputs
-from test_hostile import CASES, NOT_UTF8, PEAK, a_png_header, unwritable_folder
+from test_hostile import (
+    CASES,
+    NOT_UTF8,
+    PEAK,
+    a_png_header,
+    albedo_with,
+    half_mask_with,
+    imported_pass_with,
+    unwritable_folder,
+)
 
 
 def not_utf8_folder(folder: Path) -> list[str]:
@@ -55,6 +67,30 @@ def config_text(text: bytes):
     return make
 
 
+def bad_texel(make, value):
+    """Issue 50: an input image (albedo, half-float mask, imported pass) with one NaN or infinite texel."""
+    def made(folder: Path) -> list[str]:
+        (folder / "config.yaml").write_text(yaml.safe_dump(make(folder, np.float32(value))))
+        return []
+    return made
+
+
+def mask_at(path_of):
+    """Issue 50: the mask's path names something that is not a regular file."""
+    def made(folder: Path) -> list[str]:
+        config = base_config()
+        config["canopy"]["mask"] = str(path_of(folder))
+        (folder / "config.yaml").write_text(yaml.safe_dump(config))
+        return []
+    return made
+
+
+def named_pipe(folder: Path) -> Path:
+    if not (folder / "pipe.png").exists():
+        os.mkfifo(folder / "pipe.png")
+    return folder / "pipe.png"
+
+
 def flags(*args):
     return lambda folder: list(args)
 
@@ -67,6 +103,12 @@ FILE_CASES = [  # issue 33: the inputs that are files or flags; each makes them 
     ("cache on a folder not writable", read_only_cache),
     ("scheduler port not a number", flags("--scheduler", "tcp://127.0.0.1:eighty")),
     ("--output not UTF-8", flags("--output", f"out/{NOT_UTF8}")),
+    ("albedo EXR with a NaN texel", bad_texel(albedo_with, np.nan)),
+    ("albedo EXR with an inf texel", bad_texel(albedo_with, np.inf)),
+    ("half-float mask with a NaN texel", bad_texel(half_mask_with, np.nan)),
+    ("imported pass with an inf texel", bad_texel(imported_pass_with, np.inf)),
+    ("mask a named pipe", mask_at(named_pipe)),
+    ("mask a device", mask_at(lambda folder: Path("/dev/null"))),
 ]
 
 
@@ -82,7 +124,7 @@ def measured(args, cwd) -> tuple[int, float, float, int]:
 def main():
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
-        code, seconds, peak, _ = measured(["-c", "import pipeline.cli"], ROOT)
+        code, seconds, peak, _ = measured(["-c", "import pipeline.cli.main"], ROOT)
         print(f"{'bare start-up':<32} {seconds:5.2f} s {peak:5.0f} MB")
         worst = (0.0, 0.0)
         for name, make in [(name, config_text(text)) for name, text, _ in CASES] + FILE_CASES:

@@ -15,7 +15,7 @@ digest of each frame written, and a resume that checks the frames it skips.
 3. With ``--run FOLDER`` (a finished ``sunshade render CONFIG --output FOLDER``): the wall time
    of a resume with nothing to do (sizes, inodes and times against index.json), of one after
    every frame file was touched (every frame hashed again, as after a copy), of
-   ``--verify`` (every frame and cache item read), beside a bare ``import pipeline.cli``.
+   ``--verify`` (every frame and cache item read), beside a bare ``import pipeline.cli.main``.
    Medians of ``--repeat`` processes; ``--cache`` names the run's cache.
 
 CONFIG defaults to configs/sun-and-shade.yaml: its cache items per frame (the canopy's spectra
@@ -121,7 +121,7 @@ def frame_digests(config, frames, repeat) -> None:
 def resumes(config_path, folder, cache_root, repeat) -> None:
     args = ("render", config_path, "--output", folder, "--cache", cache_root)
     files = sorted(p for p in folder.iterdir() if p.suffix in (".exr", ".png"))
-    bare = statistics.median(seconds(lambda: subprocess.run([sys.executable, "-c", "import pipeline.cli"],
+    bare = statistics.median(seconds(lambda: subprocess.run([sys.executable, "-c", "import pipeline.cli.main"],
                                                             cwd=ROOT, check=True))
                              for _ in range(repeat))
     noop = statistics.median(sunshade(*args) for _ in range(repeat))
@@ -133,7 +133,7 @@ def resumes(config_path, folder, cache_root, repeat) -> None:
     verify = statistics.median(sunshade(*args, "--verify") for _ in range(repeat))
     print(f"resume of {folder} ({len(files)} frame files, {sum(p.stat().st_size for p in files) / 2**20:.0f} MiB), "
           f"median of {repeat} processes:")
-    print(f"  bare 'import pipeline.cli'                : {bare:6.2f} s")
+    print(f"  bare 'import pipeline.cli.main'                : {bare:6.2f} s")
     print(f"  nothing to do (stat against index.json)   : {noop:6.2f} s")
     print(f"  every frame file touched (all hashed)     : {statistics.median(touched):6.2f} s")
     print(f"  render --verify (frames and items read)   : {verify:6.2f} s")

@@ -11,7 +11,7 @@ CONFIG defaults to configs/eclipse.yaml, the default main job. Four runs of
    --jobs 1 the frame phase beside its stages' sum, so how much of the writing the next
    frame's rendering hides (docs/runs.md, "Writing");
 4. the same command again with nothing left to do: its wall time (target: at most 1 s), beside
-   the wall time of a bare ``python -c "import pipeline.cli"`` (the start-up every command pays).
+   the wall time of a bare ``python -c "import pipeline.cli.main"`` (the start-up every command pays).
 
 The stage shares come from each run's run.json (seconds summed over the frames, as measured in
 the workers: ground raster, camera resampling, compositing, writing). The ground stage is set
@@ -91,7 +91,7 @@ def main() -> None:
             runs[jobs] = (wall, json.loads((work / f"jobs{jobs}" / "run.json").read_text())["timings"])
         resume = min(sunshade(*common, "--jobs", "2", "--output", work / "jobs2") for _ in range(3))
         started = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "import pipeline.cli"], cwd=ROOT, check=True)
+        subprocess.run([sys.executable, "-c", "import pipeline.cli.main"], cwd=ROOT, check=True)
         startup = time.perf_counter() - started
         cold_timings = json.loads((work / "cold" / "run.json").read_text())["timings"]
         floor = bare_ffts(config)
@@ -126,7 +126,7 @@ def main() -> None:
     if "video" in cold_timings:
         print(f"video of all {config.animation.frames} frames (cold run): {cold_timings['video']:.1f} s")
     print(f"resume with nothing to do: {resume:.2f} s (target <= 1 s); bare start-up "
-          f"(python -c 'import pipeline.cli') {startup:.2f} s")
+          f"(python -c 'import pipeline.cli.main') {startup:.2f} s")
 
 
 if __name__ == "__main__":

@@ -92,7 +92,7 @@ def test_a_config_error_names_the_yaml_line_through_the_command(inputs, capsys):
 BAD_FILES = [
     ("corrupt mask", "canopy", {"mask": "corrupt.png"}, "corrupt.png"),
     ("mask out of range", "canopy", {"mask": "bright.exr"}, "mask values must lie in [0, 1]"),
-    ("NaN in hdri", "sky", {"model": "hdri", "hdri": "nan.exr"}, "NaN"),
+    ("NaN in hdri", "sky", {"model": "hdri", "hdri": "nan.exr"}, "the sky image holds nan at row"),
     ("hdri not an image", "sky", {"model": "hdri", "hdri": "config.txt"}, "config.txt"),
     ("periodic tile not whole pixels", "canopy", {"layout": "periodic", "size": [4.05, 4.0]},
      "whole number of ground pixels"),

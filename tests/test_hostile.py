@@ -399,3 +399,94 @@ def test_a_long_message_is_cut_in_the_middle_with_its_length(inputs, capfd):
     err = capfd.readouterr().err.strip()
     assert len(err) < 600 and "canopy.mask: no such files:" in err, err
     assert err.count(f".png ({len(str(folder / name))} characters)") == 2 and err.count("...") == 2, err
+
+
+# -- issue 50: the third pass -----------------------------------------------------------
+
+def with_bad_texel(image, value, at=(3, 5, 1)):
+    image = image.copy()
+    image[at] = value
+    return image
+
+
+def albedo_with(folder, value):
+    io.write_exr(folder / "albedo.exr", with_bad_texel(np.full((32, 32, 3), 0.3, np.float32), value))
+    config = base_config()
+    config["ground"] = {**config["ground"], "albedo": "albedo.exr", "albedo_size": 2.0}
+    return config
+
+
+def half_mask_with(folder, value):
+    io.write_exr(folder / "leaves.exr", with_bad_texel(np.full((40, 40, 3), 0.5, np.float32), value), half=True)
+    config = base_config()
+    config["canopy"] = {**config["canopy"], "mask": "leaves.exr"}
+    return config
+
+
+def imported_pass_with(folder, value):
+    for name in ("sun", "sky", "alpha"):
+        pixels = np.full((36, 64, 3), 0.5, np.float32)
+        io.write_exr(folder / f"fg_{name}.exr", with_bad_texel(pixels, value) if name == "sky" else pixels)
+    config = base_config()
+    config["camera"] = {"position": [0.0, -6.0, 1.7], "look_at": [0.0, 0.0, 1.0], "resolution": [64, 36]}
+    config["foreground"] = {"model": "passes", "sun": "fg_sun.exr", "sky": "fg_sky.exr", "alpha": "fg_alpha.exr"}
+    return config
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf], ids=["nan", "inf"])
+@pytest.mark.parametrize("make,file,what", [(albedo_with, "albedo.exr", "albedo"),
+                                            (half_mask_with, "leaves.exr", "mask"),
+                                            (imported_pass_with, "fg_sky.exr", "pass")],
+                         ids=["albedo", "half-float mask", "imported pass"])
+def test_a_non_finite_texel_of_an_input_is_one_line_naming_it(inputs, capfd, make, file, what, value):
+    """Every image a config names is read through one check of finite values: exit 2 from
+    check, render and frame (which plans without check_inputs), one line naming the file and the
+    first bad texel, nothing written."""
+    folder, out = inputs
+    config = write_config(folder, make(folder, np.float32(value)))
+    shown = "nan" if np.isnan(value) else "inf"
+    message = f"{file}: the {what} holds {shown} at row 3, column 5, channel 1; every value must be finite"
+    assert_refused(config, out, capfd, message)
+    assert main(["frame", str(config), "-o", str(out / "f.png"), "--cache", str(out / "cache")]) == 2
+    err = capfd.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert tree(out) == []
+
+
+def test_a_non_finite_albedo_is_refused_small(inputs):
+    """The albedo that ended in an internal error after 1.1 GB (issue 50): a real process's peak."""
+    folder, out = inputs
+    config = write_config(folder, albedo_with(folder, np.float32(np.nan)))
+    for command in (["render", config, "--output", out / "run", "--cache", out / "cache"],
+                    ["frame", config, "-o", out / "f.png", "--cache", out / "cache"]):
+        code, err, _, peak = run_peak(command, folder)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "the albedo holds nan" in err, err
+        assert peak < MOST_MEMORY, f"{peak / 1e6:.0f} MB"
+    assert tree(out) == []
+
+
+def test_negative_radiance_in_an_hdri_is_read_as_zero_with_the_texels_counted(inputs, capfd):
+    folder, out = inputs
+    sky = np.ones((32, 64, 3), np.float32)
+    sky[2, 3] = [-0.5, 1.0, 1.0]
+    sky[4, 9, 2] = -2.0
+    io.write_exr(folder / "sky.exr", sky)
+    config = write_config(folder, with_sky({"model": "hdri", "hdri": "sky.exr"}))
+    assert main(["ground", str(config), "-o", str(out / "g.exr"), "--cache", str(out / "cache")]) == 0
+    err = capfd.readouterr().err
+    assert "sky.exr: 2 texels of negative radiance (the lowest -2) read as 0" in err, err
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+@pytest.mark.parametrize("kind", ["named pipe", "folder", "device"])
+def test_an_input_path_that_is_not_a_regular_file_says_what_it_is(inputs, capfd, kind):
+    folder, out = inputs
+    path = {"named pipe": folder / "pipe.png", "folder": folder / "sub.png", "device": Path("/dev/null")}[kind]
+    if kind == "named pipe":
+        os.mkfifo(path)
+    elif kind == "folder":
+        path.mkdir()
+    config = base_config()
+    config["canopy"]["mask"] = str(path)
+    assert_refused(write_config(folder, config), out, capfd, f"canopy.mask: a {kind}, not a regular file: {path}")
+    assert "a device, not a regular file" == paths.not_a_file(Path("/dev/null"))

@@ -596,3 +596,83 @@ def test_index_entries_encoded_once_give_the_same_bytes(tmp_path):
     stale = dict(encoded, **{"0": '{"x":1}'})  # a text the caller failed to remove is what is written
     write_index(tmp_path, index, stale)
     assert (tmp_path / "index.json").read_text() != whole
+
+
+RACE = """
+import json, os, sys
+from pipeline.cli.main import main
+
+
+def child(args, log, gate):
+    code = 99
+    try:
+        os.close(gate[1])
+        fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.read(gate[0], 1)  # both wait here until the gate opens
+        try:
+            code = main(args)
+        except SystemExit as exc:
+            code = exc.code
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(code or 0)
+
+
+def race(configs, folder, cache, logs):
+    gate = os.pipe()
+    pids = []
+    for k, config in enumerate(configs):
+        pid = os.fork()
+        if pid == 0:
+            child(["render", config, "--output", folder, "--cache", cache, "--jobs", "1"], f"{logs}-{k}.log", gate)
+        pids.append(pid)
+    os.close(gate[0])
+    os.write(gate[1], b"go")
+    os.close(gate[1])
+    codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in pids]
+    return codes, [open(f"{logs}-{k}.log").read() for k in range(len(configs))]
+
+
+a, b, root, trials = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+for k, config in enumerate((a, b)):  # alone: the reference bytes, and every loop loaded before the forks
+    main(["render", config, "--output", f"{root}/alone-{k}", "--cache", f"{root}/cache", "--jobs", "1"])
+found = []
+for trial in range(trials):
+    for kind, configs in (("same", (a, a)), ("two", (a, b))):
+        codes, logs = race(configs, f"{root}/{kind}{trial}/new/run", f"{root}/cache", f"{root}/{kind}{trial}")
+        found.append({"folder": f"{root}/{kind}{trial}/new/run", "configs": configs, "codes": codes, "logs": logs})
+with open(f"{root}/race.json", "w") as f:
+    json.dump(found, f)
+"""
+"""Two renders forked at the same moment (after a gate both wait on) into the same new folder, two
+levels of it new, ``trials`` times with one config and with two: what each exits with and says."""
+
+
+def test_two_renders_racing_for_one_new_folder_leave_one_run_whole(tmp_path):
+    """Issue 50: of two renders started at once into one new folder (the same config, and two
+    configs), exactly one is refused with its one line and the other ends as when it runs alone,
+    20 times each: the refused one never removes the folder or the lock file the other holds."""
+    config = {**TINY, "animation": {"frames": 1, "fps": 12}, "output": {"report": False, "video": "none"},
+              "sky": {"sun": {"elevation": 60.0, "azimuth": 180.0}}}
+    a = write_config(tmp_path, config, "a.yaml")
+    b = write_config(tmp_path, {**config, "sky": {"sun": {"elevation": 60.0, "azimuth": 170.0}}}, "b.yaml")
+    subprocess.run([sys.executable, "-c", RACE, str(a), str(b), str(tmp_path), "20"], cwd=ROOT, check=True,
+                   capture_output=True, timeout=600)
+    alone = [contents(tmp_path / f"alone-{k}") for k in (0, 1)]
+    assert all(alone)
+    trials = json.loads((tmp_path / "race.json").read_text())
+    assert len(trials) == 40
+    for trial in trials:
+        folder, codes, logs = Path(trial["folder"]), trial["codes"], trial["logs"]
+        assert sorted(codes) == [0, 2], (folder, codes, logs)
+        winner, loser = codes.index(0), codes.index(2)
+        refused = f"sunshade: error: {folder}: another sunshade render is writing to this folder"
+        assert logs[loser].strip() == refused, logs[loser]
+        name = Path(trial["configs"][winner]).stem
+        expected = alone[0 if name == "a" else 1]
+        assert contents(folder) == expected, folder
+        left = sorted(p.name for p in folder.iterdir())
+        assert left == sorted([*expected, ".sunshade.lock", "index.json", "run.json"]), left

@@ -471,9 +471,15 @@ class ItemStore:
     def _write(self, path: Path, kind: str, key: str, params, arrays: dict) -> None:
         """Write ``arrays`` as item ``path`` atomically: temp folder, arrays, meta, rename."""
         import numpy as np  # not at the top: see the module docstring
-        path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.parent / f"{TEMPORARY_PREFIX}{key}-{os.getpid()}-{secrets.token_hex(4)}"
-        os.mkdir(tmp)
+        for attempt in range(3):  # a prune may remove the empty <kind>/<xx> folder between the two
+            path.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.mkdir(tmp)
+                break
+            except FileNotFoundError:
+                if attempt == 2:
+                    raise
         try:
             specs = {}
             for name, a in arrays.items():

@@ -108,7 +108,7 @@ def run_frame(args: argparse.Namespace) -> int:
     from pipeline.core import io
     from pipeline.run.render import exr_layers, frame_attributes
     from pipeline.stages.frame import render_frame
-    from pipeline.stages.plan import plan_run
+    from pipeline.stages.plan import check_inputs
 
     output = checked_output(args.output)
     suffix = output.suffix.lower()
@@ -125,7 +125,8 @@ def run_frame(args: argparse.Namespace) -> int:
         config = dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes))
     check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
-    result = render_frame(plan_run(config), args.frame, store=open_store(args.cache), workers=args.threads,
+    plan = check_inputs(config)  # every input read and checked before anything is computed or written
+    result = render_frame(plan, args.frame, store=open_store(args.cache), workers=args.threads,
                           passes=config.output.passes if suffix == ".exr" else ())
     elapsed = time.perf_counter() - started
     if not np.all(np.isfinite(result.radiance)):
@@ -173,7 +174,8 @@ def run_mask(args: argparse.Namespace) -> int:
     if args.fine and layer.sun is None:
         raise BadInput(f"{args.config}: --fine needs a sky with a sun (sky.model: cie, preetham or hdri)")
     started = time.perf_counter()
-    coarse, fine = layer_masks(plan, args.layer, args.frame)
+    masks = layer_masks(plan, args.layer, args.frame)
+    coarse, fine = masks.coarse, masks.fine
     mask, grid = coarse, layer.canopy
     if args.fine and layer.sun is not None and fine is not None:  # a sun makes its fine mask (checked above)
         mask, grid = fine, layer.sun.mask

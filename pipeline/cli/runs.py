@@ -62,7 +62,8 @@ def run_check(args: argparse.Namespace) -> int:
         print(line)
     for line in _light_lines(plan):
         print(line)
-    frames, cycle = disk_needed(plan)
+    need = disk_needed(plan)
+    frames, cycle = need.frame_bytes, need.cache_bytes
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
           f"cache at most {_size(cycle)}, "
           + (f"within the cache's budget of {_size(budget)}" if cycle <= budget else
@@ -249,21 +250,15 @@ def run_render(args: argparse.Namespace) -> int:
 
 def _render_run(config: Config, store: Cache, frames: tuple[int, ...] | None, args: argparse.Namespace,
                 source_hash: str, budget: int) -> RunSummary:
-    """``render.render_run`` of the command's frames; the folders it made are removed if it fails
-    and leaves them empty."""
-    from pipeline.run.folder import missing_folders, remove_if_empty
+    """``render.render_run`` of the command's frames (a failing run removes the folders it made, if
+    they are empty)."""
     from pipeline.run.render import render_run
 
-    new = missing_folders(config.output.folder)
-    try:
-        return render_run(config, frames=frames, store=store,
-                          jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-                          cluster_timeout=args.cluster_timeout, source_hash=source_hash, budget=budget,
-                          progress=_Progress(sys.stderr),
-                          warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
-    except BaseException:
-        remove_if_empty(new)
-        raise
+    return render_run(config, frames=frames, store=store,
+                      jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+                      cluster_timeout=args.cluster_timeout, source_hash=source_hash, budget=budget,
+                      progress=_Progress(sys.stderr),
+                      warn=lambda line: print(f"sunshade: warning: {line}", file=sys.stderr))
 
 
 def _verify_run(config: Config, store: Cache) -> int:

@@ -167,8 +167,8 @@ class Section:
             self.fail(name, f"must be a file name, not {kind_of(value)}")
         self.check_path(name, value)
         path = self.resolved(name, value)
-        if not path.is_file():
-            self.fail(name, f"no such file: {path}")
+        if (why := paths.not_a_file(path)) is not None:
+            self.fail(name, f"{why}: {path}")
         try:
             with open(path, "rb"):
                 pass

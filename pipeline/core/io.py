@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 import OpenImageIO as oiio
 
+from pipeline.core import paths
 from pipeline.core.errors import ImageError
 
 __all__ = ["MAX_IMAGE_VALUES", "PNG_FILTER_SUB", "PNG_ZLIB_LEVEL", "PNG_ZLIB_STRATEGY", "VIDEO_FORMATS", "read_image",
-           "read_codes", "read_layers", "read_attributes", "write_exr", "write_png", "half_dither", "write_video"]
+           "read_finite_image", "read_codes", "read_layers", "read_attributes", "write_exr", "write_png", "half_dither",
+           "write_video"]
 
 MAX_IMAGE_VALUES = 2**29
 """Most values (width x height x channels) an image read may hold: its header is read first, and
@@ -57,6 +59,37 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     return _read(path, "float").astype(np.float32, copy=False)
 
 
+def read_finite_image(path: str | os.PathLike[str], what: str) -> np.ndarray:
+    """``read_image`` of an input a config names (a mask, an albedo, a sky, a pass), refusing a NaN
+    or infinite value with the first such texel named, before anything is made from it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+    what : str
+        What the image is, for the message ("mask", "albedo", ...).
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, channels) float32, as ``read_image``.
+
+    Raises
+    ------
+    ImageError
+        Naming the file and, for a value that is not finite, the first one: its row, column
+        and channel (row-major order).
+    """
+    image = read_image(path)
+    bad = ~np.isfinite(image)
+    if bad.any():
+        row, col, channel = (int(v) for v in np.argwhere(bad)[0])
+        raise ImageError(path, f"the {what} holds {image[row, col, channel]} at row {row}, column {col}, "
+                               f"channel {channel}; every value must be finite")
+    return image
+
+
 def read_codes(path: str | os.PathLike[str]) -> np.ndarray:
     """The 8-bit codes of an 8-bit image file (a frame's PNG), without a float round trip.
 
@@ -81,8 +114,8 @@ def read_codes(path: str | os.PathLike[str]) -> np.ndarray:
 def _read(path, kind: str) -> np.ndarray:
     """Pixels as stored, in OpenImageIO's ``kind`` (``float``, ``uint8``), (rows, cols, channels)."""
     path = Path(path)
-    if not path.is_file():
-        raise ImageError(path, "no such file")
+    if (why := paths.not_a_file(path)) is not None:
+        raise ImageError(path, why)
     as_stored = oiio.ImageSpec()
     as_stored.attribute("oiio:UnassociatedAlpha", 1)
     with _quiet_stderr():

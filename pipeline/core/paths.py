@@ -9,9 +9,10 @@ such a line (docs/runs.md, "Errors").
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
-__all__ = ["NAME_MAX", "PATH_MAX", "SHOWN_MAX", "problem", "shown"]
+__all__ = ["NAME_MAX", "PATH_MAX", "SHOWN_MAX", "problem", "not_a_file", "shown"]
 
 NAME_MAX = 255
 """Longest file or folder name, in bytes (Linux, macOS and Windows file systems). [byte]"""
@@ -68,6 +69,32 @@ def problem(text: object) -> str | None:
     if len(whole) > PATH_MAX:
         return f"the path is {len(whole)} bytes long; the most is {PATH_MAX}"
     return None
+
+
+def not_a_file(path: Path) -> str | None:
+    """Why ``path`` cannot be read as an input file, or None for a regular file (links followed).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A path that should name a regular file.
+
+    Returns
+    -------
+    str or None
+        "no such file", or what it is instead ("a folder", "a named pipe", "a device", "a socket",
+        each "not a regular file"); None when it is a regular file.
+    """
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return "no such file"
+    if stat.S_ISREG(mode):
+        return None
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
+             (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+    kind = next((name for test, name in kinds if test(mode)), "not a file")
+    return f"{kind}, not a regular file"
 
 
 def shown(text: str | bytes | os.PathLike[str] | os.PathLike[bytes], most: int = SHOWN_MAX) -> str:

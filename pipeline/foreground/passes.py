@@ -11,7 +11,7 @@ import numpy as np
 
 from pipeline.camera.pinhole import Camera
 from pipeline.config.settings import ForegroundConfig
-from pipeline.core.io import ImageError, read_image
+from pipeline.core.io import ImageError, read_finite_image
 
 __all__ = ["ForegroundPasses", "check_passes_size", "read_passes", "imported_passes"]
 
@@ -101,9 +101,7 @@ def read_passes(sun_path: str | os.PathLike[str], sky_path: str | os.PathLike[st
     """
     images: list[np.ndarray] = []
     for path in (sun_path, sky_path, alpha_path):
-        image = read_image(path)
-        if not np.all(np.isfinite(image)):
-            raise ImageError(path, "the image holds NaN or infinite values")
+        image = read_finite_image(path, "pass")
         if images and image.shape[:2] != images[0].shape[:2]:
             (rows, cols), (want_rows, want_cols) = image.shape[:2], images[0].shape[:2]
             raise ImageError(path, f"its size {cols} x {rows} differs from {want_cols} x {want_rows} "

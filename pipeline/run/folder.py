@@ -17,7 +17,7 @@ from pipeline.core import paths
 from pipeline.core.errors import RunError
 
 __all__ = ["RUN_FILE", "INDEX_FILE", "LOCK_FILE", "parse_frames", "frame_files", "video_file", "make_folder",
-           "check_folder", "missing_folders", "remove_if_empty", "check_outputs", "remove_temporaries"]
+           "check_folder", "missing_folders", "remove_own_folders", "check_outputs", "remove_temporaries"]
 
 RUN_FILE = "run.json"
 """The run's record in its folder (docs/runs.md, "The run folder")."""
@@ -105,8 +105,12 @@ def video_file(config: Config) -> Path | None:
     return config.output.folder / f"{config.output.name}.{config.output.video}"
 
 
-def make_folder(folder: Path) -> Path:
-    """Create the output folder (and its parents).
+def make_folder(folder: Path) -> tuple[Path, ...]:
+    """Create the output folder (and its parents), saying which of them this call made.
+
+    Each missing folder is made with ``mkdir`` that fails if it exists, outermost first, so that of
+    two processes making the same new folder at once exactly one counts it as its own; only a
+    process's own folders are ever removed by it (``remove_own_folders``).
 
     Parameters
     ----------
@@ -115,22 +119,29 @@ def make_folder(folder: Path) -> Path:
 
     Returns
     -------
-    pathlib.Path
-        ``folder``.
+    tuple of pathlib.Path
+        The folders this call created, innermost first (empty when ``folder`` existed).
 
     Raises
     ------
     RunError
-        If it cannot be written.
+        If it cannot be written (what this call made is removed again).
     """
+    made: list[Path] = []
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".probe-{id(folder)}"
+        for missing in reversed(missing_folders(folder)):
+            try:
+                missing.mkdir()
+            except FileExistsError:
+                continue  # another process made it: not ours
+            made.insert(0, missing)
+        probe = folder / f".probe-{os.getpid()}-{os.urandom(4).hex()}"
         probe.touch()
         probe.unlink()
     except OSError as exc:
+        remove_own_folders(tuple(made), lock_held=False)
         raise RunError(f"{folder}: cannot write the output folder ({exc.strerror or exc})") from None
-    return folder
+    return tuple(made)
 
 
 def check_folder(folder: Path) -> None:
@@ -173,19 +184,24 @@ def missing_folders(folder: Path) -> list[Path]:
     return missing
 
 
-def remove_if_empty(folders: list[Path]) -> None:
-    """Remove the folders that a failed run made and left empty but for its lock file.
+def remove_own_folders(folders: tuple[Path, ...], *, lock_held: bool) -> None:
+    """Remove the folders that this process made (``make_folder``) and a failed run left empty.
 
-    So that a failing run leaves nothing new behind.
+    So that a failing run leaves nothing of its own behind, and never touches what another process
+    holds or made: the lock file is removed only by the process that holds the lock (before it lets
+    go), and a folder only while it is empty.
 
     Parameters
     ----------
-    folders : list of pathlib.Path
-        The folders the run made, innermost first (``missing_folders``).
+    folders : tuple of pathlib.Path
+        The folders this process made, innermost first (``make_folder``).
+    lock_held : bool
+        Whether this process holds the output folder's lock (the innermost folder's).
     """
     for folder in folders:
         with contextlib.suppress(OSError):
-            (folder / LOCK_FILE).unlink(missing_ok=True)
+            if lock_held:
+                (folder / LOCK_FILE).unlink(missing_ok=True)
             folder.rmdir()
 
 

@@ -42,7 +42,15 @@ from pipeline.config.settings import Config
 from pipeline.core import io
 from pipeline.core.cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
 from pipeline.core.errors import RunError, SunshadeError, portable
-from pipeline.run.folder import INDEX_FILE, LOCK_FILE, frame_files, make_folder, remove_temporaries, video_file
+from pipeline.run.folder import (
+    INDEX_FILE,
+    LOCK_FILE,
+    frame_files,
+    make_folder,
+    remove_own_folders,
+    remove_temporaries,
+    video_file,
+)
 from pipeline.run.index import FrameWarning, check_frames, file_stamp, read_index, write_index
 from pipeline.run.record import RunSummary, read_run_file, resolved_config, write_run_file
 from pipeline.run.video import VideoStream, encode_video
@@ -274,9 +282,9 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
     """
     started = time.perf_counter()
     run, plan = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
-    lock = _lock(run.folder)
     mine = set(config_item_keys(plan))
     timings: Timings = {}
+    made, lock = _lock(run.folder)
     try:
         with contextlib.ExitStack() as held:  # the steps' threads joined, then ``mine`` let go
             held.enter_context(run.store.in_use(mine))  # no other run's budget removes them meanwhile
@@ -297,6 +305,9 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             timings["total"] = time.perf_counter() - started
             _record(run, plan, found, video, timings, source_hash)
             pruned = tuple(run.store.prune(budget, keep=mine)) if budget is not None else ()
+    except BaseException:
+        remove_own_folders(made, lock_held=True)  # while the lock is held: nobody else's
+        raise
     finally:
         lock.release()
     return RunSummary(tuple(found.todo), tuple(f for f in run.frames if f not in set(found.todo)),
@@ -306,7 +317,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
 @dataclass(frozen=True)
 class _Run:
     """What the steps of one ``render_run`` share: ``config``, ``store`` (its root absolute: workers
-    elsewhere resolve no relative path), ``folder`` (made), ``digest`` (the config's hash), the
+    elsewhere resolve no relative path), ``folder`` (the output folder), ``digest`` (the config's hash), the
     ``frames`` asked for, ``jobs`` (processes at once) of ``threads`` (FFT threads) each, the
     ``scheduler``'s address (None: local processes), ``command`` (the process whose local workers
     end with it, ``cores.end_if_orphaned``; None on a cluster) and ``progress``."""
@@ -342,7 +353,7 @@ def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *,
           scheduler: str | None, progress: Progress | None,
           warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan]:
     """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
-    the scheduler reached, the folder made: what the later steps share."""
+    the scheduler reached: what the later steps share."""
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
     if warn is not None:
@@ -352,20 +363,31 @@ def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *,
     asked = tuple(range(config.animation.frames)) if frames is None else tuple(frames)
     if scheduler:
         _reach(scheduler)  # an unreachable scheduler fails before anything is written
-    folder = make_folder(config.output.folder)
     jobs, threads = jobs_and_threads(jobs or config.render.jobs, scheduler)
     command = None if scheduler else os.getpid()  # whose local workers end with it
-    return _Run(config, store, folder, digest, asked, jobs, threads, scheduler, command, progress), plan
+    run = _Run(config, store, config.output.folder, digest, asked, jobs, threads, scheduler, command, progress)
+    return run, plan
 
 
-def _lock(folder: Path) -> filelock.FileLock:
-    """The folder's lock, held; RunError where another render holds it."""
-    lock = filelock.FileLock(folder / LOCK_FILE, timeout=0)
-    try:
-        lock.acquire()
-    except filelock.Timeout:
-        raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
-    return lock
+def _lock(folder: Path) -> tuple[tuple[Path, ...], filelock.FileLock]:
+    """The output folder made and its lock held before anything is written in it: (the folders this
+    process made, the lock). Where another render holds the lock: RunError, the folders this process
+    made removed if they are empty (never the other's lock file or folder; docs/runs.md, "The run
+    folder"). A folder that another failing render removed between the two steps is made again."""
+    for attempt in range(3):
+        made = make_folder(folder)
+        lock = filelock.FileLock(folder / LOCK_FILE, timeout=0)
+        try:
+            lock.acquire()
+        except filelock.Timeout:
+            remove_own_folders(made, lock_held=False)
+            raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
+        except FileNotFoundError:
+            if attempt == 2:
+                raise RunError(f"{folder}: the output folder vanished while it was being locked") from None
+            continue
+        return made, lock
+    raise AssertionError("unreachable")
 
 
 def _check_folder(run: _Run, *, force: bool) -> _Found:

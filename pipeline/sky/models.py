@@ -6,6 +6,7 @@ from the config's ``sky`` section: where the sun and moon are at a frame, the fr
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Protocol
@@ -297,12 +298,15 @@ def load_hdri(sky: SkyConfig) -> equirect.EquirectSky:
     path = sky.hdri
     if path is None:
         raise ValueError("an hdri sky needs sky.hdri")
-    image = io.read_image(path)
+    image = io.read_finite_image(path, "sky image")
     if image.shape[2] < 3:
         image = np.repeat(image[..., :1], 3, axis=2)
     image = image[..., :3]
-    if not np.all(np.isfinite(image)):
-        raise io.ImageError(path, "the sky image holds NaN or infinite values")
     if image.max() > MAX_RADIANCE:
         raise io.ImageError(path, f"radiance {image.max():.3g} is above the most, {MAX_RADIANCE:g}")
+    negative = image < 0.0
+    if negative.any():  # a sky gives no negative light: clamped, and said (docs/method.md, "Conventions")
+        texels = int(negative.any(axis=2).sum())
+        warnings.warn(f"{path}: {texels} texel{'s' if texels != 1 else ''} of negative radiance (the lowest "
+                      f"{image.min():.3g}) read as 0", RuntimeWarning, stacklevel=2)
     return equirect.cut_sun(equirect.EquirectSky(np.maximum(image, 0.0), sky.rotation))

@@ -38,7 +38,7 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
         Naming the file.
     """
     path = layer.mask[frame % len(layer.mask)]
-    image = io.read_image(path)
+    image = io.read_finite_image(path, "mask")
     try:
         return masks.transmittance_from_image(image)
     except ValueError as exc:
@@ -97,7 +97,7 @@ def albedo_mipmap(ground: GroundConfig) -> mipmap.MipMap:
     if ground.albedo == "grass":
         image, grid = albedo.grass_albedo(period=ground.albedo_size)
     else:
-        image = io.read_image(ground.albedo)
+        image = io.read_finite_image(ground.albedo, "albedo")
         image = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] < 3 else image[..., :3]
         rows, cols = image.shape[:2]
         grid = Grid((0.0, ground.albedo_size), ground.albedo_size / cols, (rows, cols))
