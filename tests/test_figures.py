@@ -163,11 +163,13 @@ def test_preview_merges_without_touching_the_scene_text():
 
 
 def test_the_brdf_figure_shows_the_hot_spot_brighter_than_lambert(written):
-    """brdf-lawn.png: Lambert left, grass right, at one exposure: round the antisolar point
-    (bottom middle, the viewer has the sun behind) the grass is brighter."""
+    """brdf-lawn.png: Lambert left, grass in the middle, sand right, at one exposure: round the
+    antisolar point (bottom middle, the viewer has the sun behind) grass and sand are brighter
+    (preview: 1.37 and 1.15 times Lambert there)."""
     image = _image(written[0], "brdf-lawn.png")
-    half = image.shape[1] // 2
-    left, right = image[:, : half - 2], image[:, -(half - 2):]
+    third = image.shape[1] // 3
+    left, middle_panel, right = (image[:, i * third + 2: (i + 1) * third - 2] for i in range(3))
     rows = slice(int(0.75 * image.shape[0]), None)
     middle = slice(int(0.4 * left.shape[1]), int(0.6 * left.shape[1]))
-    assert right[rows, middle].mean() > 1.1 * left[rows, middle].mean()
+    assert middle_panel[rows, middle].mean() > 1.1 * left[rows, middle].mean()
+    assert right[rows, middle].mean() > 1.05 * left[rows, middle].mean()

@@ -1,5 +1,5 @@
 """The paper's figures, remade as PNGs (Max 1991, Figs. 4 to 7, 10 to 13 and 16, and S(t)), and
-one beyond it: the ground's reflectance, Lambert beside the grass preset.
+one beyond it: the ground's reflectance, Lambert beside the grass and sand presets.
 
 Every scene is held here as YAML text, copied from ``configs/grove.yaml``,
 ``configs/grove-point-sun.yaml`` and ``configs/crescents.yaml``, so the figures do not depend on
@@ -27,7 +27,8 @@ import yaml
 from pipeline.cache import store as cache
 from pipeline.camera import composite
 from pipeline.config.parse import parse_config
-from pipeline.config.settings import Config
+from pipeline.config.settings import BrdfConfig, Config
+from pipeline.config.vocabulary import BRDF_PRESETS
 from pipeline.core import io
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.core.geometry import I0, Grid, projected_solid_angle
@@ -76,9 +77,10 @@ FIGURES = (
      "with the contacts C1 to C4"),
     ("brdf-lawn.png",
      "Beyond the paper: the grove's ground with the sun low behind the camera, Lambert's law "
-     "(left) and the RPV grass preset (right, ground.brdf: grass) at the same exposure: the "
-     "hot spot round the antisolar point at the bottom, the grass darker looking towards the "
-     "sun's side (no trees in front)"),
+     "(left), the RPV grass preset (middle, ground.brdf: grass) and the sand preset (right, "
+     "ground.brdf: sand, Bouvet's Libya-4 fit) at the same exposure: the hot spot round the "
+     "antisolar point at the bottom, the grass darker looking towards the sun's side (no trees "
+     "in front)"),
 )
 """(file name, one-line caption) of every figure, in the order ``write_figures`` writes them."""
 
@@ -615,15 +617,17 @@ def _fig_sun_fraction(scenes: _Scenes) -> np.ndarray:
 
 
 def _fig_brdf_lawn(scenes: _Scenes) -> np.ndarray:
-    """The lawn scene's frame 0 with Lambert's law and with its BRDF, side by side, both at the
-    Lambertian frame's exposure and white balance."""
+    """The lawn scene's frame 0 with Lambert's law, with its BRDF (grass) and with the sand
+    preset, side by side, all at the Lambertian frame's exposure and white balance."""
     config = scenes.config("lawn")
     lambert = replace(config, ground=replace(config.ground, brdf=None))
-    results = [render_frame(plan_run(c), 0, store=scenes.store) for c in (lambert, config)]
+    model, parameters = BRDF_PRESETS["sand"]
+    sand = replace(config, ground=replace(config.ground, brdf=BrdfConfig(model, tuple(parameters.items()), "sand")))
+    results = [render_frame(plan_run(c), 0, store=scenes.store) for c in (lambert, config, sand)]
     shown = [composite.display(r.radiance, exposure=results[0].exposure, balance=results[0].balance,
                                transform=config.camera.display) for r in results]
     gap = np.ones((shown[0].shape[0], max(2, shown[0].shape[1] // 100), shown[0].shape[2]), dtype=shown[0].dtype)
-    return np.concatenate([shown[0], gap, shown[1]], axis=1)
+    return np.concatenate([shown[0], gap, shown[1], gap, shown[2]], axis=1)
 
 
 _MAKERS = {

@@ -7,7 +7,7 @@ from pipeline.config.registry import Model, Registry
 __all__ = ["PROCEDURAL_MODELS", "SKIES", "SKY_MODELS", "FOREGROUNDS",
            "CIE_TYPE_RANGE", "DEFAULT_CIE_TYPE", "TURBIDITY_RANGE", "DISPLAYS",
            "WHITE_BALANCES", "FOLLOWS", "SEED_MAX", "NUMBER_RANGES", "TIME_RANGE", "PASSES", "BRDF_PARAMETERS",
-           "REFLECTANCES", "BRDF_PRESETS"]
+           "REFLECTANCES", "BRDF_PRESETS", "BRDF_CHANNELS"]
 
 PROCEDURAL_MODELS = ("cie", "preetham")
 """The procedural sky's models (sky.model), named by the clear sky's angular shape."""
@@ -133,12 +133,28 @@ REFLECTANCES = Registry(
 BRDF_PRESETS = {
     "grass": ("rpv", {"rho0": 0.014, "k": 0.810, "theta": -0.169, "rho_c": 0.014}),
     "soil": ("rpv", {"rho0": 0.147, "k": 0.839, "theta": -0.096, "rho_c": 0.147}),
-    "sand": ("rpv", {"rho0": 0.30, "k": 1.15, "theta": -0.10, "rho_c": 0.30}),
+    "sand": ("rpv", {"rho0": 0.29857, "k": 0.82656, "theta": 0.02074, "rho_c": 0.56090}),
 }
 """Named ground reflectances a config may give as ``ground.brdf: NAME`` (docs/method.md, "The
 ground's reflectance"): ``grass`` and ``soil`` Rahman, Pinty and Verstraete's (1993) fits for
 grasses (rho0 = rho_c 0.014, Theta -0.169, k 0.810) and for loam soil (rho0 = rho_c 0.147,
 Theta -0.096, k 0.839) in the visible band, their table as reprinted in the SHARM manual
-(Lyapustin 2005); ``sand`` chosen by hand inside the model's ranges (no published fit for sand
-was found, docs/method.md says where we looked): bell-shaped, darker at grazing light, backward
-scattering."""
+(Lyapustin 2005); ``sand`` the desert sand of the Libya-4 site, Bouvet's spectral RPV model
+(Bouvet 2014, Remote Sens. Environ. 140, 141-154; the table ESA's DIMITRI code fed to
+libRadtran) reduced to luminance Y (CIE 1931 2-degree observer under D65) and refitted
+(``BRDF_CHANNELS``, docs/accuracy.md, "sand: the Libya-4 fit"). The renderer applies one
+shape to every channel (the albedo texture gives the colour), so a preset is one set."""
+
+BRDF_CHANNELS = {
+    "sand": {
+        "r": {"rho0": 0.46052, "k": 0.89185, "theta": -0.00349, "rho_c": 0.81581},
+        "g": {"rho0": 0.26849, "k": 0.80267, "theta": 0.02866, "rho_c": 0.46502},
+        "b": {"rho0": 0.13474, "k": 0.76816, "theta": 0.05820, "rho_c": 0.21498},
+    },
+}
+"""A spectral preset's RPV parameters per channel of linear Rec.709 (D65 white): Bouvet's (2014)
+Libya-4 model at 390-780 nm, its BRF weighted by D65 times each primary's matching function
+(the CIE 1931 2-degree observer through the Rec.709 matrix) and refitted, within 0.5% of that
+weighted BRF at zeniths to 75 degrees (docs/accuracy.md, "sand: the Libya-4 fit"; the preset
+itself, ``BRDF_PRESETS``, is the same reduction to Y). Recorded for a renderer with a shape per
+channel; the present one reads ``BRDF_PRESETS`` only. [1]"""
