@@ -374,7 +374,7 @@ def _lock(folder: Path) -> tuple[tuple[Path, ...], filelock.FileLock]:
     process made, the lock). Where another render holds the lock: RunError, the folders this process
     made removed if they are empty (never the other's lock file or folder; docs/runs.md, "The run
     folder"). A folder that another failing render removed between the two steps is made again."""
-    for attempt in range(3):
+    for _ in range(3):
         made = make_folder(folder)
         lock = filelock.FileLock(folder / LOCK_FILE, timeout=0)
         try:
@@ -383,11 +383,9 @@ def _lock(folder: Path) -> tuple[tuple[Path, ...], filelock.FileLock]:
             remove_own_folders(made, lock_held=False)
             raise RunError(f"{folder}: another sunshade render is writing to this folder") from None
         except FileNotFoundError:
-            if attempt == 2:
-                raise RunError(f"{folder}: the output folder vanished while it was being locked") from None
-            continue
+            continue  # removed by another render that failed, between the two steps: made again
         return made, lock
-    raise AssertionError("unreachable")
+    raise RunError(f"{folder}: the output folder vanished three times while it was being locked")
 
 
 def _check_folder(run: _Run, *, force: bool) -> _Found:
