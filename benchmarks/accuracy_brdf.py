@@ -169,8 +169,8 @@ def config_case(path: str, samples: int) -> None:
             worst = np.argmax(np.abs(banded / brute - 1).max(axis=0))
             print(f"    worst cell: view zenith {np.degrees(np.arccos(views[chosen[worst], 2])):.1f} deg, "
                   f"sky term {brute[1, worst]:.3f} of open {raster.irradiance[1]:.3f}, banded {banded[1, worst]:.3f}")
-            print(f"  tolerance {tolerance:g}: {bands.count} bands ({len(bands.zeniths)} zeniths x "
-                  f"{len(bands.turns)} sectors), largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
+            print(f"  tolerance {tolerance:g}: {bands.count} bands (bound {bands.error:.4f} over the sampled "
+                  f"views), largest error {np.max(np.abs(banded / brute - 1)):.4f}, "
                   f"median {np.median(np.abs(banded / brute - 1)):.4f}", flush=True)
             if tolerance == brdf_bands.BAND_TOLERANCE:
                 # the blend alone: the same bands correlated over the whole coarse window (no blocks
@@ -208,6 +208,8 @@ def window_cases() -> None:
     spectrum = shadow.occlusion_spectrum(occlusion, plan)
     gx, gy = np.broadcast_arrays(*window.ground_from_raster(np.arange(N)[:, None], np.arange(N)[None, :]))
     sel = (slice(None), slice(1, N, STEP), slice(1, N, STEP))
+    print("cells: bands chosen: largest error; the default tolerance is "
+          f"{brdf_bands.BAND_TOLERANCE:g}, at most {brdf_bands.MAX_BANDS} bands")
     print("preset  sun az/el  camera           view azimuths  Lambert  " + "  ".join(f"tol {t:g}" for t in TOLERANCES))
     for name, (model, parameters) in BRDF_PRESETS.items():
         brdf = BrdfConfig(model, tuple(parameters.items()), name)

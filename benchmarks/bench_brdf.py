@@ -87,10 +87,9 @@ def hot_spot(plan, frame: int, results) -> None:
     views = brdf_camera.view_vectors(view)
     bands = brdf_bands.choose_bands(model, brdf_bands.summed_blocks(raster, brdf_bands.band_factor(plan)),
                                     views)  # as the frame chooses them (frame.brdf_background)
-    print(f"  view bands: {bands.count}, view zeniths "
-          + ", ".join(f"{np.degrees(z):.1f}" for z in bands.zeniths)
-          + " deg by sectors at " + ", ".join(f"{np.degrees(t):+.1f}" for t in bands.turns)
-          + f" deg of azimuth; bound of the blend's error under shading over sampled pixels {bands.error:.4f}")
+    print(f"  view bands: {bands.count}, at view zenith/azimuth "
+          + ", ".join(f"{np.degrees(z):.1f}/{np.degrees(a):+.0f}" for z, a in zip(bands.zeniths, bands.azimuths))
+          + f" deg; bound of the blend's error under shading over sampled pixels {bands.error:.4f}")
     rows, _ = camera.rows_seeing_ground(view)
     ratio = (results["brdf"].radiance[rows] / np.maximum(results["lambert"].radiance[rows], 1e-12))[..., 1].reshape(-1)
     fp, _ = camera.view_footprints(view)

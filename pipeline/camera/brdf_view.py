@@ -13,7 +13,8 @@ import numpy as np
 
 from pipeline.camera import pinhole
 from pipeline.ground.brdf import VIEW_ZENITH_LIMIT, clamp_view, shape
-from pipeline.ground.brdf_bands import ViewBands, banded_sky, open_sky, sky_ratio
+from pipeline.ground.brdf_bands import banded_sky, open_sky, sky_ratio
+from pipeline.ground.view_bands import ViewBands
 
 __all__ = ["view_vectors", "ground_radiance", "relative_sky", "background"]
 

@@ -7,9 +7,7 @@ open ground (``sky_ratio``); ``choose_bands`` places the bands. Directions as in
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -18,11 +16,12 @@ from pipeline.core.geometry import Grid, fold, sky_grid, sky_offset
 from pipeline.ground import shadow
 from pipeline.ground.brdf import cell_directions, clamp_view, shape
 from pipeline.ground.shadow import IsolatedPlan
+from pipeline.ground.view_bands import LastCalls, ViewBands, barycentric, unit_view, view_plane
 from pipeline.sky.raster import SkyRaster, coarser
 
 __all__ = [
     "BAND_TOLERANCE", "MAX_BANDS", "SKY_CELLS", "SHAPE_STEP", "BAND_SKY_CELL", "band_factor", "summed_blocks",
-    "ViewBands", "ROUND_TURN", "shaded_bound", "choose_bands", "sky_ratio",
+    "shaded_bound", "choose_bands", "sky_ratio",
     "banded_sky",
     "open_sky", "shape_on_grid", "weighted_raster",
 ]
@@ -78,149 +77,7 @@ def band_factor(plan: RunPlan) -> int:
     return factor
 
 
-def _hats(x, nodes, period=None) -> np.ndarray:
-    """Hat functions (len(nodes), n) at ``x`` (n,) over sorted ``nodes``: linear between
-    neighbours, held beyond the ends, or wrapped round ``period`` when given; they sum to 1. [1]"""
-    nodes, x = np.asarray(nodes, dtype=np.float64), np.asarray(x, dtype=np.float64).reshape(-1)
-    eye = np.eye(len(nodes))
-    if len(nodes) > 1 and period is not None:  # wrapped: the last node again before the first, and after
-        x, nodes, eye = (x - nodes[0]) % period + nodes[0], np.concatenate(
-            [[nodes[-1] - period], nodes, [nodes[0] + period]]), np.concatenate([eye[-1:], eye, eye[:1]])
-    return np.stack([np.interp(x, nodes, eye[:, b]) for b in range(eye.shape[1])]) if len(nodes) > 1 \
-        else np.ones((1, len(x)))
-
-
-def _unit(zenith, azimuth) -> np.ndarray:
-    """Unit vectors (..., 3) at zenith angles and azimuths [rad] (from +y towards +x). [1]"""
-    return np.stack([np.sin(zenith) * np.sin(azimuth), np.sin(zenith) * np.cos(azimuth), np.cos(zenith)], axis=-1)
-
-
-def _turn_from(azimuth, reference: float) -> np.ndarray:
-    """Azimuths turned to ``reference``: in [-pi, pi) [rad]."""
-    return (np.asarray(azimuth) - reference + np.pi) % (2.0 * np.pi) - np.pi
-
-
-@dataclass(frozen=True)
-class ViewBands:
-    """View bands: the sky's term with the view V held per band (Max: f_r independent of V over a patch).
-
-    The views at every pair of a zenith (near to far) and a turn of azimuth (a sector across the
-    image), blended bilinearly in the view's zenith and azimuth.
-
-    Attributes
-    ----------
-    zeniths : tuple of float
-        (Z,) the bands' view zenith angles, near to far [rad].
-    azimuth : float
-        The azimuth the sectors are measured from (from the ground towards the camera) [rad].
-    error : float
-        The largest bound of the blend's relative error under any shading over the sampled
-        pixels that ``choose_bands`` measured (``shaded_bound``) [1].
-    turns : tuple of float
-        (T,) the sectors' azimuths from ``azimuth``, in [-pi, pi) [rad].
-    round : bool
-        Whether the sectors wrap round the full circle (a camera with ground all round it).
-    """
-
-    zeniths: tuple[float, ...]
-    azimuth: float
-    error: float
-    turns: tuple[float, ...] = (0.0,)
-    round: bool = False
-
-    @property
-    def count(self) -> int:
-        """The number of bands, Z x T [count]."""
-        return len(self.zeniths) * len(self.turns)
-
-    @property
-    def colours(self) -> tuple[int, ...]:
-        """The bands whose terms are correlated in every channel: sector T // 2's, one per zenith.
-
-        They give the sky light's colour under the canopy, blended by the view zenith; the others
-        are correlated on the channels' sum and give only how the reflectance modulates it
-        (``banded_sky``).
-
-        Returns
-        -------
-        tuple of int
-            Their indices, near to far [index].
-        """
-        turns = len(self.turns)
-        return tuple(z * turns + turns // 2 for z in range(len(self.zeniths)))
-
-    def zenith_weights(self, weights: np.ndarray) -> np.ndarray:
-        """The zeniths' hat weights from the bands' weights: summed over the sectors.
-
-        Parameters
-        ----------
-        weights : numpy.ndarray
-            (B, n) ``weights`` [1].
-
-        Returns
-        -------
-        numpy.ndarray
-            (Z, n), the dtype of ``weights`` [1].
-        """
-        return _ZENITH.get((weights, len(self.turns)),
-                           lambda: weights.reshape(len(self.zeniths), len(self.turns), -1).sum(axis=1))
-
-    def directions(self) -> np.ndarray:
-        """Unit view vectors of the bands, zenith by zenith, sector by sector within.
-
-        Returns
-        -------
-        numpy.ndarray
-            (B, 3) float64 [1].
-        """
-        z, t = np.meshgrid(np.asarray(self.zeniths), np.asarray(self.turns), indexing="ij")
-        return _unit(z.reshape(-1), self.azimuth + t.reshape(-1))
-
-    def weights(self, zenith: ArrayLike, azimuth: ArrayLike | None = None) -> np.ndarray:
-        """Weights of each band at views; they sum to 1.
-
-        Products of hat functions: linear between neighbouring bands' zeniths and between
-        neighbouring sectors' azimuths, held beyond the ends (wrapped round with ``round``).
-
-        Parameters
-        ----------
-        zenith : numpy.ndarray
-            (n,) view zenith angles [rad].
-        azimuth : numpy.ndarray, optional
-            (n,) view azimuths [rad]; needed with more than one sector.
-
-        Returns
-        -------
-        numpy.ndarray
-            (B, n) float64 [1].
-        """
-        by_zenith = _hats(zenith, self.zeniths)
-        if len(self.turns) == 1:
-            return by_zenith
-        by_turn = _hats(_turn_from(azimuth, self.azimuth), self.turns, 2.0 * np.pi if self.round else None)
-        return (by_zenith[:, None, :] * by_turn[None, :, :]).reshape(self.count, -1)
-
-
-class _LastCall:
-    """The last ``size`` calls of a function and their results, kept in this process: a frame asks
-    again for what the frame (or the frame before, from the same camera) made. The keys' objects
-    are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value."""
-
-    def __init__(self, size: int = 1):
-        self.size = size
-        self.calls: list[tuple[tuple, Any]] = []
-
-    def get(self, key: tuple, make: Callable[[], Any]) -> Any:
-        """The result for ``key``: a kept one if ``key`` is a kept call's, else ``make()``."""
-        for kept, value in self.calls:
-            if len(kept) == len(key) and all(a == b if isinstance(b, (int, float, str, bytes)) else a is b
-                                             for a, b in zip(kept, key)):
-                return value
-        self.calls = [(key, make()), *self.calls][: self.size]
-        return self.calls[0][1]
-
-
-_COARSE = _LastCall()
+_COARSE = LastCalls()
 """``_coarsened``: ``choose_bands`` and ``sky_ratio`` coarsen the same raster in one frame."""
 
 SKY_CELLS = 2048
@@ -244,19 +101,22 @@ def _block_step(shape, most_cells: int) -> int:
 
 @functools.lru_cache(maxsize=4)
 def _block_directions(grid, most_cells: int) -> np.ndarray:
-    """Unit vectors (m, 3) towards the centres of ``_coarsen``'s blocks of a sky grid. Read-only. [1]"""
+    """Unit vectors (m + k, 3) towards the centres of ``_coarsen``'s blocks of a sky grid, then
+    towards its k outermost cells (``_ring_cells``). Read-only. [1]"""
     step = _block_step(grid.shape, most_cells)
     rows, cols = (max(n // step * step, 1) for n in grid.shape)
     sx, sy = grid.ground_from_raster(np.arange(rows), np.arange(cols))
     x, y = sx.reshape(-1, min(step, cols)).mean(axis=-1), sy.reshape(-1, min(step, rows)).mean(axis=-1)
     w = np.stack(np.broadcast_arrays(x[None, :], y[:, None], 1.0), axis=-1)
-    dirs = (w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3)
+    dirs = np.concatenate([(w / np.linalg.norm(w, axis=-1, keepdims=True)).reshape(-1, 3), _ring_cells(grid)[1]])
     dirs.flags.writeable = False
     return dirs
 
 
 def _coarsen(raster, most_cells: int):
-    """``_coarsened``'s work: (directions (m, 3), light per block and channel (m, channels))."""
+    """``_coarsened``'s work: directions (m + k, 3) and light per block and channel (m + k,
+    channels); the last k, the raster's outermost cells, carry the light outside the raster,
+    shared as their light is, as ``weighted_raster`` weights it (by their mean shape)."""
     light = raster.weighted
     count, rows, cols = light.shape
     step = _block_step((rows, cols), most_cells)
@@ -264,13 +124,13 @@ def _coarsen(raster, most_cells: int):
     step_r, step_c = min(step, rows), min(step, cols)
     cut = light[:, :rows, :cols].reshape(count, rows // step_r, step_r, cols // step_c, step_c)
     per_block = cut.sum(axis=(2, 4), dtype=np.float64)  # (channels, block rows, block cols)
-    return _block_directions(raster.grid, most_cells), per_block.reshape(count, -1).T
+    (r, c), _ = _ring_cells(raster.grid)
+    ring = light[:, r, c].sum(axis=0, dtype=np.float64)
+    outside = ring[:, None] * (np.asarray(raster.outside, dtype=np.float64) / max(float(ring.sum()), 1e-30))[None]
+    return _block_directions(raster.grid, most_cells), np.concatenate([per_block.reshape(count, -1).T, outside])
 
 
-_ZENITH = _LastCall(2)
-"""``ViewBands.zenith_weights``: of the ground raster's cells and of the pixels, each the same every frame."""
-
-_SHAPES = _LastCall(), _LastCall()
+_SHAPES = LastCalls(), LastCalls()
 """The shape at ``choose_bands``' sampled views and at ``sky_ratio``'s lattice of views, towards
 ``_coarsen``'s blocks: the same while the camera and the bands' azimuth stand still."""
 
@@ -303,20 +163,16 @@ def shaded_bound(shapes: np.ndarray, blend: np.ndarray, light: np.ndarray) -> np
     return 0.5 * (np.abs(shapes - ratio[:, None] * blend) @ light) / np.maximum(own, 1e-30)
 
 
-ROUND_TURN = np.radians(270.0)
-"""Spread of the views' azimuths [rad] beyond which the sectors wrap round the full circle
-(a camera looking down at ground all round it). [rad]"""
-
-
 def choose_bands(brdf: BrdfConfig, raster: SkyRaster, views: np.ndarray, *, tolerance: float = BAND_TOLERANCE,
                  most: int = MAX_BANDS, samples: int = 192) -> ViewBands:
-    """View bands in zenith and sector, added where the blend is worst under shading.
+    """View bands added one at a time where the blend is worst under shading.
 
-    First one band at the middle; then, while the largest ``shaded_bound`` over the sampled pixels
-    exceeds ``tolerance``, a zenith (both ends first, then the worst pixel's) or a sector (both ends
-    of the views' azimuths first, or three round the circle, then the worst pixel's), whichever
-    lowers the largest bound more per band added, up to ``most`` bands. Sums over the raster's cells
-    coarsened to SKY_CELLS.
+    First one band at the sampled view nearest the views' middle (on ``view_plane``); then, while
+    the largest ``shaded_bound`` over the sampled pixels exceeds ``tolerance``, a band at the
+    worst sampled view, up to ``most`` bands. The samples: about ``samples`` of the views evenly,
+    and the views at the ends of their range (nearest the nadir, farthest, both ends of their
+    azimuths), so that the bound holds where the blend is held beyond its nodes. Sums over the
+    raster's cells coarsened to SKY_CELLS.
 
     Parameters
     ----------
@@ -344,53 +200,37 @@ def choose_bands(brdf: BrdfConfig, raster: SkyRaster, views: np.ndarray, *, tole
                        lambda: _choose(brdf, views, dirs, e, tolerance, most, samples))
 
 
-_CHOSEN = _LastCall()
+_CHOSEN = LastCalls()
 """``choose_bands``' last bands."""
+
+
+def _turn_from(azimuth, reference: float) -> np.ndarray:
+    """Azimuths turned to ``reference``: in [-pi, pi) [rad]."""
+    return (np.asarray(azimuth) - reference + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def _choose(brdf, views_in, dirs, e, tolerance: float, most: int, samples: int) -> ViewBands:
     """``choose_bands``' work over the coarsened raster's directions (m, 3) and light (m,)."""
-    pick = clamp_view(views_in[:: max(1, len(views_in) // samples)])
+    spread = clamp_view(views_in[:: max(1, len(views_in) // samples)])
+    middle = float(np.arctan2(*spread.mean(axis=0)[:2]))
+    every = views_in[:, 2], _turn_from(np.arctan2(views_in[:, 0], views_in[:, 1]), middle)
+    ends = [int(np.argmax(every[0])), int(np.argmin(every[0])), int(np.argmin(every[1])), int(np.argmax(every[1]))]
+    pick = np.concatenate([spread, clamp_view(views_in[ends])])
     zenith, azimuth = np.arccos(np.clip(pick[:, 2], -1.0, 1.0)), np.arctan2(pick[:, 0], pick[:, 1])
-    middle = float(np.arctan2(*pick.mean(axis=0)[:2]))
     turn = _turn_from(azimuth, middle)
-    round_ = float(np.ptp(turn)) > ROUND_TURN
-    if not round_:  # the sectors centred on the views' spread
-        middle += 0.5 * float(turn.min() + turn.max())
-        turn = _turn_from(azimuth, middle)
+    middle += 0.5 * float(turn.min() + turn.max())  # the middle of the views' azimuths (sky_ratio's lattice)
+    plane = view_plane(zenith, azimuth)
+    # a band at a sampled view has that view's shape: the blend is exact there
     exact = _SHAPES[0].get((brdf, views_in, samples, dirs), lambda: shape(brdf, pick[:, None, :], dirs[None]))
-    known: dict[tuple[float, float], np.ndarray] = {}
-
-    def shapes_at(bands: ViewBands) -> np.ndarray:
-        """s(V_b, L_i) (B, m), each band's made once per call."""
-        keys = [(z, t) for z in bands.zeniths for t in bands.turns]
-        missing = [k for k in keys if k not in known]
-        if missing:
-            made = shape(brdf, _unit(np.array([k[0] for k in missing]),
-                                     bands.azimuth + np.array([k[1] for k in missing]))[:, None, :], dirs[None])
-            known.update(zip(missing, made))
-        return np.stack([known[k] for k in keys])
-
-    def bound(zeniths: list[float], turns: list[float]) -> tuple[ViewBands, int]:
-        trial = ViewBands(tuple(zeniths), middle, 0.0, tuple(turns), round_)
-        errors = shaded_bound(exact, trial.weights(zenith, azimuth).T @ shapes_at(trial), e)
+    nodes = [int(np.argmin(np.linalg.norm(plane - plane.mean(axis=0), axis=1)))]
+    while True:
+        errors = shaded_bound(exact, barycentric(plane[nodes], plane).T @ exact[nodes], e)
         worst = int(np.argmax(errors))
-        return ViewBands(trial.zeniths, middle, float(errors[worst]), trial.turns, round_), worst
-
-    lo, hi = float(zenith.min()), float(zenith.max())
-    bands, worst = bound([0.5 * (lo + hi)], [0.0])
-    while bands.error > tolerance:
-        zeniths, turns = list(bands.zeniths), list(bands.turns)
-        first = [-2.0 * np.pi / 3.0, 0.0, 2.0 * np.pi / 3.0] if round_ else sorted({turn.min(), turn.max()})
-        options = [(sorted({lo, hi}) if len(zeniths) == 1 else sorted({*zeniths, float(zenith[worst])}), turns),
-                   (zeniths, first if len(turns) == 1 else sorted({*turns, float(turn[worst])}))]
-        options = [(z, t) for z, t in options if bands.count < len(z) * len(t) <= most]
-        if not options:
+        if errors[worst] <= tolerance or len(nodes) >= most or worst in nodes:
             break
-        tried = [bound(z, t) for z, t in options]
-        gain = [(bands.error - b.error) / (b.count - bands.count) for b, _ in tried]
-        bands, worst = tried[int(np.argmax(gain))]
-    return bands
+        nodes.append(worst)
+    return ViewBands(tuple(float(z) for z in zenith[nodes]), tuple(float(a) for a in azimuth[nodes]), middle,
+                     float(errors[worst]))
 
 
 def sky_ratio(brdf: BrdfConfig, raster: SkyRaster, bands: ViewBands, views: np.ndarray, *, lattice: int = 16,
@@ -436,7 +276,7 @@ def sky_ratio(brdf: BrdfConfig, raster: SkyRaster, bands: ViewBands, views: np.n
 
     def at_lattice() -> np.ndarray:
         z, t = np.meshgrid(*axes, indexing="ij")
-        return shape(brdf, _unit(z, bands.azimuth + t)[..., None, :], dirs)
+        return shape(brdf, unit_view(z, bands.azimuth + t)[..., None, :], dirs)
     own = _SHAPES[1].get((brdf, angles[0], angles[1], bands.azimuth, lattice, dirs), at_lattice) @ e  # (L, L, ch)
     at_bands = shape(brdf, bands.directions()[:, None, :], dirs[None]) @ e  # (B, channels)
     from pipeline.kernels import arrays
@@ -449,7 +289,7 @@ def sky_ratio(brdf: BrdfConfig, raster: SkyRaster, bands: ViewBands, views: np.n
     return out
 
 
-_READS = _LastCall()
+_READS = LastCalls()
 """``_lattice_reads``: a camera's views are the same every frame (``brdf_view.camera_views``)."""
 
 
@@ -516,7 +356,7 @@ def banded_sky(bands: ViewBands, colours: np.ndarray, bands_light: np.ndarray, w
 def _tint(bands: ViewBands, colours: ArrayLike, weights: ArrayLike) -> np.ndarray:
     """sum_z u_z E_z,ch / sum_ch E_z,ch (channels, n) float32 for colour bands' terms (Z, channels,
     n) or (Z, channels) (then broadcast over the n views of ``weights``). [1]"""
-    by_zenith = bands.zenith_weights(np.asarray(weights, dtype=np.float32))
+    by_zenith = bands.colour_weights(np.asarray(weights, dtype=np.float32))
     colours = np.asarray(colours, dtype=np.float32)
     colours = colours if colours.ndim == 3 else colours[..., None]
     tint = np.zeros((colours.shape[1], by_zenith.shape[1]), dtype=np.float32)
@@ -590,7 +430,7 @@ def shape_on_grid(brdf: BrdfConfig, view: ArrayLike, grid: Grid) -> np.ndarray:
     return shadow.resample_bilinear(coarse[None], lattice, grid)[0]
 
 
-_SUM = _LastCall()
+_SUM = LastCalls()
 """``_channel_sum``: the bands of a frame sum the same raster."""
 
 
@@ -604,10 +444,10 @@ def _channel_sum(raster) -> np.ndarray:
     return _SUM.get((raster,), made)
 
 
-_COARSER = _LastCall()
+_COARSER = LastCalls()
 """``weighted_raster``'s raster summed in blocks: the bands of a frame weight the same one."""
 
-_RING = _LastCall()
+_RING = LastCalls()
 """``_ring``: the bands of a frame weight the same raster's outside."""
 
 
@@ -630,18 +470,27 @@ def summed_blocks(raster: SkyRaster, factor: int) -> SkyRaster:
     return raster if factor == 1 else _COARSER.get((raster, factor), lambda: coarser(raster, factor))
 
 
+@functools.lru_cache(maxsize=4)
+def _ring_cells(grid) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A sky grid's outermost ring of cells: their (rows, cols) (k,) each and unit vectors
+    towards them (k, 3). Read-only. [index], [1]"""
+    ring = np.ones(grid.shape, dtype=bool)
+    ring[1:-1, 1:-1] = False
+    r, c = np.nonzero(ring)
+    sx, sy = grid.ground_from_raster(r, c)
+    w = np.stack([sx, sy, np.ones_like(sx)], axis=-1)
+    dirs = w / np.linalg.norm(w, axis=-1, keepdims=True)
+    for array in (r, c, dirs):
+        array.flags.writeable = False
+    return (r, c), dirs
+
+
 def _ring(raster):
     """The directions (m, 3) [1] and the light (m,) [radiance x sr] of a sky raster's outermost
     ring of cells, made once for the bands of a frame."""
     def made():
-        rows, cols = raster.grid.shape
-        ring = np.ones((rows, cols), dtype=bool)
-        ring[1:-1, 1:-1] = False
-        r, c = np.nonzero(ring)
-        sx, sy = raster.grid.ground_from_raster(r, c)
-        w = np.stack([sx, sy, np.ones_like(sx)], axis=-1)
-        light = raster.weighted[:, r, c].sum(axis=0, dtype=np.float64)
-        return w / np.linalg.norm(w, axis=-1, keepdims=True), light
+        (r, c), dirs = _ring_cells(raster.grid)
+        return dirs, raster.weighted[:, r, c].sum(axis=0, dtype=np.float64)
     return _RING.get((raster,), made)
 
 
