@@ -1,7 +1,7 @@
 """The ``sunshade`` command: its command line (every command's arguments in one place), the exit codes and the
-one-line errors. The commands are in ``runs`` (check, render, report, figures, cache) and ``pictures``
-(ground, frame, mask, sky), the flags they share checked in ``flags``; ``main``, ``runs`` and
-``pictures`` are the only modules that print.
+one-line errors. The commands are in ``runs`` (check, render, report, figures, cache), ``pictures``
+(ground, frame, mask, sky) and ``eclipses``, the flags they share checked in ``flags``; ``main``,
+``runs``, ``pictures`` and ``eclipses`` are the only modules that print.
 
 Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing written),
 1 an unexpected failure.
@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import errno
 import inspect
+import re
 import sys
 import traceback
 from collections.abc import Callable, Sequence
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any, NoReturn
 
 from pipeline import __version__
+from pipeline.cli.eclipses import run_eclipses
 from pipeline.cli.pictures import run_frame, run_ground, run_mask, run_sky
 from pipeline.cli.runs import run_cache, run_check, run_figures, run_render, run_report
 from pipeline.config.vocabulary import PASSES
@@ -116,6 +118,7 @@ def _parser() -> _Parser:
     _command(commands, run_check, [shared.config, shared.budget], shared)
     _add_pictures(commands, shared)
     _add_upkeep(commands, shared)
+    _add_eclipses(commands, shared)
     return parser
 
 
@@ -230,6 +233,22 @@ def _add_upkeep(commands: argparse._SubParsersAction[_Parser], shared: _Shared) 
                        "prune: remove only its items (all, or down to --max-size)")
     cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
     cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
+
+
+def _add_eclipses(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
+    """The ``eclipses`` command and its arguments."""
+    eclipses = _command(commands, run_eclipses, [], shared)
+    # "--site -33.87,151.21": a value starting with a minus sign and a digit is a value, not a flag
+    eclipses._negative_number_matcher = re.compile(r"^-\d")
+    eclipses.add_argument("--site", required=True, metavar="LAT,LON[,ELEV_M]", help="degrees north, "
+                          "degrees east, metres above sea level (default 0)")
+    eclipses.add_argument("--years", required=True, metavar="Y1-Y2", help="the span, e.g. 2026-2030")
+    eclipses.add_argument("--utc-offset", default=None, metavar="+HH:MM", help="local time's offset from "
+                          "UTC (default: the site's mean solar time)")
+    eclipses.add_argument("--write", default=None, metavar="NAME.yaml", help="write a config for one of "
+                          "the eclipses (not over an existing file)")
+    eclipses.add_argument("--pick", type=int, default=None, metavar="N", help="with --write: the N-th "
+                          "eclipse of the list (default: the greatest obscuration seen)")
 
 
 DEBUG_HELP = "on an error, print the traceback too (for a bug report)"

@@ -15,10 +15,11 @@ partial-phase contacts). One radius per body is used for every contact and for t
 fraction, so ``obscured_fraction`` is exactly 1 between the C2 and C3 that ``contact_times``
 returns. The lunar limb profile (valleys, mountains; a few seconds at C2 and C3) is ignored.
 
-Times are UTC, taken as UT1 (|UT1 - UTC| < 0.9 s). ephem's own Delta T = TT - UT model is used;
-in ephem 4.2.1 it is an extrapolation after about 2017, so recent contacts come early. The
-contact times against published local circumstances are measured in docs/accuracy.md
-(tests/test_ephemeris.py holds them).
+Times are UTC, taken as UT1 (|UT1 - UTC| < 0.9 s). Delta T = TT - UT1 is ``delta_t``: ephem's own
+before 2018, the values the USNO measured after (ephem 4.2.1 extrapolates there, 74.6 s in 2027
+against the measured 69.2 s, which made contacts about 5 s early). Contact times against
+published local circumstances and against JPL's DE421 are in docs/accuracy.md ("The eclipse
+finder against DE421"; tests/test_ephemeris.py, tests/test_eclipse_finder.py).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pipeline.core.geometry import direction_vector, tangent_axes
 __all__ = [
     "AU", "SUN_RADIUS", "EARTH_EQUATORIAL_RADIUS", "MOON_RADIUS", "Site", "BodyPosition", "sun_and_moon",
     "separation", "obscured_fraction", "moon_offset_from_sun", "contact_times", "Circumstances", "circumstances",
+    "EARTH_ROTATION_RATE", "DELTA_T_MEASURED", "delta_t", "ephem_date",
 ]
 
 AU = 149_597_870_700.0
@@ -52,9 +54,71 @@ EARTH_EQUATORIAL_RADIUS = 6_378_137.0
 MOON_RADIUS = 0.2725076 * EARTH_EQUATORIAL_RADIUS
 """Mean lunar radius k = 0.2725076 Earth radii (IAU 1982; Espenak & Meeus 2006). [m]"""
 
+EARTH_ROTATION_RATE = 7.292115e-5
+"""The Earth's rotation rate against the stars (IERS Conventions 2010, table 1.1). [rad/s]"""
+
+DELTA_T_MEASURED = (
+    ("2018-01-01", 68.9676), ("2018-07-01", 69.1134), ("2019-01-01", 69.2202), ("2019-07-01", 69.3582),
+    ("2020-01-01", 69.3612), ("2020-07-01", 69.4241), ("2021-01-01", 69.3594), ("2021-07-01", 69.3514),
+    ("2022-01-01", 69.2945), ("2022-07-01", 69.2527), ("2023-01-01", 69.2039), ("2023-07-01", 69.2201),
+    ("2024-01-01", 69.1752), ("2024-07-01", 69.1879), ("2025-01-01", 69.1377), ("2025-07-01", 69.1406),
+    ("2026-01-01", 69.1099), ("2026-07-01", 69.1695), ("2026-10-01", 69.2065),
+)
+"""Delta T = TT - UT1 as measured, at 0h UTC of each date: the USNO's monthly table
+(maia.usno.navy.mil/ser7/deltat.data), every sixth month and the last. Between its dates
+``delta_t`` interpolates linearly; after the last it holds the last value (Delta T stayed within
+68.97-69.44 s from 2018 to 2026; the USNO's 2022 prediction, deltat.preds, rose to 69.97 s by
+2030.0, about a second more: the uncertainty of a contact predicted for 2030). [s]"""
+
 _EPHEM_EPOCH = datetime(1899, 12, 31, 12, 0, 0, tzinfo=UTC)  # ephem.Date(0)
 _SECONDS_PER_DAY = 86400.0
 _CONTACTS = ("C1", "C2", "C3", "C4")
+_MEASURED_DATES = np.array([(datetime.fromisoformat(day).replace(tzinfo=UTC) - _EPHEM_EPOCH).total_seconds()
+                            / _SECONDS_PER_DAY for day, _ in DELTA_T_MEASURED])
+_MEASURED_VALUES = np.array([value for _, value in DELTA_T_MEASURED])
+
+
+def _delta_t_at(date: float) -> float:
+    """Delta T [s] at ephem date ``date`` [day]: ephem's own before ``DELTA_T_MEASURED``, then it."""
+    if date < _MEASURED_DATES[0]:
+        return float(ephem.delta_t(date))
+    return float(np.interp(date, _MEASURED_DATES, _MEASURED_VALUES))
+
+
+def delta_t(when: datetime) -> float:
+    """Delta T = TT - UT1, the clock the ephemeris runs on less the Earth's rotation, at ``when``.
+
+    ephem's own model (libastro's table, which matches the USNO's measurements to 0.01 s) before
+    2018; from 2018 on the USNO's measured values ``DELTA_T_MEASURED``, interpolated linearly and
+    held at the last one after it. Every position this module gives uses it.
+
+    Parameters
+    ----------
+    when : datetime.datetime
+        An aware datetime.
+
+    Returns
+    -------
+    float
+        Delta T [s].
+    """
+    return _delta_t_at(ephem_date(when))
+
+
+def ephem_date(when: datetime) -> float:
+    """ephem's Dublin Julian date of an aware datetime: days since 1899-12-31 12:00 UT.
+
+    Parameters
+    ----------
+    when : datetime.datetime
+        An aware datetime (any time zone).
+
+    Returns
+    -------
+    float
+        The date [day].
+    """
+    return _ephem_date(_utc(when))
 
 
 @dataclass(frozen=True)
@@ -158,15 +222,24 @@ def _observer(site: Site) -> ephem.Observer:
 
 
 class _Sky:
-    """A reusable ephem observer with the sun and moon, evaluated at ephem dates."""
+    """A reusable ephem observer with the sun and moon, evaluated at ephem dates.
+
+    ephem takes its own Delta T; ``delta_t`` replaces it: ephem is asked for the moment ``c`` =
+    delta_t - ephem's later, so that its ephemeris clock (UT + its Delta T) reads UT + delta_t,
+    and the observer is turned back by the Earth's rotation over ``c``, so that the sky over it
+    (sidereal time plus longitude) is the one at UT. Precession over ``c`` is below 1e-9 rad.
+    """
 
     def __init__(self, site: Site):
         self.observer = _observer(site)
+        self.longitude = float(site.longitude)
         self.sun = ephem.Sun()
         self.moon = ephem.Moon()
 
     def at(self, date: float) -> tuple[BodyPosition, BodyPosition]:
-        self.observer.date = date
+        correction = _delta_t_at(date) - float(ephem.delta_t(date))  # [s]
+        self.observer.date = date + correction / _SECONDS_PER_DAY
+        self.observer.lon = self.longitude - EARTH_ROTATION_RATE * correction
         self.sun.compute(self.observer)
         self.moon.compute(self.observer)
         # earth_distance is topocentric when computed for an Observer. [au]
