@@ -23,7 +23,18 @@ def _hats(x, nodes) -> np.ndarray:
 
 
 def unit_view(zenith: ArrayLike, azimuth: ArrayLike) -> np.ndarray:
-    """Unit vectors (..., 3) at zenith angles and azimuths [rad] (from +y towards +x). [1]"""
+    """Unit vectors at zenith angles and azimuths (from +y towards +x).
+
+    Parameters
+    ----------
+    zenith, azimuth : numpy.ndarray
+        (...) angles [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) float64 [1].
+    """
     return np.stack([np.sin(zenith) * np.sin(azimuth), np.sin(zenith) * np.cos(azimuth), np.cos(zenith)], axis=-1)
 
 
@@ -211,7 +222,13 @@ class ViewBands:
 class LastCalls:
     """The last ``size`` calls of a function and their results, kept in this process: a frame asks
     again for what the frame (or the frame before, from the same camera) made. The keys' objects
-    are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value."""
+    are held, so their ids are not reused, and matched by identity; numbers, strings, bytes by value.
+
+    Parameters
+    ----------
+    size : int, optional
+        How many calls are kept [count].
+    """
 
     def __init__(self, size: int = 1):
         self.size = size
