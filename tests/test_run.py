@@ -653,8 +653,12 @@ levels of it new, ``trials`` times with one config and with two: what each exits
 
 def test_two_renders_racing_for_one_new_folder_leave_one_run_whole(tmp_path):
     """Issue 50: of two renders started at once into one new folder (the same config, and two
-    configs), exactly one is refused with its one line and the other ends as when it runs alone,
-    20 times each: the refused one never removes the folder or the lock file the other holds."""
+    configs), 20 times each, the folder always ends as the renders that ran would leave it one after
+    the other. When they overlap, exactly one is refused with its one line and never removes the
+    folder or the lock file the other holds; on a loaded machine the first can finish before the
+    second reaches the lock, and the second then runs as any later render would (both exit 0: the
+    same config finds its frame done, another adds its own frames). Most trials overlap (39 or 40
+    of 40 in runs at load 4-6)."""
     config = {**TINY, "animation": {"frames": 1, "fps": 12}, "output": {"report": False, "video": "none"},
               "sky": {"sun": {"elevation": 60.0, "azimuth": 180.0}}}
     a = write_config(tmp_path, config, "a.yaml")
@@ -662,17 +666,22 @@ def test_two_renders_racing_for_one_new_folder_leave_one_run_whole(tmp_path):
     subprocess.run([sys.executable, "-c", RACE, str(a), str(b), str(tmp_path), "20"], cwd=ROOT, check=True,
                    capture_output=True, timeout=600)
     alone = [contents(tmp_path / f"alone-{k}") for k in (0, 1)]
-    assert all(alone)
+    assert all(alone) and alone[0] != alone[1]
     trials = json.loads((tmp_path / "race.json").read_text())
     assert len(trials) == 40
+    overlapped = 0
     for trial in trials:
         folder, codes, logs = Path(trial["folder"]), trial["codes"], trial["logs"]
-        assert sorted(codes) == [0, 2], (folder, codes, logs)
-        winner, loser = codes.index(0), codes.index(2)
-        refused = f"sunshade: error: {folder}: another sunshade render is writing to this folder"
-        assert logs[loser].strip() == refused, logs[loser]
-        name = Path(trial["configs"][winner]).stem
-        expected = alone[0 if name == "a" else 1]
+        assert sorted(codes) in ([0, 2], [0, 0]), (folder, codes, logs)
+        if 2 in codes:
+            overlapped += 1
+            refused = f"sunshade: error: {folder}: another sunshade render is writing to this folder"
+            assert logs[codes.index(2)].strip() == refused, logs
+        expected: dict[str, bytes] = {}  # what the renders that ran leave, as one after the other would
+        for config, code in zip(trial["configs"], codes):
+            if code == 0:
+                expected.update(alone[0 if Path(config).stem == "a" else 1])
         assert contents(folder) == expected, folder
         left = sorted(p.name for p in folder.iterdir())
         assert left == sorted([*expected, ".sunshade.lock", "index.json", "run.json"]), left
+    assert overlapped >= 5, overlapped  # the race itself was run
