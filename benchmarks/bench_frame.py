@@ -56,7 +56,7 @@ from pipeline.canopy import grove as grove_geometry
 from pipeline.config.parse import parse_config
 from pipeline.core import io
 from pipeline.foreground import trees as foreground
-from pipeline.run.render import frame_attributes
+from pipeline.run.contents import frame_attributes
 from pipeline.stages.cycle import cycle_phase
 from pipeline.stages.frame import foreground_layer, irradiance_maps, render_frame
 from pipeline.stages.ground import render_ground

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline.cache import store as cache
 from pipeline.config.vocabulary import PASSES
 from pipeline.core import io
-from pipeline.run.render import exr_layers, frame_attributes
+from pipeline.run.contents import exr_layers, frame_attributes
 from pipeline.stages.frame import render_frame
 from pipeline.stages.plan import plan_run
 from pipeline.stages.resolve import load

@@ -1,5 +1,6 @@
 """The finished frame: blending the foreground passes by S, over the background, the haze,
-exposure and the display transforms (sRGB, filmic). EXR output stays scene-linear."""
+exposure and the display transforms (sRGB, filmic, or an OpenColorIO view). EXR output stays
+scene-linear."""
 
 from __future__ import annotations
 
@@ -7,11 +8,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import DISPLAYS, WHITE_BALANCES
-from pipeline.core import io
+from pipeline.core import io, ocio
 from pipeline.core.colour import REC709_LUMINANCE
 
 __all__ = ["srgb_encode", "display_ground", "display_sky", "white_balance", "composite_frame",
-           "aces_filmic", "display", "display_codes", "exposure_for",
+           "aces_filmic", "display", "display_codes", "display_view", "exposure_for",
            "auto_exposure"]
 
 
@@ -270,6 +271,35 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
     codes = np.empty(radiance.shape, dtype=np.uint8)
     arrays.display_codes(linear, powered, io.half_dither(radiance.shape), codes)
     return codes
+
+
+def display_view(radiance: np.ndarray, *, exposure: float, source: str, view: tuple[str, str],
+                 balance: ArrayLike | None = None) -> np.ndarray:
+    """Display values in [0, 1] of scene-linear radiance through an OpenColorIO display and view.
+
+    The exposure and the white balance are applied in scene-linear Rec.709, as for ``display``,
+    before the view (docs/runs.md, "Colour").
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (rows, cols, 3) scene-linear Rec.709 radiance [kcd/m^2].
+    exposure : float
+        Exposure [m^2/kcd] (``exposure_for``, ``auto_exposure``).
+    source : str
+        The OCIO config: a file path or an ``ocio://`` URI.
+    view : tuple of (str, str)
+        (display, view) of that config.
+    balance : array_like, optional
+        (3,) the white balance's gains (``white_balance``) [1]; None: 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, cols, 3) float32 display code values in [0, 1] [1].
+    """
+    gain = np.float32(exposure) if balance is None else (np.asarray(balance) * exposure).astype(np.float32)
+    return ocio.apply_view(np.asarray(radiance, dtype=np.float32) * gain, source, *view)
 
 
 def exposure_for(unshadowed: ArrayLike, *, stops: float = 0.0) -> float:

@@ -150,11 +150,9 @@ def config_of(args: argparse.Namespace, *, named_frames: bool = True, resolved: 
     Config
         The config.
     """
-    from pipeline.config.parse import load_config
-    from pipeline.stages.resolve import resolve
+    from pipeline.api import load_config
 
-    config = load_config(args.config, named_frames=named_frames)
-    return resolve(config) if resolved else config
+    return load_config(args.config, named_frames=named_frames, resolved=resolved)
 
 
 def check_threads(args: argparse.Namespace) -> None:

@@ -43,41 +43,27 @@ def run_ground(args: argparse.Namespace) -> int:
     int
         The exit code: 0 done.
     """
-    import numpy as np
-
+    from pipeline.api import ground_irradiance
     from pipeline.camera.composite import display_ground
-    from pipeline.stages.ground import render_ground
-    from pipeline.stages.plan import plan_run
 
     exr, png = _exr_and_png(args)
     check_threads(args)
     config = config_of(args, named_frames=False)
     check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
-    digest = config.digest()
     started = time.perf_counter()
-    store = open_store(args.cache)
-    result = render_ground(plan_run(config), args.frame, store=store, workers=args.threads)
+    result = ground_irradiance(config, args.frame, cache=open_store(args.cache), threads=args.threads)
     elapsed = time.perf_counter() - started
-    if not np.all(np.isfinite(result.irradiance)):
-        raise BadInput(f"{args.config}: the ground irradiance overflowed; lower the sky's radiance")
     if not result.exact:
         print(
             "sunshade: note: the sky square (sky.alpha) does not span the canopy from every "
             "ground point; light from beyond it is taken as unshadowed",
             file=sys.stderr,
         )
-    attributes = {
-        "sunshade:window": result.grid.extent,
-        "sunshade:pixel_size": float(result.grid.pixel),
-        "sunshade:config_hash": digest,
-        "sunshade:version": __version__,
-        "sunshade:frame": int(args.frame),
-    }
-    written = _write(exr, png, result.irradiance, attributes,
+    written = _write(exr, png, result.irradiance, result.metadata,
                      lambda: display_ground(result.irradiance, result.unshadowed))
-    rows, cols = result.grid.shape
+    rows, cols = result.irradiance.shape[:2]
     print(
-        f"sunshade: ground {cols} x {rows} px at {result.grid.pixel:g} m in {elapsed:.2f} s; "
+        f"sunshade: ground {cols} x {rows} px at {result.pixel:g} m in {elapsed:.2f} s; "
         f"open-sky irradiance {', '.join(f'{v:.4g}' for v in result.unshadowed)}; "
         f"wrote {', '.join(str(p) for p in written)}"
     )
@@ -89,8 +75,8 @@ def run_frame(args: argparse.Namespace) -> int:
 
     Render one finished frame (Max 1991, Fig. 10): the ground raster and the sky resampled
     in the camera, the haze, the foreground passes blended by the sun fraction S. A .png is
-    exposed and display-transformed (camera.exposure, camera.display); an .exr stays scene-
-    linear radiance with its metadata.
+    exposed and display-transformed (camera.exposure, camera.display or output.view); an .exr
+    is scene-linear radiance (in output.colorspace) with its metadata.
 
     Parameters
     ----------
@@ -102,13 +88,7 @@ def run_frame(args: argparse.Namespace) -> int:
     int
         The exit code: 0 done (the frame written).
     """
-    import numpy as np
-
-    from pipeline.camera.composite import display
-    from pipeline.core import io
-    from pipeline.run.render import exr_layers, frame_attributes
-    from pipeline.stages.frame import render_frame
-    from pipeline.stages.plan import check_inputs
+    from pipeline.api import render_frame
 
     output = checked_output(args.output)
     suffix = output.suffix.lower()
@@ -119,26 +99,20 @@ def run_frame(args: argparse.Namespace) -> int:
     if passes and suffix != ".exr":
         raise BadInput("--passes is for EXR output")
     config = config_of(args, named_frames=False)
-    if passes is not None:
-        if passes and config.ground.brdf is not None:
-            raise BadInput(f"--passes: the light passes are not made with a ground.brdf yet ({args.config})")
-        config = dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes))
+    if passes and config.ground.brdf is not None:
+        raise BadInput(f"--passes: the light passes are not made with a ground.brdf yet ({args.config})")
+    passes = config.output.passes if passes is None else passes
     check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
-    plan = check_inputs(config)  # every input read and checked before anything is computed or written
-    result = render_frame(plan, args.frame, store=open_store(args.cache), workers=args.threads,
-                          passes=config.output.passes if suffix == ".exr" else ())
+    frame = render_frame(config, args.frame, passes=passes if suffix == ".exr" else (), cache=open_store(args.cache),
+                         threads=args.threads)
     elapsed = time.perf_counter() - started
-    if not np.all(np.isfinite(result.radiance)):
-        raise BadInput(f"{args.config}: the frame overflowed; lower the sky's radiance")
     if suffix == ".exr":
-        io.write_exr(output, result.radiance, frame_attributes(config, result, config.digest()),
-                     half=args.half, layers=exr_layers(result, args.half))
+        frame.write_exr(output, half=args.half)
     else:
-        io.write_png(output, display(result.radiance, exposure=result.exposure, transform=config.camera.display,
-                                     balance=result.balance))
-    rows, cols = result.radiance.shape[:2]
-    print(f"sunshade: frame {args.frame}, {cols} x {rows} px, S = {result.sun_fraction:.4f}, "
+        frame.write_png(output)
+    rows, cols = frame.beauty.shape[:2]
+    print(f"sunshade: frame {args.frame}, {cols} x {rows} px, S = {frame.sun_fraction:.4f}, "
           f"in {elapsed:.2f} s; wrote {output}")
     return 0
 
@@ -233,22 +207,25 @@ def run_sky(args: argparse.Namespace) -> int:
         image, parts = sky.equirect(args.width, parts=True)
     else:
         image = sky.equirect(args.width)
+    from pipeline.run.contents import colour_attributes, in_working_space
+
     attributes = {"sunshade:config_hash": config.digest(), "sunshade:frame": int(args.frame),
-                  "sunshade:version": __version__}
+                  "sunshade:version": __version__, **colour_attributes(config.output)}
     if scene.sun is not None:
         attributes["sunshade:sun_azimuth_elevation"] = (np.degrees(scene.sun.azimuth),
                                                         np.degrees(scene.sun.elevation))
     layers = None
     if passes:  # as a frame's: the standard attributes and the layers (docs/runs.md)
-        from pipeline.run.render import LAYER_CHANNELS, standard_attributes
+        from pipeline.run.contents import LAYER_CHANNELS, standard_attributes
         from pipeline.stages.lighting import open_ground_light
 
         light = open_ground_light(sky, 1.0, None)
         attributes.update(standard_attributes(
             dataclasses.replace(config, output=dataclasses.replace(config.output, passes=passes)), scene, light))
         attributes.pop("sunshade:camera_ev100", None)  # no camera here
-        layers = {LAYER_CHANNELS[name]: (parts[name], "float") for name in passes}
-    written = _write(exr, png, image, attributes, lambda: display_sky(image), layers=layers)
+        layers = {LAYER_CHANNELS[name]: (in_working_space(config.output, parts[name]), "float") for name in passes}
+    written = _write(exr, png, in_working_space(config.output, image), attributes, lambda: display_sky(image),
+                     layers=layers)
     print(f"sunshade: sky {args.width} x {args.width // 2} px; wrote {', '.join(map(str, written))}")
     return 0
 

@@ -54,6 +54,7 @@ from pipeline.config.vocabulary import (
     WHITE_BALANCES,
 )
 from pipeline.config.yamlsafe import KeyContext, key_lines, load_yaml
+from pipeline.core import ocio
 from pipeline.core.constants import SUN_RADIUS_DEG
 
 __all__ = ["FRAME_BYTES_PER_PIXEL", "LAYOUTS", "MAX_FRAMES", "MAX_IMAGE_PIXELS", "MAX_LEAVES",
@@ -152,6 +153,8 @@ def _parse(root: Section, path: Path, named_frames: bool = True) -> Config:
                                    "view: give follow: fixed")
     if output.passes and ground.brdf is not None:
         root.fail("output.passes", "the light passes are not made with a ground.brdf yet; give one or the other")
+    if output.view is not None and isinstance(root.data.get("camera"), dict) and "display" in root.data["camera"]:
+        root.fail("camera.display", "output.view shows the frames through an OCIO view instead; give one or the other")
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,
                   root.ctx.lines)
 
@@ -231,8 +234,48 @@ def _parse_output(s: Section, path: Path, named_frames: bool = True) -> OutputCo
     report = s.raw("report", OutputConfig.report)
     if not isinstance(report, bool):
         s.fail("report", f"must be true or false, not {kind_of(report)}")
+    colorspace, view, source = _parse_colour(s)
     s.done()
-    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half, passes, report)
+    return OutputConfig(name, Path(folder).expanduser().absolute(), video, half, passes, report, colorspace, view,
+                        source)
+
+
+def _parse_colour(s: Section) -> tuple[str, tuple[str, str] | None, str | None]:
+    """output.colorspace, output.view and output.ocio_config, checked against the OCIO config
+    (docs/runs.md, "Colour"), which is read only when one of the first two asks for it; a
+    built-in config is given by its versioned name, so the config's hash follows its version."""
+    colorspace = s.raw("colorspace", OutputConfig.colorspace)
+    if not isinstance(colorspace, str) or not colorspace:
+        s.fail("colorspace", f"must be a colour space name, not {kind_of(colorspace)}")
+    view = None
+    if s.raw("view", None) is not None:
+        v = s.section("view")
+        view = (v.raw("display"), v.raw("view"))
+        for key, value in zip(("display", "view"), view):
+            if not isinstance(value, str) or not value:
+                v.fail(key, f"must be a name, not {kind_of(value)}")
+        v.done()
+    given = s.raw("ocio_config", None)
+    if given is not None and (not isinstance(given, str) or not given):
+        s.fail("ocio_config", f"must be a file name or an ocio:// URI, not {kind_of(given)}")
+    source = given if given is None or given.startswith("ocio://") else str(s.file("ocio_config"))
+    if colorspace == ocio.RENDER_SPACE and view is None:
+        return colorspace, None, None
+    source, key = (source, "ocio_config") if source else (ocio.default_source(), f"ocio_config (${ocio.OCIO_ENV})")
+    try:
+        source = f"ocio://{ocio.config_name(source)}" if source.startswith("ocio://") else source
+    except ocio.OcioError as exc:
+        s.fail(key, str(exc))
+    try:
+        ocio.working_space(source, colorspace)
+    except ocio.OcioError as exc:
+        s.fail("colorspace", str(exc))
+    try:
+        if view is not None:
+            ocio.check_view(source, *view)
+    except ocio.OcioError as exc:
+        s.fail("view", str(exc))
+    return colorspace, view, source
 
 
 def _parse_passes(s: Section) -> tuple[str, ...]:

@@ -225,7 +225,8 @@ _VALID_KEYS = {
     "camera.exposure": ("mode", "stops", "time_constant", "limits"),
     "foreground": ("model", "sun", "sky", "alpha"),
     "animation": ("frames", "fps"),
-    "output": ("name", "folder", "video", "half", "passes", "report"),
+    "output": ("name", "folder", "video", "half", "passes", "report", "colorspace", "view", "ocio_config"),
+    "output.view": ("display", "view"),
     "render": ("jobs", "sun_cells"),
 }
 """Every key each section accepts (a layer's index written []), whichever the parser reads:

@@ -18,6 +18,7 @@ from pathlib import Path
 from pipeline import __version__
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE
 from pipeline.config.yamlsafe import KeyContext
+from pipeline.core.ocio import RENDER_SPACE
 
 __all__ = ["AUTO_LIMITS", "AUTO_TIME_CONSTANT", "AnimationConfig", "AutoExposureConfig", "BrdfConfig", "CameraConfig",
            "CanopyConfig", "CanopyLayer", "CloudsConfig", "Config", "FlutterConfig", "ForegroundConfig",
@@ -454,6 +455,15 @@ class OutputConfig:
     report : bool
         Whether a render that renders frames ends by writing the run's report (light.csv, light
         curve, contact sheet; docs/runs.md, "The report").
+    colorspace : str
+        The scene-linear space the EXRs' RGB layers are written in, a colour space of
+        ``ocio_config`` (``ocio.RENDER_SPACE``, the default: as rendered; docs/runs.md, "Colour").
+    view : (str, str) or None
+        (display, view) of ``ocio_config`` the PNGs, the video and the contact sheet are shown
+        through; None: ``camera.display``'s curve.
+    ocio_config : str or None
+        The OCIO config: a file path (absolute) or an ``ocio://`` URI; None where neither
+        ``colorspace`` nor ``view`` needs one.
     """
 
     name: str
@@ -462,6 +472,9 @@ class OutputConfig:
     half: bool = True
     passes: tuple[str, ...] = ()
     report: bool = True
+    colorspace: str = RENDER_SPACE
+    view: tuple[str, str] | None = None
+    ocio_config: str | None = None
 
 
 @dataclass(frozen=True)
@@ -547,6 +560,9 @@ class Config:
             values["camera"].pop("follow")  # a camera given where it stands or looks never follows
         if not values["output"]["passes"]:  # without passes a config hashes as it always did
             values["output"].pop("passes")
+        for name, default in (("colorspace", OutputConfig.colorspace), ("view", None), ("ocio_config", None)):
+            if values["output"][name] == default:  # the colour as rendered hashes as it always did
+                values["output"].pop(name)
         if values["ground"]["brdf"] is None:  # a lambertian ground hashes as it always did
             values["ground"].pop("brdf")
         if not values["sky"]["params"]:  # a sky the parser reads itself hashes as it always did
@@ -554,7 +570,9 @@ class Config:
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
-                       | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set()))
+                       | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set())
+                       | ({self.output.ocio_config} if self.output.ocio_config and
+                          not self.output.ocio_config.startswith("ocio://") else set()))
         h = hashlib.sha256()
         h.update(json.dumps(values, sort_keys=True, default=str).encode())
         h.update(__version__.encode())

@@ -409,7 +409,8 @@ VIDEO_FORMATS = (".mp4", ".gif")
 """The video files ``write_video`` writes, by suffix."""
 
 
-def write_video(path: str | os.PathLike[str], frames: Iterable[np.ndarray], *, fps: float) -> int:
+def write_video(path: str | os.PathLike[str], frames: Iterable[np.ndarray], *, fps: float,
+                colour: str | None = None) -> int:
     """Write display-referred frames as a video, atomically.
 
     ``.mp4``: H.264 in yuv420p, which browsers play; frames of odd width or height are padded
@@ -427,6 +428,10 @@ def write_video(path: str | os.PathLike[str], frames: Iterable[np.ndarray], *, f
         Each (rows, cols, 3), floats in [0, 1] or uint8 codes; read once, in order.
     fps : float
         Frames per second [1/s].
+    colour : str or None
+        ``.mp4``: the ffmpeg name of the colour primaries, transfer and matrix the video is tagged
+        with (in the H.264 stream and the MP4's colr box) and converted to YUV by ('bt709'); None:
+        untagged, BT.601's matrix (docs/runs.md, "Colour").
 
     Returns
     -------
@@ -460,7 +465,9 @@ def write_video(path: str | os.PathLike[str], frames: Iterable[np.ndarray], *, f
                 temporary, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
                 macro_block_size=1, quality=None, output_params=[
                     "-crf", "18", "-preset", "veryfast", "-threads", "1", "-movflags", "+faststart",
-                    "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact"])
+                    "-map_metadata", "-1", "-fflags", "+bitexact", "-flags:v", "+bitexact",
+                    *(["-vf", f"setparams=color_primaries={colour}:color_trc={colour}:colorspace={colour}"]
+                      if colour else [])])
             try:
                 for frame in frames:
                     codes = _codes(frame)

@@ -35,13 +35,13 @@ import filelock
 import joblib
 import numpy as np
 
-from pipeline import __version__
 from pipeline.cache import store as cache
 from pipeline.camera.composite import display_codes
 from pipeline.config.settings import Config
 from pipeline.core import io
 from pipeline.core.cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
 from pipeline.core.errors import RunError, SunshadeError, portable
+from pipeline.run.contents import exr_layers, frame_attributes, frame_picture, frame_record, in_working_space
 from pipeline.run.folder import (
     INDEX_FILE,
     LOCK_FILE,
@@ -65,172 +65,10 @@ if TYPE_CHECKING:
 
     from distributed import Client
 
-    from pipeline.stages.scene import Scene
-
     Progress = Callable[[str, int, int], None]
     Timings = dict[str, float | dict[str, float]]
 
-__all__ = ["frame_record", "frame_attributes", "REC709_CHROMATICITIES", "LAYER_CHANNELS", "standard_attributes",
-           "exr_layers", "render_run"]
-
-_RECORD = {"sunshade:config_hash": "config_hash", "sunshade:frame": "frame",
-           "sunshade:sun_fraction": "sun_fraction", "sunshade:sun_azimuth_elevation": "sun",
-           "sunshade:moon_azimuth_elevation": "moon", "sunshade:time_utc": "time_utc",
-           "sunshade:exposure": "exposure"}
-
-
-def frame_record(config: Config, frame: int, digest: str) -> dict[str, Any] | None:
-    """What a done frame's EXR says of itself.
-
-    Parameters
-    ----------
-    config : settings.Config
-        The config.
-    frame : int
-        Output frame index.
-    digest : str
-        The config's hash both files must carry.
-
-    Returns
-    -------
-    dict or None
-        ``file`` (the EXR's stem), ``frame``, ``sun_fraction`` S [1], ``sun`` and ``moon``
-        {azimuth, elevation} [deg], ``time_utc``, ``exposure`` [m^2/kcd]; None unless both its files
-        are there and carry ``digest``.
-    """
-    exr, png = frame_files(config, frame)
-    if not (exr.is_file() and png.is_file()):
-        return None
-    try:
-        found = io.read_attributes(exr, list(_RECORD))
-        png_hash = io.read_attributes(png, ["sunshade:config_hash"])["sunshade:config_hash"]
-    except io.ImageError:
-        return None
-    if found["sunshade:config_hash"] != digest or png_hash != digest or found["sunshade:frame"] != frame:
-        return None
-    record = {_RECORD[k]: v for k, v in found.items() if v is not None}
-    for key in ("sun", "moon"):
-        if key in record:
-            record[key] = {"azimuth": float(record[key][0]), "elevation": float(record[key][1])}
-    record.pop("config_hash")
-    return {"file": exr.stem, **record}
-
-
-def frame_attributes(config: Config, result: FrameResult, digest: str) -> dict[str, Any]:
-    """Metadata of a finished frame: what made it, and the sun and moon of that moment.
-
-    Parameters
-    ----------
-    config : settings.Config
-        The config.
-    result : frame.FrameResult
-        The finished frame.
-    digest : str
-        The config's hash.
-
-    Returns
-    -------
-    dict
-        EXR attributes under ``sunshade:`` (hash, version, frame, S [1], exposure [m^2/kcd], sun and
-        moon (azimuth, elevation) [deg], UTC time), and ``standard_attributes`` with light passes.
-
-    Raises
-    ------
-    ValueError
-        With light passes, for a frame without its open ground's light (``FrameResult.light``).
-    """
-    attributes: dict[str, Any] = {
-        "sunshade:config_hash": digest,
-        "sunshade:version": __version__,
-        "sunshade:frame": int(result.scene.frame),
-        "sunshade:sun_fraction": float(result.sun_fraction),
-        "sunshade:exposure": float(result.exposure),
-    }
-    for name, disc in (("sun", result.scene.sun), ("moon", result.scene.moon)):
-        if disc is not None:
-            attributes[f"sunshade:{name}_azimuth_elevation"] = (np.degrees(disc.azimuth),
-                                                                np.degrees(disc.elevation))
-    if result.scene.when is not None:
-        attributes["sunshade:time_utc"] = result.scene.when.isoformat()
-    if config.output.passes:  # only then: a frame without passes keeps its bytes
-        if result.light is None:
-            raise ValueError(f"frame {result.scene.frame}: light passes without the open ground's light")
-        attributes.update(standard_attributes(config, result.scene, result.light))
-    return attributes
-
-
-REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
-"""The working space's primaries and white (linear Rec.709, D65) as OpenEXR's chromaticities:
-red x, y, green x, y, blue x, y, white x, y (ITU-R BT.709-6)."""
-
-LAYER_CHANNELS = {"sun": ("sun.R", "sun.G", "sun.B"), "sky": ("sky.R", "sky.G", "sky.B"),
-                  "alpha": ("alpha.A",), "illuminance": ("illuminance.Y",), "depth": ("depth.Z",)}
-"""The EXR channels of each light pass, in the multi-layer convention (layer.channel)."""
-
-
-def standard_attributes(config: Config, scene: Scene, light: dict[str, Any]) -> dict[str, Any]:
-    """The EXR header of a frame with light passes (docs/runs.md, "Light passes"): OpenEXR's
-    standard ``chromaticities``; for a site and time its ``latitude``, ``longitude`` [degrees]
-    and ``altitude`` [m], and ``capDate`` (OpenImageIO's ``DateTime``, the frame's UTC time from
-    the config, not the clock) with ``utcOffset`` 0 [s]; and under ``sunshade:`` the open
-    ground's light (``lighting.open_ground_light``) [lx, EV].
-
-    Parameters
-    ----------
-    config : settings.Config
-        The config.
-    scene : scene.Scene
-        The frame's moment (its UTC time).
-    light : dict
-        The open ground's light (``FrameResult.light``): ``sun_lux`` and ``sky_lux`` [lx],
-        ``white_balance`` [1], ``ev100`` and ``camera_ev100`` [EV] (each may be None).
-
-    Returns
-    -------
-    dict
-        EXR attribute name -> value.
-    """
-    attributes: dict[str, Any] = {"chromaticities": REC709_CHROMATICITIES}
-    site = config.sky.site
-    if site is not None:
-        attributes.update({"latitude": float(np.degrees(site.latitude)),
-                           "longitude": float(np.degrees(site.longitude)),
-                           "altitude": float(site.elevation), "utcOffset": 0.0})
-    if scene.when is not None:
-        attributes["DateTime"] = scene.when.strftime("%Y:%m:%d %H:%M:%S")
-    attributes.update({"sunshade:sun_lux": light["sun_lux"], "sunshade:sky_lux": light["sky_lux"],
-                       "sunshade:open_ground_lux": light["sun_lux"] + light["sky_lux"],
-                       "sunshade:white_balance": tuple(light["white_balance"]),
-                       "sunshade:passes": ",".join(config.output.passes)})
-    for name in ("ev100", "camera_ev100"):
-        if light[name] is not None:
-            attributes[f"sunshade:{name}"] = light[name]
-    return attributes
-
-
-def exr_layers(result: FrameResult, half: bool) -> dict[tuple[str, ...], tuple[np.ndarray, str]] | None:
-    """``io.write_exr``'s layers of a frame's light passes.
-
-    RGB passes in the beauty's format, single channels in float32 (lux pass half's 65504; depth is
-    inf at the sky).
-
-    Parameters
-    ----------
-    result : frame.FrameResult
-        The finished frame, with its ``layers``.
-    half : bool
-        Whether the beauty is written in half floats.
-
-    Returns
-    -------
-    dict or None
-        {channel names: (pixels, "half" or "float")} (``LAYER_CHANNELS``); None without any pass.
-    """
-    if not result.layers:
-        return None
-    return {LAYER_CHANNELS[name]: (pixels, "half" if half and pixels.shape[-1] == 3 else "float")
-            for name, pixels in result.layers.items()}
-
+__all__ = ["render_run"]
 
 def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
                jobs: int | None = None, scheduler: str | None = None, force: bool = False,
@@ -586,10 +424,9 @@ def _write_task(config: Config, rendered: _RenderedFrame, digest: str, codes: bo
     if not np.all(np.isfinite(result.radiance)):
         raise io.ImageError(config.path, f"frame {frame} overflowed; lower the sky's radiance")
     exr, png = frame_files(config, frame)
-    io.write_exr(exr, result.radiance, frame_attributes(config, result, digest), half=config.output.half,
-                 layers=exr_layers(result, config.output.half))
-    picture = display_codes(result.radiance, exposure=result.exposure, transform=config.camera.display,
-                            balance=result.balance)
+    io.write_exr(exr, in_working_space(config.output, result.radiance), frame_attributes(config, result, digest),
+                 half=config.output.half, layers=exr_layers(result, config.output.half, config.output))
+    picture = frame_picture(config, result)
     written = io.write_png(png, picture, {"sunshade:config_hash": digest, "sunshade:frame": str(frame)})
     timings["write"] = time.perf_counter() - mark
     mark = time.perf_counter()

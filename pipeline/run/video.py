@@ -1,5 +1,6 @@
 """A run's video: encoded from the frames' PNGs once every frame of the animation is done, or
-while the frames render, from the codes their workers hand back (docs/runs.md, "The video").
+while the frames render, from the codes their workers hand back (docs/runs.md, "The video"),
+tagged with the colour of the frames' display (``video_colour``).
 The encoder writes under a temporary name: a run that fails or is killed leaves no video.
 """
 
@@ -11,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pipeline.config.settings import Config
-from pipeline.core import io
+from pipeline.core import io, ocio
 from pipeline.core.errors import RunError
 from pipeline.run.folder import frame_files, video_file
 from pipeline.run.record import current_video
@@ -23,7 +24,25 @@ if TYPE_CHECKING:
 
     Progress = Callable[[str, int, int], None]
 
-__all__ = ["encode_video", "VideoStream"]
+__all__ = ["video_colour", "encode_video", "VideoStream"]
+
+
+def video_colour(config: Config) -> str | None:
+    """The colour tags of the run's MP4 (docs/runs.md, "Colour"): 'bt709' for the built-in sRGB
+    curves and for an OCIO view of an sRGB or Rec.709 display; None (untagged) for other displays.
+
+    Parameters
+    ----------
+    config : settings.Config
+        The run's config (``output.view``, ``output.ocio_config``).
+
+    Returns
+    -------
+    str or None
+        The ffmpeg name of the primaries, transfer and matrix (``io.write_video``'s ``colour``).
+    """
+    view = config.output.view
+    return ocio.video_tags(config.output.ocio_config, view[0] if view else None)
 
 
 def encode_video(config: Config, digest: str, records: dict[int, dict[str, Any] | None], previous: dict[str, Any],
@@ -72,7 +91,7 @@ def encode_video(config: Config, digest: str, records: dict[int, dict[str, Any] 
             if progress:
                 progress("video", frame + 1, count)
 
-    io.write_video(path, pictures(), fps=config.animation.fps)
+    io.write_video(path, pictures(), fps=config.animation.fps, colour=video_colour(config))
     timings["video"] = time.perf_counter() - mark
     return _video_entry(config, digest, path)
 
@@ -189,6 +208,6 @@ class VideoStream:
 
     def _encode(self) -> None:
         try:
-            io.write_video(self.path, self._pictures(), fps=self.config.animation.fps)
+            io.write_video(self.path, self._pictures(), fps=self.config.animation.fps, colour=video_colour(self.config))
         except BaseException as error:  # said by finish(), in the command's thread
             self.error = error
