@@ -39,7 +39,7 @@ from pipeline.cache import store as cache
 from pipeline.camera.composite import display_codes
 from pipeline.config.settings import Config
 from pipeline.core import io
-from pipeline.core.cores import CLUSTER_TIMEOUT, end_if_orphaned, jobs_and_threads, scheduler_address
+from pipeline.core.cores import CLUSTER_TIMEOUT, compiled_once, end_if_orphaned, jobs_and_threads, scheduler_address
 from pipeline.core.errors import RunError, SunshadeError, portable
 from pipeline.run.contents import exr_layers, frame_attributes, frame_picture, frame_record, in_working_space
 from pipeline.run.folder import (
@@ -396,15 +396,28 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
     """Render one frame and write its EXR, then its PNG, with the PNG's 8-bit codes if ``codes``
     (for the video the command's process encodes meanwhile, ``VideoStream``)."""
     end_if_orphaned(command)
-    return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
+    with compiled_once(_last_frame_loop()):  # while the command compiles the loops: wait, then load them
+        return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
 
 
 def _compile_frame_loops(plan: RunPlan) -> None:
     """``frame.compile_loops``, and the display codes' loops of the writing (``display_codes`` of a
-    tiny picture): the frames' workers then load them from numba's cache on disk."""
-    compile_loops(plan)
-    with contextlib.suppress(Exception):  # only a head start: a frame meets the same error itself
-        display_codes(np.zeros((2, 2, 3), dtype=np.float32), exposure=1.0)
+    tiny picture): the frames' workers then load them from numba's cache on disk. The lock of
+    ``cores.compiled_once`` is held meanwhile, so that a worker whose first frame comes before
+    they are cached waits for them instead of compiling them too (docs/accuracy.md, "Compiling
+    after an install")."""
+    with compiled_once(_last_frame_loop()):
+        compile_loops(plan)
+        with contextlib.suppress(Exception):  # only a head start: a frame meets the same error itself
+            display_codes(np.zeros((2, 2, 3), dtype=np.float32), exposure=1.0)
+
+
+def _last_frame_loop() -> Any:
+    """The frame loop that ``_compile_frame_loops`` compiles last (the display codes'): once numba's
+    cache holds it, it holds the others."""
+    from pipeline.kernels import arrays  # numba costs 0.3 s to import: a frame's worker needs it anyway
+
+    return arrays.display_codes
 
 
 def _render_task(plan: RunPlan, frame: int, root: str, threads: int) -> _RenderedFrame:
