@@ -1,30 +1,36 @@
 """The eclipse sky against the published figures (docs/method.md, "The eclipse sky").
 
-1. The light curve of configs/eclipse-2024-dallas-totality.yaml: for every --step-th frame the
-   open ground's horizontal illuminance (the sky integrated over the hemisphere, the corona in
-   it, plus the sun kernel's sum, which the moon cuts), log10 of it, S and the deep-eclipse
-   weight b, with a log-scale bar; then beside it the published figures.
-2. The sky at mid-totality (frame 122) from ``sunshade sky``'s equirectangular EXR (--width):
-   horizontal illuminance, zenith luminance (above 85 degrees), the 0-10 degree band's luminance
-   over the zenith's, and the band's red/blue ratio against the uneclipsed sky's.
+1. The light curve of the totality demo, configs/eclipse-2024-dallas-totality.yaml: each frame's
+   sky light as the report's light.csv gives it (``sky_lux``, ``lighting.open_ground_light`` of
+   the frame's sky), S and the deep-eclipse weight b for the frames around the blend, and the
+   largest second difference of ln(sky light) per frame between S = 0.01 and 0.0005 on each side
+   of totality (required: at most 0.015). With --render A-B: those frames rendered with
+   ``sunshade render --preview`` and their light.csv read back against the same numbers.
+2. Mid-totality at each calibration site (``SITES``): the zenith's luminance [cd/m^2] and its
+   ratio to the uneclipsed zenith's, the open ground's illuminance [lx] (the sky and its corona),
+   the zenith's colour (correlated colour temperature with colour-science, when installed, and
+   its blue/red against the day's zenith's), and the 0-8 degree band's red/blue against the
+   day's; each against its published band.
 3. configs/eclipse-2024-dallas.yaml from C1 up to 99.8% obscuration (every --step-th frame): the
    open ground's illuminance over the uneclipsed daylight's times S; the largest deviation.
-4. With --calibration: for diffusion lengths of 20 to 80 km, the floor's factor k that puts the
-   zenith at mid-totality at 1e-4 of the day's and the k that puts the light at second contact
-   two decades under the light a minute before (the sky is linear in k: measured at k = 0 and
-   1), and what each k gives (sky 512 px wide).
+4. With --calibration: for diffusion lengths of 65 to 100 km, the floor height that gives the
+   published zenith colour shift (Dandekar & Turtle 1971) at the two calibration sites, the
+   factor k that puts the zenith at the Idaho 2017 meters' 0.78 cd/m^2, and what they give
+   (the sky is linear in k: measured at k = 0 and 1).
 
-    python benchmarks/accuracy_eclipse.py [--step N] [--width W] [--calibration]
+    python benchmarks/accuracy_eclipse.py [--step N] [--render A-B] [--calibration]
+    pip install colour-science   # for the zenith's CCT (not a dependency; without it: blue/red only)
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import subprocess
 import sys
 import tempfile
-from dataclasses import replace
-from datetime import timedelta
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -32,74 +38,184 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.core import io
 from pipeline.core.colour import REC709_LUMINANCE
-from pipeline.sky import eclipse, ephemeris
-from pipeline.sky.equirect import EquirectSky
+from pipeline.sky import daylight, eclipse, ephemeris
+from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.sun_disc import MoonDisc, SunDisc
 from pipeline.sky.sun_kernel import sun_irradiance
+from pipeline.stages.lighting import open_ground_light
 from pipeline.stages.resolve import load
-from pipeline.stages.scene import (
-    load_sky,
-    scene_at,
-)
+from pipeline.stages.scene import load_sky, scene_at
 
 Y = np.asarray(REC709_LUMINANCE, dtype=np.float64)
 TOTALITY = ROOT / "configs" / "eclipse-2024-dallas-totality.yaml"
 PARTIAL = ROOT / "configs" / "eclipse-2024-dallas.yaml"
-PUBLISHED = """published (docs/method.md, "The eclipse sky"):
-  Sharp, Silverman & Lloyd 1971: sky = clear sky x S to >= 99.8% obscuration; zenith at
-    totality about 1e-4 of its daytime value; horizontal illuminance about 1-5 lx (0.1-10 lx
-    with the umbra's size and the site's place in it)
-  2017 sky-quality meters: 12.4-13.3 mag/arcsec^2 at totality = 0.5-1.2 cd/m^2 at the zenith
-  the light falls about 2.5 decades in the last minute before second contact
-  a reddened band 0-8 degrees above the horizon all round"""
+SMOOTH_RANGE = (0.0005, 0.01)
+"""S between which the light curve's second difference is held (docs/accuracy.md). [1]"""
+SMOOTH_LIMIT = 0.015
+"""The most second difference of ln(sky light) per frame allowed there. [1]"""
+COLOUR_SHIFT = 1e6 / 11_000 - 1e6 / 9_000
+"""The zenith's reciprocal colour temperature at totality less the day's: 11,000 K against
+9,000 K (Dandekar & Turtle 1971). [1/MK, mired]"""
+METER_ZENITH = 0.78
+"""cd/m^2 of 12.85 mag/arcsec^2, the middle of the Idaho 2017 sky-quality meters' 12.4-13.3. [cd/m^2]"""
 
 
-def open_ground(config, frame: int):
-    """(lux, S, b) of the open ground at ``frame``: sky (with the corona) plus the sun kernel."""
-    sky = load_sky(config.sky, scene_at(config, frame))
-    sun = sun_irradiance(sky) if sky.sun_fraction() > 0 else np.zeros(3)
-    return 1e3 * float((sky.sky_irradiance + sun) @ Y), sky.sun_fraction(), sky._deep, sky
+@dataclass(frozen=True)
+class Calibration:
+    """A total eclipse seen from a site: a name, latitude and longitude [deg], elevation [m], an
+    hour within an hour of mid-totality (UTC), and whether the published bands (measured with
+    the sun 45-65 degrees up) apply."""
+
+    name: str
+    latitude: float
+    longitude: float
+    elevation: float
+    near: datetime
+    banded: bool
 
 
-def light_curve(step: int) -> None:
+SITES = (
+    Calibration("Dallas 2024 (configs/eclipse-2024-dallas*.yaml)", 32.78, -96.80, 140.0,
+                datetime(2024, 4, 8, 18, 40, tzinfo=UTC), True),
+    Calibration("Stanley, Idaho 2017", 44.22, -114.94, 1900.0, datetime(2017, 8, 21, 17, 30, tzinfo=UTC), True),
+    Calibration("Luxor 2027 (high sun)", 25.69, 32.64, 80.0, datetime(2027, 8, 2, 10, 0, tzinfo=UTC), False),
+    Calibration("Burgos 2026 (low sun)", 42.34, -3.70, 860.0, datetime(2026, 8, 12, 18, 27, tzinfo=UTC), False),
+)
+"""The calibration sites (docs/method.md, "The eclipse sky"): the first two fix the constants."""
+
+
+def sky_light_curve(config, frames):
+    """(frames, S, b, sky lux) of ``frames``: the report's ``sky_lux`` of each (light.csv)."""
+    rows = []
+    for frame in frames:
+        sky = load_sky(config.sky, scene_at(config, frame))
+        rows.append((frame, sky.sun_fraction(), eclipse.deep_weight(sky.sun_fraction()),
+                     open_ground_light(sky, 1.0, None)["sky_lux"]))
+    return np.array(rows)
+
+
+def worst_bend(curve) -> list[tuple[float, int]]:
+    """The largest |second difference| of ln(sky lux) per frame with S in SMOOTH_RANGE, and its
+    frame, on each side of totality (frames where S falls, then where it rises)."""
+    out = []
+    frame, s, _b, lux = curve.T
+    log = np.log(lux)
+    bend = log[2:] - 2 * log[1:-1] + log[:-2]
+    middle = s[1:-1]
+    falling = np.arange(len(middle)) < np.argmin(s)
+    for side in (falling, ~falling):
+        inside = side & (middle >= SMOOTH_RANGE[0]) & (middle <= SMOOTH_RANGE[1])
+        i = np.flatnonzero(inside)[np.argmax(np.abs(bend[inside]))]
+        out.append((float(abs(bend[i])), int(frame[i + 1])))
+    return out
+
+
+def light_curve(render: str | None) -> None:
     config = load(TOTALITY)
-    print(f"1. light curve of {TOTALITY.relative_to(ROOT)} (open ground, sky + sun)")
-    print(" frame  UTC        S         b     lux        log10  (log scale, 1 mark = 1/4 decade)")
-    for frame in range(0, config.animation.frames, step):
-        lux, s, b, _sky = open_ground(config, frame)
-        when = scene_at(config, frame).when
-        bar = "#" * max(0, int(round(4 * (np.log10(lux) + 1))))
-        print(f" {frame:5d}  {when:%H:%M:%S}  {s:.2e}  {b:4.2f}  {lux:9.3g}  {np.log10(lux):6.2f}  {bar}")
-    print(PUBLISHED)
+    frames = range(config.animation.frames)
+    curve = sky_light_curve(config, frames)
+    print(f"1. the sky light of {TOTALITY.relative_to(ROOT)} (light.csv's sky_lux), ln per frame")
+    print(" frame  S         b      sky lux   d ln   d2 ln")
+    log = np.log(curve[:, 3])
+    for i, (frame, s, b, lux) in enumerate(curve):
+        if 0 < i < len(curve) - 1 and (0 < b < 1 or abs(s - eclipse.SHARP_LIMIT) < 4e-4):
+            print(f" {int(frame):5d}  {s:.2e}  {b:5.3f}  {lux:8.3f}  {log[i] - log[i - 1]:+.3f}  "
+                  f"{log[i + 1] - 2 * log[i] + log[i - 1]:+.4f}")
+    for (bend, frame), side in zip(worst_bend(curve), ("before C2", "after C3")):
+        print(f"  {side}: largest second difference of ln(sky lux) with S in {SMOOTH_RANGE}: {bend:.4f} "
+              f"(frame {frame}; at most {SMOOTH_LIMIT})")
+    if render:
+        check_render(config, render, curve)
 
 
-def totality_sky(width: int) -> None:
-    config = load(TOTALITY)
+def check_render(config, frames: str, curve) -> None:
+    """Render ``frames`` (A-B) with --preview and compare light.csv's sky_lux with the curve."""
+    first, last = (int(v) for v in frames.split("-"))
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "sky.exr"
-        subprocess.run([sys.executable, "-m", "pipeline.cli", "sky", str(TOTALITY), "--frame", "122",
-                        "-o", str(out), "--width", str(width)], check=True, cwd=ROOT, capture_output=True)
-        image = io.read_image(out)[..., :3].astype(np.float64)
-    sky = load_sky(config.sky, scene_at(config, 122))
-    day = replace(sky, moon=None).equirect(width).astype(np.float64)
-    height = image.shape[0]
-    elevation = 90 - (np.arange(height) + 0.5) * 180 / height
-    band, top = (elevation > 0) & (elevation < 10), elevation > 85
-    lux = 1e3 * EquirectSky(image.astype(np.float32)).image_irradiance() @ Y
-    zenith = 1e3 * (image[top] @ Y).mean()
-    day_zenith = 1e3 * (day[top] @ Y).mean()
-    ratio = (image[band] @ Y).mean() / (image[top] @ Y).mean()
-    rb = image[band].reshape(-1, 3).mean(axis=0)
-    day_rb = day[band].reshape(-1, 3).mean(axis=0)
-    print(f"\n2. the sky at mid-totality (frame 122), sunshade sky --width {width}:")
-    print(f"  horizontal illuminance {lux:.3g} lx (corona {1e3 * sky.corona_irradiance @ Y:.3g} lx); zenith "
-          f"{zenith:.3g} cd/m^2 = {zenith / day_zenith:.3g} of the day's ({day_zenith:.4g} cd/m^2)")
-    print(f"  0-10 degree band {ratio:.3g} x the zenith; its red/blue {rb[0] / rb[2]:.3g} "
-          f"(uneclipsed: {day_rb[0] / day_rb[2]:.3g})")
-    print(f"  model constants: SHARP_LIMIT {eclipse.SHARP_LIMIT}, k {eclipse.MULTIPLE_SCATTERING}, "
-          f"diffusion length {eclipse.DIFFUSION_LENGTH / 1e3:g} km")
+        subprocess.run([sys.executable, "-m", "pipeline.cli", "render", str(TOTALITY), "--preview", "--frames",
+                        frames, "--output", tmp, "--cache", str(Path(tmp) / "cache")], check=True, cwd=ROOT,
+                       capture_output=True)
+        table = next(Path(tmp).rglob("light.csv"))
+        with table.open() as f:
+            read = {int(r["frame"]): float(r["sky_lux"]) for r in csv.DictReader(f) if r["sky_lux"]}
+    worst = max(abs(read[n] / curve[n, 3] - 1) for n in range(first, last + 1))
+    print(f"  rendered frames {frames} (--preview): light.csv's sky_lux against the curve: largest "
+          f"relative difference {worst:.2e}")
+
+
+def site_sky(site: ephemeris.Site, when: datetime, turbidity: float, moon: bool = True) -> ProceduralSky:
+    """The procedural CIE sky at ``site`` and ``when``, with or without the moon."""
+    sun, m = ephemeris.sun_and_moon(site, when)
+    return ProceduralSky(turbidity, SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
+                         moon=MoonDisc(m.azimuth, m.elevation, m.angular_radius) if moon else None,
+                         altitude=site.elevation)
+
+
+def at_totality(calibration: Calibration):
+    """(site, C2, mid-totality, turbidity) of a calibration site."""
+    site = ephemeris.Site.from_degrees(calibration.latitude, calibration.longitude, calibration.elevation)
+    contacts = ephemeris.contact_times(site, calibration.near - timedelta(hours=1),
+                                       calibration.near + timedelta(hours=1))
+    middle = contacts["C2"] + (contacts["C3"] - contacts["C2"]) / 2
+    return site, contacts["C2"], middle, daylight.linke_turbidity(middle, site.latitude, site.longitude)
+
+
+def band_directions() -> np.ndarray:
+    """Sky-plane points 4 degrees up at 24 azimuths: the 0-8 degree band. [tan]"""
+    azimuth = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    reach = 1 / np.tan(np.radians(4.0))
+    return np.stack([reach * np.sin(azimuth), reach * np.cos(azimuth)], axis=-1)
+
+
+def correlated_colour_temperature(rgb) -> float | None:
+    """CCT [K] of a linear Rec.709 colour (Ohno 2013, colour-science), None without colour-science."""
+    try:
+        import colour
+    except ImportError:
+        return None
+    xyz = colour.models.RGB_COLOURSPACE_BT709.matrix_RGB_to_XYZ @ np.asarray(rgb, dtype=np.float64)
+    uv = colour.xy_to_UCS_uv(xyz[:2] / xyz.sum())
+    return float(colour.uv_to_CCT(uv, method="Ohno 2013")[0])
+
+
+def totality_figures(calibration: Calibration) -> dict:
+    """The sky at mid-totality at a site and the day's there: zenith [cd/m^2], its ratio, open
+    ground [lx], the zenith's colours and blue/red, the band's red/blue."""
+    site, _c2, middle, turbidity = at_totality(calibration)
+    sky = site_sky(site, middle, turbidity)
+    day = replace(sky, moon=None)
+    zenith, day_zenith = (s.clear_radiance(np.zeros((1, 2)))[0] for s in (sky, day))
+    band, day_band = (s.clear_radiance(band_directions()).mean(axis=0) for s in (sky, day))
+    return dict(sun=float(np.degrees(sky.sun.elevation)), turbidity=turbidity, when=middle,
+                zenith=1e3 * float(zenith @ Y), ratio=float(zenith @ Y / (day_zenith @ Y)),
+                lux=1e3 * float(sky.sky_irradiance @ Y), corona=1e3 * float(sky.corona_irradiance @ Y),
+                cct=correlated_colour_temperature(zenith), day_cct=correlated_colour_temperature(day_zenith),
+                shift=float(zenith[2] / zenith[0] / (day_zenith[2] / day_zenith[0])),
+                band_red_blue=float(band[0] / band[2]), day_band_red_blue=float(day_band[0] / day_band[2]))
+
+
+def mark(value: float, low: float, high: float) -> str:
+    return "in" if low <= value <= high else "OUT of"
+
+
+def totality_sites() -> None:
+    print("\n2. mid-totality at the calibration sites (bands: published at a 45-65 degree sun)")
+    for calibration in SITES:
+        v = totality_figures(calibration)
+        cct = "" if v["cct"] is None else f"CCT {v['cct']:.0f} K against the day's {v['day_cct']:.0f} K; "
+        note = "" if calibration.banded else " (outside the bands' sun elevations: shown, not held)"
+        print(f"  {calibration.name}: {v['when']:%Y-%m-%d %H:%M:%S} UTC, sun {v['sun']:.1f} deg, turbidity "
+              f"{v['turbidity']:.2f}{note}")
+        print(f"    zenith {v['zenith']:.3g} cd/m^2 ({mark(v['zenith'], 0.5, 1.2)} 0.5-1.2), {v['ratio']:.3g} of "
+              f"the day's ({mark(v['ratio'], 0.8e-4, 4e-4)} 0.8e-4 to 4e-4)")
+        print(f"    open ground {v['lux']:.3g} lx (corona {v['corona']:.3g} lx; {mark(v['lux'], 1, 5)} 1-5 lx)")
+        mired = "" if v["cct"] is None else f" ({1e6 / v['cct'] - 1e6 / v['day_cct']:+.1f} mired; published 11,000 K " \
+            f"against 9,000 K: {COLOUR_SHIFT:+.1f})"
+        print(f"    zenith colour: {cct}blue/red {v['shift']:.3g} x the day's{mired}: "
+              f"{'bluer' if v['shift'] > 1 and (v['cct'] is None or v['cct'] > v['day_cct']) else 'NOT bluer'}")
+        print(f"    0-8 degree band red/blue {v['band_red_blue']:.3g} against the day's "
+              f"{v['day_band_red_blue']:.3g} ({'reddened' if v['band_red_blue'] > v['day_band_red_blue'] else 'NOT'})")
 
 
 def partial_phase(step: int) -> None:
@@ -107,71 +223,93 @@ def partial_phase(step: int) -> None:
     print(f"\n3. {PARTIAL.relative_to(ROOT)} up to 99.8% obscuration: open ground / (uneclipsed x S)")
     worst = 0.0
     for frame in range(0, config.animation.frames, step):
-        lux, s, b, sky = open_ground(config, frame)
-        if b > 0:
+        sky = load_sky(config.sky, scene_at(config, frame))
+        if eclipse.deep_weight(sky.sun_fraction()) > 0:
             break
         clear = replace(sky, moon=None)
-        ratio = lux / (1e3 * float((clear.sky_irradiance + sun_irradiance(clear)) @ Y) * s)
+        lux = float((sky.sky_irradiance + sun_irradiance(sky)) @ Y)
+        ratio = lux / (float((clear.sky_irradiance + sun_irradiance(clear)) @ Y) * sky.sun_fraction())
         worst = max(worst, abs(ratio - 1))
-        print(f"  frame {frame:3d}  S {s:.4f}  ratio {ratio:.4f}")
+        print(f"  frame {frame:3d}  S {sky.sun_fraction():.4f}  ratio {ratio:.4f}")
     print(f"  largest deviation {100 * worst:.2f}%")
 
 
-def calibration() -> None:
-    config = load(TOTALITY)
-    s = config.sky.site
-    site = ephemeris.Site(s.latitude, s.longitude, s.elevation)
-    contacts = ephemeris.contact_times(site, s.start, s.end)
-
-    def sky_at(when):
-        sun, moon = ephemeris.sun_and_moon(site, when)
-        scene = replace(scene_at(config, 0), when=when,
-                        sun=SunDisc(sun.azimuth, sun.elevation, sun.angular_radius),
-                        moon=MoonDisc(moon.azimuth, moon.elevation, moon.angular_radius))
-        return load_sky(config.sky, scene)
-
-    c2, c3 = contacts["C2"], contacts["C3"]
-    middle = sky_at(c2 + (c3 - c2) / 2)
-    before = sky_at(c2 - timedelta(seconds=60))
-    minute = 1e3 * float((before.sky_irradiance + before.sun_fraction() * before.undimmed_sun_irradiance()) @ Y)
-    day = replace(middle, moon=None).equirect(512).astype(np.float64)
-    elevation = 90 - (np.arange(256) + 0.5) * 180 / 256
-    band, top = (elevation > 0) & (elevation < 10), elevation > 85
-    day_zenith = (day[top] @ Y).mean()
-    print(f"\n4. calibration at Dallas (a minute before C2: {minute:.3g} lx); the sky is linear in k")
-    kept = eclipse.DIFFUSION_LENGTH, eclipse.MULTIPLE_SCATTERING
+def linear_parts(calibration: Calibration) -> dict:
+    """The mid-totality zenith (3,) and day zenith [kcd/m^2], open ground and C2's sky [lx] and
+    the light a minute before C2 [lx] at k = 0 and 1 (the sky is linear in k)."""
+    site, c2, middle, turbidity = at_totality(calibration)
+    before = site_sky(site, c2 - timedelta(seconds=60), turbidity)
+    parts = dict(minute=1e3 * float((before.sky_irradiance + before.sun_fraction() * before.undimmed_sun_irradiance())
+                                    @ Y),
+                 day=site_sky(site, middle, turbidity, moon=False).clear_radiance(np.zeros((1, 2)))[0])
+    kept = eclipse.UMBRA_SCATTERING
     try:
-        for length in (20e3, 35e3, 50e3, 80e3):
-            eclipse.DIFFUSION_LENGTH = length
-            measured = []
-            for k in (0.0, 1.0):
-                eclipse.MULTIPLE_SCATTERING = k
-                sky = sky_at(c2 + (c3 - c2) / 2)
-                image = sky.equirect(512).astype(np.float64)
-                at_c2 = sky_at(c2)
-                measured.append(np.array([(image[top] @ Y).mean() / day_zenith, 1e3 * sky.sky_irradiance @ Y,
-                                          (image[band] @ Y).mean(), (image[top] @ Y).mean(),
-                                          1e3 * at_c2.sky_irradiance @ Y, *image[band].reshape(-1, 3).mean(axis=0)]))
-            zero, one = measured
-            for target, k in (("zenith 1e-4", (1e-4 - zero[0]) / (one[0] - zero[0])),
-                              ("two decades", (minute / 100 - zero[4]) / (one[4] - zero[4]))):
-                v = zero + k * (one - zero)
-                print(f"  {length / 1e3:3.0f} km, {target}: k {k:.3g}; zenith {v[0]:.2g} of the day's, mid-totality "
-                      f"{v[1]:.3g} lx, band {v[2] / v[3]:.3g} x the zenith, C2 {v[4]:.3g} lx "
-                      f"({np.log10(minute / v[4]):.2f} decades under), band red/blue {v[5] / v[7]:.2f}")
+        for k in (0.0, 1.0):
+            eclipse.UMBRA_SCATTERING = k
+            sky = site_sky(site, middle, turbidity)
+            parts[k] = (sky.clear_radiance(np.zeros((1, 2)))[0], 1e3 * float(sky.sky_irradiance @ Y),
+                        1e3 * float(site_sky(site, c2, turbidity).sky_irradiance @ Y))
     finally:
-        eclipse.DIFFUSION_LENGTH, eclipse.MULTIPLE_SCATTERING = kept
+        eclipse.UMBRA_SCATTERING = kept
+    return parts
+
+
+def colour_shift(height: float, calibrations) -> float:
+    """The zenith's reciprocal CCT at mid-totality less the day's, mean over ``calibrations``, with
+    FLOOR_HEIGHT ``height`` [m] (k = 1: the colour hardly depends on k there). [mired]"""
+    kept = eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING
+    try:
+        eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING = height, 1.0
+        shifts = []
+        for calibration in calibrations:
+            site, _c2, middle, turbidity = at_totality(calibration)
+            zenith, day = (site_sky(site, middle, turbidity, moon=moon).clear_radiance(np.zeros((1, 2)))[0]
+                           for moon in (True, False))
+            shifts.append(1e6 / correlated_colour_temperature(zenith) - 1e6 / correlated_colour_temperature(day))
+    finally:
+        eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING = kept
+    return float(np.mean(shifts))
+
+
+def calibration() -> None:
+    print("\n4. calibration: the floor's height for the zenith's colour shift (mean over Dallas and Stanley "
+          f"{COLOUR_SHIFT:.1f} mired), k for Stanley's zenith at {METER_ZENITH} cd/m^2")
+    fixing = [c for c in SITES if c.banded]
+    kept = eclipse.DIFFUSION_LENGTH, eclipse.FLOOR_HEIGHT
+    try:
+        for length in (65e3, 80e3, 100e3):
+            eclipse.DIFFUSION_LENGTH = length
+            low, high = 2000.0, 7000.0  # the zenith bluer (fewer mired) the higher the path
+            for _ in range(10):
+                eclipse.FLOOR_HEIGHT = 0.5 * (low + high)
+                low, high = ((eclipse.FLOOR_HEIGHT, high) if colour_shift(eclipse.FLOOR_HEIGHT, fixing) > COLOUR_SHIFT
+                             else (low, eclipse.FLOOR_HEIGHT))
+            parts = [linear_parts(c) for c in fixing]
+            idaho = parts[1]
+            z0, z1 = (1e3 * float(idaho[k][0] @ Y) for k in (0.0, 1.0))
+            k = (METER_ZENITH - z0) / (z1 - z0)
+            line = f"  {length / 1e3:3.0f} km: floor {eclipse.FLOOR_HEIGHT:.0f} m, k {k:.4f};"
+            for c, p in zip(fixing, parts):
+                zenith = p[0.0][0] + k * (p[1.0][0] - p[0.0][0])
+                lux = p[0.0][1] + k * (p[1.0][1] - p[0.0][1])
+                c2 = p[0.0][2] + k * (p[1.0][2] - p[0.0][2])
+                line += (f" {c.name.split(' (')[0]}: zenith {1e3 * zenith @ Y:.3g} cd/m^2 = "
+                         f"{zenith @ Y / (p['day'] @ Y):.3g}, {lux:.3g} lx, C2 {np.log10(p['minute'] / c2):.2f} "
+                         "decades under a minute before;")
+            print(line)
+    finally:
+        eclipse.DIFFUSION_LENGTH, eclipse.FLOOR_HEIGHT = kept
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--step", type=int, default=8)
-    parser.add_argument("--width", type=int, default=1024)
+    parser.add_argument("--step", type=int, default=24)
+    parser.add_argument("--render", metavar="A-B", help="also render these frames (--preview) and read light.csv")
     parser.add_argument("--calibration", action="store_true")
     args = parser.parse_args()
-    light_curve(args.step)
-    totality_sky(args.width)
-    partial_phase(args.step * 3)
+    light_curve(args.render)
+    totality_sites()
+    partial_phase(args.step)
     if args.calibration:
         calibration()
 

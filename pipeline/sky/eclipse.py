@@ -15,19 +15,23 @@ is D m - P (D its distance, from its angular radius, m its direction), the sun's
 not move. Per channel: red light comes from farther away along a ray than blue, so the rays near
 the horizon, which leave the umbra, come out reddened.
 
-Multiple scattering, which carries light sideways into the umbra, is a floor k c M(w): M is the
-line of sight's optical depth weighted by W, the uneclipsed fraction on the ground averaged over
-a sideways diffusion length (``diffused_fraction``), found at the foot of each point along the
-moon's shadow; c the colour of that sideways path (``floor_colour``); k calibrated
-(``MULTIPLE_SCATTERING``). The deep-eclipse model is blended in below S = ``SHARP_LIMIT`` so that
-it meets the clear sky times S continuously:
+Multiple scattering, which carries light sideways into the umbra, is k c M(w) G(w): M is W, the
+uneclipsed fraction on the ground averaged over a sideways diffusion length
+(``diffused_fraction``), found at the foot of each point of the line of sight along the moon's
+shadow and averaged along it as the line of sight's extinction weights its points (1 with nothing
+eclipsed); c the colour of the light's sideways path (``floor_colour``: scattered once more,
+dimmed on the way); k the share of the clear sky's light this multiply scattered light is
+(``UMBRA_SCATTERING``). The deep-eclipse model is blended in below S = ``SHARP_LIMIT`` so that it
+meets the clear sky times S with no bend:
 
-    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k c M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1),
+    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k c M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1)^3,
 
-G(w) the clear sky's shape 90 degrees from the sun over its shape at w (the multiply scattered
-light keeps the gradation with zenith angle, not the circumsolar glow, which needs the direct
-sun; ``ProceduralSky._dimming_at``); plus, during the deep eclipse, b times the corona
-(``corona_profile``) outside the moon.
+G(w) the clear sky's shape 90 degrees from the sun over its shape at w: the multiply scattered
+light is the clear sky's light with its gradation with zenith angle (counted once: M is a mean,
+not a path length) but without the circumsolar glow, which needs the direct sun
+(``ProceduralSky._dimming_at``); plus, during the deep eclipse, b times the corona
+(``corona_profile``) outside the moon. Which measurement fixes each constant: docs/method.md,
+"The eclipse sky".
 
 Units: radians, metres; the factors are dimensionless. [1]
 """
@@ -43,8 +47,9 @@ from numpy.typing import ArrayLike
 from pipeline.sky.ephemeris import MOON_RADIUS, obscured_fraction
 
 __all__ = [
-    "SHARP_LIMIT", "MULTIPLE_SCATTERING", "EARTH_RADIUS", "RAYLEIGH_SCALE_HEIGHT", "AEROSOL_SCALE_HEIGHT",
-    "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS", "FULL_TABLE", "METER_TABLE",
+    "SHARP_LIMIT", "MULTIPLE_SCATTERING", "UMBRA_SCATTERING", "EARTH_RADIUS", "RAYLEIGH_SCALE_HEIGHT",
+    "AEROSOL_SCALE_HEIGHT", "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS",
+    "FULL_TABLE", "METER_TABLE",
     "DIFFUSION_LENGTH", "FLOOR_HEIGHT", "MAP_CELLS", "MAP_EXTENT", "CORONA_REACH", "RGB_WAVELENGTHS", "deep_weight",
     "vertical_optical_depths", "point_sun_fraction", "diffused_fraction", "line_of_sight", "EclipseField",
     "floor_colour", "corona_profile", "corona_beyond", "corona_drawn", "corona_drawn_beyond",
@@ -56,11 +61,16 @@ SHARP_LIMIT = 0.002
 attenuated sunlight. Above it the sky is exactly the clear sky times S. [1]"""
 
 MULTIPLE_SCATTERING = 0.10
-"""k, the multiple-scattering floor's factor: calibrated at the 2024 eclipse at Dallas so that
-the open ground's light at second contact lies two decades under its light a minute before (the
-published fall is 2-2.5 decades). It then gives 2.5 lx at mid-totality (published 1-5 lx) and a
-zenith of 5e-5 of its daytime value (Sharp et al. 1971: about 1e-4); with k = 0.18 the zenith
-would be 1e-4 and the fall 1.8 decades (docs/accuracy.md, "The eclipse sky"). [1]"""
+"""The twilight sky's floor of multiply scattered light, a fraction of the zenith's single
+scattering (``twilight``; docs/method.md, "The procedural sky"): the factor the eclipse sky's
+floor had when it was set at Dallas 2024; the eclipse's own is UMBRA_SCATTERING. [1]"""
+
+UMBRA_SCATTERING = 0.0195
+"""k, the share of the clear sky's (glowless) light that the multiply scattered light in the
+moon's shadow is, times the diffused uneclipsed fraction there. Fixed by the sky-quality meters
+of the 2017 eclipse in Idaho (12.4-13.3 mag/arcsec^2, the sun 46 degrees up): the zenith at
+mid-totality at Stanley, Idaho, at their middle, 0.78 cd/m^2. Dallas 2024 then gets 0.57 cd/m^2,
+1.1e-4 of the day's zenith (Sharp et al. 1971: about 1e-4) (docs/method.md, "The eclipse sky"). [1]"""
 
 EARTH_RADIUS = 6_371_000.0
 """Mean radius of the Earth, for the height of a point along a line of sight. [m]"""
@@ -92,18 +102,24 @@ for a frame's sky. [count]"""
 
 METER_TABLE = (17, 36, 96)
 """(elevations, azimuths, path nodes) of the coarser table an exposure meter reads the deep
-eclipse's horizontal irradiance from: within 0.27% of the full table's (TABLE_ELEVATIONS,
-TABLE_AZIMUTHS, PATH_NODES) at Dallas 2024 from C2 to C3, in a fifth of the time (docs/accuracy.md,
-"The eclipse sky"). [count]"""
+eclipse's horizontal irradiance from: within 0.07% of the full table's (TABLE_ELEVATIONS,
+TABLE_AZIMUTHS, PATH_NODES) at Dallas 2024 from C2 to C3 (every 10 s, per channel), in a fifth
+of the time (docs/accuracy.md, "The eclipse sky"). [count]"""
 
-DIFFUSION_LENGTH = 50_000.0
+DIFFUSION_LENGTH = 80_000.0
 """Length over which light diffuses sideways into the umbra by multiple scattering (the kernel
-of ``diffused_fraction``), a calibration choice (docs/method.md, "The eclipse sky"): shorter
-makes the sky at second contact brighter beside mid-totality (at Dallas 2024, k recalibrated:
-20 km, 5.7 times; 50 km, 1.8 times) and the light's fall before second contact shallower. [m]"""
+of ``diffused_fraction``) and the length of the sideways path that colours it (``floor_colour``).
+Fixed with UMBRA_SCATTERING and FLOOR_HEIGHT by the zenith at totality at Dallas 2024 and Stanley,
+Idaho 2017 (docs/method.md, "The eclipse sky"): with k set at Stanley, 65-100 km put Dallas's
+zenith in both published bands (0.53-0.62 cd/m^2, 1.0e-4 to 1.2e-4 of the day's); 80 km the
+middle. [m]"""
 
-FLOOR_HEIGHT = 2_000.0
-"""Height of the horizontal path that colours the multiply scattered light (``floor_colour``). [m]"""
+FLOOR_HEIGHT = 4_350.0
+"""Height of the horizontal path, DIFFUSION_LENGTH long, whose scattering and extinction colour
+the multiply scattered light (``floor_colour``). Fixed by the zenith's colour at totality: bluer
+than the day's zenith by 11,000 K against 9,000 K (Dandekar & Turtle 1971), -20.2 mired, the
+mean shift of the zenith's colour temperature at Dallas 2024 and Stanley 2017 (docs/method.md,
+"The eclipse sky"). [m]"""
 
 MAP_CELLS = 160
 """Cells a side of the map of the diffused uneclipsed fraction. [count]"""
@@ -123,6 +139,10 @@ RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
 def deep_weight(sun_fraction: float) -> float:
     """b: the weight of the deep-eclipse sky, 0 for S >= SHARP_LIMIT, 1 at S = 0.
 
+    b = u^3, u = 1 - S / SHARP_LIMIT: its slope and curvature are 0 where the blend starts, so the
+    sky's light bends there no more than the eclipse's own light curve does (a linear b stalled
+    its fall for a frame; docs/accuracy.md, "The eclipse sky").
+
     Parameters
     ----------
     sun_fraction : float
@@ -131,9 +151,9 @@ def deep_weight(sun_fraction: float) -> float:
     Returns
     -------
     float
-        b = clip(1 - S / SHARP_LIMIT, 0, 1) [1].
+        b = clip(1 - S / SHARP_LIMIT, 0, 1)^3 [1].
     """
-    return float(np.clip(1.0 - sun_fraction / SHARP_LIMIT, 0.0, 1.0))
+    return float(np.clip(1.0 - sun_fraction / SHARP_LIMIT, 0.0, 1.0) ** 3)
 
 
 def vertical_optical_depths(turbidity: float) -> tuple[np.ndarray, np.ndarray]:
@@ -256,10 +276,10 @@ def line_of_sight(directions: ArrayLike, *, sun_direction: ArrayLike, moon_direc
     of the sun at the points where the line of sight scatters (single scattering; module
     docstring), beta the Rayleigh and aerosol scattering coefficients times their phase
     functions, T the transmittance to the observer and from the sun;
-    M(w) = integral k_ext e^(-tau(0, l)) W(P0) dl: the optical depth of the line of sight
-    weighted by the sideways-diffused uneclipsed fraction W (``diffused_fraction``) at the foot
-    P0 of each point along the moon's shadow (the umbra is a cone along the moon's direction);
-    M -> 1 - exp(-tau) when nothing is eclipsed.
+    M(w) = integral k_ext e^(-tau(0, l)) W(P0) dl / integral k_ext e^(-tau(0, l)) dl: the
+    sideways-diffused uneclipsed fraction W (``diffused_fraction``) at the foot P0 of each point
+    along the moon's shadow (the umbra is a cone along the moon's direction), averaged as the
+    points' light reaches the observer; 1 when nothing is eclipsed.
 
     Parameters
     ----------
@@ -305,7 +325,8 @@ def line_of_sight(directions: ArrayLike, *, sun_direction: ArrayLike, moon_direc
     field, extent = diffused_fraction(sun_direction=sun, moon_direction=moon_direction, sun_radius=sun_radius,
                                       moon_radius=moon_radius)
     diffused = _map_lookup(field, extent, foot[..., 0], foot[..., 1])
-    multiple = np.einsum("nkc,nk->nc", step * to_observer, diffused)
+    seen = step * to_observer
+    multiple = np.einsum("nkc,nk->nc", seen, diffused) / seen.sum(axis=1)
     return single, multiple
 
 
@@ -384,8 +405,9 @@ class EclipseField:
 def floor_colour(turbidity: float) -> np.ndarray:
     """c: the colour of the multiply scattered light, green 1.
 
-    exp(-(tau_c - tau_G)) of a horizontal path DIFFUSION_LENGTH long at FLOOR_HEIGHT (the sideways
-    way into the umbra).
+    tau e^-tau per channel over green's, tau the optical depth (Rayleigh and aerosol) of a
+    horizontal path DIFFUSION_LENGTH long at FLOOR_HEIGHT: the light that reaches the umbra was
+    scattered once more on its way in (tau, bluer) and dimmed on it (e^-tau, redder).
 
     Parameters
     ----------
@@ -401,7 +423,8 @@ def floor_colour(turbidity: float) -> np.ndarray:
     per_metre = (tau_r / RAYLEIGH_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / RAYLEIGH_SCALE_HEIGHT)
                  + tau_a / AEROSOL_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / AEROSOL_SCALE_HEIGHT))
     tau = per_metre * DIFFUSION_LENGTH
-    return np.exp(-(tau - tau[1]))
+    scattered = tau * np.exp(-tau)
+    return cast(np.ndarray, scattered / scattered[1])
 
 
 def corona_profile(r: ArrayLike) -> np.ndarray:

@@ -361,7 +361,7 @@ class ProceduralSky:
         glowless = clearsky.relative_sky(w[..., 2], np.full(w.shape[:-1], np.pi / 2),
                                          sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
                                          shape=self.shape, cie_type=self.cie_type) / self._relative_sky(s)
-        deep = f + eclipse.MULTIPLE_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
+        deep = f + eclipse.UMBRA_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
         return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
 
     def corona_radiance(self, w: ArrayLike) -> np.ndarray:
