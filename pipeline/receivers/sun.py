@@ -1,0 +1,197 @@
+"""The sun on a receiver: its incidence and the two-scale sun's fine kernel on the receiver's own
+sky plane (docs/method.md, "Two scales for the sun" and "Receivers: walls and slopes").
+
+The kernel is ``sky.sun_kernel.sun_kernel`` drawn in the receiver's frame: the same sub-samples,
+limb ramps and cloud dimming, each sub-sample's world direction handed to ``disc_samples`` and its
+weight the cos^4 of its angle from the receiver's normal. For the level ground it is the ground's
+kernel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.core.geometry import length3, sky_grid, tangent_axes
+from pipeline.receivers.plane import ReceiverPlane
+from pipeline.sky.base import Sky
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.raster import SkyRaster
+from pipeline.sky.sun_disc import angle_to, disc_samples
+from pipeline.sky.sun_kernel import KERNEL_FLOOR, MAX_KERNEL_CELLS, sun_irradiance
+
+__all__ = ["sun_incidence", "sun_lights", "receiver_sun_point", "receiver_sun_kernel", "receiver_sun_irradiance"]
+
+
+def sun_incidence(sky: Sky, plane: ReceiverPlane) -> float:
+    """cos of the sun's angle from the receiver's normal, s.n; 0 without a sun. [1]
+
+    Parameters
+    ----------
+    sky : sky.base.Sky
+        The sky.
+    plane : ReceiverPlane
+        The receiver.
+
+    Returns
+    -------
+    float
+        s.n, negative for a sun behind the receiver [1].
+    """
+    if sky.sun is None:
+        return 0.0
+    return float(np.asarray(sky.sun_direction) @ plane.normal)  # type: ignore[attr-defined]
+
+
+def sun_lights(sky: Sky, plane: ReceiverPlane) -> bool:
+    """Whether the sun's disc lies wholly above the world horizon and at least ``KERNEL_FLOOR`` above
+    the receiver's plane, so that its kernel is drawn (a sun behind the receiver leaves it sky only).
+
+    Parameters
+    ----------
+    sky : sky.base.Sky
+        The sky.
+    plane : ReceiverPlane
+        The receiver.
+
+    Returns
+    -------
+    bool
+        True where the two-scale sun lights the receiver.
+    """
+    sun = sky.sun
+    if sun is None or sun.elevation - sun.angular_radius <= 1e-3:
+        return False
+    return bool(np.arcsin(np.clip(sun_incidence(sky, plane), -1.0, 1.0)) - sun.angular_radius >= KERNEL_FLOOR)
+
+
+def receiver_sun_point(sky: Sky, plane: ReceiverPlane) -> np.ndarray:
+    """The sun's centre on the receiver's sky plane; meaningful where ``sun_lights``.
+
+    Parameters
+    ----------
+    sky : sky.base.Sky
+        A sky with a sun.
+    plane : ReceiverPlane
+        The receiver.
+
+    Returns
+    -------
+    numpy.ndarray
+        (2,) (s.u / s.n, s.w / s.n) [tan].
+    """
+    s, _ = plane.sky_plane(np.asarray(sky.sun_direction))  # type: ignore[attr-defined]
+    return s
+
+
+def receiver_sun_irradiance(sky: Sky, plane: ReceiverPlane) -> np.ndarray:
+    """The sun's irradiance on the unshadowed receiver: its normal irradiance after the moon and
+    clouds times s.n, as the kernel sums it (16 cells across the disc); zeros where it does not light it.
+
+    Parameters
+    ----------
+    sky : sky.base.Sky
+        The sky.
+    plane : ReceiverPlane
+        The receiver.
+
+    Returns
+    -------
+    numpy.ndarray
+        (3,) float64 [radiance x sr; klx for a procedural sky].
+    """
+    if not sun_lights(sky, plane):
+        return np.zeros(3)
+    if plane.zenith == 0.0:  # the level ground's own
+        return sun_irradiance(sky)  # type: ignore[arg-type]
+    cos_n = sun_incidence(sky, plane)
+    q = sky.sun.angular_radius / 8 / cos_n**2  # type: ignore[union-attr]
+    return receiver_sun_kernel(sky, plane, q).weighted.sum(axis=(1, 2), dtype=np.float64)
+
+
+def receiver_sun_kernel(sky: Sky, plane: ReceiverPlane, q: float) -> SkyRaster:
+    """The sun disc on a fine grid of the receiver's sky plane, cell q.
+
+    As ``sky.sun_kernel.sun_kernel``, in the receiver's frame: each cell holds the integral of
+    L_sun cos^4(theta) dA over it, theta from the receiver's normal; its sum is the sun's
+    irradiance on the receiver, the normal irradiance times s.n.
+
+    Parameters
+    ----------
+    sky : sky.base.Sky
+        A procedural sky or an HDRI with a cut sun; ``sun_lights(sky, plane)`` must hold.
+    plane : ReceiverPlane
+        The receiver.
+    q : float
+        The sky-plane cell [tan].
+
+    Returns
+    -------
+    sky.raster.SkyRaster
+        On ``geometry.sky_grid(start, shape, q)`` of the receiver's sky plane, outside = 0 [radiance x sr].
+
+    Raises
+    ------
+    ValueError
+        Where the sun does not light the receiver, q is not positive, or the block passes MAX_KERNEL_CELLS.
+    """
+    if not sun_lights(sky, plane):
+        raise ValueError("the sun does not light this receiver: no kernel to draw")
+    if not q > 0:
+        raise ValueError(f"q must be positive [tan], got {q}")
+    sun = sky.sun
+    assert sun is not None
+    centre = plane.local_directions(np.asarray(sky.sun_direction))  # type: ignore[attr-defined]
+    grid, cells, n = _layout(centre, sun.angular_radius, q)
+    h_sub = q / n
+    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
+    offsets = (np.arange(n) + 0.5) / n - 0.5
+    ox, oy = np.meshgrid(offsets * q, -offsets * q)
+    dimming = sky.sun_cloud_transmittance if isinstance(sky, ProceduralSky) else None
+    out = np.zeros((3, grid.shape[0] * grid.shape[1]))
+    chunk = max(1, (1 << 20) // (n * n))
+    for lo in range(0, len(cells), chunk):
+        idx = cells[lo:lo + chunk]
+        sx = cx.ravel()[idx, None, None] + ox
+        sy = cy.ravel()[idx, None, None] + oy
+        cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
+        v = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
+
+        def footprint(world_centre, rho, near, v=v, cos_t=cos_t):
+            # the sub-sample spacing h_sub in angle along the gradient of rho, in the receiver's frame
+            away = v[near] * np.cos(rho)[..., None] - plane.local_directions(world_centre)
+            norm = np.maximum(length3(away), 1e-300)
+            return h_sub * cos_t[near] * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
+
+        disc = disc_samples(plane.world_directions(v), footprint, 2.0 * h_sub, sun,
+                            np.asarray(sky.sun_direction), np.asarray(sky.sun_normal_irradiance),  # type: ignore[attr-defined]
+                            getattr(sky, "moon", None))
+        L = disc if dimming is None else disc * dimming
+        out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
+    return SkyRaster(grid, out.reshape(3, *grid.shape).astype(np.float32), np.zeros(3))
+
+
+def _layout(centre: np.ndarray, r: float, q: float) -> tuple:
+    """(grid, flat indices of the cells that can hold any of the disc, sub-samples per cell side) of
+    a disc of radius r [rad] about the receiver-frame unit vector ``centre``, as ``sun_kernel``'s."""
+    azimuth = float(np.arctan2(centre[0], centre[1]))
+    elevation = float(np.arcsin(np.clip(centre[2], -1.0, 1.0)))
+    _, e1, e2 = tangent_axes(azimuth, elevation)
+    psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
+    limb = np.cos(r) * centre + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    limb = limb[:, :2] / limb[:, 2:]
+    (x_min, y_min), (x_max, y_max) = limb.min(axis=0), limb.max(axis=0)
+    c0, c1 = int(np.floor(x_min / q + 0.5)) - 1, int(np.floor(x_max / q + 0.5)) + 1
+    r0, r1 = int(np.floor(-y_max / q + 0.5)) - 1, int(np.floor(-y_min / q + 0.5)) + 1
+    shape = (r1 - r0 + 1, c1 - c0 + 1)
+    if shape[0] * shape[1] > MAX_KERNEL_CELLS:
+        raise ValueError(f"the sun kernel would be {shape[0]} x {shape[1]} cells: raise q or the sun")
+    grid = sky_grid((r0, c0), shape, q)
+    minor = min(x_max - x_min, y_max - y_min) / q
+    n = int(min(128, max(8, np.ceil(128.0 / minor))))
+    rr, cc = np.indices(shape)
+    cx, cy = grid.ground_from_raster(rr, cc)
+    centres = np.stack([cx, cy, np.ones_like(cx)], axis=-1)
+    centres /= np.linalg.norm(centres, axis=-1, keepdims=True)
+    reach = r + q * 0.75 * centres[..., 2]
+    cells = np.flatnonzero((angle_to(centres, centre) <= reach).ravel())
+    return grid, cells, n

@@ -1,0 +1,297 @@
+"""Receivers other than the level ground: the frame, the hemisphere raster, the layers, the light
+by the ground's correlation turned into the receiver's frame (docs/method.md, "Receivers: walls
+and slopes"), against the level ground's own path, a turned sky and a world-coordinate Monte Carlo."""
+
+import numpy as np
+import pytest
+from reference import disc_directions, limb_darkened_profile
+
+from pipeline.canopy import masks as canopy
+from pipeline.canopy.grove import FlutterParams, GroveParams, grow_grove, leaves_at
+from pipeline.canopy.rasteriser import grove_mask
+from pipeline.core.errors import ConfigError
+from pipeline.core.geometry import Grid, sky_grid
+from pipeline.ground import shadow
+from pipeline.receivers.hemisphere import hemisphere_irradiance, hemisphere_raster, world_radiance
+from pipeline.receivers.layers import GroveLayer, grove_in_frame, grove_layers, mask_layer
+from pipeline.receivers.light import receiver_light
+from pipeline.receivers.plane import level_ground, slope, wall
+from pipeline.receivers.sun import receiver_sun_kernel, sun_lights
+from pipeline.sky.base import UniformSky
+from pipeline.sky.equirect import EquirectSky, equirect_lookup
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.sun_disc import LIMB_DARKENING, SUN_ANGULAR_RADIUS, SunDisc
+from pipeline.sky.sun_kernel import sun_kernel
+
+DEG = np.pi / 180
+
+
+def unit(azimuth, elevation):
+    return np.array([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth), np.sin(elevation)])
+
+
+def grille(n=40, bars=5, seed=3):
+    """A lattice of bars with a few random holes punched in: transmittance in [0, 1]."""
+    t = np.ones((n, n), np.float32)
+    t[:, ::bars] = 0.0
+    t[::bars, :] = 0.0
+    rng = np.random.default_rng(seed)
+    for r, c in rng.integers(0, n - 3, (12, 2)):
+        t[r:r + 3, c:c + 3] = 0.4
+    return t
+
+
+# --- the frame ------------------------------------------------------------------------------------
+
+def test_a_south_wall_has_east_across_up_along_and_south_out():
+    plane = wall((1.0, 2.0, 0.0), facing=180 * DEG, width=3.0, height=2.0)
+    assert np.allclose(plane.normal, [0, -1, 0]) and np.allclose(plane.across, [1, 0, 0])
+    assert np.allclose(plane.along, [0, 0, 1])
+    assert np.allclose(plane.world_points([0.5, 1.5, 0.25]), [1.5, 1.75, 1.5])
+    assert np.array_equal(level_ground().rotation, np.eye(3))
+
+
+@pytest.mark.parametrize("plane", [wall((0, 0, 0), facing=230 * DEG, width=1, height=1, tilt=12 * DEG),
+                                   slope(tilt=35 * DEG, facing=70 * DEG)])
+def test_directions_go_to_the_sky_plane_and_back(plane):
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d = d[d @ plane.normal > 0.05]
+    s, cos_n = plane.sky_plane(d)
+    assert np.allclose(plane.direction(s), d, atol=1e-12)
+    assert np.allclose(cos_n, d @ plane.normal)
+    # the frame is right-handed and orthonormal, its n the normal of the plane through the points
+    assert np.allclose(plane.rotation.T @ plane.rotation, np.eye(3), atol=1e-12)
+    assert np.isclose(np.linalg.det(plane.rotation), 1.0)
+    assert np.isclose(np.cross(plane.across, plane.along) @ plane.normal, 1.0)
+    assert abs(plane.across[2]) < 1e-15  # u is level
+
+
+@pytest.mark.parametrize(("make", "key"), [
+    (lambda: wall((0, 0, 0), facing=0, width=0.0, height=2), "walls[0].width"),
+    (lambda: wall((0, 0, 0), facing=0, width=1, height=-2), "walls[0].height"),
+    (lambda: wall((0, 0, 0), facing=0, width=1, height=2, tilt=np.pi / 2), "walls[0].tilt"),
+    (lambda: slope(tilt=90 * DEG, facing=0, where="walls[0]"), "walls[0].tilt"),
+    (lambda: mask_layer(np.ones((2, 2)), center=(0, 0), size=(1, 1), distance=0.0, where="walls[0]"),
+     "walls[0].distance"),
+])
+def test_bad_geometry_is_one_line_naming_the_key(make, key):
+    with pytest.raises(ConfigError) as error:
+        make()
+    text = str(error.value)
+    assert "\n" not in text and text.split(":")[0].endswith(key.split(".")[-1])
+
+
+def test_bad_wall_size_names_the_full_key():
+    with pytest.raises(ConfigError, match=r"^receivers\.walls\[2\]\.width: must be positive"):
+        wall((0, 0, 0), facing=0, width=-1, height=2, where="receivers.walls[2]")
+
+
+# --- the hemisphere -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("plane", [level_ground(), wall((0, 0, 0), facing=3.0, width=1, height=1),
+                                   slope(tilt=40 * DEG, facing=1.0)])
+def test_a_uniform_sky_and_ground_give_the_view_factors(plane):
+    sky, ground = 1.7, 0.3
+    radiance = world_radiance(UniformSky(np.full(3, sky)), np.full(3, ground))
+    f = (1 - np.cos(plane.zenith)) / 2  # the receiver's view factor to the ground
+    expected = np.pi * (sky * (1 - f) + ground * f)
+    assert hemisphere_irradiance(radiance, plane) == pytest.approx(np.full(3, expected), rel=1e-4)
+    grid = sky_grid((-20, -20), (41, 41), 0.05)
+    raster = hemisphere_raster(radiance, plane, grid)
+    assert raster.irradiance == pytest.approx(hemisphere_irradiance(radiance, plane), rel=1e-12)
+
+
+def test_the_level_receiver_is_the_level_ground():
+    # the same mask, the same uniform sky: the receiver's path and the ground's give the same raster
+    window = Grid.from_window((-1.0, -1.0, 1.0, 1.0), 0.05)
+    t = grille()
+    layer = mask_layer(t, center=(0.2, -0.1), size=(2.0, 2.0), distance=1.5)
+    sky = UniformSky(np.array([1.0, 1.3, 1.8]))
+    ours = receiver_light(world_radiance(sky, np.zeros(3)), sky, level_ground(), window, [layer],
+                          alpha=70 * DEG)
+    occlusion, grid = canopy.occlusion_on_lattice(t, center=(0.2, -0.1), size=(2.0, 2.0), lattice=window)
+    plan = shadow.plan_isolated(window, grid, height=1.5, alpha=70 * DEG)
+    theirs = shadow.ground_isolated(sky.raster(plan.sky), shadow.occlusion_spectrum(occlusion, plan), plan)
+    assert np.max(np.abs(ours.sky - theirs)) <= 1e-5 * theirs.max()
+    # and the sun kernel of the level receiver is the ground's, to the bit
+    day = ProceduralSky(3.0, SunDisc(230 * DEG, 35 * DEG))
+    q = day.sun.angular_radius / 6
+    assert np.array_equal(receiver_sun_kernel(day, level_ground(), q).weighted, sun_kernel(day, q).weighted)
+
+
+# --- invariance: a wall under a turned sky is the ground under the sky -----------------------------
+
+def smooth_sphere(azimuth, zenith):
+    """Radiance over the whole sphere, the lower half unlike the upper (an HDRI's ground). [radiance]"""
+    base = 0.6 + 0.8 * (1 - np.cos(zenith)) + 0.3 * np.sin(zenith) * np.cos(azimuth - 135 * DEG)
+    base = base + 0.5 * np.exp(-((zenith - 60 * DEG) ** 2 + (azimuth - 40 * DEG) ** 2) / 0.05)
+    base = np.where(zenith > np.pi / 2, 0.25 + 0.1 * np.cos(2 * azimuth), base)
+    return np.stack([base, 1.1 * base, 1.4 * base], axis=-1)
+
+
+def equirect_of(function, width, height):
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    zen, az = np.meshgrid(v * np.pi, (u - 0.5) * 2 * np.pi, indexing="ij")
+    return function(az, zen).astype(np.float32)
+
+
+def test_a_wall_under_a_turned_sky_gets_the_level_grounds_raster():
+    image = equirect_of(smooth_sphere, 256, 128)
+    plane = wall((3.0, -2.0, 0.5), facing=230 * DEG, width=2, height=2, tilt=10 * DEG)
+    # the sun: 30 degrees from the normal in the receiver's frame, and the same in the world's for the ground
+    local_sun = unit(20 * DEG, 60 * DEG)
+    world_sun = plane.world_directions(local_sun)
+    assert world_sun[2] > 0.1
+    normal_irradiance = np.array([40.0, 35.0, 28.0])
+
+    def sky_at(direction):
+        azimuth, elevation = np.arctan2(direction[0], direction[1]), np.arcsin(direction[2])
+        return EquirectSky(image, sun=SunDisc(azimuth, elevation), sun_normal_irradiance=normal_irradiance)
+
+    turned = lambda d: equirect_lookup(image, plane.local_directions(d)).astype(np.float64)  # noqa: E731
+    unturned = lambda d: equirect_lookup(image, d).astype(np.float64)  # noqa: E731
+    layer = mask_layer(grille(), center=(0.1, 1.0), size=(1.6, 1.6), distance=0.7)
+    window = Grid.from_window((-0.6, 0.4, 0.6, 1.6), 0.02)
+    sun_window = Grid.from_window((-0.2, 0.8, 0.2, 1.2), 0.004)
+    on_wall = receiver_light(turned, sky_at(world_sun), plane, window, [layer], sun_window=sun_window)
+    on_ground = receiver_light(unturned, sky_at(local_sun), level_ground(), window, [layer], sun_window=sun_window)
+    for ours, theirs in ((on_wall.sky, on_ground.sky), (on_wall.total, on_ground.total)):
+        assert np.max(np.abs(ours - theirs) / theirs) < 1e-4
+    assert on_ground.total.max() > 2 * on_ground.total.min()  # a real shadow
+
+
+# --- against a world-coordinate Monte Carlo -------------------------------------------------------
+
+def cosine_rays(normal, count, rng):
+    """Cosine-weighted unit vectors about ``normal`` (world), stratified, built from an arbitrary tangent."""
+    t = np.cross(normal, rng.normal(size=3))
+    t /= np.linalg.norm(t)
+    b = np.cross(normal, t)
+    side = int(np.sqrt(count))
+    i, j = np.meshgrid(np.arange(side), np.arange(side), indexing="ij")
+    u1 = (i.ravel() + rng.random(side * side)) / side
+    u2 = (j.ravel() + rng.random(side * side)) / side
+    r, phi = np.sqrt(u1), 2 * np.pi * u2
+    return (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u1)[:, None] * normal
+
+
+def test_a_wall_behind_a_grille_matches_a_world_monte_carlo():
+    rng = np.random.default_rng(5)
+    facing, tilt = 250 * DEG, 0.0
+    foot = np.array([2.0, 1.0, 0.0])
+    plane = wall(foot, facing=facing, width=2, height=2, tilt=tilt)
+    sky = ProceduralSky(3.0, SunDisc(235 * DEG, 25 * DEG))
+    ground = np.array([0.9, 1.0, 1.1])
+    t = grille(n=30, bars=6)
+    d, centre, size = 0.4, (0.05, 1.0), (1.2, 1.2)
+    layer = mask_layer(t, center=centre, size=size, distance=d)
+    window = Grid.from_window((-0.3, 0.7, 0.3, 1.3), 0.01)
+    sun_window = Grid.from_window((-0.1, 0.9, 0.1, 1.1), 0.0005)  # the disc about 10 cells across
+    light = receiver_light(world_radiance(sky, ground), sky, plane, window, [layer], sun_window=sun_window)
+    assert light.exact
+    # independent axes from the facing and tilt; the mask's image upright as one faces the wall
+    n = unit(facing, tilt)
+    u = np.cross([0.0, 0.0, 1.0], n)
+    u /= np.linalg.norm(u)
+    w = np.cross(n, u)
+    mask = lambda a, b: np.where((np.abs(a - centre[0]) < size[0] / 2) & (np.abs(b - centre[1]) < size[1] / 2),  # noqa: E731
+                                 t[np.clip(((centre[1] + size[1] / 2 - b) / size[1] * 30).astype(int), 0, 29),
+                                   np.clip(((a - centre[0] + size[0] / 2) / size[0] * 30).astype(int), 0, 29)], 1.0)
+    # 30 pixels: 16 in the sun's penumbrae, 7 lit, 7 in the bars' umbrae (ours only chooses them)
+    sun_part = light.total[1] - shadow.resample_bilinear(light.sky, window, sun_window)[1]
+    part, lit, dark = (np.argwhere(where)
+                       for where in ((sun_part > 1) & (sun_part < 61), sun_part >= 61, sun_part <= 1))
+    pick = np.concatenate([part[rng.integers(0, len(part), 16)], lit[rng.integers(0, len(lit), 7)],
+                           dark[rng.integers(0, len(dark), 7)]])
+    pu, pw = sun_window.ground_from_raster(pick[:, 0], pick[:, 1])
+    sun = sky.sun_direction
+    r = SUN_ANGULAR_RADIUS
+    centre_radiance = sky.sun_normal_irradiance / (np.pi * r**2 * (1 - np.asarray(LIMB_DARKENING) / 3))
+    ref_right = np.cross(sun, [0, 0, 1.0])
+    ref_right /= np.linalg.norm(ref_right)
+    def monte_carlo(a, b):
+        rays = cosine_rays(n, 128 * 128, rng)
+        jitter = rng.uniform(-0.5, 0.5, (len(rays), 2)) * sun_window.pixel
+        origin = foot + (a + jitter[:, :1]) * u + (b + jitter[:, 1:]) * w
+        hit = origin + rays * (d / (rays @ n))[:, None] - foot
+        through = mask(hit @ u, hit @ w)
+        up = rays[:, 2] > 0
+        L = np.tile(ground, (len(rays), 1))
+        z = np.maximum(rays[up, 2], 1e-3)
+        L[up] = sky.radiance(rays[up, :2] / z[:, None])
+        e = np.pi * (L * through[:, None]).mean(axis=0)
+        dirs, omega = disc_directions(sun, ref_right, np.cross(ref_right, sun), r * 1.02, n=60, rng=rng)
+        o = foot + (a + jitter[: len(dirs), :1]) * u + (b + jitter[: len(dirs), 1:]) * w
+        hit = o + dirs * (d / (dirs @ n))[:, None] - foot
+        weight = mask(hit @ u, hit @ w) * (dirs @ n) * omega
+        profile = limb_darkened_profile(np.arccos(np.clip(dirs @ sun, -1, 1)), r, LIMB_DARKENING)
+        return e + (weight[:, None] * profile * centre_radiance).sum(axis=0)
+
+    # two independent estimates: their mean, and its noise from their difference
+    first, second = (np.array([monte_carlo(a, b) for a, b in zip(pu, pw)]) for _ in range(2))
+    mc = (first + second) / 2
+    noise = np.sqrt(np.mean((first - second) ** 2)) / 2 / np.mean(mc)
+    ours = light.total[:, pick[:, 0], pick[:, 1]].T
+    relative_rms = np.sqrt(np.mean((ours - mc) ** 2)) / np.mean(mc)
+    assert noise < 0.003, noise
+    assert relative_rms < 0.01, relative_rms
+    assert mc[:, 1].max() > 2 * mc[:, 1].min()  # lit and shaded pixels both picked
+
+
+# --- the sun behind, the grove turned -------------------------------------------------------------
+
+def test_a_sun_behind_the_wall_leaves_it_sky_light_only():
+    sky = ProceduralSky(3.0, SunDisc(60 * DEG, 20 * DEG))
+    plane = wall((0, 0, 0), facing=240 * DEG, width=2, height=2)
+    assert not sun_lights(sky, plane)
+    layer = mask_layer(grille(), center=(0, 1), size=(1, 1), distance=0.5)
+    window = Grid.from_window((-0.2, 0.8, 0.2, 1.2), 0.02)
+    sun_window = Grid.from_window((-0.1, 0.9, 0.1, 1.1), 0.01)
+    light = receiver_light(world_radiance(sky, np.full(3, 1.0)), sky, plane, window, [layer], sun_window=sun_window)
+    assert np.all(light.sun_unshadowed == 0)
+    assert np.allclose(light.total, shadow.resample_bilinear(light.sky, window, sun_window), rtol=1e-6)
+
+
+def test_a_turned_groves_leaves_shadow_the_wall_where_world_rays_from_the_sun_land():
+    params = GroveParams(count=1, crown_radius=1.0, leaves_per_tree=300, leaf_length=0.1, leaves_per_cluster=1,
+                         height=2.0, center=(0.0, -2.0))
+    grove = grow_grove(params)
+    flutter = FlutterParams()
+    plane = wall((0.0, 0.0, 0.0), facing=180 * DEG, width=6, height=4)
+    sky = ProceduralSky(3.0, SunDisc(200 * DEG, 30 * DEG))
+    local = grove_in_frame(grove, plane)
+    s = plane.sky_plane(sky.sun_direction)[0]
+    (layer,) = grove_layers(local, flutter, 0, distances=[2.0], sun=s)
+    no_wood = np.zeros(len(grove.wood.radius), bool)
+    leaves_only = GroveLayer(local, flutter, 0, 2.0, layer.sun, (layer.select[0], no_wood))
+    window = Grid.from_window((-2.0, 0.0, 3.0, 3.0), 0.02)
+    light = receiver_light(world_radiance(sky, np.zeros(3)), sky, plane, window, [leaves_only], sun_window=window)
+    deficit = light.sun_unshadowed[1] - (light.total[1] - light.sky[1])  # the leaves' sun shadow
+    # world: rays from points of the wall's plane y = 0 (u = x, w = z) towards the sun's centre, hitting leaf ellipses
+    leaves = leaves_at(grove, flutter, 0)
+    x, z = window.ground_from_raster(*np.indices(window.shape))
+    points = np.stack([x.ravel(), np.zeros(x.size), z.ravel()], axis=1)
+    normal = np.cross(leaves.axis_u, leaves.axis_v)
+    sun = sky.sun_direction
+    hidden = np.zeros(len(points), bool)
+    for centre, a, b, nrm in zip(leaves.center, leaves.axis_u, leaves.axis_v, normal):
+        t = ((centre - points) @ nrm) / (sun @ nrm)
+        offset = points + t[:, None] * sun - centre
+        hidden |= (t > 0) & ((offset @ a / (a @ a)) ** 2 + (offset @ b / (b @ b)) ** 2 <= 1)
+    traced = hidden.reshape(window.shape).astype(float)
+    for axis in (x, z):
+        assert (deficit * axis).sum() / deficit.sum() == pytest.approx((traced * axis).sum() / traced.sum(), abs=0.005)
+    # the same area in shadow (a leaf's penumbra keeps its area), and the same pixels blurred by the penumbra
+    shade = deficit / light.sun_unshadowed[1]
+    assert shade.sum() == pytest.approx(traced.sum(), rel=0.03)
+    blurred = sum(np.roll(traced, (dr, dc), axis=(0, 1)) for dr in (-1, 0, 1) for dc in (-1, 0, 1)) / 9
+    assert np.corrcoef(shade.ravel(), blurred.ravel())[0, 1] > 0.9
+    assert (traced * x).sum() / traced.sum() > 0.5  # the sun in the south-south-west throws it east of the tree
+    # the level receiver's turned grove is the grove: the ground's own mask
+    level = grove_in_frame(grove, level_ground())
+    ground_grid = Grid.from_window((-1.5, -3.5, 1.5, -0.5), 0.05)
+    assert np.array_equal(grove_mask(level, flutter, 3, sun=(0.2, 0.1), plane_height=2.0, grid=ground_grid),
+                          grove_mask(grove, flutter, 3, sun=(0.2, 0.1), plane_height=2.0, grid=ground_grid))
