@@ -8,15 +8,17 @@
    ``sunshade render --preview`` and their light.csv read back against the same numbers.
 2. Mid-totality at each calibration site (``SITES``): the zenith's luminance [cd/m^2] and its
    ratio to the uneclipsed zenith's, the open ground's illuminance [lx] (the sky and its corona),
-   the zenith's colour (correlated colour temperature with colour-science, when installed, and
-   its blue/red against the day's zenith's), and the 0-8 degree band's red/blue against the
-   day's; each against its published band.
+   the zenith's colour (correlated colour temperature and Duv, the distance from the Planckian
+   locus, with colour-science, when installed, and its blue/red against the day's zenith's), and
+   the 0-8 degree band's red/blue against the day's (required: at least BAND_REDDENING times);
+   each against its published band.
 3. configs/eclipse-2024-dallas.yaml from C1 up to 99.8% obscuration (every --step-th frame): the
    open ground's illuminance over the uneclipsed daylight's times S; the largest deviation.
-4. With --calibration: for diffusion lengths of 65 to 100 km, the floor height that gives the
-   published zenith colour shift (Dandekar & Turtle 1971) at the two calibration sites, the
-   factor k that puts the zenith at the Idaho 2017 meters' 0.78 cd/m^2, and what they give
-   (the sky is linear in k: measured at k = 0 and 1).
+4. With --calibration: for diffusion lengths of 60 to 120 km, the factor k that puts the
+   zenith at the Idaho 2017 meters' 0.78 cd/m^2, and what they give at the two calibration
+   sites (the sky is linear in k: measured at k = 0 and 1): the zenith, the open ground, the
+   fall in the last minute before C2, the zenith's colour shift in mired (published: Dandekar &
+   Turtle 1971) and the band's reddening.
 
     python benchmarks/accuracy_eclipse.py [--step N] [--render A-B] [--calibration]
     pip install colour-science   # for the zenith's CCT (not a dependency; without it: blue/red only)
@@ -59,6 +61,9 @@ COLOUR_SHIFT = 1e6 / 11_000 - 1e6 / 9_000
 9,000 K (Dandekar & Turtle 1971). [1/MK, mired]"""
 METER_ZENITH = 0.78
 """cd/m^2 of 12.85 mag/arcsec^2, the middle of the Idaho 2017 sky-quality meters' 12.4-13.3. [cd/m^2]"""
+BAND_REDDENING = 2.5
+"""The least red/blue of the 0-8 degree band at mid-totality over the day's band's (a reddened,
+sunset-like band; docs/method.md, "The eclipse sky", says where the figure comes from). [1]"""
 
 
 @dataclass(frozen=True)
@@ -168,20 +173,23 @@ def band_directions() -> np.ndarray:
     return np.stack([reach * np.sin(azimuth), reach * np.cos(azimuth)], axis=-1)
 
 
-def correlated_colour_temperature(rgb) -> float | None:
-    """CCT [K] of a linear Rec.709 colour (Ohno 2013, colour-science), None without colour-science."""
+def correlated_colour_temperature(rgb, duv: bool = False):
+    """CCT [K] of a linear Rec.709 colour (Ohno 2013, colour-science), None without colour-science;
+    with ``duv``, (CCT, Duv) (Duv: the distance from the Planckian locus in CIE 1960 uv, positive
+    towards green)."""
     try:
         import colour
     except ImportError:
         return None
     xyz = colour.models.RGB_COLOURSPACE_BT709.matrix_RGB_to_XYZ @ np.asarray(rgb, dtype=np.float64)
     uv = colour.xy_to_UCS_uv(xyz[:2] / xyz.sum())
-    return float(colour.uv_to_CCT(uv, method="Ohno 2013")[0])
+    cct, distance = (float(v) for v in colour.uv_to_CCT(uv, method="Ohno 2013"))
+    return (cct, distance) if duv else cct
 
 
 def totality_figures(calibration: Calibration) -> dict:
     """The sky at mid-totality at a site and the day's there: zenith [cd/m^2], its ratio, open
-    ground [lx], the zenith's colours and blue/red, the band's red/blue."""
+    ground [lx], the zenith's colours (CCT, Duv) and blue/red, the band's red/blue."""
     site, _c2, middle, turbidity = at_totality(calibration)
     sky = site_sky(site, middle, turbidity)
     day = replace(sky, moon=None)
@@ -191,6 +199,8 @@ def totality_figures(calibration: Calibration) -> dict:
                 zenith=1e3 * float(zenith @ Y), ratio=float(zenith @ Y / (day_zenith @ Y)),
                 lux=1e3 * float(sky.sky_irradiance @ Y), corona=1e3 * float(sky.corona_irradiance @ Y),
                 cct=correlated_colour_temperature(zenith), day_cct=correlated_colour_temperature(day_zenith),
+                duv=correlated_colour_temperature(zenith, duv=True), day_duv=correlated_colour_temperature(day_zenith,
+                                                                                                     duv=True),
                 shift=float(zenith[2] / zenith[0] / (day_zenith[2] / day_zenith[0])),
                 band_red_blue=float(band[0] / band[2]), day_band_red_blue=float(day_band[0] / day_band[2]))
 
@@ -214,8 +224,13 @@ def totality_sites() -> None:
             f"against 9,000 K: {COLOUR_SHIFT:+.1f})"
         print(f"    zenith colour: {cct}blue/red {v['shift']:.3g} x the day's{mired}: "
               f"{'bluer' if v['shift'] > 1 and (v['cct'] is None or v['cct'] > v['day_cct']) else 'NOT bluer'}")
+        if v["duv"] is not None:
+            print(f"    zenith Duv {v['duv'][1]:+.4f} against the day's {v['day_duv'][1]:+.4f} (the daylight locus: "
+                  "about 0; positive: greener)")
+        reddening = v["band_red_blue"] / v["day_band_red_blue"]
+        held = mark(reddening, BAND_REDDENING, np.inf) if calibration.banded else "shown, not held:"
         print(f"    0-8 degree band red/blue {v['band_red_blue']:.3g} against the day's "
-              f"{v['day_band_red_blue']:.3g} ({'reddened' if v['band_red_blue'] > v['day_band_red_blue'] else 'NOT'})")
+              f"{v['day_band_red_blue']:.3g}: x{reddening:.2f} ({held} at least x{BAND_REDDENING})")
 
 
 def partial_phase(step: int) -> None:
@@ -254,51 +269,40 @@ def linear_parts(calibration: Calibration) -> dict:
     return parts
 
 
-def colour_shift(height: float, calibrations) -> float:
-    """The zenith's reciprocal CCT at mid-totality less the day's, mean over ``calibrations``, with
-    FLOOR_HEIGHT ``height`` [m] (k = 1: the colour hardly depends on k there). [mired]"""
-    kept = eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING
-    try:
-        eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING = height, 1.0
-        shifts = []
-        for calibration in calibrations:
-            site, _c2, middle, turbidity = at_totality(calibration)
-            zenith, day = (site_sky(site, middle, turbidity, moon=moon).clear_radiance(np.zeros((1, 2)))[0]
-                           for moon in (True, False))
-            shifts.append(1e6 / correlated_colour_temperature(zenith) - 1e6 / correlated_colour_temperature(day))
-    finally:
-        eclipse.FLOOR_HEIGHT, eclipse.UMBRA_SCATTERING = kept
-    return float(np.mean(shifts))
+def colour_and_band(calibration: Calibration) -> tuple[float | None, float]:
+    """The zenith's reciprocal CCT at mid-totality less the day's [mired] (None without
+    colour-science) and the band's red/blue over the day's [1], at the current constants."""
+    v = totality_figures(calibration)
+    shift = None if v["cct"] is None else 1e6 / v["cct"] - 1e6 / v["day_cct"]
+    return shift, v["band_red_blue"] / v["day_band_red_blue"]
 
 
 def calibration() -> None:
-    print("\n4. calibration: the floor's height for the zenith's colour shift (mean over Dallas and Stanley "
-          f"{COLOUR_SHIFT:.1f} mired), k for Stanley's zenith at {METER_ZENITH} cd/m^2")
+    print(f"\n4. calibration: k for Stanley's zenith at {METER_ZENITH} cd/m^2, per diffusion length (the way in's "
+          "length and the sideways kernel's)")
     fixing = [c for c in SITES if c.banded]
-    kept = eclipse.DIFFUSION_LENGTH, eclipse.FLOOR_HEIGHT
+    kept = eclipse.DIFFUSION_LENGTH, eclipse.UMBRA_SCATTERING
     try:
-        for length in (65e3, 80e3, 100e3):
+        for length in (60e3, 80e3, 100e3, 120e3):
             eclipse.DIFFUSION_LENGTH = length
-            low, high = 2000.0, 7000.0  # the zenith bluer (fewer mired) the higher the path
-            for _ in range(10):
-                eclipse.FLOOR_HEIGHT = 0.5 * (low + high)
-                low, high = ((eclipse.FLOOR_HEIGHT, high) if colour_shift(eclipse.FLOOR_HEIGHT, fixing) > COLOUR_SHIFT
-                             else (low, eclipse.FLOOR_HEIGHT))
             parts = [linear_parts(c) for c in fixing]
             idaho = parts[1]
             z0, z1 = (1e3 * float(idaho[k][0] @ Y) for k in (0.0, 1.0))
             k = (METER_ZENITH - z0) / (z1 - z0)
-            line = f"  {length / 1e3:3.0f} km: floor {eclipse.FLOOR_HEIGHT:.0f} m, k {k:.4f};"
+            eclipse.UMBRA_SCATTERING = k
+            line = f"  {length / 1e3:3.0f} km: k {k:.4f};"
             for c, p in zip(fixing, parts):
                 zenith = p[0.0][0] + k * (p[1.0][0] - p[0.0][0])
                 lux = p[0.0][1] + k * (p[1.0][1] - p[0.0][1])
                 c2 = p[0.0][2] + k * (p[1.0][2] - p[0.0][2])
+                shift, band = colour_and_band(c)
+                mired = "" if shift is None else f"zenith {shift:+.1f} mired, "
                 line += (f" {c.name.split(' (')[0]}: zenith {1e3 * zenith @ Y:.3g} cd/m^2 = "
                          f"{zenith @ Y / (p['day'] @ Y):.3g}, {lux:.3g} lx, C2 {np.log10(p['minute'] / c2):.2f} "
-                         "decades under a minute before;")
+                         f"decades under a minute before, {mired}band x{band:.2f};")
             print(line)
     finally:
-        eclipse.DIFFUSION_LENGTH, eclipse.FLOOR_HEIGHT = kept
+        eclipse.DIFFUSION_LENGTH, eclipse.UMBRA_SCATTERING = kept
 
 
 def main() -> None:

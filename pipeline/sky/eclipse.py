@@ -15,16 +15,19 @@ is D m - P (D its distance, from its angular radius, m its direction), the sun's
 not move. Per channel: red light comes from farther away along a ray than blue, so the rays near
 the horizon, which leave the umbra, come out reddened.
 
-Multiple scattering, which carries light sideways into the umbra, is k c M(w) G(w): M is W, the
+Multiple scattering, which carries light sideways into the umbra, is k M(w) G(w): M is W, the
 uneclipsed fraction on the ground averaged over a sideways diffusion length
 (``diffused_fraction``), found at the foot of each point of the line of sight along the moon's
-shadow and averaged along it as the line of sight's extinction weights its points (1 with nothing
-eclipsed); c the colour of the light's sideways path (``floor_colour``: scattered once more,
-dimmed on the way); k the share of the clear sky's light this multiply scattered light is
-(``UMBRA_SCATTERING``). The deep-eclipse model is blended in below S = ``SHARP_LIMIT`` so that it
-meets the clear sky times S with no bend:
+shadow, times the share of light that reaches that point sideways at its own height (``way_in``:
+scattered once more on a horizontal path DIFFUSION_LENGTH long there and dimmed on it), averaged
+along the line of sight as its extinction weights its points per channel; k the share of the
+clear sky's light this multiply scattered light is (``UMBRA_SCATTERING``). The air low down takes
+little of it (its way in is opaque): a line of sight near the horizon sees it from the points far
+out and high up, through its own long low path, and comes out reddened, while the zenith's light,
+scattered in at a few kilometres, is bluer than the day's. The deep-eclipse model is blended in
+below S = ``SHARP_LIMIT`` so that it meets the clear sky times S with no bend:
 
-    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k c M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1)^3,
+    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1)^3,
 
 G(w) the clear sky's shape 90 degrees from the sun over its shape at w: the multiply scattered
 light is the clear sky's light with its gradation with zenith angle (counted once: M is a mean,
@@ -50,9 +53,9 @@ __all__ = [
     "SHARP_LIMIT", "MULTIPLE_SCATTERING", "UMBRA_SCATTERING", "EARTH_RADIUS", "RAYLEIGH_SCALE_HEIGHT",
     "AEROSOL_SCALE_HEIGHT", "AEROSOL_ASYMMETRY", "PATH_LENGTH", "PATH_NODES", "TABLE_ELEVATIONS", "TABLE_AZIMUTHS",
     "FULL_TABLE", "METER_TABLE",
-    "DIFFUSION_LENGTH", "FLOOR_HEIGHT", "MAP_CELLS", "MAP_EXTENT", "CORONA_REACH", "RGB_WAVELENGTHS", "deep_weight",
+    "DIFFUSION_LENGTH", "MAP_CELLS", "MAP_EXTENT", "CORONA_REACH", "RGB_WAVELENGTHS", "deep_weight",
     "vertical_optical_depths", "point_sun_fraction", "diffused_fraction", "line_of_sight", "EclipseField",
-    "floor_colour", "corona_profile", "corona_beyond", "corona_drawn", "corona_drawn_beyond",
+    "way_in", "corona_profile", "corona_beyond", "corona_drawn", "corona_drawn_beyond",
 ]
 
 SHARP_LIMIT = 0.002
@@ -65,12 +68,12 @@ MULTIPLE_SCATTERING = 0.10
 scattering (``twilight``; docs/method.md, "The procedural sky"): the factor the eclipse sky's
 floor had when it was set at Dallas 2024; the eclipse's own is UMBRA_SCATTERING. [1]"""
 
-UMBRA_SCATTERING = 0.0195
+UMBRA_SCATTERING = 0.147
 """k, the share of the clear sky's (glowless) light that the multiply scattered light in the
-moon's shadow is, times the diffused uneclipsed fraction there. Fixed by the sky-quality meters
-of the 2017 eclipse in Idaho (12.4-13.3 mag/arcsec^2, the sun 46 degrees up): the zenith at
-mid-totality at Stanley, Idaho, at their middle, 0.78 cd/m^2. Dallas 2024 then gets 0.57 cd/m^2,
-1.1e-4 of the day's zenith (Sharp et al. 1971: about 1e-4) (docs/method.md, "The eclipse sky"). [1]"""
+moon's shadow is, times the diffused uneclipsed fraction there and the share that reaches each
+point sideways (``way_in``). Fixed by the sky-quality meters of the 2017 eclipse in Idaho
+(12.4-13.3 mag/arcsec^2, the sun 46 degrees up): the zenith at mid-totality at Stanley, Idaho,
+at their middle, 0.78 cd/m^2 (docs/method.md, "The eclipse sky"). [1]"""
 
 EARTH_RADIUS = 6_371_000.0
 """Mean radius of the Earth, for the height of a point along a line of sight. [m]"""
@@ -102,24 +105,17 @@ for a frame's sky. [count]"""
 
 METER_TABLE = (17, 36, 96)
 """(elevations, azimuths, path nodes) of the coarser table an exposure meter reads the deep
-eclipse's horizontal irradiance from: within 0.07% of the full table's (TABLE_ELEVATIONS,
+eclipse's horizontal irradiance from: within 0.35% of the full table's (TABLE_ELEVATIONS,
 TABLE_AZIMUTHS, PATH_NODES) at Dallas 2024 from C2 to C3 (every 10 s, per channel), in a fifth
 of the time (docs/accuracy.md, "The eclipse sky"). [count]"""
 
-DIFFUSION_LENGTH = 80_000.0
+DIFFUSION_LENGTH = 100_000.0
 """Length over which light diffuses sideways into the umbra by multiple scattering (the kernel
-of ``diffused_fraction``) and the length of the sideways path that colours it (``floor_colour``).
-Fixed with UMBRA_SCATTERING and FLOOR_HEIGHT by the zenith at totality at Dallas 2024 and Stanley,
-Idaho 2017 (docs/method.md, "The eclipse sky"): with k set at Stanley, 65-100 km put Dallas's
-zenith in both published bands (0.53-0.62 cd/m^2, 1.0e-4 to 1.2e-4 of the day's); 80 km the
-middle. [m]"""
-
-FLOOR_HEIGHT = 4_350.0
-"""Height of the horizontal path, DIFFUSION_LENGTH long, whose scattering and extinction colour
-the multiply scattered light (``floor_colour``). Fixed by the zenith's colour at totality: bluer
-than the day's zenith by 11,000 K against 9,000 K (Dandekar & Turtle 1971), -20.2 mired, the
-mean shift of the zenith's colour temperature at Dallas 2024 and Stanley 2017 (docs/method.md,
-"The eclipse sky"). [m]"""
+of ``diffused_fraction``) and the length of the sideways path at each height that it crosses
+(``way_in``): the umbra's radius, about 100 km (the margin r_moon - r_sun of a total eclipse
+at 0.55 arcsec per km; 0.281 - 0.266 degrees at Dallas 2024). With k set at Stanley, Idaho
+2017, Dallas 2024's zenith is in both published bands from 85 km up (docs/method.md, "The
+eclipse sky"). [m]"""
 
 MAP_CELLS = 160
 """Cells a side of the map of the diffused uneclipsed fraction. [count]"""
@@ -276,10 +272,11 @@ def line_of_sight(directions: ArrayLike, *, sun_direction: ArrayLike, moon_direc
     of the sun at the points where the line of sight scatters (single scattering; module
     docstring), beta the Rayleigh and aerosol scattering coefficients times their phase
     functions, T the transmittance to the observer and from the sun;
-    M(w) = integral k_ext e^(-tau(0, l)) W(P0) dl / integral k_ext e^(-tau(0, l)) dl: the
+    M(w) = integral k_ext e^(-tau(0, l)) W(P0) I(l) dl / integral k_ext e^(-tau(0, l)) dl: the
     sideways-diffused uneclipsed fraction W (``diffused_fraction``) at the foot P0 of each point
-    along the moon's shadow (the umbra is a cone along the moon's direction), averaged as the
-    points' light reaches the observer; 1 when nothing is eclipsed.
+    along the moon's shadow (the umbra is a cone along the moon's direction), times the share
+    I = ``way_in`` of k_ext there that reaches the point sideways, averaged as the points' light
+    reaches the observer.
 
     Parameters
     ----------
@@ -326,7 +323,7 @@ def line_of_sight(directions: ArrayLike, *, sun_direction: ArrayLike, moon_direc
                                       moon_radius=moon_radius)
     diffused = _map_lookup(field, extent, foot[..., 0], foot[..., 1])
     seen = step * to_observer
-    multiple = np.einsum("nkc,nk->nc", seen, diffused) / seen.sum(axis=1)
+    multiple = np.einsum("nkc,nkc->nc", seen, diffused[..., None] * way_in(k_r + k_a)) / seen.sum(axis=1)
     return single, multiple
 
 
@@ -402,29 +399,26 @@ class EclipseField:
         return out[..., :3], out[..., 3:]
 
 
-def floor_colour(turbidity: float) -> np.ndarray:
-    """c: the colour of the multiply scattered light, green 1.
+def way_in(extinction: ArrayLike) -> np.ndarray:
+    """The share of light that reaches a point of the umbra sideways: tau e^-tau.
 
-    tau e^-tau per channel over green's, tau the optical depth (Rayleigh and aerosol) of a
-    horizontal path DIFFUSION_LENGTH long at FLOOR_HEIGHT: the light that reaches the umbra was
-    scattered once more on its way in (tau, bluer) and dimmed on it (e^-tau, redder).
+    tau = extinction x DIFFUSION_LENGTH, the optical depth of the horizontal path from the
+    umbra's edge at the point's own height: the light was scattered once more on its way (tau,
+    bluer) and dimmed on it (e^-tau, redder). Low down, where the air is dense, tau is large and
+    little gets in (e^-13 in red at the ground at Dallas 2024); a few kilometres up tau is near 1.
 
     Parameters
     ----------
-    turbidity : float
-        T [1], as in ``vertical_optical_depths``.
+    extinction : float or numpy.ndarray
+        Extinction coefficient (Rayleigh and aerosol) at the point, per channel [1/m].
 
     Returns
     -------
     numpy.ndarray
-        (3,) float64 per R, G, B [1].
+        tau e^-tau, float64 of the shape of ``extinction`` [1].
     """
-    tau_r, tau_a = vertical_optical_depths(turbidity)
-    per_metre = (tau_r / RAYLEIGH_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / RAYLEIGH_SCALE_HEIGHT)
-                 + tau_a / AEROSOL_SCALE_HEIGHT * np.exp(-FLOOR_HEIGHT / AEROSOL_SCALE_HEIGHT))
-    tau = per_metre * DIFFUSION_LENGTH
-    scattered = tau * np.exp(-tau)
-    return cast(np.ndarray, scattered / scattered[1])
+    tau = np.asarray(extinction, dtype=np.float64) * DIFFUSION_LENGTH
+    return cast(np.ndarray, tau * np.exp(-tau))
 
 
 def corona_profile(r: ArrayLike) -> np.ndarray:

@@ -348,7 +348,7 @@ class ProceduralSky:
     def _dimming_at(self, s) -> np.ndarray:
         """Factor on the clear sky at sky-plane points s (..., 2) [tan]: ``_sky_dimming`` (3,)
         above 99.8% obscuration; deeper, (..., 3)
-        (1 - b) S + b (F(w) + k c M(w) G(w)) times skylight (``eclipse``), G the clear sky's
+        (1 - b) S + b (F(w) + k M(w) G(w)) times skylight (``eclipse``), G the clear sky's
         shape 90 degrees from the sun over its shape at w (no circumsolar glow in the multiply
         scattered light). [1]"""
         b = self._deep
@@ -361,7 +361,7 @@ class ProceduralSky:
         glowless = clearsky.relative_sky(w[..., 2], np.full(w.shape[:-1], np.pi / 2),
                                          sun_zenith=np.pi / 2 - self.sun.elevation, turbidity=self.turbidity,
                                          shape=self.shape, cie_type=self.cie_type) / self._relative_sky(s)
-        deep = f + eclipse.UMBRA_SCATTERING * eclipse.floor_colour(self.turbidity) * m * glowless
+        deep = f + eclipse.UMBRA_SCATTERING * m * glowless
         return ((1.0 - b) * self.moon_visible + b * deep) * self.skylight
 
     def corona_radiance(self, w: ArrayLike) -> np.ndarray:
