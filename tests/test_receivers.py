@@ -2,6 +2,8 @@
 by the ground's correlation turned into the receiver's frame (docs/method.md, "Receivers: walls
 and slopes"), against the level ground's own path, a turned sky and a world-coordinate Monte Carlo."""
 
+import re
+
 import numpy as np
 import pytest
 from reference import disc_directions, limb_darkened_profile
@@ -295,3 +297,176 @@ def test_a_turned_groves_leaves_shadow_the_wall_where_world_rays_from_the_sun_la
     ground_grid = Grid.from_window((-1.5, -3.5, 1.5, -0.5), 0.05)
     assert np.array_equal(grove_mask(level, flutter, 3, sun=(0.2, 0.1), plane_height=2.0, grid=ground_grid),
                           grove_mask(grove, flutter, 3, sun=(0.2, 0.1), plane_height=2.0, grid=ground_grid))
+
+
+# --- a config's walls: the section, the wall's raster, the camera (slice 2) ------------------------
+
+def wall_scene(**wall):
+    """tiny_grove with one wall 2 m east of the tree, facing west; ``wall``: its keys changed."""
+    from scenes import tiny_grove
+
+    config = tiny_grove()
+    config["receivers"] = {"walls": [{"foot": [2.0, 0.0], "facing": 270.0, "width": 3.0, "height": 2.0,
+                                      "pixel": 0.05, **wall}]}
+    return config
+
+
+def test_a_walls_section_is_read_in_radians_with_its_presets(tmp_path):
+    from pipeline.config.parse import parse_config
+    from pipeline.config.receivers import WALL_ALBEDOS
+
+    config = parse_config(wall_scene(tilt=10.0, albedo="brick"), tmp_path)
+    (w,) = config.receivers.walls
+    assert w.name == "wall0" and w.foot == (2.0, 0.0, 0.0) and w.albedo == "brick"
+    assert w.facing == pytest.approx(270 * DEG) and w.tilt == pytest.approx(10 * DEG)
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    # the presets' luminance inside the published ranges (docs/method.md, "Receivers")
+    assert 0.70 <= luminance @ WALL_ALBEDOS["plaster"] <= 0.80 and 0.10 <= luminance @ WALL_ALBEDOS["brick"] <= 0.15
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"width": 0.0}, "receivers.walls[0].width"), ({"height": -1.0}, "receivers.walls[0].height"),
+    ({"tilt": 90.0}, "receivers.walls[0].tilt"), ({"albedo": "marble"}, "receivers.walls[0].albedo"),
+    ({"albedo": [0.5, 1.2, 0.5]}, "receivers.walls[0].albedo"), ({"foot": [1.0]}, "receivers.walls[0].foot"),
+    ({"colour": 1}, "receivers.walls[0].colour"), ({"pixel": 1e-5}, "receivers.walls[0].pixel"),
+    ({"masks": [{"image": "none.png", "size": [1, 1], "distance": 1}]}, "receivers.walls[0].masks[0].image")])
+def test_a_bad_wall_is_one_line_naming_its_key(tmp_path, change, key):
+    from pipeline.config.parse import parse_config
+
+    with pytest.raises(ConfigError) as error:
+        parse_config(wall_scene(**change), tmp_path)
+    assert key in str(error.value) and len(str(error.value).splitlines()) == 1
+
+
+def test_a_bad_slope_and_a_second_wall_of_one_name_are_refused(tmp_path):
+    from pipeline.config.parse import parse_config
+
+    config = wall_scene()
+    config["receivers"]["slope"] = {"tilt": 90.0, "facing": 180.0}
+    with pytest.raises(ConfigError, match=r"receivers\.slope\.tilt"):
+        parse_config(config, tmp_path)
+    config = wall_scene()
+    config["receivers"]["walls"].append(dict(config["receivers"]["walls"][0]))
+    config["receivers"]["walls"][1]["name"] = "wall0"
+    with pytest.raises(ConfigError, match=r"receivers\.walls\[1\]\.name"):
+        parse_config(config, tmp_path)
+
+
+def test_the_hash_of_the_level_ground_alone_is_unmoved_and_a_walls_files_move_it(tmp_path):
+    from scenes import tiny_grove
+
+    from pipeline.config.parse import parse_config
+    from pipeline.core import io
+
+    alone = parse_config(tiny_grove(), tmp_path).digest()
+    empty = tiny_grove()
+    empty["receivers"] = {"walls": []}
+    assert parse_config(empty, tmp_path).digest() == alone
+    io.write_png(tmp_path / "grille.png", grille()[..., None])
+    masked = wall_scene(masks=[{"image": "grille.png", "size": [1.0, 1.0], "distance": 0.5}])
+    first = parse_config(masked, tmp_path).digest()
+    assert first != alone
+    io.write_png(tmp_path / "grille.png", grille(seed=4)[..., None])
+    assert parse_config(masked, tmp_path).digest() != first
+
+
+def test_the_walls_raster_is_upright_as_one_faces_it(tmp_path, capsys):
+    """A wall leaning back to face the sun (its normal on the sun) behind a mask with an opaque block
+    at its upper left, as one faces the wall: the sun's shadow falls straight back, so the raster that
+    ``sunshade ground --receiver`` writes is dark at its upper left, in the block's place, and lit elsewhere."""
+    from scenes import write_config
+
+    from pipeline.cli.main import main
+    from pipeline.core import io
+
+    image = np.ones((40, 40), np.float32)
+    image[:20, :20] = 0.0  # the upper left quarter, rows along -w
+    io.write_png(tmp_path / "block.png", image[..., None])
+    config = wall_scene(facing=150.0, tilt=55.0, width=2.0, height=2.0, pixel=0.02,
+                        masks=[{"image": "block.png", "center": [0.0, 1.0], "size": [1.0, 1.0], "distance": 0.3}])
+    config["canopy"]["trees"]["crown_radius"] = 0.3  # the tree far from the wall's frame (at 2 m)
+    out = tmp_path / "wall.exr"
+    assert main(["ground", str(write_config(tmp_path, config)), "--receiver", "wall0", "--cache",
+                 str(tmp_path / "cache"), "-o", str(out)]) == 0
+    assert "wall wall0 100 x 100 px" in capsys.readouterr().out
+    y = io.read_image(out) @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    assert io.read_attributes(out, ["sunshade:receiver"])["sunshade:receiver"] == "wall0"
+    lit, block = np.median(y[55:95, 55:95]), np.median(y[30:45, 30:45])  # rows from the top
+    assert block < 0.5 * lit  # the block's sun shadow, where it stands
+    assert np.median(y[30:45, 55:70]) > 0.9 * lit and np.median(y[55:70, 30:45]) > 0.9 * lit
+
+
+def test_the_camera_sees_a_wall_where_its_rays_meet_the_rectangle_and_hides_what_is_behind():
+    """``view.wall_hits`` against the wall's corners projected by ``project_points`` (each pixel's
+    centre point inside the projected quadrilateral), its depth the ray's length to the plane; and
+    ``show_wall`` puts the wall in front of a far background only."""
+    from pipeline.camera.pinhole import Camera, project_points
+    from pipeline.receivers.view import show_wall, wall_hits
+
+    plane = wall((0.0, 5.0, 0.0), facing=200 * DEG, width=4.0, height=2.5, tilt=8 * DEG)
+    camera = Camera.look_at((1.0, -3.0, 1.4), (0.0, 5.0, 1.2), vertical_fov=40 * DEG, width=96, height=64)
+    hits = wall_hits(camera, plane, samples=1)
+    corners = plane.world_points([(-2, 0, 0), (2, 0, 0), (2, 2.5, 0), (-2, 2.5, 0)])
+    u, v, _ = project_points(camera, corners)
+    rows, cols = hits.region
+    vv, uu = np.mgrid[rows, cols] + 0.5
+    # inside the convex quadrilateral: on one side of all four edges (whichever the corners' winding)
+    edges = [((u[k], v[k]), (u[(k + 1) % 4], v[(k + 1) % 4])) for k in range(4)]
+    sides = np.stack([(b0 - a0) * (vv - a1) - (b1 - a1) * (uu - a0) for (a0, a1), (b0, b1) in edges])
+    inside = np.all(sides > 0, axis=0) | np.all(sides < 0, axis=0)
+    lengths = np.array([np.hypot(b0 - a0, b1 - a1) for (a0, a1), (b0, b1) in edges])
+    sure = np.min(np.abs(sides) / lengths[:, None, None], axis=0) > 1e-6  # not on an edge
+    assert inside.sum() > 500 and np.array_equal(hits.hit[0][sure], inside[sure])
+    seen = hits.hit[0]
+    d = np.stack([hits.u[0][seen], hits.w[0][seen], np.zeros(seen.sum())], axis=-1)
+    points = plane.world_points(d)
+    assert np.allclose(np.linalg.norm(points - np.array(camera.position), axis=-1), hits.distance[0][seen])
+    picture = np.ones((64, 96, 3), np.float32)
+    near = np.full((64, 96), 2.0, np.float32)  # a background nearer than the wall keeps its pixels
+    show_wall(picture, near, hits, lambda u, w: np.full((*u.shape, 3), 5.0, np.float32))
+    assert np.all(picture == 1.0)
+    far = np.full((64, 96), np.inf, np.float32)
+    show_wall(picture, far, hits, lambda u, w: np.full((*u.shape, 3), 5.0, np.float32))
+    assert np.all(picture[rows, cols][seen] == 5.0) and np.all(picture[rows, cols][~seen] == 1.0)
+    assert np.all(np.isfinite(far[rows, cols][seen])) and np.all(np.isinf(far[rows, cols][~seen]))
+
+
+def test_check_lists_each_wall_with_its_sun_and_bound(tmp_path, capsys):
+    """The wall faces the sun's azimuth: the sun is its elevation (55 degrees) off the wall's normal,
+    and (sun + sky) / sky is printed from the light check prints."""
+    from scenes import write_config
+
+    from pipeline.cli.main import main
+
+    config = wall_scene(facing=150.0)
+    assert main(["check", str(write_config(tmp_path, config))]) == 0
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("  wall wall0"))
+    assert "(3 x 2 m, facing 150 degrees)" in line and line.count("55 degrees off its normal") == 3  # frames 0, 3, 5
+    sun, sky, bound = (float(v) for v in re.search(r"frame 0: .*?sun ([\d.]+) klx, sky ([\d.]+) klx, a fleck at "
+                                                     r"most ([\d.]+) x", line).groups())
+    assert bound == pytest.approx((sun + sky) / sky, abs=0.02)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"receivers.slope": {"tilt": 20.0, "facing": 180.0}}, "receivers.slope: a slope is not drawn yet"),
+    ({"output": {"passes": ["sun"]}}, "output.passes: the light passes are not made with walls yet")])
+def test_what_walls_cannot_be_drawn_with_is_refused_before_anything_is_written(tmp_path, capsys, change, message):
+    from scenes import write_config
+
+    from pipeline.cli.main import main
+
+    config = wall_scene()
+    for key, value in change.items():
+        section, _, name = key.partition(".")
+        if name:
+            config[section][name] = value
+        else:
+            config[section] = value
+    path = write_config(tmp_path, config)
+    out = tmp_path / "out"
+    out.mkdir()
+    for argv in (["check", str(path)], ["frame", str(path), "--cache", str(out / "cache"), "-o", str(out / "f.exr")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, err
+        assert list(out.iterdir()) == []

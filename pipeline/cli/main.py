@@ -194,6 +194,8 @@ def _add_pictures(commands: argparse._SubParsersAction[_Parser], shared: _Shared
                                              shared.store], shared)
     ground.add_argument("-o", "--output", required=True, help="output EXR (scene-linear) or PNG "
                         "(tone-mapped) file")
+    ground.add_argument("--receiver", default=None, metavar="NAME", help="a wall's irradiance instead "
+                        "(receivers.walls[].name), upright as one faces it")
 
     frame = _command(commands, run_frame, [shared.config, shared.moment, shared.picture, shared.threads,
                                            shared.store], shared)

@@ -48,6 +48,8 @@ def run_ground(args: argparse.Namespace) -> int:
 
     exr, png = _exr_and_png(args)
     check_threads(args)
+    if args.receiver is not None:
+        return _run_wall(args, exr, png)
     config = config_of(args, named_frames=False)
     check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
     started = time.perf_counter()
@@ -67,6 +69,34 @@ def run_ground(args: argparse.Namespace) -> int:
         f"open-sky irradiance {', '.join(f'{v:.4g}' for v in result.unshadowed)}; "
         f"wrote {', '.join(str(p) for p in written)}"
     )
+    return 0
+
+
+def _run_wall(args: argparse.Namespace, exr: Path | None, png: Path | None) -> int:
+    """``sunshade ground --receiver NAME``: a wall's irradiance raster, upright as one faces it."""
+    from pipeline.camera.composite import display_ground
+    from pipeline.stages.plan import plan_run
+    from pipeline.stages.walls import wall_of_frame
+
+    config = config_of(args, named_frames=False)
+    check_frame(args.frame, config.animation.frames, "--frame", "animation.frames")
+    names = [wall.name for wall in config.receivers.walls]
+    if args.receiver not in names:
+        raise BadInput(f"--receiver: {args.config} has no wall {args.receiver!r} "
+                       f"(its walls: {', '.join(names) or 'none'})")
+    started = time.perf_counter()
+    light = wall_of_frame(plan_run(config), args.frame, args.receiver, store=open_store(args.cache),
+                          workers=args.threads)
+    elapsed = time.perf_counter() - started
+    unshadowed = light.sky_unshadowed + light.sun_unshadowed
+    metadata = {"sunshade:window": light.grid.extent, "sunshade:pixel_size": float(light.grid.pixel),
+                "sunshade:config_hash": config.digest(), "sunshade:version": __version__,
+                "sunshade:frame": int(args.frame), "sunshade:receiver": args.receiver}
+    written = _write(exr, png, light.irradiance, metadata, lambda: display_ground(light.irradiance, unshadowed))
+    rows, cols = light.irradiance.shape[:2]
+    print(f"sunshade: wall {args.receiver} {cols} x {rows} px at {light.grid.pixel:g} m in {elapsed:.2f} s; "
+          f"open-wall irradiance {', '.join(f'{v:.4g}' for v in unshadowed)} (sky "
+          f"{', '.join(f'{v:.4g}' for v in light.sky_unshadowed)}); wrote {', '.join(str(p) for p in written)}")
     return 0
 
 

@@ -62,6 +62,8 @@ def run_check(args: argparse.Namespace) -> int:
         print(line)
     for line in _light_lines(plan):
         print(line)
+    for line in _wall_lines(plan):
+        print(line)
     need = disk_needed(plan)
     frames, cycle = need.frame_bytes, need.cache_bytes
     print(f"  disk: about {_size(frames + cycle)} for a whole run: frames {_size(frames)}, "
@@ -133,6 +135,32 @@ def _light_lines(plan: RunPlan) -> list[str]:
 
         lines.append(f"  the sun gives no direct light (set, or not wholly up) in {len(dark)} of {plan.frames} "
                      f"frames ({frame_ranges(dark)}): the sky alone lights them")
+    return lines
+
+
+def _wall_lines(plan: RunPlan) -> list[str]:
+    """Each wall's open light at the first, middle and last frames: the sun's incidence on it and
+    how far a sun fleck can stand above its shade ((sun + sky) / sky, luminance), its files read."""
+    import numpy as np
+
+    from pipeline.core.colour import REC709_LUMINANCE
+    from pipeline.stages.walls import check_walls, open_walls
+
+    if not plan.receivers.walls:
+        return []
+    check_walls(plan)
+    lines = []
+    found = open_walls(plan, sorted({0, plan.frames // 2, plan.frames - 1}))
+    for wall in plan.receivers.walls:
+        shown = []
+        for w in (w for w in found if w.name == wall.name):
+            sun, sky = (float(np.asarray(v) @ REC709_LUMINANCE) for v in (w.sun, w.sky))
+            angle = np.degrees(np.arccos(np.clip(w.incidence, -1.0, 1.0)))
+            ratio = f", a fleck at most {(sun + sky) / sky:.2f} x its shade" if sky > 0 else ""
+            shown.append(f"frame {w.frame}: sun {angle:.0f} degrees off its normal, sun {sun:.1f} klx, "
+                         f"sky {sky:.1f} klx{ratio}")
+        lines.append(f"  wall {wall.name} ({wall.width:g} x {wall.height:g} m, facing "
+                     f"{np.degrees(wall.facing) % 360:.0f} degrees): " + "; ".join(shown))
     return lines
 
 

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from pipeline.config.receivers import parse_receivers
 from pipeline.config.sections import Section, is_number, kind_of
 from pipeline.config.settings import (
     AUTO_LIMITS,
@@ -140,6 +141,7 @@ def _parse(root: Section, path: Path, named_frames: bool = True) -> Config:
     foreground = _parse_foreground(root.section("foreground"), canopy)
     output = _parse_output(root.section("output"), path, named_frames)
     render = _parse_render(root.section("render"))
+    receivers = parse_receivers(root.section("receivers"))
     root.done()
     _check_frames(root, animation, camera, output)
     if camera.follow == "shadow" and (ground.sun_window is not None or ground.window is not None):
@@ -156,7 +158,7 @@ def _parse(root: Section, path: Path, named_frames: bool = True) -> Config:
     if output.view is not None and isinstance(root.data.get("camera"), dict) and "display" in root.data["camera"]:
         root.fail("camera.display", "output.view shows the frames through an OCIO view instead; give one or the other")
     return Config(path.resolve(), canopy, sky, ground, animation, camera, foreground, output, render,
-                  root.ctx.lines)
+                  root.ctx.lines, receivers)
 
 
 MAX_FRAMES = 100_000

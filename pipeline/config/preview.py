@@ -27,8 +27,9 @@ def preview(config: Config) -> Config:
 
     A quarter of the camera's resolution, ground pixels four times larger (less where a
     periodic tile must stay a whole number of them), the sun disc 6 cells across (imported
-    foreground passes keep the camera's resolution), a flutter cycle of at most 8 frames for
-    procedural trees (not with imported passes, one per cycle frame), the run in the
+    foreground passes keep the camera's resolution), walls' pixels four times larger, a flutter
+    cycle of at most 8 frames for procedural trees (not with imported passes, one per cycle
+    frame), the run in the
     ``preview`` folder inside the output folder. Everything else, every leaf and the sky
     included, is kept.
 
@@ -58,9 +59,11 @@ def preview(config: Config) -> Config:
     canopy = config.canopy
     if canopy.trees is not None and config.foreground.model != "passes":
         canopy = replace(canopy, flutter=replace(canopy.flutter, cycle=min(canopy.flutter.cycle, PREVIEW_CYCLE)))
+    walls = tuple(replace(wall, pixel=wall.pixel * PREVIEW_SCALE) for wall in config.receivers.walls)
     return replace(
         config,
         canopy=canopy,
+        receivers=replace(config.receivers, walls=walls),
         ground=replace(ground, pixel=pixel, sun_pixel=sun_pixel),
         camera=replace(config.camera, resolution=(width, height)),
         render=replace(config.render, sun_cells=PREVIEW_SUN_CELLS),

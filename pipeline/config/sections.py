@@ -207,7 +207,7 @@ class Section:
 
 
 _VALID_KEYS = {
-    "": ("animation", "ground", "canopy", "sky", "camera", "foreground", "output", "render"),
+    "": ("animation", "ground", "canopy", "sky", "camera", "foreground", "output", "render", "receivers"),
     "canopy": ("layout", "trees", "flutter", "mask", "size", "center", "height", "layers"),
     "canopy.layers[]": ("mask", "size", "center", "height"),
     "canopy.trees": ("count", "seed", "crown_radius", "leaves_per_tree", "leaf_length", "spread"),
@@ -228,6 +228,11 @@ _VALID_KEYS = {
     "output": ("name", "folder", "video", "half", "passes", "report", "colorspace", "view", "ocio_config"),
     "output.view": ("display", "view"),
     "render": ("jobs", "sun_cells"),
+    "receivers": ("walls", "slope"),
+    "receivers.walls[]": ("name", "foot", "facing", "width", "height", "tilt", "albedo", "albedo_size", "pixel",
+                          "masks"),
+    "receivers.walls[].masks[]": ("image", "center", "size", "distance"),
+    "receivers.slope": ("tilt", "facing"),
 }
 """Every key each section accepts (a layer's index written []), whichever the parser reads:
 what an unknown-key error lists."""

@@ -16,6 +16,7 @@ from datetime import datetime
 from pathlib import Path
 
 from pipeline import __version__
+from pipeline.config.receivers import ReceiversConfig
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE
 from pipeline.config.yamlsafe import KeyContext
 from pipeline.core.ocio import RENDER_SPACE
@@ -510,6 +511,8 @@ class Config:
         The sections' values.
     lines : dict
         The YAML line of each key path, for messages.
+    receivers : ReceiversConfig
+        Walls and a slope besides the level ground.
     """
 
     path: Path
@@ -523,6 +526,8 @@ class Config:
     render: RenderConfig = RenderConfig()
     lines: dict = field(default_factory=dict, compare=False, repr=False)
     """The YAML line of each key path, for messages."""
+    receivers: ReceiversConfig = field(default_factory=ReceiversConfig)
+    """Walls and a slope besides the level ground (``config.receivers``)."""
 
     def where(self, key: str) -> str:
         """Where a key is, for a message about it.
@@ -567,10 +572,14 @@ class Config:
             values["ground"].pop("brdf")
         if not values["sky"]["params"]:  # a sky the parser reads itself hashes as it always did
             values["sky"].pop("params")
+        if self.receivers == ReceiversConfig():  # the level ground alone hashes as it always did
+            values.pop("receivers")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
                        | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set())
+                       | {str(p) for wall in self.receivers.walls
+                          for p in (wall.albedo, *(m.image for m in wall.masks)) if isinstance(p, Path)}
                        | ({self.output.ocio_config} if self.output.ocio_config and
                           not self.output.ocio_config.startswith("ocio://") else set()))
         h = hashlib.sha256()

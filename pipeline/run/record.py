@@ -23,6 +23,7 @@ import filelock
 from pipeline import __version__
 from pipeline.cache.store import Cache, CacheItem
 from pipeline.config.parse import Config
+from pipeline.config.receivers import ReceiversConfig
 from pipeline.core.cores import jobs_and_threads
 from pipeline.run.folder import LOCK_FILE, RUN_FILE, video_file
 from pipeline.run.index import check_frames, read_index
@@ -108,6 +109,8 @@ def resolved_config(config: Config, plan: RunPlan) -> dict[str, Any]:
     values.pop("lines")
     if not values["sky"]["params"]:  # a sky the parser reads itself records as it always did
         values["sky"].pop("params")
+    if config.receivers == ReceiversConfig():  # the level ground alone records as it always did
+        values.pop("receivers")
     values["ground"]["window"] = list(plan.window.extent)
     if plan.sun_window is not None:
         values["ground"]["sun_window"] = list(plan.sun_window.extent)

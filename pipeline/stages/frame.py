@@ -24,6 +24,7 @@ from pipeline.sky import scattering
 from pipeline.sky.base import Sky, UniformSky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import SunDisc
+from pipeline.stages import walls
 from pipeline.stages.cycle import foreground_item
 from pipeline.stages.ground import FrameContext, GroundResult, blend_band, ground_of_frame, sky_view_terms
 from pipeline.stages.inputs import albedo_mipmap, ground_albedo
@@ -210,6 +211,9 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         raise ValueError("the light passes split a Lambertian ground's light; ground.brdf has none yet")
     else:
         background = brdf_background(context, ground)
+    if plan.receivers.walls:  # the walls in front of the ground, by depth (docs/method.md, "Receivers")
+        distance = (distance if brdf is None else pinhole.ground_distance(view)).copy()
+        walls.show_walls(view, plan.receivers.walls, walls.wall_lights(context), background, distance)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())
@@ -218,7 +222,11 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         # Koschmieder (1924): a thing at distance d is seen as T L + (1 - T) L_horizon, T =
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
-        _apply_haze(background, *_haze_of_view(view, plan.haze), pinhole.horizon_sky(view, sky))
+        haze = _haze_of_view(view, plan.haze)
+        if plan.receivers.walls:  # the haze in front of the walls by their distance
+            t = scattering.haze_transmittance(distance, plan.haze)[..., None]
+            haze = (t, 1.0 - t)
+        _apply_haze(background, *haze, pinhole.horizon_sky(view, sky))
     else:
         background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0
     fg = foreground_layer(plan, context.cycle_frame, context.store, light)

@@ -9,7 +9,7 @@ the cycle, ground and frame stages take the plan, a frame's scene and the cache
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -19,6 +19,7 @@ from pipeline.camera.pinhole import Camera
 from pipeline.canopy import grove as grove_geometry
 from pipeline.canopy import masks
 from pipeline.config.parse import size_text
+from pipeline.config.receivers import ReceiversConfig
 from pipeline.config.settings import AutoExposureConfig, CanopyConfig, CanopyLayer, Config, GroundConfig, OutputConfig
 from pipeline.config.vocabulary import FOREGROUNDS, PROCEDURAL_MODELS
 from pipeline.core import io
@@ -128,6 +129,8 @@ class RunPlan:
         With a camera that follows the shadow (``camera.follow``), per output frame its camera and
         how far its sun window moves with it, (rows, cols) of fine pixels (``at``); None: one
         camera and one sun window for every frame.
+    receivers : ReceiversConfig
+        The walls besides the level ground (``stages.walls``).
     """
 
     window: Grid
@@ -147,6 +150,7 @@ class RunPlan:
     output: OutputConfig
     source: Path
     follow: tuple[tuple[Camera, tuple[int, int]], ...] | None = None
+    receivers: ReceiversConfig = field(default_factory=ReceiversConfig)
 
     def at(self, frame: int) -> RunPlan:
         """The plan as one frame sees it: with a following camera, the frame's camera and its sun
@@ -281,9 +285,24 @@ def plan_run(config: Config) -> RunPlan:
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
-                   config.path, follow)
+                   config.path, follow, config.receivers)
     _check_sizes(config, plan)
+    _check_receivers(config)
     return plan
+
+
+def _check_receivers(config: Config) -> None:
+    """Refuse what the walls cannot be drawn with yet (docs/method.md, "Receivers: walls and slopes")."""
+    r = config.receivers
+    if r.slope is not None:
+        raise ConfigError(config.where("receivers.slope"), "a slope is not drawn yet (trees standing on it, "
+                          "its camera): leave it out")
+    if r.walls and config.canopy.layout == "periodic":
+        raise ConfigError(config.where("receivers.walls"), "a wall takes the shade of an isolated canopy; "
+                          "give canopy.layout: isolated")
+    if r.walls and config.output.passes:
+        raise ConfigError(config.where("output.passes"), "the light passes are not made with walls yet; "
+                          "give one or the other")
 
 
 def _nearest(follow: tuple[tuple[int, Camera], ...], frame: int) -> Camera:

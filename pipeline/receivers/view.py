@@ -1,0 +1,186 @@
+"""A wall in the camera: which pixels see it, where, and how far, and its radiance there
+(docs/method.md, "Receivers: walls and slopes").
+
+Each pixel is sampled at ``SAMPLES`` x ``SAMPLES`` points; a point sees the wall where its ray
+meets the rectangle in front of the pinhole, nearer than the ground the pixel sees. The wall's
+radiance at a point is albedo x irradiance / pi (Lambertian), its irradiance raster read
+bilinearly; a pixel takes the mean of its points, the points that miss keeping what was behind.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.camera.pinhole import Camera, image_rays, project_points
+from pipeline.core.geometry import Grid
+from pipeline.receivers.plane import ReceiverPlane
+
+__all__ = ["SAMPLES", "WallHits", "wall_hits", "read_bilinear", "read_tiled", "show_wall"]
+
+SAMPLES = 3
+"""Points per pixel side at which the camera looks for a wall (its edges anti-aliased). [count]"""
+
+
+@dataclass(frozen=True)
+class WallHits:
+    """Where a camera's pixels see a wall.
+
+    Attributes
+    ----------
+    region : (slice, slice)
+        The image rows and columns that may see it.
+    hit : numpy.ndarray
+        (points, rows, cols) bool: the point's ray meets the wall in front of the pinhole.
+    u, w : numpy.ndarray
+        (points, rows, cols) float32, the hit's wall coordinates (0 where it misses) [m].
+    distance : numpy.ndarray
+        (points, rows, cols) float32, from the pinhole along the ray, inf where it misses [m].
+    """
+
+    region: tuple[slice, slice]
+    hit: np.ndarray
+    u: np.ndarray
+    w: np.ndarray
+    distance: np.ndarray
+
+
+def _region(camera: Camera, plane: ReceiverPlane) -> tuple[slice, slice]:
+    """The image box holding the wall's corners (the whole image if one lies behind the pinhole)."""
+    assert plane.width is not None and plane.height is not None
+    corners = plane.world_points([(s * plane.width / 2, h, 0.0) for s in (-1, 1) for h in (0.0, plane.height)])
+    u, v, depth = project_points(camera, corners)
+    if np.any(depth <= 0):
+        return slice(0, camera.height), slice(0, camera.width)
+    c0, c1 = (int(np.clip(x, 0, camera.width)) for x in (np.floor(u.min()), np.ceil(u.max())))
+    r0, r1 = (int(np.clip(x, 0, camera.height)) for x in (np.floor(v.min()), np.ceil(v.max())))
+    return slice(r0, r1), slice(c0, c1)
+
+
+def wall_hits(camera: Camera, plane: ReceiverPlane, *, samples: int = SAMPLES) -> WallHits:
+    """Where ``samples`` x ``samples`` points of each pixel see the wall.
+
+    Parameters
+    ----------
+    camera : camera.pinhole.Camera
+        The camera.
+    plane : ReceiverPlane
+        A wall (with its width and height).
+    samples : int, optional
+        Points per pixel side [count].
+
+    Returns
+    -------
+    WallHits
+        On the image box that may see it.
+    """
+    assert plane.width is not None and plane.height is not None
+    rows, cols = region = _region(camera, plane)
+    offsets = (np.arange(samples) + 0.5) / samples
+    v, u = np.mgrid[rows, cols].astype(np.float64)
+    origin = plane.local_points(np.asarray(camera.position))
+    shape = (samples * samples, *v.shape)
+    hit = np.zeros(shape, bool)
+    across, up, distance = np.zeros(shape, np.float32), np.zeros(shape, np.float32), np.full(shape, np.inf, np.float32)
+    for k, (dv, du) in enumerate((dv, du) for dv in offsets for du in offsets):
+        d = image_rays(camera, u + du, v + dv)
+        local = plane.local_directions(d / np.linalg.norm(d, axis=-1, keepdims=True))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -origin[2] / local[..., 2]
+            a = origin[0] + t * local[..., 0]
+            b = origin[1] + t * local[..., 1]
+            hit[k] = (t > 0) & np.isfinite(t) & (np.abs(a) <= plane.width / 2) & (b >= 0) & (b <= plane.height)
+        across[k][hit[k]], up[k][hit[k]], distance[k][hit[k]] = a[hit[k]], b[hit[k]], t[hit[k]]
+    return WallHits(region, hit, across, up, distance)
+
+
+def read_bilinear(grid: Grid, image: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A raster on a wall's grid read bilinearly at (u, w), its edge pixels held beyond its centres.
+
+    Parameters
+    ----------
+    grid : Grid
+        The raster's grid in the wall's (u, w) [m].
+    image : numpy.ndarray
+        (rows, cols, channels) on ``grid``.
+    u, w : numpy.ndarray
+        Wall coordinates, one shape (...) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., channels) float32.
+    """
+    x = (u - grid.origin[0]) / grid.pixel - 0.5
+    y = (grid.origin[1] - w) / grid.pixel - 0.5
+    rows, cols = grid.shape
+    x = np.clip(x, 0.0, cols - 1.0)
+    y = np.clip(y, 0.0, rows - 1.0)
+    c0 = np.minimum(x.astype(np.int64), max(cols - 2, 0))
+    r0 = np.minimum(y.astype(np.int64), max(rows - 2, 0))
+    c1, r1 = np.minimum(c0 + 1, cols - 1), np.minimum(r0 + 1, rows - 1)
+    fx, fy = (x - c0)[..., None], (y - r0)[..., None]
+    top = image[r0, c0] * (1 - fx) + image[r0, c1] * fx
+    bottom = image[r1, c0] * (1 - fx) + image[r1, c1] * fx
+    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+
+
+def read_tiled(image: np.ndarray, size: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """An albedo image tiled over a wall, ``size`` metres wide, its bottom row at w = 0, read at the
+    nearest texel.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (rows, cols, channels) [1].
+    size : float
+        The wall covered by the image's width [m].
+    u, w : numpy.ndarray
+        Wall coordinates (...) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., channels) float32 [1].
+    """
+    rows, cols = image.shape[:2]
+    texel = size / cols
+    col = np.floor(u / texel).astype(np.int64) % cols
+    row = (rows - 1 - np.floor(w / texel).astype(np.int64)) % rows
+    return image[row, col].astype(np.float32)
+
+
+def show_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits,
+              wall_radiance: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
+    """Put a wall into a picture in place: each pixel's points that see the wall nearer than
+    ``distance`` take its radiance, the rest keep the pixel's; the distance becomes the wall's
+    where most of its points see it.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, 3) float32, the picture so far; changed [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees so far (inf: nothing); changed [m].
+    hits : WallHits
+        Where the wall is seen.
+    wall_radiance : callable
+        (u, w) wall coordinates (n,) [m] -> (n, 3) the wall's radiance there [radiance].
+    """
+    rows, cols = hits.region
+    behind = distance[rows, cols]
+    seen = hits.hit & (hits.distance < behind[None])
+    points = np.float32(1.0 / len(seen))
+    wall_sum = np.zeros((*behind.shape, 3), np.float32)
+    for k in range(len(seen)):
+        if seen[k].any():
+            wall_sum[seen[k]] += np.asarray(wall_radiance(hits.u[k][seen[k]], hits.w[k][seen[k]]),
+                                            dtype=np.float32) * points
+    coverage = seen.sum(axis=0, dtype=np.float32) * points
+    block = radiance[rows, cols]
+    block *= (1.0 - coverage)[..., None]
+    block += wall_sum
+    nearest = np.where(seen, hits.distance, np.inf).min(axis=0).astype(np.float32)
+    distance[rows, cols] = np.where(coverage > 0.5, nearest, behind)
