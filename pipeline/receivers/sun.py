@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.core.geometry import length3, sky_grid, tangent_axes
+from pipeline.core.geometry import length3
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.sky.base import Sky
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.raster import SkyRaster
-from pipeline.sky.sun_disc import angle_to, disc_samples
-from pipeline.sky.sun_kernel import KERNEL_FLOOR, MAX_KERNEL_CELLS, sun_irradiance
+from pipeline.sky.sun_disc import disc_samples
+from pipeline.sky.sun_kernel import KERNEL_FLOOR, disc_layout, sun_irradiance
 
 __all__ = ["sun_incidence", "sun_lights", "receiver_sun_point", "receiver_sun_kernel", "receiver_sun_irradiance"]
 
@@ -141,7 +141,8 @@ def receiver_sun_kernel(sky: Sky, plane: ReceiverPlane, q: float) -> SkyRaster:
     sun = sky.sun
     assert sun is not None
     centre = plane.local_directions(np.asarray(sky.sun_direction))  # type: ignore[attr-defined]
-    grid, cells, n = _layout(centre, sun.angular_radius, q)
+    grid, cells, n = disc_layout(centre, float(np.arctan2(centre[0], centre[1])),
+                                 float(np.arcsin(np.clip(centre[2], -1.0, 1.0))), sun.angular_radius, q)
     h_sub = q / n
     cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
     offsets = (np.arange(n) + 0.5) / n - 0.5
@@ -168,30 +169,3 @@ def receiver_sun_kernel(sky: Sky, plane: ReceiverPlane, q: float) -> SkyRaster:
         L = disc if dimming is None else disc * dimming
         out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
     return SkyRaster(grid, out.reshape(3, *grid.shape).astype(np.float32), np.zeros(3))
-
-
-def _layout(centre: np.ndarray, r: float, q: float) -> tuple:
-    """(grid, flat indices of the cells that can hold any of the disc, sub-samples per cell side) of
-    a disc of radius r [rad] about the receiver-frame unit vector ``centre``, as ``sun_kernel``'s."""
-    azimuth = float(np.arctan2(centre[0], centre[1]))
-    elevation = float(np.arcsin(np.clip(centre[2], -1.0, 1.0)))
-    _, e1, e2 = tangent_axes(azimuth, elevation)
-    psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
-    limb = np.cos(r) * centre + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
-    limb = limb[:, :2] / limb[:, 2:]
-    (x_min, y_min), (x_max, y_max) = limb.min(axis=0), limb.max(axis=0)
-    c0, c1 = int(np.floor(x_min / q + 0.5)) - 1, int(np.floor(x_max / q + 0.5)) + 1
-    r0, r1 = int(np.floor(-y_max / q + 0.5)) - 1, int(np.floor(-y_min / q + 0.5)) + 1
-    shape = (r1 - r0 + 1, c1 - c0 + 1)
-    if shape[0] * shape[1] > MAX_KERNEL_CELLS:
-        raise ValueError(f"the sun kernel would be {shape[0]} x {shape[1]} cells: raise q or the sun")
-    grid = sky_grid((r0, c0), shape, q)
-    minor = min(x_max - x_min, y_max - y_min) / q
-    n = int(min(128, max(8, np.ceil(128.0 / minor))))
-    rr, cc = np.indices(shape)
-    cx, cy = grid.ground_from_raster(rr, cc)
-    centres = np.stack([cx, cy, np.ones_like(cx)], axis=-1)
-    centres /= np.linalg.norm(centres, axis=-1, keepdims=True)
-    reach = r + q * 0.75 * centres[..., 2]
-    cells = np.flatnonzero((angle_to(centres, centre) <= reach).ravel())
-    return grid, cells, n

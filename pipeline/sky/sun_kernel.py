@@ -18,7 +18,8 @@ from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import angle_to, disc_samples
 
-__all__ = ["KERNEL_CACHE_SAMPLES", "KERNEL_FLOOR", "MAX_KERNEL_CELLS", "sun_irradiance", "sun_kernel", "unshadowed"]
+__all__ = ["KERNEL_CACHE_SAMPLES", "KERNEL_FLOOR", "MAX_KERNEL_CELLS", "disc_layout", "sun_irradiance", "sun_kernel",
+           "unshadowed"]
 
 
 MAX_KERNEL_CELLS = 4_000_000
@@ -159,11 +160,38 @@ def _kernel_layout(sky, q: float) -> tuple:
     """(grid, flat indices of the cells that can hold any of the disc, sub-samples n per cell
     side) of ``sun_kernel``."""
     sun = sky.sun
-    r = sun.angular_radius
+    return disc_layout(sky.sun_direction, sun.azimuth, sun.elevation, sun.angular_radius, q)
+
+
+def disc_layout(centre: np.ndarray, azimuth: float, elevation: float, r: float, q: float) -> tuple:
+    """Where a disc's kernel lies on a sky plane: its cells and how finely each is sampled.
+
+    Parameters
+    ----------
+    centre : numpy.ndarray
+        (3,) unit vector towards the disc's centre, in the plane's frame (z its normal) [1].
+    azimuth, elevation : float
+        The same direction's azimuth (from +y towards +x) and elevation [rad].
+    r : float
+        The disc's angular radius [rad].
+    q : float
+        The sky plane's cell [tan].
+
+    Returns
+    -------
+    tuple
+        (grid, flat indices (k,) of the cells that can hold any of the disc, sub-samples n per
+        cell side).
+
+    Raises
+    ------
+    ValueError
+        For a kernel of more than MAX_KERNEL_CELLS cells.
+    """
     # the disc's bounding box on the sky plane, from points on its limb
-    _, e1, e2 = tangent_axes(sun.azimuth, sun.elevation)
+    _, e1, e2 = tangent_axes(azimuth, elevation)
     psi = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
-    limb = np.cos(r) * sky.sun_direction + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    limb = np.cos(r) * centre + np.sin(r) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
     limb = limb[:, :2] / limb[:, 2:]
     (x_min, y_min), (x_max, y_max) = limb.min(axis=0), limb.max(axis=0)
     c0, c1 = int(np.floor(x_min / q + 0.5)) - 1, int(np.floor(x_max / q + 0.5)) + 1
@@ -180,7 +208,7 @@ def _kernel_layout(sky, q: float) -> tuple:
     centres = np.stack([cx, cy, np.ones_like(cx)], axis=-1)
     centres /= np.linalg.norm(centres, axis=-1, keepdims=True)
     reach = r + q * 0.75 * centres[..., 2]  # a cell spans at most q cos(theta) x sqrt(2)/2 in angle
-    near = angle_to(centres, sky.sun_direction) <= reach
+    near = angle_to(centres, centre) <= reach
     cells = np.flatnonzero(near.ravel())
     return grid, cells, n
 
