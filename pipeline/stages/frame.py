@@ -70,7 +70,8 @@ def foreground_layer(plan: RunPlan, cycle_frame: int, store: cache.Cache,
                                  bounce=0.5 * albedo_mipmap(plan.ground).mean)
 
 
-def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[mipmap.MipMap, ...]:
+def irradiance_maps(plan: RunPlan, ground: GroundResult, *,
+                    far: mipmap.MipMap | None = None) -> tuple[mipmap.MipMap, ...]:
     """The ground raster as MipMaps for the camera, finest first.
 
     Beyond the fine raster the coarse one with its coarse sun (when there is one), beyond that the
@@ -83,6 +84,9 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[mipmap.MipMap,
         The run's plan.
     ground : GroundResult
         The frame's ground, with its ``outer`` raster when there is one.
+    far : texture.mipmap.MipMap or None
+        Read beyond the window's rasters instead of the open ground (the walls' shade there,
+        ``walls.far_ground``); isolated canopy only.
 
     Returns
     -------
@@ -103,6 +107,8 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult) -> tuple[mipmap.MipMap,
         if x1 - x0 >= period[0] and y1 - y0 >= period[1]:
             return (*maps, mipmap.mipmap(raster, grid, outside="periodic", period=period))
         value = raster.reshape(-1, raster.shape[-1]).mean(axis=0)
+    elif far is not None:
+        return (*maps, mipmap.mipmap(raster, grid, outside="constant", value=np.full(3, np.nan)), far)
     else:
         value = ground.unshadowed
     return (*maps, mipmap.mipmap(raster, grid, outside="constant", value=np.asarray(value, dtype=np.float32)))
@@ -197,14 +203,18 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
     plan, sky = context.plan, context.sky
     passes = plan.output.passes if passes is None else tuple(passes)
     brdf = plan.ground.brdf
-    ground = ground_of_frame(context, outer=True, parts=bool({"sun", "sky"} & set(passes)) or brdf is not None,
-                             coarse_sky=brdf is not None)
+    ground = ground_of_frame(context, outer=True, parts=bool({"sun", "sky"} & set(passes)) or brdf is not None
+                             or bool(plan.receivers.walls), coarse_sky=brdf is not None)
+    wall_lights, far = walls.wall_lights(context) if plan.receivers.walls else (), None
+    if wall_lights:  # each wall's shadow and lost sky on the ground (docs/method.md, "A wall on the ground")
+        far = walls.far_ground(context, ground, wall_lights)
+        ground = walls.shade_ground(context, ground, wall_lights)
     clock.lap("ground")
     view = plan.camera
     seen_sky, maps = None, None
     if brdf is None:  # lambert: the camera's own path, bytes unchanged
         seen_sky = pinhole.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
-        maps = irradiance_maps(plan, ground)
+        maps = irradiance_maps(plan, ground, far=far)
         background, distance = pinhole.background(
             view, irradiance=maps, albedo=ground_albedo(plan.ground), sky=sky, seen_sky=seen_sky)
     elif passes:
@@ -213,7 +223,7 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         background = brdf_background(context, ground)
     if plan.receivers.walls:  # the walls in front of the ground, by depth (docs/method.md, "Receivers")
         distance = (distance if brdf is None else pinhole.ground_distance(view)).copy()
-        walls.show_walls(view, plan.receivers.walls, walls.wall_lights(context), background, distance)
+        walls.show_walls(view, plan.receivers.walls, wall_lights, background, distance)
     clock.lap("camera")
     light = reference_lighting(plan)
     sun_fraction = float(sky.sun_fraction())

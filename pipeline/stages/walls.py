@@ -4,8 +4,9 @@ camera's picture by depth (``receivers.view``); docs/method.md, "Receivers: wall
 from __future__ import annotations
 
 import functools
+import hashlib
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,17 +17,22 @@ from pipeline.canopy.masks import transmittance_from_image
 from pipeline.config.receivers import WallConfig
 from pipeline.core import io
 from pipeline.core.errors import ImageError
+from pipeline.core.geometry import Grid
 from pipeline.receivers import view
+from pipeline.receivers.ground_shade import SkyTable, hidden_sky, polygon_coverage, shadow_polygon, sky_table
 from pipeline.receivers.hemisphere import ground_radiance, hemisphere_irradiance, world_radiance
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.receivers.sun import receiver_sun_irradiance, sun_incidence
 from pipeline.receivers.walls import WallLight, wall_albedo_colour, wall_light, wall_plane
+from pipeline.sky.base import Sky
 from pipeline.sky.sun_kernel import sun_irradiance
-from pipeline.stages.ground import FrameContext
+from pipeline.stages.ground import FrameContext, GroundRaster, GroundResult
 from pipeline.stages.inputs import albedo_mipmap, grove_of
 from pipeline.stages.plan import RunPlan
+from pipeline.texture import mipmap
 
-__all__ = ["wall_lights", "wall_of_frame", "show_walls", "OpenWall", "open_walls", "check_walls"]
+__all__ = ["wall_lights", "wall_of_frame", "show_walls", "shade_ground", "far_ground", "FAR_PIXEL", "FAR_MARGIN",
+           "OpenWall", "open_walls", "check_walls"]
 
 
 def wall_lights(context: FrameContext) -> tuple[WallLight, ...]:
@@ -213,3 +219,142 @@ def _radiance(wall: WallConfig, light: WallLight, u: np.ndarray, w: np.ndarray) 
     else:
         albedo = wall_albedo_colour(wall).astype(np.float32)
     return irradiance * albedo * np.float32(1.0 / np.pi)
+
+
+def shade_ground(context: FrameContext, ground: GroundResult, lights: tuple[WallLight, ...]) -> GroundResult:
+    """The ground with each wall's sun shadow and the sky it hides, and the wall's own light in place
+    of that sky (docs/method.md, "A wall on the ground").
+
+    The sun's part times 1 - the shadow polygon's exact cover of each cell; the sky's part times
+    1 - the hidden sky over the open ground's (the product rule, as for the canopy's layers), plus
+    the wall's mean radiance over its view factor.
+
+    Parameters
+    ----------
+    context : ground.FrameContext
+        The frame: its plan's walls and its sky.
+    ground : ground.GroundResult
+        The frame's ground with its ``sky_part`` (``ground_of_frame(parts=True)``).
+    lights : tuple of receivers.walls.WallLight
+        The walls' light at the frame (``wall_lights``).
+
+    Returns
+    -------
+    ground.GroundResult
+        The same rasters shaded, with its ``sky_part`` [radiance x sr].
+    """
+    sky_part = ground.sky_part
+    if sky_part is None:
+        raise ValueError("the ground was made without its sky part (ground_of_frame(parts=True))")
+    shade = _Shade.of(context, lights, np.asarray(sky_part.unshadowed, dtype=np.float64))
+    sky, total = shade.raster(sky_part.irradiance, ground.irradiance, ground.grid)
+    outer, sky_outer = None, None
+    if ground.outer is not None and sky_part.outer is not None:
+        so, to = shade.raster(sky_part.outer.irradiance, ground.outer.irradiance, ground.outer.grid)
+        outer, sky_outer = GroundRaster(to, ground.outer.grid), GroundRaster(so, ground.outer.grid)
+    return replace(ground, irradiance=total, outer=outer, sky_part=replace(sky_part, irradiance=sky, outer=sky_outer))
+
+
+FAR_PIXEL = 0.25
+"""Cell of the raster that carries a wall's shadow and lost sky beyond the ground's window. [m]"""
+
+FAR_MARGIN = 40.0
+"""How far beyond the window that raster reaches; beyond it the open ground's light. [m]"""
+
+
+def far_ground(context: FrameContext, ground: GroundResult, lights: tuple[WallLight, ...]) -> mipmap.MipMap:
+    """The open ground beyond the window with the walls' shadows and lost sky, for the camera to
+    read where the window's rasters end (``FAR_PIXEL``, ``FAR_MARGIN``): no seam at the window's edge.
+
+    Parameters
+    ----------
+    context : ground.FrameContext
+        The frame.
+    ground : ground.GroundResult
+        The frame's ground, unshaded, with its ``sky_part``.
+    lights : tuple of receivers.walls.WallLight
+        The walls' light at the frame.
+
+    Returns
+    -------
+    texture.mipmap.MipMap
+        Over the window widened by ``FAR_MARGIN``; the open ground's light beyond [radiance x sr].
+    """
+    sky_part = ground.sky_part
+    if sky_part is None:
+        raise ValueError("the ground was made without its sky part (ground_of_frame(parts=True))")
+    x0, y0, x1, y1 = context.plan.window.extent
+    grid = Grid.from_window((x0 - FAR_MARGIN, y0 - FAR_MARGIN, x1 + FAR_MARGIN, y1 + FAR_MARGIN), FAR_PIXEL)
+    open_sky = np.asarray(sky_part.unshadowed, dtype=np.float64)
+    total = np.broadcast_to(np.asarray(ground.unshadowed, dtype=np.float32), grid.shape + (3,))
+    sky = np.broadcast_to(open_sky.astype(np.float32), grid.shape + (3,))
+    _, shaded = _Shade.of(context, lights, open_sky).raster(sky, total, grid)
+    return mipmap.mipmap(shaded, grid, outside="constant", value=np.asarray(ground.unshadowed, dtype=np.float32))
+
+
+@dataclass(frozen=True)
+class _Shade:
+    """What ``shade_ground`` needs at a frame: the walls, their light out, the sky's table and sun."""
+
+    walls: tuple[tuple[ReceiverPlane, np.ndarray, np.ndarray], ...]
+    table: SkyTable
+    sun: np.ndarray | None
+    open_sky: np.ndarray
+
+    @classmethod
+    def of(cls, context: FrameContext, lights: tuple[WallLight, ...], open_sky: np.ndarray) -> _Shade:
+        sky = context.sky
+        sun = np.asarray(sky.sun_direction, dtype=np.float64) if sky.sun is not None else None  # type: ignore[attr-defined]
+        albedo = albedo_mipmap(context.plan.ground).mean
+        walls = tuple((light.plane, *_wall_light_out(wall, light, sky, albedo))
+                      for wall, light in zip(context.plan.receivers.walls, lights))
+        return cls(walls, sky_table(world_radiance(sky, np.zeros(3))),
+                   sun if sun is not None and sun[2] > 0.0 else None, np.maximum(open_sky, 1e-30))
+
+    def raster(self, sky_light: np.ndarray, total: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+        """A ground raster's sky part and total (rows, cols, 3) with every wall on it, float32."""
+        sun_light = total.astype(np.float64) - sky_light
+        sky = sky_light.astype(np.float64)
+        for plane, front, back in self.walls:
+            hidden, factor, in_front = _hidden_on_grid(plane, grid, self.table)
+            sky = sky * (1.0 - hidden / self.open_sky) + np.where(in_front[..., None], front, back) * factor[..., None]
+            if self.sun is not None:
+                sun_light = sun_light * (1.0 - polygon_coverage(shadow_polygon(plane, self.sun), grid))[..., None]
+        return sky.astype(np.float32), (sky + sun_light).astype(np.float32)
+
+
+def _wall_light_out(wall: WallConfig, light: WallLight, sky: Sky,
+                    ground_albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The irradiance (3,) a wall sends a ground point per unit view factor, from its front (its
+    raster's mean) and from its back (the open back's sun and sky): albedo x its mean irradiance."""
+    if isinstance(wall.albedo, Path):
+        albedo = _albedo_image(wall.albedo).reshape(-1, 3).mean(axis=0).astype(np.float64)
+    else:
+        albedo = wall_albedo_colour(wall)
+    p = light.plane
+    behind = ReceiverPlane(p.origin, p.facing + np.pi, np.pi - p.zenith, p.width, p.height)
+    open_ground = np.asarray(sky.sky_irradiance, dtype=np.float64) + sun_irradiance(sky)  # type: ignore[attr-defined,arg-type]
+    ground = ground_radiance(ground_albedo, open_ground)
+    back = receiver_sun_irradiance(sky, behind) + hemisphere_irradiance(world_radiance(sky, ground), behind)  # type: ignore[arg-type]
+    front = light.irradiance.reshape(-1, 3).mean(axis=0).astype(np.float64)
+    return albedo * front, albedo * back
+
+
+_HIDDEN: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _hidden_on_grid(plane: ReceiverPlane, grid: Grid, table: SkyTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``hidden_sky`` at a grid's cell centres, (rows, cols, 3) and (rows, cols), and whether each
+    centre lies in front of the wall; kept for the last few (wall, grid, sky) of the process."""
+    key = (plane, grid, hashlib.sha1(table.cumulative.tobytes()).hexdigest())
+    if key not in _HIDDEN:
+        rows, cols = grid.shape
+        x = grid.origin[0] + grid.pixel * (np.arange(cols) + 0.5)
+        y = grid.origin[1] - grid.pixel * (np.arange(rows) + 0.5)
+        points = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1).reshape(-1, 2)
+        hidden, factor = hidden_sky(plane, points, table)
+        in_front = (points - np.asarray(plane.origin[:2])) @ plane.normal[:2] >= 0.0
+        if len(_HIDDEN) >= 4:
+            _HIDDEN.pop(next(iter(_HIDDEN)))
+        _HIDDEN[key] = (hidden.reshape(rows, cols, 3), factor.reshape(rows, cols), in_front.reshape(rows, cols))
+    return _HIDDEN[key]
