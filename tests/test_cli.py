@@ -311,6 +311,7 @@ def test_frame_writes_a_png_and_a_scene_linear_exr_with_metadata(inputs, capsys)
     folder, out = inputs
     config = small_camera(base_config())
     config["sky"] = {"model": "procedural", "sun": {"elevation": 40.0, "azimuth": 120.0}}
+    config["render"] = {"sun_cells": 6}  # a preview's: the sun's shadow over the window in a fifth of the time
     path = write_config(folder, config)
     assert main(["frame", str(path), "--frame", "0", "-o", str(out / "f.png")]) == 0
     assert main(["frame", str(path), "--frame", "0", "-o", str(out / "f.exr")]) == 0

@@ -11,7 +11,7 @@ import sys
 import time
 
 import pytest
-from test_run import TINY, assert_same_files, contents, run_to_end, sunshade, write_config
+from test_run import TINY, assert_same_files, contents, render_here, run_to_end, sunshade, write_config
 
 SHORT = {**TINY, "animation": {"frames": 3, "fps": 12}}
 """test_run's tiny config, three frames long: the failures come early, the resumes are short."""
@@ -32,10 +32,11 @@ def error_lines(err: str) -> list[str]:
 
 @pytest.fixture(scope="module")
 def short(tmp_path_factory):
-    """A clean run of SHORT: (config, its filled cache, the bytes every other run must give)."""
+    """A clean run of SHORT, in this process: (config, its filled cache, the bytes every other run
+    must give)."""
     folder = tmp_path_factory.mktemp("short")
     config = write_config(folder, SHORT)
-    run_to_end("render", config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
+    render_here(config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
     return config, folder / "cache", contents(folder / "run")
 
 
@@ -54,7 +55,7 @@ def test_a_full_disk_in_a_worker_is_the_one_line_of_one_process(tmp_path, short)
         assert f"{folder}/tiny.0" in lines[0] and "cannot write" in lines[0], lines
         found[jobs] = re.sub(r"\d+", "N", lines[0].replace(str(folder), "RUN"))
     assert found["1"] == found["2"]  # the same line, whatever the process it came from
-    run_to_end("render", config, "--jobs", "1", "--output", tmp_path / "run2", "--cache", cache)
+    render_here(config, "--jobs", "1", "--output", tmp_path / "run2", "--cache", cache)
     assert_same_files(tmp_path / "run2", reference)  # space back: it resumes
 
 

@@ -34,7 +34,8 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
     """``compile_loops`` (a render's command runs it while its workers make the cycle
     products) compiles every loop of the frame phase with the types a frame passes: in a
     fresh process, rendering a frame after it compiles nothing more in ``pipeline.kernels``' ``filter``, ``tiling`` or
-    ``arrays``."""
+    ``arrays``. A camera of 96 x 54 pixels: its frame runs the same 22 loops with the same types as
+    one of the default 1280 x 720 (every signature in ``pipeline.kernels`` compared), in less time."""
     code = (
         "import sys; sys.path.insert(0, 'tests')\n"
         "from pathlib import Path\n"
@@ -43,7 +44,8 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
         "from pipeline.stages.frame import compile_loops, render_frame\n"
         "from scenes import plan_of, tiny_grove\n"
         "folder = Path(sys.argv[1])\n"
-        "plan = plan_of(tiny_grove(**{'sky.clouds': {'cover': 0.4, 'scale': 300.0}}), folder)\n"
+        "plan = plan_of(tiny_grove(**{'sky.clouds': {'cover': 0.4, 'scale': 300.0},\n"
+        "                             'camera': {'resolution': [96, 54]}}), folder)\n"
         "compile_loops(plan)\n"
         "loops = [f for m in (_filter, _tiling, _array_loops) for f in vars(m).values() if hasattr(f, 'signatures')]\n"
         "before = {f.__name__: len(f.signatures) for f in loops}\n"

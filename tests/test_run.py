@@ -63,6 +63,12 @@ def run_to_end(*args) -> str:
     return out
 
 
+def render_here(*args) -> None:
+    """``sunshade render`` in this process, for a run whose own process is not what a test is
+    about (a reference, a resume): a process of its own costs seconds of imports and warm-up."""
+    assert main(["render", *map(str, args)]) == 0
+
+
 def assert_same_files(folder: Path, expected: dict) -> None:
     """The run folder holds exactly the expected frame and video files, byte for byte."""
     found = contents(folder)
@@ -80,10 +86,11 @@ def contents(folder: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """An uninterrupted run with one job: the bytes every other run must reproduce."""
+    """An uninterrupted run with one job: the bytes every other run must reproduce (made in this
+    process; the runs held to it are other processes)."""
     folder = tmp_path_factory.mktemp("reference")
     config = write_config(folder)
-    run_to_end("render", config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
+    render_here(config, "--jobs", "1", "--output", folder / "run", "--cache", folder / "cache")
     return config, contents(folder / "run")
 
 
@@ -109,13 +116,14 @@ def test_a_run_writes_every_frame_the_video_and_run_json(reference):
     assert len(frames) == 8 and frames[0].shape[:2] == (64, 96)
 
 
-def test_the_video_made_while_rendering_is_the_one_made_from_the_pngs(reference, tmp_path):
+def test_the_video_made_while_rendering_is_the_one_made_from_the_pngs(reference, tmp_path, capsys):
     config, files = reference
     run, cache = tmp_path / "run", config.parent / "cache"
     shutil.copytree(config.parent / "run", run)  # the reference run's frames and video, as written
     (run / "tiny.mp4").unlink()
-    out = run_to_end("render", config, "--output", run, "--cache", cache)
-    assert "0 frames rendered, 8 already done" in out  # the video alone, from the PNGs
+    capsys.readouterr()
+    render_here(config, "--output", run, "--cache", cache)
+    assert "0 frames rendered, 8 already done" in capsys.readouterr().out  # the video alone, from the PNGs
     assert_same_files(run, files)
 
 
@@ -137,7 +145,7 @@ def test_a_second_run_has_nothing_to_do(reference, capsys):
     assert record["config"]["ground"]["window"] == pytest.approx([-4, -4, 4, 4])
 
 
-def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
+def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path, capsys):
     """A site, a time and ``turbidity: auto``: the first run resolves the config (the ephemeris
     checks the sun, pvlib looks the turbidity up) and records the hash of the config as
     written; a resume with nothing to do reads the resolved hash beside it and imports neither
@@ -148,7 +156,7 @@ def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
     config = write_config(tmp_path, {**TINY, "sky": sky, "animation": {"frames": 2, "fps": 12},
                                      "output": {"video": "none"}})
     run, cache = tmp_path / "run", tmp_path / "cache"
-    run_to_end("render", config, "--output", run, "--cache", cache, "--jobs", "1")  # no workers to start
+    render_here(config, "--output", run, "--cache", cache, "--jobs", "1")  # the resume below: a fresh process
     record = json.loads((run / "run.json").read_text())
     assert record["config"]["sky"]["turbidity"] > 1 and record["source_hash"] != record["config_hash"]
     code = ("import sys; from pipeline.cli.main import main; main(sys.argv[1:]); "
@@ -159,7 +167,9 @@ def test_a_resume_with_nothing_to_do_resolves_nothing(tmp_path):
     assert "0 frames rendered, 2 already done" in again and again.strip().endswith("[]"), again
     assert json.loads((run / "run.json").read_text())["source_hash"] == record["source_hash"]
     config.write_text(config.read_text().replace("17:24:15Z", "17:25:15Z"))  # a new span
-    assert "2 frames rendered" in run_to_end("render", config, "--output", run, "--cache", cache, "--jobs", "1")
+    capsys.readouterr()
+    render_here(config, "--output", run, "--cache", cache, "--jobs", "1")
+    assert "2 frames rendered" in capsys.readouterr().out
 
 
 def kill_when(process, ready, *, timeout=120.0) -> bool:
@@ -206,7 +216,7 @@ def test_killed_and_resumed_run_ends_with_the_same_bytes(reference, tmp_path, na
     killed = kill_when(process, lambda: ready(run, cache))
     assert killed, f"the run ended before the kill point: {process.stderr.read()}"
     other = "1" if jobs == "2" else "2"
-    run_to_end("render", config, "--jobs", other, "--output", run, "--cache", cache)
+    render_here(config, "--jobs", other, "--output", run, "--cache", cache)  # the same command again
     assert_same_files(run, files)
     assert not list(run.glob(".*.tmp-*"))
 
@@ -236,8 +246,8 @@ def test_a_changed_config_renders_again_only_what_it_changes(reference, tmp_path
 
 def test_preview_is_small_and_apart(reference, tmp_path):
     config, _files = reference
-    run_to_end("render", config, "--preview", "--frames", "0-1", "--output", tmp_path / "run",
-               "--cache", tmp_path / "cache", "--jobs", "1")
+    render_here(config, "--preview", "--frames", "0-1", "--output", tmp_path / "run",
+                "--cache", tmp_path / "cache", "--jobs", "1")
     image = io.read_image(tmp_path / "run" / "preview" / "tiny.0000.png")
     assert image.shape[:2] == (16, 24)
     assert not list((tmp_path / "run").glob("tiny.*"))
