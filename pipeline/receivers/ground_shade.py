@@ -24,7 +24,23 @@ _CHUNK = 1 << 15  # ground points per pass of ``hidden_sky`` [count]
 
 
 def wall_corners(plane: ReceiverPlane) -> np.ndarray:
-    """The four world corners (4, 3) of a wall, in order round its edge [m]."""
+    """The four world corners of a wall, in order round its edge.
+
+    Parameters
+    ----------
+    plane : ReceiverPlane
+        A bounded receiver plane (a wall) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (4, 3) the foot's two corners, then the top's [m].
+
+    Raises
+    ------
+    ValueError
+        For an unbounded plane.
+    """
     if plane.width is None or plane.height is None:
         raise ValueError("an unbounded plane has no corners")
     half, top = plane.width / 2.0, plane.height
