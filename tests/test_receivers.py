@@ -449,7 +449,9 @@ def test_check_lists_each_wall_with_its_sun_and_bound(tmp_path, capsys):
 
 @pytest.mark.parametrize("change, message", [
     ({"receivers.slope": {"tilt": 20.0, "facing": 180.0}}, "receivers.slope: a slope is not drawn yet"),
-    ({"output": {"passes": ["sun"]}}, "output.passes: the light passes are not made with walls yet")])
+    ({"output": {"passes": ["sun"]}}, "output.passes: the light passes are not made with walls yet"),
+    ({"receivers.walls": [{"foot": [0.0, 0.0], "facing": 270.0, "width": 3.0, "height": 2.0}]},
+     "receivers.walls[0].foot: wall 'wall0' stands through the trunk of the tree at (0.0, 0.0) m")])
 def test_what_walls_cannot_be_drawn_with_is_refused_before_anything_is_written(tmp_path, capsys, change, message):
     from scenes import write_config
 
@@ -470,6 +472,77 @@ def test_what_walls_cannot_be_drawn_with_is_refused_before_anything_is_written(t
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, err
         assert list(out.iterdir()) == []
+
+
+def test_a_segments_distance_to_a_wall_is_the_brute_force_least():
+    """``wall_distance`` against the least distance between dense points on the segment and on the
+    (leaning, raised) rectangle."""
+    from pipeline.receivers.plane import wall_distance
+
+    plane = wall((0.5, -1.0, 0.3), facing=200 * DEG, width=3.0, height=2.0, tilt=20 * DEG)
+    rng = np.random.default_rng(5)
+    start, end = rng.uniform(-3, 3, (5, 3)), rng.uniform(-3, 3, (5, 3))
+    start[0], end[0] = plane.world_points([(0.3, 1.0, -1.0), (0.5, 0.8, 1.0)])  # through the wall: 0
+    u, w = np.meshgrid(np.linspace(-1.5, 1.5, 151), np.linspace(0.0, 2.0, 101))
+    rectangle = plane.world_points(np.stack([u.ravel(), w.ravel(), 0 * u.ravel()], axis=-1))
+    t = np.linspace(0.0, 1.0, 201)[:, None, None]
+    got = wall_distance(plane, start, end)
+    assert got[0] < 1e-9
+    for a, b, least in zip(start, end, got):
+        brute = np.min(np.linalg.norm(rectangle[None] - (a + t * (b - a)), axis=-1))
+        assert least <= brute + 1e-9 and least == pytest.approx(brute, abs=0.02)  # the grids' spacing
+
+
+def test_walls_that_cross_are_told_from_walls_that_meet_at_an_edge():
+    from pipeline.receivers.plane import walls_cross
+
+    south = wall((0.0, 0.0, 0.0), facing=180 * DEG, width=4.0, height=2.0)  # x from -2 to 2 on y = 0
+    east = lambda foot, **k: wall(foot, facing=90 * DEG, **{"width": 2.0, "height": 2.0, **k})  # noqa: E731
+    assert walls_cross(south, east((0.0, 0.0, 0.0)), margin=1e-3)  # an X
+    assert walls_cross(south, east((0.0, 0.99, 0.0)), margin=1e-3)  # a T 1 cm through
+    assert walls_cross(south, wall((0.0, 1.0, 0.0), facing=0.0, width=3.0, height=3.0, tilt=40 * DEG),
+                       margin=1e-3)  # a wall 1 m north leaning back over it
+    assert not walls_cross(south, east((0.0, 1.0, 0.0)), margin=1e-3)  # a T: an end against the face
+    assert not walls_cross(south, east((2.0, 1.0, 0.0)), margin=1e-3)  # an L: a corner
+    assert not walls_cross(south, east((0.0, 0.0, 2.0)), margin=1e-3)  # standing on its top edge
+
+
+@pytest.mark.parametrize("change, key, message", [
+    ({"walls": [{"foot": [0.0, 0.0]}]}, "receivers.walls[0].foot", "wall 'wall0' stands through the trunk"),
+    ({"walls": [{}, {"foot": [2.0, 0.0], "facing": 0.0}]}, "receivers.walls[1]",
+     "wall 'wall1' passes through wall 'wall0'"),
+    ({"camera": [2.0, 0.5, 1.0]}, "camera.position", "the camera stands in wall 'wall0'"),
+    ({"camera": [4.0, 0.2, 1.5]}, "camera.position", "the camera is behind wall 'wall0' (receivers.walls[0]) "
+                                                      "and sees its back")])
+def test_a_wall_through_a_trunk_a_wall_or_the_camera_is_one_line_naming_the_key(tmp_path, change, key, message):
+    """The tree stands at the origin (trunk radius 0.15 to 0.25 m); the wall 2 m east faces west."""
+    from scenes import plan_of
+
+    config = wall_scene()
+    base = config["receivers"]["walls"][0]
+    config["receivers"]["walls"] = [{**base, **w, "name": f"wall{i}"} for i, w in enumerate(change.get("walls", [{}]))]
+    if "camera" in change:
+        config["camera"] = {"position": change["camera"], "look_at": [0.0, 0.0, 1.0], "resolution": [64, 48]}
+    with pytest.raises(ConfigError) as error:
+        plan_of(config, tmp_path)
+    text = str(error.value)
+    assert len(text.splitlines()) == 1 and f"{key}: {message}" in text, text
+
+
+@pytest.mark.parametrize("change", [
+    {"foot": [0.5, 0.0]},  # 0.5 m from the trunk's axis
+    {"camera": {"position": [4.0, 0.2, 1.5], "look_at": [8.0, 0.0, 1.0]}},  # behind the wall, looking away
+    {"camera": {"position": [-3.0, 0.5, 1.5], "look_at": [2.0, 0.0, 1.0]}},  # in front of it
+    {"second": {"foot": [1.0, 1.5], "facing": 180.0, "width": 2.0}}])  # an L at the wall's north end
+def test_a_wall_clear_of_the_trunk_and_a_camera_that_cannot_see_its_back_are_planned(tmp_path, change):
+    from scenes import plan_of
+
+    config = wall_scene(**{key: value for key, value in change.items() if key == "foot"})
+    if "camera" in change:
+        config["camera"] = {**change["camera"], "resolution": [64, 48]}
+    if "second" in change:
+        config["receivers"]["walls"].append({**config["receivers"]["walls"][0], "name": "wall1", **change["second"]})
+    assert plan_of(config, tmp_path).receivers.walls
 
 
 # --- a wall on the ground: its sun shadow and the sky it hides (docs/method.md, "A wall on the ground")

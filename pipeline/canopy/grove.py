@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 from pipeline.core.geometry import normalized
 
 __all__ = ["GroveParams", "FlutterParams", "Leaves", "Wood", "Grove", "Shapes", "grow_grove", "leaves_at", "project",
-           "layer_index", "shapes_bounds", "grove_bounds"]
+           "layer_index", "shapes_bounds", "grove_bounds", "trunks"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -492,3 +492,29 @@ def grove_bounds(grove: Grove, flutter: FlutterParams | None = None, *, sun: Arr
                     sun=s, plane_height=plane_height)
     disc = np.column_stack([reach, np.zeros_like(reach)])
     return shapes_bounds(Shapes(stems.center, disc, disc[:, ::-1], stems.start, stems.end, stems.radius))
+
+
+def trunks(grove: Grove) -> Wood:
+    """The trunks of a grove at rest: the chain of wood segments that runs up from each foot.
+
+    Each trunk's segments join end to start exactly (``grow_grove``); a branch starts between
+    the trunk's knots, so the chain from a foot holds the trunk alone.
+
+    Parameters
+    ----------
+    grove : Grove
+        The grove.
+
+    Returns
+    -------
+    Wood
+        The trunks' segments, foot first, tree by tree [m].
+    """
+    wood, chosen = grove.wood, []
+    for base in grove.bases:
+        at = np.flatnonzero(np.all(wood.start == base, axis=1))
+        while len(at):
+            chosen.append(at[0])
+            at = np.flatnonzero(np.all(wood.start == wood.end[at[0]], axis=1))
+    index = np.array(chosen, dtype=np.intp)
+    return Wood(wood.start[index], wood.end[index], wood.radius[index])

@@ -15,20 +15,17 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pipeline.camera.pinhole import MIN_UPWARD
 from pipeline.core.geometry import Grid, projected_solid_angle
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.sky.base import Sky
 from pipeline.sky.raster import SkyRaster
 
-__all__ = ["Radiance", "LOWEST_SKY_COSINE", "CELL_NODES", "HEMISPHERE_NODES", "ground_radiance", "world_radiance",
+__all__ = ["Radiance", "CELL_NODES", "HEMISPHERE_NODES", "ground_radiance", "world_radiance",
            "hemisphere_raster", "hemisphere_irradiance"]
 
 Radiance = Callable[[np.ndarray], np.ndarray]
 """The light around a receiver: world unit directions (..., 3) -> (..., 3) radiance [radiance]."""
-
-LOWEST_SKY_COSINE = 1e-3
-"""A sky direction closer to the horizon is read at this z (its sky-plane point held finite), as the
-camera reads the sky (camera.pinhole.MIN_UPWARD). [1]"""
 
 CELL_NODES = 2
 """Gauss-Legendre nodes per cell side at which ``hemisphere_raster`` reads the radiance. [count]"""
@@ -85,7 +82,7 @@ def world_radiance(sky: Sky, ground: ArrayLike) -> Radiance:
         out[~up] = below
         w = d[up]
         if len(w):
-            z = np.maximum(w[:, 2], LOWEST_SKY_COSINE)
+            z = np.maximum(w[:, 2], MIN_UPWARD)  # the sky read near the horizon as the camera reads it
             w = np.column_stack([w[:, :2] * (np.sqrt(1.0 - z * z) / np.maximum(np.hypot(w[:, 0], w[:, 1]), 1e-300))
                                  [:, None], z])
             out[up] = sky.view_radiance(w, w[:, :2] / w[:, 2:])

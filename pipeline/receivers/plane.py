@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 
 from pipeline.core.errors import ConfigError
 
-__all__ = ["ReceiverPlane", "wall", "slope", "level_ground"]
+__all__ = ["ReceiverPlane", "wall", "slope", "level_ground", "wall_distance", "wall_crossings", "walls_cross"]
 
 
 @dataclass(frozen=True)
@@ -203,3 +203,96 @@ def level_ground() -> ReceiverPlane:
         The plane z = 0.
     """
     return ReceiverPlane((0.0, 0.0, 0.0), np.pi, 0.0)
+
+
+def wall_distance(plane: ReceiverPlane, start: ArrayLike, end: ArrayLike) -> np.ndarray:
+    """The least distance of each segment to a wall's rectangle.
+
+    The distance to a convex set is convex along a segment: a golden-section search finds its
+    least to 1e-12 of the segment's length.
+
+    Parameters
+    ----------
+    plane : ReceiverPlane
+        A wall (with its width and height).
+    start, end : numpy.ndarray
+        (..., 3) the segments' world ends; equal ends for points [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 [m].
+    """
+    assert plane.width is not None and plane.height is not None
+    a, b = plane.local_points(start), plane.local_points(end)
+    low, high = np.array([-plane.width / 2, 0.0]), np.array([plane.width / 2, plane.height])
+
+    def distance(t: np.ndarray) -> np.ndarray:
+        p = a + t[..., None] * (b - a)
+        return np.hypot(np.linalg.norm(p[..., :2] - np.clip(p[..., :2], low, high), axis=-1), p[..., 2])
+
+    lo, hi = np.zeros(a.shape[:-1]), np.ones(a.shape[:-1])
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(60):
+        t1, t2 = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
+        nearer = distance(t1) < distance(t2)
+        hi, lo = np.where(nearer, t2, hi), np.where(nearer, lo, t1)
+    return np.minimum(distance((lo + hi) / 2), np.minimum(distance(0 * lo), distance(0 * lo + 1)))
+
+
+def wall_crossings(plane: ReceiverPlane, start: ArrayLike, end: ArrayLike, *, margin: float = 0.0) -> np.ndarray:
+    """Whether each segment passes through a wall's rectangle, shrunk by ``margin`` from its edges.
+
+    Parameters
+    ----------
+    plane : ReceiverPlane
+        A wall (with its width and height).
+    start, end : numpy.ndarray
+        (..., 3) the segments' world ends [m].
+    margin : float, optional
+        How far inside the wall's edges the crossing must be [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) bool: the segment's ends lie on the two sides of the wall's plane and it meets the
+        plane inside the shrunk rectangle.
+    """
+    assert plane.width is not None and plane.height is not None
+    a, b = plane.local_points(start), plane.local_points(end)
+    sides = (a[..., 2] * b[..., 2] <= 0) & (a[..., 2] != b[..., 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = a[..., 2] / (a[..., 2] - b[..., 2])
+    p = a + np.where(sides, t, 0.0)[..., None] * (b - a)
+    return (sides & (np.abs(p[..., 0]) < plane.width / 2 - margin) & (p[..., 1] > margin)
+            & (p[..., 1] < plane.height - margin))
+
+
+def walls_cross(first: ReceiverPlane, second: ReceiverPlane, *, margin: float) -> bool:
+    """Whether two walls pass through each other, more than ``margin`` inside both: walls that meet
+    at an edge (a corner, a wall's end against another's face) do not cross.
+
+    Each wall shrunk by ``margin`` is tested against the other's edges shrunk by twice that: two
+    rectangles in planes that are not parallel cross where an edge of one pierces the other (walls
+    in one plane are not tested).
+
+    Parameters
+    ----------
+    first, second : ReceiverPlane
+        Two walls (with their widths and heights).
+    margin : float
+        How far inside both the crossing must be [m].
+
+    Returns
+    -------
+    bool
+        True where they cross.
+    """
+    def edges(plane: ReceiverPlane, inset: float) -> tuple[np.ndarray, np.ndarray]:
+        assert plane.width is not None and plane.height is not None
+        u, w = plane.width / 2 - inset, (inset, plane.height - inset)
+        corners = plane.world_points([(-u, w[0], 0.0), (u, w[0], 0.0), (u, w[1], 0.0), (-u, w[1], 0.0)])
+        return corners, np.roll(corners, -1, axis=0)
+
+    return any(bool(np.any(wall_crossings(b, *edges(a, 2 * margin), margin=margin)))
+               for a, b in ((first, second), (second, first)))

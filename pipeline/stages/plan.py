@@ -26,6 +26,9 @@ from pipeline.core import io
 from pipeline.core.errors import ConfigError
 from pipeline.core.geometry import Grid, sky_plane_from_direction
 from pipeline.ground import shadow
+from pipeline.receivers.plane import wall_distance, walls_cross
+from pipeline.receivers.view import wall_hits
+from pipeline.receivers.walls import wall_plane
 from pipeline.stages.framing import AUTO_SUN_MASK, Framing, frame_scene
 from pipeline.stages.inputs import albedo_mipmap, grove_of, load_mask
 from pipeline.stages.resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
@@ -36,7 +39,11 @@ if TYPE_CHECKING:
     from pipeline.sky.models import SkyModel
     from pipeline.sky.sun_disc import SunDisc
 
-__all__ = ["LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
+__all__ = ["WALL_CLEARANCE", "LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
+
+WALL_CLEARANCE = 1e-3
+"""How far a camera must stand from a wall, and two walls must reach past each other's edges to
+cross (walls that meet at an edge do not). [m]"""
 
 
 @dataclass(frozen=True)
@@ -288,6 +295,7 @@ def plan_run(config: Config) -> RunPlan:
                    config.path, follow, config.receivers)
     _check_sizes(config, plan)
     _check_receivers(config)
+    _check_walls(config, plan)
     return plan
 
 
@@ -303,6 +311,35 @@ def _check_receivers(config: Config) -> None:
     if r.walls and config.output.passes:
         raise ConfigError(config.where("output.passes"), "the light passes are not made with walls yet; "
                           "give one or the other")
+
+
+def _check_walls(config: Config, plan: RunPlan) -> None:
+    """Refuse walls the method cannot separate from what they meet: one through a tree's trunk, one
+    through another, a given camera in a wall or behind one seeing its back (docs/method.md, "Receivers:
+    walls and slopes"). Raises ConfigError."""
+    walls = config.receivers.walls
+    keys = [f"receivers.walls[{i}]" for i in range(len(walls))]
+    planes = [wall_plane(w, key) for w, key in zip(walls, keys)]
+    trunks = grove_geometry.trunks(grove_of(config.canopy)[0]) if walls and config.canopy.trees else None
+    # a given camera (the automatic one is placed by framing, which does not look for walls yet)
+    cameras = [plan.camera] + [view for view, _ in plan.follow or ()] if "camera" not in plan.auto else []
+    for i, (w, key, plane) in enumerate(zip(walls, keys, planes)):
+        if trunks is not None:
+            inside = np.flatnonzero(wall_distance(plane, trunks.start, trunks.end) < trunks.radius)
+            if len(inside):
+                x, y = (round(float(v), 2) for v in trunks.start[inside[0], :2])
+                raise ConfigError(config.where(f"{key}.foot"), f"wall {w.name!r} stands through the trunk of "
+                                  f"the tree at ({x}, {y}) m: move the wall or the trees")
+        for other, plane_other, key_other in zip(walls[:i], planes, keys):
+            if walls_cross(plane, plane_other, margin=WALL_CLEARANCE):
+                raise ConfigError(config.where(key), f"wall {w.name!r} passes through wall {other.name!r} "
+                                  f"({key_other}): walls may meet at an edge, not cross")
+        for camera in cameras:
+            if wall_distance(plane, camera.position, camera.position) < WALL_CLEARANCE:
+                raise ConfigError(config.where("camera.position"), f"the camera stands in wall {w.name!r} ({key})")
+            if plane.local_points(camera.position)[2] < 0 and wall_hits(camera, plane, samples=1).hit.any():
+                raise ConfigError(config.where("camera.position"), f"the camera is behind wall {w.name!r} ({key}) "
+                                  "and sees its back, which is not drawn: move it to the side the wall faces")
 
 
 def _nearest(follow: tuple[tuple[int, Camera], ...], frame: int) -> Camera:
