@@ -7,11 +7,12 @@ that version's bits.
 The filtering's method is the one documented in ``mipmap.sample_footprint`` and ``albedo``:
 these loops do it footprint by footprint, every tap of a footprint in turn, with the same float32 arithmetic
 and the same order of operations as the array version (tests/reference.py's ``_tap_mean``, ``_bilinear``), so
-that no per-tap arrays are built and the footprints need not be grouped and sorted by level.
+that the footprints need not be grouped and sorted by level.
 The tap counts, levels and blends come from ``mipmap.filter_choice`` (here ``filter_choice``), computed once
-for all the reads that share a footprint. A still camera reads each frame's raster at the same places:
-``tap_table`` finds them once and ``filtered3_at`` reads there (the same bits; docs/accuracy.md, "A still
-camera's taps"). Imported lazily: numba costs 0.3 s to import.
+for all the reads that share a footprint. Three channels: ``tap_table`` finds where the taps fall and
+``filtered3_at`` reads there; a still camera reads each frame's raster at the same places, so that it finds
+them once (the same bits; docs/accuracy.md, "A still camera's taps"). Imported lazily: numba costs 0.3 s to
+import.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
     return ((r0 * (cols + 2) + c0) + offset + cols + 3) * channels, fc, fr
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _bilinear(flat, first, channels, step, k, fc, fr):
     """Channel ``k`` of the bilinear sample whose first texel is ``first`` (``_first_texel``),
     ``step`` the flat stride of a stored row: tests/reference.py's ``_bilinear`` float32 arithmetic, each
@@ -99,11 +100,12 @@ def filtered(flat: np.ndarray, channels: int, offsets: np.ndarray, shapes: np.nd
     Read r is centred on (x[r], y[r]) with the ellipse and filter of footprint j = footprint[r]
     (several reads may share one: the stochastic tiling's); read r takes taps[j] trilinear samples
     (tests/reference.py's ``_tap_mean``, the same float32 arithmetic in the same order), in level level[j]
-    blended by blend[j] towards the next when > 0. The body is written out in full for three
-    channels (a helper function that returns the three means, even inlined, ran three times
-    slower) and channel by channel otherwise, in two compiled loops (``_filtered3`` and
-    ``_filtered_channels``): a run compiles the one it uses. The reads are shared among the threads
-    of ``cores.loop_threads``.
+    blended by blend[j] towards the next when > 0. Three channels: where the taps fall first
+    (``tap_table``), then read there (``filtered3_at``), the same bits as reading each tap as it is
+    found; the loops that a still camera's later frames run anyway, so that a run compiles no loop
+    of its own for its first frame (docs/accuracy.md, "Compiling after an install"). Other counts
+    of channels: channel by channel (``_filtered_channels``). The reads are shared among the
+    threads of ``cores.loop_threads``.
 
     Parameters
     ----------
@@ -139,9 +141,16 @@ def filtered(flat: np.ndarray, channels: int, offsets: np.ndarray, shapes: np.nd
     out : numpy.ndarray
         (channels, m) float32, written: the reads' means, in the raster's units.
     """
-    loop = _filtered3 if channels == 3 else _filtered_channels
-    in_shares(x.shape[0], lambda start, stop: loop(flat, channels, offsets, shapes, origins, pixels, periodic, x, y,
-                                                   footprint, major, ex, ey, taps, level, blend, out, start, stop))
+    if channels == 3:  # each read's footprint's values gathered: read r is footprint r, as tap_table takes them
+        read_taps, read_level, read_blend = taps[footprint], level[footprint], blend[footprint]
+        kept = tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major[footprint], ex[footprint],
+                         ey[footprint], read_taps, read_level, read_blend)
+        in_shares(x.shape[0], lambda start, stop: filtered3_at(flat, shapes, read_taps, read_level, read_blend, *kept,
+                                                               out, start, stop))
+        return
+    in_shares(x.shape[0], lambda start, stop: _filtered_channels(
+        flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps, level, blend,
+        out, start, stop))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -170,7 +179,7 @@ def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major,
             step, stepb, nf)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _blend3(s0, s1, s2, u0, u1, u2, t):
     """The three channels of a tap read at two mip levels, blended by t (float32 in, float32 out)."""
     s0 += (u0 - s0) * t
@@ -179,7 +188,7 @@ def _blend3(s0, s1, s2, u0, u1, u2, t):
     return s0, s1, s2
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _add_tap3(i, t0, t1, t2, s0, s1, s2):
     """The running sum of a pixel's taps after tap i (the first tap starts it, as the loops did)."""
     if i == 0:
@@ -187,35 +196,12 @@ def _add_tap3(i, t0, t1, t2, s0, s1, s2):
     return t0 + s0, t1 + s1, t2 + s2
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _store_mean3(out, r, t0, t1, t2, nf):
     """Row r of out (3, n) set to the taps' sums over their count nf."""
     out[0, r] = t0 / nf
     out[1, r] = t1 / nf
     out[2, r] = t2 / nf
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _filtered3(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps,
-               level, blend, out, start, stop):
-    """``filtered`` of three channels, reads start to stop - 1."""
-    for r in range(start, stop):
-        (t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb, offb,
-         step, stepb, nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex, ey, taps,
-                                  level, blend)
-        col, row, colb, rowb = col0, row0, colb0, rowb0
-        t0 = t1 = t2 = np.float32(0.0)
-        for i in range(n):
-            s0, s1, s2 = _bilinear3(flat, off, rows, cols, periodic, col, row, step)
-            col += dcol
-            row += drow
-            if blended:
-                u0, u1, u2 = _bilinear3(flat, offb, rowsb, colsb, periodic, colb, rowb, stepb)
-                colb += dcolb
-                rowb += drowb
-                s0, s1, s2 = _blend3(s0, s1, s2, u0, u1, u2, t)
-            t0, t1, t2 = _add_tap3(i, t0, t1, t2, s0, s1, s2)
-        _store_mean3(out, r, t0, t1, t2, nf)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -310,11 +296,10 @@ def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footp
 def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: np.ndarray, blend: np.ndarray,
                  start: np.ndarray, first: np.ndarray, fc: np.ndarray, fr: np.ndarray, out: np.ndarray, begin: int,
                  end: int) -> None:
-    """``_filtered3`` of read r = footprint r, its samples where ``tap_table`` found them: the same
-    float32 arithmetic in the same order, the same bits (a still camera reads the same places of
-    each frame's raster, so the places are found once). Its blend and sums are written out as
-    ``_filtered3``'s: the two sharing an inlined helper for them made ``_filtered3`` a quarter to
-    a half slower (921,600 random reads: 103 to 111 ms, 134 to 158 with the helper).
+    """``filtered`` of three channels, read r = footprint r, its samples where ``tap_table`` found
+    them: tests/reference.py's ``_tap_mean`` float32 arithmetic in the same order, each tap's
+    bilinear sample (``_bilinear``) blended towards the next level's (a still camera reads the
+    same places of each frame's raster, so the places are found once).
 
     Parameters
     ----------
@@ -335,27 +320,21 @@ def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: 
         nf = np.float32(n)
         k = start[r]
         t0 = t1 = t2 = np.float32(0.0)
+        # the channels as int64, not literals: numba compiles a helper once per literal argument
+        c0, c1, c2 = np.int64(0), np.int64(1), np.int64(2)
         for i in range(n):
             f, c, w = first[k], fc[k], fr[k]
-            s0, s1, s2 = (_bilinear(flat, f, 3, step, 0, c, w), _bilinear(flat, f, 3, step, 1, c, w),
-                          _bilinear(flat, f, 3, step, 2, c, w))
+            s0, s1, s2 = (_bilinear(flat, f, 3, step, c0, c, w), _bilinear(flat, f, 3, step, c1, c, w),
+                          _bilinear(flat, f, 3, step, c2, c, w))
             k += 1
             if blended:
                 f, c, w = first[k], fc[k], fr[k]
-                u0, u1, u2 = (_bilinear(flat, f, 3, stepb, 0, c, w), _bilinear(flat, f, 3, stepb, 1, c, w),
-                              _bilinear(flat, f, 3, stepb, 2, c, w))
+                u0, u1, u2 = (_bilinear(flat, f, 3, stepb, c0, c, w), _bilinear(flat, f, 3, stepb, c1, c, w),
+                              _bilinear(flat, f, 3, stepb, c2, c, w))
                 k += 1
                 s0, s1, s2 = _blend3(s0, s1, s2, u0, u1, u2, t)
             t0, t1, t2 = _add_tap3(i, t0, t1, t2, s0, s1, s2)
         _store_mean3(out, r, t0, t1, t2, nf)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _bilinear3(flat, off, rows, cols, periodic, col, row, step):
-    """The three channels of the bilinear sample at (col, row) of the level at ``off``."""
-    f, fc, fr = _first_texel(3, off, rows, cols, periodic, col, row)
-    return (_bilinear(flat, f, 3, step, 0, fc, fr), _bilinear(flat, f, 3, step, 1, fc, fr),
-            _bilinear(flat, f, 3, step, 2, fc, fr))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

@@ -43,7 +43,7 @@ _SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
 """``albedo.SECOND_KEY``."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x, read_y, read_pixel,
           read_weight):
     """Appends the read of vertex (va, vb) of weight w for footprint j at (x, y) [m] when
@@ -97,7 +97,7 @@ def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: flo
     """
     root3 = np.sqrt(3.0)
     seed_key = _seed_key(seed)
-    count = 0
+    count = np.int64(0)  # not a literal 0: numba would compile _read once more for it
     for j in range(x.shape[0]):
         a = x[j] / cell
         b = y[j] / cell
@@ -130,10 +130,10 @@ def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: flo
                       read_pixel, read_weight)
         count = _read(count, j, w2, a2, b2, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
                       read_pixel, read_weight)
-    return count
+    return int(count)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _component(lookups, lv, up, k, g, norm, tb):
     """Component k mapped back from the Gaussian g through the lookups of levels lv and up,
     blended by tb (``tiling_lookup``)."""
@@ -165,15 +165,15 @@ def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, looku
         lv = int(level[j])
         up = min(lv + 1, last)
         tb = np.float64(blend[j])
-        c0 = _component(lookups, lv, up, 0, g0, norm, tb)
-        c1 = _component(lookups, lv, up, 1, g1, norm, tb)
-        c2 = _component(lookups, lv, up, 2, g2, norm, tb)
+        # the components as int64, not literals: numba compiles a helper once per literal argument
+        c0 = _component(lookups, lv, up, np.int64(0), g0, norm, tb)
+        c1 = _component(lookups, lv, up, np.int64(1), g1, norm, tb)
+        c2 = _component(lookups, lv, up, np.int64(2), g2, norm, tb)
         for m in range(3):
             value = center[m] + (((0.0 + c0 * basis[m, 0]) + c1 * basis[m, 1]) + c2 * basis[m, 2])
             out[m, j] = np.float32(value if not value < 0.0 else 0.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
 def tiling_lookup(values: np.ndarray, read_pixel: np.ndarray, read_weight: np.ndarray, weight: np.ndarray,
                   level: np.ndarray, blend: np.ndarray, lookups: np.ndarray, center: np.ndarray, basis: np.ndarray,
                   out: np.ndarray) -> None:
@@ -182,7 +182,9 @@ def tiling_lookup(values: np.ndarray, read_pixel: np.ndarray, read_weight: np.nd
     The reads' means, footprint by footprint (``tiling_reads``' order), are summed by weight into
     the footprint's Gaussian g, divided by the root of the sum of its squared weights, mapped back
     through the inverse lookups of its level and the next, blended by ``blend``, and out of the
-    principal axes, held at 0 or more.
+    principal axes, held at 0 or more. Three channels in scalars (``_tiling_lookup3``), others in
+    ``_tiling_lookup_channels``: a run compiles the one it uses (docs/accuracy.md, "Compiling after an
+    install").
 
     Parameters
     ----------
@@ -207,12 +209,16 @@ def tiling_lookup(values: np.ndarray, read_pixel: np.ndarray, read_weight: np.nd
     out : numpy.ndarray
         (channels, n) float32, written: the albedo [1].
     """
+    loop = _tiling_lookup3 if out.shape[0] == 3 else _tiling_lookup_channels
+    loop(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _tiling_lookup_channels(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
+    """``tiling_lookup`` of any count of channels."""
     channels, n = out.shape
     bins, last = lookups.shape[2], lookups.shape[0] - 1
     reads = values.shape[1]
-    if channels == 3:
-        _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
-        return
     g = np.empty(channels, dtype=np.float64)
     comp = np.empty(channels, dtype=np.float64)
     r = 0

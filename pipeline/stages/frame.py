@@ -522,8 +522,8 @@ def compile_loops(plan: RunPlan) -> None:
         maps = (mipmap.mipmap(empty, plan.window, outside="constant", value=np.full(3, np.nan)),
                 mipmap.mipmap(empty, plan.window, outside="constant", value=np.zeros(3)))
         sky = plan.sky.at(plan.scenes[0])
-        for _ in range(2):  # the second read of the same view compiles the kept taps' loops (mipmap.filtered_read)
-            background, _ = pinhole.background(tiny, irradiance=maps, albedo=_stand_in_albedo(), sky=sky)
+        # one read compiles the kept taps' loops too: a first read finds its taps as the later ones read them
+        background, _ = pinhole.background(tiny, irradiance=maps, albedo=_stand_in_albedo(), sky=sky)
         share = np.ones((tiny.height, tiny.width, 1), dtype=np.float32)
         share.flags.writeable = False  # as _haze_of_view's
         _apply_haze(background, share, share, pinhole.horizon_sky(tiny, sky))
