@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.sky import daylight, eclipse, ephemeris
 from pipeline.sky.procedural import ProceduralSky
-from pipeline.sky.sun_disc import MoonDisc, SunDisc
+from pipeline.sky.sun_disc import MoonDisc, SunDisc, angle_to
 from pipeline.sky.sun_kernel import sun_irradiance
 from pipeline.stages.lighting import open_ground_light
 from pipeline.stages.resolve import load
@@ -90,13 +90,23 @@ SITES = (
 """The calibration sites (docs/method.md, "The eclipse sky"): the first two fix the constants."""
 
 
+def uncovered(sky: ProceduralSky) -> float:
+    """u, the sun's uncovered area fraction (1 - ``ephemeris.obscured_fraction``) that the sky's
+    deep-eclipse weight b = ``eclipse.deep_weight(u)`` is of; 1 without a moon. [1]"""
+    if sky.moon is None:
+        return 1.0
+    separation = float(angle_to(sky.moon_direction, sky.sun_direction))
+    return 1.0 - float(ephemeris.obscured_fraction(separation, sky.sun.angular_radius, sky.moon.angular_radius))
+
+
 def sky_light_curve(config, frames):
-    """(frames, S, b, sky lux) of ``frames``: the report's ``sky_lux`` of each (light.csv)."""
+    """(frames, S, b, sky lux, u) of ``frames``: the report's ``sky_lux`` of each (light.csv)."""
     rows = []
     for frame in frames:
         sky = load_sky(config.sky, scene_at(config, frame))
-        rows.append((frame, sky.sun_fraction(), eclipse.deep_weight(sky.sun_fraction()),
-                     open_ground_light(sky, 1.0, None)["sky_lux"]))
+        u = uncovered(sky)
+        rows.append((frame, sky.sun_fraction(), eclipse.deep_weight(u), open_ground_light(sky, 1.0, None)["sky_lux"],
+                     u))
     return np.array(rows)
 
 
@@ -104,7 +114,7 @@ def worst_bend(curve) -> list[tuple[float, int]]:
     """The largest |second difference| of ln(sky lux) per frame with S in SMOOTH_RANGE, and its
     frame, on each side of totality (frames where S falls, then where it rises)."""
     out = []
-    frame, s, _b, lux = curve.T
+    frame, s, _b, lux, _u = curve.T
     log = np.log(lux)
     bend = log[2:] - 2 * log[1:-1] + log[:-2]
     middle = s[1:-1]
@@ -121,11 +131,11 @@ def light_curve(render: str | None) -> None:
     frames = range(config.animation.frames)
     curve = sky_light_curve(config, frames)
     print(f"1. the sky light of {TOTALITY.relative_to(ROOT)} (light.csv's sky_lux), ln per frame")
-    print(" frame  S         b      sky lux   d ln   d2 ln")
+    print(" frame  covered   S         b      sky lux   d ln   d2 ln")
     log = np.log(curve[:, 3])
-    for i, (frame, s, b, lux) in enumerate(curve):
-        if 0 < i < len(curve) - 1 and (0 < b < 1 or abs(s - eclipse.SHARP_LIMIT) < 4e-4):
-            print(f" {int(frame):5d}  {s:.2e}  {b:5.3f}  {lux:8.3f}  {log[i] - log[i - 1]:+.3f}  "
+    for i, (frame, s, b, lux, u) in enumerate(curve):
+        if 0 < i < len(curve) - 1 and (0 < b < 1 or abs(u - eclipse.SHARP_LIMIT) < 8e-4):
+            print(f" {int(frame):5d}  {100 * (1 - u):.3f}%  {s:.2e}  {b:5.3f}  {lux:8.3f}  {log[i] - log[i - 1]:+.3f}  "
                   f"{log[i + 1] - 2 * log[i] + log[i - 1]:+.4f}")
     for (bend, frame), side in zip(worst_bend(curve), ("before C2", "after C3")):
         print(f"  {side}: largest second difference of ln(sky lux) with S in {SMOOTH_RANGE}: {bend:.4f} "
@@ -239,7 +249,7 @@ def partial_phase(step: int) -> None:
     worst = 0.0
     for frame in range(0, config.animation.frames, step):
         sky = load_sky(config.sky, scene_at(config, frame))
-        if eclipse.deep_weight(sky.sun_fraction()) > 0:
+        if eclipse.deep_weight(uncovered(sky)) > 0:
             break
         clear = replace(sky, moon=None)
         lux = float((sky.sky_irradiance + sun_irradiance(sky)) @ Y)

@@ -74,6 +74,45 @@ def test_a_partial_eclipse_sky_is_exactly_the_clear_sky_times_s():
     np.testing.assert_allclose(eclipsed.sky_irradiance, clear.sky_irradiance * eclipsed.moon_visible, rtol=1e-12)
 
 
+def uncovered_by_rings(d, r, big_r):
+    """The sun's uncovered area fraction ring by ring (quadrature; the lens formula not used): the
+    ring of radius rho is covered over arccos((rho^2 + d^2 - R^2) / (2 rho d)) / pi of its length."""
+    def ring(rho):
+        return 2 * rho * (1 - np.arccos(np.clip((rho**2 + d**2 - big_r**2) / (2 * rho * d), -1, 1)) / np.pi)
+
+    kink = big_r - d
+    return integrate.quad(ring, kink, r, epsabs=1e-13, epsrel=1e-10)[0] / r**2
+
+
+def test_the_blend_into_the_deep_eclipse_starts_at_99_8_percent_of_the_area():
+    # b = (1 - u / 0.002)^3 of the uncovered area u, exactly 0 from u = 0.002 up (the partial
+    # sky's own code path) ...
+    u = np.linspace(0.0, 0.004, 81)
+    b = np.array([eclipse.deep_weight(v) for v in u])
+    assert np.all(b[u >= eclipse.SHARP_LIMIT] == 0.0) and eclipse.deep_weight(1.0) == 0.0
+    assert eclipse.deep_weight(0.0) == 1.0 and np.all(np.diff(b[u <= eclipse.SHARP_LIMIT]) < 0)
+    np.testing.assert_allclose(b, np.clip(1 - u / 0.002, 0, 1) ** 3, rtol=1e-12, atol=0)
+    # ... and a sky at 99.79% of the sun's area covered, where limb darkening leaves S = 0.0012 of
+    # the light (under 0.002), is still exactly the clear sky times S; at 99.81% the blend has begun
+    from scipy.optimize import brentq
+
+    sun = SunDisc(np.radians(150.0), np.radians(50.0))
+    r, big_r = sun.angular_radius, 1.03 * sun.angular_radius
+    clear = ProceduralSky(3.0, sun)
+    e1 = np.array([np.cos(sun.azimuth), -np.sin(sun.azimuth), 0.0])
+
+    def sky_at(uncovered):
+        d = brentq(lambda d: uncovered_by_rings(d, r, big_r) - uncovered, big_r - r + 1e-12, big_r)
+        m = np.cos(d) * clear.sun_direction + np.sin(d) * e1
+        return ProceduralSky(3.0, sun, moon=MoonDisc(float(np.arctan2(m[0], m[1])), float(np.arcsin(m[2])), big_r))
+
+    shallow, deep = sky_at(0.0021), sky_at(0.0019)
+    assert shallow._deep == 0.0 and shallow.sun_fraction() < 0.0015
+    points = np.random.default_rng(2).uniform(-3, 3, (200, 2))
+    np.testing.assert_allclose(shallow.radiance(points), clear.radiance(points) * shallow.moon_visible, rtol=1e-12)
+    assert deep._deep == pytest.approx((1 - 0.0019 / 0.002) ** 3, rel=1e-4)
+
+
 def test_corona_profile_integral():
     def flux(a, b):
         return 2 * integrate.quad(lambda r: r * eclipse.corona_profile(r), a, b, limit=200, epsabs=0.0, epsrel=1e-10)[0]
@@ -184,7 +223,8 @@ def test_the_sky_light_bends_smoothly_into_the_deep_eclipse():
     light = {int(n): open_ground_light(load_sky(config.sky, scene_at(config, int(n)), metering=True), 1.0,
                                        None)["sky_lux"] for n in frames}
     bends = [np.log(light[n + 1]) - 2 * np.log(light[n]) + np.log(light[n - 1]) for n in inside]
-    assert eclipse.deep_weight(s[inside].min()) > 0.3  # the blend is well under way in the range
+    deepest = int(inside[np.argmin(s[inside])])  # the blend is under way in the range (b 0.14 at S = 0.00055)
+    assert load_sky(config.sky, scene_at(config, deepest))._deep > 0.1
     assert np.max(np.abs(bends)) <= 0.015
 
 
@@ -210,8 +250,8 @@ def test_the_light_falls_smoothly_into_totality_and_rises_after():
     assert before[0] / before[12] > 100
     assert np.all(np.diff(before) < 0) and np.all(np.diff(after) > 0)
     # the sun's last sliver goes in the last seconds; the sky follows with no step (its steepest
-    # 5 s, at the contacts themselves: 1.67 and 1.72 times, where the open ground's light changes
-    # 4.6 and 5.0 times)
+    # 5 s, at the contacts themselves: 1.50 and 1.54 times, where the open ground's light changes
+    # 4.4 and 4.8 times)
     assert np.max(sky_before[:-1] / sky_before[1:]) < 1.8 and np.max(sky_after[1:] / sky_after[:-1]) < 1.8
 
 

@@ -14,8 +14,10 @@ from jplephem import Ephemeris
 
 from pipeline.cli.main import main
 from pipeline.config.parse import load_config
+from pipeline.config.preview import preview
 from pipeline.sky.eclipse_search import find_eclipses
 from pipeline.sky.ephemeris import Site
+from pipeline.stages.framing import CAMERA_HEIGHT, ECLIPSE_PITCH
 
 ARCSEC = np.pi / 180.0 / 3600.0
 C_KM_S = 299_792.458
@@ -247,6 +249,17 @@ def test_command_lists_and_writes_a_config(tmp_path, capsys, monkeypatch):
     assert start < datetime(2024, 4, 8, 18, 40, 41, tzinfo=UTC) and end > datetime(2024, 4, 8, 18, 44, 36, tzinfo=UTC)
     covered = reference_gaps(SITES["dallas"], [start, end])["covered"]
     assert covered == pytest.approx([0.9, 0.9], abs=0.003)
+    # its preview resolves the crescents: at least 12 cells across the sun, and a pinhole image
+    # (2 H sin r / sqrt(sin(h - r) sin(h + r)) across; the sun under 65 degrees up, 0.266 in radius)
+    # at least 12 preview pixels across on the farthest ground in view (the top row of the plan's
+    # camera, at eye height, ECLIPSE_PITCH down); at the default 50 degrees and 6 cells, 6 pixels and
+    # 1 cell: blobs
+    quick = preview(config)
+    assert quick.render.sun_cells >= 12
+    h, r = np.radians(65.0), np.radians(0.266)
+    width = 2 * quick.canopy.layers[0].height * np.sin(r) / np.sqrt(np.sin(h - r) * np.sin(h + r))
+    farthest = CAMERA_HEIGHT / np.sin(np.radians(ECLIPSE_PITCH) - quick.camera.fov / 2)  # [m] along the top row's ray
+    assert width / (2 * farthest * np.tan(quick.camera.fov / 2) / quick.camera.resolution[1]) >= 12
 
 
 @pytest.mark.parametrize(

@@ -18,8 +18,8 @@ if TYPE_CHECKING:
     from pipeline.sky.eclipse_search import SiteEclipse
     from pipeline.sky.ephemeris import Site
 
-__all__ = ["YEARS", "SPAN_COVERED", "run_eclipses", "parse_site", "parse_years", "parse_offset", "render_span",
-           "config_text"]
+__all__ = ["YEARS", "SPAN_COVERED", "CLOSE_FOV", "CLOSE_SUN_CELLS", "run_eclipses", "parse_site", "parse_years",
+           "parse_offset", "render_span", "config_text"]
 
 YEARS = (1900, 2100)
 """The years ``--years`` may name: Delta T is measured or held near its measured value within them. [year]"""
@@ -27,6 +27,14 @@ SPAN_COVERED = 0.9
 """A written config of a total or annular eclipse starts before C2 and ends after C3 where the moon
 covers this much of the sun (S = 0.1, as configs/eclipse-2026-burgos-sunset.yaml starts): the
 crescents thin into totality and grow out of it. [1]"""
+CLOSE_FOV = 25.0
+"""Vertical field of view of a written config's camera where the sun stands above
+``stages.framing.LOW_SUN`` at the span's middle (where the plan looks 50 degrees down at the deep
+shade): half the default's, so that a crescent spans about 25 pixels of the preview's 320 x 180
+and 100 of the full 1280 x 720 (docs/accuracy.md, "The eclipse finder against DE421"). [deg]"""
+CLOSE_SUN_CELLS = 32
+"""``render.sun_cells`` of such a config: its crescents, 100 pixels across, drawn from 32 cells
+across the sun; the preview keeps 13 (``config.preview.preview_sun_cells``). [1]"""
 _TWILIGHT_MARGIN = math.radians(0.05)  # [rad] above stages.resolve.MIN_SUN_ELEVATION
 _LOW_SUN = math.radians(12.0)  # [rad] under it the wider sky square, the small tree of the Burgos config
 
@@ -305,13 +313,29 @@ _TREES = {  # the crowns of configs/eclipse-2024-dallas-totality.yaml and config
 }
 
 
+def _close_framing(middle: float) -> tuple[str, str]:
+    """The camera's field of view and the sun's cells of a written config whose sun stands
+    ``middle`` degrees high at the span's middle (``CLOSE_FOV``, ``CLOSE_SUN_CELLS``): YAML lines,
+    empty below LOW_SUN, where the plan frames the shadow's rim 35 degrees down."""
+    from pipeline.stages.framing import LOW_SUN
+
+    if middle < LOW_SUN:
+        return "", ""
+    return (f"  fov: {CLOSE_FOV}                   # vertical, degrees: close on the flecks, each crescent some\n"
+            "                              # 11 cm and 100 pixels across, a few dozen in the picture\n",
+            f"render: {{sun_cells: {CLOSE_SUN_CELLS}}}     # cells across the sun's disc on its fine grid\n"
+            "                              # (3.4 mm pixels): the close crescents sharp; --preview keeps 13\n")
+
+
 def config_text(site: Site, eclipse: SiteEclipse, name: str, command: str) -> str:
     """A config for ``eclipse`` at ``site``, written as configs/*.yaml are: commented, in flow style.
 
     The span ``render_span``; the tree of configs/eclipse-2024-dallas-totality.yaml, or the small
     one of configs/eclipse-2026-burgos-sunset.yaml (and a wider sky square) where the sun stands
-    under 12 degrees during it; no camera and no windows (the plan places them); automatic
-    exposure; the built-in grass albedo, so that the file renders wherever it is.
+    under 12 degrees during it; no camera place and no windows (the plan places them), the
+    camera's field of view ``CLOSE_FOV`` and ``CLOSE_SUN_CELLS`` where the sun stands above
+    ``stages.framing.LOW_SUN`` at the span's middle; automatic exposure; the built-in grass
+    albedo, so that the file renders wherever it is.
 
     Parameters
     ----------
@@ -335,6 +359,7 @@ def config_text(site: Site, eclipse: SiteEclipse, name: str, command: str) -> st
     heights = [math.degrees(sun_and_moon(site, start + (end - start) * (k / 8))[0].elevation) for k in range(9)]
     low = min(heights) < math.degrees(_LOW_SUN)
     height, trees = _TREES["low" if low else "high"]
+    fov, cells = _close_framing(heights[len(heights) // 2])
     c = eclipse.contacts
     contacts = ", ".join(f"{key} {when:%H:%M:%S}" for key, when in c.items() if when is not None)
     what = {"total": "through totality", "annular": "through annularity"}.get(eclipse.seen, "the whole partial eclipse")
@@ -353,8 +378,8 @@ def config_text(site: Site, eclipse: SiteEclipse, name: str, command: str) -> st
 # obscuration {100 * eclipse.obscuration:.2f}%; {sun}.{horizon}
 # Written by
 #   {command}
-# Camera and windows are left out: the plan places them on the tree's shadow (docs/method.md,
-# "Framing"). Contacts, camera and light at the site: sunshade check {name}
+# The camera's place and the windows are left out: the plan places them on the tree's shadow
+# (docs/method.md, "Framing"). Contacts, camera and light at the site: sunshade check {name}
 # Render it:
 #   sunshade render {name}
 # or a first look:
@@ -375,10 +400,10 @@ ground:
   # albedo: the built-in grass; crescents show best on pale sand: albedo: PATH/configs/assets/sand.png
   # with albedo_size: 2.0
 camera:
-  resolution: [1280, 720]
+{fov}  resolution: [1280, 720]
   # auto exposure: follows the open ground's light down into the eclipse and back, 0.75 stops over it
   exposure: {{mode: auto, stops: 0.75, time_constant: 0.05, limits: {limits}}}
   white_balance: shade         # the skylit shade neutral, the crescents warm
 foreground: {{model: none}}     # the crown is out of the picture: no tree passes
-animation: {{frames: 240, fps: 24}}
+{cells}animation: {{frames: 240, fps: 24}}
 """

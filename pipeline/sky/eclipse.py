@@ -25,9 +25,10 @@ clear sky's light this multiply scattered light is (``UMBRA_SCATTERING``). The a
 little of it (its way in is opaque): a line of sight near the horizon sees it from the points far
 out and high up, through its own long low path, and comes out reddened, while the zenith's light,
 scattered in at a few kilometres, is bluer than the day's. The deep-eclipse model is blended in
-below S = ``SHARP_LIMIT`` so that it meets the clear sky times S with no bend:
+once the moon covers 99.8% of the sun's area (u, the uncovered area fraction of the uniform discs,
+below ``SHARP_LIMIT``) so that it meets the clear sky times S with no bend:
 
-    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k M(w) G(w))],   b = clip(1 - S / SHARP_LIMIT, 0, 1)^3,
+    L(w) = L_clear(w) [(1 - b) S + b (F(w) + k M(w) G(w))],   b = clip(1 - u / SHARP_LIMIT, 0, 1)^3,
 
 G(w) the clear sky's shape 90 degrees from the sun over its shape at w: the multiply scattered
 light is the clear sky's light with its gradation with zenith angle (counted once: M is a mean,
@@ -59,9 +60,11 @@ __all__ = [
 ]
 
 SHARP_LIMIT = 0.002
-"""S (luminance-weighted uneclipsed fraction) below which the deep-eclipse sky is blended in:
-99.8% obscuration, the depth to which Sharp, Silverman & Lloyd (1971) found the sky to behave as
-attenuated sunlight. Above it the sky is exactly the clear sky times S. [1]"""
+"""u, the sun's uncovered area fraction (1 - ``ephemeris.obscured_fraction``, the obscuration that
+``sunshade check`` and ``sunshade eclipses`` give), below which the deep-eclipse sky is blended
+in: 99.8% obscuration, the depth to which Sharp, Silverman & Lloyd (1971) found the sky to behave
+as attenuated sunlight. At and above it the sky is exactly the clear sky times S (S, the
+limb-darkened sun's light left, is about 0.0011 there). [1]"""
 
 MULTIPLE_SCATTERING = 0.10
 """The twilight sky's floor of multiply scattered light, a fraction of the zenith's single
@@ -132,24 +135,28 @@ RGB_WAVELENGTHS = np.array([0.610, 0.550, 0.465])
 (``sun_disc.sun_colour``). [um]"""
 
 
-def deep_weight(sun_fraction: float) -> float:
-    """b: the weight of the deep-eclipse sky, 0 for S >= SHARP_LIMIT, 1 at S = 0.
+def deep_weight(uncovered: float) -> float:
+    """b: the weight of the deep-eclipse sky, 0 for u >= SHARP_LIMIT, 1 at u = 0.
 
-    b = u^3, u = 1 - S / SHARP_LIMIT: its slope and curvature are 0 where the blend starts, so the
+    b = v^3, v = 1 - u / SHARP_LIMIT: its slope and curvature are 0 where the blend starts, so the
     sky's light bends there no more than the eclipse's own light curve does (a linear b stalled
-    its fall for a frame; docs/accuracy.md, "The eclipse sky").
+    its fall for a frame; docs/accuracy.md, "The eclipse sky"). u is the sun's uncovered area,
+    not its light S: the blend starts at 99.8% obscuration as ``sunshade check`` reports it
+    (limb darkening puts S = 0.002 at 99.66%).
 
     Parameters
     ----------
-    sun_fraction : float
-        S, the uneclipsed fraction of the sun [1].
+    uncovered : float
+        u, the uncovered area fraction of the sun's disc, 1 - ``ephemeris.obscured_fraction`` [1].
 
     Returns
     -------
     float
-        b = clip(1 - S / SHARP_LIMIT, 0, 1)^3 [1].
+        b = clip(1 - u / SHARP_LIMIT, 0, 1)^3; exactly 0 for u >= SHARP_LIMIT [1].
     """
-    return float(np.clip(1.0 - sun_fraction / SHARP_LIMIT, 0.0, 1.0) ** 3)
+    if not uncovered < SHARP_LIMIT:
+        return 0.0
+    return float(min(1.0 - uncovered / SHARP_LIMIT, 1.0) ** 3)
 
 
 def vertical_optical_depths(turbidity: float) -> tuple[np.ndarray, np.ndarray]:

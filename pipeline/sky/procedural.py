@@ -32,6 +32,7 @@ from pipeline.core.geometry import (
     tangent_axes,
 )
 from pipeline.sky import clearsky, daylight, eclipse
+from pipeline.sky.ephemeris import obscured_fraction
 from pipeline.sky.nodes import (
     gauss_legendre,
     lerp_nodes,
@@ -321,10 +322,13 @@ class ProceduralSky:
     @cached_property
     def _deep(self) -> float:
         """b: the weight of the deep-eclipse sky (``eclipse.deep_weight``), 0 without a moon or
-        above 99.8% obscuration, where the sky is the clear sky times S. [1]"""
+        up to 99.8% obscuration (of the sun's area, ``ephemeris.obscured_fraction``, the discs
+        of ``moon_visible``), where the sky is the clear sky times S. [1]"""
         if self.moon is None:
             return 0.0
-        return eclipse.deep_weight(float(self.moon_visible @ np.asarray(REC709_LUMINANCE, dtype=np.float64)))
+        separation = float(angle_to(self.moon_direction, self.sun_direction))
+        covered = float(obscured_fraction(separation, self.sun.angular_radius, self.moon.angular_radius))
+        return eclipse.deep_weight(1.0 - covered)
 
     @cached_property
     def moon_direction(self) -> np.ndarray:
