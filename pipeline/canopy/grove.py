@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 from pipeline.core.geometry import normalized
 
 __all__ = ["GroveParams", "FlutterParams", "Leaves", "Wood", "Grove", "Shapes", "grow_grove", "leaves_at", "project",
-           "layer_index", "shapes_bounds", "grove_bounds", "trunks"]
+           "swing_axes", "layer_index", "shapes_bounds", "grove_bounds", "trunks"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -97,6 +97,21 @@ class FlutterParams:
     cycle: int = 48
     swing: float = float(np.radians(12.0))
     twist: float = float(np.radians(20.0))
+
+    def angle(self, frame: int) -> float:
+        """The cycle's angle at ``frame`` (any int), reduced modulo ``cycle``: 2 pi (frame mod cycle) / cycle.
+
+        Parameters
+        ----------
+        frame : int
+            The frame [frames].
+
+        Returns
+        -------
+        float
+            The angle the phases are added to [rad].
+        """
+        return 2 * np.pi * np.mod(frame, self.cycle) / self.cycle
 
 
 @dataclass(frozen=True)
@@ -328,7 +343,7 @@ def _grow_tree(rng: np.random.Generator, base: np.ndarray, p: GroveParams) -> di
     v = normalized(np.cross(u, rng.normal(size=(n, 3))))
     axis_u = 0.5 * length[:, None] * u
     axis_v = 0.5 * (length * rng.uniform(0.4, 0.7, n))[:, None] * v
-    swing_axis = normalized(np.column_stack([-u[:, 1], u[:, 0], np.zeros(n)]) + [1e-12, 0, 0])  # across the leaf
+    swing_axis = swing_axes(u)
     return dict(center=center, axis_u=axis_u, axis_v=axis_v, pivot=center - axis_u,
                 swing_axis=swing_axis, swing_phase=rng.uniform(0, 2 * np.pi, n),
                 twist_phase=rng.uniform(0, 2 * np.pi, n), start=np.concatenate(start),
@@ -344,12 +359,26 @@ def _wrap(points: np.ndarray, p: GroveParams) -> tuple[np.ndarray, np.ndarray]:
     return points + shift, shift
 
 
-def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
-    """The leaves at ``frame`` (any int), exactly periodic.
+def swing_axes(length: np.ndarray) -> np.ndarray:
+    """Each leaf's swing axis: horizontal, across its length.
 
-    Each twists about its length axis by twist sin(2 pi frame / cycle + twist_phase), then swings about
-    its horizontal axis through its stem by swing sin(2 pi frame / cycle + swing_phase). The frame is
-    reduced modulo ``cycle`` first. (Compiled: pipeline/kernels/raster.py, ``flutter``.)
+    Parameters
+    ----------
+    length : numpy.ndarray
+        (n, 3) each leaf's direction along its length (any length).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 3) unit vectors [1].
+    """
+    return normalized(np.column_stack([-length[:, 1], length[:, 0], np.zeros(len(length))]) + [1e-12, 0, 0])
+
+
+def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
+    """The leaves at ``frame`` (any int), exactly periodic: each twists about its length axis, then
+    swings about its horizontal axis (``swing_axes``) through its stem, as ``FlutterParams`` says.
+    (Compiled: pipeline/kernels/raster.py, ``flutter``.)
 
     Parameters
     ----------
@@ -367,7 +396,7 @@ def leaves_at(grove: Grove, flutter: FlutterParams, frame: int) -> Leaves:
     """
     from pipeline.kernels import raster
 
-    omega = 2 * np.pi * np.mod(frame, flutter.cycle) / flutter.cycle
+    omega = flutter.angle(frame)
     leaves = grove.leaves
     center, axis_u, axis_v, pivot, swing_axis, swing_phase, twist_phase = (
         np.ascontiguousarray(a, dtype=np.float64) for a in (leaves.center, leaves.axis_u, leaves.axis_v, grove.pivot,

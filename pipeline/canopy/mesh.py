@@ -21,7 +21,7 @@ import numpy as np
 from pipeline.core.errors import ImageError
 
 __all__ = ["MESH_FORMATS", "FORMAT_UP", "GLTF_ALPHA_CUTOFF", "MeshParams", "MeshMaterial", "TreeMesh", "read_mesh",
-           "leaf_groups"]
+           "leaf_groups", "mesh_files"]
 
 MESH_FORMATS = {".glb": "gltf", ".gltf": "gltf", ".obj": "obj", ".ply": "ply"}
 """The file name endings read, and their format."""
@@ -54,6 +54,8 @@ class MeshParams:
         Names of the leaf materials; None finds them (alpha-masked or blended, or an alpha texture).
     wood : tuple of str
         Names of materials that are wood whatever their alpha.
+    max_triangles : int or None
+        The most triangles the file may hold (zero-area ones counted); None for no limit.
     """
 
     path: Path
@@ -63,6 +65,7 @@ class MeshParams:
     up: str | None = None
     leaves: tuple[str, ...] | None = None
     wood: tuple[str, ...] = ()
+    max_triangles: int | None = None
 
 
 @dataclass(frozen=True)
@@ -150,7 +153,7 @@ def read_mesh(params: MeshParams) -> TreeMesh:
     ------
     ImageError
         One line naming the file: not a mesh, a missing or unreadable texture, vertices that are not
-        finite, no leaves found, an unknown material name.
+        finite, no leaves found, an unknown material name, more triangles than ``max_triangles``.
     """
     path = Path(params.path)
     kind = MESH_FORMATS.get(path.suffix.lower())
@@ -163,6 +166,9 @@ def read_mesh(params: MeshParams) -> TreeMesh:
         raise ImageError(path, f"the up axis must be 'y' or 'z', not {up!r}")
     textures = _texture_files(path, kind)
     parts = _load_parts(path)
+    count = sum(len(p[1]) for p in parts)
+    if params.max_triangles is not None and count > params.max_triangles:
+        raise ImageError(path, f"{count:,} triangles, over the limit of {params.max_triangles:,} (max_triangles)")
     vertices = np.concatenate([p[0] for p in parts])
     bad = int(np.count_nonzero(~np.isfinite(vertices).all(axis=1)))
     if bad:
@@ -356,6 +362,45 @@ def leaf_groups(vertices: np.ndarray, triangles: np.ndarray, leaf: np.ndarray) -
         group[kind] = offset + number
         offset += int(number.max()) + 1
     return group
+
+
+def mesh_files(path: Path) -> list[Path]:
+    """The mesh file and every file it reads: OBJ's material libraries and their textures, glTF's images
+    and buffers beside it, PLY's texture (for the cache's content hash; each is checked by ``read_mesh``).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The mesh file.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The file first, then those it names that exist, each once.
+    """
+    from urllib.parse import unquote
+
+    path = Path(path)
+    kind = MESH_FORMATS.get(path.suffix.lower())
+    found = [path]
+    if kind == "obj":
+        libraries = [" ".join(line.split()[1:]) for line in path.read_text(errors="replace").splitlines()
+                     if line.startswith("mtllib ")]
+        found += [path.parent / library for library in libraries]
+        found += [file for entry in _mtl_entries(path).values() for key, file in entry.items() if key != "d"]
+    elif kind == "gltf":
+        found += [data for _, data in _gltf_images(path) if isinstance(data, Path)]
+        raw = path.read_bytes()
+        if raw[:4] != b"glTF":
+            buffers = json.loads(raw).get("buffers", [])
+            found += [path.parent / unquote(b["uri"]) for b in buffers
+                      if isinstance(b.get("uri"), str) and not b["uri"].startswith("data:")]
+    elif kind == "ply":
+        for line in path.read_bytes()[:65536].split(b"end_header")[0].splitlines():
+            words = line.decode("latin-1").split()
+            if len(words) >= 3 and words[0] == "comment" and words[1].lower() == "texturefile":
+                found.append(path.parent / " ".join(words[2:]))
+    return list(dict.fromkeys(file for file in found if file.is_file()))
 
 
 def _texture_files(path: Path, kind: str) -> dict[str, dict[str, Any]]:

@@ -20,6 +20,8 @@ from pipeline.core.geometry import Grid
 __all__ = ["TEXELS_PER_PIXEL", "CoverageTables", "coverage_tables", "project_mesh", "sun_facing", "mesh_layer_index",
            "mesh_mask", "alpha_weighted_area"]
 
+_BAND_ROWS = 8  # groups are drawn in bands of this many raster rows (for the cache) [pixel]
+
 TEXELS_PER_PIXEL = 4.0
 """A leaf texture is read at the finest of its box-filtered levels whose texel spans at most
 1 / TEXELS_PER_PIXEL of a mask pixel (docs/accuracy.md, "Trees from mesh files") [1]."""
@@ -32,23 +34,31 @@ class CoverageTables:
     Attributes
     ----------
     prefix : numpy.ndarray
-        Flat float64: each level's (height, width + 1) row prefix sums [texel].
+        Flat float64: each level's (height, width + 1) row prefix sums, then its transposed table's [texel].
     level_base : numpy.ndarray
-        (materials, L) int64 where each level starts in ``prefix``.
+        (materials, L, 2) int64 where each level and its transposed table start in ``prefix``.
     level_size : numpy.ndarray
         (materials, L, 2) int64 each level's (width, height) [texel].
     levels : numpy.ndarray
         (materials,) int64 the levels of each material.
+    double : numpy.ndarray
+        Flat float64 laid out as ``prefix``: the prefix sums of each row's prefix integral [texel^2].
+    partner : numpy.ndarray
+        (m, 3) int64: the mesh's triangle of the same group across each edge (corner k to k + 1) with the
+        same vertices and texture coordinates at both ends, or -1 (none, or more than one).
     """
 
     prefix: np.ndarray
     level_base: np.ndarray
     level_size: np.ndarray
     levels: np.ndarray
+    double: np.ndarray
+    partner: np.ndarray
 
 
 def coverage_tables(mesh: TreeMesh) -> CoverageTables:
-    """The mesh's coverage tables: level 0 each material's own, each next one 2 x 2 texels averaged.
+    """The mesh's coverage tables (level 0 each material's own, each next one 2 x 2 texels averaged) and
+    which triangles share an edge.
 
     Parameters
     ----------
@@ -62,17 +72,46 @@ def coverage_tables(mesh: TreeMesh) -> CoverageTables:
     """
     pyramids = [_pyramid(np.asarray(m.coverage, dtype=np.float64)) for m in mesh.materials]
     depth = max(len(p) for p in pyramids)
-    base = np.zeros((len(pyramids), depth), dtype=np.int64)
+    base = np.zeros((len(pyramids), depth, 2), dtype=np.int64)
     size = np.ones((len(pyramids), depth, 2), dtype=np.int64)
-    parts, offset = [], 0
+    parts, doubles, offset = [], [], 0
     for m, pyramid in enumerate(pyramids):
         for level, table in enumerate(pyramid):
-            rows = np.zeros((table.shape[0], table.shape[1] + 1))
-            np.cumsum(table, axis=1, out=rows[:, 1:])
-            base[m, level], size[m, level] = offset, (table.shape[1], table.shape[0])
-            parts.append(rows.reshape(-1))
-            offset += rows.size
-    return CoverageTables(np.concatenate(parts), base, size, np.array([len(p) for p in pyramids], dtype=np.int64))
+            size[m, level] = (table.shape[1], table.shape[0])
+            for turned, oriented in enumerate((table, table.T)):
+                rows = np.zeros((oriented.shape[0], oriented.shape[1] + 1))
+                np.cumsum(oriented, axis=1, out=rows[:, 1:])
+                double = np.zeros_like(rows)  # F is linear on each texel: its integral by the trapezoid
+                np.cumsum(0.5 * (rows[:, :-1] + rows[:, 1:]), axis=1, out=double[:, 1:])
+                base[m, level, turned] = offset
+                parts.append(rows.reshape(-1))
+                doubles.append(double.reshape(-1))
+                offset += rows.size
+    levels = np.array([len(p) for p in pyramids], dtype=np.int64)
+    return CoverageTables(np.concatenate(parts), base, size, levels, np.concatenate(doubles), _partners(mesh))
+
+
+def _partners(mesh: TreeMesh) -> np.ndarray:
+    """(m, 3) int64: the triangle across each edge of the same group with the same two vertices and texture
+    coordinates at them, or -1 (no such triangle, or more than one)."""
+    m = len(mesh.triangles)
+    start, end = mesh.triangles, np.roll(mesh.triangles, -1, axis=1)
+    uv_start, uv_end = mesh.uv, np.roll(mesh.uv, -1, axis=1)
+    low, high = np.minimum(start, end).reshape(-1), np.maximum(start, end).reshape(-1)
+    forward = (start <= end).reshape(-1, 1)
+    uv_low = np.where(forward, uv_start.reshape(-1, 2), uv_end.reshape(-1, 2))
+    uv_high = np.where(forward, uv_end.reshape(-1, 2), uv_start.reshape(-1, 2))
+    group = np.repeat(mesh.group, 3)
+    order = np.lexsort((high, low, group))
+    same = (group[order][1:] == group[order][:-1]) & (low[order][1:] == low[order][:-1]) & \
+        (high[order][1:] == high[order][:-1])
+    alone = np.r_[True, ~same[:-1]] & np.r_[~same[1:], True]  # exactly two edges with this key
+    first = np.flatnonzero(same & alone)
+    a, b = order[first], order[first + 1]
+    keep = np.all(uv_low[a] == uv_low[b], axis=1) & np.all(uv_high[a] == uv_high[b], axis=1)
+    partner = np.full(3 * m, -1, dtype=np.int64)
+    partner[a[keep]], partner[b[keep]] = b[keep] // 3, a[keep] // 3
+    return partner.reshape(m, 3)
 
 
 def _pyramid(table: np.ndarray) -> list[np.ndarray]:
@@ -204,14 +243,24 @@ def mesh_mask(mesh: TreeMesh, *, sun: ArrayLike, plane_height: float, grid: Grid
     chosen = chosen[np.argsort(mesh.group[chosen], kind="stable")]
     plane = project_mesh(mesh, sun=sun, plane_height=plane_height, select=chosen)
     corners = np.stack([plane[..., 0] - grid.origin[0], grid.origin[1] - plane[..., 1]], axis=-1) / grid.pixel
-    texels = np.stack([mesh.uv[chosen, :, 0], 1.0 - mesh.uv[chosen, :, 1]], axis=-1)
     group = mesh.group[chosen]
     group_start = np.flatnonzero(np.r_[True, group[1:] != group[:-1], True]).astype(np.int64)
+    # groups in bands of raster rows, so that neighbours share the cache (the result is the same product)
+    band = np.floor(corners[group_start[:-1], 0, 1] / _BAND_ROWS).astype(np.int64)
+    order = np.argsort(band, kind="stable")
+    sizes = np.diff(group_start)[order]
+    moved = np.repeat(group_start[:-1][order] - np.cumsum(sizes) + sizes, sizes) + np.arange(len(chosen))
+    chosen, corners = chosen[moved], corners[moved]
+    texels = np.stack([mesh.uv[chosen, :, 0], 1.0 - mesh.uv[chosen, :, 1]], axis=-1)
+    group_start = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+    local = np.full(len(mesh.triangles), -1, dtype=np.int64)
+    local[chosen] = np.arange(len(chosen))
+    partner = np.where(tables.partner[chosen] >= 0, local[np.maximum(tables.partner[chosen], 0)], -1)
     transmittance = np.ones(grid.shape)
     triangles.mesh_transmittance(np.ascontiguousarray(corners), np.ascontiguousarray(texels),
                                  np.ascontiguousarray(mesh.material[chosen]), group_start, tables.prefix,
                                  tables.level_base, tables.level_size, tables.levels, TEXELS_PER_PIXEL,
-                                 transmittance)
+                                 transmittance, tables.double, np.ascontiguousarray(partner))
     return transmittance.astype(np.float32)
 
 
@@ -238,5 +287,5 @@ def alpha_weighted_area(mesh: TreeMesh, tables: CoverageTables | None = None) ->
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     texels = np.stack([mesh.uv[leaf, :, 0], 1.0 - mesh.uv[leaf, :, 1]], axis=-1)
     alpha = triangles.triangle_alpha(np.ascontiguousarray(texels), np.ascontiguousarray(mesh.material[leaf]),
-                                     tables.prefix, tables.level_base, tables.level_size)
+                                     tables.prefix, tables.level_base, tables.level_size, tables.double)
     return float(np.sum(area * alpha))

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from pipeline.config.meshes import parse_meshes
 from pipeline.config.receivers import parse_receivers
 from pipeline.config.sections import Section, is_number, kind_of
 from pipeline.config.settings import (
@@ -143,6 +144,8 @@ def _parse(root: Section, path: Path, named_frames: bool = True) -> Config:
     render = _parse_render(root.section("render"))
     receivers = parse_receivers(root.section("receivers"))
     root.done()
+    if canopy.meshes and (receivers.walls or receivers.slope is not None):
+        root.fail("canopy.mesh", "mesh trees shade the level ground alone yet: leave out receivers")
     _check_frames(root, animation, camera, output)
     if camera.follow == "shadow" and (ground.sun_window is not None or ground.window is not None):
         given = "ground.sun_window" if ground.sun_window is not None else "ground.window"
@@ -379,11 +382,12 @@ def _parse_canopy(s: Section, ground: GroundConfig) -> CanopyConfig:
         and any(isinstance(item, dict) and "mask" in item for item in s.data["layers"]))
     if images and s.has("trees"):
         s.fail("trees", "give either trees (a procedural grove) or mask images, not both")
-    trees = None if images else _parse_trees(s.section("trees"))
-    flutter = _parse_flutter(s.section("flutter")) if trees else None
-    if not trees and s.has("flutter"):
+    meshes = parse_meshes(s, layout, images)
+    trees = None if images or meshes else _parse_trees(s.section("trees"))
+    flutter = _parse_flutter(s.section("flutter")) if trees or meshes else None
+    if not trees and not meshes and s.has("flutter"):
         s.fail("flutter", "only used with trees (a mask sequence flutters by its own frames)")
-    base = _parse_layer(s, {}, ground, layout, images=images, mask_required=not s.has("layers"))
+    base = _parse_layer(s, {}, ground, layout, images=images, mask_required=not s.has("layers"), sized=bool(meshes))
     if not s.has("layers"):
         layers = [base]
     else:
@@ -394,14 +398,14 @@ def _parse_canopy(s: Section, ground: GroundConfig) -> CanopyConfig:
         for i, item in enumerate(items):
             ls = Section(item, s.key(f"layers[{i}]"), s.ctx)
             layers.append(_parse_layer(ls, base, ground, layout, images=images,
-                                       mask_required=not base["mask"]))
+                                       mask_required=not base["mask"], sized=bool(meshes)))
             ls.done()
         counts = {len(layer["mask"]) for layer in layers}
         if len(counts) > 1:
             s.fail("layers", f"mask sequences of every layer must have the same length (got {sorted(counts)})")
     s.done()
     return CanopyConfig(layout, tuple(CanopyLayer(**layer) for layer in layers), trees,
-                        flutter or FlutterConfig(1, 0.0, 0.0))
+                        flutter or FlutterConfig(1, 0.0, 0.0), meshes)
 
 
 def _parse_trees(s: Section) -> TreesConfig:
@@ -431,19 +435,20 @@ def _parse_flutter(s: Section) -> FlutterConfig:
 
 
 def _parse_layer(s: Section, base: dict[str, Any], ground: GroundConfig, layout: str, *, images: bool,
-                 mask_required: bool) -> dict[str, Any]:
-    """One canopy plane's keys, each defaulting to ``base``'s; its rasters checked for size."""
+                 mask_required: bool, sized: bool = False) -> dict[str, Any]:
+    """One canopy plane's keys, each defaulting to ``base``'s; its rasters checked for size (``sized``: an
+    area of its own, as mesh trees' planes have)."""
     if images and (s.has("mask") or mask_required):
         mask = s.mask_files("mask")
     else:
         mask = base.get("mask", ())
-    default_size = (20.0, 20.0) if images or layout == "periodic" else None
+    default_size = (20.0, 20.0) if images or sized or layout == "periodic" else None
     default_size = base.get("size", default_size)
     if default_size is None and not s.has("size"):
         size = (0.0, 0.0)  # an isolated grove sizes itself
     else:
         size = s.numbers("size", 2, default_size)
-    if min(size) <= 0 and (images or layout == "periodic" or s.has("size")):
+    if min(size) <= 0 and (images or sized or layout == "periodic" or s.has("size")):
         s.fail("size", f"both sides must be above 0 (got {list(size)})")
     layer = {
         "mask": mask,

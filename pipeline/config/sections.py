@@ -208,7 +208,9 @@ class Section:
 
 _VALID_KEYS = {
     "": ("animation", "ground", "canopy", "sky", "camera", "foreground", "output", "render", "receivers"),
-    "canopy": ("layout", "trees", "flutter", "mask", "size", "center", "height", "layers"),
+    "canopy": ("layout", "trees", "flutter", "mask", "size", "center", "height", "layers", "mesh"),
+    "canopy.mesh": ("file", "scale", "position", "rotation", "up", "leaves", "wood", "max_triangles", "seed"),
+    "canopy.mesh[]": ("file", "scale", "position", "rotation", "up", "leaves", "wood", "max_triangles", "seed"),
     "canopy.layers[]": ("mask", "size", "center", "height"),
     "canopy.trees": ("count", "seed", "crown_radius", "leaves_per_tree", "leaf_length", "spread"),
     "canopy.flutter": ("cycle", "swing", "twist"),

@@ -24,7 +24,7 @@ from pipeline.core.ocio import RENDER_SPACE
 __all__ = ["AUTO_LIMITS", "AUTO_TIME_CONSTANT", "AnimationConfig", "AutoExposureConfig", "BrdfConfig", "CameraConfig",
            "CanopyConfig", "CanopyLayer", "CloudsConfig", "Config", "FlutterConfig", "ForegroundConfig",
            "GroundConfig", "MoonConfig", "OutputConfig", "RenderConfig", "SiteConfig", "SkyConfig", "SunConfig",
-           "TreesConfig"]
+           "TreesConfig", "MeshConfig"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +80,43 @@ class TreesConfig:
 
 
 @dataclass(frozen=True)
+class MeshConfig:
+    """A tree read from a mesh file (``canopy.mesh``; ``mesh.MeshParams``).
+
+    Attributes
+    ----------
+    file : Path
+        The .glb, .gltf, .obj (with its .mtl) or .ply file.
+    scale : float
+        Metres per file unit. [m]
+    position : (float, float)
+        Where the file's origin stands on the ground, x east and y north. [m]
+    rotation : float
+        Turn about the vertical, anticlockwise seen from above. [rad]
+    up : str or None
+        The file's up axis, 'y' or 'z'; None for its format's own.
+    leaves : tuple of str or None
+        The leaf materials' names; None finds them by their alpha.
+    wood : tuple of str
+        Materials that are wood whatever their alpha.
+    max_triangles : int
+        The most triangles the file may hold.
+    seed : int
+        Seed of its leaves' flutter phases.
+    """
+
+    file: Path
+    scale: float
+    position: tuple[float, float]
+    rotation: float
+    up: str | None
+    leaves: tuple[str, ...] | None
+    wood: tuple[str, ...]
+    max_triangles: int
+    seed: int
+
+
+@dataclass(frozen=True)
 class FlutterConfig:
     """The procedural leaves' motion.
 
@@ -109,13 +146,16 @@ class CanopyConfig:
     trees : TreesConfig or None
         The procedural grove; None when the layers have mask images.
     flutter : FlutterConfig
-        The grove's motion.
+        The grove's motion (and the mesh trees' leaves').
+    meshes : tuple of MeshConfig
+        Trees read from mesh files (``canopy.mesh``); empty for none.
     """
 
     layout: str
     layers: tuple[CanopyLayer, ...]
     trees: TreesConfig | None
     flutter: FlutterConfig
+    meshes: tuple[MeshConfig, ...] = ()
 
     @property
     def cycle(self) -> int:
@@ -126,7 +166,7 @@ class CanopyConfig:
         int
             The cycle's length [frames].
         """
-        if self.trees is not None:
+        if self.trees is not None or self.meshes:
             return self.flutter.cycle
         return len(self.layers[0].mask)
 
@@ -574,7 +614,10 @@ class Config:
             values["sky"].pop("params")
         if self.receivers == ReceiversConfig():  # the level ground alone hashes as it always did
             values.pop("receivers")
+        if not self.canopy.meshes:  # a canopy without mesh trees hashes as it always did
+            values["canopy"].pop("meshes")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
+                       | {str(mesh.file) for mesh in self.canopy.meshes}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
                        | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set())

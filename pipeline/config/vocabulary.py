@@ -78,6 +78,9 @@ NUMBER_RANGES = {
     "canopy.layers[].height": (0.01, 1000.0, "m"),
     "canopy.trees.count": (1, 1000, "trees"),
     "canopy.trees.seed": (0, SEED_MAX, ""),
+    **{f"canopy.{mesh}.{key}": limits for mesh in ("mesh", "mesh[]") for key, limits in (
+        ("seed", (0, SEED_MAX, "")), ("scale", (1e-6, 1e6, "m per file unit")), ("position", (-1e4, 1e4, "m")),
+        ("rotation", (-360.0, 360.0, "deg")))},
     "canopy.trees.crown_radius": (0.0, 100.0, "m"),
     "canopy.trees.leaf_length": (0.001, 10.0, "m"),
     "canopy.trees.spread": (0.0, 1e4, "m"),

@@ -1,18 +1,22 @@
 """Compiled loops of the mesh coverage (``canopy.mesh_coverage``): triangles drawn exactly into a transmittance mask.
 
-Each triangle, projected onto the canopy plane in pixel units, is clipped against every pixel square
-it touches (Sutherland-Hodgman: a row's strip, then each pixel of it); the clipped polygon's area
-times the mean of its material's coverage table over the polygon's image in texture space is its
-coverage. The mean is exact for the table taken as constant over each of its texels: by Green's
-theorem the integral over the polygon is the line integral of the table's row prefix sums along its
-boundary, walked texel by texel (docs/method.md, "Trees from mesh files"). Triangles of one group (a
-leaf, a piece of wood) add their coverages in a pixel; groups combine as ``prod (1 - c)``, the
-procedural leaves' contract. Imported lazily: numba costs 0.3 s to import.
+A triangle's coverage of a pixel is the integral, over their overlap, of its material's coverage
+table (constant over each texel) mapped affinely onto the canopy plane. By Green's theorem it is the
+line integral of the table's row prefix F (dF/du = the table) d(row) around the overlap's boundary,
+and that boundary is made of two kinds of piece: the triangle's edges cut at the pixel lines, and the
+pixel lines cut by the triangle (each shared by two pixels, counted once for each with opposite
+signs). Each piece's integral is exact in closed form within a texel row (F is linear in u within a
+texel; its own prefix H, quadratic, integrates it across texels), so a piece costs the texel rows it
+crosses (docs/method.md, "Trees from mesh files"); a triangle whose pixel lines cross fewer texel columns
+than rows walks the transposed table's rows, and an edge two triangles of a group share, where their
+pieces on it cancel, is left out of both. Triangles of one group (a leaf, a piece of wood)
+add their coverages in a pixel; groups combine as ``prod (1 - c)``, the procedural leaves' contract.
+The pieces of a group's triangles are listed first, then integrated in one loop: arrays handed to a
+compiled function per piece cost two atomic reference counts each, more than the piece's arithmetic.
+Imported lazily: numba costs 0.3 s to import.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numba import njit
@@ -20,208 +24,264 @@ from numba import njit
 __all__ = ["mesh_transmittance", "triangle_alpha"]
 
 _OPAQUE = 1.0 - 2.0**-20  # a group's coverage clipped just below 1, as kernels/raster.py clips a leaf's
-_MAX_VERTICES = 16  # a triangle clipped by four lines has at most 7 corners
+
+
+_PARAMS = 12  # a triangle's parameters: affine map (6), weight, base, width, height, flags, period
+_PIECE = 7  # a piece's row: x0, y0, x1, y1 [pixel], the pixel it bounds positively, negatively (-1: none), triangle
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _clip(xs, ys, n, axis, value, keep_above, out_x, out_y):
-    """The polygon (xs, ys)[:n] clipped to the half-plane coordinate ``axis`` (0: x, 1: y) >= value
-    (``keep_above``) or <= value; written to out_x, out_y; returns its corner count."""
-    m = 0
-    for i in range(n):
-        j = (i + 1) % n
-        a = (xs[i] if axis == 0 else ys[i]) - value
-        b = (xs[j] if axis == 0 else ys[j]) - value
-        if not keep_above:
-            a, b = -a, -b
-        if a >= 0:
-            out_x[m], out_y[m] = xs[i], ys[i]
-            m += 1
-        if (a >= 0) != (b >= 0):
-            t = a / (a - b)
-            out_x[m], out_y[m] = xs[i] + t * (xs[j] - xs[i]), ys[i] + t * (ys[j] - ys[i])
-            m += 1
-    return m
+def _integrate(pieces, count, params, prefix, double, acc):
+    """Each listed piece's line integral times its triangle's weight, added to the pixel it bounds positively
+    and taken from the one it bounds negatively: x dy for a constant triangle, else F dr along the piece's image
+    in the texture, walked texel row by row (rows and columns repeating unless the triangle stays in the
+    first period). Within a row F is linear in u on each texel: a shallow piece (|du| > |dr|) integrates by
+    the difference of H (F's integral) times dr / du; a steep one crosses at most one texel line in a row,
+    and F at the middle of each part is exact. One loop: arrays handed to a compiled function cost two
+    atomic reference counts each, more than a piece's arithmetic."""
+    for n in range(count):
+        x0, y0, x1, y1, t = pieces[n, 0], pieces[n, 1], pieces[n, 2], pieces[n, 3], int(pieces[n, 6])
+        flags, value = int(params[t, 10]), 0.0
+        if flags & 1:
+            value = 0.5 * (x0 + x1) * (y1 - y0)
+        else:
+            c0, c1, c2, c3, c4, c5 = params[t, 0], params[t, 1], params[t, 2], params[t, 3], params[t, 4], params[t, 5]
+            u0, r0 = c0 + c1 * x0 + c2 * y0, c3 + c4 * x0 + c5 * y0
+            u1, r1 = c0 + c1 * x1 + c2 * y1, c3 + c4 * x1 + c5 * y1
+            base, width, height, within = int(params[t, 7]), int(params[t, 8]), int(params[t, 9]), flags & 2 != 0
+            sign = 1.0
+            if r1 < r0:
+                u0, r0, u1, r1, sign = u1, r1, u0, r0, -1.0
+            du, dr = u1 - u0, r1 - r0
+            row, last = np.floor(r0), (np.ceil(r1) - 1.0 if r1 > r0 else np.floor(r0) - 1.0)
+            shallow = abs(du) > dr
+            run = du / dr if dr > 0.0 else 0.0
+            ra, ua = r0, u0
+            while row <= last:
+                rb = r1 if row == last else row + 1.0
+                ub = u1 if row == last else u0 + run * (rb - r0)
+                k = min(max(int(row), 0), height - 1) if within else int(row) % height
+                start = base + k * (width + 1)
+                lo, hi = min(ua, ub), max(ua, ub)
+                cut = min(np.floor(lo) + 1.0, hi)
+                for part in range(2):  # shallow: H(ub), H(ua); steep: F over [lo, cut], [cut, hi]
+                    a, b = (lo, cut) if part == 0 else (cut, hi)
+                    if not shallow and b <= a and not (part == 0 and hi == lo):
+                        continue
+                    u = (ub if part == 0 else ua) if shallow else 0.5 * (a + b)
+                    periods = 0.0 if within else np.floor(u / width)
+                    rest = u - periods * width
+                    i = min(max(int(rest), 0), width - 1)
+                    x, low = rest - i, prefix[start + i]
+                    slope = prefix[start + i + 1] - low
+                    if shallow:
+                        h = double[start + i] + x * (low + 0.5 * x * slope) + periods * (
+                            double[start + width] + prefix[start + width] * (width * 0.5 * (periods - 1.0) + rest))
+                        value += sign * (dr / du) * (h if part == 0 else -h)
+                    else:
+                        f = low + x * slope + periods * prefix[start + width]
+                        value += sign * (rb - ra) * f * ((b - a) / (hi - lo) if hi > lo else 1.0)
+                ra, ua = rb, ub
+                row += 1.0
+        value *= params[t, 6]
+        plus, minus = int(pieces[n, 4]), int(pieces[n, 5])
+        if plus >= 0:
+            acc[plus] += value
+        if minus >= 0:
+            acc[minus] -= value
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _signed_area(xs, ys, n):
-    """The shoelace area of the polygon (xs, ys)[:n], positive anticlockwise in (x, y)."""
-    total = 0.0
-    for i in range(n):
-        j = (i + 1) % n
-        total += xs[i] * ys[j] - xs[j] * ys[i]
-    return 0.5 * total
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _prefix(prefix, base, width, height, row, u):
-    """The integral of the table's row ``row`` from 0 to u, the table repeating (rows and columns) [texel]:
-    its prefix sums (row-major, width + 1 a row, from ``base``) read linearly."""
-    start = base + (row % height) * (width + 1)
-    periods = math.floor(u / width)
-    rest = u - periods * width
-    i = min(int(rest), width - 1)
-    return (periods * prefix[start + width] + prefix[start + i]
-            + (rest - i) * (prefix[start + i + 1] - prefix[start + i]))
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _prefix_within(prefix, base, width, row, u):
-    """``_prefix`` for 0 <= u <= width and 0 <= row < height: no period to take off."""
-    start = base + row * (width + 1)
-    i = min(int(u), width - 1)
-    return prefix[start + i] + (u - i) * (prefix[start + i + 1] - prefix[start + i])
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _edge_integral(u0, r0, u1, r1, within, prefix, base, width, height):
-    """The line integral of G(u, r) dr along the edge (u0, r0) -> (u1, r1), G the row prefix integral,
-    the edge walked piece by piece between texel lines (exact: G is linear in u within a texel and
-    constant in r within a row); ``within``: the edge lies in the table's first period."""
-    dr = r1 - r0
-    if dr == 0.0:
-        return 0.0
-    du = u1 - u0
-    inf = np.inf
-    if du > 0:
-        step_u = 1.0 / du
-        next_u = (math.floor(u0) + 1.0 - u0) * step_u
-    elif du < 0:
-        step_u = -1.0 / du
-        next_u = (u0 - (math.ceil(u0) - 1.0)) * step_u
-    else:
-        step_u, next_u = inf, inf
-    step_r = 1.0 / abs(dr)
-    next_r = ((math.floor(r0) + 1.0 - r0) if dr > 0 else (r0 - (math.ceil(r0) - 1.0))) * step_r
-    total, t = 0.0, 0.0
-    while True:
-        t_next = min(next_u, next_r, 1.0)
-        if t_next > t:
-            mid = 0.5 * (t + t_next)
-            u, row = u0 + du * mid, int(math.floor(r0 + dr * mid))
-            if within:
-                total += (t_next - t) * _prefix_within(prefix, base, width, row, u)
+def _edge_pieces(x, y, t, skip, pieces, count, rows, cols):
+    """The triangle's edges (anticlockwise) cut at the pixel lines, listed, but for those whose bit is set in
+    ``skip`` (shared with a triangle of the group that cancels them); returns the count."""
+    for e in range(3):
+        ax, ay, bx, by = x[e], y[e], x[(e + 1) % 3], y[(e + 1) % 3]
+        dx, dy = bx - ax, by - ay
+        if skip & (1 << e) and not (dx == 0.0 and ax == np.floor(ax)) and not (dy == 0.0 and ay == np.floor(ay)):
+            continue  # (along a pixel line each triangle's piece bounds the pixel on its own side)
+        t_lo, t_hi = 0.0, 1.0  # the edge clipped to the raster
+        for axis in range(2):
+            a, d, n = (ax, dx, cols) if axis == 0 else (ay, dy, rows)
+            if d == 0.0:
+                if a < 0.0 or a > n:
+                    t_hi = -1.0
             else:
-                total += (t_next - t) * _prefix(prefix, base, width, height, row, u)
-        if t_next >= 1.0:
-            break
-        t = t_next
-        if next_u <= t_next:
-            next_u += step_u
-        if next_r <= t_next:
-            next_r += step_r
-    return total * dr
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _mean_over(us, rs, n, prefix, base, width, height):
-    """The mean of the table over the polygon (us, rs)[:n] in its texel units: the polygon moved by whole
-    periods to start in the first; where it has no area, its centroid's texel; where the texels of its
-    bounding box are all 0 or all 1, that; else the line integral over its area."""
-    u_lo, u_hi, r_lo, r_hi = us[0], us[0], rs[0], rs[0]
-    for i in range(1, n):
-        u_lo, u_hi, r_lo, r_hi = min(u_lo, us[i]), max(u_hi, us[i]), min(r_lo, rs[i]), max(r_hi, rs[i])
-    shift_u, shift_r = width * math.floor(u_lo / width), height * math.floor(r_lo / height)
-    for i in range(n):
-        us[i] -= shift_u
-        rs[i] -= shift_r
-    u_lo, u_hi, r_lo, r_hi = u_lo - shift_u, u_hi - shift_u, r_lo - shift_r, r_hi - shift_r
-    area = _signed_area(us, rs, n)
-    if abs(area) < 1e-12:
-        u, r = 0.0, 0.0
-        for i in range(n):
-            u += us[i] / n
-            r += rs[i] / n
-        row = int(math.floor(r))
-        return _prefix(prefix, base, width, height, row, math.floor(u) + 1.0) - \
-            _prefix(prefix, base, width, height, row, math.floor(u))
-    within = u_hi <= width and r_hi <= height
-    if within:  # the texels of the bounding box all 0 or all 1: no walk
-        first, last = int(u_lo), min(int(math.ceil(u_hi)), width)
-        total = 0.0
-        for row in range(int(r_lo), min(int(math.ceil(r_hi)), height)):
-            start = base + row * (width + 1)
-            total += prefix[start + last] - prefix[start + first]
-        if total == 0.0:
-            return 0.0
-        if total == (last - first) * (min(int(math.ceil(r_hi)), height) - int(r_lo)):
-            return 1.0
-    total = 0.0
-    for i in range(n):
-        j = (i + 1) % n
-        total += _edge_integral(us[i], rs[i], us[j], rs[j], within, prefix, base, width, height)
-    return min(max(total / area, 0.0), 1.0)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _level(corners, texels, t, levels, width0, height0, texels_per_pixel):
-    """The table level whose texels are about 1 / texels_per_pixel of a pixel under triangle t."""
-    x, y, u, r = corners[t, :, 0], corners[t, :, 1], texels[t, :, 0] * width0, texels[t, :, 1] * height0
-    plane = abs((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]))
-    texture = abs((u[1] - u[0]) * (r[2] - r[0]) - (u[2] - u[0]) * (r[1] - r[0]))
-    ratio = math.sqrt(texture / max(plane, 1e-300)) / texels_per_pixel
-    return 0 if ratio <= 1.0 else min(int(math.floor(math.log2(ratio))), levels - 1)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _triangle(corners, texels, t, m, level, prefix, level_base, level_size, acc, touched, count, rows, cols, buf):
-    """Triangle t's coverage of each pixel, added to acc (flat), new pixels appended to touched; returns
-    the count."""
-    x, y = corners[t, :, 0], corners[t, :, 1]
-    ex1, ey1, ex2, ey2 = x[1] - x[0], y[1] - y[0], x[2] - x[0], y[2] - y[0]
-    det = ex1 * ey2 - ex2 * ey1
-    if abs(det) < 1e-12:
-        return count
-    base, width, height = level_base[m, level], level_size[m, level, 0], level_size[m, level, 1]
-    constant = width == 1 and height == 1
-    # texture coordinates [texel of the level] as an affine function of the plane's [pixel]
-    tu, tr = texels[t, :, 0] * width, texels[t, :, 1] * height
-    a_u = ((tu[1] - tu[0]) * ey2 - (tu[2] - tu[0]) * ey1) / det
-    b_u = ((tu[2] - tu[0]) * ex1 - (tu[1] - tu[0]) * ex2) / det
-    a_r = ((tr[1] - tr[0]) * ey2 - (tr[2] - tr[0]) * ey1) / det
-    b_r = ((tr[2] - tr[0]) * ex1 - (tr[1] - tr[0]) * ex2) / det
-    sx, sy, px, py, qx, qy, us, rs = buf
-    for k in range(3):
-        px[k], py[k] = x[k], y[k]
-    r_lo, r_hi = max(int(math.floor(min(y[0], y[1], y[2]))), 0), min(int(math.ceil(max(y[0], y[1], y[2]))), rows)
-    for row in range(r_lo, r_hi):
-        n = _clip(px, py, 3, 1, float(row), True, qx, qy)
-        n = _clip(qx, qy, n, 1, float(row + 1), False, sx, sy)
-        if n < 3:
+                ta, tb = (0.0 - a) / d, (n - a) / d
+                t_lo, t_hi = max(t_lo, min(ta, tb)), min(t_hi, max(ta, tb))
+        if t_lo >= t_hi:
             continue
-        x_lo, x_hi = sx[0], sx[0]
-        for i in range(1, n):
-            x_lo, x_hi = min(x_lo, sx[i]), max(x_hi, sx[i])
-        for col in range(max(int(math.floor(x_lo)), 0), min(int(math.ceil(x_hi)), cols)):
-            k = _clip(sx, sy, n, 0, float(col), True, qx, qy)
-            k = _clip(qx, qy, k, 0, float(col + 1), False, us, rs)
-            if k < 3:
-                continue
-            area = abs(_signed_area(us, rs, k))
-            if area <= 0.0:
-                continue
-            if constant:
-                mean = prefix[base + 1]
-            else:
-                for i in range(k):
-                    dx, dy = us[i] - x[0], rs[i] - y[0]
-                    us[i], rs[i] = tu[0] + a_u * dx + b_u * dy, tr[0] + a_r * dx + b_r * dy
-                mean = _mean_over(us, rs, k, prefix, base, width, height)
-            cover = area * mean
-            if cover > 0.0:
-                p = row * cols + col
-                if acc[p] == 0.0:
-                    touched[count] = p
+        px, py = ax + dx * t_lo, ay + dy * t_lo
+        line_x = (np.floor(px) + 1.0 if dx > 0 else np.ceil(px) - 1.0) if dx != 0 else 0.0
+        line_y = (np.floor(py) + 1.0 if dy > 0 else np.ceil(py) - 1.0) if dy != 0 else 0.0
+        inv_x, inv_y = (1.0 / dx if dx != 0 else 0.0), (1.0 / dy if dy != 0 else 0.0)
+        step_x, step_y = (1.0 if dx > 0 else -1.0), (1.0 if dy > 0 else -1.0)
+        s = t_lo
+        while s < t_hi:
+            tx = (line_x - ax) * inv_x if dx != 0 else np.inf
+            ty = (line_y - ay) * inv_y if dy != 0 else np.inf
+            s_next = min(tx, ty, t_hi)
+            if s_next > s:
+                qx, qy = ax + dx * s_next, ay + dy * s_next
+                mx, my = 0.5 * (px + qx), 0.5 * (py + qy)
+                col, row = np.floor(mx), np.floor(my)
+                if col == mx and dy > 0:  # along a pixel line: the pixel on the triangle's side (its left)
+                    col -= 1.0
+                if row == my and dx < 0:
+                    row -= 1.0
+                if 0 <= col < cols and 0 <= row < rows:
+                    pieces[count, 0], pieces[count, 1], pieces[count, 2], pieces[count, 3] = px, py, qx, qy
+                    pieces[count, 4], pieces[count, 5], pieces[count, 6] = row * cols + col, -1.0, t
                     count += 1
-                acc[p] += cover
+                px, py, s = qx, qy, s_next
+            if tx <= s_next:
+                line_x += step_x
+            if ty <= s_next:
+                line_y += step_y
     return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _span(x, y, at, along_x):
+    """The triangle's extent on the line x = at (``along_x`` False: its y range) or y = at (its x range)."""
+    lo, hi = np.inf, -np.inf
+    for e in range(3):
+        a0, a1 = (y[e], y[(e + 1) % 3]) if along_x else (x[e], x[(e + 1) % 3])
+        b0, b1 = (x[e], x[(e + 1) % 3]) if along_x else (y[e], y[(e + 1) % 3])
+        if a0 != a1 and (a0 - at) * (a1 - at) <= 0.0:
+            b = b0 + (b1 - b0) * ((at - a0) / (a1 - a0))
+            lo, hi = min(lo, b), max(hi, b)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _inner_pieces(x, y, t, constant, pieces, count, rows, cols):
+    """The pixel lines through the triangle cut at the pixel lines across them, listed with the pixels on
+    either side (x = line upwards: the left one's boundary, the right one's reversed; y = line towards +x:
+    the one below's, the one above's reversed); returns the count. A constant triangle's horizontal
+    pieces are left out (x dy is 0 along them)."""
+    for vertical in (True, False):
+        if constant and not vertical:
+            break
+        a0, a1, a2 = (x[0], x[1], x[2]) if vertical else (y[0], y[1], y[2])
+        n_a, n_b = (cols, rows) if vertical else (rows, cols)
+        first = max(int(np.floor(min(a0, a1, a2))) + 1, 0)
+        last = min(int(np.ceil(max(a0, a1, a2))) - 1, n_a)
+        for line in range(first, last + 1):
+            lo, hi = _span(x, y, float(line), not vertical)
+            for k in range(max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) - 1, n_b - 1) + 1):
+                s0, s1 = max(lo, float(k)), min(hi, k + 1.0)
+                if s1 <= s0:
+                    continue
+                if vertical:
+                    pieces[count, 0], pieces[count, 1], pieces[count, 2], pieces[count, 3] = line, s0, line, s1
+                    pieces[count, 4] = k * cols + line - 1 if line > 0 else -1
+                    pieces[count, 5] = k * cols + line if line < cols else -1
+                else:
+                    pieces[count, 0], pieces[count, 1], pieces[count, 2], pieces[count, 3] = s0, line, s1, line
+                    pieces[count, 4] = line * cols + k if line < rows else -1
+                    pieces[count, 5] = (line - 1) * cols + k if line > 0 else -1
+                pieces[count, 6] = t
+                count += 1
+    return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _setup(x, y, tu, tr, width, height, params, t):
+    """Triangle t's map from the plane [pixel] to the texture [texel] written to params[t, :7] (u = c0 + c1 x +
+    c2 y, r = c3 + c4 x + c5 y, the texture moved by whole periods to start in the first; 1 / Jacobian) and
+    its period flag (2: it stays in the first period) to params[t, 10]; returns its texture area [texel^2]."""
+    det = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+    shift_u = width * np.floor(min(tu[0], tu[1], tu[2]) / width)
+    shift_r = height * np.floor(min(tr[0], tr[1], tr[2]) / height)
+    ex1, ey1, ex2, ey2 = x[1] - x[0], y[1] - y[0], x[2] - x[0], y[2] - y[0]
+    eu1, eu2, er1, er2 = tu[1] - tu[0], tu[2] - tu[0], tr[1] - tr[0], tr[2] - tr[0]
+    a_u, b_u = (eu1 * ey2 - eu2 * ey1) / det, (eu2 * ex1 - eu1 * ex2) / det
+    a_r, b_r = (er1 * ey2 - er2 * ey1) / det, (er2 * ex1 - er1 * ex2) / det
+    params[t, 0], params[t, 1], params[t, 2] = tu[0] - shift_u - a_u * x[0] - b_u * y[0], a_u, b_u
+    params[t, 3], params[t, 4], params[t, 5] = tr[0] - shift_r - a_r * x[0] - b_r * y[0], a_r, b_r
+    within = max(tu[0], tu[1], tu[2]) - shift_u <= width and max(tr[0], tr[1], tr[2]) - shift_r <= height
+    params[t, 10] = 2.0 if within else 0.0
+    jacobian = a_u * b_r - b_u * a_r
+    params[t, 6] = 1.0 / jacobian if jacobian != 0.0 else 0.0
+    params[t, 11] = shift_u * 65536.0 + shift_r  # which period: shared edges cancel only within one
+    return abs(jacobian * det)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, params, placed):
+    """Every triangle's parameters (``_PARAMS``; flags 1: constant, 2: in the first period, 4: drawn) and its
+    corners made anticlockwise (``placed``, (m, 3, 2)) [pixel]."""
+    for t in range(corners.shape[0]):
+        m = material[t]
+        x = (corners[t, 0, 0], corners[t, 1, 0], corners[t, 2, 0])
+        y = (corners[t, 0, 1], corners[t, 1, 1], corners[t, 2, 1])
+        tu = (texels[t, 0, 0], texels[t, 1, 0], texels[t, 2, 0])
+        tr = (texels[t, 0, 1], texels[t, 1, 1], texels[t, 2, 1])
+        det = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+        if det < 0.0:  # anticlockwise in (x, y)
+            x, y, tu, tr = (x[0], x[2], x[1]), (y[0], y[2], y[1]), (tu[0], tu[2], tu[1]), (tr[0], tr[2], tr[1])
+        for k in range(3):
+            placed[t, k, 0], placed[t, k, 1] = x[k], y[k]
+        params[t, 10] = 0.0
+        if abs(det) < 1e-12:
+            continue
+        width0, height0 = level_size[m, 0, 0], level_size[m, 0, 1]
+        texture = abs((tu[1] - tu[0]) * (tr[2] - tr[0]) - (tu[2] - tu[0]) * (tr[1] - tr[0])) * width0 * height0
+        ratio = np.sqrt(texture / abs(det)) / texels_per_pixel  # the level whose texels are ~1 / tpp of a pixel
+        level = 0 if ratio <= 1.0 else min(int(np.floor(np.log2(ratio))), levels[m] - 1)
+        base, width, height = level_base[m, level, 0], level_size[m, level, 0], level_size[m, level, 1]
+        tu = (tu[0] * width, tu[1] * width, tu[2] * width)
+        tr = (tr[0] * height, tr[1] * height, tr[2] * height)
+        texture_area = _setup(x, y, tu, tr, width, height, params, t)
+        params[t, 7], params[t, 8], params[t, 9] = base, width, height
+        one_texel = np.floor(tu[0]) == np.floor(tu[1]) == np.floor(tu[2]) and \
+            np.floor(tr[0]) == np.floor(tr[1]) == np.floor(tr[2])
+        if (width == 1 and height == 1) or one_texel or texture_area < 1e-12:
+            # the table's value over the whole triangle (where it has no area: its centroid's texel)
+            u, r = (tu[0] + tu[1] + tu[2]) / 3.0, (tr[0] + tr[1] + tr[2]) / 3.0
+            start = base + (int(np.floor(r)) % height) * (width + 1)
+            i = int(np.floor(u)) % width
+            params[t, 6], params[t, 7], params[t, 10] = prefix[start + i + 1] - prefix[start + i], -1.0, 1.0
+            params[t, 11] = 0.0
+        elif abs(params[t, 1]) + abs(params[t, 2]) < abs(params[t, 4]) + abs(params[t, 5]):
+            # the pixel lines cross fewer texel columns than rows: walk the transposed table's rows instead
+            # (u and r swapped, the Jacobian's sign with them: the same integral)
+            _setup(x, y, tr, tu, height, width, params, t)
+            params[t, 7], params[t, 8], params[t, 9] = level_base[m, level, 1], height, width
+        if params[t, 6] != 0.0:
+            params[t, 10] += 4.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _shared_edges(placed, partner, params):
+    """Each drawn triangle's edges (as ``placed``, bit e from corner e to e + 1) that a partner's cancels: the
+    partner across it (``partner`` (m, 3), -1 for none) runs it the other way, with the same table, level and
+    period (or the same constant), so their pieces on it are equal and opposite."""
+    skip = np.zeros(placed.shape[0], np.int64)
+    for t in range(placed.shape[0]):
+        if not int(params[t, 10]) & 4:
+            continue
+        for e in range(3):
+            p = partner[t, e]
+            if p < 0 or not int(params[p, 10]) & 4 or params[t, 7] != params[p, 7] or \
+                    params[t, 11] != params[p, 11] or (params[t, 7] < 0.0 and params[t, 6] != params[p, 6]):
+                continue
+            for j in range(3):  # the placed edge A -> B of t that the partner runs B -> A
+                ax, ay = placed[t, j, 0], placed[t, j, 1]
+                bx, by = placed[t, (j + 1) % 3, 0], placed[t, (j + 1) % 3, 1]
+                for k in range(3):
+                    if placed[p, k, 0] == bx and placed[p, k, 1] == by and \
+                            placed[p, (k + 1) % 3, 0] == ax and placed[p, (k + 1) % 3, 1] == ay:
+                        skip[t] |= 1 << j
+    return skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def mesh_transmittance(corners: np.ndarray, texels: np.ndarray, material: np.ndarray, group_start: np.ndarray,
                        prefix: np.ndarray, level_base: np.ndarray, level_size: np.ndarray, levels: np.ndarray,
-                       texels_per_pixel: float, transmittance: np.ndarray) -> None:
+                       texels_per_pixel: float, transmittance: np.ndarray, double: np.ndarray,
+                       partner: np.ndarray) -> None:
     """Triangles drawn into a transmittance raster by their exact coverage, group by group.
 
     Parameters
@@ -238,7 +298,7 @@ def mesh_transmittance(corners: np.ndarray, texels: np.ndarray, material: np.nda
     prefix : numpy.ndarray
         Flat float64 row prefix sums of every material's tables, (height, width + 1) each [texel].
     level_base : numpy.ndarray
-        (materials, L) int64: where each level's prefix sums start.
+        (materials, L, 2) int64: where each level's prefix sums start, and its transposed table's.
     level_size : numpy.ndarray
         (materials, L, 2) int64: each level's (width, height) [texel].
     levels : numpy.ndarray
@@ -247,34 +307,54 @@ def mesh_transmittance(corners: np.ndarray, texels: np.ndarray, material: np.nda
         The finest level whose texel spans at most 1 / texels_per_pixel of a pixel is read [1].
     transmittance : numpy.ndarray
         (rows, cols) float64, multiplied in place by 1 - each group's coverage [1].
+    double : numpy.ndarray
+        Laid out as ``prefix``: each row's prefix sums of the integral of its prefix F [texel^2].
+    partner : numpy.ndarray
+        (m, 3) int64: the triangle of the same group across each edge (corner k to k + 1) with the same
+        vertices and texture coordinates at both ends, or -1; their shared edge is not drawn where the two
+        cancel on it.
     """
     rows, cols = transmittance.shape
     flat = transmittance.reshape(-1)
     acc = np.zeros(rows * cols)
-    touched = np.empty(rows * cols, np.int64)
-    buf = (np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES),
-           np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES), np.empty(_MAX_VERTICES))
+    params, placed = np.empty((corners.shape[0], _PARAMS)), np.empty_like(corners)
+    _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, params, placed)
+    skip = _shared_edges(placed, partner, params)
+    pieces = np.empty((4096, _PIECE))
     for g in range(group_start.shape[0] - 1):
-        count = 0
+        count, r_lo, r_hi, c_lo, c_hi = 0, rows, 0, cols, 0
         for t in range(group_start[g], group_start[g + 1]):
-            m = material[t]
-            level = _level(corners, texels, t, levels[m], level_size[m, 0, 0], level_size[m, 0, 1], texels_per_pixel)
-            count = _triangle(corners, texels, t, m, level, prefix, level_base, level_size, acc, touched, count,
-                              rows, cols, buf)
-        for i in range(count):
-            p = touched[i]
-            flat[p] *= 1.0 - min(acc[p], _OPAQUE)
-            acc[p] = 0.0
+            x = (placed[t, 0, 0], placed[t, 1, 0], placed[t, 2, 0])
+            y = (placed[t, 0, 1], placed[t, 1, 1], placed[t, 2, 1])
+            c0, c1 = max(int(np.floor(min(x))), 0), min(int(np.ceil(max(x))), cols)
+            r0, r1 = max(int(np.floor(min(y))), 0), min(int(np.ceil(max(y))), rows)
+            if c1 <= c0 or r1 <= r0 or not int(params[t, 10]) & 4:
+                continue
+            r_lo, r_hi, c_lo, c_hi = min(r_lo, r0), max(r_hi, r1), min(c_lo, c0), max(c_hi, c1)
+            most = 3 * (c1 - c0 + r1 - r0 + 3) + 2 * (c1 - c0 + 1) * (r1 - r0 + 1)
+            if count + most > pieces.shape[0]:
+                _integrate(pieces, count, params, prefix, double, acc)
+                count = 0
+                if most > pieces.shape[0]:
+                    pieces = np.empty((most, _PIECE))
+            count = _edge_pieces(x, y, t, skip[t], pieces, count, rows, cols)
+            count = _inner_pieces(x, y, t, int(params[t, 10]) & 1 != 0, pieces, count, rows, cols)
+        _integrate(pieces, count, params, prefix, double, acc)
+        for r in range(r_lo, r_hi):
+            for p in range(r * cols + c_lo, r * cols + c_hi):
+                if acc[p] > 0.0:
+                    flat[p] *= 1.0 - min(acc[p], _OPAQUE)
+                acc[p] = 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def triangle_alpha(texels: np.ndarray, material: np.ndarray, prefix: np.ndarray, level_base: np.ndarray,
-                   level_size: np.ndarray) -> np.ndarray:
+                   level_size: np.ndarray, double: np.ndarray) -> np.ndarray:
     """The mean of each triangle's coverage table over the triangle in texture space (level 0).
 
     Parameters
     ----------
-    texels, material, prefix, level_base, level_size
+    texels, material, prefix, level_base, level_size, double
         As for ``mesh_transmittance``.
 
     Returns
@@ -282,12 +362,26 @@ def triangle_alpha(texels: np.ndarray, material: np.ndarray, prefix: np.ndarray,
     numpy.ndarray
         (m,) float64 in [0, 1] [1].
     """
-    out = np.empty(texels.shape[0])
-    us, rs = np.empty(3), np.empty(3)
-    for t in range(texels.shape[0]):
-        m = material[t]
-        width, height = level_size[m, 0, 0], level_size[m, 0, 1]
+    m = texels.shape[0]
+    out, params, pieces = np.zeros(m), np.zeros((m, _PARAMS)), np.empty((3 * m, _PIECE))
+    for t in range(m):  # F dr around the triangle in the texture over its area: the pieces of _integrate
+        material_t = material[t]
+        base, width, height = level_base[material_t, 0, 0], level_size[material_t, 0, 0], level_size[material_t, 0, 1]
+        tu = (texels[t, 0, 0] * width, texels[t, 1, 0] * width, texels[t, 2, 0] * width)
+        tr = (texels[t, 0, 1] * height, texels[t, 1, 1] * height, texels[t, 2, 1] * height)
+        area = 0.5 * ((tu[1] - tu[0]) * (tr[2] - tr[0]) - (tu[2] - tu[0]) * (tr[1] - tr[0]))
+        shift_u, shift_r = width * np.floor(min(tu) / width), height * np.floor(min(tr) / height)
+        within = max(tu) - shift_u <= width and max(tr) - shift_r <= height
+        params[t, 1], params[t, 5], params[t, 6] = 1.0, 1.0, 1.0 / area if abs(area) >= 1e-12 else 0.0
+        params[t, 7], params[t, 8], params[t, 9], params[t, 10] = base, width, height, 2.0 if within else 0.0
         for k in range(3):
-            us[k], rs[k] = texels[t, k, 0] * width, texels[t, k, 1] * height
-        out[t] = _mean_over(us, rs, 3, prefix, level_base[m, 0], width, height)
-    return out
+            j = (k + 1) % 3
+            pieces[3 * t + k, 0], pieces[3 * t + k, 1] = tu[k] - shift_u, tr[k] - shift_r
+            pieces[3 * t + k, 2], pieces[3 * t + k, 3] = tu[j] - shift_u, tr[j] - shift_r
+            pieces[3 * t + k, 4], pieces[3 * t + k, 5], pieces[3 * t + k, 6] = t, -1.0, t
+        if abs(area) < 1e-12:  # no area: its centroid's texel
+            start = base + (int(np.floor((tr[0] + tr[1] + tr[2]) / 3.0)) % height) * (width + 1)
+            i = int(np.floor((tu[0] + tu[1] + tu[2]) / 3.0)) % width
+            out[t] = prefix[start + i + 1] - prefix[start + i]
+    _integrate(pieces, 3 * m, params, prefix, double, out)
+    return np.minimum(np.maximum(out, 0.0), 1.0)
