@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 import pytest
-from reference import disc_directions, limb_darkened_profile
+from reference import receiver_monte_carlo
 
 from pipeline.canopy import masks as canopy
 from pipeline.canopy.grove import FlutterParams, GroveParams, grow_grove, leaves_at
@@ -22,7 +22,7 @@ from pipeline.receivers.sun import receiver_sun_kernel, sun_lights
 from pipeline.sky.base import UniformSky
 from pipeline.sky.equirect import EquirectSky, equirect_lookup
 from pipeline.sky.procedural import ProceduralSky
-from pipeline.sky.sun_disc import LIMB_DARKENING, SUN_ANGULAR_RADIUS, SunDisc
+from pipeline.sky.sun_disc import SunDisc
 from pipeline.sky.sun_kernel import sun_kernel
 
 DEG = np.pi / 180
@@ -41,6 +41,13 @@ def grille(n=40, bars=5, seed=3):
     for r, c in rng.integers(0, n - 3, (12, 2)):
         t[r:r + 3, c:c + 3] = 0.4
     return t
+
+
+def grille_lookup(t, centre, size):
+    """f(a, b) [m] -> the 30 x 30 grille ``t`` covering ``size`` around ``centre`` (nearest texel), 1 outside."""
+    return lambda a, b: np.where((np.abs(a - centre[0]) < size[0] / 2) & (np.abs(b - centre[1]) < size[1] / 2),
+                                 t[np.clip(((centre[1] + size[1] / 2 - b) / size[1] * 30).astype(int), 0, 29),
+                                   np.clip(((a - centre[0] + size[0] / 2) / size[0] * 30).astype(int), 0, 29)], 1.0)
 
 
 # --- the frame ------------------------------------------------------------------------------------
@@ -140,9 +147,10 @@ def equirect_of(function, width, height):
     return function(az, zen).astype(np.float32)
 
 
-def test_a_wall_under_a_turned_sky_gets_the_level_grounds_raster():
+def turned_and_level(plane, **options):
+    """``receiver_light`` (with ``options``) of ``plane`` under a smooth sky turned with it, and of the level
+    ground under the sky unturned, behind the same grille 0.7 m away: (on the receiver, on the ground)."""
     image = equirect_of(smooth_sphere, 256, 128)
-    plane = wall((3.0, -2.0, 0.5), facing=230 * DEG, width=2, height=2, tilt=10 * DEG)
     # the sun: 30 degrees from the normal in the receiver's frame, and the same in the world's for the ground
     local_sun = unit(20 * DEG, 60 * DEG)
     world_sun = plane.world_directions(local_sun)
@@ -158,27 +166,19 @@ def test_a_wall_under_a_turned_sky_gets_the_level_grounds_raster():
     layer = mask_layer(grille(), center=(0.1, 1.0), size=(1.6, 1.6), distance=0.7)
     window = Grid.from_window((-0.6, 0.4, 0.6, 1.6), 0.02)
     sun_window = Grid.from_window((-0.2, 0.8, 0.2, 1.2), 0.004)
-    on_wall = receiver_light(turned, sky_at(world_sun), plane, window, [layer], sun_window=sun_window)
-    on_ground = receiver_light(unturned, sky_at(local_sun), level_ground(), window, [layer], sun_window=sun_window)
+    return (receiver_light(turned, sky_at(world_sun), plane, window, [layer], sun_window=sun_window, **options),
+            receiver_light(unturned, sky_at(local_sun), level_ground(), window, [layer], sun_window=sun_window,
+                           **options))
+
+
+def test_a_wall_under_a_turned_sky_gets_the_level_grounds_raster():
+    on_wall, on_ground = turned_and_level(wall((3.0, -2.0, 0.5), facing=230 * DEG, width=2, height=2, tilt=10 * DEG))
     for ours, theirs in ((on_wall.sky, on_ground.sky), (on_wall.total, on_ground.total)):
         assert np.max(np.abs(ours - theirs) / theirs) < 1e-4
     assert on_ground.total.max() > 2 * on_ground.total.min()  # a real shadow
 
 
 # --- against a world-coordinate Monte Carlo -------------------------------------------------------
-
-def cosine_rays(normal, count, rng):
-    """Cosine-weighted unit vectors about ``normal`` (world), stratified, built from an arbitrary tangent."""
-    t = np.cross(normal, rng.normal(size=3))
-    t /= np.linalg.norm(t)
-    b = np.cross(normal, t)
-    side = int(np.sqrt(count))
-    i, j = np.meshgrid(np.arange(side), np.arange(side), indexing="ij")
-    u1 = (i.ravel() + rng.random(side * side)) / side
-    u2 = (j.ravel() + rng.random(side * side)) / side
-    r, phi = np.sqrt(u1), 2 * np.pi * u2
-    return (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u1)[:, None] * normal
-
 
 def test_a_wall_behind_a_grille_matches_a_world_monte_carlo():
     rng = np.random.default_rng(5)
@@ -199,43 +199,17 @@ def test_a_wall_behind_a_grille_matches_a_world_monte_carlo():
     u = np.cross([0.0, 0.0, 1.0], n)
     u /= np.linalg.norm(u)
     w = np.cross(n, u)
-    mask = lambda a, b: np.where((np.abs(a - centre[0]) < size[0] / 2) & (np.abs(b - centre[1]) < size[1] / 2),  # noqa: E731
-                                 t[np.clip(((centre[1] + size[1] / 2 - b) / size[1] * 30).astype(int), 0, 29),
-                                   np.clip(((a - centre[0] + size[0] / 2) / size[0] * 30).astype(int), 0, 29)], 1.0)
+    mask = grille_lookup(t, centre, size)
     # 30 pixels: 16 in the sun's penumbrae, 7 lit, 7 in the bars' umbrae (ours only chooses them)
     sun_part = light.total[1] - shadow.resample_bilinear(light.sky, window, sun_window)[1]
     part, lit, dark = (np.argwhere(where)
                        for where in ((sun_part > 1) & (sun_part < 61), sun_part >= 61, sun_part <= 1))
     pick = np.concatenate([part[rng.integers(0, len(part), 16)], lit[rng.integers(0, len(lit), 7)],
                            dark[rng.integers(0, len(dark), 7)]])
-    pu, pw = sun_window.ground_from_raster(pick[:, 0], pick[:, 1])
-    sun = sky.sun_direction
-    r = SUN_ANGULAR_RADIUS
-    centre_radiance = sky.sun_normal_irradiance / (np.pi * r**2 * (1 - np.asarray(LIMB_DARKENING) / 3))
-    ref_right = np.cross(sun, [0, 0, 1.0])
-    ref_right /= np.linalg.norm(ref_right)
-    def monte_carlo(a, b):
-        rays = cosine_rays(n, 128 * 128, rng)
-        jitter = rng.uniform(-0.5, 0.5, (len(rays), 2)) * sun_window.pixel
-        origin = foot + (a + jitter[:, :1]) * u + (b + jitter[:, 1:]) * w
-        hit = origin + rays * (d / (rays @ n))[:, None] - foot
-        through = mask(hit @ u, hit @ w)
-        up = rays[:, 2] > 0
-        L = np.tile(ground, (len(rays), 1))
-        z = np.maximum(rays[up, 2], 1e-3)
-        L[up] = sky.radiance(rays[up, :2] / z[:, None])
-        e = np.pi * (L * through[:, None]).mean(axis=0)
-        dirs, omega = disc_directions(sun, ref_right, np.cross(ref_right, sun), r * 1.02, n=60, rng=rng)
-        o = foot + (a + jitter[: len(dirs), :1]) * u + (b + jitter[: len(dirs), 1:]) * w
-        hit = o + dirs * (d / (dirs @ n))[:, None] - foot
-        weight = mask(hit @ u, hit @ w) * (dirs @ n) * omega
-        profile = limb_darkened_profile(np.arccos(np.clip(dirs @ sun, -1, 1)), r, LIMB_DARKENING)
-        return e + (weight[:, None] * profile * centre_radiance).sum(axis=0)
-
+    points = np.column_stack(sun_window.ground_from_raster(pick[:, 0], pick[:, 1]))
     # two independent estimates: their mean, and its noise from their difference
-    first, second = (np.array([monte_carlo(a, b) for a, b in zip(pu, pw)]) for _ in range(2))
-    mc = (first + second) / 2
-    noise = np.sqrt(np.mean((first - second) ** 2)) / 2 / np.mean(mc)
+    mc, noise = receiver_monte_carlo(points, origin=foot, u=u, w=w, normal=n, distance=d, transmittance=mask, sky=sky,
+                                     ground=ground, pixel=sun_window.pixel, rng=rng)
     ours = light.total[:, pick[:, 0], pick[:, 1]].T
     relative_rms = np.sqrt(np.mean((ours - mc) ** 2)) / np.mean(mc)
     assert noise < 0.003, noise
@@ -448,7 +422,7 @@ def test_check_lists_each_wall_with_its_sun_and_bound(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"receivers.slope": {"tilt": 20.0, "facing": 180.0}}, "receivers.slope: a slope is not drawn yet"),
+    ({"receivers.slope": {"tilt": 20.0, "facing": 180.0}}, "receivers.walls: walls on a slope are not drawn yet"),
     ({"output": {"passes": ["sun"]}}, "output.passes: the light passes are not made with walls yet"),
     ({"receivers.walls": [{"foot": [0.0, 0.0], "facing": 270.0, "width": 3.0, "height": 2.0}]},
      "receivers.walls[0].foot: wall 'wall0' stands through the trunk of the tree at (0.0, 0.0) m")])

@@ -353,7 +353,14 @@ def ground_irradiance(config: ConfigLike, frame: int = 0, *, cache: Cache | str 
 
     config = load_config(config, named_frames=False)
     _check_frame(frame, config)
-    result = render_ground(plan_run(config), frame, store=_cache(cache), workers=threads)
+    plan = plan_run(config)
+    if plan.receivers.slope is not None:  # the slope's light, in its (u, w) metres (docs/method.md, "A sloped ground")
+        from pipeline.stages.ground import FrameContext
+        from pipeline.stages.slope import slope_ground
+
+        result = slope_ground(FrameContext.of(plan, frame, store=_cache(cache), workers=threads))
+    else:
+        result = render_ground(plan, frame, store=_cache(cache), workers=threads)
     if not np.all(np.isfinite(result.irradiance)):
         raise BadInput(f"{config.path}: the ground irradiance overflowed; lower the sky's radiance")
     metadata = {"sunshade:window": result.grid.extent, "sunshade:pixel_size": float(result.grid.pixel),

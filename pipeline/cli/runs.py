@@ -62,7 +62,11 @@ def run_check(args: argparse.Namespace) -> int:
         print(line)
     for line in _light_lines(plan):
         print(line)
-    for line in _wall_lines(plan):
+    for line in _receiver_lines(plan, config):
+        print(line)
+    for line in _slope_lines(plan):
+        print(line)
+    for line in _mesh_lines(plan):
         print(line)
     need = disk_needed(plan)
     frames, cycle = need.frame_bytes, need.cache_bytes
@@ -138,29 +142,80 @@ def _light_lines(plan: RunPlan) -> list[str]:
     return lines
 
 
-def _wall_lines(plan: RunPlan) -> list[str]:
-    """Each wall's open light at the first, middle and last frames: the sun's incidence on it and
-    how far a sun fleck can stand above its shade ((sun + sky) / sky, luminance), its files read."""
+def _receiver_lines(plan: RunPlan, config: Config) -> list[str]:
+    """With walls, each receiver (the level ground, then each wall) at the first, middle and last frames:
+    the sun's angle off its normal, its open sun and sky light and how far a sun fleck can stand above
+    its shade ((sun + sky) / sky, luminance; ``wall_framing.open_receivers``), and the share of the
+    picture it fills; the walls' files read."""
     import numpy as np
 
-    from pipeline.core.colour import REC709_LUMINANCE
-    from pipeline.stages.walls import check_walls, open_walls
+    from pipeline.stages.wall_framing import (
+        EXPOSURE_SHARE,
+        exposure_stops,
+        open_receivers,
+        receiver_shares,
+        wall_planes,
+    )
+    from pipeline.stages.walls import check_walls
 
     if not plan.receivers.walls:
         return []
     check_walls(plan)
-    lines = []
-    found = open_walls(plan, sorted({0, plan.frames // 2, plan.frames - 1}))
-    for wall in plan.receivers.walls:
+    frames = sorted({0, plan.frames // 2, plan.frames - 1})
+    found = [open_receivers(config, plan.sky.at(plan.scenes[f])) for f in frames]
+    shares = receiver_shares(plan.camera, wall_planes(config))
+    names = ["the level ground"] + [f"wall {w.name}" for w in plan.receivers.walls]
+    looked = int(np.argmax(shares))
+    lines = [f"  receivers: {', '.join(f'{n} ({100 * f:.0f}% of the picture)' for n, f in zip(names, shares))}; "
+             f"the camera{' (placed)' if 'camera' in plan.auto else ''} sees most of {names[looked]}"]
+    for k, name in enumerate(names):
         shown = []
-        for w in (w for w in found if w.name == wall.name):
-            sun, sky = (float(np.asarray(v) @ REC709_LUMINANCE) for v in (w.sun, w.sky))
-            angle = np.degrees(np.arccos(np.clip(w.incidence, -1.0, 1.0)))
-            ratio = f", a fleck at most {(sun + sky) / sky:.2f} x its shade" if sky > 0 else ""
-            shown.append(f"frame {w.frame}: sun {angle:.0f} degrees off its normal, sun {sun:.1f} klx, "
-                         f"sky {sky:.1f} klx{ratio}")
-        lines.append(f"  wall {wall.name} ({wall.width:g} x {wall.height:g} m, facing "
-                     f"{np.degrees(wall.facing) % 360:.0f} degrees): " + "; ".join(shown))
+        for frame, lights in zip(frames, found):
+            light = lights[k]
+            angle = np.degrees(np.arccos(np.clip(light.incidence, -1.0, 1.0)))
+            ratio = f", a fleck at most {light.most:.2f} x its shade" if light.sky > 0 else ""
+            shown.append(f"frame {frame}: sun {angle:.0f} degrees off its normal, sun {light.sun:.1f} klx, "
+                         f"sky {light.sky:.1f} klx{ratio}")
+        wall = plan.receivers.walls[k - 1] if k else None
+        what = "" if wall is None else (f" ({wall.width:g} x {wall.height:g} m, facing "
+                                        f"{np.degrees(wall.facing) % 360:.0f} degrees)")
+        lines.append(f"  {name}{what}: " + "; ".join(shown))
+    stops = exposure_stops(config, plan.sky.at(plan.scenes[plan.frames // 2]), plan.camera)
+    if stops:
+        lines.append(f"  exposure: {stops:+.2f} stops from the open ground's, for the brightest receiver that fills "
+                     f"at least {100 * EXPOSURE_SHARE:.0f}% of the picture (camera.exposure adds to it)")
+    return lines
+
+
+def _mesh_lines(plan: RunPlan) -> list[str]:
+    """Each mesh tree's triangles, leaves, leaf area, bounding box, the layers it falls in and the memory a
+    worker takes; a warning where the camera sees it (its foreground passes are not drawn yet)."""
+    import numpy as np
+
+    from pipeline.camera.pinhole import project_points
+    from pipeline.canopy.mesh_layers import MAX_MESH_BYTES, mesh_bytes, mesh_summary
+    from pipeline.stages.cycle import mesh_trees
+
+    lines = []
+    heights = [lp.height for lp in plan.layers]
+    cells = max(int(np.prod(g.shape)) for lp in plan.layers for g in (lp.canopy, *([lp.sun.mask] if lp.sun else ())))
+    for mesh, tree in zip(plan.canopy.meshes, mesh_trees(plan.canopy)):
+        got = mesh_summary(tree, heights)
+        x0, y0, z0, x1, y1, z1 = got.box
+        layers = ", ".join(f"{n:,} at {h:g} m" for n, h in zip(got.layers, heights) if n)
+        lines.append(f"  mesh {mesh.file.name}: {got.triangles:,} triangles ({got.skipped:,} of zero area left "
+                     f"out), {got.leaves:,} leaves of {got.leaf_triangles:,} triangles, leaf area "
+                     f"{got.leaf_area:.3g} m^2; x {x0:.2f} to {x1:.2f}, y {y0:.2f} to {y1:.2f}, z {z0:.2f} to "
+                     f"{z1:.2f} m; triangles per layer: {layers}; about {_size(mesh_bytes(tree, cells))} a "
+                     f"worker (the most {_size(MAX_MESH_BYTES)})")
+        corners = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)] +
+                           [[(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2]])
+        u, v, depth = project_points(plan.camera, corners)
+        seen = (depth > 0) & (u >= 0) & (u <= plan.camera.width) & (v >= 0) & (v <= plan.camera.height)
+        if seen.any():
+            print(f"sunshade: warning: the mesh tree {mesh.file.name} stands in the camera's view, and a mesh "
+                  "tree is not drawn in the picture yet (its shadow is): docs/method.md, \"Trees from mesh files\"",
+                  file=sys.stderr)
     return lines
 
 
@@ -194,9 +249,33 @@ def _framing_lines(plan: RunPlan, config: Config) -> list[str]:
     return lines
 
 
+def _slope_lines(plan: RunPlan) -> list[str]:
+    """With a slope, its open light at the first, middle and last frames: the sun's angle off its
+    normal, its sun and sky light and how far a fleck can stand above its shade ((sun + sky) / sky)."""
+    import numpy as np
+
+    from pipeline.core.colour import REC709_LUMINANCE
+    from pipeline.stages.slope import open_slope
+
+    slope = plan.receivers.slope
+    if slope is None:
+        return []
+    shown = []
+    for light in open_slope(plan, sorted({0, plan.frames // 2, plan.frames - 1})):
+        sun, sky = (float(np.asarray(v) @ REC709_LUMINANCE) for v in (light.sun, light.sky))
+        angle = np.degrees(np.arccos(np.clip(light.incidence, -1.0, 1.0)))
+        ratio = f", a fleck at most {(sun + sky) / sky:.2f} x its shade" if sky > 0 else ""
+        shown.append(f"frame {light.frame}: sun {angle:.0f} degrees off its normal, sun {sun:.1f} klx, "
+                     f"sky {sky:.1f} klx{ratio}")
+    return [f"  slope ({np.degrees(slope.tilt):g} degrees, falling towards {np.degrees(slope.facing) % 360:.0f} "
+            "degrees): " + "; ".join(shown)]
+
+
 def _warn(config: Config, plan: RunPlan) -> None:
     from pipeline.stages.framing import framing_warnings
 
+    if plan.receivers.slope is not None:  # the framing's warnings are the level ground's
+        return
     for line in framing_warnings(config, plan):
         print(f"sunshade: warning: {line}", file=sys.stderr)
 

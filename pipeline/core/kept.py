@@ -14,8 +14,10 @@ __all__ = ["POINTS_KEPT", "kept_at"]
 
 _Result = TypeVar("_Result")
 
-POINTS_KEPT = 2
-"""How many (key, points) one ``kept_at`` store keeps: a frame's camera, and a second view."""
+POINTS_KEPT = 3
+"""How many (key, points) one ``kept_at`` store keeps: a frame's camera's reads of its ground's three
+maps with a wall (the window's, the coarse ground's beyond it, the far ground's), or a frame's camera
+and a second view."""
 
 
 def kept_at(kept: dict[Any, Any], key: Hashable, points: np.ndarray | tuple[np.ndarray, ...],

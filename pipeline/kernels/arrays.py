@@ -1,11 +1,12 @@
-"""Compiled loops that stand for whole-array float32 expressions of the ground and frame stages, pixel by
-pixel: the bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze
-over the view (``frame._apply_haze``), the procedural sky raster's rows (``procedural.ProceduralSky.raster``) and the
-ground reflectance's lattice read (``brdf_bands.sky_ratio``), a frame's display codes
+"""Compiled loops that stand for whole-array expressions of the ground and frame stages, pixel by pixel: the
+bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze over the view
+(``frame._apply_haze``), the procedural sky raster's rows (``procedural.ProceduralSky.raster``) and the ground
+reflectance's lattice read (``brdf_bands.sky_ratio``), a wall's irradiance read where the camera's points see it
+(``view.read_taps``) and its points' sum and cover in each pixel (``view.put_wall``), a frame's display codes
 (``composite.display_codes``, around numpy's power) and the clouds' ``np.interp`` tables
-(``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float32 operation
-for float32 operation in the same order, so that no temporary arrays are built, and the tests hold it to that
-version's bits. Imported lazily: numba costs 0.3 s to import.
+(``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float operation for
+float operation (float32, or float64 where it widens) in the same order, so that no temporary arrays are built,
+and the tests hold it to that version's bits. Imported lazily: numba costs 0.3 s to import.
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "exposed_display", "display_codes",
-           "scattering_weights", "hermite_mean"]
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_add", "wall_over",
+           "exposed_display", "display_codes", "scattering_weights", "hermite_mean"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -161,6 +162,102 @@ def lattice_read(flat: np.ndarray, corner: np.ndarray, taps: np.ndarray, lattice
             v += flat[c, k + lattice + 1] * taps[3, p]
             out[c, p] = v
 
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def taps_read(flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray, bottom_left: np.ndarray,
+              bottom_right: np.ndarray, fx: np.ndarray, fy: np.ndarray, out: np.ndarray, start: int, stop: int) -> None:
+    """``view.read_taps``'s bilinear read of a raster at points start to stop - 1.
+
+    Point p takes the values at its four corners, in float64: ``top = v_tl (1 - fx) + v_tr fx``,
+    ``bottom = v_bl (1 - fx) + v_br fx``, ``top (1 - fy) + bottom fy``, then float32: the operations of
+    the array version, in its order.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (cells, channels) float32, the raster's cells row by row (irradiance [klx]).
+    top_left, top_right, bottom_left, bottom_right : numpy.ndarray
+        (n,) int32, each point's four cells in ``flat``.
+    fx, fy : numpy.ndarray
+        (n,) float32, its fractions across and down from the top-left cell's centre [1].
+    out : numpy.ndarray
+        (n, channels) float32, rows start to stop - 1 written: the values read, in ``flat``'s units.
+    start, stop : int
+        The points read.
+    """
+    for p in range(start, stop):
+        x, y = np.float64(fx[p]), np.float64(fy[p])
+        gx, gy = 1.0 - x, 1.0 - y
+        a, b, c, d = top_left[p], top_right[p], bottom_left[p], bottom_right[p]
+        for k in range(flat.shape[1]):
+            top = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
+            bottom = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
+            out[p, k] = np.float32(top * gy + bottom * y)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def points_add(total: np.ndarray, seen: np.ndarray, values: np.ndarray, weight: np.float32) -> None:
+    """``view.put_wall``'s ``total[flatnonzero(seen)] += values * weight`` in place, in float32.
+
+    Parameters
+    ----------
+    total : numpy.ndarray
+        (pixels, channels) float32, the sum so far; the rows ``seen`` selects changed (radiance).
+    seen : numpy.ndarray
+        (pixels,) bool, which pixels take a value.
+    values : numpy.ndarray
+        (seen pixels, channels) float32, their values in the order of the pixels, in ``total``'s units.
+    weight : numpy.float32
+        Each value's weight [1].
+    """
+    j = 0
+    for p in range(seen.shape[0]):
+        if seen[p]:
+            for k in range(total.shape[1]):
+                total[p, k] += values[j, k] * weight
+            j += 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def wall_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int, seen: np.ndarray,
+              hit_distance: np.ndarray, total: np.ndarray, weight: np.float32) -> None:
+    """``view.put_wall``'s blend in place: over the box from (``top``, ``left``), each pixel's cover
+    c = (its seen points) ``weight``, radiance ``L (1 - c) + total``, and where c > 0.5 its distance
+    the nearest seen point's: the float32 operations of the array version, in its order.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, channels) float32, the picture; changed in the box [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees; changed in the box [m].
+    top, left : int
+        The box's first row and column [pixel].
+    seen : numpy.ndarray
+        (points, rows, cols) bool, the pixels' points that see the wall.
+    hit_distance : numpy.ndarray
+        (points, rows, cols) float32, their distances [m].
+    total : numpy.ndarray
+        (rows x cols, channels) float32, the weighted sum of the seen points' radiance [radiance].
+    weight : numpy.float32
+        Each point's weight [1].
+    """
+    one, half = np.float32(1.0), np.float32(0.5)
+    for i in range(seen.shape[1]):
+        for j in range(seen.shape[2]):
+            count, nearest = np.float32(0.0), np.float32(np.inf)
+            for k in range(seen.shape[0]):
+                if seen[k, i, j]:
+                    count += one
+                    nearest = min(nearest, hit_distance[k, i, j])
+            cover = count * weight
+            keep = one - cover
+            p = i * seen.shape[2] + j
+            for c in range(radiance.shape[2]):
+                radiance[top + i, left + j, c] = radiance[top + i, left + j, c] * keep + total[p, c]
+            if cover > half:
+                distance[top + i, left + j] = nearest
 
 _ACES = tuple(np.float32(c) for c in (0.0, 1.0, 2.51, 0.03, 2.43, 0.59, 0.14))
 _SRGB = tuple(np.float32(c) for c in (0.0031308, 12.92, 1.055, 0.055, 255.0, 0.5))

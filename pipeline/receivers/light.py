@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.core.geometry import Grid, sky_offset
+from pipeline.core.geometry import Grid
 from pipeline.ground.shadow import (
     combine_layers,
     fine_mask_spectrum,
@@ -25,10 +25,10 @@ from pipeline.ground.shadow import (
 from pipeline.receivers.hemisphere import Radiance, hemisphere_irradiance, hemisphere_raster
 from pipeline.receivers.layers import Layer
 from pipeline.receivers.plane import ReceiverPlane
-from pipeline.receivers.sun import receiver_sun_irradiance, receiver_sun_kernel, sun_lights
+from pipeline.receivers.sun import kernel_block, receiver_sun_irradiance, receiver_sun_kernel, sun_lights
 from pipeline.sky.base import Sky
 
-__all__ = ["MAX_ALPHA", "ReceiverLight", "covering_alpha", "receiver_light"]
+__all__ = ["MAX_ALPHA", "ReceiverLight", "covering_alpha", "unshadowed_on", "receiver_light"]
 
 MAX_ALPHA = float(np.radians(89.0))
 """Widest sky square ``covering_alpha`` gives a layer; beyond it the layer's light is taken as unshadowed. [rad]"""
@@ -55,6 +55,10 @@ class ReceiverLight:
         light it) [radiance x sr].
     exact : bool
         Every layer seen within its sky square from every window pixel.
+    outer : numpy.ndarray or None
+        (3, rows, cols) float32 on ``window``: the sky plus the sun at the coarse cell, layers
+        combined (``receiver_light(coarse_sun=True)``; the camera reads it beyond the sun window);
+        else None [radiance x sr].
     """
 
     window: Grid
@@ -64,6 +68,7 @@ class ReceiverLight:
     sky_unshadowed: np.ndarray
     sun_unshadowed: np.ndarray
     exact: bool
+    outer: np.ndarray | None = None
 
 
 def covering_alpha(window: Grid, canopy: Grid, distance: float) -> float:
@@ -87,8 +92,27 @@ def covering_alpha(window: Grid, canopy: Grid, distance: float) -> float:
     return float(min(np.arctan(reach / distance), MAX_ALPHA))
 
 
+def unshadowed_on(window: Grid, total: np.ndarray) -> np.ndarray:
+    """A layer's light where it has no sky square (beyond MAX_ALPHA): the unshadowed light on every pixel.
+
+    Parameters
+    ----------
+    window : Grid
+        The receiver's coarse window [m].
+    total : numpy.ndarray
+        (3,) the open receiver's light [radiance x sr].
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, rows, cols) float32 on ``window`` [radiance x sr].
+    """
+    return np.broadcast_to(total.astype(np.float32)[:, None, None], (3, *window.shape)).copy()
+
+
 def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: Grid, layers: Sequence[Layer], *,
-                   sun_window: Grid | None = None, alpha: float | None = None, workers: int = 1) -> ReceiverLight:
+                   sun_window: Grid | None = None, alpha: float | None = None, coarse_sun: bool = False,
+                   workers: int = 1) -> ReceiverLight:
     """The receiver's irradiance under its layers: the ground's correlation in the receiver's frame.
 
     Per layer, its occlusion on the window's lattice is correlated with the receiver's hemisphere
@@ -114,6 +138,8 @@ def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: G
         The fine window [m]; None: no sun raster.
     alpha : float or None, optional
         The sky square's half-angle; None: ``covering_alpha`` per layer [rad].
+    coarse_sun : bool, optional
+        Also the sun through each layer at the coarse cell, in ``ReceiverLight.outer``.
     workers : int, optional
         FFT threads.
 
@@ -125,7 +151,7 @@ def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: G
     sky_total = hemisphere_irradiance(radiance, plane)
     lit = sun_window is not None and sun_lights(sky, plane)
     sun_total = receiver_sun_irradiance(sky, plane) if lit else np.zeros(3)
-    coarse, fine = [], []
+    coarse, fine, outer = [], [], []
     exact = True
     for layer in layers:
         occlusion, cells = layer.occlusion_on(window)
@@ -133,23 +159,25 @@ def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: G
         plan = plan_isolated(window, cells, height=layer.distance, alpha=layer_alpha)
         exact &= plan.exact
         if plan.sky is None:
-            g = np.broadcast_to(sky_total.astype(np.float32)[:, None, None], (3, *window.shape)).copy()
+            g = unshadowed_on(window, sky_total)
         else:
             raster = hemisphere_raster(radiance, plane, plan.sky)
             g = ground_isolated(raster, occlusion_spectrum(occlusion, plan, workers=workers), plan, workers=workers)
         coarse.append(g)
+        if coarse_sun:
+            outer.append(g + (_sun_through(sky, plane, layer, window, workers) if lit else 0.0))
         if sun_window is not None:
             fine.append(resample_bilinear(g, window, sun_window)
                         + (_sun_through(sky, plane, layer, sun_window, workers) if lit else 0.0))
     total = None if sun_window is None else combine_layers(fine, sky_total + sun_total)
-    return ReceiverLight(window, combine_layers(coarse, sky_total), sun_window, total, sky_total, sun_total, exact)
+    return ReceiverLight(window, combine_layers(coarse, sky_total), sun_window, total, sky_total, sun_total, exact,
+                         combine_layers(outer, sky_total + sun_total) if coarse_sun else None)
 
 
 def _sun_through(sky: Sky, plane: ReceiverPlane, layer: Layer, sun_window: Grid, workers: int) -> np.ndarray:
     """The sun's light (3, rows, cols) on ``sun_window`` through ``layer``'s fine mask. [radiance x sr]"""
     kernel = receiver_sun_kernel(sky, plane, sun_window.pixel / layer.distance)
-    lo = sky_offset(kernel.grid)
-    hi = (lo[0] + kernel.grid.shape[0] - 1, lo[1] + kernel.grid.shape[1] - 1)
+    lo, hi = kernel_block(kernel.grid)
     plan = plan_sun(sun_window, offset_lo=lo, offset_hi=hi)
     spectrum = fine_mask_spectrum(layer.transmittance_on(plan.mask), plan, workers=workers)
     return ground_sun(kernel, spectrum, plan, workers=workers)

@@ -11,15 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.core.geometry import length3
+from pipeline.core.geometry import Grid, sky_offset
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.sky.base import Sky
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import disc_samples
-from pipeline.sky.sun_kernel import KERNEL_FLOOR, disc_layout, sun_irradiance
+from pipeline.sky.sun_kernel import KERNEL_FLOOR, disc_layout, disc_sub_samples, sub_sample_footprint, sun_irradiance
 
-__all__ = ["sun_incidence", "sun_lights", "receiver_sun_point", "receiver_sun_kernel", "receiver_sun_irradiance"]
+__all__ = ["sun_incidence", "sun_lights", "receiver_sun_point", "receiver_sun_kernel", "receiver_sun_irradiance",
+           "receiver_disc_layout", "kernel_block"]
 
 
 def sun_incidence(sky: Sky, plane: ReceiverPlane) -> float:
@@ -140,28 +141,14 @@ def receiver_sun_kernel(sky: Sky, plane: ReceiverPlane, q: float) -> SkyRaster:
         raise ValueError(f"q must be positive [tan], got {q}")
     sun = sky.sun
     assert sun is not None
-    centre = plane.local_directions(np.asarray(sky.sun_direction))  # type: ignore[attr-defined]
-    grid, cells, n = disc_layout(centre, float(np.arctan2(centre[0], centre[1])),
-                                 float(np.arcsin(np.clip(centre[2], -1.0, 1.0))), sun.angular_radius, q)
+    grid, cells, n = receiver_disc_layout(sky, plane, q)
     h_sub = q / n
-    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
-    offsets = (np.arange(n) + 0.5) / n - 0.5
-    ox, oy = np.meshgrid(offsets * q, -offsets * q)
     dimming = sky.sun_cloud_transmittance if isinstance(sky, ProceduralSky) else None
     out = np.zeros((3, grid.shape[0] * grid.shape[1]))
-    chunk = max(1, (1 << 20) // (n * n))
-    for lo in range(0, len(cells), chunk):
-        idx = cells[lo:lo + chunk]
-        sx = cx.ravel()[idx, None, None] + ox
-        sy = cy.ravel()[idx, None, None] + oy
-        cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
-        v = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
+    for idx, cos_t, v in disc_sub_samples(grid, cells, n, q):
 
-        def footprint(world_centre, rho, near, v=v, cos_t=cos_t):
-            # the sub-sample spacing h_sub in angle along the gradient of rho, in the receiver's frame
-            away = v[near] * np.cos(rho)[..., None] - plane.local_directions(world_centre)
-            norm = np.maximum(length3(away), 1e-300)
-            return h_sub * cos_t[near] * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
+        def footprint(world_centre, rho, near, v=v, cos_t=cos_t):  # in the receiver's frame
+            return sub_sample_footprint(h_sub, v, cos_t, plane.local_directions(world_centre), rho, near)
 
         disc = disc_samples(plane.world_directions(v), footprint, 2.0 * h_sub, sun,
                             np.asarray(sky.sun_direction), np.asarray(sky.sun_normal_irradiance),  # type: ignore[attr-defined]
@@ -169,3 +156,38 @@ def receiver_sun_kernel(sky: Sky, plane: ReceiverPlane, q: float) -> SkyRaster:
         L = disc if dimming is None else disc * dimming
         out[:, idx] = np.einsum("kijc,kij->ck", L, cos_t**4) * h_sub**2
     return SkyRaster(grid, out.reshape(3, *grid.shape).astype(np.float32), np.zeros(3))
+
+
+def receiver_disc_layout(sky: Sky, plane: ReceiverPlane, q: float) -> tuple:
+    """Where the sun's kernel lies on the receiver's sky plane (``sun_kernel.disc_layout`` in its frame).
+
+    Parameters
+    ----------
+    sky, plane, q
+        As in ``receiver_sun_kernel``.
+
+    Returns
+    -------
+    tuple
+        (grid, flat indices (k,) of the cells that can hold any of the disc, sub-samples n per cell side).
+    """
+    centre = plane.local_directions(np.asarray(sky.sun_direction))  # type: ignore[attr-defined]
+    return disc_layout(centre, float(np.arctan2(centre[0], centre[1])),
+                       float(np.arcsin(np.clip(centre[2], -1.0, 1.0))), sky.sun.angular_radius, q)  # type: ignore[union-attr]
+
+
+def kernel_block(grid: Grid) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The sky offsets of the first and last cells of a kernel's block on a sky plane.
+
+    Parameters
+    ----------
+    grid : Grid
+        The kernel's grid (``geometry.sky_grid``) [tan].
+
+    Returns
+    -------
+    tuple
+        ((dr, dc) of the first cell, (dr, dc) of the last) [cell].
+    """
+    lo = sky_offset(grid)
+    return lo, (lo[0] + grid.shape[0] - 1, lo[1] + grid.shape[1] - 1)

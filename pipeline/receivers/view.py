@@ -15,10 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.camera.pinhole import Camera, image_rays, project_points
+from pipeline.core.cores import in_shares
 from pipeline.core.geometry import Grid
 from pipeline.receivers.plane import ReceiverPlane
 
-__all__ = ["SAMPLES", "WallHits", "wall_hits", "read_bilinear", "read_tiled", "show_wall"]
+__all__ = ["SAMPLES", "WallHits", "wall_hits", "BilinearTaps", "bilinear_taps", "read_taps", "read_taps_arrays",
+           "read_bilinear", "read_tiled", "show_wall", "seen_points", "put_wall"]
 
 SAMPLES = 3
 """Points per pixel side at which the camera looks for a wall (its edges anti-aliased). [count]"""
@@ -96,6 +98,115 @@ def wall_hits(camera: Camera, plane: ReceiverPlane, *, samples: int = SAMPLES) -
     return WallHits(region, hit, across, up, distance)
 
 
+@dataclass(frozen=True)
+class BilinearTaps:
+    """Where points read a raster bilinearly (``bilinear_taps``): the four neighbours' flat indices
+    into its (rows x cols) cells and the weights along each axis.
+
+    Attributes
+    ----------
+    corners : tuple of numpy.ndarray
+        (top-left, top-right, bottom-left, bottom-right) flat cell indices, each (n,) int32 (int64
+        for a raster of 2**31 cells or more).
+    fx, fy : numpy.ndarray
+        (n, 1), the points' fractions across and down from the top-left centre, float32 for float32
+        points (exact), else float64 [1].
+    """
+
+    corners: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    fx: np.ndarray
+    fy: np.ndarray
+
+    def take(self, keep: np.ndarray) -> BilinearTaps:
+        """The taps of the points ``keep`` selects (a boolean or index array)."""
+        return BilinearTaps(tuple(c[keep] for c in self.corners), self.fx[keep], self.fy[keep])  # type: ignore[arg-type]
+
+
+def bilinear_taps(grid: Grid, u: np.ndarray, w: np.ndarray) -> BilinearTaps:
+    """Where points (u, w) read a raster on a wall's grid bilinearly, its edge pixels held beyond
+    its centres (``read_bilinear`` in two steps, so that fixed points read each frame's raster).
+
+    Parameters
+    ----------
+    grid : Grid
+        The raster's grid in the wall's (u, w) [m].
+    u, w : numpy.ndarray
+        Wall coordinates (n,) [m].
+
+    Returns
+    -------
+    BilinearTaps
+        The points' neighbours and weights.
+    """
+    x = (u - grid.origin[0]) / grid.pixel - 0.5
+    y = (grid.origin[1] - w) / grid.pixel - 0.5
+    rows, cols = grid.shape
+    x = np.clip(x, 0.0, cols - 1.0)
+    y = np.clip(y, 0.0, rows - 1.0)
+    c0 = np.minimum(x.astype(np.int64), max(cols - 2, 0))
+    r0 = np.minimum(y.astype(np.int64), max(rows - 2, 0))
+    c1, r1 = np.minimum(c0 + 1, cols - 1), np.minimum(r0 + 1, rows - 1)
+    index = np.int32 if rows * cols < 2**31 else np.int64  # kept per camera: half the memory
+    corners = tuple((r * cols + c).astype(index) for r, c in ((r0, c0), (r0, c1), (r1, c0), (r1, c1)))
+    fx, fy = (x - c0)[..., None], (y - r0)[..., None]
+    if x.dtype == np.float32:  # a float32 point's fraction is a float32 exactly (read_taps widens it again)
+        fx, fy = fx.astype(np.float32), fy.astype(np.float32)
+    return BilinearTaps(corners, fx, fy)  # type: ignore[arg-type]
+
+
+def read_taps(image: np.ndarray, taps: BilinearTaps) -> np.ndarray:
+    """A raster read at the points of ``taps``.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (rows, cols, channels) on the taps' grid.
+    taps : BilinearTaps
+        The points (``bilinear_taps``).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, channels) float32.
+    """
+    flat = image.reshape(-1, image.shape[-1])
+    if flat.dtype == np.float32 and taps.fx.dtype == np.float32 and all(c.dtype == np.int32 for c in taps.corners):
+        from pipeline.kernels.arrays import taps_read  # numba: imported when a wall is seen
+
+        out = np.empty((len(taps.fx), flat.shape[1]), np.float32)
+        fx, fy = taps.fx.reshape(-1), taps.fy.reshape(-1)
+        in_shares(len(out), lambda start, stop: taps_read(flat, *taps.corners, fx, fy, out, start, stop))
+        return out
+    return read_taps_arrays(flat, taps)
+
+
+def read_taps_arrays(flat: np.ndarray, taps: BilinearTaps) -> np.ndarray:
+    """``read_taps`` with whole arrays (numpy), for any dtypes: the compiled loop's reference.
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        (rows x cols, channels), the raster's cells row by row.
+    taps : BilinearTaps
+        The points (``bilinear_taps``).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, channels) float32.
+    """
+    fx, fy = taps.fx.astype(np.float64), taps.fy.astype(np.float64)
+    gx = 1 - fx
+    top = flat[taps.corners[0]] * gx  # in place where it can be: the same operations as read_bilinear's
+    top += flat[taps.corners[1]] * fx
+    bottom = flat[taps.corners[2]] * gx
+    bottom += flat[taps.corners[3]] * fx
+    top *= 1 - fy
+    bottom *= fy
+    top += bottom
+    return top.astype(np.float32)
+
+
 def read_bilinear(grid: Grid, image: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
     """A raster on a wall's grid read bilinearly at (u, w), its edge pixels held beyond its centres.
 
@@ -113,18 +224,9 @@ def read_bilinear(grid: Grid, image: np.ndarray, u: np.ndarray, w: np.ndarray) -
     numpy.ndarray
         (..., channels) float32.
     """
-    x = (u - grid.origin[0]) / grid.pixel - 0.5
-    y = (grid.origin[1] - w) / grid.pixel - 0.5
-    rows, cols = grid.shape
-    x = np.clip(x, 0.0, cols - 1.0)
-    y = np.clip(y, 0.0, rows - 1.0)
-    c0 = np.minimum(x.astype(np.int64), max(cols - 2, 0))
-    r0 = np.minimum(y.astype(np.int64), max(rows - 2, 0))
-    c1, r1 = np.minimum(c0 + 1, cols - 1), np.minimum(r0 + 1, rows - 1)
-    fx, fy = (x - c0)[..., None], (y - r0)[..., None]
-    top = image[r0, c0] * (1 - fx) + image[r0, c1] * fx
-    bottom = image[r1, c0] * (1 - fx) + image[r1, c1] * fx
-    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+    shape = np.shape(u)
+    taps = bilinear_taps(grid, np.reshape(u, -1), np.reshape(w, -1))
+    return read_taps(image, taps).reshape(*shape, image.shape[-1])
 
 
 def read_tiled(image: np.ndarray, size: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -169,15 +271,60 @@ def show_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits,
     wall_radiance : callable
         (u, w) wall coordinates (n,) [m] -> (n, 3) the wall's radiance there [radiance].
     """
+    seen = seen_points(hits, distance)
+    put_wall(radiance, distance, hits, seen, [wall_radiance(hits.u[k][seen[k]], hits.w[k][seen[k]])
+                                              for k in range(len(seen))])
+
+
+def seen_points(hits: WallHits, distance: np.ndarray) -> np.ndarray:
+    """Which of the pixels' points see the wall nearer than what they saw.
+
+    Parameters
+    ----------
+    hits : WallHits
+        Where the wall is seen.
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees so far (inf: nothing) [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (points, rows, cols) bool on ``hits.region``.
+    """
+    rows, cols = hits.region
+    return hits.hit & (hits.distance < distance[rows, cols][None])
+
+
+def put_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, seen: np.ndarray,
+             values: list[np.ndarray]) -> None:
+    """Put a wall's radiance at its seen points into a picture (``show_wall``'s second half).
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, 3) float32, the picture so far; changed [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees so far; changed [m].
+    hits : WallHits
+        Where the wall is seen.
+    seen : numpy.ndarray
+        (points, rows, cols) bool (``seen_points``).
+    values : list of numpy.ndarray
+        Per point k, (n_k, 3) the wall's radiance at the points ``seen[k]`` selects, in their order [radiance].
+    """
     rows, cols = hits.region
     behind = distance[rows, cols]
-    seen = hits.hit & (hits.distance < behind[None])
     points = np.float32(1.0 / len(seen))
     wall_sum = np.zeros((*behind.shape, 3), np.float32)
-    for k in range(len(seen)):
-        if seen[k].any():
-            wall_sum[seen[k]] += np.asarray(wall_radiance(hits.u[k][seen[k]], hits.w[k][seen[k]]),
-                                            dtype=np.float32) * points
+    flat = wall_sum.reshape(-1, 3)
+    from pipeline.kernels.arrays import points_add, wall_over  # numba: imported when a wall is seen
+
+    for k in range(len(seen)):  # flat[flatnonzero(seen[k])] += values[k] * points
+        if len(values[k]):
+            points_add(flat, seen[k].reshape(-1), np.ascontiguousarray(values[k], dtype=np.float32), points)
+    if all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)):
+        wall_over(radiance, distance, rows.start, cols.start, seen, hits.distance, flat, points)
+        return
     coverage = seen.sum(axis=0, dtype=np.float32) * points
     block = radiance[rows, cols]
     block *= (1.0 - coverage)[..., None]

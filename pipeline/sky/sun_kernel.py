@@ -7,19 +7,20 @@ The kernel draws a sky's sun: it uses the sky models (``sky``, ``equirect``), no
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import numpy as np
 
-from pipeline.core.geometry import length3, sky_grid, tangent_axes
+from pipeline.core.geometry import Grid, length3, sky_grid, tangent_axes
 from pipeline.sky.equirect import EquirectSky
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import angle_to, disc_samples
 
-__all__ = ["KERNEL_CACHE_SAMPLES", "KERNEL_FLOOR", "MAX_KERNEL_CELLS", "disc_layout", "sun_irradiance", "sun_kernel",
-           "unshadowed"]
+__all__ = ["KERNEL_CACHE_SAMPLES", "KERNEL_FLOOR", "MAX_KERNEL_CELLS", "disc_layout", "disc_sub_samples",
+           "sub_sample_footprint", "sun_irradiance", "sun_kernel", "unshadowed"]
 
 
 MAX_KERNEL_CELLS = 4_000_000
@@ -218,29 +219,73 @@ def _kept_kernel_samples(sky, q: float) -> tuple:
     """``_kernel_samples`` computed (cached for the keys ``_kernel_samples`` gives it)."""
     grid, cells, n = _kernel_layout(sky, q)
     h_sub = q / n
-    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
-    offsets = (np.arange(n) + 0.5) / n - 0.5
-    ox, oy = np.meshgrid(offsets * q, -offsets * q)
-
-    def footprint(centre, rho, near):
-        # sky-plane sub-sample spacing h_sub expressed in angle along the gradient of rho, at w[near]:
-        # at most h_sub (cos_t <= 1, the ratio <= 1 to rounding), so 2 h_sub is a safe ``widest``
-        away = w[near] * np.cos(rho)[..., None] - centre
-        norm = np.maximum(length3(away), 1e-300)
-        return h_sub * cos_t[near] * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)
-
     chunks = []
-    chunk = max(1, (1 << 20) // (n * n))
-    for lo in range(0, len(cells), chunk):
-        idx = cells[lo : lo + chunk]
-        sx = cx.ravel()[idx, None, None] + ox
-        sy = cy.ravel()[idx, None, None] + oy
-        cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
-        w = np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
-        disc = disc_samples(w, footprint, 2.0 * h_sub, sky.sun, sky.sun_direction, sky.sun_normal_irradiance,
-                             getattr(sky, "moon", None))
+    for idx, cos_t, w in disc_sub_samples(grid, cells, n, q):
+        # 2 h_sub is a safe ``widest``: the footprint is at most h_sub (cos_t <= 1, the ratio <= 1 to rounding)
+        disc = disc_samples(w, partial(sub_sample_footprint, h_sub, w, cos_t), 2.0 * h_sub, sky.sun,
+                            sky.sun_direction, sky.sun_normal_irradiance, getattr(sky, "moon", None))
         cos4 = cos_t**4
         for a in (idx, disc, cos4):
             a.setflags(write=False)
         chunks.append((idx, disc, cos4))
     return grid, h_sub, tuple(chunks)
+
+
+def disc_sub_samples(grid: Grid, cells: np.ndarray, n: int, q: float) -> Iterator[tuple[np.ndarray, ...]]:
+    """A disc's kernel's sub-samples (``disc_layout``'s), n x n a cell, by chunks of at most 2^20.
+
+    Parameters
+    ----------
+    grid : Grid
+        The kernel's sky-plane grid [tan].
+    cells : numpy.ndarray
+        (k,) flat indices of the cells to sample.
+    n : int
+        Sub-samples per cell side.
+    q : float
+        The sky plane's cell [tan].
+
+    Yields
+    ------
+    tuple
+        (cells (c,), cos(theta) (c, n, n) [1], unit directions (c, n, n, 3) in the plane's frame [1]),
+        theta from the plane's normal.
+    """
+    cx, cy = grid.ground_from_raster(*np.indices(grid.shape))
+    offsets = (np.arange(n) + 0.5) / n - 0.5
+    ox, oy = np.meshgrid(offsets * q, -offsets * q)
+    chunk = max(1, (1 << 20) // (n * n))
+    for lo in range(0, len(cells), chunk):
+        idx = cells[lo : lo + chunk]
+        sx = np.ravel(cx)[idx, None, None] + ox
+        sy = np.ravel(cy)[idx, None, None] + oy
+        cos_t = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
+        yield idx, cos_t, np.stack([sx * cos_t, sy * cos_t, cos_t], axis=-1)
+
+
+def sub_sample_footprint(h_sub: float, w: np.ndarray, cos_t: np.ndarray, centre: np.ndarray, rho: np.ndarray,
+                         near: np.ndarray) -> np.ndarray:
+    """The sky-plane sub-sample spacing expressed in angle along the gradient of rho (``disc_samples``'
+    ``footprint``), at most ``h_sub``.
+
+    Parameters
+    ----------
+    h_sub : float
+        The sub-sample spacing on the sky plane [tan].
+    w, cos_t : numpy.ndarray
+        A chunk's directions and cos(theta) (``disc_sub_samples``) [1].
+    centre : numpy.ndarray
+        (3,) the disc's centre in the same frame as ``w`` [1].
+    rho : numpy.ndarray
+        The angles from it of the samples ``near`` picks [rad].
+    near : numpy.ndarray
+        The samples, as an index of ``w``.
+
+    Returns
+    -------
+    numpy.ndarray
+        The spacing at each [rad].
+    """
+    away = w[near] * np.cos(rho)[..., None] - centre
+    norm = np.maximum(length3(away), 1e-300)
+    return h_sub * cos_t[near] * np.maximum(np.hypot(away[..., 0], away[..., 1]) / norm, 1e-9)

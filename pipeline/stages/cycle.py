@@ -5,7 +5,6 @@ cache"). Every function takes the RunPlan."""
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
@@ -20,19 +19,24 @@ from pipeline.cache import keys as cache_keys
 from pipeline.cache import store as cache
 from pipeline.canopy import grove as grove_geometry
 from pipeline.canopy import masks as canopy
-from pipeline.canopy import rasteriser
+from pipeline.canopy import mesh_layers, rasteriser
+from pipeline.canopy.mesh import MeshParams, mesh_files
+from pipeline.canopy.mesh_coverage import TEXELS_PER_PIXEL
 from pipeline.config.parse import FRAME_BYTES_PER_PIXEL
+from pipeline.config.settings import CanopyConfig
 from pipeline.core.cores import compiled_once, end_if_orphaned
 from pipeline.core.errors import portable
 from pipeline.foreground import models, tree_detail
 from pipeline.foreground import trees as foreground
 from pipeline.ground import shadow
-from pipeline.stages.inputs import grove_of, load_mask
+from pipeline.stages.inputs import file_sha256, flutter_of, grove_of, load_mask
 from pipeline.stages.plan import RunPlan
+from pipeline.stages.wall_cycle import WALL_KIND, wall_index, wall_item, wall_params, wall_task
 
 __all__ = ["LayerSpectra", "LayerMasks", "layer_masks", "cycle_params", "cycle_item", "cycle_phase", "DiskNeed",
            "disk_needed", "CONFIG_INDEX", "config_item_keys", "record_config_items", "recorded_configs",
-           "foreground_params", "foreground_item", "ForegroundView", "foreground_views"]
+           "foreground_params", "foreground_item", "ForegroundView", "foreground_views", "mesh_trees",
+           "check_mesh_trees"]
 
 
 @dataclass(frozen=True)
@@ -144,7 +148,12 @@ def layer_masks(plan: RunPlan, layer_index: int, cycle_frame: int) -> LayerMasks
     layer, lp = c.layers[layer_index], plan.layers[layer_index]
     periodic = c.layout == "periodic"
     grids = [lp.canopy] + ([lp.sun.mask] if lp.sun else [])
-    if c.trees is None:
+    if c.meshes:
+        heights = tuple(l.height for l in c.layers)
+        masks = [mesh_layers.layer_transmittance(mesh_trees(c), flutter_of(c), cycle_frame, heights=heights,
+                                                 layer=layer_index, sun=np.array(plan.projection), grid=g)
+                 for g in grids]
+    elif c.trees is None:
         image = load_mask(layer, cycle_frame)
         masks = [canopy.transmittance_on_grid(image, center=layer.center, size=layer.size,
                                               grid=g, periodic=periodic) for g in grids]
@@ -180,8 +189,12 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict[str,
     c = plan.canopy
     lp = plan.layers[layer_index]
     source: dict[str, Any]
-    if c.trees is None:
-        source = {"mask": _file_digest(c.layers[layer_index].mask[cycle_frame])}
+    if c.meshes:
+        source = {"meshes": [{**asdict(m), "files": [file_sha256(f) for f in mesh_files(m.file)]}
+                             for m in c.meshes], "flutter": asdict(c.flutter), "heights": [l.height for l in c.layers],
+                  "coverage": TEXELS_PER_PIXEL}
+    elif c.trees is None:
+        source = {"mask": file_sha256(c.layers[layer_index].mask[cycle_frame])}
     else:
         source = {"trees": asdict(c.trees), "flutter": asdict(c.flutter),
                   "heights": [l.height for l in c.layers]}
@@ -195,9 +208,55 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict[str,
     }
 
 
-@functools.lru_cache(maxsize=64)
-def _file_digest(path: str) -> str:
-    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+def mesh_trees(canopy_config: CanopyConfig) -> list[mesh_layers.MeshTree]:
+    """The canopy's mesh trees (``canopy.mesh``), each read once per process.
+
+    Parameters
+    ----------
+    canopy_config : settings.CanopyConfig
+        The canopy.
+
+    Returns
+    -------
+    list of mesh_layers.MeshTree
+        One per mesh, in the config's order; empty without any.
+    """
+    return [mesh_layers.mesh_tree(MeshParams(m.file, m.scale, (*m.position, 0.0), m.rotation, m.up, m.leaves, m.wood,
+                                             m.max_triangles), seed=m.seed, index=i)
+            for i, m in enumerate(canopy_config.meshes)]
+
+
+def check_mesh_trees(plan: RunPlan) -> None:
+    """Refuse mesh trees whose shadow can fall beyond a plane's mask area, or that pass MAX_MESH_BYTES.
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        The run's plan.
+
+    Raises
+    ------
+    ImageError
+        One line naming the mesh file (those of ``mesh.read_mesh`` too).
+    """
+    from pipeline.core.errors import ImageError
+
+    meshes, trees = plan.canopy.meshes, mesh_trees(plan.canopy)
+    cells = max((int(np.prod(g.shape)) for lp in plan.layers for g in (lp.canopy, *([lp.sun.mask] if lp.sun else ()))),
+                default=0)
+    need = sum(mesh_layers.mesh_bytes(tree, cells) for tree in trees)
+    if trees and need > mesh_layers.MAX_MESH_BYTES:
+        raise ImageError(meshes[0].file, f"the mesh trees' layers would take about {need / 1e9:.3g} GB a worker; "
+                                         f"the most is {mesh_layers.MAX_MESH_BYTES / 1e9:.3g} GB: fewer triangles, "
+                                         "a smaller canopy.size or a larger ground.pixel")
+    for mesh, tree in zip(meshes, trees):
+        for lp in plan.layers:
+            x0, y0, x1, y1 = mesh_layers.shadow_bounds(tree, sun=plan.projection, plane_height=lp.height)
+            g0, g1, g2, g3 = lp.canopy.extent
+            if x0 < g0 or y0 < g1 or x1 > g2 or y1 > g3:
+                raise ImageError(mesh.file, f"its shadow on the plane at {lp.height:g} m reaches x {x0:.2f} to "
+                                 f"{x1:.2f}, y {y0:.2f} to {y1:.2f} m, beyond the canopy's mask (x {g0:.2f} to "
+                                 f"{g2:.2f}, y {g1:.2f} to {g3:.2f} m): raise canopy.size or move canopy.center")
 
 
 def cycle_item(plan: RunPlan, layer_index: int, cycle_frame: int, store: cache.Cache,
@@ -270,10 +329,15 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: in
     int
         The number of items computed.
     """
+    if plan.canopy.meshes:  # checked by plan.check_inputs too; the API may come here first
+        check_mesh_trees(plan)
     frames = range(plan.canopy.cycle) if cycle_frames is None else sorted(set(cycle_frames))
     tasks: list[tuple[RunPlan, int | None, int]] = [
-        (plan, layer, frame) for frame in frames for layer in range(len(plan.layers))]
+        (plan, layer, frame) for frame in frames  # a slope's frames read no level layer (stages.slope)
+        for layer in range(len(plan.layers) if plan.receivers.slope is None else 0)]
     tasks += [(view.plan, None, view.cycle_frame) for view in foreground_views(plan, frames)]
+    tasks += [(plan, wall_task(wall), frame) for frame in frames  # type: ignore[misc]  # each wall's layers
+              for wall in range(len(plan.receivers.walls))]
     missing = [task for task in tasks if store.get(*_product_key(*task)) is None]
     done = len(tasks) - len(missing)
     if progress:
@@ -293,7 +357,10 @@ def cycle_phase(plan: RunPlan, store: cache.Cache, *, jobs: int = 1, workers: in
 
 
 def _product_key(plan: RunPlan, layer: int | None, frame: int) -> tuple[str, dict[str, Any]]:
-    """(kind, params) of a cycle product: a layer's spectra, or the foreground (layer None)."""
+    """(kind, params) of a cycle product: a layer's spectra, the foreground (layer None) or a wall's
+    spectra (``wall_cycle.wall_task``)."""
+    if wall_index(layer) is not None:
+        return WALL_KIND, wall_params(plan, wall_index(layer), frame)  # type: ignore[arg-type]
     if layer is None:
         return "foreground", foreground_params(plan, frame)
     return "spectra", cycle_params(plan, layer, frame)
@@ -386,6 +453,8 @@ def config_item_keys(plan: RunPlan) -> dict[str, tuple[str, int]]:
     products: list[tuple[RunPlan, int | None, int]] = [
         (plan, layer, frame) for frame in range(plan.canopy.cycle) for layer in range(len(plan.layers))]
     products += [(view.plan, None, view.cycle_frame) for view in foreground_views(plan, range(plan.canopy.cycle))]
+    products += [(plan, wall_task(wall), frame) for frame in range(plan.canopy.cycle)  # type: ignore[misc]
+                 for wall in range(len(plan.receivers.walls))]
     keys = {}
     for view, layer, frame in products:
         kind, params = _product_key(view, layer, frame)
@@ -453,7 +522,9 @@ def _cycle_task(plan: RunPlan, layer: int | None, frame: int, root: str, workers
     from pipeline.kernels import raster  # numba costs 0.3 s to import: a worker needs it anyway
 
     with compiled_once(raster.shapes):  # after an install, one worker compiles the rasteriser
-        if layer is None:
+        if wall_index(layer) is not None:
+            wall_item(plan, wall_index(layer), frame, store, workers=workers)  # type: ignore[arg-type]
+        elif layer is None:
             foreground_item(plan, frame, store)
         else:
             cycle_item(plan, layer, frame, store, workers=workers)
@@ -497,7 +568,8 @@ def foreground_params(plan: RunPlan, cycle_frame: int) -> dict[str, Any]:
             "stored": "cut to the trees",  # cut_to_trees
             "copies": None if c.layout != "periodic" else {  # how a periodic forest's tile is copied
                 "detail": tree_detail.LEAF_PIXELS, "reach": tree_detail.HAZE_REACH,
-                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS}}
+                "most": tree_detail.MAX_FOREST_REACH, "stems": tree_detail.STEM_DETAIL_PIXELS},
+            **({"slope": asdict(plan.receivers.slope)} if plan.receivers.slope else {})}  # trees standing on it
 
 
 def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> models.StoredTreePasses:
@@ -525,7 +597,7 @@ def foreground_item(plan: RunPlan, cycle_frame: int, store: cache.Cache) -> mode
         raise ValueError("the foreground's cycle products are the built-in trees' (canopy.trees)")
 
     def compute() -> dict[str, np.ndarray]:
-        grove, flutter = grove_of(c)
+        grove, flutter = grove_of(c, plan.receivers.slope)  # standing on a slope, if there is one
         leaves = grove_geometry.leaves_at(grove, flutter, cycle_frame)
         wood, owner = tree_detail.taper_wood(grove.wood)
         has_sun = plan.sun_window is not None

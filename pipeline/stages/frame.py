@@ -24,7 +24,7 @@ from pipeline.sky import scattering
 from pipeline.sky.base import Sky, UniformSky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import SunDisc
-from pipeline.stages import walls
+from pipeline.stages import slope, walls
 from pipeline.stages.cycle import foreground_item
 from pipeline.stages.ground import FrameContext, GroundResult, blend_band, ground_of_frame, sky_view_terms
 from pipeline.stages.inputs import albedo_mipmap, ground_albedo
@@ -203,8 +203,9 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
     plan, sky = context.plan, context.sky
     passes = plan.output.passes if passes is None else tuple(passes)
     brdf = plan.ground.brdf
-    ground = ground_of_frame(context, outer=True, parts=bool({"sun", "sky"} & set(passes)) or brdf is not None
-                             or bool(plan.receivers.walls), coarse_sky=brdf is not None)
+    ground = slope.slope_ground(context) if plan.receivers.slope else ground_of_frame(
+        context, outer=True, parts=bool({"sun", "sky"} & set(passes)) or brdf is not None
+        or bool(plan.receivers.walls), coarse_sky=brdf is not None)
     wall_lights, far = walls.wall_lights(context) if plan.receivers.walls else (), None
     if wall_lights:  # each wall's shadow and lost sky on the ground (docs/method.md, "A wall on the ground")
         far = walls.far_ground(context, ground, wall_lights)
@@ -212,7 +213,11 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
     clock.lap("ground")
     view = plan.camera
     seen_sky, maps = None, None
-    if brdf is None:  # lambert: the camera's own path, bytes unchanged
+    horizon: np.ndarray | None = None  # the sky the far ground fades to; None: the level horizon's
+    if plan.receivers.slope:  # the level ground's camera turned into the slope's frame
+        maps = irradiance_maps(plan, ground)
+        background, distance, horizon = slope.slope_background(plan, maps, sky)
+    elif brdf is None:  # lambert: the camera's own path, bytes unchanged
         seen_sky = pinhole.sky_view(view, sky) if "sky" in passes else None  # read once, for the sky pass too
         maps = irradiance_maps(plan, ground, far=far)
         background, distance = pinhole.background(
@@ -233,16 +238,16 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         # exp(-d / haze), L_horizon the sky just above the horizon in its column (the sky model
         # holds its own haze), so the far ground meets the sky at the horizon without a line
         haze = _haze_of_view(view, plan.haze)
-        if plan.receivers.walls:  # the haze in front of the walls by their distance
+        if plan.receivers.walls or plan.receivers.slope:  # the haze in front of them by their distance
             t = scattering.haze_transmittance(distance, plan.haze)[..., None]
             haze = (t, 1.0 - t)
-        _apply_haze(background, *haze, pinhole.horizon_sky(view, sky))
+        _apply_haze(background, *haze, pinhole.horizon_sky(view, sky) if horizon is None else horizon)
     else:
         background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0
     fg = foreground_layer(plan, context.cycle_frame, context.store, light)
     if fg is not None and fg.haze is not None and sky_scale > 0:
         # the haze in front of the trees, as in front of the ground
-        horizon = pinhole.horizon_sky(view, sky)[None, fg.region[1]]
+        horizon = (pinhole.horizon_sky(view, sky) if horizon is None else horizon)[None, fg.region[1]]
         veil = fg.haze[..., None] * (horizon / np.float32(sky_scale))
         fg = replace(fg, sun=fg.sun + veil, sky=fg.sky + veil)
     # outside the passes' region, and everywhere without a foreground, the trees add nothing:
@@ -503,7 +508,7 @@ def brdf_background(context: FrameContext, ground: GroundResult) -> np.ndarray:
 
 def compile_loops(plan: RunPlan) -> None:
     """Compile the frame phase's loops (numba) in this process, or load them from numba's
-    cache on disk, by resampling a tiny view of the plan's ground and sky (twice) with its haze, and by
+    cache on disk, by resampling a tiny view of the plan's ground and sky with its haze, and by
     making a tiny sky raster and blend band (and, with a ground reflectance, reading a tiny
     lattice as ``brdf_bands.sky_ratio`` does). A render's command calls it while its workers make the cycle
     products (``render.render_run``), so that after an install the workers of the frame phase load the

@@ -16,8 +16,18 @@ from pipeline.camera.pinhole import Camera
 from pipeline.canopy import grove as grove_geometry
 from pipeline.config.settings import Config
 from pipeline.core.geometry import direction_vector, pinhole_image_axes, sky_plane_from_direction
+from pipeline.receivers.plane import ReceiverPlane
+from pipeline.sky.sun_disc import SunDisc
 from pipeline.stages.inputs import grove_of
-from pipeline.stages.scene import Scene, shading_scenes, sun_of, sun_shades
+from pipeline.stages.scene import Scene, shading_scenes, sky_model, sun_of, sun_shades
+from pipeline.stages.wall_framing import (
+    clear_of_walls,
+    exposure_stops,
+    ground_shadow_boxes,
+    sees_wall_flecks,
+    wall_camera,
+    wall_planes,
+)
 
 if TYPE_CHECKING:
     from pipeline.stages.plan import RunPlan
@@ -75,6 +85,9 @@ class Framing:
     follow : tuple of (int, pinhole.Camera) or None
         With a camera that follows the shadow (``camera.follow``), per shading scene its frame and
         its camera (``camera`` is the middle one's); None: one camera for every frame.
+    exposure_stops : float
+        With walls, the stops that expose the brightest receiver in view (``wall_framing.exposure_stops``);
+        0 without [stops].
     """
 
     window: Box
@@ -83,6 +96,7 @@ class Framing:
     auto: tuple[str, ...]
     shadow: Box | None
     follow: tuple[tuple[int, Camera], ...] | None = None
+    exposure_stops: float = 0.0
 
 
 def canopy_extent(config: Config, projection: tuple[float, float]) -> Box:
@@ -334,10 +348,15 @@ def frame_scene(config: Config, scenes: Sequence[Scene], projection: tuple[float
         sw = ground.sun_window  # a given sun window: the camera looks at its middle
         target, aim = np.array([(sw[0] + sw[2]) / 2, (sw[1] + sw[3]) / 2]), 0.5
     pitch = ECLIPSE_PITCH if deep else CAMERA_PITCH
-    view = _place_camera(config, target, s, auto, pitch, aim)
+    planes = wall_planes(config)
+    view, at_wall = _view_at_walls(config, planes, sun, auto) if planes else (None, False)
+    if view is None:
+        view = _place_camera(config, target, s, auto, pitch, aim)
+        if planes and "camera" in auto and c.position is None and c.look_at is None:  # clear of the walls
+            view = clear_of_walls(view, target, planes)
     follow = None
-    movable = (sun is not None and c.position is None and c.look_at is None and ground.sun_window is None
-               and ground.window is None  # a given window is where the light is computed: the camera stays
+    movable = (not at_wall and sun is not None and c.position is None and c.look_at is None
+               and ground.sun_window is None and ground.window is None  # a given window: the camera stays
                and not periodic  # an endless forest has no shadow to follow
                and config.foreground.model != "passes")  # imported passes hold one camera's view
     if movable and c.follow != "fixed" and len(scenes) > 1:
@@ -353,8 +372,23 @@ def frame_scene(config: Config, scenes: Sequence[Scene], projection: tuple[float
             sun_window = _seen_sun_window(config, scenes, view, shadow_box, window)
     if "ground.window" in auto and not periodic:  # only the ground some frame's camera sees
         window = _seen_window([view] if follow is None else [v for _, v in follow], view, sun_window, window)
+    stops = exposure_stops(config, sky_model(config.sky).at(scenes[len(scenes) // 2]), view) if planes else 0.0
     return Framing(_floats(window), None if sun_window is None else _floats(sun_window),
-                   view, tuple(auto), shadow_box, follow)
+                   view, tuple(auto), shadow_box, follow, stops)
+
+
+def _view_at_walls(config: Config, planes: list[ReceiverPlane], sun: SunDisc | None,
+                   auto: list[str]) -> tuple[Camera | None, bool]:
+    """Where a wall takes the leaves' shadow, a camera not given (no position, look_at, yaw or pitch)
+    looks at it there (``wall_framing.wall_camera``) and stays: a wall's shadow moves little."""
+    c = config.camera
+    if sun is None or c.position is not None or c.look_at is not None or c.yaw is not None or c.pitch is not None:
+        return None, False
+    view = wall_camera(config, sun, planes, CAMERA_HEIGHT)
+    if view is None:
+        return None, False
+    auto.append("camera")
+    return view, True
 
 
 def _floats(box: Sequence[float]) -> Box:
@@ -603,7 +637,8 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
     key = "ground.sun_window" if plan.sun_window is not None else "ground.window"
     points, _ = seen_ground(plan.camera)
     seen = ((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1))
-    if not seen.any():
+    middle = scenes[len(scenes) // 2].sun
+    if not seen.any() and not (middle is not None and sees_wall_flecks(config, plan.camera, middle)):
         warnings.append(f"the camera sees none of {key} [{x0:.2f}, {y0:.2f}, {x1:.2f}, {y1:.2f}]: "
                         f"its frames will show no sun flecks (leave camera out to place it)")
     reach = np.pi / 2 - config.sky.alpha  # the lowest sun the sky square holds [rad]
@@ -617,11 +652,13 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
                         f"unshadowed there; raise sky.alpha")
     if config.canopy.layout == "isolated" and plan.sun_window is not None:
         shading = shading_scenes(scenes)
-        boxes = leaf_shadow_extents(config, shading, plan.projection)
+        boxes: Sequence[Box | None] = (  # the shadows a wall takes lie in its own fine raster
+            ground_shadow_boxes(config, [sun_of(sc) for sc in shading]) if config.receivers.walls
+            else leaf_shadow_extents(config, shading, plan.projection))
         missed = []
         for sc, box in zip(shading, boxes):
             moved = plan.at(sc.frame).sun_window  # the frame's own, with a following camera
-            if moved is not None and _intersect(box, moved.extent) is None:
+            if box is not None and moved is not None and _intersect(box, moved.extent) is None:
                 missed.append(sc.frame)
         if missed:
             elevations = [np.degrees(sun_of(scenes[f]).elevation) for f in missed]

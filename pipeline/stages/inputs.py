@@ -5,16 +5,20 @@ ground's albedo and imported foreground passes, each read and checked once per p
 from __future__ import annotations
 
 import functools
+import hashlib
+import os
 
 import numpy as np
 
 from pipeline.canopy import grove, masks
+from pipeline.config.receivers import SlopeConfig
 from pipeline.config.settings import CanopyConfig, CanopyLayer, GroundConfig
 from pipeline.core import io
 from pipeline.core.geometry import Grid
+from pipeline.receivers.slope import grove_on_slope, slope_plane
 from pipeline.texture import albedo, mipmap
 
-__all__ = ["load_mask", "grove_of", "albedo_mipmap", "ground_albedo"]
+__all__ = ["load_mask", "grove_of", "flutter_of", "isolated_grove", "file_sha256", "albedo_mipmap", "ground_albedo"]
 
 
 def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
@@ -46,13 +50,15 @@ def load_mask(layer: CanopyLayer, frame: int = 0) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
-def grove_of(canopy_config: CanopyConfig) -> tuple[grove.Grove, grove.FlutterParams]:
+def grove_of(canopy_config: CanopyConfig, slope: SlopeConfig | None = None) -> tuple[grove.Grove, grove.FlutterParams]:
     """The grove of a canopy config and its flutter, grown once per process.
 
     Parameters
     ----------
     canopy_config : settings.CanopyConfig
         A canopy with built-in ``trees``.
+    slope : config.receivers.SlopeConfig or None, optional
+        A sloped ground the trees stand on (``receivers.slope.grove_on_slope``); None: level.
 
     Returns
     -------
@@ -76,8 +82,67 @@ def grove_of(canopy_config: CanopyConfig) -> tuple[grove.Grove, grove.FlutterPar
         layout=canopy_config.layout,
         tile=layer0.size[0] if canopy_config.layout == "periodic" else None,
         center=layer0.center, spread=trees.spread)
+    grown = grove.grow_grove(params)
+    if slope is not None:
+        grown = grove_on_slope(grown, slope_plane(slope))
+    return grown, flutter_of(canopy_config)
+
+
+def flutter_of(canopy_config: CanopyConfig) -> grove.FlutterParams:
+    """The canopy's flutter, for built-in trees and mesh trees alike.
+
+    Parameters
+    ----------
+    canopy_config : settings.CanopyConfig
+        Its ``flutter``.
+
+    Returns
+    -------
+    grove.FlutterParams
+        The cycle [frames], swing and twist [rad].
+    """
     f = canopy_config.flutter
-    return grove.grow_grove(params), grove.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+    return grove.FlutterParams(cycle=f.cycle, swing=f.swing, twist=f.twist)
+
+
+def isolated_grove(canopy_config: CanopyConfig) -> tuple[grove.Grove, grove.FlutterParams] | None:
+    """The grove of an isolated canopy of built-in trees (``grove_of``), else None.
+
+    Parameters
+    ----------
+    canopy_config : settings.CanopyConfig
+        Its ``trees`` and ``layout`` decide.
+
+    Returns
+    -------
+    (grove.Grove, grove.FlutterParams) or None
+        The grove at rest and its flutter; None for mask images or a periodic forest.
+    """
+    c = canopy_config
+    return grove_of(c) if c.trees is not None and c.layout == "isolated" else None
+
+
+def file_sha256(path: os.PathLike[str] | str) -> str:
+    """SHA-256 of a file's bytes, kept per (path, size, modification time): a changed file is hashed again.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+
+    Returns
+    -------
+    str
+        The hex digest.
+    """
+    stat = os.stat(path)
+    return _stamped_sha256(str(path), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _stamped_sha256(path: str, size: int, modified: int) -> str:
+    """SHA-256 of a file's bytes; the size [B] and modification time [ns] make the cache's key."""
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
 
 
 @functools.lru_cache(maxsize=4)

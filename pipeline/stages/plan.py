@@ -27,23 +27,20 @@ from pipeline.core.errors import ConfigError
 from pipeline.core.geometry import Grid, sky_plane_from_direction
 from pipeline.ground import shadow
 from pipeline.receivers.plane import wall_distance, walls_cross
-from pipeline.receivers.view import wall_hits
+from pipeline.receivers.slope import camera_in_frame, slope_plane
 from pipeline.receivers.walls import wall_plane
 from pipeline.stages.framing import AUTO_SUN_MASK, Framing, frame_scene
 from pipeline.stages.inputs import albedo_mipmap, grove_of, load_mask
 from pipeline.stages.resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
 from pipeline.stages.scene import Scene, scene_at, shading_scenes, sky_model, sun_of, sun_shades
+from pipeline.stages.wall_framing import WALL_CLEARANCE, camera_wall_problem
 
 if TYPE_CHECKING:
     from pipeline.foreground.models import ForegroundModel
     from pipeline.sky.models import SkyModel
     from pipeline.sky.sun_disc import SunDisc
 
-__all__ = ["WALL_CLEARANCE", "LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
-
-WALL_CLEARANCE = 1e-3
-"""How far a camera must stand from a wall, and two walls must reach past each other's edges to
-cross (walls that meet at an edge do not). [m]"""
+__all__ = ["LayerPlan", "ExposurePlan", "RunPlan", "check_inputs", "plan_run"]
 
 
 @dataclass(frozen=True)
@@ -229,6 +226,10 @@ def check_inputs(config: Config) -> RunPlan:
             raise io.ImageError(config.ground.albedo, "albedo must be finite and not negative")
     plan = plan_run(config)
     plan.foreground.check(plan.camera, config.canopy.cycle)
+    if config.canopy.meshes:  # mesh trees read, their shadow inside the masks, their memory (cycle imports plan)
+        from pipeline.stages.cycle import check_mesh_trees
+
+        check_mesh_trees(plan)
     return plan
 
 
@@ -288,7 +289,8 @@ def plan_run(config: Config) -> RunPlan:
     if framing.follow is not None:
         follow = tuple((_nearest(framing.follow, f), shifts[f] if shifts else (0, 0)) for f in range(len(scenes)))
     c = config.camera
-    exposure = ExposurePlan(c.exposure, c.auto_exposure, config.animation.fps, c.white_balance)
+    stops = c.exposure + framing.exposure_stops if framing.exposure_stops else c.exposure  # walls: the brightest
+    exposure = ExposurePlan(stops, c.auto_exposure, config.animation.fps, c.white_balance)
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
                    None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
@@ -296,15 +298,24 @@ def plan_run(config: Config) -> RunPlan:
     _check_sizes(config, plan)
     _check_receivers(config)
     _check_walls(config, plan)
+    _check_slope(config, plan)
     return plan
 
 
 def _check_receivers(config: Config) -> None:
     """Refuse what the walls cannot be drawn with yet (docs/method.md, "Receivers: walls and slopes")."""
     r = config.receivers
-    if r.slope is not None:
-        raise ConfigError(config.where("receivers.slope"), "a slope is not drawn yet (trees standing on it, "
-                          "its camera): leave it out")
+    if r.slope is not None:  # what a slope is not drawn with yet (docs/method.md, "A sloped ground")
+        for given, key, what in ((r.walls, "receivers.walls", "walls on a slope are not drawn yet"),
+                                 (config.canopy.layout == "periodic", "canopy.layout",
+                                  "a slope takes the shade of an isolated canopy: give canopy.layout: isolated"),
+                                 (config.canopy.trees is None, "canopy", "a slope takes the shade of the built-in "
+                                  "trees (canopy.trees): mask images are not turned onto it yet"),
+                                 (config.output.passes, "output.passes", "the light passes are not made on a slope"),
+                                 (config.ground.brdf is not None, "ground.brdf", "a slope is Lambertian: leave "
+                                  "ground.brdf out")):
+            if given:
+                raise ConfigError(config.where(key), what)
     if r.walls and config.canopy.layout == "periodic":
         raise ConfigError(config.where("receivers.walls"), "a wall takes the shade of an isolated canopy; "
                           "give canopy.layout: isolated")
@@ -321,8 +332,8 @@ def _check_walls(config: Config, plan: RunPlan) -> None:
     keys = [f"receivers.walls[{i}]" for i in range(len(walls))]
     planes = [wall_plane(w, key) for w, key in zip(walls, keys)]
     trunks = grove_geometry.trunks(grove_of(config.canopy)[0]) if walls and config.canopy.trees else None
-    # a given camera (the automatic one is placed by framing, which does not look for walls yet)
-    cameras = [plan.camera] + [view for view, _ in plan.follow or ()] if "camera" not in plan.auto else []
+    cameras = [plan.camera] + [view for view, _ in plan.follow or ()]  # given, or placed (framing keeps clear)
+    placed = " (placed by the plan: give camera.position and camera.look_at)" if "camera" in plan.auto else ""
     for i, (w, key, plane) in enumerate(zip(walls, keys, planes)):
         if trunks is not None:
             inside = np.flatnonzero(wall_distance(plane, trunks.start, trunks.end) < trunks.radius)
@@ -335,11 +346,29 @@ def _check_walls(config: Config, plan: RunPlan) -> None:
                 raise ConfigError(config.where(key), f"wall {w.name!r} passes through wall {other.name!r} "
                                   f"({key_other}): walls may meet at an edge, not cross")
         for camera in cameras:
-            if wall_distance(plane, camera.position, camera.position) < WALL_CLEARANCE:
-                raise ConfigError(config.where("camera.position"), f"the camera stands in wall {w.name!r} ({key})")
-            if plane.local_points(camera.position)[2] < 0 and wall_hits(camera, plane, samples=1).hit.any():
+            problem = camera_wall_problem(camera, plane)
+            if problem == "in":
+                raise ConfigError(config.where("camera.position"), f"the camera stands in wall {w.name!r} ({key})"
+                                  + placed)
+            if problem == "behind":
                 raise ConfigError(config.where("camera.position"), f"the camera is behind wall {w.name!r} ({key}) "
-                                  "and sees its back, which is not drawn: move it to the side the wall faces")
+                                  "and sees its back, which is not drawn: move it to the side the wall faces" + placed)
+
+
+def _check_slope(config: Config, plan: RunPlan) -> None:
+    """Refuse a slope's camera or windows placed for the level ground, and a camera that does not
+    look straight up or down the slope or is not above it (docs/method.md, "A sloped ground")."""
+    if config.receivers.slope is None:
+        return
+    for key in ("camera", "ground.window", "ground.sun_window"):
+        if key in plan.auto:
+            raise ConfigError(config.where(key), "on a slope give it: it is placed for the level ground")
+    if plan.follow is not None:
+        raise ConfigError(config.where("camera.follow"), "a camera on a slope stands still")
+    try:
+        camera_in_frame(plan.camera, slope_plane(config.receivers.slope))
+    except ValueError as exc:
+        raise ConfigError(config.where("camera.look_at"), str(exc)) from None
 
 
 def _nearest(follow: tuple[tuple[int, Camera], ...], frame: int) -> Camera:

@@ -14,7 +14,7 @@ import numpy as np
 from pipeline.cache import store as cache
 from pipeline.camera.pinhole import Camera
 from pipeline.canopy.masks import transmittance_from_image
-from pipeline.config.receivers import WallConfig
+from pipeline.config.receivers import WALL_ALBEDOS, WallConfig
 from pipeline.core import io
 from pipeline.core.errors import ImageError
 from pipeline.core.geometry import Grid
@@ -23,12 +23,13 @@ from pipeline.receivers.ground_shade import SkyTable, hidden_sky, polygon_covera
 from pipeline.receivers.hemisphere import ground_radiance, hemisphere_irradiance, world_radiance
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.receivers.sun import receiver_sun_irradiance, sun_incidence
-from pipeline.receivers.walls import WallLight, wall_albedo_colour, wall_light, wall_plane
+from pipeline.receivers.walls import WallLight, kept_by_sky, wall_albedo_colour, wall_light, wall_light_from, wall_plane
 from pipeline.sky.base import Sky
 from pipeline.sky.sun_kernel import sun_irradiance
 from pipeline.stages.ground import FrameContext, GroundRaster, GroundResult
-from pipeline.stages.inputs import albedo_mipmap, grove_of
+from pipeline.stages.inputs import albedo_mipmap
 from pipeline.stages.plan import RunPlan
+from pipeline.stages.wall_cycle import wall_grove, wall_item, wall_run_plan
 from pipeline.texture import mipmap
 
 __all__ = ["wall_lights", "wall_of_frame", "show_walls", "shade_ground", "far_ground", "FAR_PIXEL", "FAR_MARGIN",
@@ -52,14 +53,30 @@ def wall_lights(context: FrameContext) -> tuple[WallLight, ...]:
 
 
 def _wall_light(context: FrameContext, index: int) -> WallLight:
-    """The irradiance of wall ``index`` at the context's frame."""
+    """The irradiance of wall ``index`` at the context's frame, from its cycle products
+    (``wall_cycle.wall_item``); drawn for the frame alone where its sun is not in the run's plan."""
     plan, sky = context.plan, context.sky
-    c = plan.canopy
-    grove = grove_of(c) if c.trees is not None and c.layout == "isolated" else None
-    open_ground = np.asarray(sky.sky_irradiance, dtype=np.float64) + sun_irradiance(sky)  # type: ignore[arg-type]
-    return wall_light(plan.receivers.walls[index], sky, ground_albedo=albedo_mipmap(plan.ground).mean,
-                      open_ground=open_ground, grove=grove, cycle_frame=context.cycle_frame,
-                      where=f"receivers.walls[{index}]", workers=context.workers)
+    albedo = albedo_mipmap(plan.ground).mean
+    spectra = wall_item(plan, index, context.cycle_frame, context.store, workers=context.workers)
+    light = wall_light_from(wall_run_plan(plan, index), spectra, sky, ground_radiance(albedo, _open_ground(sky)),
+                            workers=context.workers)
+    if light is not None:
+        return light
+    return wall_light(plan.receivers.walls[index], sky, ground_albedo=albedo, open_ground=_open_ground(sky),
+                      grove=wall_grove(plan), cycle_frame=context.cycle_frame, where=f"receivers.walls[{index}]",
+                      workers=context.workers)
+
+
+def _open_ground(sky: Sky) -> np.ndarray:
+    """The open ground's irradiance (3,), sky and sun, kept for the last few skies [radiance x sr]."""
+    return np.array(kept_by_sky(_kept_open_ground, sky))
+
+
+@functools.lru_cache(maxsize=4)
+def _kept_open_ground(sky: Sky) -> np.ndarray:
+    light = np.asarray(sky.sky_irradiance, dtype=np.float64) + sun_irradiance(sky)  # type: ignore[arg-type]
+    light.setflags(write=False)
+    return light
 
 
 def wall_of_frame(plan: RunPlan, frame: int, name: str, *, store: cache.Cache | None = None,
@@ -208,17 +225,51 @@ def show_walls(camera: Camera, walls: tuple[WallConfig, ...], lights: tuple[Wall
         hits = _hits(camera, light.plane)
         if not hits.hit.any():
             continue
-        view.show_wall(radiance, distance, hits, functools.partial(_radiance, wall, light))
+        seen = view.seen_points(hits, distance)
+        values = []
+        for k, (where, taps, albedo) in enumerate(_looks(camera, light.plane, light.grid, wall.albedo,
+                                                         wall.albedo_size)):
+            keep = seen[k].reshape(-1)[where]
+            if not keep.all():
+                taps, albedo = _taken(taps, albedo, np.packbits(keep).tobytes(), len(keep))
+            values.append(view.read_taps(light.irradiance, taps) * albedo * np.float32(1.0 / np.pi))
+        view.put_wall(radiance, distance, hits, seen, values)
 
 
-def _radiance(wall: WallConfig, light: WallLight, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """The wall's radiance (n, 3) at its points (u, w) (n,): albedo x irradiance / pi [radiance]."""
-    irradiance = view.read_bilinear(light.grid, light.irradiance, u, w)
-    if isinstance(wall.albedo, Path):
-        albedo = view.read_tiled(_albedo_image(wall.albedo), wall.albedo_size, u, w)
-    else:
-        albedo = wall_albedo_colour(wall).astype(np.float32)
-    return irradiance * albedo * np.float32(1.0 / np.pi)
+def _taken(taps: view.BilinearTaps, albedo: np.ndarray, keep: bytes,
+           count: int) -> tuple[view.BilinearTaps, np.ndarray]:
+    """The taps and albedo of the points ``keep`` (packed bits of ``count``) selects, kept for the
+    last few (a still camera sees the same points each frame)."""
+    key = (id(taps), keep)
+    if key not in _TAKEN or _TAKEN[key][0] is not taps:
+        chosen = np.unpackbits(np.frombuffer(keep, np.uint8), count=count).astype(bool)
+        if len(_TAKEN) >= 2 * view.SAMPLES**2:
+            _TAKEN.pop(next(iter(_TAKEN)))
+        _TAKEN[key] = (taps, taps.take(chosen), albedo if albedo.ndim == 1 else albedo[chosen])
+    return _TAKEN[key][1:]
+
+
+_TAKEN: dict[tuple[int, bytes], tuple[view.BilinearTaps, view.BilinearTaps, np.ndarray]] = {}
+
+
+@functools.lru_cache(maxsize=8)
+def _looks(camera: Camera, plane: ReceiverPlane, grid: Grid, albedo: str | tuple | Path,
+           albedo_size: float) -> tuple[tuple[np.ndarray, view.BilinearTaps, np.ndarray], ...]:
+    """Per point of the pixels (``view.SAMPLES`` squared), the flat places in the wall's image box
+    of those that meet the wall, where they read its raster, and their albedo, (3,) or (n, 3) [1]:
+    once per camera and wall (a run's camera stands still)."""
+    hits = _hits(camera, plane)
+    looks = []
+    for k in range(len(hits.hit)):
+        where = np.flatnonzero(hits.hit[k])
+        u, w = hits.u[k].reshape(-1)[where], hits.w[k].reshape(-1)[where]
+        if isinstance(albedo, Path):
+            colour = view.read_tiled(_albedo_image(albedo), albedo_size, u, w)
+        else:
+            colour = np.asarray(WALL_ALBEDOS[albedo] if isinstance(albedo, str) else albedo,
+                                dtype=np.float64).astype(np.float32)
+        looks.append((where, view.bilinear_taps(grid, u, w), colour))
+    return tuple(looks)
 
 
 def shade_ground(context: FrameContext, ground: GroundResult, lights: tuple[WallLight, ...]) -> GroundResult:
@@ -308,7 +359,7 @@ class _Shade:
         albedo = albedo_mipmap(context.plan.ground).mean
         walls = tuple((light.plane, *_wall_light_out(wall, light, sky, albedo))
                       for wall, light in zip(context.plan.receivers.walls, lights))
-        return cls(walls, sky_table(world_radiance(sky, np.zeros(3))),
+        return cls(walls, kept_by_sky(_sky_table, sky),
                    sun if sun is not None and sun[2] > 0.0 else None, np.maximum(open_sky, 1e-30))
 
     def raster(self, sky_light: np.ndarray, total: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
@@ -331,13 +382,27 @@ def _wall_light_out(wall: WallConfig, light: WallLight, sky: Sky,
         albedo = _albedo_image(wall.albedo).reshape(-1, 3).mean(axis=0).astype(np.float64)
     else:
         albedo = wall_albedo_colour(wall)
-    p = light.plane
-    behind = ReceiverPlane(p.origin, p.facing + np.pi, np.pi - p.zenith, p.width, p.height)
-    open_ground = np.asarray(sky.sky_irradiance, dtype=np.float64) + sun_irradiance(sky)  # type: ignore[attr-defined,arg-type]
-    ground = ground_radiance(ground_albedo, open_ground)
-    back = receiver_sun_irradiance(sky, behind) + hemisphere_irradiance(world_radiance(sky, ground), behind)  # type: ignore[arg-type]
+    back = np.array(kept_by_sky(_back_light, sky, light.plane, tuple(np.broadcast_to(ground_albedo, (3,)).tolist())))
     front = light.irradiance.reshape(-1, 3).mean(axis=0).astype(np.float64)
     return albedo * front, albedo * back
+
+
+@functools.lru_cache(maxsize=4)
+def _sky_table(sky: Sky) -> SkyTable:
+    """``ground_shade.sky_table`` of the sky alone (no light below the horizon)."""
+    return sky_table(world_radiance(sky, np.zeros(3)))
+
+
+@functools.lru_cache(maxsize=8)
+def _back_light(sky: Sky, plane: ReceiverPlane, ground_albedo: tuple[float, ...]) -> np.ndarray:
+    """The open back of a wall's light (3,), the sun's if it lights it and its hemisphere's with the
+    open ground below [radiance x sr]."""
+    p = plane
+    behind = ReceiverPlane(p.origin, p.facing + np.pi, np.pi - p.zenith, p.width, p.height)
+    ground = ground_radiance(np.array(ground_albedo), _open_ground(sky))
+    back = receiver_sun_irradiance(sky, behind) + hemisphere_irradiance(world_radiance(sky, ground), behind)
+    back.setflags(write=False)
+    return back
 
 
 _HIDDEN: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
