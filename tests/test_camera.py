@@ -366,8 +366,8 @@ def test_a_chains_footprints_beyond_its_first_map_keep_their_taps_too():
     texture._TAPS.clear()
     for _ in range(4):  # the subset kept from the second frame, its taps from the fourth
         np.testing.assert_array_equal(camera.filtered_chain((fine, coarse), fp), want)
-    tables = [entry[1] for entry in texture._TAPS.values()]
-    assert len(tables) == 2 and all(table is not None for table in tables)  # the fine read's and the subset's
+    tables = [entry[1] for entry in texture._TAPS.values() if entry[1] is not None]
+    assert len(tables) == 2  # the fine read's and the subset's (a first frame's one-off ask holds none)
 
 
 @pytest.mark.parametrize("view", [
