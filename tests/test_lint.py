@@ -15,10 +15,10 @@ def test_ruff_finds_nothing():
     assert result.returncode == 0, result.stdout + result.stderr
 
 
-def test_mypy_finds_nothing():
-    result = subprocess.run([sys.executable, "-m", "mypy", "--no-incremental", "pipeline"],
-                            cwd=ROOT, capture_output=True, text=True)
-    assert result.returncode == 0, result.stdout + result.stderr
+def test_mypy_finds_nothing(mypy_result):
+    """mypy on pipeline/ (started when the session was collected: tests/conftest.py)."""
+    returncode, output = mypy_result
+    assert returncode == 0, output
 
 
 def untyped_public_functions(package: Path = ROOT / "pipeline") -> list[str]:
