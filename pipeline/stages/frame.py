@@ -86,7 +86,7 @@ def irradiance_maps(plan: RunPlan, ground: GroundResult, *,
         The frame's ground, with its ``outer`` raster when there is one.
     far : texture.mipmap.MipMap or None
         Read beyond the window's rasters instead of the open ground (the walls' shade there,
-        ``walls.far_ground``); isolated canopy only.
+        ``walls.shade_ground``); isolated canopy only.
 
     Returns
     -------
@@ -208,8 +208,7 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         or bool(plan.receivers.walls), coarse_sky=brdf is not None)
     wall_lights, far = walls.wall_lights(context) if plan.receivers.walls else (), None
     if wall_lights:  # each wall's shadow and lost sky on the ground (docs/method.md, "A wall on the ground")
-        far = walls.far_ground(context, ground, wall_lights)
-        ground = walls.shade_ground(context, ground, wall_lights)
+        ground, far = walls.shade_ground(context, ground, wall_lights)
     clock.lap("ground")
     view = plan.camera
     seen_sky, maps = None, None

@@ -32,7 +32,7 @@ from pipeline.stages.plan import RunPlan
 from pipeline.stages.wall_cycle import wall_grove, wall_item, wall_run_plan
 from pipeline.texture import mipmap
 
-__all__ = ["wall_lights", "wall_of_frame", "show_walls", "shade_ground", "far_ground", "FAR_PIXEL", "FAR_MARGIN",
+__all__ = ["wall_lights", "wall_of_frame", "show_walls", "shade_ground", "FAR_PIXEL", "FAR_MARGIN",
            "OpenWall", "open_walls", "check_walls"]
 
 
@@ -272,13 +272,16 @@ def _looks(camera: Camera, plane: ReceiverPlane, grid: Grid, albedo: str | tuple
     return tuple(looks)
 
 
-def shade_ground(context: FrameContext, ground: GroundResult, lights: tuple[WallLight, ...]) -> GroundResult:
+def shade_ground(context: FrameContext, ground: GroundResult,
+                 lights: tuple[WallLight, ...]) -> tuple[GroundResult, mipmap.MipMap]:
     """The ground with each wall's sun shadow and the sky it hides, and the wall's own light in place
-    of that sky (docs/method.md, "A wall on the ground").
+    of that sky (docs/method.md, "A wall on the ground"), in the window and beyond it.
 
     The sun's part times 1 - the shadow polygon's exact cover of each cell; the sky's part times
     1 - the hidden sky over the open ground's (the product rule, as for the canopy's layers), plus
-    the wall's mean radiance over its view factor.
+    the wall's mean radiance over its view factor. Beyond the window, a raster of ``FAR_PIXEL``
+    cells reaching ``FAR_MARGIN`` further carries the same for the camera to read where the
+    window's rasters end: no seam at the window's edge.
 
     Parameters
     ----------
@@ -291,19 +294,23 @@ def shade_ground(context: FrameContext, ground: GroundResult, lights: tuple[Wall
 
     Returns
     -------
-    ground.GroundResult
+    shaded : ground.GroundResult
         The same rasters shaded, with its ``sky_part`` [radiance x sr].
+    far : texture.mipmap.MipMap
+        Over the window widened by ``FAR_MARGIN``; the open ground's light beyond [radiance x sr].
     """
     sky_part = ground.sky_part
     if sky_part is None:
         raise ValueError("the ground was made without its sky part (ground_of_frame(parts=True))")
     shade = _Shade.of(context, lights, np.asarray(sky_part.unshadowed, dtype=np.float64))
+    far = _far_ground(context, ground, shade)
     sky, total = shade.raster(sky_part.irradiance, ground.irradiance, ground.grid)
     outer, sky_outer = None, None
     if ground.outer is not None and sky_part.outer is not None:
         so, to = shade.raster(sky_part.outer.irradiance, ground.outer.irradiance, ground.outer.grid)
         outer, sky_outer = GroundRaster(to, ground.outer.grid), GroundRaster(so, ground.outer.grid)
-    return replace(ground, irradiance=total, outer=outer, sky_part=replace(sky_part, irradiance=sky, outer=sky_outer))
+    shaded = replace(ground, irradiance=total, outer=outer, sky_part=replace(sky_part, irradiance=sky, outer=sky_outer))
+    return shaded, far
 
 
 FAR_PIXEL = 0.25
@@ -313,33 +320,14 @@ FAR_MARGIN = 40.0
 """How far beyond the window that raster reaches; beyond it the open ground's light. [m]"""
 
 
-def far_ground(context: FrameContext, ground: GroundResult, lights: tuple[WallLight, ...]) -> mipmap.MipMap:
-    """The open ground beyond the window with the walls' shadows and lost sky, for the camera to
-    read where the window's rasters end (``FAR_PIXEL``, ``FAR_MARGIN``): no seam at the window's edge.
-
-    Parameters
-    ----------
-    context : ground.FrameContext
-        The frame.
-    ground : ground.GroundResult
-        The frame's ground, unshaded, with its ``sky_part``.
-    lights : tuple of receivers.walls.WallLight
-        The walls' light at the frame.
-
-    Returns
-    -------
-    texture.mipmap.MipMap
-        Over the window widened by ``FAR_MARGIN``; the open ground's light beyond [radiance x sr].
-    """
-    sky_part = ground.sky_part
-    if sky_part is None:
-        raise ValueError("the ground was made without its sky part (ground_of_frame(parts=True))")
+def _far_ground(context: FrameContext, ground: GroundResult, shade: _Shade) -> mipmap.MipMap:
+    """``shade_ground``'s ground beyond the window, from the unshaded ``ground``."""
     x0, y0, x1, y1 = context.plan.window.extent
     grid = Grid.from_window((x0 - FAR_MARGIN, y0 - FAR_MARGIN, x1 + FAR_MARGIN, y1 + FAR_MARGIN), FAR_PIXEL)
-    open_sky = np.asarray(sky_part.unshadowed, dtype=np.float64)
+    open_sky = np.asarray(ground.sky_part.unshadowed, dtype=np.float64)  # type: ignore[union-attr]
     total = np.broadcast_to(np.asarray(ground.unshadowed, dtype=np.float32), grid.shape + (3,))
     sky = np.broadcast_to(open_sky.astype(np.float32), grid.shape + (3,))
-    _, shaded = _Shade.of(context, lights, open_sky).raster(sky, total, grid)
+    _, shaded = shade.raster(sky, total, grid)
     return mipmap.mipmap(shaded, grid, outside="constant", value=np.asarray(ground.unshadowed, dtype=np.float32))
 
 
