@@ -2,7 +2,7 @@
 one run (docs/method.md, "A sloped ground"; issue 44).
 
     python benchmarks/bench_slope.py [--config configs/hillside-low-sun.yaml] [--cycle 4] [--repeats 3]
-                                     [--threads 2]
+                                     [--threads 2] [--code DIR] [--baseline DIR [--rounds 3]]
 
 The level version is the hillside turned into the slope's frame: the trees' centre, the camera
 (``receivers.slope.camera_in_frame``) and the sun at their places in the slope's (u, w, n) axes, the
@@ -13,6 +13,11 @@ times: the median of the per-frame ratios, of each's seconds and of its stages' 
 Then the low sun's contrast on the slope at frame 0: p95 / p5 of the slope's irradiance (luminance)
 over the pixels that see it, against the open slope's (sun + sky) / sky (``sunshade check``'s bound).
 
+``--code DIR`` imports ``pipeline`` from another tree (a worktree of another commit). ``--baseline
+DIR`` pairs this tree against DIR's: the benchmark is run ``--rounds`` times in turn in fresh
+processes, this tree's then DIR's, and prints each tree's median frame seconds, level and slope,
+and the median of the rounds' ratios of this tree's slope frame over DIR's.
+
 Prints the load average before and after.
 """
 
@@ -20,8 +25,10 @@ from __future__ import annotations
 
 import argparse
 import copy
+import json
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -30,7 +37,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+CODE = Path(sys.argv[sys.argv.index("--code") + 1]).resolve() if "--code" in sys.argv[:-1] else ROOT
+sys.path.insert(0, str(CODE))
 
 from pipeline.cache import store as cache
 from pipeline.camera import pinhole
@@ -43,8 +52,6 @@ from pipeline.stages.ground import FrameContext
 from pipeline.stages.plan import RunPlan, plan_run
 from pipeline.stages.resolve import resolve
 from pipeline.stages.slope import open_slope, slope_ground
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def plans(config: Path, cycle: int) -> tuple[RunPlan, RunPlan]:
@@ -89,8 +96,16 @@ def main() -> None:
     parser.add_argument("--cycle", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--code", type=Path, default=ROOT, help="the tree to import pipeline from")
+    parser.add_argument("--baseline", type=Path, help="a tree to pair this one against, process by process")
+    parser.add_argument("--rounds", type=int, default=3, help="with --baseline: processes of each tree")
+    parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    if args.baseline is not None:
+        paired(args)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        return
     slope, level = plans(args.config, args.cycle)
     work = Path(tempfile.mkdtemp(prefix="sunshade-bench-slope-"))
     try:
@@ -118,8 +133,31 @@ def main() -> None:
               f"{len(ratios)} pairs)")
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    if args.json:
+        print(json.dumps({name: float(np.median(seconds[name])) for name in seconds}))
+        return
     contrast(slope)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+def paired(args: argparse.Namespace) -> None:
+    """This tree against ``args.baseline``, a fresh process of each in turn, ``args.rounds`` times."""
+    seconds: dict[str, dict[str, list[float]]] = {name: {"level": [], "slope": []} for name in ("this", "baseline")}
+    ratios = []
+    for _ in range(args.rounds):
+        for name, code in (("this", ROOT), ("baseline", args.baseline)):
+            out = subprocess.run([sys.executable, __file__, "--config", str(args.config), "--cycle", str(args.cycle),
+                                  "--repeats", str(args.repeats), "--threads", str(args.threads), "--code", str(code),
+                                  "--json"], check=True, capture_output=True, text=True).stdout
+            for key, value in json.loads(out.strip().splitlines()[-1]).items():
+                seconds[name][key].append(value)
+        ratios.append(seconds["this"]["slope"][-1] / seconds["baseline"]["slope"][-1])
+    for name in seconds:
+        print(f"{name}: level frame {np.median(seconds[name]['level']):.2f} s, slope frame "
+              f"{np.median(seconds[name]['slope']):.2f} s (medians of {args.rounds} processes); slope / level "
+              f"{np.median(seconds[name]['slope']) / np.median(seconds[name]['level']):.2f}")
+    print(f"this tree's slope frame / the baseline's: median {np.median(ratios):.2f} (min {min(ratios):.2f}, "
+          f"max {max(ratios):.2f}, {len(ratios)} rounds)")
 
 
 if __name__ == "__main__":

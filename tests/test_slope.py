@@ -5,7 +5,7 @@ on it, the camera turned into its frame, a tiny config drawn and what is refused
 import numpy as np
 import pytest
 from reference import receiver_monte_carlo
-from test_receivers import grille, grille_lookup, turned_and_level, unit
+from test_receivers import equirect_of, grille, grille_lookup, smooth_sphere, turned_and_level, unit
 
 from pipeline.camera.pinhole import Camera, project_points
 from pipeline.canopy.grove import GroveParams, grow_grove
@@ -15,7 +15,7 @@ from pipeline.ground import shadow
 from pipeline.receivers.hemisphere import world_radiance
 from pipeline.receivers.layers import mask_layer
 from pipeline.receivers.light import receiver_light
-from pipeline.receivers.plane import slope
+from pipeline.receivers.plane import level_ground, slope
 from pipeline.receivers.slope import SkyInFrame, camera_in_frame, grove_on_slope, height_on
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.sun_disc import SunDisc
@@ -174,10 +174,123 @@ def test_a_tiny_hillside_is_seen_at_the_slopes_depth_with_its_light(tmp_path):
     ({"receivers": {"slope": {"tilt": 90.0, "facing": 270.0}}}, "receivers.slope.tilt"),
     ({"camera": {"position": [-3.0, 1.0, 2.0], "look_at": [3.0, 0.0, 3.0], "resolution": [64, 36]}},
      "camera.look_at"),
-    ({"output": {"passes": ["sun"]}}, "output.passes")])
+    ({"output": {"passes": ["sun"]}}, "output.passes"),
+    ({"camera": {"position": [-3.0, 0.0, 2.0], "resolution": [64, 36]}}, "camera.look_at"),  # a camera in part
+    ({"camera": {"look_at": [3.0, 0.0, 3.0], "resolution": [64, 36]}}, "camera.position"),
+    ({"camera": {"resolution": [64, 36], "follow": "shadow"}}, "camera.follow")])
 def test_what_a_slope_cannot_be_drawn_with_is_one_line_naming_the_key(tmp_path, changes, key):
     from scenes import plan_of
 
     with pytest.raises(ConfigError) as error:
         plan_of(hillside(**changes), tmp_path)
     assert key in str(error.value) and len(str(error.value).splitlines()) == 1
+
+
+@pytest.mark.parametrize("windows", [True, False])
+def test_a_camera_placed_on_a_slope_sees_sunlit_slope_and_the_trees_shade_on_it(tmp_path, windows):
+    # no camera (and no windows): the plan places one on the slope, looking along its fall line towards
+    # the low sun, at eye height straight above the slope; its picture of the slope's light holds
+    # both sun flecks and shade, judged against the open slope's sun and sky
+    from scenes import plan_of
+
+    from pipeline.camera import pinhole
+    from pipeline.core.colour import REC709_LUMINANCE
+    from pipeline.stages.frame import irradiance_maps
+    from pipeline.stages.ground import FrameContext
+    from pipeline.stages.slope import open_slope, plane_of, slope_ground
+
+    config = hillside(camera={"fov": 50.0, "resolution": [64, 36]})
+    if not windows:
+        config["ground"] = {k: v for k, v in config["ground"].items() if k not in ("window", "sun_window")}
+    plan = plan_of(config, tmp_path)
+    assert "camera" in plan.auto and ("ground.window" in plan.auto) is not windows
+    plane = plane_of(plan)
+    view = camera_in_frame(plan.camera, plane)  # along the fall line: it would raise
+    x, y, z = plan.camera.position
+    assert z - height_on(plane, x, y) == pytest.approx(1.7)
+    assert plan.camera.pitch < -np.radians(30)  # down the slope, towards the sun in the west
+    assert np.sin(plan.camera.yaw) < -0.99
+    assert plan.exposure.stops < -1  # the slope facing the sun is over twice the level ground's light
+    context = FrameContext.of(plan, 0)
+    seen = pinhole.ground_irradiance(view, irradiance=irradiance_maps(plan, slope_ground(context)))
+    light = (seen @ REC709_LUMINANCE)[pinhole.ground_fraction_rows(view) >= 1].ravel()
+    (open_light,) = open_slope(plan, [0])
+    sun, sky = (float(np.asarray(v) @ REC709_LUMINANCE) for v in (open_light.sun, open_light.sky))
+    assert len(light) > 0.9 * 64 * 36  # the slope fills the picture
+    assert np.mean(light > sky + 0.7 * sun) > 0.05, np.mean(light > sky + 0.7 * sun)  # sunlit
+    assert np.mean(light < sky + 0.3 * sun) > 0.05, np.mean(light < sky + 0.3 * sun)  # shaded
+
+
+def test_a_mask_image_on_a_slope_lies_parallel_to_it_at_its_distance(tmp_path):
+    # canopy.layers' mask on a slope: its centre and size in the slope's (u, w) metres, its top up the
+    # slope, its height along the normal. Under the sky turned with the slope (the lower half, the
+    # ground's, included) it gives the level ground's raster behind the same image, unturned, at that
+    # height, within 1e-4: coarse, fine and the coarse sun beyond the fine window
+    from scenes import plan_of
+
+    from pipeline.core import io
+    from pipeline.sky.equirect import EquirectSky, equirect_lookup
+    from pipeline.stages.slope import layers_on_slope, plane_of
+
+    t = grille()
+    t[t == 0.4] = 1.0  # the holes open: 0 and 1 survive the PNG exactly
+    io.write_png(tmp_path / "grille.png", t[..., None])
+    config = hillside(canopy={"mask": "grille.png", "layers": [{"height": 0.7, "center": [0.1, 1.0],
+                                                                 "size": [1.6, 1.2]}]}, foreground={"model": "none"})
+    plan = plan_of(config, tmp_path)
+    plane = plane_of(plan)
+    image = equirect_of(smooth_sphere, 256, 128)
+    local_sun = unit(20 * DEG, 60 * DEG)
+    world_sun = plane.world_directions(local_sun)
+
+    def sky_at(direction):
+        azimuth, elevation = np.arctan2(direction[0], direction[1]), np.arcsin(direction[2])
+        return EquirectSky(image, sun=SunDisc(azimuth, elevation), sun_normal_irradiance=np.array([40.0, 35.0, 28.0]))
+
+    (layer,) = layers_on_slope(plan, sky_at(world_sun), 0)
+    window = Grid.from_window((-0.6, 0.4, 0.6, 1.6), 0.02)
+    sun_window = Grid.from_window((-0.2, 0.8, 0.2, 1.2), 0.004)
+    on_slope = receiver_light(lambda d: equirect_lookup(image, plane.local_directions(d)).astype(np.float64),
+                              sky_at(world_sun), plane, window, [layer], sun_window=sun_window, coarse_sun=True)
+    level = mask_layer(t, center=(0.1, 1.0), size=(1.6, 1.2), distance=0.7)
+    on_ground = receiver_light(lambda d: equirect_lookup(image, d).astype(np.float64), sky_at(local_sun),
+                               level_ground(), window, [level], sun_window=sun_window, coarse_sun=True)
+    for ours, theirs in ((on_slope.sky, on_ground.sky), (on_slope.total, on_ground.total),
+                         (on_slope.outer, on_ground.outer)):
+        assert np.max(np.abs(ours - theirs) / theirs) < 1e-4
+    assert on_ground.total.max() > 2 * on_ground.total.min()  # a real shadow
+    # the image upside down (its top down the slope) is another shadow
+    flipped = receiver_light(lambda d: equirect_lookup(image, d).astype(np.float64), sky_at(local_sun),
+                             level_ground(), window, [mask_layer(t[::-1], center=(0.1, 1.0), size=(1.6, 1.2),
+                                                                 distance=0.7)], sun_window=sun_window)
+    assert np.max(np.abs(flipped.total - on_slope.total) / on_slope.total) > 0.1
+
+
+def test_a_still_skys_hemisphere_raster_is_kept_and_a_moved_one_is_not():
+    # the slope's hemisphere raster and irradiance are kept while the light stands still: a procedural
+    # sky at another time (no clouds) reads the kept ones, equal to those made afresh; another sun,
+    # another light below the horizon or another plane make their own
+    from dataclasses import replace
+
+    from pipeline.core.geometry import sky_grid
+    from pipeline.receivers.hemisphere import hemisphere_irradiance, hemisphere_raster
+
+    plane = slope(tilt=35 * DEG, facing=270 * DEG)
+    grid = sky_grid((-20, -20), (40, 40), 0.1)  # to 63 degrees off the normal: past the world horizon
+    sky = ProceduralSky(3.0, SunDisc(250 * DEG, 12 * DEG))
+    below = np.array([0.5, 0.6, 0.4])
+    first, again, later = (hemisphere_raster(world_radiance(replace(sky, time=t), below), plane, grid)
+                           for t in (0.0, 1.0, 2.0))
+    assert later is again and first is not again  # kept from the second ask
+    fresh = hemisphere_raster(lambda d: world_radiance(sky, below)(d), plane, grid)  # a plain function: not kept
+    assert np.array_equal(later.weighted, fresh.weighted) and np.array_equal(later.outside, fresh.outside)
+    assert not later.weighted.flags.writeable
+    for light, where in ((world_radiance(ProceduralSky(3.0, SunDisc(250 * DEG, 13 * DEG)), below), plane),
+                         (world_radiance(sky, below * 1.1), plane),
+                         (world_radiance(sky, below), slope(tilt=36 * DEG, facing=270 * DEG))):
+        other = hemisphere_raster(light, where, grid)  # the kept one, were the key to miss what moved
+        assert other is not later and np.abs(other.weighted - later.weighted).max() > 0
+    plain = hemisphere_irradiance(lambda d: light(d), where)
+    assert np.array_equal(hemisphere_irradiance(light, where), plain)
+    assert np.array_equal(hemisphere_irradiance(light, where), plain)  # kept
+    assert not np.array_equal(hemisphere_irradiance(world_radiance(sky, below), plane), plain)

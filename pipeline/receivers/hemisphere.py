@@ -10,7 +10,8 @@ correlates, as ``Sky.raster`` does for the level ground.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -19,9 +20,10 @@ from pipeline.camera.pinhole import MIN_UPWARD
 from pipeline.core.geometry import Grid, projected_solid_angle
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.sky.base import Sky
-from pipeline.sky.raster import SkyRaster
+from pipeline.sky.procedural import ProceduralSky
+from pipeline.sky.raster import KEPT_RASTERS, SkyRaster, kept_raster
 
-__all__ = ["Radiance", "CELL_NODES", "HEMISPHERE_NODES", "ground_radiance", "world_radiance",
+__all__ = ["Radiance", "CELL_NODES", "HEMISPHERE_NODES", "ground_radiance", "world_radiance", "WorldRadiance",
            "hemisphere_raster", "hemisphere_irradiance"]
 
 Radiance = Callable[[np.ndarray], np.ndarray]
@@ -58,7 +60,7 @@ def ground_radiance(albedo: ArrayLike, irradiance: ArrayLike) -> np.ndarray:
                            / np.pi, (3,)).copy()
 
 
-def world_radiance(sky: Sky, ground: ArrayLike) -> Radiance:
+def world_radiance(sky: Sky, ground: ArrayLike) -> WorldRadiance:
     """The light around a receiver: ``sky``'s radiance without its sun disc above the horizon, ``ground`` below.
 
     Parameters
@@ -70,25 +72,73 @@ def world_radiance(sky: Sky, ground: ArrayLike) -> Radiance:
 
     Returns
     -------
-    Radiance
-        d (..., 3) -> (..., 3) float64 [radiance].
+    WorldRadiance
+        d (..., 3) -> (..., 3) float64 [radiance]; the rasters and irradiance made of it are kept
+        while the sky stands still (``hemisphere_raster``).
     """
     below = np.asarray(ground, dtype=np.float64)
+    return WorldRadiance(sky, (float(below[0]), float(below[1]), float(below[2])))
 
-    def radiance(d: np.ndarray) -> np.ndarray:
+
+@dataclass(frozen=True)
+class WorldRadiance:
+    """The light around a receiver by world direction (``world_radiance``), a ``Radiance``.
+
+    Attributes
+    ----------
+    sky : sky.base.Sky
+        The sky above the world's horizon, read without its sun disc.
+    below : tuple of 3 float
+        The ground's radiance below it [radiance].
+    """
+
+    sky: Sky
+    below: tuple[float, float, float]
+
+    def __call__(self, d: np.ndarray) -> np.ndarray:
+        """The radiance (..., 3) float64 along world unit directions d (..., 3) [radiance]."""
         d = np.asarray(d, dtype=np.float64)
         up = d[..., 2] > 0.0
         out = np.empty(d.shape[:-1] + (3,))
-        out[~up] = below
+        out[~up] = np.asarray(self.below, dtype=np.float64)
         w = d[up]
         if len(w):
             z = np.maximum(w[:, 2], MIN_UPWARD)  # the sky read near the horizon as the camera reads it
             w = np.column_stack([w[:, :2] * (np.sqrt(1.0 - z * z) / np.maximum(np.hypot(w[:, 0], w[:, 1]), 1e-300))
                                  [:, None], z])
-            out[up] = sky.view_radiance(w, w[:, :2] / w[:, 2:])
+            out[up] = self.sky.view_radiance(w, w[:, :2] / w[:, 2:])
         return out
 
-    return radiance
+    @property
+    def still(self) -> Hashable | None:
+        """What the light depends on while the sky stands still: a procedural sky without clouds
+        at time 0 (its time moves only the clouds), any other sky by value or, unhashable (an
+        image's), by identity; None for a sky whose clouds move. Read-only."""
+        sky = self.sky
+        if isinstance(sky, ProceduralSky):
+            return None if sky.clouds is not None else (replace(sky, time=0.0), self.below)
+        try:
+            hash(sky)
+        except TypeError:
+            return (_Same(sky), self.below)
+        return (sky, self.below)
+
+
+@dataclass(frozen=True, eq=False)
+class _Same:
+    """A key that is equal to another of the same object only (holding it, so its id is not reused)."""
+
+    thing: object
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Same) and other.thing is self.thing
+
+    def __hash__(self) -> int:
+        return id(self.thing)
+
+
+_kept_rasters: dict = {}  # hemisphere_raster's of a still light: (light, plane, grid, nodes) -> SkyRaster
+_kept_irradiance: dict = {}  # hemisphere_irradiance's of a still light: (light, plane) -> (3,) read-only
 
 
 def hemisphere_raster(radiance: Radiance, plane: ReceiverPlane, grid: Grid, *, nodes: int = CELL_NODES) -> SkyRaster:
@@ -114,8 +164,19 @@ def hemisphere_raster(radiance: Radiance, plane: ReceiverPlane, grid: Grid, *, n
     Returns
     -------
     sky.raster.SkyRaster
-        float32 cells [radiance x sr].
+        float32 cells [radiance x sr]; of a still light (``WorldRadiance.still``), kept from the
+        second frame that asks for it, read-only (``sky.raster.kept_raster``: 0.9 s of a frame of
+        hillside-low-sun.yaml).
     """
+    still = radiance.still if isinstance(radiance, WorldRadiance) else None
+    if still is None:
+        return _hemisphere_raster(radiance, plane, grid, nodes)
+    return kept_raster(_kept_rasters, (still, plane, grid, nodes),
+                       lambda: _hemisphere_raster(radiance, plane, grid, nodes), again=True)
+
+
+def _hemisphere_raster(radiance: Radiance, plane: ReceiverPlane, grid: Grid, nodes: int) -> SkyRaster:
+    """``hemisphere_raster`` computed. [radiance x sr]"""
     x, weight = np.polynomial.legendre.leggauss(nodes)
     ox, oy = np.meshgrid(x * grid.pixel / 2, -x * grid.pixel / 2)
     wk = np.outer(weight, weight).ravel()
@@ -153,8 +214,24 @@ def hemisphere_irradiance(radiance: Radiance, plane: ReceiverPlane) -> np.ndarra
     Returns
     -------
     numpy.ndarray
-        (3,) float64 [radiance x sr].
+        (3,) float64 [radiance x sr]; of a still light (``WorldRadiance.still``), kept, read-only.
     """
+    still = radiance.still if isinstance(radiance, WorldRadiance) else None
+    if still is None:
+        return _hemisphere_irradiance(radiance, plane)
+    key = (still, plane)
+    found = _kept_irradiance.pop(key, None)
+    if found is None:
+        found = _hemisphere_irradiance(radiance, plane)
+        found.flags.writeable = False
+        while len(_kept_irradiance) >= KEPT_RASTERS:
+            _kept_irradiance.pop(next(iter(_kept_irradiance)))
+    _kept_irradiance[key] = found
+    return found
+
+
+def _hemisphere_irradiance(radiance: Radiance, plane: ReceiverPlane) -> np.ndarray:
+    """``hemisphere_irradiance`` computed. [radiance x sr]"""
     n_z, n_phi = HEMISPHERE_NODES
     z = (np.arange(n_z) + 0.5) / n_z
     phi = (np.arange(n_phi) + 0.5) * 2.0 * np.pi / n_phi

@@ -165,7 +165,8 @@ DAPPLE_CELL = 0.25
 """Cell of the leaf-shadow density map that finds it (averaged over 1 m). [m]"""
 
 
-def dappled_point(config: Config, s: ArrayLike, transmittance: float = DAPPLE_TRANSMITTANCE) -> np.ndarray:
+def dappled_point(config: Config, s: ArrayLike, transmittance: float = DAPPLE_TRANSMITTANCE,
+                  grove: grove_geometry.Grove | None = None) -> np.ndarray:
     """The point on the ground where the sun gets through the grove's leaves in about ``transmittance``.
 
     Each leaf's shadow (its ellipse's area pi |u| |v| times |n . w| / w_z along the sun w) is summed
@@ -182,20 +183,22 @@ def dappled_point(config: Config, s: ArrayLike, transmittance: float = DAPPLE_TR
         The sun's sky-plane point [tan].
     transmittance : float
         The share of the sun sought [1].
+    grove : canopy.grove.Grove or None
+        The grove in a receiver's axes, z along its normal (a slope's, ``slope_framing``) [m];
+        None: the config's on the level ground.
 
     Returns
     -------
     ndarray, shape (2,)
         (x, y) [m].
     """
-    centre = crown_centre(config)
+    centre = crown_centre(config) if grove is None else grove.pivot.mean(axis=0)
     middle = centre[:2] - centre[2] * np.asarray(s)
-    if config.canopy.trees is None or config.canopy.layout == "periodic":
+    if grove is None and (config.canopy.trees is None or config.canopy.layout == "periodic"):
         return middle
     from scipy.ndimage import uniform_filter
 
-    grove, _ = grove_of(config.canopy)
-    leaves = grove.leaves
+    leaves = (grove_of(config.canopy)[0] if grove is None else grove).leaves
     w = np.append(s, 1.0) / np.linalg.norm(np.append(s, 1.0))
     normal = np.cross(leaves.axis_u, leaves.axis_v)
     area = np.pi * np.abs(normal @ w) / w[2]  # |u x v| |n . w| = |(u x v) . w|
@@ -630,6 +633,8 @@ def framing_warnings(config: Config, plan: RunPlan) -> list[str]:
     list of str
         The warnings, none for a good framing.
     """
+    if config.receivers.slope is not None:  # its windows are in its frame (slope_framing)
+        return []
     scenes = list(plan.scenes)
     warnings = []
     fine = plan.sun_window or plan.window

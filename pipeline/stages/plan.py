@@ -33,6 +33,7 @@ from pipeline.stages.framing import AUTO_SUN_MASK, Framing, frame_scene
 from pipeline.stages.inputs import albedo_mipmap, grove_of, load_mask
 from pipeline.stages.resolve import BYTES_PER_CELL, MAX_FFT_CELLS, MAX_GROUND_PIXELS, MAX_SUN_PIXELS
 from pipeline.stages.scene import Scene, scene_at, shading_scenes, sky_model, sun_of, sun_shades
+from pipeline.stages.slope_framing import frame_slope
 from pipeline.stages.wall_framing import WALL_CLEARANCE, camera_wall_problem
 
 if TYPE_CHECKING:
@@ -271,10 +272,14 @@ def plan_run(config: Config) -> RunPlan:
         sx, sy = sky_plane_from_direction(sun.azimuth, np.pi / 2 - sun.elevation)
         projection = (float(sx), float(sy))
     heights = [layer.height for layer in config.canopy.layers]
-    framing = frame_scene(config, shading or [replace(scenes[0], sun=None)], projection)
+    _check_receivers(config)  # before the framing: a slope's places only what it can draw
+    framing = (frame_slope(config, shading or [replace(scenes[0], sun=None)]) if config.receivers.slope is not None
+               else frame_scene(config, shading or [replace(scenes[0], sun=None)], projection))
     _check_auto_window(config, framing)
     window = Grid.from_window(framing.window, config.ground.pixel)
-    sun_window = (_sun_window(config, shading, min(heights), framing.sun_window or framing.window)
+    lowest = min(heights) * (np.cos(config.receivers.slope.tilt)  # the crowns' distance along a slope's normal
+                             if config.receivers.slope is not None and config.canopy.trees is not None else 1.0)
+    sun_window = (_sun_window(config, shading, lowest, framing.sun_window or framing.window)
                   if has_sun else None)
     shifts = _follow_shifts(framing, sun_window, len(scenes))
     layers = _plan_layers(config, shading, window, sun_window, projection, shifts)
@@ -296,7 +301,6 @@ def plan_run(config: Config) -> RunPlan:
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
                    config.path, follow, config.receivers)
     _check_sizes(config, plan)
-    _check_receivers(config)
     _check_walls(config, plan)
     _check_slope(config, plan)
     return plan
@@ -309,8 +313,6 @@ def _check_receivers(config: Config) -> None:
         for given, key, what in ((r.walls, "receivers.walls", "walls on a slope are not drawn yet"),
                                  (config.canopy.layout == "periodic", "canopy.layout",
                                   "a slope takes the shade of an isolated canopy: give canopy.layout: isolated"),
-                                 (config.canopy.trees is None, "canopy", "a slope takes the shade of the built-in "
-                                  "trees (canopy.trees): mask images are not turned onto it yet"),
                                  (config.output.passes, "output.passes", "the light passes are not made on a slope"),
                                  (config.ground.brdf is not None, "ground.brdf", "a slope is Lambertian: leave "
                                   "ground.brdf out")):
@@ -356,14 +358,11 @@ def _check_walls(config: Config, plan: RunPlan) -> None:
 
 
 def _check_slope(config: Config, plan: RunPlan) -> None:
-    """Refuse a slope's camera or windows placed for the level ground, and a camera that does not
-    look straight up or down the slope or is not above it (docs/method.md, "A sloped ground")."""
+    """Refuse a camera on a slope that follows the shadow, does not look straight up or down the
+    slope or is not above it (docs/method.md, "A sloped ground")."""
     if config.receivers.slope is None:
         return
-    for key in ("camera", "ground.window", "ground.sun_window"):
-        if key in plan.auto:
-            raise ConfigError(config.where(key), "on a slope give it: it is placed for the level ground")
-    if plan.follow is not None:
+    if plan.follow is not None or config.camera.follow == "shadow":
         raise ConfigError(config.where("camera.follow"), "a camera on a slope stands still")
     try:
         camera_in_frame(plan.camera, slope_plane(config.receivers.slope))

@@ -4,26 +4,28 @@ ground")."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.camera import pinhole
-from pipeline.receivers.hemisphere import ground_radiance, hemisphere_irradiance, world_radiance
+from pipeline.config.settings import CanopyLayer
+from pipeline.receivers.hemisphere import hemisphere_irradiance, world_radiance
+from pipeline.receivers.layers import Layer, mask_layer
 from pipeline.receivers.light import receiver_light
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.receivers.slope import SkyInFrame, camera_in_frame, slope_layers, slope_plane
 from pipeline.receivers.sun import receiver_sun_irradiance, sun_incidence
 from pipeline.sky.base import Sky
-from pipeline.sky.procedural import ProceduralSky
-from pipeline.sky.sun_kernel import sun_irradiance
 from pipeline.stages.ground import FrameContext, GroundRaster, GroundResult
-from pipeline.stages.inputs import albedo_mipmap, ground_albedo, grove_of
+from pipeline.stages.inputs import ground_albedo, grove_of, load_mask
 from pipeline.stages.plan import RunPlan
+from pipeline.stages.slope_framing import below_radiance
 from pipeline.texture.mipmap import MipMap
 
-__all__ = ["plane_of", "slope_ground", "slope_background", "OpenSlope", "open_slope"]
+__all__ = ["plane_of", "layers_on_slope", "slope_ground", "slope_background", "OpenSlope", "open_slope"]
 
 
 def plane_of(plan: RunPlan) -> ReceiverPlane:
@@ -49,23 +51,9 @@ def _below(plan: RunPlan, sky: Sky) -> np.ndarray:
     for kept, ground, value in _BELOW:
         if kept is sky and ground is plan.ground:
             return value
-    value = ground_radiance(albedo_mipmap(plan.ground).mean,
-                            np.asarray(sky.sky_irradiance, dtype=np.float64) + _open_sun(sky))
+    value = below_radiance(plan.ground, sky)
     _BELOW[:] = [(sky, plan.ground, value), *_BELOW[:3]]
     return value
-
-
-def _open_sun(sky: Sky) -> np.ndarray:
-    """The sun's light (3,) on the open level ground for the light below the slope's horizon: a
-    procedural sky's sun as a point, E_n cos(zenith) dimmed by the moon and the clouds (the kernel's
-    sum to O(r^2); at a low sun the kernel stretched over the level sky plane costs seconds), any
-    other sky's ``sun_kernel.sun_irradiance``. [radiance x sr]"""
-    if isinstance(sky, ProceduralSky):
-        if sky.sun is None or sky.sun.elevation - sky.sun.angular_radius <= 1e-3:
-            return np.zeros(3)
-        return np.asarray(sky.undimmed_sun_irradiance() * sky.moon_visible * sky.sun_cloud_transmittance,
-                          dtype=np.float64)
-    return sun_irradiance(sky)  # type: ignore[arg-type]
 
 
 _BELOW: list[tuple[Sky, object, np.ndarray]] = []
@@ -93,12 +81,7 @@ def slope_ground(context: FrameContext) -> GroundResult:
     plan, sky = context.plan, context.sky
     plane = plane_of(plan)
     radiance = world_radiance(sky, _below(plan, sky))
-    c = plan.canopy
-    grove = None
-    if c.trees is not None:
-        standing, flutter = grove_of(c, plan.receivers.slope)
-        grove = (standing, flutter)
-    layers = slope_layers(plane, sky, grove, context.cycle_frame)
+    layers = layers_on_slope(plan, sky, context.cycle_frame)
     fine = plan.sun_window
     if not layers:
         sky_total = hemisphere_irradiance(radiance, plane)
@@ -117,6 +100,41 @@ def slope_ground(context: FrameContext) -> GroundResult:
     assert fine is not None
     outer = None if light.outer is None else GroundRaster(_hwc(light.outer), plan.window)
     return GroundResult(_hwc(light.total), fine, unshadowed, light.exact, outer)
+
+
+def layers_on_slope(plan: RunPlan, sky: Sky, cycle_frame: int) -> list[Layer]:
+    """The slope's occluders at a frame: its mask layers parallel to it (``canopy.layers``: each
+    image's centre and size in the slope's (u, w) metres, its top up the slope, its height along the
+    slope's normal), or the trees standing on it in one layer (``receivers.slope.slope_layers``).
+
+    Parameters
+    ----------
+    plan : plan.RunPlan
+        A plan with ``receivers.slope``.
+    sky : sky.base.Sky
+        The frame's sky (the sun the grove is projected along).
+    cycle_frame : int
+        The flutter's frame (a mask sequence's image) [frames].
+
+    Returns
+    -------
+    list of receivers.layers.Layer
+        Nearest the slope first; none for an open slope.
+    """
+    c = plan.canopy
+    if c.trees is None:
+        return sorted((mask_layer(_mask(layer, cycle_frame % len(layer.mask)), center=layer.center, size=layer.size,
+                                  distance=layer.height, where=f"canopy.layers[{i}]")
+                       for i, layer in enumerate(c.layers)), key=lambda layer: layer.distance)
+    return slope_layers(plane_of(plan), sky, grove_of(c, plan.receivers.slope), cycle_frame)
+
+
+@functools.lru_cache(maxsize=8)
+def _mask(layer: CanopyLayer, frame: int) -> np.ndarray:
+    """A mask layer's transmittance at a frame of its sequence, read once a process (read-only)."""
+    transmittance = load_mask(layer, frame)
+    transmittance.flags.writeable = False
+    return transmittance
 
 
 def _hwc(raster: np.ndarray) -> np.ndarray:
