@@ -149,6 +149,7 @@ def _receiver_lines(plan: RunPlan, config: Config) -> list[str]:
     picture it fills; the walls' files read."""
     import numpy as np
 
+    from pipeline.receivers.walls import sky_key
     from pipeline.stages.wall_framing import (
         EXPOSURE_SHARE,
         exposure_stops,
@@ -162,7 +163,17 @@ def _receiver_lines(plan: RunPlan, config: Config) -> list[str]:
         return []
     check_walls(plan)
     frames = sorted({0, plan.frames // 2, plan.frames - 1})
-    found = [open_receivers(config, plan.sky.at(plan.scenes[f])) for f in frames]
+    found, by_light = [], {}  # each light once: a still sun's frames share it (its exact sun, ~1 s)
+    for f in frames:
+        sky = plan.sky.at(plan.scenes[f])
+        key: object = sky_key(sky)
+        try:
+            hash(key)
+        except TypeError:  # a sky that cannot be a key (an HDRI's arrays): each frame its own
+            key = f
+        if key not in by_light:
+            by_light[key] = open_receivers(config, sky)
+        found.append(by_light[key])
     shares = receiver_shares(plan.camera, wall_planes(config))
     names = ["the level ground"] + [f"wall {w.name}" for w in plan.receivers.walls]
     looked = int(np.argmax(shares))

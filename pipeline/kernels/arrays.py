@@ -2,7 +2,8 @@
 bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze over the view
 (``frame._apply_haze``), the procedural sky raster's rows (``procedural.ProceduralSky.raster``) and the ground
 reflectance's lattice read (``brdf_bands.sky_ratio``), a wall's irradiance read where the camera's points see it
-(``view.read_taps``) and its points' sum and cover in each pixel (``view.put_wall``), a frame's display codes
+(``view.read_taps``) and its points' sum and cover in each pixel (``view.put_wall``), the walls' shade on the
+ground (``walls.shade_ground``), a frame's display codes
 (``composite.display_codes``, around numpy's power) and the clouds' ``np.interp`` tables
 (``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float operation for
 float operation (float32, or float64 where it widens) in the same order, so that no temporary arrays are built,
@@ -14,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_add", "wall_over",
-           "exposed_display", "display_codes", "scattering_weights", "hermite_mean"]
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_add", "points_read_add",
+           "points_over", "rows_sum", "walls_on_ground", "wall_over", "exposed_display", "display_codes",
+           "scattering_weights", "hermite_mean"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -217,6 +219,177 @@ def points_add(total: np.ndarray, seen: np.ndarray, values: np.ndarray, weight: 
             for k in range(total.shape[1]):
                 total[p, k] += values[j, k] * weight
             j += 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def points_read_add(total: np.ndarray, first: np.ndarray, sample: np.ndarray, seen: np.ndarray, flat: np.ndarray,
+                    top_left: np.ndarray, top_right: np.ndarray, bottom_left: np.ndarray, bottom_right: np.ndarray,
+                    fx: np.ndarray, fy: np.ndarray, albedo: np.ndarray, scale: np.float32, weight: np.float32,
+                    start: int, stop: int) -> None:
+    """``taps_read``, the albedo and ``points_add`` in one pass, pixel by pixel, for pixels start to
+    stop - 1: each of pixel p's points j (``first[p]`` to ``first[p + 1] - 1``, by ``sample``)
+    that ``seen`` holds adds ``read (j) albedo scale weight`` to ``total[p]``, float32 in that order
+    (``view.put_wall``'s sum of ``read_taps(...) * albedo * scale`` over the points in turn), its
+    points' reads near one another in the raster.
+
+    Parameters
+    ----------
+    total : numpy.ndarray
+        (pixels, channels) float32, the sum so far; changed (radiance).
+    first : numpy.ndarray
+        (pixels + 1,) int64, each pixel's first point; the last, the points' count.
+    sample : numpy.ndarray
+        (n,) uint8, which of its pixel's points each is, ascending within a pixel.
+    seen : numpy.ndarray
+        (samples, pixels) bool, the pixels' points seen.
+    flat : numpy.ndarray
+        (cells, channels) float32 or float64, the raster's cells row by row (irradiance [klx]).
+    top_left, top_right, bottom_left, bottom_right : numpy.ndarray
+        (n,) int, each point's four cells in ``flat``.
+    fx, fy : numpy.ndarray
+        (n,) float, its fractions across and down from the top-left cell's centre [1].
+    albedo : numpy.ndarray
+        (n, channels) float32 per point, or (1, channels) for all [1].
+    scale, weight : numpy.float32
+        The factors after the albedo, in that order (1 / pi [1/sr], the point's weight [1]).
+    start, stop : int
+        The pixels.
+    """
+    each = albedo.shape[0] != 1
+    for p in range(start, stop):
+        for j in range(first[p], first[p + 1]):
+            if seen[sample[j], p]:
+                x, y = np.float64(fx[j]), np.float64(fy[j])
+                gx, gy = 1.0 - x, 1.0 - y
+                a, b, c, d = top_left[j], top_right[j], bottom_left[j], bottom_right[j]
+                r = j if each else 0
+                for k in range(flat.shape[1]):
+                    top = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
+                    bottom = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
+                    value = np.float32(top * gy + bottom * y) * albedo[r, k] * scale
+                    total[p, k] += value * weight
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int, cols: int, hit_distance: np.ndarray,
+                first: np.ndarray, sample: np.ndarray, flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray,
+                bottom_left: np.ndarray, bottom_right: np.ndarray, fx: np.ndarray, fy: np.ndarray,
+                albedo: np.ndarray, scale: np.float32, weight: np.float32, start: int, stop: int) -> None:
+    """``view.seen_points``, ``points_read_add`` and ``wall_over`` in one pass, for the box's pixels
+    start to stop - 1 (row by row): a pixel's points that meet the wall nearer than its distance
+    are seen; their sum from 0, cover and nearest distance blend into the picture as ``wall_over``
+    blends them: the float32 operations of the three, in their order.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, channels) float32, the picture; changed in the box [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees; changed in the box [m].
+    top, left, cols : int
+        The box's first row and column, and its columns [pixel].
+    hit_distance : numpy.ndarray
+        (samples, box pixels) float32, the points' distances to the wall [m].
+    first, sample, flat, top_left, top_right, bottom_left, bottom_right, fx, fy, albedo, scale, weight
+        As in ``points_read_add``.
+    start, stop : int
+        The box's pixels, row by row.
+    """
+    each = albedo.shape[0] != 1
+    one, half = np.float32(1.0), np.float32(0.5)
+    total = np.empty(flat.shape[1], np.float32)
+    for p in range(start, stop):
+        row, col = top + p // cols, left + p % cols
+        behind = distance[row, col]
+        count, nearest = np.float32(0.0), np.float32(np.inf)
+        total[:] = 0.0
+        for j in range(first[p], first[p + 1]):
+            there = hit_distance[sample[j], p]
+            if there < behind:
+                count += one
+                nearest = min(nearest, there)
+                x, y = np.float64(fx[j]), np.float64(fy[j])
+                gx, gy = 1.0 - x, 1.0 - y
+                a, b, c, d = top_left[j], top_right[j], bottom_left[j], bottom_right[j]
+                r = j if each else 0
+                for k in range(flat.shape[1]):
+                    upper = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
+                    lower = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
+                    value = np.float32(upper * gy + lower * y) * albedo[r, k] * scale
+                    total[k] += value * weight
+        cover = count * weight
+        keep = one - cover
+        for k in range(radiance.shape[2]):
+            radiance[row, col, k] = radiance[row, col, k] * keep + total[k]
+        if cover > half:
+            distance[row, col] = nearest
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rows_sum(values: np.ndarray) -> np.ndarray:
+    """``values.sum(axis=0)`` of a C-ordered (n, channels) float32 array: row after row from 0, in
+    float32, as numpy's reduction over the outer axis adds them (``stages.walls``' mean of a wall's light).
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        (n, channels) float32.
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels,) float32.
+    """
+    total = np.zeros(values.shape[1], np.float32)
+    for i in range(values.shape[0]):
+        for k in range(values.shape[1]):
+            total[k] += values[i, k]
+    return total
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def walls_on_ground(sky_light: np.ndarray, total: np.ndarray, keep: np.ndarray, factor: np.ndarray,
+                    in_front: np.ndarray, front: np.ndarray, back: np.ndarray, sun_keep: np.ndarray, lit: bool,
+                    sky_out: np.ndarray, total_out: np.ndarray, start: int, stop: int) -> None:
+    """``stages.walls``' ground shaded by its walls, cells start to stop - 1: in float64, the sun's
+    part ``total - sky``, then wall by wall ``sky keep + (front or back) factor`` and ``sun sun_keep``
+    (where ``lit``); then ``sky`` and ``sky + sun`` in float32: the array version's operations in its order.
+
+    Parameters
+    ----------
+    sky_light, total : numpy.ndarray
+        (rows, cols, channels) the ground's sky part and its total [radiance x sr].
+    keep : numpy.ndarray
+        (walls, rows, cols, channels) float64, 1 - each wall's hidden sky over the open sky's [1].
+    factor : numpy.ndarray
+        (walls, rows, cols) float64, each wall's view factor [1].
+    in_front : numpy.ndarray
+        (walls, rows, cols) bool, the cell's centre in front of the wall.
+    front, back : numpy.ndarray
+        (walls, channels) float64, the light each wall sends per unit view factor from its front and
+        its back [radiance x sr].
+    sun_keep : numpy.ndarray
+        (walls, rows, cols) float64, 1 - each wall's sun shadow's cover of the cell (read where ``lit``) [1].
+    lit : bool
+        Whether the sun lights the ground.
+    sky_out, total_out : numpy.ndarray
+        (rows, cols, channels) float32, cells start to stop - 1 (row by row) written [radiance x sr].
+    start, stop : int
+        The cells, row by row.
+    """
+    cols = sky_light.shape[1]
+    for n in range(start, stop):
+        i, j = n // cols, n % cols
+        for c in range(sky_light.shape[2]):
+            sky = np.float64(sky_light[i, j, c])
+            sun = np.float64(total[i, j, c]) - sky
+            for w in range(keep.shape[0]):
+                light = front[w, c] if in_front[w, i, j] else back[w, c]
+                sky = sky * keep[w, i, j, c] + light * factor[w, i, j]
+                if lit:
+                    sun = sun * sun_keep[w, i, j]
+            sky_out[i, j, c] = np.float32(sky)
+            total_out[i, j, c] = np.float32(sky + sun)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

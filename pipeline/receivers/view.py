@@ -20,7 +20,8 @@ from pipeline.core.geometry import Grid
 from pipeline.receivers.plane import ReceiverPlane
 
 __all__ = ["SAMPLES", "WallHits", "wall_hits", "BilinearTaps", "bilinear_taps", "read_taps", "read_taps_arrays",
-           "read_bilinear", "read_tiled", "show_wall", "seen_points", "put_wall"]
+           "read_bilinear", "read_tiled", "show_wall", "seen_points", "put_wall", "WallPoints", "wall_points",
+           "show_points", "add_points", "blend_wall"]
 
 SAMPLES = 3
 """Points per pixel side at which the camera looks for a wall (its edges anti-aliased). [count]"""
@@ -312,18 +313,163 @@ def put_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, seen: n
     values : list of numpy.ndarray
         Per point k, (n_k, 3) the wall's radiance at the points ``seen[k]`` selects, in their order [radiance].
     """
-    rows, cols = hits.region
-    behind = distance[rows, cols]
     points = np.float32(1.0 / len(seen))
-    wall_sum = np.zeros((*behind.shape, 3), np.float32)
+    wall_sum = np.zeros((*seen.shape[1:], 3), np.float32)
     flat = wall_sum.reshape(-1, 3)
-    from pipeline.kernels.arrays import points_add, wall_over  # numba: imported when a wall is seen
+    from pipeline.kernels.arrays import points_add  # numba: imported when a wall is seen
 
     for k in range(len(seen)):  # flat[flatnonzero(seen[k])] += values[k] * points
         if len(values[k]):
             points_add(flat, seen[k].reshape(-1), np.ascontiguousarray(values[k], dtype=np.float32), points)
+    blend_wall(radiance, distance, hits, seen, wall_sum)
+
+
+@dataclass(frozen=True)
+class WallPoints:
+    """The pixels' points that meet a wall, pixel by pixel (``wall_points``).
+
+    Attributes
+    ----------
+    first : numpy.ndarray
+        (pixels + 1,) int64: pixel p's points are ``first[p]`` to ``first[p + 1] - 1``, over
+        ``WallHits.region``'s pixels row by row.
+    sample : numpy.ndarray
+        (n,) uint8: which of its pixel's points each is (``WallHits``' first axis), ascending.
+    """
+
+    first: np.ndarray
+    sample: np.ndarray
+
+
+def wall_points(hits: WallHits) -> tuple[WallPoints, np.ndarray, np.ndarray]:
+    """The points of ``hits`` that meet the wall, pixel by pixel, each pixel's in the order of its points.
+
+    Parameters
+    ----------
+    hits : WallHits
+        Where a camera's pixels see a wall.
+
+    Returns
+    -------
+    points : WallPoints
+        Their pixels and samples.
+    u, w : numpy.ndarray
+        (n,) their wall coordinates, in that order [m].
+    """
+    samples = len(hits.hit)
+    flat = np.flatnonzero(np.moveaxis(hits.hit, 0, -1))  # pixel by pixel, then sample by sample
+    pixel, sample = flat // samples, (flat % samples).astype(np.uint8)
+    counts = hits.hit.reshape(samples, -1).sum(axis=0)
+    first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return (WallPoints(first, sample), hits.u.reshape(samples, -1)[sample, pixel],
+            hits.w.reshape(samples, -1)[sample, pixel])
+
+
+def show_points(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, points: WallPoints, image: np.ndarray,
+                taps: BilinearTaps, albedo: np.ndarray, scale: np.float32) -> None:
+    """Put a wall into a picture in place from its raster read at the pixels' points: ``show_wall``
+    with the radiance ``read (image) albedo scale``, compiled in one pass over the pixels (the bits
+    of ``seen_points``, ``read_taps`` and ``put_wall``).
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, 3) float32, the picture so far; changed [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees so far (inf: nothing); changed [m].
+    hits : WallHits
+        Where the wall is seen.
+    points : WallPoints
+        The points that meet it (``wall_points(hits)``).
+    image : numpy.ndarray
+        (rows, cols, 3) the wall's raster [radiance x sr].
+    taps : BilinearTaps
+        The points' reads of it (``bilinear_taps`` at their ``wall_points`` coordinates).
+    albedo : numpy.ndarray
+        (3,) or (n, 3) float32 [1].
+    scale : numpy.float32
+        The factor after the albedo (1 / pi) [1].
+    """
+    weight = np.float32(1.0 / len(hits.hit))
+    if not all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)):
+        seen = seen_points(hits, distance)
+        wall_sum = np.zeros((*seen.shape[1:], 3), np.float32)
+        add_points(wall_sum.reshape(-1, 3), seen.reshape(len(seen), -1), points, image, taps, albedo, scale, weight)
+        blend_wall(radiance, distance, hits, seen, wall_sum)
+        return
+    if albedo.dtype != np.float32:
+        raise ValueError("show_points takes float32 albedos")
+    rows, cols = hits.region
+    flat = image.reshape(-1, image.shape[-1])
+    colour = albedo.reshape(-1, albedo.shape[-1])
+    fx, fy = taps.fx.reshape(-1), taps.fy.reshape(-1)
+    far = hits.distance.reshape(len(hits.distance), -1)
+    from pipeline.kernels.arrays import points_over  # numba: imported when a wall is seen
+
+    in_shares(len(points.first) - 1, lambda start, stop: points_over(
+        radiance, distance, rows.start, cols.start, cols.stop - cols.start, far, points.first, points.sample, flat,
+        *taps.corners, fx, fy, colour, scale, weight, start, stop))
+
+
+def add_points(total: np.ndarray, seen: np.ndarray, points: WallPoints, image: np.ndarray, taps: BilinearTaps,
+               albedo: np.ndarray, scale: np.float32, weight: np.float32) -> None:
+    """Add a wall's radiance at the pixels' seen points to their sum: ``total[p] += read (image)
+    albedo scale weight`` over pixel p's seen points in turn, in float32, compiled (``put_wall``'s
+    sum of ``read_taps(image, taps) * albedo * scale`` to the bit, without those arrays).
+
+    Parameters
+    ----------
+    total : numpy.ndarray
+        (pixels, 3) float32 over ``WallHits.region``'s pixels row by row, the sum so far; changed [radiance].
+    seen : numpy.ndarray
+        (samples, pixels) bool, the points that see the wall (``seen_points``).
+    points : WallPoints
+        The points that meet it (``wall_points``).
+    image : numpy.ndarray
+        (rows, cols, 3) the wall's raster [radiance x sr].
+    taps : BilinearTaps
+        The points' reads of it (``bilinear_taps`` at their ``wall_points`` coordinates).
+    albedo : numpy.ndarray
+        (3,) or (n, 3) float32 [1].
+    scale, weight : numpy.float32
+        The factors after the albedo, in that order (1 / pi; the point's weight) [1].
+    """
+    if albedo.dtype != np.float32 or total.dtype != np.float32 or not total.flags.c_contiguous:
+        raise ValueError("add_points sums float32 albedos into a contiguous float32 total")
+    flat = image.reshape(-1, image.shape[-1])
+    colour = albedo.reshape(-1, albedo.shape[-1])
+    fx, fy = taps.fx.reshape(-1), taps.fy.reshape(-1)
+    from pipeline.kernels.arrays import points_read_add  # numba: imported when a wall is seen
+
+    in_shares(len(total), lambda start, stop: points_read_add(
+        total, points.first, points.sample, seen, flat, *taps.corners, fx, fy, colour, scale, weight, start, stop))
+
+
+def blend_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, seen: np.ndarray,
+               wall_sum: np.ndarray) -> None:
+    """Put a wall's summed points into a picture: each pixel's cover c (its seen points over all),
+    radiance ``L (1 - c) + sum``, and where c > 0.5 the distance of its nearest seen point.
+
+    Parameters
+    ----------
+    radiance : numpy.ndarray
+        (height, width, 3) float32, the picture so far; changed [radiance].
+    distance : numpy.ndarray
+        (height, width) float32, what each pixel sees so far; changed [m].
+    hits : WallHits
+        Where the wall is seen.
+    seen : numpy.ndarray
+        (points, rows, cols) bool (``seen_points``).
+    wall_sum : numpy.ndarray
+        (rows, cols, 3) float32 on ``hits.region``, the seen points' radiance times 1 / points, summed [radiance].
+    """
+    rows, cols = hits.region
+    behind = distance[rows, cols]
+    points = np.float32(1.0 / len(seen))
+    from pipeline.kernels.arrays import wall_over  # numba: imported when a wall is seen
+
     if all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)):
-        wall_over(radiance, distance, rows.start, cols.start, seen, hits.distance, flat, points)
+        wall_over(radiance, distance, rows.start, cols.start, seen, hits.distance, wall_sum.reshape(-1, 3), points)
         return
     coverage = seen.sum(axis=0, dtype=np.float32) * points
     block = radiance[rows, cols]

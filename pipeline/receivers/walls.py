@@ -420,8 +420,13 @@ def wall_light_from(plan: WallPlan, spectra: WallSpectra, sky: Sky, ground: Arra
             if lp.sun is None or fine_spectrum is None or not _inside(kernel, lp.sun):
                 return None
             sun = ground_sun(kernel, fine_spectrum, lp.sun, workers=workers)
-        fined.append(resample_bilinear(g, window, fine) + sun)
-    total = combine_layers(fined, sky_total + sun_total)
+        seen = resample_bilinear(g, window, fine)
+        if isinstance(sun, np.ndarray) and sun.dtype == seen.dtype:
+            seen += sun  # in place: the bits of seen + sun
+        else:
+            seen = seen + sun
+        fined.append(seen)
+    total = fined[0] if len(fined) == 1 else combine_layers(fined, sky_total + sun_total)  # one: itself, not a copy
     return WallLight(plane, fine, np.ascontiguousarray(np.moveaxis(total, 0, -1)), sky_total, sun_total)
 
 

@@ -238,8 +238,7 @@ def _render_frame(plan: RunPlan, frame: int, store: cache.Cache | None, workers:
         # holds its own haze), so the far ground meets the sky at the horizon without a line
         haze = _haze_of_view(view, plan.haze)
         if plan.receivers.walls or plan.receivers.slope:  # the haze in front of them by their distance
-            t = scattering.haze_transmittance(distance, plan.haze)[..., None]
-            haze = (t, 1.0 - t)
+            haze = walls.distance_haze(distance, plan.haze)
         _apply_haze(background, *haze, pinhole.horizon_sky(view, sky) if horizon is None else horizon)
     else:
         background += np.float32(0.0)  # as _apply_haze: -0 + 0 is +0

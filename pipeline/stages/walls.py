@@ -4,7 +4,6 @@ camera's picture by depth (``receivers.view``); docs/method.md, "Receivers: wall
 from __future__ import annotations
 
 import functools
-import hashlib
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -16,6 +15,7 @@ from pipeline.camera.pinhole import Camera
 from pipeline.canopy.masks import transmittance_from_image
 from pipeline.config.receivers import WALL_ALBEDOS, WallConfig
 from pipeline.core import io
+from pipeline.core.cores import in_shares
 from pipeline.core.errors import ImageError
 from pipeline.core.geometry import Grid
 from pipeline.receivers import view
@@ -24,6 +24,7 @@ from pipeline.receivers.hemisphere import ground_radiance, hemisphere_irradiance
 from pipeline.receivers.plane import ReceiverPlane
 from pipeline.receivers.sun import receiver_sun_irradiance, sun_incidence
 from pipeline.receivers.walls import WallLight, kept_by_sky, wall_albedo_colour, wall_light, wall_light_from, wall_plane
+from pipeline.sky import scattering
 from pipeline.sky.base import Sky
 from pipeline.sky.sun_kernel import sun_irradiance
 from pipeline.stages.ground import FrameContext, GroundRaster, GroundResult
@@ -33,7 +34,7 @@ from pipeline.stages.wall_cycle import wall_grove, wall_item, wall_run_plan
 from pipeline.texture import mipmap
 
 __all__ = ["wall_lights", "wall_of_frame", "show_walls", "shade_ground", "FAR_PIXEL", "FAR_MARGIN",
-           "OpenWall", "open_walls", "check_walls"]
+           "OpenWall", "open_walls", "check_walls", "distance_haze"]
 
 
 def wall_lights(context: FrameContext) -> tuple[WallLight, ...]:
@@ -221,55 +222,60 @@ def show_walls(camera: Camera, walls: tuple[WallConfig, ...], lights: tuple[Wall
         (height, width) float32, the ground's distance (inf: none); changed to the walls' where
         they are seen [m].
     """
+    scale = np.float32(1.0 / np.pi)
     for wall, light in zip(walls, lights):
         hits = _hits(camera, light.plane)
         if not hits.hit.any():
             continue
-        seen = view.seen_points(hits, distance)
-        values = []
-        for k, (where, taps, albedo) in enumerate(_looks(camera, light.plane, light.grid, wall.albedo,
-                                                         wall.albedo_size)):
-            keep = seen[k].reshape(-1)[where]
-            if not keep.all():
-                taps, albedo = _taken(taps, albedo, np.packbits(keep).tobytes(), len(keep))
-            values.append(view.read_taps(light.irradiance, taps) * albedo * np.float32(1.0 / np.pi))
-        view.put_wall(radiance, distance, hits, seen, values)
+        points, taps, albedo = _looks(camera, light.plane, light.grid, wall.albedo, wall.albedo_size)
+        view.show_points(radiance, distance, hits, points, light.irradiance, taps, albedo, scale)
 
 
-def _taken(taps: view.BilinearTaps, albedo: np.ndarray, keep: bytes,
-           count: int) -> tuple[view.BilinearTaps, np.ndarray]:
-    """The taps and albedo of the points ``keep`` (packed bits of ``count``) selects, kept for the
-    last few (a still camera sees the same points each frame)."""
-    key = (id(taps), keep)
-    if key not in _TAKEN or _TAKEN[key][0] is not taps:
-        chosen = np.unpackbits(np.frombuffer(keep, np.uint8), count=count).astype(bool)
-        if len(_TAKEN) >= 2 * view.SAMPLES**2:
-            _TAKEN.pop(next(iter(_TAKEN)))
-        _TAKEN[key] = (taps, taps.take(chosen), albedo if albedo.ndim == 1 else albedo[chosen])
-    return _TAKEN[key][1:]
+def distance_haze(distance: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """The haze's transmittance T over the distances a frame's pixels see (``scattering.haze_transmittance``)
+    and 1 - T, kept for the last distances (a still camera sees its walls where it saw them): read-only.
+
+    Parameters
+    ----------
+    distance : numpy.ndarray
+        (rows, cols) float32, what each pixel sees (the ground, a wall; inf: the sky) [m].
+    length : float
+        The haze's extinction length [m].
+
+    Returns
+    -------
+    transmittance, veil : numpy.ndarray
+        (rows, cols, 1) float32, T and 1 - T [1].
+    """
+    bits = distance.view(np.uint32) if distance.dtype == np.float32 and distance.flags.c_contiguous else None
+    kept = _HAZE.get(length)
+    if bits is not None and kept is not None and kept[0].shape == bits.shape and np.array_equal(kept[0], bits):
+        return kept[1], kept[2]
+    transmittance = scattering.haze_transmittance(distance, length)[..., None]
+    veil = 1.0 - transmittance
+    for array in (transmittance, veil):
+        array.flags.writeable = False
+    _HAZE.clear()
+    if bits is not None:
+        _HAZE[length] = (bits.copy(), transmittance, veil)
+    return transmittance, veil
 
 
-_TAKEN: dict[tuple[int, bytes], tuple[view.BilinearTaps, view.BilinearTaps, np.ndarray]] = {}
+_HAZE: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 @functools.lru_cache(maxsize=8)
 def _looks(camera: Camera, plane: ReceiverPlane, grid: Grid, albedo: str | tuple | Path,
-           albedo_size: float) -> tuple[tuple[np.ndarray, view.BilinearTaps, np.ndarray], ...]:
-    """Per point of the pixels (``view.SAMPLES`` squared), the flat places in the wall's image box
-    of those that meet the wall, where they read its raster, and their albedo, (3,) or (n, 3) [1]:
-    once per camera and wall (a run's camera stands still)."""
-    hits = _hits(camera, plane)
-    looks = []
-    for k in range(len(hits.hit)):
-        where = np.flatnonzero(hits.hit[k])
-        u, w = hits.u[k].reshape(-1)[where], hits.w[k].reshape(-1)[where]
-        if isinstance(albedo, Path):
-            colour = view.read_tiled(_albedo_image(albedo), albedo_size, u, w)
-        else:
-            colour = np.asarray(WALL_ALBEDOS[albedo] if isinstance(albedo, str) else albedo,
-                                dtype=np.float64).astype(np.float32)
-        looks.append((where, view.bilinear_taps(grid, u, w), colour))
-    return tuple(looks)
+           albedo_size: float) -> tuple[view.WallPoints, view.BilinearTaps, np.ndarray]:
+    """The pixels' points that meet the wall (``view.wall_points``), where they read its raster, and
+    their albedo, (3,) or (n, 3) float32 [1]: once per camera and wall (a run's camera stands still)."""
+    points, u, w = view.wall_points(_hits(camera, plane))
+    if isinstance(albedo, Path):
+        colour = view.read_tiled(_albedo_image(albedo), albedo_size, u, w)
+    else:
+        colour = np.asarray(WALL_ALBEDOS[albedo] if isinstance(albedo, str) else albedo,
+                            dtype=np.float64).astype(np.float32)
+    return points, view.bilinear_taps(grid, u, w), colour
 
 
 def shade_ground(context: FrameContext, ground: GroundResult,
@@ -351,28 +357,43 @@ class _Shade:
                    sun if sun is not None and sun[2] > 0.0 else None, np.maximum(open_sky, 1e-30))
 
     def raster(self, sky_light: np.ndarray, total: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
-        """A ground raster's sky part and total (rows, cols, 3) with every wall on it, float32."""
-        sun_light = total.astype(np.float64) - sky_light
-        sky = sky_light.astype(np.float64)
-        for plane, front, back in self.walls:
-            hidden, factor, in_front = _hidden_on_grid(plane, grid, self.table)
-            sky = sky * (1.0 - hidden / self.open_sky) + np.where(in_front[..., None], front, back) * factor[..., None]
-            if self.sun is not None:
-                sun_light = sun_light * (1.0 - polygon_coverage(shadow_polygon(plane, self.sun), grid))[..., None]
-        return sky.astype(np.float32), (sky + sun_light).astype(np.float32)
+        """A ground raster's sky part and total (rows, cols, 3) with every wall on it, float32: in
+        float64 the sun's part ``total - sky``, then wall by wall ``sky (1 - hidden / open sky) +
+        (front or back) x view factor`` and ``sun (1 - the shadow's cover)``."""
+        cells = _cells_on(tuple(plane for plane, _, _ in self.walls), grid, self.table, self.open_sky, self.sun)
+        front = np.array([f for _, f, _ in self.walls], dtype=np.float64).reshape(-1, 3)
+        back = np.array([b for _, _, b in self.walls], dtype=np.float64).reshape(-1, 3)
+        sky, shaded = np.empty(sky_light.shape, np.float32), np.empty(sky_light.shape, np.float32)
+        from pipeline.kernels.arrays import walls_on_ground  # numba: imported when a wall is seen
+
+        in_shares(grid.shape[0] * grid.shape[1], lambda start, stop: walls_on_ground(
+            sky_light, total, cells.keep, cells.factor, cells.in_front, front, back, cells.sun_keep,
+            self.sun is not None, sky, shaded, start, stop))
+        return sky, shaded
 
 
 def _wall_light_out(wall: WallConfig, light: WallLight, sky: Sky,
                     ground_albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The irradiance (3,) a wall sends a ground point per unit view factor, from its front (its
     raster's mean) and from its back (the open back's sun and sky): albedo x its mean irradiance."""
-    if isinstance(wall.albedo, Path):
-        albedo = _albedo_image(wall.albedo).reshape(-1, 3).mean(axis=0).astype(np.float64)
-    else:
-        albedo = wall_albedo_colour(wall)
+    albedo = _albedo_mean(wall.albedo) if isinstance(wall.albedo, Path) else wall_albedo_colour(wall)
     back = np.array(kept_by_sky(_back_light, sky, light.plane, tuple(np.broadcast_to(ground_albedo, (3,)).tolist())))
-    front = light.irradiance.reshape(-1, 3).mean(axis=0).astype(np.float64)
+    cells = light.irradiance.reshape(-1, 3)
+    if cells.dtype == np.float32 and cells.flags.c_contiguous:  # numpy's mean over the rows, compiled
+        from pipeline.kernels.arrays import rows_sum  # numba: imported when a wall is seen
+
+        front = (rows_sum(cells) / np.float32(len(cells))).astype(np.float64)
+    else:
+        front = cells.mean(axis=0).astype(np.float64)
     return albedo * front, albedo * back
+
+
+@functools.lru_cache(maxsize=8)
+def _albedo_mean(path: Path) -> np.ndarray:
+    """A wall's albedo image's mean (3,) float64 [1]."""
+    mean = _albedo_image(path).reshape(-1, 3).mean(axis=0).astype(np.float64)
+    mean.setflags(write=False)
+    return mean
 
 
 @functools.lru_cache(maxsize=4)
@@ -393,21 +414,43 @@ def _back_light(sky: Sky, plane: ReceiverPlane, ground_albedo: tuple[float, ...]
     return back
 
 
-_HIDDEN: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+@dataclass(frozen=True)
+class _Cells:
+    """What the walls do to a ground grid's cells at a sky and sun, stacked wall by wall (``_Shade.raster``)."""
+
+    keep: np.ndarray  # (walls, rows, cols, 3) float64: 1 - the hidden sky over the open sky's [1]
+    factor: np.ndarray  # (walls, rows, cols) float64: the view factor [1]
+    in_front: np.ndarray  # (walls, rows, cols) bool: the cell's centre in front of the wall
+    sun_keep: np.ndarray  # (walls, rows, cols) float64: 1 - the sun shadow's cover; (walls, 1, 1) without a sun [1]
 
 
-def _hidden_on_grid(plane: ReceiverPlane, grid: Grid, table: SkyTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``hidden_sky`` at a grid's cell centres, (rows, cols, 3) and (rows, cols), and whether each
-    centre lies in front of the wall; kept for the last few (wall, grid, sky) of the process."""
-    key = (plane, grid, hashlib.sha1(table.cumulative.tobytes()).hexdigest())
-    if key not in _HIDDEN:
-        rows, cols = grid.shape
-        x = grid.origin[0] + grid.pixel * (np.arange(cols) + 0.5)
-        y = grid.origin[1] - grid.pixel * (np.arange(rows) + 0.5)
-        points = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1).reshape(-1, 2)
-        hidden, factor = hidden_sky(plane, points, table)
-        in_front = (points - np.asarray(plane.origin[:2])) @ plane.normal[:2] >= 0.0
-        if len(_HIDDEN) >= 4:
-            _HIDDEN.pop(next(iter(_HIDDEN)))
-        _HIDDEN[key] = (hidden.reshape(rows, cols, 3), factor.reshape(rows, cols), in_front.reshape(rows, cols))
-    return _HIDDEN[key]
+_CELLS_KEPT = 6  # (walls, grid, sky) of _cells_on kept: a frame's three grids (window, beyond it, far), two skies
+_CELLS: dict[tuple, tuple[SkyTable, _Cells]] = {}
+
+
+def _cells_on(planes: tuple[ReceiverPlane, ...], grid: Grid, table: SkyTable, open_sky: np.ndarray,
+              sun: np.ndarray | None) -> _Cells:
+    """``_Cells`` of the walls on ``grid`` under the sky of ``table`` (the same object, or equal
+    values) with ``open_sky`` (3,) and ``sun`` (3,) or None: kept for the last few, a still sun's
+    frames sharing them."""
+    key = (planes, grid, tuple(open_sky.tolist()), None if sun is None else tuple(sun.tolist()))
+    found = _CELLS.get(key)
+    if found is not None and (found[0] is table or np.array_equal(found[0].cumulative, table.cumulative)):
+        return found[1]
+    rows, cols = grid.shape
+    x = grid.origin[0] + grid.pixel * (np.arange(cols) + 0.5)
+    y = grid.origin[1] - grid.pixel * (np.arange(rows) + 0.5)
+    points = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1).reshape(-1, 2)
+    keep, factor, in_front, sun_keep = [], [], [], []
+    for plane in planes:
+        hidden, f = hidden_sky(plane, points, table)
+        keep.append(1.0 - hidden.reshape(rows, cols, 3) / open_sky)
+        factor.append(f.reshape(rows, cols))
+        in_front.append(((points - np.asarray(plane.origin[:2])) @ plane.normal[:2] >= 0.0).reshape(rows, cols))
+        sun_keep.append(np.ones((1, 1)) if sun is None else 1.0 - polygon_coverage(shadow_polygon(plane, sun), grid))
+    cells = _Cells(np.stack(keep), np.stack(factor), np.stack(in_front), np.stack(sun_keep))
+    _CELLS.pop(key, None)
+    while len(_CELLS) >= _CELLS_KEPT:
+        _CELLS.pop(next(iter(_CELLS)))
+    _CELLS[key] = (table, cells)
+    return cells
