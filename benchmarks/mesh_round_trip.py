@@ -27,10 +27,10 @@ from pipeline.api import functions as api
 
 
 def main() -> None:
-    with tempfile.TemporaryDirectory() as folder:
-        base = Path(folder)
-        for elevation in (90.0, 55.0):
-            for planes in (None, [{"height": 3.6}, {"height": 4.4}]):
+    for elevation in (90.0, 55.0):
+        for planes in (None, [{"height": 3.6}, {"height": 4.4}]):
+            with tempfile.TemporaryDirectory() as folder:
+                base = Path(folder)
                 procedural = tiny_grove(**{"canopy.flutter.swing": 0.0, "canopy.flutter.twist": 0.0,
                                            "sky.sun.elevation": elevation})
                 if planes:

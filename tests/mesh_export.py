@@ -62,8 +62,10 @@ def write_grove_gltf(path: Path, leaves, wood, sections: int = 32) -> None:
     for a, b, r in zip(_y_up(wood.start), _y_up(wood.end), wood.radius):
         turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], b - a)
         turn[:3, 3] = 0.5 * (a + b)  # trimesh's capsule is centred on the origin
-        pieces.append(trimesh.creation.capsule(height=float(np.linalg.norm(b - a)), radius=float(r),
-                                               count=[sections, sections], transform=turn))
+        piece = trimesh.creation.capsule(height=float(np.linalg.norm(b - a)), radius=float(r),
+                                         count=[sections, sections], transform=turn)
+        piece.vertices[:, 1] = np.maximum(piece.vertices[:, 1], 0.0)  # a trunk's foot is cut flat at the ground
+        pieces.append(piece)
     bark = trimesh.util.concatenate(pieces)
     bark.visual = trimesh.visual.TextureVisuals(material=PBRMaterial(name="bark", baseColorFactor=[90, 60, 40, 255]))
     scene = trimesh.Scene()

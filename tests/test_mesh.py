@@ -193,6 +193,25 @@ def test_obj_blended_coverage_and_leaf_area(tmp_path):
     assert np.sum(1.0 - shadow.astype(np.float64)) * GRID.pixel**2 == pytest.approx(projected, rel=0.005)
 
 
+def test_alpha_masked_outline_keeps_the_leaf_area(tmp_path):
+    """An alpha-masked leaf is drawn by its alpha's outline (docs/method.md, "Trees from mesh files"): under a
+    high sun its cards' shadow is the texture's own covered area to 1e-6, at every outline level; each card is
+    the sum of its two triangles drawn alone (clipped to the card, its diagonal is not drawn)."""
+    _write_glb(tmp_path / "tree.glb", "MASK")
+    mesh = read_mesh(MeshParams(tmp_path / "tree.glb"))
+    own = (_alpha() >= 128).mean() * SIDE**2
+    projected = own * (1 + np.cos(np.radians(30.0)))
+    for pixel in (0.05, 0.01, 0.2):  # 16, 3.2 and 64 texels a pixel: different outline levels
+        grid = Grid(GRID.origin, pixel, (int(36 * 0.05 / pixel), int(100 * 0.05 / pixel)))
+        shadow = mesh_mask(mesh, sun=(0.0, 0.0), plane_height=PLANE, grid=grid, select=mesh.leaf)
+        assert np.sum(1.0 - shadow.astype(np.float64)) * pixel**2 == pytest.approx(projected, rel=1e-6)
+    together = mesh_mask(mesh, sun=SUN, plane_height=PLANE, grid=GRID, select=mesh.leaf).astype(np.float64)
+    alone = [mesh_mask(mesh, sun=SUN, plane_height=PLANE, grid=GRID, select=np.arange(len(mesh.leaf)) == t)
+             for t in np.flatnonzero(mesh.leaf)]  # (the two cards' shadows do not meet)
+    assert (together < 0.5).any() and np.allclose(1.0 - together, sum(1.0 - m.astype(np.float64) for m in alone),
+                                                   atol=2e-6)
+
+
 def test_placed_and_layered(tmp_path):
     """Scale, turn and position move the file's origin as asked; the glTF node's lift and Y-up are
     converted; each leaf falls whole into its nearest layer, the trunk by its triangles."""

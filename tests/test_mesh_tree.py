@@ -14,13 +14,14 @@ from scenes import config_of, plan_of, tiny_grove
 
 from pipeline.api import functions as api
 from pipeline.canopy import grove, mesh_layers, rasteriser
-from pipeline.canopy.mesh import MeshParams, mesh_files, read_mesh
+from pipeline.canopy.mesh import MeshParams, read_mesh
 from pipeline.canopy.mesh_coverage import mesh_mask
 from pipeline.canopy.mesh_flutter import leaf_motion, mesh_at
 from pipeline.cli.main import main
 from pipeline.core import io
 from pipeline.core.errors import ConfigError
 from pipeline.core.geometry import Grid
+from pipeline.core.mesh_files import mesh_files
 from pipeline.stages.cycle import cycle_params, layer_masks
 
 FLUTTER = grove.FlutterParams(cycle=48, swing=np.radians(12.0), twist=np.radians(20.0))
@@ -196,19 +197,61 @@ def test_bad_mesh_trees_are_one_line_naming_the_file(tmp_path, capsys, monkeypat
 
 def test_a_procedural_tree_through_gltf_renders_the_same_ground(tmp_path):
     """The round trip: the tiny grove's tree, at rest, written as a glTF (cards with an elliptical alpha, capsules
-    of wood) and read back, lights the ground within 1 % RMS of the tree itself under a high sun; under an
-    oblique sun its leaves' mask is within 0.5 % RMS of the grove's (geometry, alpha and axes). (The grove
-    draws a capsule's ends as round discs; a capsule's ends cast ellipses under an oblique sun.)"""
-    procedural = tiny_grove(**{"canopy.flutter.swing": 0.0, "canopy.flutter.twist": 0.0, "sky.sun.elevation": 90.0})
-    tree, meshed = mesh_twin(procedural, tmp_path)
-    want = api.ground_irradiance(config_of(procedural, tmp_path), 0, cache=tmp_path / "cache", threads=1)
-    got = api.ground_irradiance(config_of(meshed, tmp_path), 0, cache=tmp_path / "cache", threads=1)
-    assert got.extent == want.extent and want.irradiance.min() < 0.5 * want.irradiance.max()
-    error = np.sqrt(np.mean((got.irradiance - want.irradiance) ** 2)) / np.mean(want.irradiance)
-    assert 0 < error < 0.01
+    of wood, the trunk's foot cut flat at the ground) and read back, lights the ground within 1 % RMS of the tree
+    itself under a sun at the zenith and 55 degrees up; under the oblique sun its leaves' mask is within 0.5 % RMS
+    of the grove's (geometry, alpha and axes)."""
+    for elevation in (90.0, 55.0):
+        procedural = tiny_grove(**{"canopy.flutter.swing": 0.0, "canopy.flutter.twist": 0.0,
+                                   "sky.sun.elevation": elevation})
+        tree, meshed = mesh_twin(procedural, tmp_path)
+        want = api.ground_irradiance(config_of(procedural, tmp_path), 0, cache=tmp_path / "cache", threads=1)
+        got = api.ground_irradiance(config_of(meshed, tmp_path), 0, cache=tmp_path / "cache", threads=1)
+        assert got.extent == want.extent and want.irradiance.min() < 0.5 * want.irradiance.max()
+        error = np.sqrt(np.mean((got.irradiance - want.irradiance) ** 2)) / np.mean(want.irradiance)
+        assert 0 < error < 0.01, elevation
     sun, grid = (0.35, -0.61), Grid((-2.5, 2.5), 0.04, (125, 125))  # 55 degrees up, from the south-south-east
     mesh = read_mesh(MeshParams(tmp_path / "tree.glb"))
     leaves = grove.project(tree.leaves, sun=sun, plane_height=4.0)
     reference = rasteriser.rasterize_transmittance(leaves, grid)
     drawn = mesh_mask(mesh, sun=sun, plane_height=4.0, grid=grid, select=mesh.leaf)
     assert reference.min() < 0.2 and np.sqrt(np.mean((drawn - reference) ** 2)) < 0.005
+
+
+def test_a_resumed_run_renders_again_when_a_texture_changes(tmp_path, capsys):
+    """The config's hash holds every file the mesh reads: a run resumed after its OBJ's leaf texture changed
+    renders its frames again (their shadow changes), and one resumed with nothing changed renders none."""
+    Image = pytest.importorskip("PIL.Image")
+    rgba = np.zeros((8, 8, 4), np.uint8)
+    rgba[:, :4, 3] = 255  # the card's west half covers
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "leaf.png")
+    (tmp_path / "tree.mtl").write_text("newmtl leaf\nmap_Kd leaf.png\n")
+    (tmp_path / "tree.obj").write_text("mtllib tree.mtl\nv -0.5 3 0.5\nv 0.5 3 0.5\nv 0.5 3 -0.5\nv -0.5 3 -0.5\n"
+                                       "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl leaf\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    config = _mesh_config(tmp_path, file="tree.obj")
+    config["canopy"].update(size=[5.0, 5.0], height=3.0)
+    config["ground"] = {"window": [-1.5, -1.5, 1.5, 1.5], "pixel": 0.1, "sun_window": [-0.5, -0.5, 0.5, 0.5],
+                        "sun_pixel": 0.05}
+    config["animation"] = {"frames": 1}
+    config["output"] = {"folder": str(tmp_path / "run"), "video": "none"}
+    path = _write(tmp_path, config)
+    render = ["render", str(path), "--cache", str(tmp_path / "cache"), "--jobs", "1"]
+    assert main(render) == 0
+    first = (tmp_path / "run" / "tree.0000.exr").read_bytes()
+    assert main(render) == 0
+    assert "0 frames rendered, 1 already done" in capsys.readouterr().out, "nothing changed: nothing rendered"
+    rgba[:, :4, 3], rgba[:, 4:, 3] = 0, 255  # now its east half
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "leaf.png")
+    assert main(render) == 0
+    assert "1 frame rendered, 0 already done" in capsys.readouterr().out
+    assert (tmp_path / "run" / "tree.0000.exr").read_bytes() != first
+
+
+def test_a_tree_file_rewritten_in_the_same_process_is_read_again(tmp_path):
+    """A process keeps a tree it has read only while its file stays as it was: a tree written again at the same
+    path (another grove's) is the new tree, as a fresh process reads it."""
+    kept = []
+    for leaves in (400, 120):
+        mesh_twin(tiny_grove(**{"canopy.trees.leaves_per_tree": leaves}), tmp_path)
+        kept.append(mesh_layers.mesh_tree(MeshParams(tmp_path / "tree.glb"), seed=0))
+        assert kept[-1].mesh.triangles.shape[0] == read_mesh(MeshParams(tmp_path / "tree.glb")).triangles.shape[0]
+    assert kept[0].mesh.triangles.shape[0] != kept[1].mesh.triangles.shape[0]

@@ -19,12 +19,10 @@ from typing import Any
 import numpy as np
 
 from pipeline.core.errors import ImageError
+from pipeline.core.mesh_files import MESH_FORMATS, obj_libraries
 
-__all__ = ["MESH_FORMATS", "FORMAT_UP", "GLTF_ALPHA_CUTOFF", "MeshParams", "MeshMaterial", "TreeMesh", "read_mesh",
-           "leaf_groups", "mesh_files"]
-
-MESH_FORMATS = {".glb": "gltf", ".gltf": "gltf", ".obj": "obj", ".ply": "ply"}
-"""The file name endings read, and their format."""
+__all__ = ["FORMAT_UP", "GLTF_ALPHA_CUTOFF", "MeshParams", "MeshMaterial", "TreeMesh", "read_mesh",
+           "leaf_groups"]
 
 FORMAT_UP = {"gltf": "y", "obj": "y", "ply": "z"}
 """Each format's up axis: glTF's by its specification (+Y up, +Z the asset's front); OBJ's as Blender's, Maya's
@@ -364,45 +362,6 @@ def leaf_groups(vertices: np.ndarray, triangles: np.ndarray, leaf: np.ndarray) -
     return group
 
 
-def mesh_files(path: Path) -> list[Path]:
-    """The mesh file and every file it reads: OBJ's material libraries and their textures, glTF's images
-    and buffers beside it, PLY's texture (for the cache's content hash; each is checked by ``read_mesh``).
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        The mesh file.
-
-    Returns
-    -------
-    list of pathlib.Path
-        The file first, then those it names that exist, each once.
-    """
-    from urllib.parse import unquote
-
-    path = Path(path)
-    kind = MESH_FORMATS.get(path.suffix.lower())
-    found = [path]
-    if kind == "obj":
-        libraries = [" ".join(line.split()[1:]) for line in path.read_text(errors="replace").splitlines()
-                     if line.startswith("mtllib ")]
-        found += [path.parent / library for library in libraries]
-        found += [file for entry in _mtl_entries(path).values() for key, file in entry.items() if key != "d"]
-    elif kind == "gltf":
-        found += [data for _, data in _gltf_images(path) if isinstance(data, Path)]
-        raw = path.read_bytes()
-        if raw[:4] != b"glTF":
-            buffers = json.loads(raw).get("buffers", [])
-            found += [path.parent / unquote(b["uri"]) for b in buffers
-                      if isinstance(b.get("uri"), str) and not b["uri"].startswith("data:")]
-    elif kind == "ply":
-        for line in path.read_bytes()[:65536].split(b"end_header")[0].splitlines():
-            words = line.decode("latin-1").split()
-            if len(words) >= 3 and words[0] == "comment" and words[1].lower() == "texturefile":
-                found.append(path.parent / " ".join(words[2:]))
-    return list(dict.fromkeys(file for file in found if file.is_file()))
-
-
 def _texture_files(path: Path, kind: str) -> dict[str, dict[str, Any]]:
     """The textures the file names, each checked to exist and decode (ImageError naming it otherwise):
     for OBJ each MTL material's {'map_Kd': Path, 'map_d': Path, 'd': float}; glTF's and PLY's are
@@ -439,9 +398,7 @@ def _check_image(path: Path, name: str, data: bytes | Path) -> None:
 def _mtl_entries(path: Path) -> dict[str, dict[str, Any]]:
     """Each material of the OBJ's MTL libraries: its map_Kd and map_d files (checked) and its d."""
     entries: dict[str, dict[str, Any]] = {}
-    libraries = [" ".join(line.split()[1:]) for line in path.read_text(errors="replace").splitlines()
-                 if line.startswith("mtllib ")]
-    for library in libraries:
+    for library in obj_libraries(path):
         mtl = path.parent / library
         if not mtl.is_file():
             raise ImageError(path, f"material library {library} is missing")

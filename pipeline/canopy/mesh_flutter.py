@@ -39,7 +39,7 @@ class LeafMotion:
     owner : numpy.ndarray
         (k,) int64 the leaf of each.
     arm : numpy.ndarray
-        (3, k, 3): component j of each corner's offset from its leaf's pivot, ``arm[j][t, c]`` [m].
+        (k, 3, 3) each leaf triangle's corners' offsets from its leaf's pivot [m].
     """
 
     pivot: np.ndarray
@@ -115,26 +115,16 @@ def leaf_motion(mesh: TreeMesh, *, seed: int, index: int = 0) -> LeafMotion:
     leaf_triangles = np.flatnonzero(leaf)
     arm = rest[leaf_triangles] - pivot[group][:, None, :]
     return LeafMotion(pivot, length_axis, swing_axis, rng.uniform(0, 2 * np.pi, count),
-                      rng.uniform(0, 2 * np.pi, count), rest, leaf_triangles, group,
-                      np.ascontiguousarray(np.moveaxis(arm, 2, 0)))
-
-
-def _rotations(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """(3, 3, n) turns about unit axes (n, 3) by angles (n,) [rad] (Rodrigues), entry [i, j] an (n,) array."""
-    c, s = np.cos(angle), np.sin(angle)
-    x, y, z = axis.T
-    k = 1 - c
-    return np.array([[c + k * x * x, k * x * y - s * z, k * x * z + s * y],
-                     [k * y * x + s * z, c + k * y * y, k * y * z - s * x],
-                     [k * z * x - s * y, k * z * y + s * x, c + k * z * z]])
+                      rng.uniform(0, 2 * np.pi, count), rest, leaf_triangles, group, np.ascontiguousarray(arm))
 
 
 def mesh_at(mesh: TreeMesh, motion: LeafMotion, flutter: FlutterParams, frame: int) -> TreeMesh:
     """The tree at ``frame`` (any int), exactly periodic: every leaf turned rigidly about its pivot.
 
     Each leaf twists about its long axis, then swings about its horizontal axis, both through its pivot,
-    as ``grove.FlutterParams`` says; the wood stays. Every triangle gets corners of its own (none shared), its
-    texture coordinates, material and group kept.
+    as ``grove.FlutterParams`` says; the wood stays. The two turns are made one rotation a leaf, which
+    then turns the leaf's corners (compiled: ``kernels/mesh_arrange.py``, ``turn_corners``). Every triangle
+    gets corners of its own (none shared), its texture coordinates, material and group kept.
 
     Parameters
     ----------
@@ -150,13 +140,10 @@ def mesh_at(mesh: TreeMesh, motion: LeafMotion, flutter: FlutterParams, frame: i
     TreeMesh
         The tree at ``frame`` [m].
     """
+    from pipeline.kernels.mesh_arrange import turn_corners
+
     omega = flutter.angle(frame)
-    swing = _rotations(motion.swing_axis, flutter.swing * np.sin(omega + motion.swing_phase))
-    twist = _rotations(motion.length_axis, flutter.twist * np.sin(omega + motion.twist_phase))
-    turn = np.einsum("ikn,kjn->ijn", swing, twist)[:, :, motion.owner, None]  # the twist first, then the swing
-    corners = motion.rest.copy()
-    moved = np.empty((len(motion.owner), 3, 3))
-    for i in range(3):  # component i of each turned corner: sum over j of turn[i, j] arm[j]
-        moved[..., i] = turn[i, 0] * motion.arm[0] + turn[i, 1] * motion.arm[1] + turn[i, 2] * motion.arm[2]
-    corners[motion.leaf_triangles] = moved + motion.pivot[motion.owner][:, None, :]
+    corners = turn_corners(motion.rest, motion.leaf_triangles, motion.owner, motion.arm, motion.pivot,
+                           motion.length_axis, flutter.twist * np.sin(omega + motion.twist_phase),
+                           motion.swing_axis, flutter.swing * np.sin(omega + motion.swing_phase))
     return replace(mesh, vertices=corners.reshape(-1, 3), triangles=np.arange(3 * len(corners)).reshape(-1, 3))

@@ -20,6 +20,7 @@ from pipeline.canopy import mesh_coverage, mesh_flutter
 from pipeline.canopy.grove import FlutterParams
 from pipeline.canopy.mesh import MeshParams, TreeMesh, read_mesh
 from pipeline.core.geometry import Grid
+from pipeline.core.mesh_files import mesh_files
 
 __all__ = ["MAX_MESH_BYTES", "MeshTree", "MeshSummary", "mesh_tree", "layer_transmittance", "shadow_bounds",
            "mesh_bytes", "mesh_summary"]
@@ -83,9 +84,9 @@ class MeshSummary:
     layers: tuple[int, ...]
 
 
-@functools.lru_cache(maxsize=4)
 def mesh_tree(params: MeshParams, *, seed: int, index: int = 0) -> MeshTree:
-    """A mesh tree read, its leaves' motion found and its tables made, once per process.
+    """A mesh tree read, its leaves' motion found and its tables made, once per process while its files
+    (``core.mesh_files.mesh_files``) keep their sizes and times.
 
     Parameters
     ----------
@@ -104,6 +105,13 @@ def mesh_tree(params: MeshParams, *, seed: int, index: int = 0) -> MeshTree:
     ImageError
         One line naming the file (``mesh.read_mesh``).
     """
+    stamps = tuple((str(file), file.stat().st_size, file.stat().st_mtime_ns) for file in mesh_files(params.path))
+    return _read_tree(params, stamps, seed, index)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_tree(params: MeshParams, stamps: tuple, seed: int, index: int) -> MeshTree:
+    """``mesh_tree``'s tree, kept under its files' ``stamps`` (a file rewritten is read again)."""
     mesh = read_mesh(params)
     return MeshTree(mesh, mesh_flutter.leaf_motion(mesh, seed=seed, index=index), mesh_coverage.coverage_tables(mesh))
 

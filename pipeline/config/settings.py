@@ -19,6 +19,7 @@ from pipeline import __version__
 from pipeline.config.receivers import ReceiversConfig
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE
 from pipeline.config.yamlsafe import KeyContext
+from pipeline.core.mesh_files import mesh_files
 from pipeline.core.ocio import RENDER_SPACE
 
 __all__ = ["AUTO_LIMITS", "AUTO_TIME_CONSTANT", "AnimationConfig", "AutoExposureConfig", "BrdfConfig", "CameraConfig",
@@ -617,7 +618,7 @@ class Config:
         if not self.canopy.meshes:  # a canopy without mesh trees hashes as it always did
             values["canopy"].pop("meshes")
         files = sorted({str(m) for layer in self.canopy.layers for m in layer.mask}
-                       | {str(mesh.file) for mesh in self.canopy.meshes}
+                       | {str(file) for mesh in self.canopy.meshes for file in mesh_files(mesh.file)}
                        | {str(p) for p in (*self.foreground.sun, *self.foreground.sky, *self.foreground.alpha)}
                        | ({str(self.sky.hdri)} if self.sky.hdri else set())
                        | ({str(self.ground.albedo)} if isinstance(self.ground.albedo, Path) else set())

@@ -26,7 +26,7 @@ __all__ = ["mesh_transmittance", "triangle_alpha"]
 _OPAQUE = 1.0 - 2.0**-20  # a group's coverage clipped just below 1, as kernels/raster.py clips a leaf's
 
 
-_PARAMS = 12  # a triangle's parameters: affine map (6), weight, base, width, height, flags, period
+_PARAMS = 14  # a triangle's parameters: affine map (6), weight, base, width, height, flags, period, outline loops
 _PIECE = 7  # a piece's row: x0, y0, x1, y1 [pixel], the pixel it bounds positively, negatively (-1: none), triangle
 
 
@@ -209,9 +209,11 @@ def _setup(x, y, tu, tr, width, height, params, t):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, params, placed):
-    """Every triangle's parameters (``_PARAMS``; flags 1: constant, 2: in the first period, 4: drawn) and its
-    corners made anticlockwise (``placed``, (m, 3, 2)) [pixel]."""
+def _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, outline_range,
+                outline_levels, outline_texels, params, placed):
+    """Every triangle's parameters (``_PARAMS``; flags 1: constant, 2: in the first period, 4: drawn, 8: drawn
+    by its table's outline, loops params[12] .. params[13] - 1) and its corners made anticlockwise
+    (``placed``, (m, 3, 2)) [pixel]."""
     for t in range(corners.shape[0]):
         m = material[t]
         x = (corners[t, 0, 0], corners[t, 1, 0], corners[t, 2, 0])
@@ -228,6 +230,13 @@ def _parameters(corners, texels, material, prefix, level_base, level_size, level
             continue
         width0, height0 = level_size[m, 0, 0], level_size[m, 0, 1]
         texture = abs((tu[1] - tu[0]) * (tr[2] - tr[0]) - (tu[2] - tu[0]) * (tr[1] - tr[0])) * width0 * height0
+        if outline_levels[m] > 0 and texture > 0.0 and max(tu) - np.floor(min(tu)) <= 1.0 and \
+                max(tr) - np.floor(min(tr)) <= 1.0:  # a 0 / 1 table, the triangle in one period: its outline
+            step = np.sqrt(texture / abs(det)) / outline_texels
+            k = 0 if step <= 1.0 else min(int(np.floor(np.log2(step))), outline_levels[m] - 1)
+            params[t, 7], params[t, 10] = -2.0, 14.0
+            params[t, 12], params[t, 13] = outline_range[m, k, 0], outline_range[m, k, 1]
+            continue
         ratio = np.sqrt(texture / abs(det)) / texels_per_pixel  # the level whose texels are ~1 / tpp of a pixel
         level = 0 if ratio <= 1.0 else min(int(np.floor(np.log2(ratio))), levels[m] - 1)
         base, width, height = level_base[m, level, 0], level_size[m, level, 0], level_size[m, level, 1]
@@ -260,13 +269,14 @@ def _shared_edges(placed, partner, params):
     period (or the same constant), so their pieces on it are equal and opposite."""
     skip = np.zeros(placed.shape[0], np.int64)
     for t in range(placed.shape[0]):
-        if not int(params[t, 10]) & 4:
+        if int(params[t, 10]) & 13 != 4:
             continue
         for e in range(3):
             p = partner[t, e]
-            if p < 0 or not int(params[p, 10]) & 4 or params[t, 7] != params[p, 7] or \
-                    params[t, 11] != params[p, 11] or (params[t, 7] < 0.0 and params[t, 6] != params[p, 6]):
-                continue
+            if p < 0 or int(params[p, 10]) & 13 != 4 or params[t, 7] != params[p, 7] or \
+                    params[t, 11] != params[p, 11] or (params[t, 7] < 0.0 and params[t, 6] != params[p, 6]) or \
+                    abs(params[t, 6] - params[p, 6]) > 1e-9 * abs(params[t, 6]):
+                continue  # the pieces scale by 1 / Jacobian: unequal maps (a fold, a crease) do not cancel
             for j in range(3):  # the placed edge A -> B of t that the partner runs B -> A
                 ax, ay = placed[t, j, 0], placed[t, j, 1]
                 bx, by = placed[t, (j + 1) % 3, 0], placed[t, (j + 1) % 3, 1]
@@ -278,11 +288,221 @@ def _shared_edges(placed, partner, params):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _accumulate(x0, y0, x1, y1, weight, cells, rows, cols):
+    """The segment's exact signed area added to the accumulation raster ``cells`` ((rows, cols + 1), flat),
+    split at the pixel lines: a part in pixel (row, col) adds dy (col + 1 - x_mid) to cell (row, col) and
+    dy (x_mid - col) to (row, col + 1), so that a row's running sum is the area a closed outline covers in
+    each pixel (left of the raster: all of dy to column 0; right of it: nothing)."""
+    if y0 == y1:
+        return
+    top, left = np.floor(min(y0, y1)), np.floor(min(x0, x1))
+    if 0.0 <= top and top + 1.0 >= max(y0, y1) and top < rows and 0.0 <= left and left + 1.0 >= max(x0, x1) and \
+            left < cols:  # within one pixel
+        cell, mid = int(top) * (cols + 1) + int(left), 0.5 * (x0 + x1) - left
+        cells[cell] += (y1 - y0) * weight * (1.0 - mid)
+        cells[cell + 1] += (y1 - y0) * weight * mid
+        return
+    lo_y, hi_y = max(min(y0, y1), 0.0), min(max(y0, y1), float(rows))
+    slope = (x1 - x0) / (y1 - y0)
+    for row in range(int(np.floor(lo_y)), int(np.ceil(hi_y))):
+        ya, yb = max(lo_y, float(row)), min(hi_y, row + 1.0)
+        if yb <= ya:
+            continue
+        dy = (yb - ya) * weight if y1 > y0 else (ya - yb) * weight
+        xa, xb = x0 + slope * (ya - y0), x0 + slope * (yb - y0)
+        left, right = min(xa, xb), max(xa, xb)
+        line = row * (cols + 1)
+        first, last = max(int(np.floor(left)), -1), min(int(np.floor(right)), cols)
+        if first == last or right == left:  # within one column
+            mid = 0.5 * (left + right)
+            if first < 0 or mid <= 0.0:
+                cells[line] += dy
+            elif first < cols:
+                c = min(int(np.floor(mid)), cols - 1)
+                cells[line + c] += dy * (c + 1.0 - mid)
+                cells[line + c + 1] += dy * (mid - c)
+            continue
+        per = dy / (right - left)
+        for c in range(first, last + 1):
+            a, b = max(left, float(c)) if c >= 0 else left, min(right, c + 1.0) if c >= 0 else min(right, 0.0)
+            if b <= a or c >= cols:
+                continue
+            part = per * (b - a)
+            if c < 0:
+                cells[line] += part
+            else:
+                mid = 0.5 * (a + b)
+                cells[line + c] += part * (c + 1.0 - mid)
+                cells[line + c + 1] += part * (mid - c)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _clip(src_u, src_r, n, au, ar, bu, br, side, dst_u, dst_r):
+    """The polygon (src, n corners) clipped to the half-plane left of A -> B (``side`` 1) or right of it
+    (-1), written to dst (Sutherland-Hodgman); returns its corners' count."""
+    out = 0
+    eu, er = bu - au, br - ar
+    pu, pr = src_u[n - 1], src_r[n - 1]
+    pd = side * (eu * (pr - ar) - er * (pu - au))
+    for k in range(n):
+        qu, qr = src_u[k], src_r[k]
+        qd = side * (eu * (qr - ar) - er * (qu - au))
+        if (pd >= 0.0) != (qd >= 0.0):
+            f = pd / (pd - qd)
+            dst_u[out], dst_r[out] = pu + f * (qu - pu), pr + f * (qr - pr)
+            out += 1
+        if qd >= 0.0:
+            dst_u[out], dst_r[out] = qu, qr
+            out += 1
+        pu, pr, pd = qu, qr, qd
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _outline_draw(p, tex, clip, count, outline, loop_start, loop_box, first, end, weight, cells, rows, cols, buf):
+    """The table's outline (loops ``first`` .. ``end`` - 1, anticlockwise around what covers, in the
+    texture [fraction]) clipped to the convex polygon ``clip`` ((count, 2), its corners in turn) in the
+    texture, mapped onto the raster by the affine map that takes ``tex`` (3, 2) [fraction] to ``p`` (3, 2)
+    [pixel], and accumulated into ``cells`` times ``weight``; ``buf`` (4, n) scratch."""
+    fu1, fu2, fr1, fr2 = tex[1, 0] - tex[0, 0], tex[2, 0] - tex[0, 0], tex[1, 1] - tex[0, 1], tex[2, 1] - tex[0, 1]
+    det = fu1 * fr2 - fu2 * fr1
+    if det == 0.0:
+        return
+    ex1, ex2, ey1, ey2 = p[1, 0] - p[0, 0], p[2, 0] - p[0, 0], p[1, 1] - p[0, 1], p[2, 1] - p[0, 1]
+    # pixel = p0 + A (t - t0), A = E F^-1
+    a00, a01 = (ex1 * fr2 - ex2 * fr1) / det, (ex2 * fu1 - ex1 * fu2) / det
+    a10, a11 = (ey1 * fr2 - ey2 * fr1) / det, (ey2 * fu1 - ey1 * fu2) / det
+    w = weight if a00 * a11 - a01 * a10 < 0.0 else -weight  # the raster's rows run down
+    side = 1.0 if det > 0.0 else -1.0
+    lo_u, hi_u, lo_r, hi_r = np.inf, -np.inf, np.inf, -np.inf
+    for k in range(count):
+        lo_u, hi_u = min(lo_u, clip[k, 0]), max(hi_u, clip[k, 0])
+        lo_r, hi_r = min(lo_r, clip[k, 1]), max(hi_r, clip[k, 1])
+    for loop in range(first, end):
+        if loop_box[loop, 0] >= hi_u or loop_box[loop, 2] <= lo_u or loop_box[loop, 1] >= hi_r or \
+                loop_box[loop, 3] <= lo_r:
+            continue
+        a, n = loop_start[loop], loop_start[loop + 1] - loop_start[loop]
+        src_u, src_r = outline[a:a + n, 0], outline[a:a + n, 1]
+        into = 0
+        for e in range(count):  # the loop clipped to each edge's inner side in turn, unless its box is inside it
+            j = (e + 1) % count
+            eu, er = clip[j, 0] - clip[e, 0], clip[j, 1] - clip[e, 1]
+            inside = True
+            for corner in range(4):
+                cu, cr = loop_box[loop, 0 if corner < 2 else 2], loop_box[loop, 1 + 2 * (corner % 2)]
+                inside = inside and side * (eu * (cr - clip[e, 1]) - er * (cu - clip[e, 0])) >= 0.0
+            if inside:
+                continue
+            n = _clip(src_u, src_r, n, clip[e, 0], clip[e, 1], clip[j, 0], clip[j, 1], side, buf[into],
+                      buf[into + 1])
+            src_u, src_r, into = buf[into], buf[into + 1], 2 - into
+            if n == 0:
+                break
+        if n < 3:
+            continue
+        u0, r0 = tex[0, 0], tex[0, 1]
+        px = p[0, 0] + a00 * (src_u[n - 1] - u0) + a01 * (src_r[n - 1] - r0)
+        py = p[0, 1] + a10 * (src_u[n - 1] - u0) + a11 * (src_r[n - 1] - r0)
+        for k in range(n):
+            qx = p[0, 0] + a00 * (src_u[k] - u0) + a01 * (src_r[k] - r0)
+            qy = p[0, 1] + a10 * (src_u[k] - u0) + a11 * (src_r[k] - r0)
+            _accumulate(px, py, qx, qy, w, cells, rows, cols)
+            px, py = qx, qy
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _card(corners, texels, params, t, end, tex, clip):
+    """Triangle t's texture coordinates moved into the first period (``tex``) and the polygon its outline is
+    clipped to (``clip``); returns its corners' count: 4 where t and the next triangle (of its group, which
+    ends before ``end``) are two halves of a card (across an edge whose corners they share; the same outline
+    level; one affine map; a convex quadrilateral in the texture), so that their shared edge is not drawn;
+    else 3 (the triangle)."""
+    shift_u = np.floor(min(texels[t, 0, 0], texels[t, 1, 0], texels[t, 2, 0]))
+    shift_r = np.floor(min(texels[t, 0, 1], texels[t, 1, 1], texels[t, 2, 1]))
+    for k in range(3):
+        tex[k, 0], tex[k, 1] = texels[t, k, 0] - shift_u, texels[t, k, 1] - shift_r
+        clip[k, 0], clip[k, 1] = tex[k, 0], tex[k, 1]
+    o = t + 1
+    if o >= end or not int(params[o, 10]) & 8 or params[o, 12] != params[t, 12] or \
+            params[o, 13] != params[t, 13]:
+        return 3
+    e, d = -1, -1  # the edge t shares with o (the same corners and texture coordinates), o's corner off it
+    for k in range(3):
+        for j in range(3):
+            a, b = (k + 1) % 3, (j + 1) % 3
+            if corners[o, j, 0] == corners[t, a, 0] and corners[o, j, 1] == corners[t, a, 1] and \
+                    corners[o, b, 0] == corners[t, k, 0] and corners[o, b, 1] == corners[t, k, 1] and \
+                    texels[o, j, 0] == texels[t, a, 0] and texels[o, j, 1] == texels[t, a, 1] and \
+                    texels[o, b, 0] == texels[t, k, 0] and texels[o, b, 1] == texels[t, k, 1]:
+                e, d = k, (j + 2) % 3
+    if e < 0:
+        return 3
+    du, dr = texels[o, d, 0] - shift_u, texels[o, d, 1] - shift_r
+    fu1, fu2, fr1, fr2 = tex[1, 0] - tex[0, 0], tex[2, 0] - tex[0, 0], tex[1, 1] - tex[0, 1], tex[2, 1] - tex[0, 1]
+    det = fu1 * fr2 - fu2 * fr1
+    if det == 0.0 or not (0.0 <= du <= 1.0 and 0.0 <= dr <= 1.0):
+        return 3
+    b1 = ((du - tex[0, 0]) * fr2 - fu2 * (dr - tex[0, 1])) / det
+    b2 = (fu1 * (dr - tex[0, 1]) - (du - tex[0, 0]) * fr1) / det
+    scale = 1e-9 * (1.0 + abs(corners[t, 1, 0] - corners[t, 0, 0]) + abs(corners[t, 1, 1] - corners[t, 0, 1]))
+    for axis in range(2):  # the other half's corner where t's map takes its texture coordinates
+        at = corners[t, 0, axis] + b1 * (corners[t, 1, axis] - corners[t, 0, axis]) + \
+            b2 * (corners[t, 2, axis] - corners[t, 0, axis])
+        if abs(at - corners[o, d, axis]) > scale:
+            return 3
+    order = (e, -1, (e + 1) % 3, (e + 2) % 3)
+    for k in range(4):
+        if order[k] < 0:
+            clip[k, 0], clip[k, 1] = du, dr
+        else:
+            clip[k, 0], clip[k, 1] = tex[order[k], 0], tex[order[k], 1]
+    side = 1.0 if det > 0.0 else -1.0
+    for k in range(4):  # convex: every corner turns the triangle's way
+        a, b, c = clip[k], clip[(k + 1) % 4], clip[(k + 2) % 4]
+        if side * ((b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])) <= 0.0:
+            for j in range(3):
+                clip[j, 0], clip[j, 1] = tex[j, 0], tex[j, 1]
+            return 3
+    return 4
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _scratch(loop_start):
+    """Scratch for the clipped loops (4, n), a triangle's texture coordinates (3, 2), a clip polygon (4, 2)
+    and the pieces."""
+    longest = 3
+    for loop in range(loop_start.shape[0] - 1):
+        longest = max(longest, loop_start[loop + 1] - loop_start[loop])
+    return np.empty((4, 8 * longest + 16)), np.empty((3, 2)), np.empty((4, 2)), np.empty((4096, _PIECE))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _outlined(t, flags, x, y, corners, texels, params, end, tex, clip, outline, loop_start, loop_box, cells, rows,
+              cols, buf):
+    """Triangle t accumulated into ``cells``: a constant one as itself (anticlockwise, ``x``, ``y``) times its
+    value, else its table's outline clipped by it, or by its card with the next triangle; returns the card's
+    second half (drawn with it), or -1."""
+    if flags & 1:
+        for k in range(3):
+            j = (k + 1) % 3
+            _accumulate(x[k], y[k], x[j], y[j], -params[t, 6], cells, rows, cols)
+        return -1
+    sides = _card(corners, texels, params, t, end, tex, clip)
+    _outline_draw(corners[t], tex, clip, sides, outline, loop_start, loop_box, int(params[t, 12]), int(params[t, 13]),
+                  1.0, cells, rows, cols, buf)
+    return t + 1 if sides == 4 else -1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def mesh_transmittance(corners: np.ndarray, texels: np.ndarray, material: np.ndarray, group_start: np.ndarray,
                        prefix: np.ndarray, level_base: np.ndarray, level_size: np.ndarray, levels: np.ndarray,
                        texels_per_pixel: float, transmittance: np.ndarray, double: np.ndarray,
-                       partner: np.ndarray) -> None:
-    """Triangles drawn into a transmittance raster by their exact coverage, group by group.
+                       partner: np.ndarray, outline: np.ndarray, loop_start: np.ndarray, loop_box: np.ndarray,
+                       outline_range: np.ndarray, outline_levels: np.ndarray, outline_texels: float) -> None:
+    """Triangles drawn into a transmittance raster by their exact coverage, group by group: a constant one,
+    and one whose table is 0 or 1 within one period of it, accumulated as polygons (the triangle; the outline
+    clipped by it) of exact signed area into a raster summed along its rows; any other piece by piece.
 
     Parameters
     ----------
@@ -297,54 +517,79 @@ def mesh_transmittance(corners: np.ndarray, texels: np.ndarray, material: np.nda
         (g + 1,) int64: group i is triangles group_start[i] .. group_start[i + 1] - 1.
     prefix : numpy.ndarray
         Flat float64 row prefix sums of every material's tables, (height, width + 1) each [texel].
-    level_base : numpy.ndarray
-        (materials, L, 2) int64: where each level's prefix sums start, and its transposed table's.
-    level_size : numpy.ndarray
-        (materials, L, 2) int64: each level's (width, height) [texel].
-    levels : numpy.ndarray
-        (materials,) int64: the levels each material has.
+    level_base, level_size, levels : numpy.ndarray
+        (materials, L, 2) int64 where each level's prefix sums start, and its transposed table's; each level's
+        (width, height) [texel]; (materials,) int64 the levels each material has.
     texels_per_pixel : float
         The finest level whose texel spans at most 1 / texels_per_pixel of a pixel is read [1].
     transmittance : numpy.ndarray
         (rows, cols) float64, multiplied in place by 1 - each group's coverage [1].
     double : numpy.ndarray
-        Laid out as ``prefix``: each row's prefix sums of the integral of its prefix F [texel^2].
+        As ``prefix``: each row's prefix sums of the integral of its prefix F [texel^2].
     partner : numpy.ndarray
         (m, 3) int64: the triangle of the same group across each edge (corner k to k + 1) with the same
         vertices and texture coordinates at both ends, or -1; their shared edge is not drawn where the two
         cancel on it.
+    outline, loop_start, loop_box, outline_range, outline_levels : numpy.ndarray
+        The tables' outlines, as ``canopy.mesh_coverage.CoverageTables`` holds them: their corners (n, 2), loop
+        after loop [fraction of the table]; where each loop starts; each loop's box; each material's loops at
+        each level; the levels with an outline (0: the table is not all 0 and 1).
+    outline_texels : float
+        The coarsest outline whose texel spans at most 1 / outline_texels of a pixel is drawn [1].
     """
     rows, cols = transmittance.shape
     flat = transmittance.reshape(-1)
-    acc = np.zeros(rows * cols)
+    acc, cells = np.zeros(rows * cols), np.zeros(rows * (cols + 1))
     params, placed = np.empty((corners.shape[0], _PARAMS)), np.empty_like(corners)
-    _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, params, placed)
+    _parameters(corners, texels, material, prefix, level_base, level_size, levels, texels_per_pixel, outline_range,
+                outline_levels, outline_texels, params, placed)
     skip = _shared_edges(placed, partner, params)
-    pieces = np.empty((4096, _PIECE))
+    buf, tex, clip, pieces = _scratch(loop_start)
     for g in range(group_start.shape[0] - 1):
-        count, r_lo, r_hi, c_lo, c_hi = 0, rows, 0, cols, 0
+        count, r_lo, r_hi, c_lo, c_hi, card, pieced = 0, rows, 0, cols, 0, -1, False
         for t in range(group_start[g], group_start[g + 1]):
             x = (placed[t, 0, 0], placed[t, 1, 0], placed[t, 2, 0])
             y = (placed[t, 0, 1], placed[t, 1, 1], placed[t, 2, 1])
             c0, c1 = max(int(np.floor(min(x))), 0), min(int(np.ceil(max(x))), cols)
             r0, r1 = max(int(np.floor(min(y))), 0), min(int(np.ceil(max(y))), rows)
-            if c1 <= c0 or r1 <= r0 or not int(params[t, 10]) & 4:
+            flags = int(params[t, 10])
+            if c1 <= c0 or r1 <= r0 or not flags & 4:
                 continue
             r_lo, r_hi, c_lo, c_hi = min(r_lo, r0), max(r_hi, r1), min(c_lo, c0), max(c_hi, c1)
+            if flags & 9:
+                if t != card:  # (a card's second half is drawn with its first)
+                    card = _outlined(t, flags, x, y, corners, texels, params, group_start[g + 1], tex, clip, outline,
+                                     loop_start, loop_box, cells, rows, cols, buf)
+                continue
+            pieced = True
             most = 3 * (c1 - c0 + r1 - r0 + 3) + 2 * (c1 - c0 + 1) * (r1 - r0 + 1)
             if count + most > pieces.shape[0]:
                 _integrate(pieces, count, params, prefix, double, acc)
                 count = 0
                 if most > pieces.shape[0]:
                     pieces = np.empty((most, _PIECE))
-            count = _edge_pieces(x, y, t, skip[t], pieces, count, rows, cols)
-            count = _inner_pieces(x, y, t, int(params[t, 10]) & 1 != 0, pieces, count, rows, cols)
+            count = _inner_pieces(x, y, t, False, pieces, _edge_pieces(x, y, t, skip[t], pieces, count, rows, cols),
+                                  rows, cols)
         _integrate(pieces, count, params, prefix, double, acc)
-        for r in range(r_lo, r_hi):
-            for p in range(r * cols + c_lo, r * cols + c_hi):
-                if acc[p] > 0.0:
-                    flat[p] *= 1.0 - min(acc[p], _OPAQUE)
-                acc[p] = 0.0
+        _deposit(flat, acc, cells, r_lo, r_hi, c_lo, c_hi, cols, pieced)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _deposit(flat, acc, cells, r_lo, r_hi, c_lo, c_hi, cols, pieced):
+    """A group's coverage (the running row sums of ``cells``, plus the pieces' sums ``acc`` where it has
+    pieces) taken into the transmittance, clipped just below 1, and the buffers cleared over the group's box."""
+    for r in range(r_lo, r_hi):
+        line, running = r * (cols + 1), 0.0
+        for c in range(c_lo, c_hi):
+            running += cells[line + c]
+            cells[line + c] = 0.0
+            cover = running
+            if pieced:
+                cover += acc[r * cols + c]
+                acc[r * cols + c] = 0.0
+            if cover > 0.0:
+                flat[r * cols + c] *= 1.0 - min(cover, _OPAQUE)
+        cells[line + c_hi] = 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

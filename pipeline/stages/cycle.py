@@ -20,12 +20,13 @@ from pipeline.cache import store as cache
 from pipeline.canopy import grove as grove_geometry
 from pipeline.canopy import masks as canopy
 from pipeline.canopy import mesh_layers, rasteriser
-from pipeline.canopy.mesh import MeshParams, mesh_files
-from pipeline.canopy.mesh_coverage import TEXELS_PER_PIXEL
+from pipeline.canopy.mesh import MeshParams
+from pipeline.canopy.mesh_coverage import OUTLINE_TEXELS_PER_PIXEL, TEXELS_PER_PIXEL
 from pipeline.config.parse import FRAME_BYTES_PER_PIXEL
 from pipeline.config.settings import CanopyConfig
 from pipeline.core.cores import compiled_once, end_if_orphaned
 from pipeline.core.errors import portable
+from pipeline.core.mesh_files import mesh_files
 from pipeline.foreground import models, tree_detail
 from pipeline.foreground import trees as foreground
 from pipeline.ground import shadow
@@ -192,7 +193,7 @@ def cycle_params(plan: RunPlan, layer_index: int, cycle_frame: int) -> dict[str,
     if c.meshes:
         source = {"meshes": [{**asdict(m), "files": [file_sha256(f) for f in mesh_files(m.file)]}
                              for m in c.meshes], "flutter": asdict(c.flutter), "heights": [l.height for l in c.layers],
-                  "coverage": TEXELS_PER_PIXEL}
+                  "coverage": [TEXELS_PER_PIXEL, OUTLINE_TEXELS_PER_PIXEL]}
     elif c.trees is None:
         source = {"mask": file_sha256(c.layers[layer_index].mask[cycle_frame])}
     else:
