@@ -3,6 +3,7 @@ source: which package imports which (the table in the docs, parsed), no private 
 another module, no import cycle, no module over 700 lines, no function over 80 lines."""
 
 import ast
+import functools
 import re
 import shutil
 import subprocess
@@ -62,14 +63,30 @@ def _absolute(node: ast.ImportFrom, me: str, is_init: bool) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
-def imports(path: Path, *, top_level_only: bool = False, package: Path = PACKAGE) -> dict[str, set[str]]:
+@functools.cache
+def _tree(text: str) -> ast.Module:
+    """A module's source parsed, once for the session (about 10 ms a module; the checks below
+    read the same unchanged modules several times over, and never change a tree)."""
+    return ast.parse(text)
+
+
+def imports(path: Path, *, top_level_only: bool = False, package: Path = PACKAGE,
+            names: dict[Path, str] | None = None) -> dict[str, set[str]]:
     """What the module at ``path`` takes from the package: {module imported (dotted below pipeline):
     the names taken from it, and the attributes read on it}. Relative or absolute imports, at module
-    level only or anywhere; ``if TYPE_CHECKING:`` blocks are annotations, not imports."""
-    names = module_names(package)
-    known = set(names.values())
-    me = names[path]
-    tree = ast.parse(path.read_text())
+    level only or anywhere; ``if TYPE_CHECKING:`` blocks are annotations, not imports. ``names``:
+    ``module_names(package)``, when the caller has it."""
+    names = names or module_names(package)
+    found = _imports(path.read_text(), names[path], path.name == "__init__.py", top_level_only,
+                     frozenset(names.values()))
+    return {module: set(taken) for module, taken in found.items()}
+
+
+@functools.cache
+def _imports(text: str, me: str, is_init: bool, top_level_only: bool,
+             known: frozenset[str]) -> dict[str, frozenset[str]]:
+    """``imports`` of a module's text, found once for each text, name and package."""
+    tree = _tree(text)
     found: dict[str, set[str]] = {}
     aliases = {}
 
@@ -84,7 +101,7 @@ def imports(path: Path, *, top_level_only: bool = False, package: Path = PACKAGE
                 continue
             if top or not top_level_only:
                 if isinstance(child, ast.ImportFrom):
-                    source = _absolute(child, me, path.name == "__init__.py")
+                    source = _absolute(child, me, is_init)
                     if source is not None:
                         for alias in child.names:
                             inner = f"{source}.{alias.name}".lstrip(".")
@@ -108,7 +125,7 @@ def imports(path: Path, *, top_level_only: bool = False, package: Path = PACKAGE
         for node in ast.walk(tree):
             if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases:
                 take(aliases[node.value.id], node.attr)
-    return {module: taken for module, taken in found.items() if module in known and module != me}
+    return {module: frozenset(taken) for module, taken in found.items() if module in known and module != me}
 
 
 def violations(package: Path = PACKAGE) -> list[str]:
@@ -116,7 +133,8 @@ def violations(package: Path = PACKAGE) -> list[str]:
     subpackage the table does not place, as 'a.b imports c.d'."""
     table = import_table(DESIGN.read_text())
     found = []
-    for path, name in module_names(package).items():
+    names = module_names(package)
+    for path, name in names.items():
         home = name.split(".")[0]
         if path.parent == package:
             allowed = set(table)  # pipeline/__init__.py only
@@ -125,7 +143,7 @@ def violations(package: Path = PACKAGE) -> list[str]:
             continue
         else:
             allowed = table[home]
-        found += [f"{name} imports {other}" for other in sorted(imports(path, package=package))
+        found += [f"{name} imports {other}" for other in sorted(imports(path, package=package, names=names))
                   if other and other.split(".")[0] not in allowed]
     return sorted(set(found))
 
@@ -134,8 +152,9 @@ def private_names_taken(package: Path = PACKAGE) -> list[str]:
     """Every private name (``_x``, not ``__x__``) that a module takes from another module of the
     package, by ``from m import _x`` or ``m._x``, as 'a.b takes c.d._x'."""
     found = []
-    for path, name in module_names(package).items():
-        for other, taken in imports(path, package=package).items():
+    names = module_names(package)
+    for path, name in names.items():
+        for other, taken in imports(path, package=package, names=names).items():
             found += [f"{name} takes {other}.{t}" for t in sorted(taken)
                       if t.startswith("_") and not (t.startswith("__") and t.endswith("__"))]
     return found
@@ -145,7 +164,7 @@ def long_functions(package: Path = PACKAGE) -> list[str]:
     """Every function of the package longer than ``MOST_FUNCTION_LINES`` lines, as 'a.b:f N'."""
     found = []
     for path, name in module_names(package).items():
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_tree(path.read_text())):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 length = node.end_lineno - min([node.lineno, *(d.lineno for d in node.decorator_list)]) + 1
                 if length > MOST_FUNCTION_LINES:
@@ -234,7 +253,7 @@ def test_a_resume_with_nothing_to_do_imports_no_numpy():
 
 
 def test_there_is_no_import_cycle():
-    graph = {name: set(imports(path, top_level_only=True)) for path, name in MODULES.items()}
+    graph = {name: set(imports(path, top_level_only=True, names=MODULES)) for path, name in MODULES.items()}
     done, trail, cycles = set(), [], []
 
     def visit(name):

@@ -11,7 +11,9 @@ import sys
 import time
 
 import pytest
-from test_run import TINY, assert_same_files, contents, render_here, run_to_end, sunshade, write_config
+from test_run import TINY, assert_same_files, contents, render_here, sunshade, write_config
+
+from pipeline.cli.main import main
 
 SHORT = {**TINY, "animation": {"frames": 3, "fps": 12}}
 """test_run's tiny config, three frames long: the failures come early, the resumes are short."""
@@ -24,6 +26,20 @@ def full_disk():
     full disk stops them; the worker processes inherit it."""
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_LIMIT, FILE_LIMIT))
+
+
+@contextlib.contextmanager
+def full_disk_here():
+    """``full_disk`` in this process for the block: only the soft limit is lowered, so that it
+    goes back up after."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_LIMIT, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
 
 
 def error_lines(err: str) -> list[str]:
@@ -40,15 +56,25 @@ def short(tmp_path_factory):
     return config, folder / "cache", contents(folder / "run")
 
 
-def test_a_full_disk_in_a_worker_is_the_one_line_of_one_process(tmp_path, short):
+def test_a_full_disk_in_a_worker_is_the_one_line_of_one_process(tmp_path, short, capsys):
+    """The same line from the command's own process (``--jobs 1``, run here) and from a worker
+    process of a real ``sunshade`` process (``--jobs 2``)."""
     config, cache, reference = short
+
+    def args(jobs):
+        return ["render", str(config), "--jobs", jobs, "--output", str(tmp_path / f"run{jobs}"), "--cache", str(cache)]
+
+    capsys.readouterr()
+    with full_disk_here():  # the cycle products are cached: the frames' writes fail
+        code = main(args("1"))
+    said = {"1": (code, capsys.readouterr().err)}
+    process = sunshade(*args("2"), preexec_fn=full_disk)
+    err = process.communicate(timeout=240)[1]
+    said["2"] = (process.returncode, err)
     found = {}
-    for jobs in ("1", "2"):  # the cycle products are cached: the frames' writes fail
+    for jobs, (code, err) in said.items():
         folder = tmp_path / f"run{jobs}"
-        process = sunshade("render", config, "--jobs", jobs, "--output", folder,
-                           "--cache", cache, preexec_fn=full_disk)
-        _, err = process.communicate(timeout=240)
-        assert process.returncode == 2, err
+        assert code == 2, err
         assert "Traceback" not in err and "BrokenProcessPool" not in err, err
         lines = error_lines(err)
         assert len(lines) == 1 and err.strip().splitlines()[-1] == lines[0], err
@@ -77,7 +103,7 @@ def test_losing_every_worker_ends_the_run_in_the_stated_time_and_it_resumes(tmp_
         try:
             client.wait_for_workers(1, timeout=60)
             process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
-                               "--cluster-timeout", "2", "--output", tmp_path / "run",
+                               "--cluster-timeout", "1", "--output", tmp_path / "run",
                                "--cache", tmp_path / "cache")
             seen = []
             for line in process.stderr:  # the cycle products are being made on the worker
@@ -92,14 +118,14 @@ def test_losing_every_worker_ends_the_run_in_the_stated_time_and_it_resumes(tmp_
         err = "".join(seen) + err
         assert process.returncode == 2, err
         assert error_lines(err) == [err.strip().splitlines()[-1]], err
-        assert "lost the cluster (no workers for 2 s)" in err and "run the same command again" in err
+        assert "lost the cluster (no workers for 1 s)" in err and "run the same command again" in err
         assert "Traceback" not in err
         assert not (tmp_path / "run").exists() or contents(tmp_path / "run") != reference
         worker = dask_worker(cluster.scheduler_address)
         try:
-            client.wait_for_workers(1, timeout=60)
-            run_to_end("render", config, "--scheduler", cluster.scheduler_address,
-                       "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+            client.wait_for_workers(1, timeout=60)  # the resume: its frames rendered on the new worker
+            render_here(config, "--scheduler", cluster.scheduler_address,
+                        "--output", tmp_path / "run", "--cache", tmp_path / "cache")
         finally:
             worker.kill()
             worker.wait()
@@ -112,7 +138,7 @@ def test_losing_the_scheduler_ends_the_run_with_one_line(tmp_path):
     cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True,
                                        host="127.0.0.1", dashboard_address=None)
     process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
-                       "--cluster-timeout", "2", "--output", tmp_path / "run",
+                       "--cluster-timeout", "1", "--output", tmp_path / "run",
                        "--cache", tmp_path / "cache")
     seen = []
     for line in process.stderr:
@@ -155,16 +181,19 @@ def test_a_worker_process_killed_ends_the_run_with_one_line(tmp_path):
     assert "Traceback" not in err
 
 
-def test_a_cluster_without_workers_ends_the_run_and_writes_nothing(tmp_path, short):
+def test_a_cluster_without_workers_ends_the_run_and_writes_nothing(tmp_path, short, capfd):
+    """The command in this process (what it says is what a process of its own says: the one
+    line, from the same code, as test_losing_the_scheduler_ends_the_run_with_one_line's)."""
     distributed = pytest.importorskip("distributed")
     config, _, _ = short
     with distributed.LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
-        process = sunshade("render", config, "--scheduler", cluster.scheduler_address,
-                           "--cluster-timeout", "1", "--output", tmp_path / "new" / "run",
-                           "--cache", tmp_path / "cache")
-        _, err = process.communicate(timeout=120)
-    assert process.returncode == 2, err
+        capfd.readouterr()
+        code = main(["render", str(config), "--scheduler", cluster.scheduler_address,
+                     "--cluster-timeout", "1", "--output", str(tmp_path / "new" / "run"),
+                     "--cache", str(tmp_path / "cache")])
+        err = capfd.readouterr().err
+    assert code == 2, err
     assert error_lines(err) == [err.strip().splitlines()[-1]], err
     assert "lost the cluster (no workers for 1 s)" in err and "Traceback" not in err
     assert not (tmp_path / "new").exists()
@@ -191,7 +220,7 @@ def test_the_workers_of_a_killed_render_end_with_it(tmp_path):
     config = write_config(tmp_path, {**TINY, "animation": {"frames": 400, "fps": 12}})
     process = sunshade("render", config, "--jobs", "2", "--output", tmp_path / "run", "--cache", tmp_path / "cache")
     started = time.monotonic()
-    while not list((tmp_path / "run").glob("*.0003.png")) and time.monotonic() - started < 120:
+    while not list((tmp_path / "run").glob("*.0000.png")) and time.monotonic() - started < 120:
         time.sleep(0.05)
     workers = children(process.pid)
     assert len(workers) >= 2, workers

@@ -56,13 +56,6 @@ def sunshade(*args, **popen):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
-def run_to_end(*args) -> str:
-    process = sunshade(*args)
-    out, err = process.communicate(timeout=240)
-    assert process.returncode == 0, err
-    return out
-
-
 def render_here(*args) -> None:
     """``sunshade render`` in this process, for a run whose own process is not what a test is
     about (a reference, a resume): a process of its own costs seconds of imports and warm-up."""
@@ -261,14 +254,15 @@ def test_parse_frames():
             parse_frames(bad, 10)
 
 
-def test_a_second_render_in_the_same_folder_is_refused(reference, tmp_path):
+def test_a_second_render_in_the_same_folder_is_refused(reference, tmp_path, capsys):
+    """The folder's lock held here (another open file: flock refuses it as it would another
+    process's; renders in two processes race in test_two_renders_racing_for_one_new_folder_...)."""
     config, _ = reference
     run = tmp_path / "run"
     run.mkdir()
     with filelock.FileLock(run / ".sunshade.lock"):
-        process = sunshade("render", config, "--output", run, "--cache", tmp_path / "cache")
-        _out, err = process.communicate(timeout=60)
-    assert process.returncode == 2 and "another sunshade render" in err
+        code = main(["render", str(config), "--output", str(run), "--cache", str(tmp_path / "cache")])
+    assert code == 2 and "another sunshade render" in capsys.readouterr().err
     assert not list(run.glob("tiny.*"))
 
 
@@ -277,8 +271,9 @@ def test_a_dask_cluster_renders_the_same_bytes(reference, tmp_path):
     config, files = reference
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   host="127.0.0.1", dashboard_address=None) as cluster:
-        run_to_end("render", config, "--scheduler", cluster.scheduler_address,
-                   "--output", tmp_path / "run", "--cache", tmp_path / "cache")
+        # the command in this process; its cycle products and frames are made by the two workers
+        render_here(config, "--scheduler", cluster.scheduler_address,
+                    "--output", tmp_path / "run", "--cache", tmp_path / "cache")
     assert_same_files(tmp_path / "run", files)
 
 
@@ -510,13 +505,13 @@ def test_frames_made_from_an_item_found_damaged_elsewhere_render_again_pruned_do
     assert code == 0 and "0 frames rendered, 8 already done" in out
 
 
-def test_an_unreachable_scheduler_writes_nothing(tmp_path):
+def test_an_unreachable_scheduler_writes_nothing(tmp_path, capfd):
     pytest.importorskip("distributed")
     config = write_config(tmp_path)
-    process = sunshade("render", config, "--scheduler", "tcp://127.0.0.1:9", "--output",
-                       tmp_path / "run", "--cache", tmp_path / "cache")
-    _out, err = process.communicate(timeout=120)
-    assert process.returncode == 2 and "cannot reach the scheduler" in err
+    code = main(["render", str(config), "--scheduler", "tcp://127.0.0.1:9", "--output",
+                 str(tmp_path / "run"), "--cache", str(tmp_path / "cache")])
+    err = capfd.readouterr().err
+    assert code == 2 and "cannot reach the scheduler" in err
     assert not (tmp_path / "run").exists()
 
 
