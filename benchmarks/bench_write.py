@@ -8,10 +8,12 @@ product made first in ``--cache``, default a fresh folder, not timed), then writ
 files as a run writes them (``run.render._write_task``: the finiteness check, the EXR with its
 layers and attributes, the display codes, the PNG, then ``contents.frame_record`` and the
 ``index.file_stamp`` of both files, which read them back) ``--repeat`` times into a fresh folder,
-each part timed by ``time.process_time`` (the process's CPU, every thread). The EXR and the PNG
-are written both by this checkout's ``core.io`` and by TREE's (``--baseline``, e.g. a ``git
-worktree add`` of the commit before; its ``pipeline/core/io.py`` loaded beside this one),
-alternated within each repetition; the other parts are this checkout's for both. Prints each
+each part timed by ``time.process_time`` (the process's CPU, every thread). The EXR, the display
+codes and the PNG are made both by this checkout (``core.io``,
+``camera.composite.display_codes``) and by TREE's (``--baseline``, e.g. a ``git worktree add`` of
+the commit before; its ``pipeline/core/io.py`` and ``pipeline/camera/composite.py`` loaded beside
+this one's, numpy casting to half in its ``write_exr``), alternated within each repetition; the
+other parts are this checkout's for both. Prints each
 part's median CPU [ms] per frame for both, the totals and their ratio, whether the two EXRs are
 byte-identical and whether the two PNGs decode to the same codes, and the load average before
 and after. One FFT thread renders; OpenEXR and zlib write in the calling thread.
@@ -40,13 +42,7 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.cache import store as cache
 from pipeline.core import io
-from pipeline.run.contents import (
-    exr_layers,
-    frame_attributes,
-    frame_picture,
-    frame_record,
-    in_working_space,
-)
+from pipeline.run.contents import exr_layers, frame_attributes, frame_picture, frame_record, in_working_space
 from pipeline.run.folder import frame_files
 from pipeline.run.index import file_stamp
 from pipeline.stages.cycle import cycle_phase
@@ -58,17 +54,21 @@ from pipeline.stages.resolve import load
 PARTS = ("finite", "exr", "display codes", "png", "record", "stamps")
 
 
-def baseline_io(tree: Path):
-    """TREE's ``pipeline/core/io.py`` as a module of its own (its imports of other packages are
-    this checkout's)."""
-    spec = importlib.util.spec_from_file_location("baseline_io", tree / "pipeline" / "core" / "io.py")
+def baseline_module(tree: Path, name: str):
+    """TREE's ``pipeline/NAME.py`` (``core/io``, ``camera/composite``) as a module of its own (its
+    imports of other modules are this checkout's)."""
+    spec = importlib.util.spec_from_file_location(f"baseline_{name.replace('/', '_')}",
+                                                  tree / "pipeline" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-def write_frame(module, config, result, frame: int) -> dict[str, float]:
-    """The write stage of ``run.render._write_task`` with ``module`` as ``core.io``: CPU [s] per part."""
+def write_frame(module, config, result, frame: int, composite=None) -> dict[str, float]:
+    """The write stage of ``run.render._write_task`` with ``module`` as ``core.io``: CPU [s] per part.
+    ``composite``:
+    a baseline's ``camera.composite`` whose ``display_codes`` makes the PNG's codes, or None for
+    this checkout's ``contents.frame_picture``."""
     seconds: dict[str, float] = {}
     mark = time.process_time()
 
@@ -81,10 +81,16 @@ def write_frame(module, config, result, frame: int) -> dict[str, float]:
     assert np.all(np.isfinite(result.radiance))
     lap("finite")
     exr, png = frame_files(config, frame)
-    module.write_exr(exr, in_working_space(config.output, result.radiance), frame_attributes(config, result, "bench"),
-                     half=config.output.half, layers=exr_layers(result, config.output.half, config.output))
+    half = config.output.half
+    pixels = in_working_space(config.output, result.radiance)
+    layers = exr_layers(result, half, config.output)
+    module.write_exr(exr, pixels, frame_attributes(config, result, "bench"), half=half, layers=layers)
     lap("exr")
-    picture = frame_picture(config, result)
+    if composite is not None and config.output.view is None:
+        picture = composite.display_codes(result.radiance, exposure=result.exposure,
+                                          transform=config.camera.display, balance=result.balance)
+    else:
+        picture = frame_picture(config, result)
     lap("display codes")
     module.write_png(png, picture, {"sunshade:config_hash": "bench", "sunshade:frame": str(frame)})
     lap("png")
@@ -179,19 +185,21 @@ def main() -> None:
     result = render_frame(plan, args.frame, store=store, workers=1, passes=config.output.passes or None)
     folder = Path(tempfile.mkdtemp(prefix="sunshade-write-"))
     modules = {"new": io}
+    composites = {"new": None}
     if args.baseline:
-        modules = {"baseline": baseline_io(args.baseline.resolve()), "new": io}
+        modules = {"baseline": baseline_module(args.baseline.resolve(), "core/io"), "new": io}
+        composites["baseline"] = baseline_module(args.baseline.resolve(), "camera/composite")
     configs = {name: replace(config, output=replace(config.output, folder=folder / name)) for name in modules}
     for each in configs.values():
         each.output.folder.mkdir()
     print(f"{Path(args.config).stem} frame {args.frame}, {result.radiance.shape[1]} x {result.radiance.shape[0]}, "
           f"layers {sorted(result.layers) or 'none'}; load average {os.getloadavg()}", flush=True)
     for name, module in modules.items():  # warm: imports, numba's cache, the dither
-        write_frame(module, configs[name], result, args.frame)
+        write_frame(module, configs[name], result, args.frame, composites[name])
     times: dict[str, dict[str, list[float]]] = {name: {p: [] for p in PARTS} for name in modules}
     for _ in range(args.repeat):
         for name, module in modules.items():
-            for part, value in write_frame(module, configs[name], result, args.frame).items():
+            for part, value in write_frame(module, configs[name], result, args.frame, composites[name]).items():
                 times[name][part].append(value)
     medians = {name: {p: statistics.median(v) * 1e3 for p, v in parts.items()} for name, parts in times.items()}
     print(f"median CPU per frame [ms] of {args.repeat}:")

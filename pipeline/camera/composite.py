@@ -12,7 +12,7 @@ from pipeline.core import io, ocio
 from pipeline.core.colour import REC709_LUMINANCE
 
 __all__ = ["srgb_encode", "display_ground", "display_sky", "white_balance", "composite_frame",
-           "aces_filmic", "display", "display_codes", "display_view", "exposure_for",
+           "aces_filmic", "display", "display_codes", "CODES_BAND", "display_view", "exposure_for",
            "auto_exposure"]
 
 
@@ -240,7 +240,7 @@ def _check_display(transform: str) -> None:
 def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "filmic",
                   balance: ArrayLike | None = None) -> np.ndarray:
     """The 8-bit codes ``io.write_png`` writes of ``display(radiance, ...)``, bit for bit, in
-    two compiled passes around numpy's power (docs/runs.md, "Writing").
+    two compiled passes around numpy's power, CODES_BAND rows at a time (docs/runs.md, "Writing").
 
     Parameters
     ----------
@@ -263,14 +263,25 @@ def display_codes(radiance: np.ndarray, *, exposure: float, transform: str = "fi
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
     gain = np.array(np.broadcast_to(np.float32(exposure) if balance is None  # a copy: one compiled signature
                                     else (np.asarray(balance) * exposure).astype(np.float32), 3), dtype=np.float32)
-    linear = np.empty_like(radiance)
-    arrays.exposed_display(radiance, gain, transform == "filmic", linear)
-    # numpy's power, as srgb_encode takes it (its vector loops may differ from a compiled powf in
-    # the last bit), over an array of the same shape
-    powered = np.power(linear, np.float32(1.0 / 2.4))
+    dither = io.half_dither(radiance.shape)
     codes = np.empty(radiance.shape, dtype=np.uint8)
-    arrays.display_codes(linear, powered, io.half_dither(radiance.shape), codes)
+    band = (min(CODES_BAND, radiance.shape[0]), *radiance.shape[1:])
+    linear, powered = np.empty(band, dtype=np.float32), np.empty(band, dtype=np.float32)
+    for top in range(0, radiance.shape[0], CODES_BAND):
+        rows = slice(top, top + CODES_BAND)
+        size = len(range(*rows.indices(radiance.shape[0])))
+        arrays.exposed_display(radiance[rows], gain, transform == "filmic", linear[:size])
+        # numpy's power, as srgb_encode takes it (its vector loops may differ from a compiled powf in
+        # the last bit): value by value the same over a band as over the frame
+        np.power(linear[:size], np.float32(1.0 / 2.4), out=powered[:size])
+        arrays.display_codes(linear[:size], powered[:size], dither[rows], codes[rows])
     return codes
+
+
+CODES_BAND = 32
+"""Rows of a frame that ``display_codes`` takes at a time: its two float32 bands of a 1280-wide frame
+(0.5 MB each) stay in the core's cache between the passes and are not made afresh for each frame's
+whole size, whose pages the kernel would clear (docs/accuracy.md, "The write stage")."""
 
 
 def display_view(radiance: np.ndarray, *, exposure: float, source: str, view: tuple[str, str],

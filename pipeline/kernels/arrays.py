@@ -442,7 +442,8 @@ def exposed_display(radiance: np.ndarray, gain: np.ndarray, filmic: bool, out: n
 
     ``x = max(L g, 0)`` then ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14)`` clipped to [0, 1]
     (``composite.aces_filmic``), or ``L g`` clipped to [0, 1]: the float32 operations of the array
-    versions, in their order.
+    versions, in their order, a row at a time with the gains laid along the row (so that the
+    loop is vectorised).
 
     Parameters
     ----------
@@ -456,14 +457,19 @@ def exposed_display(radiance: np.ndarray, gain: np.ndarray, filmic: bool, out: n
         (rows, cols, 3) C-contiguous float32, written: display-linear values in [0, 1] [1].
     """
     zero, one, a, b, c, d, e = _ACES
-    flat, linear = radiance.reshape(-1, 3), out.reshape(-1, 3)
-    for p in range(flat.shape[0]):  # the three channels spelled out: the loop vectorises
-        for k in (0, 1, 2):
-            x = flat[p, k] * gain[k]
+    rows, width = radiance.shape[0], radiance.shape[1] * 3
+    source, linear = radiance.reshape(rows, width), out.reshape(rows, width)
+    gains = np.empty(width, dtype=np.float32)
+    for j in range(width):
+        gains[j] = gain[j % 3]
+    for r in range(rows):
+        row, line = source[r], linear[r]
+        for j in range(width):
+            x = row[j] * gains[j]
             if filmic:
                 x = max(x, zero)
                 x = (x * a + b) * x / ((x * c + d) * x + e)
-            linear[p, k] = min(max(x, zero), one)
+            line[j] = min(max(x, zero), one)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
