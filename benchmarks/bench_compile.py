@@ -12,8 +12,10 @@ checkout) is the ``pipeline`` package run, from this checkout's folder, so that 
 worktree can be measured in the same run.
 
 Then, in this process, with numba's cache in another new empty folder: ``frame.compile_loops``
-(the frame phase's loops, as a render's warm-up thread compiles them) and one cycle product
-(the leaf rasteriser, as the first cycle worker compiles it), wall and CPU seconds, and each
+(the frame phase's loops, as a render's warm-up thread compiles them), ``rasteriser.compile_loops``
+(the cycle products' loops, as a render's worker compiles them while the command plans; skipped
+where this checkout lacks it) and one cycle product (which then compiles
+nothing, or, without that warm-up, the leaf rasteriser), wall and CPU seconds, and each
 compiled function's own seconds from numba's compile events (its nested compiles not counted
 in it), the largest first. Default CONFIG: configs/eclipse.yaml.
 """
@@ -115,10 +117,15 @@ def loop_by_loop(config: str, top: int) -> None:
                 stack[-1][2] += seconds
 
     event.register("numba:compile", Compiles())
+    from pipeline.canopy import rasteriser
+
     plan = plan_run(load(config))
     print(f"loop by loop (load average {os.getloadavg()[0]:.1f}):", flush=True)
-    for what, run in (("frame phase (compile_loops)", lambda: compile_loops(plan)),
-                      ("cycle product (one)", lambda: cycle_item(plan, 0, 0, cache.Cache(scratch / "cache")))):
+    steps = [("frame phase (compile_loops)", lambda: compile_loops(plan))]
+    if hasattr(rasteriser, "compile_loops"):
+        steps.append(("cycle warm-up (rasteriser.compile_loops)", rasteriser.compile_loops))
+    steps.append(("cycle product (one)", lambda: cycle_item(plan, 0, 0, cache.Cache(scratch / "cache"))))
+    for what, run in steps:
         own.clear()
         start, cpu = time.perf_counter(), time.process_time()
         run()

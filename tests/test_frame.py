@@ -59,6 +59,35 @@ def test_compile_loops_leaves_a_frame_nothing_to_compile_for_its_camera(tmp_path
     assert out.strip() == "{}", out
 
 
+def test_the_rasterisers_compile_loops_leave_a_cycle_product_nothing_to_compile(tmp_path):
+    """``rasteriser.compile_loops`` (a render's command has a worker run it while it plans the run)
+    compiles every loop of a cycle product with the types a product passes: in a fresh process,
+    making a cycle product of a grove with leaves and wood after it compiles nothing more in
+    ``pipeline.kernels``' ``raster``, and it ran each of them."""
+    code = (
+        "import sys; sys.path.insert(0, 'tests')\n"
+        "from pathlib import Path\n"
+        "from pipeline.cache import store as cache\n"
+        "from pipeline.canopy.rasteriser import compile_loops\n"
+        "from pipeline.kernels import raster\n"
+        "from pipeline.stages.cycle import cycle_item\n"
+        "from pipeline.stages.inputs import grove_of\n"
+        "from scenes import plan_of, tiny_grove\n"
+        "folder = Path(sys.argv[1])\n"
+        "plan = plan_of(tiny_grove(), folder)\n"
+        "assert len(grove_of(plan.canopy)[0].wood.radius) > 0\n"
+        "compile_loops()\n"
+        "loops = [f for f in vars(raster).values() if hasattr(f, 'signatures')]\n"
+        "before = {f.__name__: len(f.signatures) for f in loops}\n"
+        "assert before['shapes'] == before['flutter'] == before['onto'] == 1, before\n"
+        "cycle_item(plan, 0, 0, cache.Cache(folder / 'cache'))\n"
+        "print({f.__name__: len(f.signatures) - before[f.__name__] for f in loops"
+        " if len(f.signatures) > before[f.__name__]})\n")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True,
+                         check=True, cwd=ROOT).stdout
+    assert out.strip() == "{}", out
+
+
 def test_the_compiled_haze_has_the_bits_of_the_array_operations():
     rng = np.random.default_rng(5)
     background = rng.normal(size=(37, 53, 3)).astype(np.float32) * 40.0

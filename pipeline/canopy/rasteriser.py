@@ -2,18 +2,23 @@
 
 ``rasterize_transmittance`` draws ``grove.Shapes`` as a transmittance mask, ``coverage_fragments``
 gives the coverage of every pixel by every shape, and ``grove_mask`` draws a grove at one
-flutter frame (``kernels/raster.py`` holds the compiled kernels).
+flutter frame (``kernels/raster.py`` holds the compiled kernels); ``compile_loops`` compiles those
+kernels ahead of a render's cycle products.
 """
 
 from __future__ import annotations
+
+import os
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from pipeline.canopy.grove import FlutterParams, Grove, Shapes, leaves_at, project
+from pipeline.core.cores import compiled_once
 from pipeline.core.geometry import Grid
 
-__all__ = ["rasterize_transmittance", "coverage_fragments", "grove_mask"]
+__all__ = ["rasterize_transmittance", "coverage_fragments", "grove_mask", "loops_cached", "compile_loops"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -215,3 +220,42 @@ def _translates(center, half, period, shape):
     nu = np.maximum(count[src, 0], 1)
     shift = np.column_stack([first[src, 0] + m % nu, first[src, 1] + m // nu]) * period
     return src, center[src] + shift
+
+
+def loops_cached() -> bool:
+    """Whether numba's cache on disk holds the rasteriser's loops (``compile_loops``'s), so that a
+    cycle product loads them instead of compiling them; False where numba keeps no cache of them.
+
+    Returns
+    -------
+    bool
+        The cache's index of the kernel that draws the shapes exists.
+    """
+    from pipeline.kernels import raster
+
+    loop: Any = raster.shapes
+    try:
+        return os.path.exists(loop._cache._cache_file._index_path)  # numba's FunctionCache: its index file
+    except AttributeError:
+        return False
+
+
+def compile_loops() -> None:
+    """Compile the loops of a cycle product (flutter, projection, the ellipses and capsule pieces
+    drawn as a mask), or load them from numba's cache, on one tiny leaf and one tiny stem with the
+    types a cycle product passes, holding ``cores.compiled_once``'s lock meanwhile so that the
+    cycle phase's other workers wait for them and load them. A render's command has one of its
+    workers run this while it plans the run (``render.render_run``): the first cycle products then
+    find the loops compiled or load them (docs/accuracy.md, "Compiling after an install").
+    """
+    from pipeline.kernels import raster
+
+    with compiled_once(raster.shapes):
+        one = np.zeros((1, 3))
+        pose = raster.flutter(one + (0.0, 0.0, 1.0), one + (0.05, 0.0, 0.0), one + (0.0, 0.03, 0.0), one,
+                              one + (1.0, 0.0, 0.0), np.zeros(1), np.zeros(1), 0.1, 0.2, 0.3)
+        center = raster.onto(np.ascontiguousarray(pose[0]), 0.1, 0.2, 0.0)
+        ends = raster.onto(np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 1.0]]), 0.1, 0.2, 0.0)
+        axis_a, axis_b = (raster.onto(axis, 0.1, 0.2, 0.0) - center for axis in pose[1:])
+        shapes = Shapes(center, axis_a, axis_b, ends[:1], ends[1:], np.full(1, 0.02))
+        rasterize_transmittance(shapes, Grid((-0.5, 0.5), 0.05, (20, 20)))

@@ -37,6 +37,8 @@ import numpy as np
 
 from pipeline.cache import store as cache
 from pipeline.camera.composite import display_codes
+from pipeline.canopy.rasteriser import compile_loops as rasteriser_compile_loops
+from pipeline.canopy.rasteriser import loops_cached
 from pipeline.config.settings import Config
 from pipeline.core import io
 from pipeline.core.cores import CLUSTER_TIMEOUT, compiled_once, end_if_orphaned, jobs_and_threads, scheduler_address
@@ -70,11 +72,10 @@ if TYPE_CHECKING:
 
 __all__ = ["render_run"]
 
-def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache,
-               jobs: int | None = None, scheduler: str | None = None, force: bool = False,
-               progress: Progress | None = None, warn: Callable[[str], None] | None = None,
-               cluster_timeout: float | None = None, source_hash: str | None = None,
-               budget: int | None = None) -> RunSummary:
+def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: cache.Cache, jobs: int | None = None,
+               scheduler: str | None = None, force: bool = False, progress: Progress | None = None,
+               warn: Callable[[str], None] | None = None, cluster_timeout: float | None = None,
+               source_hash: str | None = None, budget: int | None = None) -> RunSummary:
     """Render ``frames`` (default: all) of the config's animation into ``config.output.folder``:
     the cycle products they need, the frames not done yet (all with ``force``), then the video
     once every frame of the animation is done, and ``run.json``.
@@ -119,12 +120,13 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         Before any work.
     """
     started = time.perf_counter()
-    run, plan = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
+    run, plan, compiling = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
     mine = set(config_item_keys(plan))
     timings: Timings = {}
     made, lock = _lock(run.folder)
     try:
         with contextlib.ExitStack() as held:  # the steps' threads joined, then ``mine`` let go
+            held.callback(_end_compiling, compiling)  # its worker never left writing numba's cache
             held.enter_context(run.store.in_use(mine))  # no other run's budget removes them meanwhile
             found = _check_folder(run, force=force)
             timings["check"] = time.perf_counter() - started
@@ -189,9 +191,18 @@ class _Found:
 
 def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
           scheduler: str | None, progress: Progress | None,
-          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan]:
+          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan, threading.Thread | None]:
     """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
-    the scheduler reached: what the later steps share."""
+    the scheduler reached: what the later steps share; and the thread whose worker compiles the
+    cycle products' loops meanwhile (``_compile_cycle_loops``)."""
+    compiling = _compile_cycle_loops(config, jobs or config.render.jobs, scheduler)
+    return (*_planned(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn), compiling)
+
+
+def _planned(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
+             scheduler: str | None, progress: Progress | None,
+             warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan]:
+    """``_plan``'s run and plan."""
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
     if warn is not None:
@@ -398,6 +409,34 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
     end_if_orphaned(command)
     with compiled_once(_last_frame_loop()):  # while the command compiles the loops: wait, then load them
         return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
+
+
+def _compile_cycle_loops(config: Config, jobs: int | None, scheduler: str | None) -> threading.Thread | None:
+    """With local workers and the built-in trees, numba's cache lacking the cycle products' loops: a
+    thread that has one of joblib's worker processes compile them (``rasteriser.compile_loops``)
+    while this one plans the run. The workers start meanwhile and that one compiles on the core the
+    plan leaves idle; the cycle phase reuses them, and its first products find the loops compiled
+    or load them (docs/accuracy.md, "Compiling after an install"). None where nothing was started."""
+    jobs = jobs_and_threads(jobs, scheduler)[0]
+    trees = config.canopy.trees is not None and not config.canopy.meshes
+    if not trees or scheduler or jobs < 2 or loops_cached():
+        return None
+    thread = threading.Thread(target=_compile_in_a_worker, args=(jobs,), name="sunshade-compile", daemon=True)
+    thread.start()
+    return thread
+
+
+def _compile_in_a_worker(jobs: int) -> None:
+    """``rasteriser.compile_loops`` in one of the ``jobs`` local worker processes that the cycle phase
+    then reuses (joblib's reusable executor, the same size)."""
+    with contextlib.suppress(Exception):  # only a head start: each cycle product compiles them otherwise
+        joblib.Parallel(n_jobs=jobs)([joblib.delayed(rasteriser_compile_loops)()])
+
+
+def _end_compiling(thread: threading.Thread | None) -> None:
+    """Wait for ``_compile_cycle_loops``'s thread to end (None: nothing)."""
+    if thread is not None:
+        thread.join()
 
 
 def _compile_frame_loops(plan: RunPlan) -> None:
