@@ -16,7 +16,7 @@ from pipeline.receivers.hemisphere import world_radiance
 from pipeline.receivers.layers import mask_layer
 from pipeline.receivers.light import receiver_light
 from pipeline.receivers.plane import level_ground, slope
-from pipeline.receivers.slope import SkyInFrame, camera_in_frame, grove_on_slope, height_on
+from pipeline.receivers.slope import SkyInFrame, camera_in_frame, grove_on_slope, height_on, shading_grove
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.sun_disc import SunDisc
 
@@ -90,6 +90,10 @@ def test_trees_stand_vertical_on_the_slope_with_their_feet_on_it():
     foot, radius = standing.wood.start[feet], standing.wood.radius[feet]
     downhill = foot + radius[:, None] * np.array([np.sin(200 * DEG), np.cos(200 * DEG), 0.0])
     assert np.allclose(plane.local_points(downhill)[:, 2], 0.0, atol=1e-9)
+    # as they shade the slope, the feet stand on it at their axes: nothing buried casts a shadow
+    shading = shading_grove(standing, plane)
+    assert np.allclose(plane.local_points(shading.wood.start[feet])[:, 2], 0.0, atol=1e-9)
+    assert np.array_equal(np.delete(shading.wood.start, feet, axis=0), np.delete(standing.wood.start, feet, axis=0))
 
 
 @pytest.mark.parametrize("uphill", [True, False])

@@ -21,8 +21,8 @@ from pipeline.sky.base import Sky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_disc import SunDisc
 
-__all__ = ["TRUNK_SEGMENTS", "slope_plane", "height_on", "grove_on_slope", "slope_layers", "camera_in_frame",
-           "SkyInFrame"]
+__all__ = ["TRUNK_SEGMENTS", "slope_plane", "height_on", "grove_on_slope", "shading_grove", "slope_layers",
+           "camera_in_frame", "SkyInFrame"]
 
 TRUNK_SEGMENTS = 3
 """Segments of a procedural tree's trunk, first in its wood (``canopy.grove``). [count]"""
@@ -100,12 +100,41 @@ def grove_on_slope(grove: Grove, plane: ReceiverPlane) -> Grove:
     per_leaf = np.repeat(lift, len(grove.leaves.center) // count)[:, None] * np.array([0.0, 0.0, 1.0])
     per_wood = np.repeat(lift, len(grove.wood.start) // count)[:, None] * np.array([0.0, 0.0, 1.0])
     start = grove.wood.start + per_wood
-    feet = np.arange(count) * (len(grove.wood.start) // count)  # each tree's first trunk segment
+    feet = _feet(grove)
     start[feet, 2] -= grove.wood.radius[feet] * np.tan(plane.zenith)
     bases = grove.bases + lift[:, None] * np.array([0.0, 0.0, 1.0])
     return replace(grove, leaves=Leaves(grove.leaves.center + per_leaf, grove.leaves.axis_u, grove.leaves.axis_v),
                    pivot=grove.pivot + per_leaf, wood=Wood(start, grove.wood.end + per_wood, grove.wood.radius),
                    bases=bases)
+
+
+def _feet(grove: Grove) -> np.ndarray:
+    """The index of each tree's first trunk segment in ``grove.wood``."""
+    return np.arange(len(grove.bases)) * (len(grove.wood.start) // len(grove.bases))
+
+
+def shading_grove(grove: Grove, plane: ReceiverPlane) -> Grove:
+    """The grove standing on a slope (``grove_on_slope``) as it shades the slope: each trunk's foot
+    raised back to the slope's height at the trunk's axis. The foot lowered for the picture, where
+    the trunk meets the slope downhill, would cast the shadow of its buried part past the foot
+    towards a sun from downhill.
+
+    Parameters
+    ----------
+    grove : canopy.grove.Grove
+        The grove standing on the slope, world axes [m].
+    plane : ReceiverPlane
+        The slope.
+
+    Returns
+    -------
+    canopy.grove.Grove
+        The same grove, its feet on the slope at their axes [m].
+    """
+    feet = _feet(grove)
+    start = grove.wood.start.copy()
+    start[feet, 2] += grove.wood.radius[feet] * np.tan(plane.zenith)
+    return replace(grove, wood=Wood(start, grove.wood.end, grove.wood.radius))
 
 
 def slope_layers(plane: ReceiverPlane, sky: Sky, grove: tuple[Grove, FlutterParams] | None,
@@ -133,7 +162,7 @@ def slope_layers(plane: ReceiverPlane, sky: Sky, grove: tuple[Grove, FlutterPara
     """
     if grove is None:
         return []
-    turned = grove_in_frame(grove[0], plane)
+    turned = grove_in_frame(shading_grove(grove[0], plane), plane)
     front = turned.leaves.center[:, 2]
     front = front[front > 0.0]
     if not len(front):
