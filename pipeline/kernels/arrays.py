@@ -222,6 +222,16 @@ def points_add(total: np.ndarray, seen: np.ndarray, values: np.ndarray, weight: 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _bilinear(flat, a, b, c, d, x, y, k):
+    """Channel ``k`` of ``flat`` read bilinearly between the rows a, b (top) and c, d (bottom) at the
+    fractions x, y, in float64, rounded to float32."""
+    gx, gy = 1.0 - x, 1.0 - y
+    top = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
+    bottom = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
+    return np.float32(top * gy + bottom * y)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def points_read_add(total: np.ndarray, first: np.ndarray, sample: np.ndarray, seen: np.ndarray, flat: np.ndarray,
                     top_left: np.ndarray, top_right: np.ndarray, bottom_left: np.ndarray, bottom_right: np.ndarray,
                     fx: np.ndarray, fy: np.ndarray, albedo: np.ndarray, scale: np.float32, weight: np.float32,
@@ -260,14 +270,10 @@ def points_read_add(total: np.ndarray, first: np.ndarray, sample: np.ndarray, se
         for j in range(first[p], first[p + 1]):
             if seen[sample[j], p]:
                 x, y = np.float64(fx[j]), np.float64(fy[j])
-                gx, gy = 1.0 - x, 1.0 - y
                 a, b, c, d = top_left[j], top_right[j], bottom_left[j], bottom_right[j]
                 r = j if each else 0
                 for k in range(flat.shape[1]):
-                    top = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
-                    bottom = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
-                    value = np.float32(top * gy + bottom * y) * albedo[r, k] * scale
-                    total[p, k] += value * weight
+                    total[p, k] += _bilinear(flat, a, b, c, d, x, y, k) * albedo[r, k] * scale * weight
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -309,14 +315,10 @@ def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int,
                 count += one
                 nearest = min(nearest, there)
                 x, y = np.float64(fx[j]), np.float64(fy[j])
-                gx, gy = 1.0 - x, 1.0 - y
                 a, b, c, d = top_left[j], top_right[j], bottom_left[j], bottom_right[j]
                 r = j if each else 0
                 for k in range(flat.shape[1]):
-                    upper = np.float64(flat[a, k]) * gx + np.float64(flat[b, k]) * x
-                    lower = np.float64(flat[c, k]) * gx + np.float64(flat[d, k]) * x
-                    value = np.float32(upper * gy + lower * y) * albedo[r, k] * scale
-                    total[k] += value * weight
+                    total[k] += _bilinear(flat, a, b, c, d, x, y, k) * albedo[r, k] * scale * weight
         cover = count * weight
         keep = one - cover
         for k in range(radiance.shape[2]):
