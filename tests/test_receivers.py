@@ -373,9 +373,10 @@ def test_the_walls_raster_is_upright_as_one_faces_it(tmp_path, capsys):
 def test_the_camera_sees_a_wall_where_its_rays_meet_the_rectangle_and_hides_what_is_behind():
     """``view.wall_hits`` against the wall's corners projected by ``project_points`` (each pixel's
     centre point inside the projected quadrilateral), its depth the ray's length to the plane; and
-    ``show_wall`` puts the wall in front of a far background only."""
+    ``show_points`` puts the wall in front of a far background only."""
     from pipeline.camera.pinhole import Camera, project_points
-    from pipeline.receivers.view import show_wall, wall_hits
+    from pipeline.core.geometry import Grid
+    from pipeline.receivers.view import bilinear_taps, show_points, wall_hits, wall_points
 
     plane = wall((0.0, 5.0, 0.0), facing=200 * DEG, width=4.0, height=2.5, tilt=8 * DEG)
     camera = Camera.look_at((1.0, -3.0, 1.4), (0.0, 5.0, 1.2), vertical_fov=40 * DEG, width=96, height=64)
@@ -395,12 +396,16 @@ def test_the_camera_sees_a_wall_where_its_rays_meet_the_rectangle_and_hides_what
     d = np.stack([hits.u[0][seen], hits.w[0][seen], np.zeros(seen.sum())], axis=-1)
     points = plane.world_points(d)
     assert np.allclose(np.linalg.norm(points - np.array(camera.position), axis=-1), hits.distance[0][seen])
+    grid = Grid.from_window((-2.0, 0.0, 2.0, 2.5), 0.1)
+    raster = np.full((*grid.shape, 3), 5.0, np.float32)  # the wall's radiance, 5 everywhere
+    wall_at, wu, ww = wall_points(hits)
+    taps, white = bilinear_taps(grid, wu, ww), np.ones((1, 3), np.float32)
     picture = np.ones((64, 96, 3), np.float32)
     near = np.full((64, 96), 2.0, np.float32)  # a background nearer than the wall keeps its pixels
-    show_wall(picture, near, hits, lambda u, w: np.full((*u.shape, 3), 5.0, np.float32))
+    show_points(picture, near, hits, wall_at, raster, taps, white, np.float32(1.0))
     assert np.all(picture == 1.0)
     far = np.full((64, 96), np.inf, np.float32)
-    show_wall(picture, far, hits, lambda u, w: np.full((*u.shape, 3), 5.0, np.float32))
+    show_points(picture, far, hits, wall_at, raster, taps, white, np.float32(1.0))
     assert np.all(picture[rows, cols][seen] == 5.0) and np.all(picture[rows, cols][~seen] == 1.0)
     assert np.all(np.isfinite(far[rows, cols][seen])) and np.all(np.isinf(far[rows, cols][~seen]))
 

@@ -1,10 +1,11 @@
 """The camera's reads of a wall (``receivers.view``): the compiled loops (``kernels.arrays.taps_read``,
-``points_add``, ``wall_over``, ``points_over``) give the bits of their array versions and of the plain bilinear
+``points_over``) give the bits of their array versions and of the plain bilinear
 formula, on random points and on a real wall's raster where a camera's points see it; the walls' shade on the
 ground (``walls_on_ground``), the mean of a wall's light (``rows_sum``) and the haze of the walls' distances
 give numpy's bits (docs/accuracy.md, "The walls' cycle products and a wall's cost")."""
 
 import numpy as np
+import pytest
 
 from pipeline.camera.pinhole import Camera
 from pipeline.core.geometry import Grid
@@ -15,10 +16,8 @@ from pipeline.receivers.light import receiver_light
 from pipeline.receivers.plane import wall
 from pipeline.receivers.view import (
     bilinear_taps,
-    put_wall,
     read_taps,
     read_taps_arrays,
-    seen_points,
     show_points,
     wall_hits,
     wall_points,
@@ -62,10 +61,9 @@ def test_the_compiled_read_is_the_array_reads_bits_on_random_points():
     assert_reads_agree(grid, image, u, w)
 
 
-def test_the_compiled_reads_and_sums_are_the_array_versions_bits_on_a_real_wall():
+def test_the_compiled_reads_are_the_array_versions_bits_on_a_real_wall():
     """A wall's irradiance under a grille and a low sun, read where a camera's 3 x 3 points per
-    pixel see it (partly hidden behind a near background) and put into a picture: the bits of the
-    numpy reads, and of the pixels' sums in the order of the points."""
+    pixel see it (partly hidden behind a near background): the bits of the numpy reads."""
     plane = wall((0.0, 4.0, 0.0), facing=200 * DEG, width=3.0, height=2.0)
     sky = ProceduralSky(3.0, SunDisc(200 * DEG, 12 * DEG))
     bars = np.ones((24, 24), np.float32)
@@ -79,34 +77,17 @@ def test_the_compiled_reads_and_sums_are_the_array_versions_bits_on_a_real_wall(
     hits = wall_hits(camera, plane)
     distance = np.full((48, 64), np.inf, np.float32)
     distance[30:, :20] = 3.0  # nearer than the wall: those points keep the picture's
-    seen = seen_points(hits, distance)
-    assert 0 < seen.sum() < hits.hit.sum()
-    values = []
-    for k in range(len(seen)):
-        u, w = hits.u[k][seen[k]], hits.w[k][seen[k]]
-        assert_reads_agree(window, raster, u, w)
-        values.append(read_taps(raster, bilinear_taps(window, u, w)))
-    picture, depth = np.ones((48, 64, 3), np.float32), distance.copy()
-    put_wall(picture, depth, hits, seen, values)
     rows, cols = hits.region
-    total = np.zeros((*seen.shape[1:], 3), np.float32)  # the points' sum as numpy's fancy indexing adds it
+    seen = hits.hit & (hits.distance < distance[rows, cols][None])
+    assert 0 < seen.sum() < hits.hit.sum()
     for k in range(len(seen)):
-        total.reshape(-1, 3)[np.flatnonzero(seen[k])] += values[k] * np.float32(1 / len(seen))
-    coverage = seen.sum(axis=0, dtype=np.float32) * np.float32(1 / len(seen))
-    expected = np.ones((48, 64, 3), np.float32)
-    expected[rows, cols] = expected[rows, cols] * (1 - coverage)[..., None] + total
-    assert picture.tobytes() == expected.tobytes()
-    nearest = np.where(seen, hits.distance, np.inf).min(axis=0)
-    assert np.array_equal(depth[rows, cols], np.where(coverage > 0.5, nearest, distance[rows, cols]))
-    strided, strided_depth = np.ones((48, 64, 4), np.float32)[..., :3], distance.copy()  # put_wall's numpy blend
-    put_wall(strided, strided_depth, hits, seen, values)
-    assert strided.tobytes() == picture.tobytes() and strided_depth.tobytes() == depth.tobytes()
+        assert_reads_agree(window, raster, hits.u[k][seen[k]], hits.w[k][seen[k]])
 
 
 def numpy_show(picture, depth, hits, image, points_u, points_w, grid, albedo, scale):
     """A wall put into a picture with numpy alone: each sample's seen points read bilinearly
     (``read_taps_arrays``), times the albedo and ``scale``, summed into their pixels sample after
-    sample by fancy indexing, then blended by cover as ``put_wall`` documents."""
+    sample by fancy indexing, then blended by cover as ``show_points`` documents."""
     rows, cols = hits.region
     seen = hits.hit & (hits.distance < depth[rows, cols][None])
     weight = np.float32(1 / len(seen))
@@ -125,7 +106,7 @@ def numpy_show(picture, depth, hits, image, points_u, points_w, grid, albedo, sc
 def test_the_walls_one_pass_show_is_numpys_bits_pixel_by_pixel():
     """``show_points`` (one compiled pass over the pixels, their points pixel by pixel) against
     numpy's reads and sums sample by sample, on a wall partly hidden behind a near background,
-    with one albedo and with a texture's per point; and its numpy fallback on a strided picture."""
+    with one albedo and with a texture's per point; a strided picture is refused."""
     plane = wall((0.0, 4.0, 0.0), facing=200 * DEG, width=3.0, height=2.0)
     grid = Grid.from_window((-1.5, 0.0, 1.5, 2.0), 0.04)
     rng = np.random.default_rng(11)
@@ -151,9 +132,9 @@ def test_the_walls_one_pass_show_is_numpys_bits_pixel_by_pixel():
         numpy_show(expected, expected_depth, hits, image, hits.u, hits.w, grid, sampled, scale)
         assert 0 < (picture != 1).sum() and picture.tobytes() == expected.tobytes()
         assert depth.tobytes() == expected_depth.tobytes()
-        strided, strided_depth = np.ones((48, 64, 4), np.float32)[..., :3], distance.copy()
-        show_points(strided, strided_depth, hits, points, image, taps, albedo, scale)
-        assert strided.tobytes() == picture.tobytes() and strided_depth.tobytes() == depth.tobytes()
+    with pytest.raises(ValueError, match="C-contiguous"):
+        show_points(np.ones((48, 64, 4), np.float32)[..., :3], distance.copy(), hits, points, image, taps, albedo,
+                    scale)
 
 
 def test_the_compiled_shade_of_the_ground_is_the_array_expressions_bits():

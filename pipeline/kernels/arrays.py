@@ -2,7 +2,7 @@
 bilinear resampling of the coarse ground under the sun window (``shadow.resample_bilinear``), the haze over the view
 (``frame._apply_haze``), the procedural sky raster's rows (``procedural.ProceduralSky.raster``) and the ground
 reflectance's lattice read (``brdf_bands.sky_ratio``), a wall's irradiance read where the camera's points see it
-(``view.read_taps``) and its points' sum and cover in each pixel (``view.put_wall``), the walls' shade on the
+(``view.read_taps``) and its points' sum and cover in each pixel (``view.show_points``), the walls' shade on the
 ground (``walls.shade_ground``), a frame's display codes
 (``composite.display_codes``, around numpy's power) and the clouds' ``np.interp`` tables
 (``clouds.CloudLayer.radiance`` and ``coverage``). Each does what its array version does, float operation for
@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_add", "points_read_add",
-           "points_over", "rows_sum", "walls_on_ground", "wall_over", "exposed_display", "display_codes",
+__all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_over", "rows_sum",
+           "walls_on_ground", "exposed_display", "display_codes",
            "scattering_weights", "hermite_mean"]
 
 
@@ -199,29 +199,6 @@ def taps_read(flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray, bot
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def points_add(total: np.ndarray, seen: np.ndarray, values: np.ndarray, weight: np.float32) -> None:
-    """``view.put_wall``'s ``total[flatnonzero(seen)] += values * weight`` in place, in float32.
-
-    Parameters
-    ----------
-    total : numpy.ndarray
-        (pixels, channels) float32, the sum so far; the rows ``seen`` selects changed (radiance).
-    seen : numpy.ndarray
-        (pixels,) bool, which pixels take a value.
-    values : numpy.ndarray
-        (seen pixels, channels) float32, their values in the order of the pixels, in ``total``'s units.
-    weight : numpy.float32
-        Each value's weight [1].
-    """
-    j = 0
-    for p in range(seen.shape[0]):
-        if seen[p]:
-            for k in range(total.shape[1]):
-                total[p, k] += values[j, k] * weight
-            j += 1
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def _bilinear(flat, a, b, c, d, x, y, k):
     """Channel ``k`` of ``flat`` read bilinearly between the rows a, b (top) and c, d (bottom) at the
     fractions x, y, in float64, rounded to float32."""
@@ -232,59 +209,15 @@ def _bilinear(flat, a, b, c, d, x, y, k):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def points_read_add(total: np.ndarray, first: np.ndarray, sample: np.ndarray, seen: np.ndarray, flat: np.ndarray,
-                    top_left: np.ndarray, top_right: np.ndarray, bottom_left: np.ndarray, bottom_right: np.ndarray,
-                    fx: np.ndarray, fy: np.ndarray, albedo: np.ndarray, scale: np.float32, weight: np.float32,
-                    start: int, stop: int) -> None:
-    """``taps_read``, the albedo and ``points_add`` in one pass, pixel by pixel, for pixels start to
-    stop - 1: each of pixel p's points j (``first[p]`` to ``first[p + 1] - 1``, by ``sample``)
-    that ``seen`` holds adds ``read (j) albedo scale weight`` to ``total[p]``, float32 in that order
-    (``view.put_wall``'s sum of ``read_taps(...) * albedo * scale`` over the points in turn), its
-    points' reads near one another in the raster.
-
-    Parameters
-    ----------
-    total : numpy.ndarray
-        (pixels, channels) float32, the sum so far; changed (radiance).
-    first : numpy.ndarray
-        (pixels + 1,) int64, each pixel's first point; the last, the points' count.
-    sample : numpy.ndarray
-        (n,) uint8, which of its pixel's points each is, ascending within a pixel.
-    seen : numpy.ndarray
-        (samples, pixels) bool, the pixels' points seen.
-    flat : numpy.ndarray
-        (cells, channels) float32 or float64, the raster's cells row by row (irradiance [klx]).
-    top_left, top_right, bottom_left, bottom_right : numpy.ndarray
-        (n,) int, each point's four cells in ``flat``.
-    fx, fy : numpy.ndarray
-        (n,) float, its fractions across and down from the top-left cell's centre [1].
-    albedo : numpy.ndarray
-        (n, channels) float32 per point, or (1, channels) for all [1].
-    scale, weight : numpy.float32
-        The factors after the albedo, in that order (1 / pi [1/sr], the point's weight [1]).
-    start, stop : int
-        The pixels.
-    """
-    each = albedo.shape[0] != 1
-    for p in range(start, stop):
-        for j in range(first[p], first[p + 1]):
-            if seen[sample[j], p]:
-                x, y = np.float64(fx[j]), np.float64(fy[j])
-                a, b, c, d = top_left[j], top_right[j], bottom_left[j], bottom_right[j]
-                r = j if each else 0
-                for k in range(flat.shape[1]):
-                    total[p, k] += _bilinear(flat, a, b, c, d, x, y, k) * albedo[r, k] * scale * weight
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int, cols: int, hit_distance: np.ndarray,
                 first: np.ndarray, sample: np.ndarray, flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray,
                 bottom_left: np.ndarray, bottom_right: np.ndarray, fx: np.ndarray, fy: np.ndarray,
                 albedo: np.ndarray, scale: np.float32, weight: np.float32, start: int, stop: int) -> None:
-    """``view.seen_points``, ``points_read_add`` and ``wall_over`` in one pass, for the box's pixels
-    start to stop - 1 (row by row): a pixel's points that meet the wall nearer than its distance
-    are seen; their sum from 0, cover and nearest distance blend into the picture as ``wall_over``
-    blends them: the float32 operations of the three, in their order.
+    """A wall put into the picture for the box's pixels start to stop - 1 (row by row): a pixel's
+    points that meet the wall nearer than its distance are seen; each seen point's bilinear read of
+    ``flat`` (``taps_read``'s float operations) times its albedo, ``scale`` and ``weight`` is summed
+    from 0 in the points' order; the pixel's radiance becomes ``L (1 - cover) + sum`` with cover the
+    seen points times ``weight``, and its distance the nearest seen point's where cover > 1/2.
 
     Parameters
     ----------
@@ -296,8 +229,16 @@ def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int,
         The box's first row and column, and its columns [pixel].
     hit_distance : numpy.ndarray
         (samples, box pixels) float32, the points' distances to the wall [m].
-    first, sample, flat, top_left, top_right, bottom_left, bottom_right, fx, fy, albedo, scale, weight
-        As in ``points_read_add``.
+    first, sample : numpy.ndarray
+        ``view.WallPoints``: each box pixel's first point, and each point's sample [1].
+    flat : numpy.ndarray
+        (cells, channels) float32, the wall's raster [radiance x sr].
+    top_left, top_right, bottom_left, bottom_right, fx, fy : numpy.ndarray
+        Each point's bilinear taps (``view.BilinearTaps``) [1].
+    albedo : numpy.ndarray
+        (1, channels) or (points, channels) float32 [1].
+    scale, weight : numpy.float32
+        The factor after the albedo, and 1 / points a pixel [1].
     start, stop : int
         The box's pixels, row by row.
     """
@@ -393,46 +334,6 @@ def walls_on_ground(sky_light: np.ndarray, total: np.ndarray, keep: np.ndarray, 
             sky_out[i, j, c] = np.float32(sky)
             total_out[i, j, c] = np.float32(sky + sun)
 
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def wall_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int, seen: np.ndarray,
-              hit_distance: np.ndarray, total: np.ndarray, weight: np.float32) -> None:
-    """``view.put_wall``'s blend in place: over the box from (``top``, ``left``), each pixel's cover
-    c = (its seen points) ``weight``, radiance ``L (1 - c) + total``, and where c > 0.5 its distance
-    the nearest seen point's: the float32 operations of the array version, in its order.
-
-    Parameters
-    ----------
-    radiance : numpy.ndarray
-        (height, width, channels) float32, the picture; changed in the box [radiance].
-    distance : numpy.ndarray
-        (height, width) float32, what each pixel sees; changed in the box [m].
-    top, left : int
-        The box's first row and column [pixel].
-    seen : numpy.ndarray
-        (points, rows, cols) bool, the pixels' points that see the wall.
-    hit_distance : numpy.ndarray
-        (points, rows, cols) float32, their distances [m].
-    total : numpy.ndarray
-        (rows x cols, channels) float32, the weighted sum of the seen points' radiance [radiance].
-    weight : numpy.float32
-        Each point's weight [1].
-    """
-    one, half = np.float32(1.0), np.float32(0.5)
-    for i in range(seen.shape[1]):
-        for j in range(seen.shape[2]):
-            count, nearest = np.float32(0.0), np.float32(np.inf)
-            for k in range(seen.shape[0]):
-                if seen[k, i, j]:
-                    count += one
-                    nearest = min(nearest, hit_distance[k, i, j])
-            cover = count * weight
-            keep = one - cover
-            p = i * seen.shape[2] + j
-            for c in range(radiance.shape[2]):
-                radiance[top + i, left + j, c] = radiance[top + i, left + j, c] * keep + total[p, c]
-            if cover > half:
-                distance[top + i, left + j] = nearest
 
 _ACES = tuple(np.float32(c) for c in (0.0, 1.0, 2.51, 0.03, 2.43, 0.59, 0.14))
 _SRGB = tuple(np.float32(c) for c in (0.0031308, 12.92, 1.055, 0.055, 255.0, 0.5))

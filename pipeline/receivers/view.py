@@ -9,7 +9,6 @@ bilinearly; a pixel takes the mean of its points, the points that miss keeping w
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,8 +19,7 @@ from pipeline.core.geometry import Grid
 from pipeline.receivers.plane import ReceiverPlane
 
 __all__ = ["SAMPLES", "WallHits", "wall_hits", "BilinearTaps", "bilinear_taps", "read_taps", "read_taps_arrays",
-           "read_bilinear", "read_tiled", "show_wall", "seen_points", "put_wall", "WallPoints", "wall_points",
-           "show_points", "add_points", "blend_wall"]
+           "read_bilinear", "read_tiled", "WallPoints", "wall_points", "show_points"]
 
 SAMPLES = 3
 """Points per pixel side at which the camera looks for a wall (its edges anti-aliased). [count]"""
@@ -255,75 +253,6 @@ def read_tiled(image: np.ndarray, size: float, u: np.ndarray, w: np.ndarray) -> 
     return image[row, col].astype(np.float32)
 
 
-def show_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits,
-              wall_radiance: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
-    """Put a wall into a picture in place: each pixel's points that see the wall nearer than
-    ``distance`` take its radiance, the rest keep the pixel's; the distance becomes the wall's
-    where most of its points see it.
-
-    Parameters
-    ----------
-    radiance : numpy.ndarray
-        (height, width, 3) float32, the picture so far; changed [radiance].
-    distance : numpy.ndarray
-        (height, width) float32, what each pixel sees so far (inf: nothing); changed [m].
-    hits : WallHits
-        Where the wall is seen.
-    wall_radiance : callable
-        (u, w) wall coordinates (n,) [m] -> (n, 3) the wall's radiance there [radiance].
-    """
-    seen = seen_points(hits, distance)
-    put_wall(radiance, distance, hits, seen, [wall_radiance(hits.u[k][seen[k]], hits.w[k][seen[k]])
-                                              for k in range(len(seen))])
-
-
-def seen_points(hits: WallHits, distance: np.ndarray) -> np.ndarray:
-    """Which of the pixels' points see the wall nearer than what they saw.
-
-    Parameters
-    ----------
-    hits : WallHits
-        Where the wall is seen.
-    distance : numpy.ndarray
-        (height, width) float32, what each pixel sees so far (inf: nothing) [m].
-
-    Returns
-    -------
-    numpy.ndarray
-        (points, rows, cols) bool on ``hits.region``.
-    """
-    rows, cols = hits.region
-    return hits.hit & (hits.distance < distance[rows, cols][None])
-
-
-def put_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, seen: np.ndarray,
-             values: list[np.ndarray]) -> None:
-    """Put a wall's radiance at its seen points into a picture (``show_wall``'s second half).
-
-    Parameters
-    ----------
-    radiance : numpy.ndarray
-        (height, width, 3) float32, the picture so far; changed [radiance].
-    distance : numpy.ndarray
-        (height, width) float32, what each pixel sees so far; changed [m].
-    hits : WallHits
-        Where the wall is seen.
-    seen : numpy.ndarray
-        (points, rows, cols) bool (``seen_points``).
-    values : list of numpy.ndarray
-        Per point k, (n_k, 3) the wall's radiance at the points ``seen[k]`` selects, in their order [radiance].
-    """
-    points = np.float32(1.0 / len(seen))
-    wall_sum = np.zeros((*seen.shape[1:], 3), np.float32)
-    flat = wall_sum.reshape(-1, 3)
-    from pipeline.kernels.arrays import points_add  # numba: imported when a wall is seen
-
-    for k in range(len(seen)):  # flat[flatnonzero(seen[k])] += values[k] * points
-        if len(values[k]):
-            points_add(flat, seen[k].reshape(-1), np.ascontiguousarray(values[k], dtype=np.float32), points)
-    blend_wall(radiance, distance, hits, seen, wall_sum)
-
-
 @dataclass(frozen=True)
 class WallPoints:
     """The pixels' points that meet a wall, pixel by pixel (``wall_points``).
@@ -367,9 +296,11 @@ def wall_points(hits: WallHits) -> tuple[WallPoints, np.ndarray, np.ndarray]:
 
 def show_points(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, points: WallPoints, image: np.ndarray,
                 taps: BilinearTaps, albedo: np.ndarray, scale: np.float32) -> None:
-    """Put a wall into a picture in place from its raster read at the pixels' points: ``show_wall``
-    with the radiance ``read (image) albedo scale``, compiled in one pass over the pixels (the bits
-    of ``seen_points``, ``read_taps`` and ``put_wall``).
+    """Put a wall into a picture in place from its raster read at the pixels' points, compiled in one
+    pass over the pixels: each pixel's points that see the wall nearer than ``distance`` take the
+    radiance ``read (image) albedo scale`` (``read_taps``'s bits), summed in the order of the points
+    and weighted 1 / points; the pixel keeps ``1 - cover`` of its radiance; the distance becomes
+    the nearest point's where more than half of the points see the wall.
 
     Parameters
     ----------
@@ -391,14 +322,9 @@ def show_points(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, poin
         The factor after the albedo (1 / pi) [1].
     """
     weight = np.float32(1.0 / len(hits.hit))
-    if not all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)):
-        seen = seen_points(hits, distance)
-        wall_sum = np.zeros((*seen.shape[1:], 3), np.float32)
-        add_points(wall_sum.reshape(-1, 3), seen.reshape(len(seen), -1), points, image, taps, albedo, scale, weight)
-        blend_wall(radiance, distance, hits, seen, wall_sum)
-        return
-    if albedo.dtype != np.float32:
-        raise ValueError("show_points takes float32 albedos")
+    if not all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)) or \
+            albedo.dtype != np.float32:
+        raise ValueError("show_points takes C-contiguous float32 pictures and distances and float32 albedos")
     rows, cols = hits.region
     flat = image.reshape(-1, image.shape[-1])
     colour = albedo.reshape(-1, albedo.shape[-1])
@@ -409,71 +335,3 @@ def show_points(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, poin
     in_shares(len(points.first) - 1, lambda start, stop: points_over(
         radiance, distance, rows.start, cols.start, cols.stop - cols.start, far, points.first, points.sample, flat,
         *taps.corners, fx, fy, colour, scale, weight, start, stop))
-
-
-def add_points(total: np.ndarray, seen: np.ndarray, points: WallPoints, image: np.ndarray, taps: BilinearTaps,
-               albedo: np.ndarray, scale: np.float32, weight: np.float32) -> None:
-    """Add a wall's radiance at the pixels' seen points to their sum: ``total[p] += read (image)
-    albedo scale weight`` over pixel p's seen points in turn, in float32, compiled (``put_wall``'s
-    sum of ``read_taps(image, taps) * albedo * scale`` to the bit, without those arrays).
-
-    Parameters
-    ----------
-    total : numpy.ndarray
-        (pixels, 3) float32 over ``WallHits.region``'s pixels row by row, the sum so far; changed [radiance].
-    seen : numpy.ndarray
-        (samples, pixels) bool, the points that see the wall (``seen_points``).
-    points : WallPoints
-        The points that meet it (``wall_points``).
-    image : numpy.ndarray
-        (rows, cols, 3) the wall's raster [radiance x sr].
-    taps : BilinearTaps
-        The points' reads of it (``bilinear_taps`` at their ``wall_points`` coordinates).
-    albedo : numpy.ndarray
-        (3,) or (n, 3) float32 [1].
-    scale, weight : numpy.float32
-        The factors after the albedo, in that order (1 / pi; the point's weight) [1].
-    """
-    if albedo.dtype != np.float32 or total.dtype != np.float32 or not total.flags.c_contiguous:
-        raise ValueError("add_points sums float32 albedos into a contiguous float32 total")
-    flat = image.reshape(-1, image.shape[-1])
-    colour = albedo.reshape(-1, albedo.shape[-1])
-    fx, fy = taps.fx.reshape(-1), taps.fy.reshape(-1)
-    from pipeline.kernels.arrays import points_read_add  # numba: imported when a wall is seen
-
-    in_shares(len(total), lambda start, stop: points_read_add(
-        total, points.first, points.sample, seen, flat, *taps.corners, fx, fy, colour, scale, weight, start, stop))
-
-
-def blend_wall(radiance: np.ndarray, distance: np.ndarray, hits: WallHits, seen: np.ndarray,
-               wall_sum: np.ndarray) -> None:
-    """Put a wall's summed points into a picture: each pixel's cover c (its seen points over all),
-    radiance ``L (1 - c) + sum``, and where c > 0.5 the distance of its nearest seen point.
-
-    Parameters
-    ----------
-    radiance : numpy.ndarray
-        (height, width, 3) float32, the picture so far; changed [radiance].
-    distance : numpy.ndarray
-        (height, width) float32, what each pixel sees so far; changed [m].
-    hits : WallHits
-        Where the wall is seen.
-    seen : numpy.ndarray
-        (points, rows, cols) bool (``seen_points``).
-    wall_sum : numpy.ndarray
-        (rows, cols, 3) float32 on ``hits.region``, the seen points' radiance times 1 / points, summed [radiance].
-    """
-    rows, cols = hits.region
-    behind = distance[rows, cols]
-    points = np.float32(1.0 / len(seen))
-    from pipeline.kernels.arrays import wall_over  # numba: imported when a wall is seen
-
-    if all(a.dtype == np.float32 and a.flags.c_contiguous for a in (radiance, distance, hits.distance)):
-        wall_over(radiance, distance, rows.start, cols.start, seen, hits.distance, wall_sum.reshape(-1, 3), points)
-        return
-    coverage = seen.sum(axis=0, dtype=np.float32) * points
-    block = radiance[rows, cols]
-    block *= (1.0 - coverage)[..., None]
-    block += wall_sum
-    nearest = np.where(seen, hits.distance, np.inf).min(axis=0).astype(np.float32)
-    distance[rows, cols] = np.where(coverage > 0.5, nearest, behind)
