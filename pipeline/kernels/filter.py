@@ -25,6 +25,10 @@ from pipeline.core.cores import in_shares
 __all__ = ["filtered", "tap_table", "filtered3_at", "footprint_axes", "row_footprints", "filter_choice",
            "halve_level"]
 
+_FLOAT64_MAX = float(np.finfo(np.float64).max)
+"""The largest float64, ``filter_choice``'s stand-in for -inf (a constant: ``np.finfo`` in a loop compiles two
+functions more)."""
+
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _first_texel(channels, offset, rows, cols, periodic, col, row):
@@ -37,7 +41,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
     c0f, r0f = np.floor(col), np.floor(row)
     fc = np.float32(col - c0f)
     fr = np.float32(row - r0f)
-    c0, r0 = int(c0f), int(r0f)
+    c0, r0 = np.int64(c0f), np.int64(r0f)
     if periodic:  # a mask for a power of two, as tests/reference.py's _wrap: no division
         c0 = c0 & (cols - 1) if cols & (cols - 1) == 0 else c0 % cols
         r0 = r0 & (rows - 1) if rows & (rows - 1) == 0 else r0 % rows
@@ -180,31 +184,6 @@ def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _blend3(s0, s1, s2, u0, u1, u2, t):
-    """The three channels of a tap read at two mip levels, blended by t (float32 in, float32 out)."""
-    s0 += (u0 - s0) * t
-    s1 += (u1 - s1) * t
-    s2 += (u2 - s2) * t
-    return s0, s1, s2
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _add_tap3(i, t0, t1, t2, s0, s1, s2):
-    """The running sum of a pixel's taps after tap i (the first tap starts it, as the loops did)."""
-    if i == 0:
-        return s0, s1, s2
-    return t0 + s0, t1 + s1, t2 + s2
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _store_mean3(out, r, t0, t1, t2, nf):
-    """Row r of out (3, n) set to the taps' sums over their count nf."""
-    out[0, r] = t0 / nf
-    out[1, r] = t1 / nf
-    out[2, r] = t2 / nf
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey,
                        taps, level, blend, out, start, stop):
     """``filtered`` of any count of channels, reads start to stop - 1."""
@@ -263,32 +242,35 @@ def tap_table(channels: int, offsets: np.ndarray, shapes: np.ndarray, origins: n
     samples = int(np.sum(taps.astype(np.int64) * np.where(blend > 0, 2, 1)))
     start, first = np.empty(len(x) + 1, dtype=np.int64), np.empty(samples, dtype=np.int64)
     fc, fr = np.empty(samples, dtype=np.float32), np.empty(samples, dtype=np.float32)
-    _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, np.arange(len(x)), major, ex, ey, taps,
-               level, blend, start, first, fc, fr)
+    _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend, start,
+               first, fc, fr)
     return start, first, fc, fr
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey, taps, level,
-               blend, start, first, fc, fr):
-    """``tap_table``'s loop, into its arrays."""
-    k = 0
+def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend, start,
+               first, fc, fr):
+    """``tap_table``'s loop, into its arrays: read r's taps where ``_read`` puts them, level by level (a
+    blended read's samples alternate between its two levels; each level's steps are the same float64 sums in
+    the same order), so that ``_coords`` and ``_first_texel`` are inlined once each (docs/accuracy.md,
+    "Compiling after an install")."""
+    k = np.int64(0)
     for r in range(x.shape[0]):
-        (_t, n, blended, col0, row0, dcol, drow, rows, cols, off, colb0, rowb0, dcolb, drowb, rowsb, colsb,
-         offb, _step, _stepb, _nf) = _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major, ex,
-                                           ey, taps, level, blend)
+        lv, n = np.int64(level[r]), np.int64(taps[r])
+        stride = np.int64(2) if blend[r] > 0 else np.int64(1)
+        spacing = major[r] / n
+        offset = (0.5 - 0.5 * n) * spacing
+        sx, sy, dx, dy = x[r] + offset * ex[r], y[r] + offset * ey[r], spacing * ex[r], spacing * ey[r]
         start[r] = k
-        col, row, colb, rowb = col0, row0, colb0, rowb0
-        for _ in range(n):
-            first[k], fc[k], fr[k] = _first_texel(channels, off, rows, cols, periodic, col, row)
-            k += 1
-            col += dcol
-            row += drow
-            if blended:
-                first[k], fc[k], fr[k] = _first_texel(channels, offb, rowsb, colsb, periodic, colb, rowb)
-                k += 1
-                colb += dcolb
-                rowb += drowb
+        for b in range(stride):
+            m = lv + b
+            col, row, dcol, drow = _coords(origins[m, 0], origins[m, 1], pixels[m, 0], pixels[m, 1], sx, sy, dx, dy)
+            rows, cols, off = shapes[m, 0], shapes[m, 1], offsets[m]
+            for i in range(k + b, k + n * stride, stride):
+                first[i], fc[i], fr[i] = _first_texel(channels, off, rows, cols, periodic, col, row)
+                col += dcol
+                row += drow
+        k += n * stride
     start[x.shape[0]] = k
 
 
@@ -299,7 +281,8 @@ def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: 
     """``filtered`` of three channels, read r = footprint r, its samples where ``tap_table`` found
     them: tests/reference.py's ``_tap_mean`` float32 arithmetic in the same order, each tap's
     bilinear sample (``_bilinear``) blended towards the next level's (a still camera reads the
-    same places of each frame's raster, so the places are found once).
+    same places of each frame's raster, so the places are found once). The blend, the sum and the
+    mean are written here, not in helpers: each helper is one more function for numba to compile.
 
     Parameters
     ----------
@@ -313,11 +296,10 @@ def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: 
         The reads done: begin to end - 1 (``cores.in_shares``'s share).
     """
     for r in range(begin, end):
-        lv, t, n = int(level[r]), blend[r], int(taps[r])
+        lv, t, n = np.int64(level[r]), blend[r], np.int64(taps[r])
         blended = t > 0
         step = (shapes[lv, 1] + 2) * 3
         stepb = (shapes[lv + 1, 1] + 2) * 3 if blended else step
-        nf = np.float32(n)
         k = start[r]
         t0 = t1 = t2 = np.float32(0.0)
         # the channels as int64, not literals: numba compiles a helper once per literal argument
@@ -332,9 +314,17 @@ def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: 
                 u0, u1, u2 = (_bilinear(flat, f, 3, stepb, c0, c, w), _bilinear(flat, f, 3, stepb, c1, c, w),
                               _bilinear(flat, f, 3, stepb, c2, c, w))
                 k += 1
-                s0, s1, s2 = _blend3(s0, s1, s2, u0, u1, u2, t)
-            t0, t1, t2 = _add_tap3(i, t0, t1, t2, s0, s1, s2)
-        _store_mean3(out, r, t0, t1, t2, nf)
+                s0 += (u0 - s0) * t
+                s1 += (u1 - s1) * t
+                s2 += (u2 - s2) * t
+            if i == 0:  # the first tap starts the sum
+                t0, t1, t2 = s0, s1, s2
+            else:
+                t0, t1, t2 = t0 + s0, t1 + s1, t2 + s2
+        nf = np.float32(n)
+        out[0, r] = t0 / nf
+        out[1, r] = t1 / nf
+        out[2, r] = t2 / nf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -486,7 +476,7 @@ def filter_choice(texel: float, lod_bias: float, count: int, max_taps: int, majo
     blend : numpy.ndarray
         (n,) float32, written: the blend towards the next level, in [0, 1) [1].
     """
-    big = np.finfo(np.float64).max
+    big = _FLOAT64_MAX
     top = float(count - 1)
     for j in range(major.shape[0]):
         a, b = major[j], minor[j]

@@ -44,21 +44,6 @@ _SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _read(count, j, w, va, vb, skip, seed_key, x, y, period_x, period_y, read_x, read_y, read_pixel,
-          read_weight):
-    """Appends the read of vertex (va, vb) of weight w for footprint j at (x, y) [m] when
-    w >= skip (``albedo.StochasticTiling.offsets``); returns the new count of reads."""
-    if not w >= skip:
-        return count
-    key = _vertex_key(va, vb, seed_key)
-    read_x[count] = x + _unit_hash(key) * period_x
-    read_y[count] = y + _unit_hash(key ^ _SECOND_KEY) * period_y
-    read_pixel[count] = j
-    read_weight[count] = w
-    return count + 1
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: float, period_x: float, period_y: float,
                  weight: np.ndarray, read_x: np.ndarray, read_y: np.ndarray, read_pixel: np.ndarray,
                  read_weight: np.ndarray) -> int:
@@ -97,7 +82,7 @@ def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: flo
     """
     root3 = np.sqrt(3.0)
     seed_key = _seed_key(seed)
-    count = np.int64(0)  # not a literal 0: numba would compile _read once more for it
+    count = 0
     for j in range(x.shape[0]):
         a = x[j] / cell
         b = y[j] / cell
@@ -124,13 +109,17 @@ def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: flo
         w1 /= total
         w2 /= total
         weight[0, j], weight[1, j], weight[2, j] = w0, w1, w2
-        count = _read(count, j, w0, a0, b0, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
-                      read_pixel, read_weight)
-        count = _read(count, j, w1, a1, b1, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
-                      read_pixel, read_weight)
-        count = _read(count, j, w2, a2, b2, skip, seed_key, x[j], y[j], period_x, period_y, read_x, read_y,
-                      read_pixel, read_weight)
-    return int(count)
+        # the three vertices' reads in one loop: numba types and lowers its body once
+        for vertex in range(3):
+            va, vb, w = (a0, b0, w0) if vertex == 0 else ((a1, b1, w1) if vertex == 1 else (a2, b2, w2))
+            if w >= skip:  # else left out (``albedo.StochasticTiling.offsets``)
+                key = _vertex_key(va, vb, seed_key)
+                read_x[count] = x[j] + _unit_hash(key) * period_x
+                read_y[count] = y[j] + _unit_hash(key ^ _SECOND_KEY) * period_y
+                read_pixel[count] = j
+                read_weight[count] = w
+                count += 1
+    return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -139,7 +128,7 @@ def _component(lookups, lv, up, k, g, norm, tb):
     blended by tb (``tiling_lookup``)."""
     bins = lookups.shape[2]
     position = min(max((g / norm + 4.0) * (bins / 8.0) - 0.5, 0.0), bins - 1.0)
-    low = min(int(np.floor(position)), bins - 2)
+    low = min(np.int64(np.floor(position)), bins - 2)
     frac = position - low
     here = lookups[lv, k, low] * (1.0 - frac) + lookups[lv, k, low + 1] * frac
     there = lookups[up, k, low] * (1.0 - frac) + lookups[up, k, low + 1] * frac
@@ -162,7 +151,7 @@ def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, looku
             g2 += w * np.float64(values[2, r])
             r += 1
         norm = np.sqrt(weight[0, j] * weight[0, j] + weight[1, j] * weight[1, j] + weight[2, j] * weight[2, j])
-        lv = int(level[j])
+        lv = np.int64(level[j])
         up = min(lv + 1, last)
         tb = np.float64(blend[j])
         # the components as int64, not literals: numba compiles a helper once per literal argument
