@@ -72,19 +72,19 @@ def _compiled(shapes: Shapes, grid: Grid, period: tuple[float, float] | None, *,
     period_px = None if period is None else np.asarray(period, dtype=np.float64) / grid.pixel
     count = 0
     parts = []
-    for primitive, capsule, offset in ((_ellipses(shapes, grid), False, 0),
+    rowwise = period_px is None  # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
+    for primitive, capsule, offset in ((_ellipses(shapes, grid, rowwise=rowwise), False, 0),
                                        (_capsule_pieces(shapes, grid), True, len(shapes.center))):
         center, half, params, feature, thickness, owner = primitive
-        if period_px is None:
-            # row by row, for the cache (a radix sort of 16-bit rows), every array in that order
-            order = np.argsort(np.clip(center[:, 1], 0, 65535).astype(np.uint16), kind="stable")
-            center, half, params, feature, thickness, owner = raster.in_order(
-                order, center, half, params, feature, thickness, owner)
-            index = np.arange(len(order))
+        if rowwise:
+            if capsule:  # a few pieces: numpy's gather
+                order = _row_order(center[:, 1])
+                center, half, feature, thickness, owner = (a[order] for a in (center, half, feature, thickness, owner))
+                params = params[order]
+            index = np.arange(len(center))
         else:
             index, center = _translates(center, half, period_px, grid.shape)
-            params = params.astype(np.float32)
-        parts.append((capsule, center, half, index, params, feature, thickness, owner + offset))
+        parts.append((capsule, center, half, index, params.astype(np.float32), feature, thickness, owner + offset))
     size = sum(raster.box_pixels(part[1], part[2], part[3], rows, cols) for part in parts) if emit else 0
     fragments = (np.empty(size, np.int64), np.empty(size, np.float32), np.empty(size, np.int64))
     transmittance = np.empty((rows, cols)) if emit else np.ones((rows, cols))
@@ -173,16 +173,26 @@ def _pixels(points: np.ndarray, grid: Grid) -> np.ndarray:
     return np.column_stack([points[:, 0] - grid.origin[0], grid.origin[1] - points[:, 1]]) / grid.pixel
 
 
-def _ellipses(shapes: Shapes, grid: Grid):
+def _row_order(rows: np.ndarray) -> np.ndarray:
+    """The stable order of the rows [pixel] taken as 16-bit integers (clipped): a radix sort."""
+    return np.argsort(np.clip(rows, 0, 65535).astype(np.uint16), kind="stable")
+
+
+def _ellipses(shapes: Shapes, grid: Grid, *, rowwise: bool = False):
     """Ellipses in pixel units: centre, bbox half-size, (major unit vector, semi-axes A >= B),
-    feature size B, thickness 2B, each ellipse's index. (Compiled: kernels.raster.ellipse_params.)"""
+    feature size B, thickness 2B, each ellipse's index; with ``rowwise`` in ``_row_order`` of their
+    centres' rows, computed in that order (their arrays are then read one after another, not at
+    random: docs/accuracy.md, "The leaf rasteriser"), those whose box misses the grid only as far
+    as the rasteriser reads them. (Compiled: kernels.raster.ellipse_params.)"""
     from pipeline.kernels import raster
 
     center, axis_a, axis_b = (np.ascontiguousarray(a, dtype=np.float64)
                               for a in (shapes.center, shapes.axis_a, shapes.axis_b))
-    return (*raster.ellipse_params(center, axis_a, axis_b, float(grid.origin[0]), float(grid.origin[1]),
-                                    float(grid.pixel)),
-            np.arange(len(shapes.center)))
+    origin_x, origin_y, pixel = float(grid.origin[0]), float(grid.origin[1]), float(grid.pixel)
+    # the rows as ellipse_params computes them
+    order = _row_order((origin_y - center[:, 1]) / pixel) if rowwise else np.arange(len(center))
+    rows, cols = (float(n) for n in grid.shape) if rowwise else (0.0, 0.0)  # not with translates
+    return (*raster.ellipse_params(order, center, axis_a, axis_b, origin_x, origin_y, pixel, rows, cols), order)
 
 
 def _capsule_pieces(shapes: Shapes, grid: Grid):

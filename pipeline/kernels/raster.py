@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "box_pixels", "in_order", "shapes", "flutter", "onto", "ellipse_params", "leaf_fragments",
+    "box_pixels", "shapes", "flutter", "onto", "ellipse_params", "leaf_fragments",
     "scatter_light", "leaf_heights",
 ]
 
@@ -55,52 +55,14 @@ def box_pixels(center: np.ndarray, half: np.ndarray, index: np.ndarray, rows: in
     return total
 
 
-@njit(cache=True, nogil=True)
-def in_order(order: np.ndarray, center: np.ndarray, half: np.ndarray, prm: np.ndarray, feature: np.ndarray,
-             thickness: np.ndarray, owner: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The shapes' arrays taken in the order ``order`` (prm as float32).
-
-    The kernels then read them one after another, not at random (docs/accuracy.md, "The leaf
-    rasteriser").
-
-    Parameters
-    ----------
-    order : numpy.ndarray
-        (n,) indices.
-    center, half : numpy.ndarray
-        (n, 2) [pixel].
-    prm : numpy.ndarray
-        (n, k) shape parameters.
-    feature, thickness : numpy.ndarray
-        (n,) [pixel].
-    owner : numpy.ndarray
-        (n,) shape numbers.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        (center, half, prm, feature, thickness, owner) reordered; ``prm`` float32.
-    """
-    n = order.shape[0]
-    center_out, half_out, prm_out = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, prm.shape[1]), np.float32)
-    feature_out, thickness_out, owner_out = np.empty(n), np.empty(n), np.empty(n, owner.dtype)
-    for ii in range(n):
-        i = order[ii]
-        center_out[ii, 0], center_out[ii, 1], half_out[ii, 0], half_out[ii, 1] = \
-            center[i, 0], center[i, 1], half[i, 0], half[i, 1]
-        for j in range(prm.shape[1]):
-            prm_out[ii, j] = prm[i, j]
-        feature_out[ii], thickness_out[ii], owner_out[ii] = feature[i], thickness[i], owner[i]
-    return center_out, half_out, prm_out, feature_out, thickness_out, owner_out
-
-
 _OPAQUE = np.float32(1.0 - 2.0**-20)
 
-# inline="always" (numba inlines before typing, which costs compile time) only where it was
-# measured to matter, the box loop's helpers that take the sample buffers; LLVM inlines the
-# small arithmetic ones (_square_cdf, _cover, _turn) as fast
-# (docs/accuracy.md, "The leaf rasteriser").
+# inline="always" (numba inlines before typing, which costs compile time) only on ``_box``,
+# ``_row_tables`` (run when a box's width or k changes) and ``_pixel_cover`` (called, the fine
+# mask's sums took a fifth more); LLVM inlines the small arithmetic helpers (_square_cdf, _cover,
+# _turn) as fast. The helpers that each box runs on whole arrays are called: numba's inlining
+# reference-counts their arrays, atomic increments and decrements at each box (docs/accuracy.md,
+# "The leaf rasteriser").
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -134,68 +96,67 @@ def _cover(d, nx, ny, kf, thick):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _samples(rx, ry, w, h, k, dxs, dys):
-    """Sub-sample offsets from the shape's centre [pixel] over its w x h box, k x k per pixel,
-    sub-sample by sub-sample: the (sy, sx)-th of every pixel, row by row, then the next
-    (float32, as the array version computes them: k is a power of two, so multiplying by 1 / k
-    gives the bits of dividing by k); returns their count."""
+def _row_tables(w, k, qx, qy):
+    """One pixel row's sub-samples over a box w pixels wide, k x k per pixel, sub-sample by
+    sub-sample: the (sy, sx)-th of every pixel, then the next. Their x from the box's left edge
+    into qx (float32, as the array version computes them before it subtracts the centre: k is a
+    power of two, so multiplying by 1 / k gives the bits of dividing by k) and their sub-row sy
+    into qy (float32), then copies of the last up to a multiple of 8 (the vector loops then run no
+    scalar remainder); returns that multiple, the row's stride in the coverage buffer."""
     step = np.float32(1.0) / np.float32(k)
-    n = w * h
-    # x of the planes (0, sx): their first row, then copies of it; y of the planes (sy, 0)
-    for c in range(w * k):
-        dxs[(c % k) * n + c // k] = (np.float32(c) + np.float32(0.5)) * step - rx
-    for sx in range(k):
-        for p in range(w, n):
-            dxs[sx * n + p] = dxs[sx * n + p - w]
+    t = 0
     for sy in range(k):
-        for r in range(h):
-            dy = (np.float32(r * k + sy) + np.float32(0.5)) * step - ry
-            for c in range(w):
-                dys[sy * k * n + r * w + c] = dy
-    for sy in range(k):  # every other plane copies them
         for sx in range(k):
-            plane = (sy * k + sx) * n
-            for p in range(n):
-                if sy > 0:
-                    dxs[plane + p] = dxs[sx * n + p]
-                if sx > 0:
-                    dys[plane + p] = dys[sy * k * n + p]
-    m = k * k * n
-    return m
+            for c in range(w):
+                qx[t] = (np.float32(c * k + sx) + np.float32(0.5)) * step
+                qy[t] = np.float32(sy)
+                t += 1
+    stride = (t + 7) // 8 * 8
+    for j in range(t, stride):
+        qx[j], qy[j] = qx[t - 1], qy[t - 1]
+    return stride
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _sum_samples(buf, n, k):
-    """Each of the n pixels' k x k sub-sample coverages (as ``_samples`` orders them) summed
-    into buf[:n], in the order (sy, sx) of the array version, all pixels at once."""
-    for s in range(1, k * k):
-        for p in range(n):
-            buf[p] += buf[s * n + p]
+def _pixel_cover(buf, base, w, k):
+    """The coverage of the pixel whose first sub-sample is buf[base] (``_row_tables``' order): its
+    k x k sub-samples summed in the order (sy, sx) of the array version, divided by k k (a power of
+    two: the bits of dividing). k is spelled out so that each sum has a fixed length."""
+    total = buf[base]
+    if k == 4:
+        for s in range(1, 16):
+            total += buf[base + s * w]
+        return total * np.float32(1.0 / 16.0)
+    if k == 2:
+        for s in range(1, 4):
+            total += buf[base + s * w]
+        return total * np.float32(0.25)
+    return total
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _deposit(buf, w, h, k, x0, y0, transmittance, fragments, shape, count):
-    """The coverages of a w x h box at (x0, y0), buf[:w h] (the sums of ``_sum_samples``)
-    divided by k k, clipped just below 1: transmittance[row, col] multiplied by 1 - cover, or,
-    where ``fragments`` (pixel, coverage, shape) has room, fragments appended at ``count``.
-    Returns the new count."""
-    pixel, coverage, source = fragments
-    mean = np.float32(1.0) / np.float32(k * k)  # a power of two: the bits of dividing
-    if pixel.shape[0]:
-        for r in range(h):
-            for c in range(w):
-                cover = buf[r * w + c] * mean
-                if cover > 0:
-                    pixel[count] = (y0 + r) * transmittance.shape[1] + x0 + c
-                    coverage[count] = min(cover, _OPAQUE)
-                    source[count] = shape
-                    count += 1
-    else:
-        for r in range(h):
-            for c in range(w):
-                cover = buf[r * w + c] * mean
-                if cover > 0:
-                    transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE))
+@njit(cache=True, nogil=True, error_model="numpy")
+def _multiply(buf, w, h, k, stride, x0, y0, transmittance):
+    """transmittance[row, col] of the w x h box at (x0, y0) multiplied by 1 - cover, cover each
+    pixel's ``_pixel_cover`` (row r's sub-samples from buf[r stride]) clipped just below 1, where
+    cover > 0 (elsewhere by 1.0, which keeps every value's bits: no branch in the loop)."""
+    for r in range(h):
+        for c in range(w):
+            cover = _pixel_cover(buf, r * stride + c, w, k)
+            transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE)) if cover > 0 else 1.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _emit(buf, w, h, k, stride, x0, y0, cols, pixel, coverage, source, shape, count):
+    """The coverages of ``_multiply``'s pixels where cover > 0 as fragments (flat pixel, coverage
+    clipped just below 1, ``shape``) appended at ``count``, row by row; returns the new count."""
+    for r in range(h):
+        for c in range(w):
+            cover = _pixel_cover(buf, r * stride + c, w, k)
+            if cover > 0:
+                pixel[count] = (y0 + r) * cols + x0 + c
+                coverage[count] = min(cover, _OPAQUE)
+                source[count] = shape
+                count += 1
     return count
 
 
@@ -216,24 +177,6 @@ def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
         k = 1 if w * h * 4 > most else 2
     thick = np.float32(thickness * k) if thickness * k < 1.5 else np.float32(-1.0)
     return int(x0), int(y0), w, h, k, thick
-
-
-@njit(cache=True, nogil=True)
-def _grown(buffer, size):
-    return buffer if buffer.shape[0] >= size else np.empty(2 * size, np.float32)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _next_box(ii, center, half, index, feature, thickness, most, transmittance, samples):
-    """The ii-th box to draw, as ``_box`` gives it: (shape index i, col, row, width, height, k,
-    thick, its centre relative to (col, row) (float32) [pixel], the sample buffers ``samples``
-    (x, y, coverage) grown to hold its sub-samples)."""
-    i, cx, cy = index[ii], center[ii, 0], center[ii, 1]
-    rows, cols = transmittance.shape
-    x0, y0, w, h, k, thick = _box(cx, cy, half[i, 0], half[i, 1], feature[i], thickness[i], rows, cols, most)
-    n = w * h * k * k
-    return i, x0, y0, w, h, k, thick, np.float32(cx - x0), np.float32(cy - y0), \
-        (_grown(samples[0], n), _grown(samples[1], n), _grown(samples[2], n))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -285,71 +228,89 @@ def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarra
     int
         The new count of fragments [count].
     """
-    samples = (np.empty(1024, np.float32), np.empty(1024, np.float32), np.empty(1024, np.float32))
+    rows, cols = transmittance.shape
+    qx, qy = np.empty(16 * cols + 8, np.float32), np.empty(16 * cols + 8, np.float32)
+    buf = np.empty(1024, np.float32)
+    pixel, coverage, source = fragments
+    stride, table_k, table_w = 0, 0, 0
     for ii in range(index.shape[0]):
-        i, bx, by, w, h, k, thick, rx, ry, samples = _next_box(ii, center, half, index, feature, thickness,
-                                                               most, transmittance, samples)
+        i, cx, cy = index[ii], center[ii, 0], center[ii, 1]
+        bx, by, w, h, k, thick = _box(cx, cy, half[i, 0], half[i, 1], feature[i], thickness[i], rows, cols, most)
         if w == 0:
             continue
-        dxs, dys, buf = samples
-        kf = np.float32(k)
-        m = _samples(rx, ry, w, h, k, dxs, dys)
+        if k != table_k or w != table_w:  # the tables depend on k and w alone
+            stride, table_k, table_w = _row_tables(w, k, qx, qy), k, w
+        if stride * h > buf.shape[0]:
+            buf = np.empty(2 * stride * h, np.float32)
+        rx, ry = np.float32(cx - bx), np.float32(cy - by)
         if capsule:
-            _capsule_cover(prm[i], m, dxs, dys, kf, thick, buf)
+            _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf)
+            _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf)
         else:
-            _ellipse_cover(prm[i], m, dxs, dys, kf, thick, buf)
-        _sum_samples(buf, w * h, k)
-        if capsule:
-            _clear_outside_stretch(prm[i], w, h, rx, ry, buf)
-        count = _deposit(buf, w, h, k, bx, by, transmittance, fragments, owner[i], count)
+            _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf)
+        if pixel.shape[0]:
+            count = _emit(buf, w, h, k, stride, bx, by, cols, pixel, coverage, source, owner[i], count)
+        else:
+            _multiply(buf, w, h, k, stride, bx, by, transmittance)
     return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _ellipse_cover(prm, m, dxs, dys, kf, thick, buf):
-    """The coverage of the first ``m`` sub-samples (dxs, dys) by the ellipse ``prm`` (4,), into ``buf``."""
-    ex, ey, major, minor = prm[0], prm[1], prm[2], prm[3]
+def _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
+    """The coverage by the ellipse prm[i] (the major unit vector, A, B) of the sub-samples of a box's
+    h pixel rows, row r's (``_row_tables``' qx, qy, offsets from the centre (rx, ry) [pixel]) into
+    buf[r stride:]."""
+    ex, ey, major, minor = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3]
     ab, bb, aa = major * minor, minor * minor, major * major
     eps, eps2 = np.float32(1e-3) * minor, np.float32(1e-3) * bb
-    for j in range(m):
-        dx, dy = dxs[j], dys[j]
-        p = dx * ex + dy * ey
-        q = dy * ex - dx * ey
-        bp = bb * p
-        aq = aa * q
-        mp = minor * p
-        mq = major * q
-        gauge = np.sqrt(mp * mp + mq * mq)
-        inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
-        d = (gauge - ab) * (gauge + eps) * inv
-        buf[j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
+    kf, step = np.float32(k), np.float32(1.0) / np.float32(k)
+    for r in range(h):
+        row = np.float32(r * k)  # + sy: the sub-row's index, exactly
+        for j in range(stride):
+            dx, dy = qx[j] - rx, ((row + qy[j]) + np.float32(0.5)) * step - ry
+            p = dx * ex + dy * ey
+            q = dy * ex - dx * ey
+            bp = bb * p
+            aq = aa * q
+            mp = minor * p
+            mq = major * q
+            gauge = np.sqrt(mp * mp + mq * mq)
+            inv = np.float32(1.0) / (np.sqrt(bp * bp + aq * aq) + eps2)
+            d = (gauge - ab) * (gauge + eps) * inv
+            buf[r * stride + j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _capsule_cover(prm, m, dxs, dys, kf, thick, buf):
-    """The coverage of the first ``m`` sub-samples (dxs, dys) by the capsule piece ``prm`` (8,), into ``buf``."""
-    x0, y0, ex, ey, inverse, radius = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5]
-    for j in range(m):
-        px, py = dxs[j] - x0, dys[j] - y0
-        t = min(max((px * ex + py * ey) * inverse, np.float32(0.0)), np.float32(1.0))
-        qx, qy = px - t * ex, py - t * ey
-        length = np.sqrt(qx * qx + qy * qy) + np.float32(1e-6)
-        inv = np.float32(1.0) / length
-        buf[j] = _cover(length - radius, qx * inv, qy * inv, kf, thick)
+def _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
+    """The coverage by the capsule piece prm[i] of the sub-samples of a box's h pixel rows, as
+    ``_ellipse_box``."""
+    x0, y0, ex, ey, inverse, radius = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3], prm[i, 4], prm[i, 5]
+    kf, step = np.float32(k), np.float32(1.0) / np.float32(k)
+    for r in range(h):
+        row = np.float32(r * k)
+        for j in range(stride):
+            px, py = (qx[j] - rx) - x0, (((row + qy[j]) + np.float32(0.5)) * step - ry) - y0
+            t = min(max((px * ex + py * ey) * inverse, np.float32(0.0)), np.float32(1.0))
+            nx, ny = px - t * ex, py - t * ey
+            length = np.sqrt(nx * nx + ny * ny) + np.float32(1e-6)
+            inv = np.float32(1.0) / length
+            buf[r * stride + j] = _cover(length - radius, nx * inv, ny * inv, kf, thick)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _clear_outside_stretch(prm, w, h, rx, ry, buf):
-    """Clears the coverage of the box's pixels outside the capsule piece's stretch [t_lo, t_hi) of its axis,
-    judged at the pixels' centres in float64 (the pieces of one capsule tile its axis)."""
-    x0, y0, ex, ey, inverse, t_lo, t_hi = prm[0], prm[1], prm[2], prm[3], prm[4], prm[6], prm[7]
+def _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf):
+    """Clears the sub-samples of the box's pixels outside the capsule piece's stretch [t_lo, t_hi) of its
+    axis, judged at the pixels' centres in float64 (the pieces of one capsule tile its axis): their
+    sum is then 0, as the array version's."""
+    x0, y0, ex, ey, inverse, t_lo, t_hi = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3], prm[i, 4], prm[i, 6], prm[i, 7]
     for r in range(h):
         cy = float(r) + 0.5 - float(ry) - float(y0)
         for c in range(w):
             cx = float(c) + 0.5 - float(rx) - float(x0)
             t = (cx * float(ex) + cy * float(ey)) * float(inverse)
             if not (t >= float(t_lo) and t < float(t_hi)):
-                buf[r * w + c] = 0.0
+                for s in range(k * k):
+                    buf[r * stride + s * w + c] = 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -439,12 +400,16 @@ def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ellipse_params(center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, origin_x: float, origin_y: float,
-                   pixel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """rasteriser._ellipses in one pass: ellipses in the pixel units of a grid.
+def ellipse_params(order: np.ndarray, center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, origin_x: float,
+                   origin_y: float, pixel: float, rows: float, cols: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """rasteriser._ellipses in one pass: ellipses in the pixel units of a grid, in the order ``order``.
 
     Parameters
     ----------
+    order : numpy.ndarray
+        (m,) the ellipses to take, in their order (each read at random once, its outputs written one
+        after another).
     center : numpy.ndarray
         (n, 2) centres [m].
     axis_a, axis_b : numpy.ndarray
@@ -453,29 +418,41 @@ def ellipse_params(center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, o
         The grid's north-west corner [m].
     pixel : float
         The grid's pixel [m].
+    rows, cols : float
+        The raster drawn [pixel]: an ellipse whose box lies wholly outside it (the box that ``shapes``
+        then skips) gets its centre and half-size only, the rest 0; rows 0 for every ellipse whole.
 
     Returns
     -------
     tuple of numpy.ndarray
-        (centre (n, 2), box half-size (n, 2), (major unit vector, A, max(B, 1e-4)) (n, 4), B (n,),
-        2 B (n,)) [pixel].
+        (centre (m, 2), box half-size (m, 2), (major unit vector, A, max(B, 1e-4)) (m, 4), B (m,),
+        2 B (m,)) [pixel], the ii-th of ellipse order[ii].
     """
-    n = center.shape[0]
+    n = order.shape[0]
     c_px, half, prm = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 4))
     minor_out, thick = np.empty(n), np.empty(n)
-    for i in range(n):
-        a0, a1 = axis_a[i, 0] / pixel, -axis_a[i, 1] / pixel
-        b0, b1 = axis_b[i, 0] / pixel, -axis_b[i, 1] / pixel
+    read = np.empty((256, 6))  # a block's inputs, read first in a tight loop: its misses then overlap
+    for ii in range(n):
+        j = ii % 256
+        if j == 0:
+            for jj in range(min(256, n - ii)):
+                i = order[ii + jj]
+                read[jj, 0], read[jj, 1], read[jj, 2] = center[i, 0], center[i, 1], axis_a[i, 0]
+                read[jj, 3], read[jj, 4], read[jj, 5] = axis_a[i, 1], axis_b[i, 0], axis_b[i, 1]
+        a0, a1 = read[j, 2] / pixel, -read[j, 3] / pixel
+        b0, b1 = read[j, 4] / pixel, -read[j, 5] / pixel
         p, s = a0 * a0 + b0 * b0, a1 * a1 + b1 * b1
+        cx, cy, hx, hy = (read[j, 0] - origin_x) / pixel, (origin_y - read[j, 1]) / pixel, math.sqrt(p), math.sqrt(s)
+        c_px[ii, 0], c_px[ii, 1], half[ii, 0], half[ii, 1] = cx, cy, hx, hy
+        if rows > 0 and (cx + hx <= 0 or cx - hx >= cols or cy + hy <= 0 or cy - hy >= rows):  # _box: w or h 0
+            prm[ii, 0], prm[ii, 1], prm[ii, 2], prm[ii, 3], minor_out[ii], thick[ii] = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            continue
         q = a0 * a1 + b0 * b1
         major = math.sqrt(0.5 * (p + s) + math.hypot(0.5 * (p - s), q))
         minor = abs(a0 * b1 - a1 * b0) / max(major, 1e-30)
         angle = 0.5 * math.atan2(2 * q, p - s)
-        c_px[i, 0] = (center[i, 0] - origin_x) / pixel
-        c_px[i, 1] = (origin_y - center[i, 1]) / pixel
-        half[i, 0], half[i, 1] = math.sqrt(p), math.sqrt(s)
-        prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3] = math.cos(angle), math.sin(angle), major, max(minor, 1e-4)
-        minor_out[i], thick[i] = minor, 2 * minor
+        prm[ii, 0], prm[ii, 1], prm[ii, 2], prm[ii, 3] = math.cos(angle), math.sin(angle), major, max(minor, 1e-4)
+        minor_out[ii], thick[ii] = minor, 2 * minor
     return c_px, half, prm, minor_out, thick
 
 
