@@ -69,6 +69,7 @@ if TYPE_CHECKING:
 
     Progress = Callable[[str, int, int], None]
     Timings = dict[str, float | dict[str, float]]
+    Starting = concurrent.futures.Future[None]
 
 __all__ = ["render_run"]
 
@@ -120,13 +121,13 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         Before any work.
     """
     started = time.perf_counter()
-    run, plan, compiling = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
+    run, plan, starting = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
     mine = set(config_item_keys(plan))
     timings: Timings = {}
     made, lock = _lock(run.folder)
     try:
         with contextlib.ExitStack() as held:  # the steps' threads joined, then ``mine`` let go
-            held.callback(_end_compiling, compiling)  # its worker never left writing numba's cache
+            held.callback(_end_starting, starting)  # its worker never left writing numba's cache
             held.enter_context(run.store.in_use(mine))  # no other run's budget removes them meanwhile
             found = _check_folder(run, force=force)
             timings["check"] = time.perf_counter() - started
@@ -134,7 +135,7 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
             if found.todo:
                 plan = with_exposures(plan, found.todo)
                 with _backend(scheduler, cluster_timeout or CLUSTER_TIMEOUT):
-                    _cycles(run, plan, found.todo, held, timings)
+                    _cycles(run, plan, found.todo, held, timings, starting)
                     stream = _frames(run, plan, found, timings)
             video: dict[str, Any] | None
             if stream:
@@ -191,12 +192,12 @@ class _Found:
 
 def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
           scheduler: str | None, progress: Progress | None,
-          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan, threading.Thread | None]:
+          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan, Starting | None]:
     """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
-    the scheduler reached: what the later steps share; and the thread whose worker compiles the
-    cycle products' loops meanwhile (``_compile_cycle_loops``)."""
-    compiling = _compile_cycle_loops(config, jobs or config.render.jobs, scheduler)
-    return (*_planned(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn), compiling)
+    the scheduler reached: what the later steps share; and the local workers being started meanwhile,
+    one compiling the cycle products' loops where they are not cached (``_start_workers``)."""
+    starting = _start_workers(config, frames, jobs or config.render.jobs, scheduler)
+    return (*_planned(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn), starting)
 
 
 def _planned(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
@@ -260,15 +261,18 @@ def _check_folder(run: _Run, *, force: bool) -> _Found:
     return _Found(index, records, todo, read_run_file(folder), force or bool(checked.damaged))
 
 
-def _cycles(run: _Run, plan: RunPlan, todo: list[int], held: contextlib.ExitStack, timings: Timings) -> None:
+def _cycles(run: _Run, plan: RunPlan, todo: list[int], held: contextlib.ExitStack, timings: Timings,
+            starting: Starting | None) -> None:
     """The cycle products the ``todo`` frames need (``cycle.cycle_phase``), then recorded as the
     config's; with local processes the frames' loops compiled meanwhile, here, once, by a thread
-    that ``held`` joins as it closes."""
+    that ``held`` joins as it closes, unless numba's cache holds them (``_frame_loops_cached``).
+    The workers ``_start_workers`` started are waited for first (``_workers_started``)."""
     mark = time.perf_counter()
-    if run.jobs > 1 and not run.scheduler:  # the frames' loops compiled meanwhile, here, once
+    if run.jobs > 1 and not run.scheduler and not _frame_loops_cached():
         compiling = threading.Thread(target=_compile_frame_loops, args=(plan,), daemon=True)
         compiling.start()
         held.callback(compiling.join)  # never left writing numba's cache as the command ends
+    _workers_started(starting)
     cycle_phase(plan, run.store, jobs=run.jobs, workers=run.threads, command=run.command,
                 cycle_frames={f % run.config.canopy.cycle for f in todo},
                 progress=functools.partial(run.progress, "cycle") if run.progress else None)
@@ -411,32 +415,75 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
         return _write_task(config, _render_task(plan, frame, root, threads), digest, codes)
 
 
-def _compile_cycle_loops(config: Config, jobs: int | None, scheduler: str | None) -> threading.Thread | None:
-    """With local workers and the built-in trees, numba's cache lacking the cycle products' loops: a
-    thread that has one of joblib's worker processes compile them (``rasteriser.compile_loops``)
-    while this one plans the run. The workers start meanwhile and that one compiles on the core the
-    plan leaves idle; the cycle phase reuses them, and its first products find the loops compiled
-    or load them (docs/accuracy.md, "Compiling after an install"). None where nothing was started."""
-    jobs = jobs_and_threads(jobs, scheduler)[0]
-    trees = config.canopy.trees is not None and not config.canopy.meshes
-    if not trees or scheduler or jobs < 2 or loops_cached():
+def _start_workers(config: Config, frames: tuple[int, ...] | None, jobs: int | None,
+                   scheduler: str | None) -> Starting | None:
+    """With local workers: have joblib start them now, from a thread, while this process plans the
+    run and checks its folder, instead of when a phase first asks for them. Each imports what a
+    task needs (0.6 s of CPU) on the core the plan leaves idle, and where numba's cache lacks the
+    cycle products' loops (the built-in trees), one of them compiles them (``rasteriser.compile_loops``;
+    docs/accuracy.md, "Compiling after an install"). The phases reuse them (joblib's reusable
+    executor, the same size: one per frame asked, at most ``jobs``). Returns what ends when they
+    are started (``_workers_started``); None where nothing was started: on a cluster, with one
+    job, or for one frame."""
+    count = min(jobs_and_threads(jobs, scheduler)[0], config.animation.frames if frames is None else len(frames))
+    if scheduler or count < 2:
         return None
-    thread = threading.Thread(target=_compile_in_a_worker, args=(jobs,), name="sunshade-compile", daemon=True)
-    thread.start()
-    return thread
+    trees = config.canopy.trees is not None and not config.canopy.meshes
+    starting: Starting = concurrent.futures.Future()
+    threading.Thread(target=_ready_workers, args=(starting, count, trees and not loops_cached(), os.getpid()),
+                     name="sunshade-workers", daemon=True).start()
+    return starting
 
 
-def _compile_in_a_worker(jobs: int) -> None:
-    """``rasteriser.compile_loops`` in one of the ``jobs`` local worker processes that the cycle phase
-    then reuses (joblib's reusable executor, the same size)."""
-    with contextlib.suppress(Exception):  # only a head start: each cycle product compiles them otherwise
-        joblib.Parallel(n_jobs=jobs)([joblib.delayed(rasteriser_compile_loops)()])
+def _ready_workers(starting: Starting, count: int, compile_cycle: bool, command: int) -> None:
+    """``_ready_worker`` in each of the ``count`` local worker processes, the first compiling the cycle
+    products' loops if ``compile_cycle``; ``starting`` ends with what it raised, if anything."""
+    try:
+        joblib.Parallel(n_jobs=count)(joblib.delayed(_ready_worker)(command, compile_cycle and k == 0)
+                                      for k in range(count))
+    except BaseException as exc:
+        starting.set_exception(exc)
+    else:
+        starting.set_result(None)
 
 
-def _end_compiling(thread: threading.Thread | None) -> None:
-    """Wait for ``_compile_cycle_loops``'s thread to end (None: nothing)."""
-    if thread is not None:
-        thread.join()
+def _ready_worker(command: int, compile_cycle: bool) -> None:
+    """A worker process started and its modules imported (by loading this task), its end with the
+    command ``command`` watched (``cores.end_if_orphaned``), its memory kept from being taken for a
+    leak (``_keep_worker``); the cycle products' loops compiled (or loaded) if ``compile_cycle``."""
+    end_if_orphaned(command)
+    _keep_worker()
+    if compile_cycle:
+        rasteriser_compile_loops()
+
+
+def _keep_worker() -> None:
+    """Keep this worker process through the run: joblib's workers (loky's) measure their memory
+    after their first task and end themselves, to be started again, where it has grown by 300 MB
+    since. After ``_ready_worker``, a small first task, the first frame or cycle product grows it by
+    more (a frame's rasters and caches), so the worker was ended there: started, imported and loaded
+    again (2 s of CPU) and the command printed "A worker stopped while some jobs were given to the
+    executor" (docs/accuracy.md, "A run's start and end"). Where loky has no such check (no
+    psutil, or another version), nothing is done."""
+    with contextlib.suppress(ImportError):
+        from joblib.externals.loky import process_executor  # type: ignore[import-untyped]
+
+        if getattr(process_executor, "_USE_PSUTIL", None) is True:
+            process_executor._USE_PSUTIL = False  # its one switch: read by the worker's loop after each task
+
+
+def _workers_started(starting: Starting | None) -> None:
+    """Wait for ``_start_workers``'s workers (None: nothing). One that died meanwhile (killed, out of
+    memory) raises BrokenProcessPool, which ends the run with ``_backend``'s line, as in a phase,
+    instead of a phase starting another unseen; any other error is left to the phases."""
+    if starting is not None and isinstance(error := starting.exception(), BrokenProcessPool):
+        raise error
+
+
+def _end_starting(starting: Starting | None) -> None:
+    """Wait for ``_start_workers``'s thread to end, whatever it raised (None: nothing)."""
+    if starting is not None:
+        starting.exception()
 
 
 def _compile_frame_loops(plan: RunPlan) -> None:
@@ -449,6 +496,19 @@ def _compile_frame_loops(plan: RunPlan) -> None:
         compile_loops(plan)
         with contextlib.suppress(Exception):  # only a head start: a frame meets the same error itself
             display_codes(np.zeros((2, 2, 3), dtype=np.float32), exposure=1.0)
+
+
+def _frame_loops_cached() -> bool:
+    """Whether numba's cache on disk holds the frames' loops (its index of ``_last_frame_loop``
+    exists), so that the workers load them: loading them here too only took a core from the
+    workers' first frames (1 to 2 s of CPU for configs/eclipse.yaml). After an install it does not,
+    and ``_compile_frame_loops`` compiles them once; after an edit of a kernel the workers each
+    compile what changed, as they would without this."""
+    loop = _last_frame_loop()
+    try:
+        return os.path.exists(loop._cache._cache_file._index_path)  # numba's FunctionCache: its index file
+    except AttributeError:
+        return False
 
 
 def _last_frame_loop() -> Any:
