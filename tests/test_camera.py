@@ -102,6 +102,9 @@ def test_constant_mipmap_has_the_bits_of_the_array_levels(shape, value):
     assert mip.shapes == tuple(level.shape[:2] for level in levels)
     for k, level in enumerate(levels):
         assert mip.level(k).tobytes() == level.tobytes()
+    moved = np.moveaxis(np.ascontiguousarray(np.moveaxis(raster, -1, 0)), 0, -1)  # channels first in memory
+    assert mip.texels.tobytes() == mipmap(moved, Grid((0.0, 0.0), 0.5, shape), outside="constant",
+                                          value=value).texels.tobytes()
     stored = mip.texels[mip.offsets[-1]:].reshape(3, 3, 3)
     assert stored[0].tobytes() == np.broadcast_to(value, (3, 3)).tobytes()
 
@@ -545,6 +548,24 @@ def test_horizon_row_and_antialiased_coverage():
     np.testing.assert_allclose(image[row], f * 0.5 + (1 - f) * 2.0, rtol=1e-5)
     np.testing.assert_allclose(image[:row], 2.0)
     np.testing.assert_allclose(image[row + 1:], 0.5, rtol=1e-6)
+
+
+@pytest.mark.parametrize("pitch", [-0.2, -1.2, 0.5])  # the horizon in view; ground alone; sky alone
+def test_background_is_f_ground_plus_1_minus_f_sky_to_the_bit(pitch):
+    """pinhole.background (f ground made channels first, added to (1 - f) sky channel by channel)
+    gives the bits of the image's float32 products f ground + (1 - f) sky."""
+    view = Camera((0.0, 0.0, 1.7), 1.1, pitch, 0.7, 24, 61)
+    grid = Grid((-30.0, 30.0), 0.25, (240, 240))
+    irradiance = mipmap(np.random.default_rng(5).random((240, 240, 3)).astype(np.float32) * 3.0, grid,
+                        outside="constant", value=np.full(3, 1.5, dtype=np.float32))
+    sky = UniformSky(np.array([2.0, 1.5, 1.0]))
+    ground, fraction, distance = ground_view(view, irradiance=irradiance, albedo=constant_mip(0.4))
+    assert (fraction < 1).any() == (pitch > -1)
+    f = fraction[..., None]
+    want = ground * f + camera.sky_view(view, sky) * (np.float32(1) - f)
+    got, got_distance = background(view, irradiance=irradiance, albedo=constant_mip(0.4), sky=sky)
+    assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+    assert got_distance.tobytes() == distance.tobytes()
 
 
 def test_far_ground_does_not_alias():

@@ -317,6 +317,7 @@ def test_coarser_isolated_is_the_block_mean_mask_and_the_correlation_at_its_cell
 @pytest.mark.parametrize("fft_shape, start, count, workers", [
     ((540, 625), -174, 175, 1), ((864, 864), -439, 440, 2), ((75, 96), 30, 60, 1), ((81, 50), -7, 81, 2),
     ((64, 90), 5, 150, 1),  # more rows than the period: wrapped round
+    ((540, 625), 0, 175, 1), ((75, 96), 10, 60, 2),  # not wrapped: a view of the rows kept
 ])
 def test_a_correlations_kept_rows_are_irfft2s_rows_to_the_bit(fft_shape, start, count, workers):
     """shadow._correlate with ``rows``: its complex pass down the columns, then the real pass along
@@ -348,3 +349,26 @@ def test_a_block_placed_in_zeros_correlates_as_the_whole_raster_to_the_bit(fft_s
         want = shadow._correlate(raster, spectrum, fft_shape, workers, rows=rows)
         got = shadow._correlate(kernel, spectrum, fft_shape, workers, rows=rows, at=at)
         assert got.tobytes() == want.tobytes()
+
+
+def test_a_sky_raster_zero_but_for_a_block_gives_ground_isolated_to_the_bit():
+    """shadow.ground_isolated_block (the coarse sun kernel: only its rows transformed) gives the
+    bits of ground_isolated of the whole raster of zeros with the block in place."""
+    rng = np.random.default_rng(7)
+    checked = 0
+    while checked < 4:
+        window, canopy_grid, _, h, alpha, _, _, _, mask = random_case(rng, 3)
+        plan = shadow.plan_isolated(window, canopy_grid, height=h, alpha=alpha)
+        if plan.sky is None or min(plan.sky.shape) < 2:
+            continue
+        r0, c0 = (int(rng.integers(0, n - 1)) for n in plan.sky.shape)
+        block = rng.random((3, int(rng.integers(1, plan.sky.shape[0] - r0 + 1)),
+                            int(rng.integers(1, plan.sky.shape[1] - c0 + 1))), dtype=np.float32)
+        weighted = np.zeros((3, *plan.sky.shape), dtype=np.float32)
+        weighted[:, r0:r0 + block.shape[1], c0:c0 + block.shape[2]] = block
+        sky = SkyRaster(plan.sky, weighted, rng.random(3))
+        spectrum = shadow.occlusion_spectrum(1 - mask, plan)
+        want = shadow.ground_isolated(sky, spectrum, plan)
+        got = shadow.ground_isolated_block(block, (r0, c0), sky.irradiance, spectrum, plan)
+        assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+        checked += 1

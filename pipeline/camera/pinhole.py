@@ -383,14 +383,23 @@ def ground_view(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.M
     Near the horizon the footprints grow without bound and the samples reach the rasters'
     coarsest levels: their means for periodic rasters, the outside value otherwise.
     """
-    rows, e = _seen_irradiance(camera, irradiance)
+    rows, e = _seen_radiance(camera, irradiance, albedo)
     radiance = np.zeros((camera.height, camera.width, 3), dtype=np.float32)
+    if len(rows):
+        radiance[rows] = e.T.reshape(len(rows), camera.width, -1)
+    return radiance, ground_fractions(camera)[0], ground_distance(camera)
+
+
+def _seen_radiance(camera: Camera, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap],
+                   albedo: mipmap.MipMap | StochasticTiling):
+    """(the image rows that see ground, albedo E / pi (channels, pixels) float32 over their
+    footprints or None without such rows): ``ground_view``'s radiance, channels first. [radiance]"""
+    rows, e = _seen_irradiance(camera, irradiance)
     if len(rows):
         rho = albedo_in_view(camera, albedo)
         e = np.multiply(e, rho, out=e if len(e) >= len(rho) else None)  # (e rho) / pi in float32
         e *= np.float32(1.0 / np.pi)
-        radiance[rows] = e.T.reshape(len(rows), camera.width, -1)
-    return radiance, ground_fractions(camera)[0], ground_distance(camera)
+    return rows, e
 
 
 def ground_irradiance(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.MipMap]) -> np.ndarray:
@@ -633,10 +642,32 @@ def background(camera: Camera, *, irradiance: mipmap.MipMap | Sequence[mipmap.Mi
     distance : numpy.ndarray
         (height, width) float32: the ground's (inf where there is no ground). [m]
     """
-    ground, _, distance = ground_view(camera, irradiance=irradiance, albedo=albedo)
-    sky_radiance = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()
+    rows, e = _seen_radiance(camera, irradiance, albedo)
     _, row, rest = ground_fractions(camera)
-    ground *= row  # f ground + (1 - f) sky in float32, in place
-    sky_radiance *= rest
-    ground += sky_radiance
-    return ground, distance
+    if not len(rows) or rows[-1] - rows[0] + 1 != len(rows):
+        ground = np.zeros((camera.height, camera.width, 3), dtype=np.float32)  # ground_view's radiance
+        if len(rows):
+            ground[rows] = e.T.reshape(len(rows), camera.width, -1)
+        sky_radiance = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()
+        ground *= row  # f ground + (1 - f) sky in float32, in place
+        sky_radiance *= rest
+        ground += sky_radiance
+        return ground, ground_distance(camera)
+    # the same float32 operations on the ground's rows, f ground made channels first and added to
+    # (1 - f) sky channel by channel: a pass less than the image's f ground, and no transposed copy
+    top, bottom = int(rows[0]), int(rows[-1]) + 1
+    ground = e.reshape(len(e), bottom - top, camera.width)
+    ground *= row[top:bottom, :, 0]
+    if seen_sky is None and not len(_sky_rays(camera)[0]):  # no sky in view: (1 - f) sky is +0 throughout
+        out = np.empty((camera.height, camera.width, 3), dtype=np.float32)
+        out[:top], out[bottom:] = 0.0, 0.0
+        for k in range(3):
+            np.add(ground[min(k, len(ground) - 1)], np.float32(0.0), out=out[top:bottom, :, k])
+        return out, ground_distance(camera)
+    out = sky_view(camera, sky) if seen_sky is None else seen_sky.copy()
+    out *= rest
+    out[:top] += np.float32(0.0)  # 0 f + (1 - f) sky where no ground is seen
+    out[bottom:] += np.float32(0.0)
+    for k in range(3):
+        np.add(ground[min(k, len(ground) - 1)], out[top:bottom, :, k], out=out[top:bottom, :, k])
+    return out, ground_distance(camera)

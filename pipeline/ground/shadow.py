@@ -46,7 +46,7 @@ from pipeline.core.geometry import Grid, fold, lattice_offset, sky_grid, sky_off
 
 __all__ = [
     "MAX_SKY_CELLS", "sky_half_cells", "IsolatedPlan", "plan_isolated", "occlusion_spectrum", "ground_isolated",
-    "coarser_isolated",
+    "ground_isolated_block", "coarser_isolated",
     "PeriodicPlan", "plan_periodic", "transmittance_spectrum", "ground_periodic", "SunPlan", "sun_offset_range",
     "plan_sun", "fine_mask_spectrum", "ground_sun", "resample_bilinear", "interpolation_matrices", "combine_layers",
 ]
@@ -210,6 +210,34 @@ def ground_isolated(sky: SkyRaster, spectrum: np.ndarray, plan: IsolatedPlan, *,
     if plan.sky is None:
         return np.broadcast_to(total, (len(total), *plan.window_shape)).copy()
     blocked = _correlate(sky.weighted, spectrum, plan.fft_shape, workers, rows=(plan.start[0], plan.window_shape[0]))
+    g = _take_wrapped(blocked, (0, plan.start[1]), plan.window_shape)
+    return np.subtract(total, g, out=g)
+
+
+def ground_isolated_block(block: np.ndarray, at: tuple[int, int], irradiance: np.ndarray, spectrum: np.ndarray,
+                          plan: IsolatedPlan, *, workers: int = 1) -> np.ndarray:
+    """``ground_isolated`` of a sky raster on ``plan.sky`` zero but for one block (the coarse sun
+    kernel), transforming only the block's rows along the rows (``_correlate``'s ``at``): the same bits.
+
+    Parameters
+    ----------
+    block : numpy.ndarray
+        (channels, r, c) float32: the raster's cells that are not zero, from (row, column) ``at``.
+    at : (int, int)
+        Where the block starts in the raster.
+    irradiance : numpy.ndarray
+        (channels,) float64: the whole raster's ``SkyRaster.irradiance`` [radiance x sr].
+    spectrum, plan, workers
+        As in ``ground_isolated``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (channels, rows, cols) float32, as ``ground_isolated`` [radiance x sr].
+    """
+    total = np.asarray(irradiance).astype(np.float32)[:, None, None]
+    blocked = _correlate(np.ascontiguousarray(block, dtype=np.float32), spectrum, plan.fft_shape, workers,
+                         rows=(plan.start[0], plan.window_shape[0]), at=at)
     g = _take_wrapped(blocked, (0, plan.start[1]), plan.window_shape)
     return np.subtract(total, g, out=g)
 
@@ -476,7 +504,8 @@ def fine_mask_spectrum(transmittance: np.ndarray, plan: SunPlan, *, workers: int
     return sfft.rfft2(m, s=plan.fft_shape, axes=(-2, -1), workers=workers)
 
 
-def ground_sun(kernel: SkyRaster, spectrum: np.ndarray, plan: SunPlan, *, workers: int = 1) -> np.ndarray:
+def ground_sun(kernel: SkyRaster, spectrum: np.ndarray, plan: SunPlan, *, workers: int = 1,
+               add_to: np.ndarray | None = None) -> np.ndarray:
     """Ground irradiance of the sun kernel through the fine mask.
 
     Exact for the discrete sum: every ray from the window through the kernel meets the fine mask.
@@ -490,11 +519,14 @@ def ground_sun(kernel: SkyRaster, spectrum: np.ndarray, plan: SunPlan, *, worker
         ``fine_mask_spectrum`` of the mask.
     plan, workers
         The SunPlan; the FFT thread count (optional).
+    add_to : numpy.ndarray or None
+        (channels, rows, cols) float32: when given, the light is added to it in place (the bits
+        of ``add_to + ground_sun(...)``, without the light's own copy) and it is returned.
 
     Returns
     -------
     numpy.ndarray
-        (channels, rows, cols) float32 [radiance x sr], as in ``ground_isolated``.
+        (channels, rows, cols) float32 [radiance x sr], as in ``ground_isolated`` (or ``add_to``).
 
     Raises
     ------
@@ -511,6 +543,8 @@ def ground_sun(kernel: SkyRaster, spectrum: np.ndarray, plan: SunPlan, *, worker
             f"offsets {plan.offset_lo}..{plan.offset_hi}"
         )
     lit = _correlate(kernel.weighted, spectrum, plan.fft_shape, workers, rows=(0, plan.window_shape[0]), at=u0)
+    if add_to is not None:
+        return np.add(add_to, lit[..., :, : plan.window_shape[1]], out=add_to)
     return np.ascontiguousarray(lit[..., :, : plan.window_shape[1]])
 
 
@@ -645,7 +679,9 @@ def _correlate(sky, spectrum, fft_shape, workers, rows=None, at=None):
         whole = sfft.irfft2(sky_spectrum, s=fft_shape, axes=(-2, -1), workers=workers)
         return whole if rows is None else _take_wrapped(whole, (rows[0], 0), (rows[1], fft_shape[1]))
     columns = sfft.ifft(sky_spectrum, axis=-2, norm="forward", workers=workers, overwrite_x=True)
-    kept = columns[..., (rows[0] + np.arange(rows[1])) % fft_shape[0], :]
+    first = rows[0] % fft_shape[0]  # the rows kept: a view where they do not wrap round the period
+    kept = (columns[..., first:first + rows[1], :] if first + rows[1] <= fft_shape[0]
+            else columns[..., (first + np.arange(rows[1])) % fft_shape[0], :])
     out = sfft.irfft(kept, n=fft_shape[1], axis=-1, norm="forward", workers=workers, overwrite_x=True)
     out *= np.float32(np.longdouble(1) / np.longdouble(fft_shape[0] * fft_shape[1]))  # pocketfft's T(1 / ldbl(N))
     return out

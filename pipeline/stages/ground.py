@@ -329,8 +329,10 @@ def ground_of_frame(context: FrameContext, *, outer: bool = False, parts: bool =
         sky_total = layers[0].sky_raster.irradiance
         kept = CoarseSky(_combined([g.sky_ground for g in layers], sky_total), sky_total,
                          tuple(g.sky_raster for g in layers))
-    return GroundResult(_combined([g.irradiance for g in layers], total), grid, total, exact, around, sky_part,
-                        kept)
+    # one layer: its own fresh raster, not a copy (the results above are copies of theirs)
+    irradiance = np.moveaxis(layers[0].irradiance, 0, -1) if len(layers) == 1 else _combined(
+        [g.irradiance for g in layers], total)
+    return GroundResult(irradiance, grid, total, exact, around, sky_part, kept)
 
 
 def _combined(grounds: list, unshadowed: np.ndarray) -> np.ndarray:
@@ -459,7 +461,7 @@ def _with_sun(context: FrameContext, lp: LayerPlan, spectra: LayerSpectra, sky_l
         kernel = sun_kernel(_sun_sky(sky), plan.sun_window.pixel / lp.height)
         g = shadow.resample_bilinear(g, plan.window, plan.sun_window)
         sky_part = g.copy() if parts else None
-        g += shadow.ground_sun(kernel, spectra.fine, lp.sun, workers=workers)
+        shadow.ground_sun(kernel, spectra.fine, lp.sun, workers=workers, add_to=g)
         total = total + kernel.weighted.sum(axis=(1, 2), dtype=np.float64)
         return replace(sky_light, irradiance=g, unshadowed=total, outer=g_outer, sky_part=sky_part)
     # a sun under scene.SHADOW_FLOOR throws the canopy's shadow beyond the window: its light
@@ -492,14 +494,20 @@ def _coarse_sun(context: FrameContext, lp: LayerPlan, spectra: LayerSpectra) -> 
         return shadow.ground_periodic(SkyRaster(kernel.grid, kernel.weighted, np.zeros(3)),
                                       spectra.coarse, coarse, spectra.mean, workers=workers)
     weighted = np.zeros((3, *coarse.sky.shape), dtype=np.float32) if coarse.sky else np.zeros((3, 1, 1), np.float32)
+    block = None
     if coarse.sky is not None:  # the kernel's cells inside the sky square; the rest reach the ground
         dr, dc = np.subtract(sky_offset(kernel.grid), sky_offset(coarse.sky))
         rows, cols = kernel.weighted.shape[1:]
         r0, c0 = max(dr, 0), max(dc, 0)
         r1, c1 = min(dr + rows, coarse.sky.shape[0]), min(dc + cols, coarse.sky.shape[1])
         if r1 > r0 and c1 > c0:
-            weighted[:, r0:r1, c0:c1] = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
-    outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - weighted.sum(axis=(1, 2), dtype=np.float64)
+            block = kernel.weighted[:, r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+            weighted[:, r0:r1, c0:c1] = block
+    inside = weighted.sum(axis=(1, 2), dtype=np.float64)  # the whole raster's sum, as SkyRaster.irradiance's
+    outside = kernel.weighted.sum(axis=(1, 2), dtype=np.float64) - inside
+    if block is not None:  # only the kernel's rows transformed: the same bits (shadow.ground_isolated_block)
+        return shadow.ground_isolated_block(block, (r0, c0), inside + outside, spectra.coarse, coarse,
+                                            workers=workers)
     raster = SkyRaster(coarse.sky or sky_grid((0, 0), (1, 1), kernel.grid.pixel), weighted, outside)
     return shadow.ground_isolated(raster, spectra.coarse, coarse, workers=workers)
 
