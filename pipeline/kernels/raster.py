@@ -13,6 +13,7 @@ import and one on-disk compile cache.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -22,8 +23,14 @@ __all__ = [
     "scatter_light", "leaf_heights",
 ]
 
+# Every loop is compiled without numba's C-callable wrapper (nothing takes a loop's address), and
+# the helpers, which only other loops call, without its Python one: each wrapper is only more LLVM
+# to build and optimise, about 0.4 s of CPU in all (docs/accuracy.md, "Compiling after an install").
+_LOOP: dict[str, Any] = {"no_cfunc_wrapper": True}
+_HELPER: dict[str, Any] = {"no_cfunc_wrapper": True, "no_cpython_wrapper": True}
 
-@njit(cache=True, nogil=True)
+
+@njit(cache=True, nogil=True, **_LOOP)
 def box_pixels(center: np.ndarray, half: np.ndarray, index: np.ndarray, rows: int, cols: int) -> int:
     """How many pixels the boxes hold within the raster.
 
@@ -65,7 +72,7 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 # "The leaf rasteriser").
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
     b = min(|nx|, |ny|): the CDF of a trapezoid (tests/test_canopy.py's _square_cdf, branch-free). One division:
@@ -79,7 +86,7 @@ def _square_cdf(t, a, b):
     return tail if t < 0 else np.float32(1.0) - tail
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _cover(d, nx, ny, kf, thick):
     """Coverage of one sub-sample from its signed distance d and normal (nx, ny) [pixel]; thick
     >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in.
@@ -134,7 +141,7 @@ def _pixel_cover(buf, base, w, k):
     return total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _multiply(buf, w, h, k, stride, x0, y0, transmittance):
     """transmittance[row, col] of the w x h box at (x0, y0) multiplied by 1 - cover, cover each
     pixel's ``_pixel_cover`` (row r's sub-samples from buf[r stride]) clipped just below 1, where
@@ -145,7 +152,7 @@ def _multiply(buf, w, h, k, stride, x0, y0, transmittance):
             transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE)) if cover > 0 else 1.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _emit(buf, w, h, k, stride, x0, y0, cols, pixel, coverage, source, shape, count):
     """The coverages of ``_multiply``'s pixels where cover > 0 as fragments (flat pixel, coverage
     clipped just below 1, ``shape``) appended at ``count``, row by row; returns the new count."""
@@ -179,7 +186,7 @@ def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
     return int(x0), int(y0), w, h, k, thick
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
 def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarray, prm: np.ndarray,
            feature: np.ndarray, thickness: np.ndarray, most: int, transmittance: np.ndarray,
            fragments: tuple[np.ndarray, np.ndarray, np.ndarray], owner: np.ndarray, count: int) -> int:
@@ -255,7 +262,7 @@ def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarra
     return count
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
     """The coverage by the ellipse prm[i] (the major unit vector, A, B) of the sub-samples of a box's
     h pixel rows, row r's (``_row_tables``' qx, qy, offsets from the centre (rx, ry) [pixel]) into
@@ -280,7 +287,7 @@ def _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
             buf[r * stride + j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
     """The coverage by the capsule piece prm[i] of the sub-samples of a box's h pixel rows, as
     ``_ellipse_box``."""
@@ -297,7 +304,7 @@ def _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
             buf[r * stride + j] = _cover(length - radius, nx * inv, ny * inv, kf, thick)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
 def _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf):
     """Clears the sub-samples of the box's pixels outside the capsule piece's stretch [t_lo, t_hi) of its
     axis, judged at the pixels' centres in float64 (the pieces of one capsule tile its axis): their
@@ -313,18 +320,16 @@ def _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf):
                     buf[r * stride + s * w + c] = 0.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _turn(v, k, c, s, out):
-    """Rodrigues: ``v`` (3,) turned about the unit axis ``k`` (3,) by the angle of cosine c and
-    sine s, into ``out`` (3,)."""
-    dot = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
-    x = v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * dot
-    y = v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * dot
-    z = v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * dot
-    out[0], out[1], out[2] = x, y, z
+@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+def _turn(v0, v1, v2, k0, k1, k2, c, s):
+    """Rodrigues: (v0, v1, v2) turned about the unit axis (k0, k1, k2) by the angle of cosine c and
+    sine s."""
+    dot = (k0 * v0 + k1 * v1 + k2 * v2) * (1 - c)
+    return (v0 * c + (k1 * v2 - k2 * v1) * s + k0 * dot, v1 * c + (k2 * v0 - k0 * v2) * s + k1 * dot,
+            v2 * c + (k0 * v1 - k1 * v0) * s + k2 * dot)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
 def flutter(center: np.ndarray, axis_u: np.ndarray, axis_v: np.ndarray, pivot: np.ndarray, swing_axis: np.ndarray,
             swing_phase: np.ndarray, twist_phase: np.ndarray, omega: float, swing: float,
             twist: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -352,26 +357,24 @@ def flutter(center: np.ndarray, axis_u: np.ndarray, axis_v: np.ndarray, pivot: n
     """
     n = center.shape[0]
     c_out, u_out, v_out = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-    length, turned, rel = np.empty(3), np.empty(3), np.empty(3)
     for i in range(n):
-        norm = math.sqrt(axis_u[i, 0] ** 2 + axis_u[i, 1] ** 2 + axis_u[i, 2] ** 2)
-        for d in range(3):
-            length[d] = axis_u[i, d] / norm
+        u0, u1, u2 = axis_u[i, 0], axis_u[i, 1], axis_u[i, 2]
+        norm = math.sqrt(u0 ** 2 + u1 ** 2 + u2 ** 2)
         angle = twist * math.sin(omega + twist_phase[i])
-        _turn(axis_v[i], length, math.cos(angle), math.sin(angle), turned)
+        t0, t1, t2 = _turn(axis_v[i, 0], axis_v[i, 1], axis_v[i, 2], u0 / norm, u1 / norm, u2 / norm,
+                           math.cos(angle), math.sin(angle))
         angle = swing * math.sin(omega + swing_phase[i])
         c, s = math.cos(angle), math.sin(angle)
-        for d in range(3):
-            rel[d] = center[i, d] - pivot[i, d]
-        _turn(rel, swing_axis[i], c, s, c_out[i])
-        for d in range(3):
-            c_out[i, d] += pivot[i, d]
-        _turn(axis_u[i], swing_axis[i], c, s, u_out[i])
-        _turn(turned, swing_axis[i], c, s, v_out[i])
+        a0, a1, a2 = swing_axis[i, 0], swing_axis[i, 1], swing_axis[i, 2]
+        p0, p1, p2 = pivot[i, 0], pivot[i, 1], pivot[i, 2]
+        x, y, z = _turn(center[i, 0] - p0, center[i, 1] - p1, center[i, 2] - p2, a0, a1, a2, c, s)
+        c_out[i, 0], c_out[i, 1], c_out[i, 2] = x + p0, y + p1, z + p2
+        u_out[i, 0], u_out[i, 1], u_out[i, 2] = _turn(u0, u1, u2, a0, a1, a2, c, s)
+        v_out[i, 0], v_out[i, 1], v_out[i, 2] = _turn(t0, t1, t2, a0, a1, a2, c, s)
     return c_out, u_out, v_out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
 def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
     """grove.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
 
@@ -399,7 +402,7 @@ def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
 def ellipse_params(order: np.ndarray, center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, origin_x: float,
                    origin_y: float, pixel: float, rows: float, cols: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -456,7 +459,7 @@ def ellipse_params(order: np.ndarray, center: np.ndarray, axis_a: np.ndarray, ax
     return c_px, half, prm, minor_out, thick
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **_LOOP)
 def leaf_fragments(flat: np.ndarray, shape: np.ndarray, leaves: int, cols: int, rows: int, focal: float,
                    n_forward: np.ndarray, n_right: np.ndarray, n_up: np.ndarray, n_rel: np.ndarray,
                    nearest: np.ndarray, farthest: np.ndarray, leaf_sky: np.ndarray, leaf_sun: np.ndarray,
@@ -510,7 +513,7 @@ def leaf_fragments(flat: np.ndarray, shape: np.ndarray, leaves: int, cols: int, 
             frag_sky[f, c] = leaf_sky[s, c]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **_LOOP)
 def scatter_light(flat: np.ndarray, weight: np.ndarray, frag_sun: np.ndarray, frag_sky: np.ndarray,
                   pixels: int) -> tuple[np.ndarray, np.ndarray]:
     """``trees.tree_passes``'s sun and sky images: each fragment's light times its weight added to its pixel.
@@ -544,7 +547,7 @@ def scatter_light(flat: np.ndarray, weight: np.ndarray, frag_sun: np.ndarray, fr
     return sun, sky
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **_LOOP)
 def leaf_heights(shape: np.ndarray, leaves: int, px: np.ndarray, py: np.ndarray, cx: np.ndarray, cy: np.ndarray,
                  slope_x: np.ndarray, slope_y: np.ndarray, h_center: np.ndarray, reach: np.ndarray,
                  height: np.ndarray) -> None:
