@@ -15,12 +15,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pipeline.kernels import HELPER, LOOP
+
 __all__ = ["resample_separable", "haze_over", "sky_rows", "lattice_read", "taps_read", "points_over", "rows_sum",
            "walls_on_ground", "exposed_display", "display_codes",
            "scattering_weights", "hermite_mean"]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def resample_separable(raster: np.ndarray, row_at: np.ndarray, row_weight: np.ndarray, col_at: np.ndarray,
                        col_weight: np.ndarray, out: np.ndarray) -> None:
     """``shadow.resample_bilinear``'s ``R @ image @ C.T`` per channel.
@@ -64,7 +66,7 @@ def resample_separable(raster: np.ndarray, row_at: np.ndarray, row_weight: np.nd
                     out[ch, i, j] = total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def haze_over(background: np.ndarray, transmittance: np.ndarray, veil: np.ndarray, horizon: np.ndarray) -> None:
     """``frame.render_frame``'s haze, in place: the background becomes ``T B + (1 - T) L_horizon + 0``.
 
@@ -90,7 +92,7 @@ def haze_over(background: np.ndarray, transmittance: np.ndarray, veil: np.ndarra
                 background[i, j, k] = (background[i, j, k] * t + v * horizon[j, k]) + zero
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def sky_rows(along: np.ndarray, row_at: np.ndarray, row_frac: np.ndarray, first: int, count: int, clouded: bool,
              transmittance: np.ndarray, glow: np.ndarray, weights: np.ndarray, out: np.ndarray) -> None:
     """Rows ``first`` to ``first + count`` of ``procedural.ProceduralSky.raster``'s weighted raster.
@@ -135,7 +137,7 @@ def sky_rows(along: np.ndarray, row_at: np.ndarray, row_frac: np.ndarray, first:
                 out[c, row, j] = value * weights[row, j]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def lattice_read(flat: np.ndarray, corner: np.ndarray, taps: np.ndarray, lattice: int, out: np.ndarray) -> None:
     """``brdf_bands.sky_ratio``'s bilinear read of a lattice at n points (tests/reference.py's ``lattice_read_arrays``).
 
@@ -166,7 +168,7 @@ def lattice_read(flat: np.ndarray, corner: np.ndarray, taps: np.ndarray, lattice
 
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def taps_read(flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray, bottom_left: np.ndarray,
               bottom_right: np.ndarray, fx: np.ndarray, fy: np.ndarray, out: np.ndarray, start: int, stop: int) -> None:
     """``view.read_taps``'s bilinear read of a raster at points start to stop - 1.
@@ -198,7 +200,7 @@ def taps_read(flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray, bot
             out[p, k] = np.float32(top * gy + bottom * y)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _bilinear(flat, a, b, c, d, x, y, k):
     """Channel ``k`` of ``flat`` read bilinearly between the rows a, b (top) and c, d (bottom) at the
     fractions x, y, in float64, rounded to float32."""
@@ -208,7 +210,7 @@ def _bilinear(flat, a, b, c, d, x, y, k):
     return np.float32(top * gy + bottom * y)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int, cols: int, hit_distance: np.ndarray,
                 first: np.ndarray, sample: np.ndarray, flat: np.ndarray, top_left: np.ndarray, top_right: np.ndarray,
                 bottom_left: np.ndarray, bottom_right: np.ndarray, fx: np.ndarray, fy: np.ndarray,
@@ -268,7 +270,7 @@ def points_over(radiance: np.ndarray, distance: np.ndarray, top: int, left: int,
             distance[row, col] = nearest
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def rows_sum(values: np.ndarray) -> np.ndarray:
     """``values.sum(axis=0)`` of a C-ordered (n, channels) float32 array: row after row from 0, in
     float32, as numpy's reduction over the outer axis adds them (``stages.walls``' mean of a wall's light).
@@ -290,7 +292,7 @@ def rows_sum(values: np.ndarray) -> np.ndarray:
     return total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def walls_on_ground(sky_light: np.ndarray, total: np.ndarray, keep: np.ndarray, factor: np.ndarray,
                     in_front: np.ndarray, front: np.ndarray, back: np.ndarray, sun_keep: np.ndarray, lit: bool,
                     sky_out: np.ndarray, total_out: np.ndarray, start: int, stop: int) -> None:
@@ -339,7 +341,7 @@ _ACES = tuple(np.float32(c) for c in (0.0, 1.0, 2.51, 0.03, 2.43, 0.59, 0.14))
 _SRGB = tuple(np.float32(c) for c in (0.0031308, 12.92, 1.055, 0.055, 255.0, 0.5))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def exposed_display(radiance: np.ndarray, gain: np.ndarray, filmic: bool, out: np.ndarray) -> None:
     """``composite.display`` up to the sRGB power: exposed, ACES-filmic if ``filmic``, clipped.
 
@@ -375,7 +377,7 @@ def exposed_display(radiance: np.ndarray, gain: np.ndarray, filmic: bool, out: n
             line[j] = min(max(x, zero), one)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def display_codes(linear: np.ndarray, powered: np.ndarray, half_dither: np.ndarray, out: np.ndarray) -> None:
     """``composite.srgb_encode`` from its power on, then ``io.write_png``'s 8-bit codes.
 
@@ -418,7 +420,7 @@ def _interval(points, x):
     return lo
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def scattering_weights(tau: np.ndarray, nodes: np.ndarray, tables: np.ndarray, sun_weight: np.ndarray,
                        sky_weight: np.ndarray) -> None:
     """The multiple-scattering weights of ``clouds.CloudLayer.radiance``: ``np.interp`` of two tables at
@@ -472,7 +474,7 @@ def scattering_weights(tau: np.ndarray, nodes: np.ndarray, tables: np.ndarray, s
         sky_weight[i] = np.float32(values[1])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def hermite_mean(field: np.ndarray, spread: np.ndarray, nodes: np.ndarray, weights: np.ndarray, values: np.ndarray,
                  levels: np.ndarray, out: np.ndarray) -> None:
     """``clouds.CloudLayer.coverage``'s mean over a footprint: ``out`` gets ``sum_k weights[k]

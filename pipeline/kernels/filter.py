@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.core.cores import in_shares
+from pipeline.kernels import HELPER, LOOP
 
 __all__ = ["filtered", "tap_table", "filtered3_at", "footprint_axes", "row_footprints", "filter_choice",
            "halve_level"]
@@ -48,7 +49,7 @@ def _first_texel(channels, offset, rows, cols, periodic, col, row):
     return ((r0 * (cols + 2) + c0) + offset + cols + 3) * channels, fc, fr
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _bilinear(flat, first, channels, step, k, fc, fr):
     """Channel ``k`` of the bilinear sample whose first texel is ``first`` (``_first_texel``),
     ``step`` the flat stride of a stored row: tests/reference.py's ``_bilinear`` float32 arithmetic, each
@@ -183,7 +184,7 @@ def _read(r, channels, offsets, shapes, origins, pixels, x, y, footprint, major,
             step, stepb, nf)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def _filtered_channels(flat, channels, offsets, shapes, origins, pixels, periodic, x, y, footprint, major, ex, ey,
                        taps, level, blend, out, start, stop):
     """``filtered`` of any count of channels, reads start to stop - 1."""
@@ -247,7 +248,7 @@ def tap_table(channels: int, offsets: np.ndarray, shapes: np.ndarray, origins: n
     return start, first, fc, fr
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major, ex, ey, taps, level, blend, start,
                first, fc, fr):
     """``tap_table``'s loop, into its arrays: read r's taps where ``_read`` puts them, level by level (a
@@ -274,7 +275,7 @@ def _tap_table(channels, offsets, shapes, origins, pixels, periodic, x, y, major
     start[x.shape[0]] = k
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def filtered3_at(flat: np.ndarray, shapes: np.ndarray, taps: np.ndarray, level: np.ndarray, blend: np.ndarray,
                  start: np.ndarray, first: np.ndarray, fc: np.ndarray, fr: np.ndarray, out: np.ndarray, begin: int,
                  end: int) -> None:
@@ -364,7 +365,7 @@ def _axes(dxdu, dxdv, dydu, dydv):
     return major, minor, ex / norm, ey / norm
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def footprint_axes(dxdu: np.ndarray, dxdv: np.ndarray, dydu: np.ndarray,
                    dydv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``_axes`` (``mipmap.footprint_axes``) of every Jacobian.
@@ -388,7 +389,7 @@ def footprint_axes(dxdu: np.ndarray, dxdv: np.ndarray, dydu: np.ndarray,
     return out[0], out[1], out[2], out[3]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def row_footprints(rows: np.ndarray, part: np.ndarray, width: int, height: int, focal: float, position: np.ndarray,
                    right: np.ndarray, up: np.ndarray, forward: np.ndarray, min_downward: float, x: np.ndarray,
                    y: np.ndarray, major: np.ndarray, minor: np.ndarray, ex: np.ndarray, ey: np.ndarray,
@@ -452,7 +453,7 @@ def row_footprints(rows: np.ndarray, part: np.ndarray, width: int, height: int, 
             i += 1
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def filter_choice(texel: float, lod_bias: float, count: int, max_taps: int, major: np.ndarray, minor: np.ndarray,
                   taps: np.ndarray, level: np.ndarray, blend: np.ndarray) -> None:
     """``mipmap.filter_choice`` footprint by footprint, the same float64 operations.
@@ -514,7 +515,7 @@ def filter_choice(texel: float, lod_bias: float, count: int, max_taps: int, majo
         blend[j] = np.float32(t)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def halve_level(texels: np.ndarray, source: int, rows: int, cols: int, target: int) -> None:
     """One step of the constant mip map's levels (``mipmap._constant_mipmap``; its numpy reference
     tests/reference.py, ``constant_levels``): one level averaged 2 x 2 into the next, in place.

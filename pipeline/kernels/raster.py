@@ -13,24 +13,19 @@ import and one on-disk compile cache.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numba import njit
+
+from pipeline.kernels import HELPER, LOOP
 
 __all__ = [
     "box_pixels", "shapes", "flutter", "onto", "ellipse_params", "leaf_fragments",
     "scatter_light", "leaf_heights",
 ]
 
-# Every loop is compiled without numba's C-callable wrapper (nothing takes a loop's address), and
-# the helpers, which only other loops call, without its Python one: each wrapper is only more LLVM
-# to build and optimise, about 0.4 s of CPU in all (docs/accuracy.md, "Compiling after an install").
-_LOOP: dict[str, Any] = {"no_cfunc_wrapper": True}
-_HELPER: dict[str, Any] = {"no_cfunc_wrapper": True, "no_cpython_wrapper": True}
 
-
-@njit(cache=True, nogil=True, **_LOOP)
+@njit(cache=True, nogil=True, **LOOP)
 def box_pixels(center: np.ndarray, half: np.ndarray, index: np.ndarray, rows: int, cols: int) -> int:
     """How many pixels the boxes hold within the raster.
 
@@ -72,7 +67,7 @@ _OPAQUE = np.float32(1.0 - 2.0**-20)
 # "The leaf rasteriser").
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _square_cdf(t, a, b):
     """Fraction of a unit square (centred on 0) where n . u <= t, |n| = 1, a = max(|nx|, |ny|),
     b = min(|nx|, |ny|): the CDF of a trapezoid (tests/test_canopy.py's _square_cdf, branch-free). One division:
@@ -86,7 +81,7 @@ def _square_cdf(t, a, b):
     return tail if t < 0 else np.float32(1.0) - tail
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _cover(d, nx, ny, kf, thick):
     """Coverage of one sub-sample from its signed distance d and normal (nx, ny) [pixel]; thick
     >= 0 (thin shapes) subtracts the parallel half-plane ``thick`` sub-sample widths further in.
@@ -141,7 +136,7 @@ def _pixel_cover(buf, base, w, k):
     return total
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _multiply(buf, w, h, k, stride, x0, y0, transmittance):
     """transmittance[row, col] of the w x h box at (x0, y0) multiplied by 1 - cover, cover each
     pixel's ``_pixel_cover`` (row r's sub-samples from buf[r stride]) clipped just below 1, where
@@ -152,7 +147,7 @@ def _multiply(buf, w, h, k, stride, x0, y0, transmittance):
             transmittance[y0 + r, x0 + c] *= 1.0 - float(min(cover, _OPAQUE)) if cover > 0 else 1.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _emit(buf, w, h, k, stride, x0, y0, cols, pixel, coverage, source, shape, count):
     """The coverages of ``_multiply``'s pixels where cover > 0 as fragments (flat pixel, coverage
     clipped just below 1, ``shape``) appended at ``count``, row by row; returns the new count."""
@@ -186,7 +181,7 @@ def _box(cx, cy, hx, hy, feature, thickness, rows, cols, most):
     return int(x0), int(y0), w, h, k, thick
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarray, prm: np.ndarray,
            feature: np.ndarray, thickness: np.ndarray, most: int, transmittance: np.ndarray,
            fragments: tuple[np.ndarray, np.ndarray, np.ndarray], owner: np.ndarray, count: int) -> int:
@@ -262,7 +257,7 @@ def shapes(capsule: bool, center: np.ndarray, half: np.ndarray, index: np.ndarra
     return count
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
     """The coverage by the ellipse prm[i] (the major unit vector, A, B) of the sub-samples of a box's
     h pixel rows, row r's (``_row_tables``' qx, qy, offsets from the centre (rx, ry) [pixel]) into
@@ -287,7 +282,7 @@ def _ellipse_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
             buf[r * stride + j] = _cover(d, (bp * ex - aq * ey) * inv, (bp * ey + aq * ex) * inv, kf, thick)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
     """The coverage by the capsule piece prm[i] of the sub-samples of a box's h pixel rows, as
     ``_ellipse_box``."""
@@ -304,7 +299,7 @@ def _capsule_box(prm, i, h, k, thick, qx, qy, stride, rx, ry, buf):
             buf[r * stride + j] = _cover(length - radius, nx * inv, ny * inv, kf, thick)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf):
     """Clears the sub-samples of the box's pixels outside the capsule piece's stretch [t_lo, t_hi) of its
     axis, judged at the pixels' centres in float64 (the pieces of one capsule tile its axis): their
@@ -320,7 +315,7 @@ def _clear_outside_stretch(prm, i, w, h, k, stride, rx, ry, buf):
                     buf[r * stride + s * w + c] = 0.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_HELPER)
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _turn(v0, v1, v2, k0, k1, k2, c, s):
     """Rodrigues: (v0, v1, v2) turned about the unit axis (k0, k1, k2) by the angle of cosine c and
     sine s."""
@@ -329,7 +324,7 @@ def _turn(v0, v1, v2, k0, k1, k2, c, s):
             v2 * c + (k0 * v1 - k1 * v0) * s + k2 * dot)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def flutter(center: np.ndarray, axis_u: np.ndarray, axis_v: np.ndarray, pivot: np.ndarray, swing_axis: np.ndarray,
             swing_phase: np.ndarray, twist_phase: np.ndarray, omega: float, swing: float,
             twist: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -374,7 +369,7 @@ def flutter(center: np.ndarray, axis_u: np.ndarray, axis_v: np.ndarray, pivot: n
     return c_out, u_out, v_out
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
     """grove.project's map of ``points`` along the sun onto the plane z = offset, in one pass.
 
@@ -402,7 +397,7 @@ def onto(points: np.ndarray, sx: float, sy: float, offset: float) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy", **_LOOP)
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def ellipse_params(order: np.ndarray, center: np.ndarray, axis_a: np.ndarray, axis_b: np.ndarray, origin_x: float,
                    origin_y: float, pixel: float, rows: float, cols: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -459,7 +454,7 @@ def ellipse_params(order: np.ndarray, center: np.ndarray, axis_a: np.ndarray, ax
     return c_px, half, prm, minor_out, thick
 
 
-@njit(cache=True, nogil=True, **_LOOP)
+@njit(cache=True, nogil=True, **LOOP)
 def leaf_fragments(flat: np.ndarray, shape: np.ndarray, leaves: int, cols: int, rows: int, focal: float,
                    n_forward: np.ndarray, n_right: np.ndarray, n_up: np.ndarray, n_rel: np.ndarray,
                    nearest: np.ndarray, farthest: np.ndarray, leaf_sky: np.ndarray, leaf_sun: np.ndarray,
@@ -513,7 +508,7 @@ def leaf_fragments(flat: np.ndarray, shape: np.ndarray, leaves: int, cols: int, 
             frag_sky[f, c] = leaf_sky[s, c]
 
 
-@njit(cache=True, nogil=True, **_LOOP)
+@njit(cache=True, nogil=True, **LOOP)
 def scatter_light(flat: np.ndarray, weight: np.ndarray, frag_sun: np.ndarray, frag_sky: np.ndarray,
                   pixels: int) -> tuple[np.ndarray, np.ndarray]:
     """``trees.tree_passes``'s sun and sky images: each fragment's light times its weight added to its pixel.
@@ -547,7 +542,7 @@ def scatter_light(flat: np.ndarray, weight: np.ndarray, frag_sun: np.ndarray, fr
     return sun, sky
 
 
-@njit(cache=True, nogil=True, **_LOOP)
+@njit(cache=True, nogil=True, **LOOP)
 def leaf_heights(shape: np.ndarray, leaves: int, px: np.ndarray, py: np.ndarray, cx: np.ndarray, cy: np.ndarray,
                  slope_x: np.ndarray, slope_y: np.ndarray, h_center: np.ndarray, reach: np.ndarray,
                  height: np.ndarray) -> None:

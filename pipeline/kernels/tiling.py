@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from pipeline.kernels import HELPER, LOOP
+
 __all__ = ["tiling_reads", "tiling_lookup", "cloud_field", "cloud_grid"]
 
 
@@ -43,7 +45,7 @@ _SECOND_KEY = np.uint64(0xD6E8FEB86659FD93)
 """``albedo.SECOND_KEY``."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: float, period_x: float, period_y: float,
                  weight: np.ndarray, read_x: np.ndarray, read_y: np.ndarray, read_pixel: np.ndarray,
                  read_weight: np.ndarray) -> int:
@@ -122,7 +124,7 @@ def tiling_reads(x: np.ndarray, y: np.ndarray, cell: float, seed: int, skip: flo
     return count
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _component(lookups, lv, up, k, g, norm, tb):
     """Component k mapped back from the Gaussian g through the lookups of levels lv and up,
     blended by tb (``tiling_lookup``)."""
@@ -135,7 +137,7 @@ def _component(lookups, lv, up, k, g, norm, tb):
     return here * (1.0 - tb) + there * tb
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def _tiling_lookup3(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
     """``tiling_lookup`` for three channels, in scalars."""
     n = out.shape[1]
@@ -202,7 +204,7 @@ def tiling_lookup(values: np.ndarray, read_pixel: np.ndarray, read_weight: np.nd
     loop(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def _tiling_lookup_channels(values, read_pixel, read_weight, weight, level, blend, lookups, center, basis, out):
     """``tiling_lookup`` of any count of channels."""
     channels, n = out.shape
@@ -370,7 +372,7 @@ def _tap_point(rows, cols, major, ex, ey, i, t, n_taps, direct):
     return rows[i] + -ey[i] * step, cols[i] + ex[i] * step
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _field_samples(flat, offsets, sides, rows, cols, direct, taps, k0, blend, major, ex, ey, out, tile_blend, seed,
                    base_row, base_col):
     """``cloud_field``'s loop over samples and taps. The levels are read here, not in a helper:
@@ -429,7 +431,7 @@ def _field_samples(flat, offsets, sides, rows, cols, direct, taps, k0, blend, ma
         out[i] = total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def cloud_field(flat: np.ndarray, offsets: np.ndarray, sides: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                 direct: bool, taps: np.ndarray, k0: np.ndarray, blend: np.ndarray, major: np.ndarray,
                 ex: np.ndarray, ey: np.ndarray, out: np.ndarray, tile_blend: float, seed: int, base_row: int,
@@ -507,7 +509,7 @@ def _column_copies(cols, side0, band, base_col):
     return col_count, col_copy, col_share
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **HELPER)
 def _column_taps(copy_row, cr, first_copy, cols, col_count, col_copy, seed_key, side0, shift_rows, col_ok, col_at,
                  col_w):
     """For row copy ``copy_row`` (the row's cr-th, 0 or 1) of ``cloud_grid``: the shift's row part
@@ -564,7 +566,7 @@ def _grid_row(flat, base, side0, count_row, share_lower, share_upper, col_count,
         out[at + j] = total
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", **LOOP)
 def cloud_grid(flat: np.ndarray, offsets: np.ndarray, sides: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                start: int, stop: int, out: np.ndarray, tile_blend: float, seed: int, base_row: int,
                base_col: int) -> np.ndarray:
