@@ -18,7 +18,7 @@ from pipeline.sky.base import Sky, UniformSky
 from pipeline.sky.ephemeris import obscured_fraction
 from pipeline.sky.equirect import EquirectSky, cut_sun
 from pipeline.sky.procedural import ProceduralSky
-from pipeline.sky.sun_disc import MoonDisc, SunDisc, sun_disc_radiance
+from pipeline.sky.sun_disc import MoonDisc, SunDisc, sun_disc_radiance, sun_light
 from pipeline.sky.sun_kernel import sun_irradiance, sun_kernel, unshadowed
 
 
@@ -693,3 +693,19 @@ def test_an_hdri_keeps_a_still_cameras_view():
     assert views[0] is not views[1] and views[2] is views[1] and not views[1].flags.writeable
     np.testing.assert_array_equal(views[1], hdri.view_radiance(w, None))
     assert hdri.view_radiance(w, None) is not hdri.view_radiance(w, None)
+
+
+def test_a_still_suns_light_made_once_gives_the_same_bits_and_only_for_its_sun():
+    sun, other = SunDisc(0.3, 0.5), SunDisc(0.3, 0.9)
+    light = sun_light(sun, 3.0, 200.0)
+    computed = ProceduralSky(turbidity=3.0, sun=sun, altitude=200.0)
+    carried = ProceduralSky(turbidity=3.0, sun=sun, altitude=200.0, light=light)
+    assert carried.sun_light is light and computed.sun_light is not light
+    assert carried.sun_normal_irradiance.tobytes() == computed.sun_normal_irradiance.tobytes()
+    assert carried.zenith_luminance == computed.zenith_luminance
+    # a light of another sun, turbidity or altitude is not taken: the sky's own is computed
+    for sky in (ProceduralSky(turbidity=3.0, sun=other, altitude=200.0, light=light),
+                ProceduralSky(turbidity=4.0, sun=sun, altitude=200.0, light=light),
+                ProceduralSky(turbidity=3.0, sun=sun, altitude=0.0, light=light)):
+        assert sky.sun_light is not light
+        assert sky.daylight == sun_light(sky.sun, sky.turbidity, sky.altitude).daylight

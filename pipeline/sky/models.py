@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import functools
 import warnings
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from typing import Protocol
 
@@ -23,7 +24,7 @@ from pipeline.sky.clouds import CloudLayer
 from pipeline.sky.eclipse import FULL_TABLE, METER_TABLE
 
 __all__ = ["FrameScene", "SkyModel", "ProceduralModel", "ConstantSky", "UniformModel", "HdriModel", "clear_sky",
-           "load_hdri"]
+           "load_hdri", "with_still_sun"]
 
 
 class FrameScene(Protocol):
@@ -120,9 +121,12 @@ class ProceduralModel:
     ----------
     config : SkyConfig
         The config's resolved ``sky`` section (``resolve``: turbidity looked up).
+    light : sun_disc.SunLight or None
+        The light of the run's sun where it stands still (``with_still_sun``), given to its skies.
     """
 
     config: SkyConfig
+    light: sun_disc.SunLight | None = field(default=None, compare=False, repr=False)
 
     def discs(self, fraction: float) -> tuple[datetime | None, sun_disc.SunDisc | None, sun_disc.MoonDisc | None]:
         """The sun and moon from the ephemeris at the time ``fraction`` through ``sky.time``, or
@@ -157,13 +161,13 @@ class ProceduralModel:
             clouds = CloudLayer(cover=c.cover, scale=c.scale, altitude=c.altitude,
                                 wind=c.wind, thickness=c.thickness, seed=c.seed)
         return clear_sky(self.config, scene.sun, moon=scene.moon, clouds=clouds, time=scene.time,
-                         eclipse_table=METER_TABLE if metering else FULL_TABLE)
+                         eclipse_table=METER_TABLE if metering else FULL_TABLE, light=self.light)
 
     def clear_light(self, sun: sun_disc.SunDisc | None) -> tuple[np.ndarray, np.ndarray]:
         """The clear sky's (no clouds, no moon) with ``sun``."""
         if sun is None:  # a procedural sky has a sun (``discs``)
             raise ValueError("a procedural sky needs a sun")
-        clear = clear_sky(self.config, sun)
+        clear = clear_sky(self.config, sun, light=self.light)
         return clear.sun_normal_irradiance, clear.clear_sky_irradiance
 
     def check(self) -> None:
@@ -250,7 +254,8 @@ class HdriModel:
 
 def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, *, moon: sun_disc.MoonDisc | None = None,
               clouds: procedural.Clouds | None = None, time: float = 0.0,
-              eclipse_table: tuple[int, int, int] = FULL_TABLE) -> procedural.ProceduralSky:
+              eclipse_table: tuple[int, int, int] = FULL_TABLE,
+              light: sun_disc.SunLight | None = None) -> procedural.ProceduralSky:
     """The procedural sky of a config with ``sun``.
 
     Parameters
@@ -259,9 +264,9 @@ def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, *, moon: sun_disc.MoonDisc 
         A procedural sky's resolved config section.
     sun : sun_disc.SunDisc
         The sun.
-    moon, clouds, time, eclipse_table
-        The moon, the clouds, the time [s] and the eclipse's table, as ``procedural.ProceduralSky`` takes
-        them.
+    moon, clouds, time, eclipse_table, light
+        The moon, the clouds, the time [s], the eclipse's table and the light of a still sun, as
+        ``procedural.ProceduralSky`` takes them.
 
     Returns
     -------
@@ -270,7 +275,32 @@ def clear_sky(sky: SkyConfig, sun: sun_disc.SunDisc, *, moon: sun_disc.MoonDisc 
     """
     return procedural.ProceduralSky(turbidity=sky.turbidity, sun=sun, skylight=sky.skylight, shape=sky.model,
                                 cie_type=sky.cie_type, altitude=sky.site.elevation if sky.site else 0.0,
-                                moon=moon, clouds=clouds, time=time, eclipse_table=eclipse_table)
+                                moon=moon, clouds=clouds, time=time, eclipse_table=eclipse_table, light=light)
+
+
+def with_still_sun(model: SkyModel, suns: Sequence[sun_disc.SunDisc | None]) -> SkyModel:
+    """A procedural model carrying the light of its sun (``sun_disc.sun_light``, pvlib) made once,
+    where the sun stands still over ``suns``.
+
+    The plan's model goes to the workers that render the frames: with the light in it they neither
+    import pvlib nor compute it again (docs/accuracy.md, "A worker's first frame"). A moving sun's
+    light is computed per frame.
+
+    Parameters
+    ----------
+    model : SkyModel
+        A config's sky model (``scene.sky_model``).
+    suns : sequence of sun_disc.SunDisc or None
+        The sun of each frame of the run.
+
+    Returns
+    -------
+    SkyModel
+        ``model`` with its ``light`` where it is procedural and ``suns`` are one sun; else ``model``.
+    """
+    if not isinstance(model, ProceduralModel) or len(set(suns)) != 1 or suns[0] is None:
+        return model
+    return replace(model, light=clear_sky(model.config, suns[0]).sun_light)
 
 
 @functools.lru_cache(maxsize=4)

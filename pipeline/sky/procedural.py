@@ -13,7 +13,7 @@ share its cached state.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Literal, Protocol, overload
 
@@ -22,7 +22,6 @@ from numpy.typing import ArrayLike
 
 from pipeline.config.vocabulary import DEFAULT_CIE_TYPE, PROCEDURAL_MODELS, TURBIDITY_RANGE
 from pipeline.core.colour import REC709_LUMINANCE
-from pipeline.core.constants import SUN_ANGULAR_RADIUS
 from pipeline.core.geometry import (
     Grid,
     direction_vector,
@@ -43,7 +42,15 @@ from pipeline.sky.nodes import (
     solid_angles32,
 )
 from pipeline.sky.raster import SkyRaster, kept_raster
-from pipeline.sky.sun_disc import MoonDisc, SunDisc, angle_to, disc_samples, sun_colour, sun_disc_radiance
+from pipeline.sky.sun_disc import (
+    MoonDisc,
+    SunDisc,
+    SunLight,
+    angle_to,
+    disc_samples,
+    sun_disc_radiance,
+    sun_light,
+)
 
 __all__ = ["CLEAR_SKY_NODE_SPACING", "Clouds", "ProceduralSky"]
 
@@ -154,6 +161,7 @@ class ProceduralSky:
     cie_type: int = DEFAULT_CIE_TYPE
     altitude: float = 0.0
     eclipse_table: tuple[int, int, int] = eclipse.FULL_TABLE
+    light: SunLight | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         lo, hi = TURBIDITY_RANGE
@@ -179,19 +187,25 @@ class ProceduralSky:
         return self.sun_direction[:2] / self.sun_direction[2]
 
     @cached_property
+    def sun_light(self) -> SunLight:
+        """The clear sky's daylight and the sun's colour at this sun, turbidity and altitude:
+        ``light`` where it is theirs (a still sun's, made once in the command), else
+        ``sun_disc.sun_light``'s (pvlib)."""
+        if self.light is not None and self.light.of(self.sun, self.turbidity, self.altitude):
+            return self.light
+        return sun_light(self.sun, self.turbidity, self.altitude)
+
+    @property
     def daylight(self) -> daylight.ClearDaylight:
         """The clear sky's direct and diffuse light at this sun, turbidity, altitude and distance."""
-        return daylight.sky_daylight(self.sun.elevation, self.turbidity, altitude=self.altitude,
-                                     distance_factor=(self.sun.angular_radius / SUN_ANGULAR_RADIUS) ** 2,
-                                     sun_radius=self.sun.angular_radius)
+        return self.sun_light.daylight
 
     @cached_property
     def sun_normal_irradiance(self) -> np.ndarray:
         """Clear, uneclipsed normal irradiance of the sun after the atmosphere (3,): the direct
-        normal illuminance of ``daylight`` in the colour of ``sun_colour`` (zeros with the disc
-        not wholly up). [klx]"""
-        zenith = min(np.pi / 2 - self.sun.elevation, np.pi / 2)
-        return self.daylight.direct_normal_illuminance * sun_colour(zenith, self.turbidity)
+        normal illuminance of ``daylight`` in the colour of ``sun_disc.sun_colour`` (zeros with the
+        disc not wholly up). [klx]"""
+        return self.daylight.direct_normal_illuminance * self.sun_light.colour
 
     def undimmed_sun_irradiance(self) -> np.ndarray:
         """The sun's horizontal irradiance before the moon and clouds dim it (the hidden part included).

@@ -16,9 +16,10 @@ from numpy.typing import ArrayLike
 from pipeline.core.colour import REC709_LUMINANCE
 from pipeline.core.constants import SUN_ANGULAR_RADIUS
 from pipeline.core.geometry import direction_vector, length3
-from pipeline.sky import eclipse
+from pipeline.sky import daylight, eclipse
 
-__all__ = ["LIMB_DARKENING", "RGB_WAVELENGTHS", "MoonDisc", "SunDisc", "sun_colour", "sun_disc_radiance"]
+__all__ = ["LIMB_DARKENING", "RGB_WAVELENGTHS", "MoonDisc", "SunDisc", "SunLight", "sun_colour", "sun_light",
+           "sun_disc_radiance"]
 
 
 RGB_WAVELENGTHS = eclipse.RGB_WAVELENGTHS
@@ -123,6 +124,79 @@ class SunDisc:
         u = np.asarray(self.limb_darkening, dtype=np.float64)
         if u.shape != (3,) or np.any(~((u >= 0) & (u <= 1))):
             raise ValueError(f"sun limb_darkening must be three numbers in [0, 1], got {self.limb_darkening}")
+
+
+@dataclass(frozen=True, eq=False)
+class SunLight:
+    """What pvlib's formulas give a procedural sky at its sun (``sun_light``): the clear sky's
+    daylight and the sun's colour, with the sun, turbidity and altitude they are of.
+
+    Made once in the command for a sun that stands still and carried by the plan's sky model, so
+    that the workers rendering the frames neither import pvlib nor compute them again
+    (docs/accuracy.md, "A worker's first frame").
+
+    Attributes
+    ----------
+    sun : SunDisc
+        The sun.
+    turbidity : float
+        Linke turbidity TL [1].
+    altitude : float
+        Of the site above sea level [m].
+    daylight : daylight.ClearDaylight
+        ``daylight.sky_daylight`` at the sun [W/m^2, klx].
+    colour : numpy.ndarray
+        (3,) ``sun_colour`` at the sun [1].
+    """
+
+    sun: SunDisc
+    turbidity: float
+    altitude: float
+    daylight: daylight.ClearDaylight
+    colour: np.ndarray
+
+    def of(self, sun: SunDisc, turbidity: float, altitude: float) -> bool:
+        """Whether this is the light of ``sun`` at ``turbidity`` [1] and ``altitude`` [m].
+
+        Parameters
+        ----------
+        sun : SunDisc
+            The sun.
+        turbidity : float
+            Linke turbidity TL [1].
+        altitude : float
+            Of the site above sea level [m].
+
+        Returns
+        -------
+        bool
+            True when all three are this light's.
+        """
+        return (self.sun, self.turbidity, self.altitude) == (sun, turbidity, altitude)
+
+
+def sun_light(sun: SunDisc, turbidity: float, altitude: float) -> SunLight:
+    """The clear sky's daylight (``daylight.sky_daylight``) and the sun's colour (``sun_colour``) at a sun.
+
+    Parameters
+    ----------
+    sun : SunDisc
+        The sun, at least ``daylight.TWILIGHT_END`` high; its angular radius gives its distance [rad].
+    turbidity : float
+        Linke turbidity TL [1].
+    altitude : float
+        Of the site above sea level [m].
+
+    Returns
+    -------
+    SunLight
+        Irradiances [W/m^2], illuminances [klx] and the colour [1].
+    """
+    light = daylight.sky_daylight(sun.elevation, turbidity, altitude=altitude,
+                                  distance_factor=(sun.angular_radius / SUN_ANGULAR_RADIUS) ** 2,
+                                  sun_radius=sun.angular_radius)
+    colour = sun_colour(min(np.pi / 2 - sun.elevation, np.pi / 2), turbidity)
+    return SunLight(sun, turbidity, altitude, light, colour)
 
 
 @dataclass(frozen=True)

@@ -296,8 +296,11 @@ def plan_run(config: Config) -> RunPlan:
     c = config.camera
     stops = c.exposure + framing.exposure_stops if framing.exposure_stops else c.exposure  # walls: the brightest
     exposure = ExposurePlan(stops, c.auto_exposure, config.animation.fps, c.white_balance)
+    from pipeline.sky.models import with_still_sun  # the models are imported on first use (docs/design.md)
+
+    sky = with_still_sun(sky_model(config.sky), [s.sun for s in scenes])  # a still sun's light made once
     plan = RunPlan(window, sun_window, projection, tuple(layers), framing.camera, framing.auto,
-                   None, tuple(scenes), sky_model(config.sky), config.sky.haze, config.canopy, config.ground,
+                   None, tuple(scenes), sky, config.sky.haze, config.canopy, config.ground,
                    FOREGROUNDS.load(config.foreground.model)(config.foreground), exposure, config.output,
                    config.path, follow, config.receivers)
     _check_sizes(config, plan)
