@@ -121,13 +121,13 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         Before any work.
     """
     started = time.perf_counter()
-    run, plan, starting = _plan(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
+    run, plan = _planned(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn)
     mine = set(config_item_keys(plan))
     timings: Timings = {}
     made, lock = _lock(run.folder)
     try:
         with contextlib.ExitStack() as held:  # the steps' threads joined, then ``mine`` let go
-            held.callback(_end_starting, starting)  # its worker never left writing numba's cache
+            held.callback(_end_starting, starting := _start_workers(config, frames, jobs, scheduler))  # checked inputs
             held.enter_context(run.store.in_use(mine))  # no other run's budget removes them meanwhile
             found = _check_folder(run, force=force)
             timings["check"] = time.perf_counter() - started
@@ -190,20 +190,11 @@ class _Found:
     remake_video: bool
 
 
-def _plan(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
-          scheduler: str | None, progress: Progress | None,
-          warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan, Starting | None]:
-    """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
-    the scheduler reached: what the later steps share; and the local workers being started meanwhile,
-    one compiling the cycle products' loops where they are not cached (``_start_workers``)."""
-    starting = _start_workers(config, frames, jobs or config.render.jobs, scheduler)
-    return (*_planned(config, frames, store, jobs=jobs, scheduler=scheduler, progress=progress, warn=warn), starting)
-
-
 def _planned(config: Config, frames: tuple[int, ...] | None, store: cache.Cache, *, jobs: int | None,
              scheduler: str | None, progress: Progress | None,
              warn: Callable[[str], None] | None) -> tuple[_Run, RunPlan]:
-    """``_plan``'s run and plan."""
+    """The run's plan, its inputs checked (``plan.check_inputs``) and its warnings said to ``warn``;
+    the scheduler reached: what the later steps share."""
     store = cache.Cache(store.root.absolute())  # workers elsewhere resolve no relative path
     plan = check_inputs(config)
     if warn is not None:
@@ -417,15 +408,17 @@ def _frame_task(config: Config, plan: RunPlan, frame: int, root: str, digest: st
 
 def _start_workers(config: Config, frames: tuple[int, ...] | None, jobs: int | None,
                    scheduler: str | None) -> Starting | None:
-    """With local workers: have joblib start them now, from a thread, while this process plans the
-    run and checks its folder, instead of when a phase first asks for them. Each imports what a
-    task needs (0.6 s of CPU) on the core the plan leaves idle, and where numba's cache lacks the
+    """With local workers: have joblib start them now, from a thread, once the run's inputs are
+    checked and its folder locked (a worker still starting as a command that failed ends prints
+    loky's traceback), while this process checks the folder and meters the exposures, instead of
+    when a phase first asks for them. Each imports what a task needs (0.6 s of CPU), and where numba's cache lacks the
     cycle products' loops (the built-in trees), one of them compiles them (``rasteriser.compile_loops``;
     docs/accuracy.md, "Compiling after an install"). The phases reuse them (joblib's reusable
     executor, the same size: one per frame asked, at most ``jobs``). Returns what ends when they
     are started (``_workers_started``); None where nothing was started: on a cluster, with one
     job, or for one frame."""
-    count = min(jobs_and_threads(jobs, scheduler)[0], config.animation.frames if frames is None else len(frames))
+    count = min(jobs_and_threads(jobs or config.render.jobs, scheduler)[0],
+                config.animation.frames if frames is None else len(frames))
     if scheduler or count < 2:
         return None
     trees = config.canopy.trees is not None and not config.canopy.meshes
