@@ -8,14 +8,11 @@ kernels ahead of a render's cycle products.
 
 from __future__ import annotations
 
-import os
-from typing import Any
-
 import numpy as np
 from numpy.typing import ArrayLike
 
 from pipeline.canopy.grove import FlutterParams, Grove, Shapes, leaves_at, project
-from pipeline.core.cores import compiled_once
+from pipeline.core.cores import compiled_once, on_disk
 from pipeline.core.geometry import Grid
 
 __all__ = ["rasterize_transmittance", "coverage_fragments", "grove_mask", "loops_cached", "compile_loops"]
@@ -243,11 +240,7 @@ def loops_cached() -> bool:
     """
     from pipeline.kernels import raster
 
-    loop: Any = raster.shapes
-    try:
-        return os.path.exists(loop._cache._cache_file._index_path)  # numba's FunctionCache: its index file
-    except AttributeError:
-        return False
+    return on_disk(raster.shapes)
 
 
 def compile_loops() -> None:

@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-__all__ = ["MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
+__all__ = ["on_disk", "MAX_JOBS_PER_CORE", "CLUSTER_TIMEOUT", "SCHEDULER_SCHEMES", "ORPHAN_CHECK", "scheduler_address",
            "default_workers", "jobs_and_threads", "loop_threads", "in_shares", "SHARES_PER_THREAD", "SMALLEST_SHARE",
            "end_if_orphaned", "compiled_once"]
 
@@ -191,6 +191,26 @@ def _watch(command: int) -> None:
 _ran_loops: set[str] = set()  # the compiled loops this process has run (compiled, or loaded from numba's cache)
 
 
+def on_disk(loop: Any) -> bool:
+    """Whether numba's cache on disk holds a compiled loop, so that a process loads it instead of
+    compiling it (docs/runs.md, "Compiled loops").
+
+    Parameters
+    ----------
+    loop : numba dispatcher
+        A function compiled with ``cache=True``.
+
+    Returns
+    -------
+    bool
+        The index file of its cache exists; False where numba keeps no cache of it.
+    """
+    try:
+        return os.path.exists(loop._cache._cache_file._index_path)  # numba's FunctionCache: its index file
+    except AttributeError:
+        return False
+
+
 @contextlib.contextmanager
 def compiled_once(loop: Any) -> Iterator[None]:
     """Hold off the machine's other processes while this one first runs a compiled loop that numba's
@@ -215,8 +235,8 @@ def compiled_once(loop: Any) -> Iterator[None]:
     lock = None
     if name not in _ran_loops:
         try:
-            cached = loop._cache  # numba's FunctionCache: its index file, its folder
-            if not os.path.exists(cached._cache_file._index_path):
+            if not on_disk(loop):
+                cached = loop._cache  # numba's FunctionCache: its folder
                 from filelock import FileLock
 
                 os.makedirs(cached._cache_path, exist_ok=True)

@@ -41,7 +41,14 @@ from pipeline.canopy.rasteriser import compile_loops as rasteriser_compile_loops
 from pipeline.canopy.rasteriser import loops_cached
 from pipeline.config.settings import Config
 from pipeline.core import io
-from pipeline.core.cores import CLUSTER_TIMEOUT, compiled_once, end_if_orphaned, jobs_and_threads, scheduler_address
+from pipeline.core.cores import (
+    CLUSTER_TIMEOUT,
+    compiled_once,
+    end_if_orphaned,
+    jobs_and_threads,
+    on_disk,
+    scheduler_address,
+)
 from pipeline.core.errors import RunError, SunshadeError, portable
 from pipeline.run.contents import exr_layers, frame_attributes, frame_picture, frame_record, in_working_space
 from pipeline.run.folder import (
@@ -497,11 +504,7 @@ def _frame_loops_cached() -> bool:
     workers' first frames (1 to 2 s of CPU for configs/eclipse.yaml). After an install it does not,
     and ``_compile_frame_loops`` compiles them once; after an edit of a kernel the workers each
     compile what changed, as they would without this."""
-    loop = _last_frame_loop()
-    try:
-        return os.path.exists(loop._cache._cache_file._index_path)  # numba's FunctionCache: its index file
-    except AttributeError:
-        return False
+    return on_disk(_last_frame_loop())
 
 
 def _last_frame_loop() -> Any:
