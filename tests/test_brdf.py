@@ -5,6 +5,7 @@ config's errors, the sun's term per pixel and the sky's view bands against a bru
 import numpy as np
 import pytest
 import reference
+from scenes import config_of, tiny_grove
 
 from pipeline.camera import brdf_view as brdf_camera
 from pipeline.camera import pinhole as cam
@@ -18,7 +19,6 @@ from pipeline.ground.view_bands import ViewBands
 from pipeline.sky.procedural import ProceduralSky
 from pipeline.sky.sun_disc import SunDisc
 from pipeline.texture import mipmap as texture
-from tests.scenes import config_of, tiny_grove
 
 PRESETS = {name: BrdfConfig(m, tuple(p.items()), name) for name, (m, p) in BRDF_PRESETS.items()}
 ROSSLI = BrdfConfig("rossli", (("f_iso", 0.1), ("f_vol", 0.05), ("f_geo", 0.02)))
