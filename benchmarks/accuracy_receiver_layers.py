@@ -10,8 +10,9 @@ layers, each holding about a quarter of the leaves (the wall: 1.8, 2.6, 3.4 and 
 ground: 2.26, 2.44, 2.69 and 2.92 m up, the crown being flat), by the same code path
 (``receivers.light``; for the level ground it is ``ground.shadow``'s, tests/test_receivers.py).
 Printed, over the deep shade (the pixels where the one-layer sun is hidden): the median light as
-the pipeline combines it (the product of the layers' sun + sky over the open light), the sky's
-part alone by its own product, and sun and sky each by its own product; by how many of the four
+the pipeline combines it (the sky's light and the sun's each by the product rule,
+``ground.layers.combine_lights``; before, the rule on their sum), the sky's part alone by its own
+product, and sun and sky each by its own product, computed here; by how many of the four
 layers hide the sun; and the sun's transmittance with one layer against the product of four
 (the layers' masks against the one layer's: a layer drawing leaves of another would darken it).
 """

@@ -5,6 +5,7 @@ from reference import direct_sum, equirect_patch, image_transmittance, monte_car
 from pipeline.canopy import masks as canopy
 from pipeline.core.geometry import Grid, fold, sky_grid, sky_offset
 from pipeline.ground import shadow
+from pipeline.ground.layers import combine_layers, combine_lights
 from pipeline.sky.base import UniformSky
 from pipeline.sky.equirect import EquirectSky
 from pipeline.sky.raster import SkyRaster
@@ -94,9 +95,9 @@ def test_layers_combine_by_the_product_rule():
     a = rng.random((3, 4, 5)).astype(np.float32) * i0[:, None, None]
     b = rng.random((3, 4, 5)).astype(np.float32) * i0[:, None, None]
     open_layer = np.broadcast_to(i0[:, None, None], a.shape).astype(np.float32)
-    assert np.allclose(shadow.combine_layers([a, open_layer], i0), a)
-    assert np.allclose(shadow.combine_layers([a, b], i0), a * b / i0[:, None, None])
-    assert np.allclose(shadow.combine_layers([a], i0), a)
+    assert np.allclose(combine_layers([a, open_layer], i0), a)
+    assert np.allclose(combine_layers([a, b], i0), a * b / i0[:, None, None])
+    assert np.allclose(combine_layers([a], i0), a)
 
 
 ALPHA_85 = np.radians(85)
@@ -372,3 +373,66 @@ def test_a_sky_raster_zero_but_for_a_block_gives_ground_isolated_to_the_bit():
         got = shadow.ground_isolated_block(block, (r0, c0), sky.irradiance, spectrum, plan)
         assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
         checked += 1
+
+
+def test_two_layers_under_sun_and_sky_match_world_monte_carlo():
+    """Two planes of opaque leaves (8 m and 5.5 m up) under a uniform sky and a small bright patch
+    standing for the sun: the layers' rasters combined with the sky's light and the sun's apart
+    (``layers.combine_lights``) against rays traced in world coordinates through both planes. Where
+    both planes hide the sun the paper's rule on the sum of the two lights scales the sky's light
+    down by the sun's share of the open-sky total; the lights combined apart do not."""
+    rng = np.random.default_rng(11)
+    p, size = 0.1, (20.0, 20.0)
+    n = 200
+    yy, xx = np.mgrid[0:n, 0:n]
+    masks = []
+    for _ in range(2):
+        mask = np.ones((n, n), np.float32)
+        for cx, cy, r in zip(rng.uniform(20, 180, 30), rng.uniform(20, 180, 30), rng.uniform(8, 20, 30)):
+            mask[(xx - cx) ** 2 + (yy - cy) ** 2 < r * r] = 0.0
+        masks.append(mask)
+    heights = (8.0, 5.5)
+    window = Grid.from_window((-8, -8, 8, 8), p)
+    sun_image, azimuth, zenith = equirect_patch(1024, 512, azimuth=np.radians((150, 153)),
+                                                zenith=np.radians((30, 33)), radiance=2000.0)
+    sky_image = np.ones((256, 512, 3), np.float32)
+
+    def layer(image, mask, height):
+        occlusion, grid = canopy.occlusion_on_lattice(mask, center=(0, 0), size=size, lattice=window)
+        plan = shadow.plan_isolated(window, grid, height=height, alpha=ALPHA_85)
+        raster = EquirectSky(image).raster(plan.sky)
+        return shadow.ground_isolated(raster, shadow.occlusion_spectrum(occlusion, plan), plan), raster.irradiance
+
+    skies, suns = zip(*[(layer(sky_image, m, h), layer(sun_image, m, h)) for m, h in zip(masks, heights)])
+    sky_total, sun_total = skies[0][1], suns[0][1]
+    grounds = [s[0] + u[0] for s, u in zip(skies, suns)]
+    apart = combine_lights(grounds, [s[0] for s in skies], sky_total + sun_total, sky_total)[0]
+    summed = combine_layers(grounds, sky_total + sun_total)[0]  # the paper's rule on the sum
+    planes = [image_transmittance(m, center=(0, 0), size=size) for m in masks]
+    # world rays through both planes, each ray's transmittances multiplied, from 60 ground pixels at
+    # random and 20 where each plane alone hides the sun (picked from the layers' sun rasters)
+    hidden = np.argwhere((suns[0][0][0] < 0.02 * sun_total[0]) & (suns[1][0][0] < 0.02 * sun_total[0]))
+    assert len(hidden) > 1000  # the case this is about is there
+    pick = np.concatenate([rng.integers(0, window.shape[0], (60, 2)), hidden[rng.choice(len(hidden), 20)]])
+    xs, ys = window.ground_from_raster(pick[:, 0], pick[:, 1])
+    truth = []
+    for x, y in zip(xs, ys):
+        def through(dx, dy, x=x, y=y):  # (dx, dy): a ray's offset per metre of height
+            return planes[0](x + heights[0] * dx, y + heights[0] * dy) * planes[1](x + heights[1] * dx,
+                                                                                 y + heights[1] * dy)
+        sky = monte_carlo_irradiance(np.zeros((1, 2)), height=1.0, transmittance=through,
+                                     radiance=lambda az, zen: np.ones((*np.shape(az), 1)), rays=64 * 64, rng=rng)
+        sun = monte_carlo_patch(np.zeros((1, 2)), height=1.0, transmittance=through, azimuth=azimuth,
+                                zenith=zenith, radiance=[2000.0], rays=4000, rng=rng)
+        truth.append(float(sky[0, 0] + sun[0, 0]))
+    truth, hidden_rows = np.array(truth), slice(60, None)
+    ours, paper = apart[pick[:, 0], pick[:, 1]], summed[pick[:, 0], pick[:, 1]]
+
+    def error(estimate, rows):  # mean absolute error over the mean light [1]
+        return np.abs(estimate - truth)[rows].mean() / truth[rows].mean()
+
+    # where both planes hide the sun the rule still assumes the planes uncorrelated, which they are
+    # not around the sun's direction there: 7 to 9% under the rays (seeds 11 to 13), the rule on
+    # the sum 47 to 49%
+    assert error(ours, hidden_rows) < 0.15 and error(paper, hidden_rows) > 0.35
+    assert error(ours, slice(60)) < 0.06 and error(ours, slice(60)) < 0.7 * error(paper, slice(60))

@@ -48,7 +48,7 @@ __all__ = [
     "MAX_SKY_CELLS", "sky_half_cells", "IsolatedPlan", "plan_isolated", "occlusion_spectrum", "ground_isolated",
     "ground_isolated_block", "coarser_isolated",
     "PeriodicPlan", "plan_periodic", "transmittance_spectrum", "ground_periodic", "SunPlan", "sun_offset_range",
-    "plan_sun", "fine_mask_spectrum", "ground_sun", "resample_bilinear", "interpolation_matrices", "combine_layers",
+    "plan_sun", "fine_mask_spectrum", "ground_sun", "resample_bilinear", "interpolation_matrices",
 ]
 
 if TYPE_CHECKING:
@@ -626,31 +626,6 @@ def _interpolation(u: np.ndarray, n: int) -> sparse.csr_matrix:
     at = np.arange(len(u))
     return sparse.csr_matrix((np.concatenate([1 - f, f]), (np.concatenate([at, at]),
                               np.concatenate([u0, u1]))), shape=(len(u), n))
-
-
-def combine_layers(grounds: Iterable[np.ndarray], unshadowed: ArrayLike) -> np.ndarray:
-    """Several canopy layers, assumed uncorrelated: the product of the layers' ground rasters over ``I0^(n - 1)``.
-
-    Max 1991, "Extensions to multiple shadow casting planes".
-
-    Parameters
-    ----------
-    grounds : sequence of numpy.ndarray
-        (channels, rows, cols) rasters [radiance x sr].
-    unshadowed : numpy.ndarray
-        (channels,) irradiance of the open sky [radiance x sr].
-
-    Returns
-    -------
-    numpy.ndarray
-        (channels, rows, cols) [radiance x sr].
-    """
-    layers = list(grounds)
-    i0 = np.asarray(unshadowed, dtype=np.float32)[:, None, None]
-    out = layers[0].copy()
-    for g in layers[1:]:
-        out *= np.divide(g, i0, out=np.zeros_like(g), where=i0 > 0)  # a dark channel stays 0
-    return out
 
 
 def _correlate(sky, spectrum, fft_shape, workers, rows=None, at=None):

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.core.geometry import Grid
+from pipeline.ground.layers import combine_layers, combine_lights
 from pipeline.ground.shadow import (
-    combine_layers,
     fine_mask_spectrum,
     ground_isolated,
     ground_sun,
@@ -151,7 +151,7 @@ def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: G
     sky_total = hemisphere_irradiance(radiance, plane)
     lit = sun_window is not None and sun_lights(sky, plane)
     sun_total = receiver_sun_irradiance(sky, plane) if lit else np.zeros(3)
-    coarse, fine, outer = [], [], []
+    coarse, fine, fine_sky, outer = [], [], [], []
     exact = True
     for layer in layers:
         occlusion, cells = layer.occlusion_on(window)
@@ -167,11 +167,12 @@ def receiver_light(radiance: Radiance, sky: Sky, plane: ReceiverPlane, window: G
         if coarse_sun:
             outer.append(g + (_sun_through(sky, plane, layer, window, workers) if lit else 0.0))
         if sun_window is not None:
-            fine.append(resample_bilinear(g, window, sun_window)
-                        + (_sun_through(sky, plane, layer, sun_window, workers) if lit else 0.0))
-    total = None if sun_window is None else combine_layers(fine, sky_total + sun_total)
+            fine_sky.append(resample_bilinear(g, window, sun_window))
+            fine.append(fine_sky[-1] + (_sun_through(sky, plane, layer, sun_window, workers) if lit else 0.0))
+    light = sky_total + sun_total  # the sky's light and the sun's combined apart (layers.combine_lights)
+    total = None if sun_window is None else combine_lights(fine, fine_sky, light, sky_total)
     return ReceiverLight(window, combine_layers(coarse, sky_total), sun_window, total, sky_total, sun_total, exact,
-                         combine_layers(outer, sky_total + sun_total) if coarse_sun else None)
+                         combine_lights(outer, coarse, light, sky_total) if coarse_sun else None)
 
 
 def _sun_through(sky: Sky, plane: ReceiverPlane, layer: Layer, sun_window: Grid, workers: int) -> np.ndarray:

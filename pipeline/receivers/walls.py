@@ -20,10 +20,10 @@ from pipeline.config.receivers import WALL_ALBEDOS, WallConfig
 from pipeline.core import io
 from pipeline.core.errors import ImageError
 from pipeline.core.geometry import Grid
+from pipeline.ground.layers import combine_lights
 from pipeline.ground.shadow import (
     IsolatedPlan,
     SunPlan,
-    combine_layers,
     fine_mask_spectrum,
     ground_isolated,
     ground_sun,
@@ -406,7 +406,7 @@ def wall_light_from(plan: WallPlan, spectra: WallSpectra, sky: Sky, ground: Arra
     if not plan.layers:
         image = np.broadcast_to((sky_total + sun_total).astype(np.float32), (*fine.shape, 3)).copy()
         return WallLight(plane, fine, image, sky_total, sun_total)
-    coarse, fined = [], []
+    coarse, fined, skies = [], [], []  # skies: each layer's sky part, where there are several
     for lp, spectrum, fine_spectrum in zip(plan.layers, spectra.coarse, spectra.fine):
         if lp.coarse.sky is None:
             g = unshadowed_on(window, sky_total)
@@ -421,12 +421,14 @@ def wall_light_from(plan: WallPlan, spectra: WallSpectra, sky: Sky, ground: Arra
                 return None
             sun = ground_sun(kernel, fine_spectrum, lp.sun, workers=workers)
         seen = resample_bilinear(g, window, fine)
+        skies += [seen.copy()] if len(plan.layers) > 1 else []
         if isinstance(sun, np.ndarray) and sun.dtype == seen.dtype:
             seen += sun  # in place: the bits of seen + sun
         else:
             seen = seen + sun
         fined.append(seen)
-    total = fined[0] if len(fined) == 1 else combine_layers(fined, sky_total + sun_total)  # one: itself, not a copy
+    # one layer: its raster itself, not a copy
+    total = fined[0] if len(fined) == 1 else combine_lights(fined, skies, sky_total + sun_total, sky_total)
     return WallLight(plane, fine, np.ascontiguousarray(np.moveaxis(total, 0, -1)), sky_total, sun_total)
 
 

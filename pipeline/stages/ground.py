@@ -18,6 +18,7 @@ from pipeline.config.settings import BrdfConfig
 from pipeline.core.cores import default_workers
 from pipeline.core.geometry import Grid, sky_grid, sky_offset
 from pipeline.ground import brdf_bands, shadow
+from pipeline.ground.layers import combine_layers, combine_lights
 from pipeline.sky.base import Sky
 from pipeline.sky.raster import SkyRaster
 from pipeline.sky.sun_kernel import sun_irradiance, sun_kernel
@@ -308,17 +309,20 @@ def ground_of_frame(context: FrameContext, *, outer: bool = False, parts: bool =
     """
     plan = context.plan
     outer = outer and plan.sun_window is not None and not _covers(plan.sun_window, plan.window)
-    layers = [_ground_of_layer(context, lp, spectra, outer=outer, parts=parts)
+    several = len(plan.layers) > 1  # the sky's light and the sun's combined apart: each layer's sky part
+    layers = [_ground_of_layer(context, lp, spectra, outer=outer, parts=parts or several)
               for lp, spectra in zip(plan.layers, context.spectra)]
     exact = True
     for layer in layers:
         exact &= layer.exact
-    total = layers[0].unshadowed
+    total, sky_total = layers[0].unshadowed, layers[0].sky_raster.irradiance
     grid = plan.sun_window or plan.window
-    around = GroundRaster(_combined([g.outer for g in layers], total), plan.window) if outer else None
+    around = None
+    if outer:
+        around = GroundRaster(_combined([g.outer for g in layers], total, [g.sky_ground for g in layers], sky_total),
+                              plan.window)
     sky_part = None
     if parts:
-        sky_total = layers[0].sky_raster.irradiance
         sky_around = None
         if outer:
             sky_around = GroundRaster(_combined([g.sky_ground for g in layers], sky_total), plan.window)
@@ -326,19 +330,22 @@ def ground_of_frame(context: FrameContext, *, outer: bool = False, parts: bool =
                                 sky_around)
     kept = None
     if coarse_sky:
-        sky_total = layers[0].sky_raster.irradiance
         kept = CoarseSky(_combined([g.sky_ground for g in layers], sky_total), sky_total,
                          tuple(g.sky_raster for g in layers))
     # one layer: its own fresh raster, not a copy (the results above are copies of theirs)
-    irradiance = np.moveaxis(layers[0].irradiance, 0, -1) if len(layers) == 1 else _combined(
-        [g.irradiance for g in layers], total)
+    irradiance = np.moveaxis(layers[0].irradiance, 0, -1) if not several else _combined(
+        [g.irradiance for g in layers], total, [g.sky_part for g in layers], sky_total)
     return GroundResult(irradiance, grid, total, exact, around, sky_part, kept)
 
 
-def _combined(grounds: list, unshadowed: np.ndarray) -> np.ndarray:
-    """The layers' rasters (channels, rows, cols) combined by the paper's product rule
-    (``shadow.combine_layers``), as (rows, cols, channels)."""
-    return np.moveaxis(shadow.combine_layers(grounds, unshadowed), 0, -1)
+def _combined(grounds: list, unshadowed: np.ndarray, skies: list | None = None,
+              sky_total: np.ndarray | None = None) -> np.ndarray:
+    """The layers' rasters (channels, rows, cols) combined by the paper's product rule, as (rows,
+    cols, channels): with their sky parts ``skies``, the sky's light and the sun's apart
+    (``layers.combine_lights``), else as one light (``layers.combine_layers``)."""
+    if skies is None or sky_total is None:
+        return np.moveaxis(combine_layers(grounds, unshadowed), 0, -1)
+    return np.moveaxis(combine_lights(grounds, skies, unshadowed, sky_total), 0, -1)
 
 
 def sky_view_terms(context: FrameContext, views: np.ndarray, ground: GroundResult, *,
