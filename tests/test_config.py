@@ -197,3 +197,64 @@ def test_a_sky_model_is_one_module_and_one_registry_line(tmp_path):
     uniform = parse_config({**base_config(), **sky_of, "sky": {"model": "uniform", "radiance": 2.5}}, tmp_path)
     frames = [render_frame(plan_run(resolve(c)), store=Cache(tmp_path / "cache")).radiance for c in (overcast, uniform)]
     assert frames[0].tobytes() == frames[1].tobytes() and frames[0].max() > 0
+
+
+YAML_NUMBERS = ["4e-2", "1E5", "1e-300", "2e+3", "1.5e3", "-.5", ".5e3", "-2.5e-3", "1.0e+3"]
+"""Floats in YAML 1.2: all but the last two YAML 1.1 (PyYAML's own resolver) reads as text."""
+
+
+def test_yaml_1_2_floats_are_numbers_and_the_rest_keeps_its_meaning(tmp_path):
+    """``pixel: 4e-2`` was refused as the text '4e-2'; Python's float() is the reference."""
+    import math
+
+    import yaml
+
+    from pipeline.config.yamlsafe import load_yaml
+
+    lines = [f"n{i}: {token}" for i, token in enumerate(YAML_NUMBERS)]
+    lines += ["quoted: '4e-2'", 'double: "1E5"', "seed: 7", "octal: 010", "zero_led: 08",
+              "inf: .inf", "nan: .nan", "half: 0.5", "version: 1.2.3", "day: 2024-06-01"]
+    _, data = load_yaml(write_config(tmp_path, "\n".join(lines) + "\n"))
+    for i, token in enumerate(YAML_NUMBERS):
+        assert type(data[f"n{i}"]) is float and data[f"n{i}"] == float(token), token
+        assert isinstance(yaml.safe_load(token), str if i < 7 else float)  # yaml.SafeLoader as it was
+    assert data["quoted"] == "4e-2" and data["double"] == "1E5"
+    assert type(data["seed"]) is int and data["seed"] == 7 and data["octal"] == 8
+    assert data["zero_led"] == "08" and data["version"] == "1.2.3" and str(data["day"]) == "2024-06-01"
+    assert data["inf"] == math.inf and math.isnan(data["nan"])
+    assert data["half"] == 0.5
+
+
+def test_a_pixel_written_4e_2_is_the_pixel_0_04_and_quoted_stays_text(tmp_path):
+    write_inputs(tmp_path)
+    text = "ground:\n  window: [-4, -4, 4, 4]\n  pixel: {}\ncanopy:\n  mask: mask.png\n"
+    exponent = load_config(write_config(tmp_path, text.format("4e-2"), "exponent.yaml"))
+    decimal = load_config(write_config(tmp_path, text.format("0.04"), "decimal.yaml"))
+    assert exponent.ground.pixel == 0.04 and exponent.digest() == decimal.digest()
+    path = write_config(tmp_path, text.format("'4e-2'"), "quoted.yaml")
+    with pytest.raises(ConfigError, match=f"{path}:3: ground.pixel: must be a number, not the text '4e-2'"):
+        load_config(path)
+
+
+def test_the_frame_rate_error_docs_runs_md_quotes_is_what_the_config_it_names_gets(tmp_path):
+    import re
+
+    doc = (ROOT / "docs" / "runs.md").read_text()
+    given, quoted = re.search(r"\(`(animation: \{fps: [^`]+\})` gives\s+`([^`]+)`\)", doc).groups()
+    path = write_config(tmp_path, given + "\n")
+    with pytest.raises(ConfigError) as caught:
+        resolve(load_config(path))
+    assert str(caught.value).endswith(f"{path}:1: {quoted}")
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "# a comment\n# another\n", "---\n", "~\n", "null\n"])
+def test_an_empty_config_is_refused_naming_the_file(tmp_path, text):
+    path = write_config(tmp_path, text, "empty.yaml")
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert str(caught.value) == (f"{path}: the config is empty; start from one of configs/*.yaml "
+                                 "(an explicit {} renders every default)")
+
+
+def test_an_explicit_empty_mapping_is_every_default(tmp_path):
+    assert load_config(write_config(tmp_path, "{}\n", "config.yaml")) == parse_config({}, tmp_path)

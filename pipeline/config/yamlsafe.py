@@ -2,12 +2,14 @@
 
 The one place a config's YAML is read: UTF-8 text of at most MAX_CONFIG_BYTES, nested at most
 MAX_YAML_DEPTH deep, at most MAX_YAML_VALUES values once its aliases are expanded, no key twice
-in a mapping; each limit is checked before anything big is built (docs/runs.md, "Errors").
+in a mapping; each limit is checked before anything big is built. Numbers are YAML 1.1's and
+YAML 1.2's floats (``4e-2``); an empty config is refused (docs/runs.md, "Errors").
 """
 
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,28 +28,43 @@ MAX_YAML_VALUES = 100_000
 MAX_YAML_DEPTH = 32
 """Deepest nesting of mappings and lists in a config."""
 _TOO_DEEP = f"nested too deep; the most is {MAX_YAML_DEPTH} levels"
+_EMPTY = ("the config is empty; start from one of configs/*.yaml (an explicit {} renders every "
+          "default)")
 
 
-def load_yaml(path: str | os.PathLike[str]) -> tuple[yaml.Node | None, Any]:
+class _ConfigLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (YAML 1.1) that also reads YAML 1.2's floats: ``4e-2``, ``1E5``,
+    ``1.5e3``, ``-.5``, which YAML 1.1 leaves as text (its floats need a dot and a signed
+    exponent). Digits alone keep their YAML 1.1 meaning: ``7`` an int, ``08`` text."""
+
+
+_ConfigLoader.add_implicit_resolver(  # tried after YAML 1.1's own, so 1.1's ints stay ints
+    "tag:yaml.org,2002:float",
+    re.compile(r"^(?=.*[.eE])[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?$"),
+    list("-+.0123456789"))
+
+
+def load_yaml(path: str | os.PathLike[str]) -> tuple[yaml.Node, Any]:
     """Read a YAML file, the one place YAML is read, within the limits of this module.
 
     Parameters
     ----------
     path : str or path-like
         The file: UTF-8 text of at most MAX_CONFIG_BYTES, at most MAX_YAML_DEPTH deep and
-        MAX_YAML_VALUES values with its aliases expanded.
+        MAX_YAML_VALUES values with its aliases expanded, not empty.
 
     Returns
     -------
-    node : yaml.Node or None
-        The document's node tree, with each node's line (None for an empty file).
+    node : yaml.Node
+        The document's node tree, with each node's line.
     data : object
-        The values it holds (None for an empty file).
+        The values it holds (``4e-2`` a float, as in YAML 1.2).
 
     Raises
     ------
     ConfigError
-        Naming the file (and line) of the first problem, before anything big is built.
+        Naming the file (and line) of the first problem, before anything big is built; for
+        an empty file, one holding only comments, or a bare null.
     """
     if problem := paths.problem(path):
         raise ConfigError(paths.shown(path), f"bad config path: {problem}")
@@ -66,18 +83,21 @@ def load_yaml(path: str | os.PathLike[str]) -> tuple[yaml.Node | None, Any]:
         line = raw[:exc.start].count(b"\n") + 1
         raise ConfigError(f"{path}:{line}", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
                           f"offset {exc.start}); save the config as UTF-8") from None
-    loader = yaml.SafeLoader(text)
+    loader = _ConfigLoader(text)
     try:
         depth = 0
-        for event in yaml.parse(text, Loader=yaml.SafeLoader):  # flat: no recursion
+        for event in yaml.parse(text, Loader=_ConfigLoader):  # flat: no recursion
             depth += (isinstance(event, yaml.CollectionStartEvent)
                       - isinstance(event, yaml.CollectionEndEvent))
             if depth > MAX_YAML_DEPTH:
                 raise ConfigError(f"{path}:{event.start_mark.line + 1}", _TOO_DEEP)
         node = loader.get_single_node()
-        if node is not None:
-            _expanded_size(node, 0, set(), {}, path)
-        data = loader.construct_document(node) if node is not None else None
+        if node is None:  # no document, or only comments: almost always a mistake
+            raise ConfigError(str(path), _EMPTY)
+        _expanded_size(node, 0, set(), {}, path)
+        data = loader.construct_document(node)
+        if data is None:  # a bare ``~`` or ``null``
+            raise ConfigError(str(path), _EMPTY)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark else str(path)
