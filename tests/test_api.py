@@ -11,6 +11,7 @@ from scenes import ROOT, tiny_grove, write_config
 import pipeline.api as api
 from pipeline.cli.main import main
 from pipeline.core import io
+from pipeline.core.errors import RunError
 from pipeline.sky.ephemeris import Site, contact_times
 
 ALL = "sun,sky,alpha,illuminance,depth"
@@ -131,3 +132,105 @@ def test_importing_the_api_stays_cheap():
     loaded = subprocess.run([sys.executable, "-c", "import sys, pipeline.api; print(' '.join(sys.modules))"],
                             capture_output=True, text=True, check=True, cwd=Path(__file__).parent).stdout.split()
     assert "PyOpenColorIO" not in loaded and "pipeline.stages.frame" not in loaded and "numba" not in loaded
+
+
+def quiet_grove(frames=2):
+    """``tiny_grove`` of ``frames`` frames and no video: a run of a frame or two takes a second."""
+    return tiny_grove(**{"animation.frames": frames}) | {"output": {"video": "none"}}
+
+
+@pytest.mark.parametrize("frames", ["0-x", "2", "1-0", [0.5], [True], [-1], [2], [], 3, 1.5, b"01", ["0"]])
+def test_frames_from_the_caller_are_checked_at_the_door_as_render_frames_is(tmp_path, capsys, frames):
+    """A bad ``frames`` (text the command would refuse too, a float, a bool, a frame outside
+    0..1, nothing) raises one line naming --frames, before anything is written; text the
+    command takes raises what the command prints."""
+    folder = tmp_path / "run"
+    with pytest.raises(api.SunshadeError) as raised:
+        api.render_run(quiet_grove(), folder, frames=frames, cache=tmp_path / "cache", jobs=1)
+    said = str(raised.value)
+    assert said.startswith("--frames: ") and "\n" not in said and "Traceback" not in said
+    assert isinstance(raised.value, RunError) and list(tmp_path.iterdir()) == []
+    if isinstance(frames, str):
+        path = write_config(tmp_path, quiet_grove())
+        assert main(["render", str(path), "--frames", frames, "--output", str(folder),
+                     "--cache", str(tmp_path / "cache")]) == 2
+        assert capsys.readouterr().err.strip() == f"sunshade: error: {said}"
+        assert list(tmp_path.iterdir()) == [path]
+
+
+@pytest.mark.parametrize(("call", "flag"), [
+    (lambda c: api.render_frame(c, "1"), "--frame"),
+    (lambda c: api.render_frame(c, 1.0), "--frame"),
+    (lambda c: api.render_frame(c, True), "--frame"),
+    (lambda c: api.ground_irradiance(c, -1), "--frame"),
+    (lambda c: api.ground_irradiance(c, np.int64(2)), "--frame"),
+    (lambda c: api.render_frame(c, 0, threads=0), "--threads"),
+    (lambda c: api.render_frame(c, 0, passes=5), "--passes"),
+    (lambda c: api.render_frame(c, 0, passes="sun,glow"), "--passes"),
+    (lambda c: api.render_run(c, jobs="2"), "--jobs"),
+    (lambda c: api.render_run(c, jobs=0), "--jobs"),
+    (lambda c: api.render_run(c, jobs=2.0), "--jobs"),
+    (lambda c: api.render_run(c, jobs=10**6), "--jobs"),
+])
+def test_a_frame_jobs_threads_or_passes_of_the_wrong_kind_raise_one_line(tmp_path, monkeypatch, call, flag):
+    monkeypatch.chdir(tmp_path)  # the default cache and output folder: nothing may land there
+    with pytest.raises(api.SunshadeError) as raised:
+        call(quiet_grove())
+    assert str(raised.value).startswith(f"{flag} ") or str(raised.value).startswith(f"{flag}: ")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_mapping_s_errors_name_it_not_a_file_that_is_not_there(tmp_path, monkeypatch):
+    """A mapping is parsed as if read from ./config.yaml; its errors, from the parse and from the
+    plan of a ``Config`` made of it, call it ``config (a mapping)``, as docs/api.md quotes."""
+    monkeypatch.chdir(tmp_path)
+    quoted = re.findall(r"`(config \(a mapping\): [^`]*)`", (ROOT / "docs" / "api.md").read_text())
+    for base_dir in (None, ".", tmp_path):
+        with pytest.raises(api.SunshadeError) as raised:
+            api.load_config(tiny_grove(**{"sky.alpha": 120}), base_dir=base_dir)
+        assert str(raised.value) == quoted[0] == "config (a mapping): sky.alpha: must be below 90 (got 120)"
+        assert raised.value.where == "config (a mapping): sky.alpha"
+    vast = api.load_config(tiny_grove(**{"ground.sun_pixel": 1e-5}), resolved=False)  # refused once planned
+    with pytest.raises(api.SunshadeError, match=r"^config \(a mapping\): ground\.sun_window: ") as raised:
+        api.render_frame(vast)
+    assert str(tmp_path) not in str(raised.value) and list(tmp_path.iterdir()) == []
+    path = write_config(tmp_path, tiny_grove(**{"ground.sun_pixel": 1e-5}))  # a file's errors name the file
+    with pytest.raises(api.SunshadeError, match=f"^{re.escape(str(path))}: ground.sun_window: "):
+        api.render_frame(api.load_config(path, resolved=False))
+
+
+def test_the_errors_docs_api_md_quotes_are_what_the_library_raises(tmp_path):
+    text = (ROOT / "docs" / "api.md").read_text()
+    path = write_config(tmp_path, tiny_grove(**{"sky.alpha": 120}))
+    with pytest.raises(api.SunshadeError) as raised:
+        api.load_config(path)
+    quoted = re.search(r"`configs/x\.yaml:12: (sky\.alpha: [^`]*)`", text).group(1)
+    assert str(raised.value).endswith(f".yaml:{raised.value.where.split(':')[1]}: {quoted}")
+    lines = re.findall(r"`(--frames: [^`]*)`", text)
+    assert len(lines) == 2
+    for line in lines:  # "--frames: 0.5 ...", "--frames: 48 ...": of an animation of 48 frames
+        given = line.split()[1]
+        with pytest.raises(api.SunshadeError) as raised:
+            api.render_run(tiny_grove(**{"animation.frames": 48}), tmp_path / "run",
+                           frames=[float(given) if "." in given else int(given)])
+        assert str(raised.value) == line
+    assert list(tmp_path.iterdir()) == [path]
+
+
+def test_progress_starts_at_what_the_cache_holds(tmp_path):
+    """Each stage's first call counts what is done already: from an empty cache ``cycle 0 N``;
+    with the products cached (an earlier run's) one call, ``cycle N N``; the frames from 0."""
+    calls = {}
+    for name, frames in (("first", "1"), ("again", [1])):
+        calls[name] = []
+        summary = api.render_run(quiet_grove(), tmp_path / name, frames=frames, cache=tmp_path / "cache", jobs=1,
+                                 progress=lambda *said, name=name: calls[name].append(said))
+        assert summary.rendered == (1,) and summary.skipped == ()
+    products = calls["first"][0][2]
+    assert products >= 1 and calls["first"][:2] == [("cycle", 0, products), ("cycle", 1, products)]
+    assert calls["again"] == [("cycle", products, products), ("frames", 0, 1), ("frames", 1, 1)]
+    assert calls["first"][-2:] == calls["again"][-2:]
+    done = []
+    api.render_run(quiet_grove(), tmp_path / "again", frames=[1], cache=tmp_path / "cache", jobs=1,
+                   progress=lambda *said: done.append(said))
+    assert done == []  # nothing to do, nothing said

@@ -5,9 +5,14 @@ stages are imported inside the functions, so that importing the API (and the com
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import dataclasses
+import numbers
 import os
-from collections.abc import Callable, Iterable, Mapping
+import re
+import weakref
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -16,7 +21,8 @@ from typing import TYPE_CHECKING, Any
 from pipeline import __version__
 from pipeline.config.settings import Config
 from pipeline.config.vocabulary import PASSES
-from pipeline.core.errors import BadInput
+from pipeline.core.errors import BadInput, RunError, SunshadeError
+from pipeline.core.paths import shown
 
 if TYPE_CHECKING:
     import numpy as np
@@ -27,11 +33,18 @@ if TYPE_CHECKING:
     from pipeline.stages.frame import FrameResult
 
 __all__ = ["ConfigLike", "Frame", "Ground", "load_config", "render_frame", "render_run", "ground_irradiance",
-           "eclipse"]
+           "eclipse", "check_jobs"]
 
 ConfigLike = Config | str | os.PathLike[str] | Mapping[str, Any]
 """What every function takes as its config: a YAML file, a mapping (what the file would hold) or a
 ``Config`` (``load_config``'s)."""
+
+MAPPING_NAME = "config (a mapping)"
+"""What an error calls a config given as a mapping, in place of the file it is parsed as if read
+from (``base_dir/config.yaml``, which need not exist; docs/api.md, "Errors")."""
+
+_from_mappings: weakref.WeakValueDictionary[int, Config] = weakref.WeakValueDictionary()
+# the Configs load_config made of a mapping, by id: their errors too say MAPPING_NAME
 
 
 def load_config(source: ConfigLike, *, base_dir: str | os.PathLike[str] | None = None,
@@ -66,16 +79,112 @@ def load_config(source: ConfigLike, *, base_dir: str | os.PathLike[str] | None =
 
     if isinstance(source, Config):
         return source
-    if isinstance(source, Mapping):
-        config = parse_config(dict(source), base_dir if base_dir is not None else Path.cwd(),
-                              named_frames=named_frames)
-    else:
-        config = load_file(source, named_frames=named_frames)
-    if not resolved:
-        return config
-    from pipeline.stages.resolve import resolve
+    if not isinstance(source, (Mapping, str, os.PathLike)):
+        raise BadInput(f"config: {_shown(source)} is not a config: give a YAML file, a mapping or a Config")
+    with _naming(source, base_dir):
+        if isinstance(source, Mapping):
+            config = parse_config(dict(source), _mapping_file(base_dir).parent, named_frames=named_frames)
+        else:
+            config = load_file(source, named_frames=named_frames)
+        if resolved:
+            from pipeline.stages.resolve import resolve
 
-    return resolve(config)
+            config = resolve(config)
+    if isinstance(source, Mapping):
+        _from_mappings[id(config)] = config
+    return config
+
+
+def _shown(value: object) -> str:
+    """``repr(value)`` as a message shows it, cut in the middle if long (``paths.shown``)."""
+    return shown(repr(value))
+
+
+def _mapping_file(base_dir: str | os.PathLike[str] | None) -> Path:
+    """The file a mapping is parsed as if read from: ``base_dir/config.yaml``, absolute."""
+    if base_dir is not None and not isinstance(base_dir, (str, os.PathLike)):
+        raise BadInput(f"base_dir: {_shown(base_dir)} is not a folder")
+    return Path(base_dir if base_dir is not None else Path.cwd()).absolute() / "config.yaml"
+
+
+@contextlib.contextmanager
+def _naming(source: object, base_dir: str | os.PathLike[str] | None = None) -> Iterator[None]:
+    """Errors raised inside call a config given as a mapping (or a ``Config`` made of one)
+    MAPPING_NAME instead of the file it was parsed as if read from, which does not exist."""
+    if isinstance(source, Mapping):
+        file = _mapping_file(base_dir)
+        made_up = {str(file), str(file.resolve())}
+    elif isinstance(source, Config) and _from_mappings.get(id(source)) is source:
+        made_up = {str(source.path)}
+    else:
+        yield
+        return
+    try:
+        yield
+    except SunshadeError as error:
+        names = "|".join(re.escape(name) for name in sorted(made_up, key=len, reverse=True))
+        said = re.compile(rf"(?<![^\s(])(?:{names})(?=[\s:),]|$)")  # the whole path, not a part of one
+        renamed = copy.copy(error)  # its class and attributes (SunshadeError pickles as it was)
+        renamed.args = tuple(said.sub(MAPPING_NAME, a) if isinstance(a, str) else a for a in error.args)
+        if renamed.args == error.args:
+            raise
+        if isinstance(where := getattr(error, "where", None), str):
+            renamed.where = said.sub(MAPPING_NAME, where)  # type: ignore[attr-defined]
+        raise renamed.with_traceback(error.__traceback__) from None
+
+
+def _whole(value: object) -> bool:
+    """Whether ``value`` is a whole number: an int or a numpy integer, not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _count(name: str, value: object) -> int | None:
+    """``value`` (None, or a count from the caller: jobs, threads) checked to be at least 1."""
+    if value is None:
+        return None
+    if not _whole(value):
+        raise BadInput(f"{name} must be a whole number, at least 1 (got {_shown(value)})")
+    if value < 1:  # type: ignore[operator]
+        raise BadInput(f"{name} must be at least 1 (got {value})")
+    return int(value)  # type: ignore[call-overload]
+
+
+def _frame_number(frame: object, config: Config) -> int:
+    """An output frame from the caller, checked: an int in 0..animation.frames-1 (the words of
+    the commands' ``--frame``)."""
+    count = config.animation.frames
+    if not _whole(frame):
+        raise BadInput(f"--frame {_shown(frame)} is not a frame: give an int in 0..{count - 1}")
+    if not 0 <= frame < count:  # type: ignore[operator]
+        raise BadInput(f"--frame {frame} is outside 0..{count - 1} (animation.frames is {count})")
+    return int(frame)  # type: ignore[call-overload]
+
+
+def _frames_chosen(frames: object, config: Config) -> tuple[int, ...] | None:
+    """The output frames a caller chose (None: all), sorted, each once: ints, or text like
+    ``0-47,100`` as ``sunshade render --frames`` takes it, in the command's words."""
+    from pipeline.run.folder import parse_frames
+
+    count = config.animation.frames
+    if frames is None:
+        return None
+    if isinstance(frames, str):
+        return parse_frames(frames, count)
+    try:
+        if isinstance(frames, (bytes, bytearray)):
+            raise TypeError
+        given = list(frames)  # type: ignore[call-overload]
+    except TypeError:
+        raise RunError(f"--frames: {_shown(frames)} is not a list of frames: give ints or text like "
+                       "'0-47,100'") from None
+    for frame in given:
+        if not _whole(frame):
+            raise RunError(f"--frames: {_shown(frame)} is not a frame: give ints in 0..{count - 1}")
+        if not 0 <= frame < count:
+            raise RunError(f"--frames: {frame} is outside 0..{count - 1} (animation.frames is {count})")
+    if not given:
+        raise RunError("--frames: no frames given (None renders them all)")
+    return tuple(sorted({int(frame) for frame in given}))
 
 
 def _cache(cache: Cache | str | os.PathLike[str] | None) -> Cache:
@@ -88,12 +197,6 @@ def _cache(cache: Cache | str | os.PathLike[str] | None) -> Cache:
     if root.exists() and not root.is_dir():
         raise BadInput(f"the cache folder {root}: is a file, not a folder")
     return Cache(root)
-
-
-def _check_frame(frame: int, config: Config) -> None:
-    count = config.animation.frames
-    if not 0 <= frame < count:
-        raise BadInput(f"--frame {frame} is outside 0..{count - 1} (animation.frames is {count})")
 
 
 @dataclass(frozen=True)
@@ -180,7 +283,7 @@ class Frame:
         io.write_png(path, self.picture())
 
 
-def render_frame(config: ConfigLike, frame: int = 0, *, passes: Iterable[str] | None = None,
+def render_frame(config: ConfigLike, frame: int = 0, *, passes: Iterable[str] | str | None = None,
                  cache: Cache | str | os.PathLike[str] | None = None, threads: int | None = None) -> Frame:
     """Render one finished frame into arrays (``sunshade frame``).
 
@@ -189,14 +292,15 @@ def render_frame(config: ConfigLike, frame: int = 0, *, passes: Iterable[str] | 
     config : str, os.PathLike, mapping or Config
         The config (``load_config``).
     frame : int, default 0
-        The output frame: the sun, moon and clouds of that moment, the canopy at frame mod cycle.
-    passes : iterable of str, optional
-        The light passes to make, names in ``vocabulary.PASSES`` (default: all of them, none with a
-        ``ground.brdf``).
+        The output frame, 0..animation.frames-1: the sun, moon and clouds of that moment, the
+        canopy at frame mod cycle.
+    passes : iterable of str, or str, optional
+        The light passes to make, names in ``vocabulary.PASSES`` or text like ``sun,sky`` as
+        ``--passes`` takes it (default: all of them, none with a ``ground.brdf``).
     cache : Cache, str or os.PathLike, optional
         The cache of the cycle products (default $SUNSHADE_CACHE, else ./cache).
     threads : int, optional
-        FFT threads (default: all cores).
+        FFT threads, at least 1 (default: all cores).
 
     Returns
     -------
@@ -214,21 +318,16 @@ def render_frame(config: ConfigLike, frame: int = 0, *, passes: Iterable[str] | 
     from pipeline.stages.frame import render_frame as frame_stage
     from pipeline.stages.plan import check_inputs
 
-    config = load_config(config, named_frames=False)
-    if passes is None:
-        passes = PASSES if config.ground.brdf is None else ()
-    wanted = set(passes)
-    if unknown := sorted(wanted - set(PASSES)):
-        raise BadInput(f"--passes: unknown pass {unknown[0]!r}; valid: {', '.join(PASSES)}")
-    if wanted and config.ground.brdf is not None:
-        raise BadInput(f"--passes: the light passes are not made with a ground.brdf yet ({config.path})")
-    config = dataclasses.replace(config, output=dataclasses.replace(
-        config.output, passes=tuple(p for p in PASSES if p in wanted)))
-    _check_frame(frame, config)
-    plan = check_inputs(config)  # every input read and checked before anything is computed
-    result = frame_stage(plan, frame, store=_cache(cache), workers=threads, passes=config.output.passes)
-    if not np.all(np.isfinite(result.radiance)):
-        raise BadInput(f"{config.path}: the frame overflowed; lower the sky's radiance")
+    with _naming(config):
+        config = load_config(config, named_frames=False)
+        config = dataclasses.replace(config, output=dataclasses.replace(
+            config.output, passes=_passes_wanted(passes, config)))
+        frame = _frame_number(frame, config)
+        threads = _count("--threads", threads)
+        plan = check_inputs(config)  # every input read and checked before anything is computed
+        result = frame_stage(plan, frame, store=_cache(cache), workers=threads, passes=config.output.passes)
+        if not np.all(np.isfinite(result.radiance)):
+            raise BadInput(f"{config.path}: the frame overflowed; lower the sky's radiance")
     layers = {name: in_working_space(config.output, pixels) for name, pixels in result.layers.items()}
 
     def single(name: str) -> np.ndarray | None:
@@ -240,8 +339,30 @@ def render_frame(config: ConfigLike, frame: int = 0, *, passes: Iterable[str] | 
                  float(result.exposure), config, result)
 
 
+def _passes_wanted(passes: object, config: Config) -> tuple[str, ...]:
+    """The light passes a caller asked for (None: all, none with a ``ground.brdf``), names or
+    text like ``sun,sky`` as ``sunshade frame --passes`` takes it, in ``PASSES``' order."""
+    if passes is None:
+        return PASSES if config.ground.brdf is None else ()
+    if isinstance(passes, str):
+        passes = [name.strip() for name in passes.split(",") if name.strip()]
+    try:
+        if isinstance(passes, (bytes, bytearray)):
+            raise TypeError
+        given = list(passes)  # type: ignore[call-overload]
+    except TypeError:
+        raise BadInput(f"--passes: {_shown(passes)} is not a list of pass names; valid: {', '.join(PASSES)}") \
+            from None
+    for name in given:
+        if not isinstance(name, str) or name not in PASSES:
+            raise BadInput(f"--passes: unknown pass {_shown(name)}; valid: {', '.join(PASSES)}")
+    if given and config.ground.brdf is not None:
+        raise BadInput(f"--passes: the light passes are not made with a ground.brdf yet ({config.path})")
+    return tuple(name for name in PASSES if name in given)
+
+
 def render_run(config: ConfigLike, folder: str | os.PathLike[str] | None = None, *,
-               frames: Iterable[int] | None = None, progress: Callable[[str, int, int], None] | None = None,
+               frames: Iterable[int] | str | None = None, progress: Callable[[str, int, int], None] | None = None,
                cache: Cache | str | os.PathLike[str] | None = None, jobs: int | None = None,
                force: bool = False) -> RunSummary:
     """Render a config's animation into a folder, resumably (``sunshade render``).
@@ -252,14 +373,17 @@ def render_run(config: ConfigLike, folder: str | os.PathLike[str] | None = None,
         The config (``load_config``).
     folder : str or os.PathLike, optional
         The output folder (default ``output.folder``).
-    frames : iterable of int, optional
-        The output frames to render (default: all); the video is made once all are done.
+    frames : iterable of int, or str, optional
+        The output frames to render (default: all), ints or text like ``0-47,100`` as ``--frames``
+        takes it; the video is made once all are done.
     progress : callable, optional
-        Called as ``progress(stage, done, total)``, stage ``cycle``, ``frames`` or ``video``.
+        Called as ``progress(stage, done, total)``, stage ``cycle``, ``frames`` or ``video``; a
+        stage's first call counts what is done already (cycle products found in the cache), so a
+        run whose products are all cached says ``cycle N N`` once (docs/api.md, "Progress").
     cache : Cache, str or os.PathLike, optional
         The cache of the cycle products (default $SUNSHADE_CACHE, else ./cache).
     jobs : int, optional
-        Processes at once (default ``render.jobs``, else one per core).
+        Processes at once, 1 to 4 a core (default ``render.jobs``, else one per core).
     force : bool, default False
         Render the frames done already too.
 
@@ -277,19 +401,45 @@ def render_run(config: ConfigLike, folder: str | os.PathLike[str] | None = None,
     from pipeline.run.render import render_run as run
     from pipeline.stages.resolve import resolve, source_digest
 
-    written = load_config(config, resolved=False)
-    if folder is not None:
-        written = dataclasses.replace(written, output=dataclasses.replace(
-            written.output, folder=Path(folder).expanduser().absolute()))
-    if jobs is not None and jobs < 1:
-        raise BadInput(f"--jobs must be at least 1 (got {jobs})")
-    chosen = None if frames is None else tuple(sorted(set(frames)))
-    for frame in chosen or ():
-        _check_frame(frame, written)
-    check_outputs(written)
-    source_hash = source_digest(written)
-    return run(resolve(written), frames=chosen, store=_cache(cache), jobs=jobs, force=force,
-               progress=progress, source_hash=source_hash)
+    with _naming(config):
+        written = load_config(config, resolved=False)
+        if folder is not None:
+            if not isinstance(folder, (str, os.PathLike)):
+                raise BadInput(f"--output: {_shown(folder)} is not a folder")
+            written = dataclasses.replace(written, output=dataclasses.replace(
+                written.output, folder=Path(folder).expanduser().absolute()))
+        jobs = _count("--jobs", jobs)
+        check_jobs(jobs, written)
+        chosen = _frames_chosen(frames, written)
+        if progress is not None and not callable(progress):
+            raise BadInput(f"progress: {_shown(progress)} is not callable: give a function of (stage, done, total)")
+        check_outputs(written)
+        source_hash = source_digest(written)
+        return run(resolve(written), frames=chosen, store=_cache(cache), jobs=jobs, force=bool(force),
+                   progress=progress, source_hash=source_hash)
+
+
+def check_jobs(jobs: int | None, config: Config) -> None:
+    """Refuse more processes at once than a local run may start (here and ``sunshade render``).
+
+    Parameters
+    ----------
+    jobs : int or None
+        The processes asked for; None: ``render.jobs`` of ``config``, else one per core.
+    config : Config
+        The run's config.
+
+    Raises
+    ------
+    BadInput
+        Naming --jobs or the config's key, over MAX_JOBS_PER_CORE a core.
+    """
+    from pipeline.core.cores import MAX_JOBS_PER_CORE, default_workers
+
+    count, most = jobs or config.render.jobs, MAX_JOBS_PER_CORE * default_workers()
+    if count and count > most:
+        raise BadInput(f"{'--jobs' if jobs else config.where('render.jobs')} {count} would start {count} "
+                       f"processes on {default_workers()} cores; the most is {most} ({MAX_JOBS_PER_CORE} a core)")
 
 
 @dataclass(frozen=True)
@@ -330,7 +480,7 @@ def ground_irradiance(config: ConfigLike, frame: int = 0, *, cache: Cache | str 
     config : str, os.PathLike, mapping or Config
         The config (``load_config``).
     frame : int, default 0
-        The output frame.
+        The output frame, 0..animation.frames-1.
     cache : Cache, str or os.PathLike, optional
         The cache of the cycle products (default $SUNSHADE_CACHE, else ./cache).
     threads : int, optional
@@ -351,18 +501,20 @@ def ground_irradiance(config: ConfigLike, frame: int = 0, *, cache: Cache | str 
     from pipeline.stages.ground import render_ground
     from pipeline.stages.plan import plan_run
 
-    config = load_config(config, named_frames=False)
-    _check_frame(frame, config)
-    plan = plan_run(config)
-    if plan.receivers.slope is not None:  # the slope's light, in its (u, w) metres (docs/method.md, "A sloped ground")
-        from pipeline.stages.ground import FrameContext
-        from pipeline.stages.slope import slope_ground
+    with _naming(config):
+        config = load_config(config, named_frames=False)
+        frame = _frame_number(frame, config)
+        threads = _count("--threads", threads)
+        plan = plan_run(config)
+        if plan.receivers.slope is not None:  # its light in its (u, w) metres (docs/method.md, "A sloped ground")
+            from pipeline.stages.ground import FrameContext
+            from pipeline.stages.slope import slope_ground
 
-        result = slope_ground(FrameContext.of(plan, frame, store=_cache(cache), workers=threads))
-    else:
-        result = render_ground(plan, frame, store=_cache(cache), workers=threads)
-    if not np.all(np.isfinite(result.irradiance)):
-        raise BadInput(f"{config.path}: the ground irradiance overflowed; lower the sky's radiance")
+            result = slope_ground(FrameContext.of(plan, frame, store=_cache(cache), workers=threads))
+        else:
+            result = render_ground(plan, frame, store=_cache(cache), workers=threads)
+        if not np.all(np.isfinite(result.irradiance)):
+            raise BadInput(f"{config.path}: the ground irradiance overflowed; lower the sky's radiance")
     metadata = {"sunshade:window": result.grid.extent, "sunshade:pixel_size": float(result.grid.pixel),
                 "sunshade:config_hash": config.digest(), "sunshade:version": __version__,
                 "sunshade:frame": int(frame)}
