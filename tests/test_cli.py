@@ -1,7 +1,10 @@
+import contextlib
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from datetime import timedelta
 from pathlib import Path
 
@@ -23,7 +26,7 @@ def test_ground_writes_exr_with_metadata_and_png(inputs, capsys):
     folder, out = inputs
     config = write_config(folder, base_config())
     assert main(["ground", str(config), "-o", str(out / "g.exr"), "--png"]) == 0
-    assert "wrote" in capsys.readouterr().out
+    assert " klx (R, G, B); wrote" in capsys.readouterr().out  # the open sky's light, with its unit
     g = io.read_image(out / "g.exr")
     assert g.shape == (80, 80, 3) and g.dtype == np.float32
     attrs = io.read_attributes(out / "g.exr", ["sunshade:window", "sunshade:pixel_size",
@@ -517,3 +520,100 @@ def test_check_shows_a_window_laid_on_whole_pixels_beside_the_configs(tmp_path, 
     assert main(["check", str(write_config(tmp_path, TINY, "whole.yaml"))]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if "ground.window:" in x)
     assert line.endswith("[-4.00, -4.00, 4.00, 4.00] m at 0.05 m"), line
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n\n"])
+def test_an_empty_config_exits_2_in_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch, text):
+    """``: > empty.yaml; sunshade render empty.yaml`` once rendered the whole default animation
+    (205 MB of frames, 446 MB of cache); now every command refuses it naming the file, and a
+    render with no flags makes neither ./renders nor ./cache."""
+    folder = tmp_path / "work"
+    out = tmp_path / "out"
+    folder.mkdir()
+    out.mkdir()
+    config = write_config(folder, text, "empty.yaml")
+    message = "empty.yaml: the config is empty; start from one of configs/*.yaml (an explicit {} renders every default)"
+    assert_refused(config, out, capsys, message)
+    monkeypatch.chdir(folder)
+    monkeypatch.delenv("SUNSHADE_CACHE", raising=False)
+    assert main(["render", "empty.yaml"]) == 2
+    assert capsys.readouterr().err.strip() == f"sunshade: error: {message}"
+    assert sorted(p.name for p in folder.iterdir()) == ["empty.yaml"]
+
+
+def test_cache_help_says_what_each_action_does_and_a_missing_action_is_named(tmp_path, capsys, monkeypatch):
+    """``sunshade cache --help`` gives each action a line, ``cache ACTION --help`` shows the arguments
+    that action takes, and a bare ``sunshade cache`` names the actions (it said "required: action", a
+    word not in its usage line)."""
+    monkeypatch.setenv("COLUMNS", "200")  # argparse's width: a line per action
+    with pytest.raises(SystemExit) as done:
+        main(["cache", "--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0
+    lines = {line.split()[0]: line for line in out.splitlines() if re.match(r"    \S", line)}
+    assert list(lines) == ["list", "verify", "clear", "prune"], out
+    assert "remove every item" in lines["clear"] and "--max-size" in lines["prune"], out
+    helps = {}
+    for action in ("list", "verify", "clear", "prune"):
+        with pytest.raises(SystemExit):
+            main(["cache", action, "--help"])
+        helps[action] = capsys.readouterr().out
+        assert helps[action].startswith(f"usage: sunshade cache {action} "), helps[action]
+    assert "--max-size" in helps["prune"] and "CONFIG" in helps["prune"] and "--remove" not in helps["prune"]
+    assert "--remove" in helps["verify"] and "--max-size" not in helps["verify"] and "CONFIG" not in helps["verify"]
+    assert "CONFIG" in helps["list"] and "--max-size" not in helps["clear"] and "CONFIG" not in helps["clear"]
+    assert main(["cache"]) == 2
+    assert capsys.readouterr().err == ("sunshade: error: sunshade cache needs an action: list, verify, clear or "
+                                       "prune (see sunshade cache --help)\n")
+    (tmp_path / "c").mkdir()
+    for argv in (["cache", "--cache", str(tmp_path / "c"), "list"], ["cache", "list", "--cache", str(tmp_path / "c")]):
+        assert main(argv) == 0  # --cache before the action or after it
+        assert capsys.readouterr().out == f"0 items, 0 B in {tmp_path / 'c'}\n"
+    assert main(["cache", "verify", "x.yaml", "--cache", str(tmp_path / "c")]) == 2
+    assert capsys.readouterr().err == "sunshade: error: cache verify takes no CONFIG (list and prune do)\n"
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="finds the command's child processes in /proc")
+def test_sigterm_ends_a_render_as_cleanly_as_ctrl_c(tmp_path):
+    """``kill PID`` (SIGTERM) to a render while its two workers render and its video is encoded: one
+    line and exit code 143, as Ctrl-C's ``sunshade: interrupted`` and 130; the workers and the encoder
+    (ffmpeg) have ended when the command ends, its temporary video is gone, and the frames done are
+    kept. Before, the command died where it stood (exit code -15, no word, loky's warnings), its
+    workers and encoder outlived it, and the encoder's hidden ``.tmp-`` video stayed."""
+    from test_failures import children, state
+
+    config = write_config(tmp_path, {**TINY, "animation": {"frames": 40, "fps": 12}}, "tiny.yaml")
+    run = tmp_path / "run"
+    args = ["render", str(config), "--jobs", "2", "--output", str(run), "--cache", str(tmp_path / "cache")]
+    process = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(run.glob(".tiny.tmp-*.mp4")) and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)  # the first frame is in the encoder
+    started = {}
+    for pid in children(process.pid):
+        with contextlib.suppress(OSError), open(f"/proc/{pid}/cmdline") as cmdline:
+            started[pid] = cmdline.read()
+
+    def alive(pids):
+        return [started[pid] for pid in pids if (state(pid) or ("Z",))[0] != "Z"]
+
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=60)  # not communicate(): a worker left alive would hold the pipes open
+    at_exit = alive([pid for pid, line in started.items() if "popen_loky" in line or "ffmpeg" in line])
+    err = process.stderr.read()
+    process.stdout.close()
+    process.stderr.close()
+    assert len([line for line in started.values() if "popen_loky" in line]) == 2, started
+    assert process.returncode == 143, err
+    assert [line for line in err.splitlines() if not re.match(r"sunshade: (cycle products|frames) \d+/\d+", line)] == [
+        "sunshade: terminated"], err
+    assert at_exit == []
+    deadline = time.monotonic() + 5.0  # joblib's resource tracker ends once the command is gone
+    while alive(started) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert alive(started) == []
+    assert not list(run.glob(".*tmp-*"))
+    time.sleep(0.5)
+    assert not list(run.glob(".*tmp-*")) and not (run / "tiny.mp4").exists()
+    assert (run / "tiny.0000.png").is_file()  # the frames done are kept (a resume renders the others)

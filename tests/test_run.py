@@ -219,9 +219,12 @@ def test_a_changed_config_renders_again_only_what_it_changes(reference, tmp_path
     run, cache = tmp_path / "run", tmp_path / "cache"
     assert main(["render", str(config), "--frames", "0-2", "--output", str(run), "--cache", str(cache),
                  "--jobs", "1"]) == 0
-    assert not (run / "tiny.mp4").exists()  # the video waits for every frame
+    assert not (run / "tiny.mp4").exists()  # the video waits for every frame, and the last line says so
     assert json.loads((run / "run.json").read_text())["video"] is None
-    capsys.readouterr()
+    assert "3 frames rendered, 0 already done" in (out := capsys.readouterr().out)
+    assert out.rstrip().endswith("; the video waits for the other 5 frames"), out
+    assert main(["render", str(config), "--frames", "1", "--output", str(run), "--cache", str(cache)]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("; the video waits for the other 5 frames")  # nothing to do
     assert main(["render", str(config), "--output", str(run), "--cache", str(cache), "--jobs", "1"]) == 0
     assert "5 frames rendered, 3 already done" in capsys.readouterr().out
     assert_same_files(run, files)

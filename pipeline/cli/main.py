@@ -4,18 +4,21 @@ one-line errors. The commands are in ``runs`` (check, render, report, figures, c
 ``runs``, ``pictures`` and ``eclipses`` are the only modules that print.
 
 Exit codes: 0 done, 2 bad input (one line naming the key or file; nothing written),
-1 an unexpected failure.
+1 an unexpected failure, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM, ``kill PID``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import inspect
 import re
+import signal
 import sys
+import threading
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -25,12 +28,16 @@ from pipeline.cli.pictures import run_frame, run_ground, run_mask, run_sky
 from pipeline.cli.runs import run_cache, run_check, run_figures, run_render, run_report
 from pipeline.config.vocabulary import PASSES
 from pipeline.core.cores import CLUSTER_TIMEOUT
-from pipeline.core.errors import SunshadeError, WorkerError, one_line, one_line_warnings
+from pipeline.core.errors import BadInput, SunshadeError, WorkerError, one_line, one_line_warnings
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "main"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "main"]
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+"""Ctrl-C (SIGINT): the shell's code for a command a signal ended."""
+EXIT_TERMINATED = 128 + signal.SIGTERM
+"""SIGTERM (``kill PID``, a job scheduler ending the job), ended as cleanly as Ctrl-C ends it."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -54,7 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _UsageError as exc:
         return _fail(str(exc), EXIT_BAD_INPUT)
     try:
-        return args.run(args)
+        with _terminate_as_interrupt():
+            return args.run(args)
     except SunshadeError as exc:
         return _fail(str(exc), EXIT_BAD_INPUT, args.debug)
     except MemoryError:
@@ -62,13 +70,46 @@ def main(argv: Sequence[str] | None = None) -> int:
                      "or the canopy size", EXIT_BAD_INPUT, args.debug)
     except OSError as exc:
         return _fail(_os_error_line(exc), EXIT_BAD_INPUT, args.debug)
+    except _Terminated:
+        print("sunshade: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print("sunshade: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as exc:  # a bug: one line, the traceback only under --debug
         what = str(exc) if isinstance(exc, WorkerError) else f"{type(exc).__name__}: {exc}"
         return _fail(f"internal error ({what}); run again with --debug for the traceback, and "
                      "please report it", EXIT_FAILURE, args.debug)
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread: a KeyboardInterrupt, so that the command unwinds as after
+    Ctrl-C (joblib ends the worker processes, the video's encoder ends and its temporary file is
+    removed, the run's lock is let go; done frames are kept)."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises ``_Terminated`` in the main thread, once (a second SIGTERM
+    meanwhile ends the process at once, as before); the previous handler is put back after. Before,
+    SIGTERM ended the process where it stood: the video's encoder (a child process) wrote on into
+    its temporary file, which stayed. Nothing changes outside the main thread (Python runs signal
+    handlers only there)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGTERM)
+    restore = previous if previous is not None else signal.SIG_DFL  # None: a handler not set from Python
+
+    def terminated(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, restore)
+        raise _Terminated
+
+    signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, restore)
 
 
 def _fail(line: str, code: int, debug: bool = False) -> int:
@@ -140,7 +181,7 @@ def _shared_options() -> _Shared:
     """The parent parsers of the options several commands share."""
     return _Shared(
         config=_shared("config", help="YAML config file"),
-        store=_shared("--cache", default=None, help="cache folder (default $SUNSHADE_CACHE or ./cache)"),
+        store=_shared("--cache", default=None, help=STORE_HELP),
         budget=_shared("--cache-size", default=None, metavar="SIZE", help="the cache's budget, e.g. 20G: "
                        "at the end of a render the least recently used items no live run uses are "
                        "removed down to it (default $SUNSHADE_CACHE_SIZE, else 20G)"),
@@ -229,12 +270,42 @@ def _add_upkeep(commands: argparse._SubParsersAction[_Parser], shared: _Shared) 
     figures.add_argument("--output", default="figures", help="folder (default ./figures)")
     figures.add_argument("--preview", action="store_true", help="small and fast")
 
+    _add_cache(commands, shared)
+
+
+CACHE_ACTIONS = {  # each action's line in ``sunshade cache --help``, in its order
+    "list": "the items by the config that made them: name, size, cycle frames (CONFIG: its items only)",
+    "verify": "read every item whole and name the broken ones (exit code 1 if any; --remove removes them)",
+    "clear": "remove every item",
+    "prune": "remove the least recently used items down to --max-size, or a CONFIG's items",
+}
+CACHE_ARGUMENTS = (  # (flags, options, {action taking it: its help}): the others parse it, its help hidden
+    (("config",), {"nargs": "?", "default": None, "metavar": "CONFIG"},
+     {"list": "only this config's items", "prune": "remove only its items (all, or down to --max-size)"}),
+    (("--max-size",), {"default": None, "metavar": "SIZE"}, {"prune": "the most to keep, e.g. 2G (binary units)"}),
+    (("--remove",), {"action": "store_true"}, {"verify": "also remove the broken items"}),
+)
+
+
+def _add_cache(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
+    """The ``cache`` command: an action of CACHE_ACTIONS, each a subcommand whose help shows the
+    arguments it takes. Each parses all of CACHE_ARGUMENTS, so that ``run_cache`` says which action takes
+    which, as before; --cache is taken before the action too (``sunshade cache --cache DIR list``)."""
     cache = _command(commands, run_cache, [shared.store], shared)
-    cache.add_argument("action", choices=("list", "verify", "clear", "prune"))
-    cache.add_argument("config", nargs="?", default=None, help="list: only this config's items; "
-                       "prune: remove only its items (all, or down to --max-size)")
-    cache.add_argument("--max-size", default=None, help="prune: the most to keep, e.g. 2G (binary units)")
-    cache.add_argument("--remove", action="store_true", help="verify: also remove broken items")
+    cache.set_defaults(run=_cache_without_action)
+    store = _shared("--cache", default=argparse.SUPPRESS, help=STORE_HELP)  # unset, it keeps the command's
+    actions = cache.add_subparsers(dest="action", metavar="ACTION", title="actions", parser_class=_Parser)
+    for name, line in CACHE_ACTIONS.items():
+        action = actions.add_parser(name, parents=[store, shared.debug], help=line, description=f"{line}.")
+        action.set_defaults(run=run_cache)
+        for flags, options, helps in CACHE_ARGUMENTS:
+            action.add_argument(*flags, **options, help=helps.get(name, argparse.SUPPRESS))
+
+
+def _cache_without_action(args: argparse.Namespace) -> int:
+    """``sunshade cache`` with no action: one line naming them."""
+    *first, last = CACHE_ACTIONS
+    raise BadInput(f"sunshade cache needs an action: {', '.join(first)} or {last} (see sunshade cache --help)")
 
 
 def _add_eclipses(commands: argparse._SubParsersAction[_Parser], shared: _Shared) -> None:
@@ -254,6 +325,7 @@ def _add_eclipses(commands: argparse._SubParsersAction[_Parser], shared: _Shared
 
 
 DEBUG_HELP = "on an error, print the traceback too (for a bug report)"
+STORE_HELP = "cache folder (default $SUNSHADE_CACHE or ./cache)"
 
 
 def _shared(*flags: str, **options: Any) -> _Parser:

@@ -66,7 +66,7 @@ def run_ground(args: argparse.Namespace) -> int:
     rows, cols = result.irradiance.shape[:2]
     print(
         f"sunshade: ground {cols} x {rows} px at {result.pixel:g} m in {elapsed:.2f} s; "
-        f"open-sky irradiance {', '.join(f'{v:.4g}' for v in result.unshadowed)}; "
+        f"open-sky irradiance {', '.join(f'{v:.4g}' for v in result.unshadowed)} klx (R, G, B); "
         f"wrote {', '.join(str(p) for p in written)}"
     )
     return 0

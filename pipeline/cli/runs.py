@@ -312,8 +312,9 @@ def run_render(args: argparse.Namespace) -> int:
     """
     from dataclasses import replace
 
+    from pipeline.api.functions import check_jobs
     from pipeline.config.preview import preview
-    from pipeline.core.cores import MAX_JOBS_PER_CORE, default_workers, scheduler_address
+    from pipeline.core.cores import scheduler_address
     from pipeline.run.folder import check_outputs, parse_frames
     from pipeline.run.record import nothing_to_do
     from pipeline.stages.resolve import resolve, source_digest
@@ -339,11 +340,8 @@ def run_render(args: argparse.Namespace) -> int:
     frames = None if args.frames is None else parse_frames(args.frames, config.animation.frames)
     if args.verify:
         return _verify_run(resolved(), store)
-    jobs, most = args.jobs or config.render.jobs, MAX_JOBS_PER_CORE * default_workers()
-    if jobs and jobs > most and args.scheduler is None:
-        raise BadInput(f"{'--jobs' if args.jobs else f'{args.config}: render.jobs'} {jobs} would "
-                       f"start {jobs} processes on {default_workers()} cores; the most is {most} "
-                       f"({MAX_JOBS_PER_CORE} a core)")
+    if args.scheduler is None:
+        check_jobs(args.jobs, config)
     check_outputs(config)
     source_hash = source_digest(config)
     summary = None if args.force else nothing_to_do(config, store, frames, jobs=args.jobs, scheduler=args.scheduler,
@@ -356,6 +354,8 @@ def run_render(args: argparse.Namespace) -> int:
     elif banner:
         print(banner, flush=True)
     made = f"; video {summary.video}" if summary.video else ""
+    if not summary.video and summary.waiting and config.output.video != "none":
+        made = f"; the video waits for the other {summary.waiting} frame{'' if summary.waiting == 1 else 's'}"
     count = len(summary.rendered)
     print(f"sunshade: {count} frame{'' if count == 1 else 's'} rendered, {len(summary.skipped)} already done, "
           f"in {summary.timings['total']:.1f} s; {config.output.folder}{made}")

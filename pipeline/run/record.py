@@ -207,6 +207,8 @@ class RunSummary:
         {phase: seconds [s]}.
     pruned : tuple
         The cache items the cache's budget removed at the end of the run (``Cache.prune``).
+    waiting : int
+        Frames of the animation not done yet: the video waits for them [frames].
     """
 
     rendered: tuple[int, ...]
@@ -215,6 +217,8 @@ class RunSummary:
     timings: dict[str, Any]
     pruned: tuple[CacheItem, ...] = ()
     """The cache items the cache's budget removed at the end of the run (``Cache.prune``)."""
+    waiting: int = 0
+    """Frames of the animation not done yet: the video waits for them [frames]."""
 
 
 def nothing_to_do(config: Config, store: Cache, frames: Iterable[int] | None = None, *, jobs: int | None = None,
@@ -286,4 +290,5 @@ def nothing_to_do(config: Config, store: Cache, frames: Iterable[int] | None = N
                        source_hash=previous.get("source_hash"))
     finally:
         lock.release()
-    return RunSummary((), frames, video_file(config) if made else None, timings)
+    return RunSummary((), frames, video_file(config) if made else None, timings,
+                      waiting=count - len(checked.done))

@@ -70,7 +70,7 @@ from pipeline.stages.lighting import with_exposures
 from pipeline.stages.plan import RunPlan, check_inputs
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterable, Iterator
+    from collections.abc import Callable, Generator, Iterable, Iterator
 
     from distributed import Client
 
@@ -158,8 +158,8 @@ def render_run(config: Config, *, frames: tuple[int, ...] | None = None, store: 
         raise
     finally:
         lock.release()
-    return RunSummary(tuple(found.todo), tuple(f for f in run.frames if f not in set(found.todo)),
-                      video_file(config) if video else None, timings, pruned)
+    return RunSummary(tuple(found.todo), tuple(f for f in run.frames if f not in set(found.todo)), video_file(config)
+                      if video else None, timings, pruned, sum(r is None for r in found.records.values()))
 
 
 @dataclass(frozen=True)
@@ -292,8 +292,9 @@ def _frames(run: _Run, plan: RunPlan, found: _Found, timings: Timings) -> VideoS
         from pipeline.run.report import import_drawing
 
         threading.Thread(target=import_drawing, name="sunshade-report", daemon=True).start()
+    phase = _frame_phase(run, plan, found.todo, codes=stream is not None)
     try:
-        for written in _frame_phase(run, plan, found.todo, codes=stream is not None):
+        for written in phase:
             for category, text in written.caught:  # raised in a worker: said here, once
                 warnings.warn(text, category, stacklevel=3)
             found.index[str(written.frame)] = written.entry
@@ -305,8 +306,10 @@ def _frames(run: _Run, plan: RunPlan, found: _Found, timings: Timings) -> VideoS
             if stream and written.codes is not None:
                 stream.add(written.frame, written.codes)
     except BaseException:
+        phase.close()  # its workers ended (joblib's abort), then what one ended mid-write removed (the lock is ours)
         if stream:
             stream.abort()
+        remove_temporaries(run.folder)
         raise
     timings["frames"] = time.perf_counter() - mark
     return stream
@@ -360,7 +363,7 @@ class _WrittenFrame:
     codes: np.ndarray | None
 
 
-def _frame_phase(run: _Run, plan: RunPlan, todo: list[int], *, codes: bool) -> Iterator[_WrittenFrame]:
+def _frame_phase(run: _Run, plan: RunPlan, todo: list[int], *, codes: bool) -> Generator[_WrittenFrame, None, None]:
     """Render the ``todo`` frames in parallel; yields each as its files are written. With one
     local job the frames render here, one after another, and each frame's files are written by
     a thread while the next frame renders (``_frames_here``)."""
