@@ -258,3 +258,11 @@ def test_an_empty_config_is_refused_naming_the_file(tmp_path, text):
 
 def test_an_explicit_empty_mapping_is_every_default(tmp_path):
     assert load_config(write_config(tmp_path, "{}\n", "config.yaml")) == parse_config({}, tmp_path)
+
+
+def test_a_list_of_the_wrong_length_says_how_long_it_is(tmp_path):
+    """ground.window with three numbers: the line says it got a list of 3, not just "a list"."""
+    config = base_config()
+    config["ground"] = {**config.get("ground", {}), "window": [-4, -4, 4]}
+    with pytest.raises(ConfigError, match=r"ground\.window: must be a list of 4 numbers, not a list of 3$"):
+        load_config(write_config(tmp_path, config))

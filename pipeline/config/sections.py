@@ -93,7 +93,8 @@ class Section:
     def numbers(self, name: str, count: int, default: Any = _MISSING) -> tuple[float, ...]:
         value = self.raw(name, default)
         if not (isinstance(value, (list, tuple)) and len(value) == count):
-            self.fail(name, f"must be a list of {count} numbers, not {kind_of(value)}")
+            got = f"a list of {len(value)}" if isinstance(value, (list, tuple)) else kind_of(value)
+            self.fail(name, f"must be a list of {count} numbers, not {got}")
         for item in value:
             if not is_number(item) or not math.isfinite(float(item)):
                 self.fail(name, f"must be a list of {count} finite numbers (got {value})")
