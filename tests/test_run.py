@@ -695,3 +695,29 @@ def test_two_renders_racing_for_one_new_folder_leave_one_run_whole(tmp_path):
         left = sorted(p.name for p in folder.iterdir())
         assert left == sorted([*expected, ".sunshade.lock", "index.json", "run.json"]), left
     assert overlapped >= 5, overlapped  # the race itself was run
+
+
+def test_an_interrupt_while_the_video_finishes_leaves_no_video(tmp_path):
+    """Ctrl-C or SIGTERM while the command waits for the encoder (``VideoStream.finish``): the
+    encoder is stopped and its temporary file removed, no video under its name. Here the
+    interrupt comes from ``finish``'s progress call, with the encoder waiting for the last frame."""
+    import numpy as np
+
+    from pipeline.run.video import VideoStream
+
+    written = load(write_config(tmp_path))
+    config = replace(written, output=replace(written.output, folder=tmp_path / "run"))
+    config.output.folder.mkdir()
+    path = config.output.folder / "tiny.mp4"
+    count = config.animation.frames
+    stream = VideoStream(config, "0" * 16, path, range(count))
+    for frame in range(count - 1):  # the last frame never comes: the encoder waits for it
+        stream.add(frame, np.full((64, 96, 3), 10 * frame, dtype=np.uint8))
+
+    def interrupted(stage, done, total):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        stream.finish(interrupted, {})
+    assert not stream.thread.is_alive()
+    assert sorted(p.name for p in config.output.folder.iterdir()) == []  # no video, no temporary

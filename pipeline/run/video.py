@@ -181,10 +181,14 @@ class VideoStream:
         Returns the video's run.json entry, as ``encode_video``; raises what stopped the encoder.
         """
         mark, count = time.perf_counter(), self.config.animation.frames
-        while self.thread.is_alive():
-            if progress:
-                progress("video", self.fed, count)
-            self.thread.join(0.25)
+        try:
+            while self.thread.is_alive():
+                if progress:
+                    progress("video", self.fed, count)
+                self.thread.join(0.25)
+        except BaseException:  # Ctrl-C or SIGTERM while the last frames are encoded: no video left
+            self.abort()
+            raise
         if self.error is not None:
             raise self.error
         if progress:
@@ -194,6 +198,8 @@ class VideoStream:
 
     def _pictures(self) -> Iterator[np.ndarray]:
         for frame in range(self.config.animation.frames):
+            if self.aborted:  # read unlocked: a bool, set once
+                raise RunError("the video was abandoned with its run")
             if frame in self.fresh:
                 with self.ready:
                     while frame not in self.arrived and not self.aborted:
