@@ -64,7 +64,7 @@ def encode_video(config: Config, digest: str, records: dict[int, dict[str, Any] 
     force : bool
         Make the video again even if the one on disk is current.
     progress : callable or None
-        Called as ``progress("video", done, total)`` as each frame is read.
+        Called as ``progress("video", done, total)`` first with 0, then as each frame is read.
     timings : dict
         Receives ``video``: the encoding's seconds [s].
 
@@ -86,6 +86,8 @@ def encode_video(config: Config, digest: str, records: dict[int, dict[str, Any] 
     count = config.animation.frames
 
     def pictures() -> Iterator[np.ndarray]:
+        if progress:
+            progress("video", 0, count)  # the stage's first call, as the others' (docs/api.md, "Progress")
         for frame in range(count):
             yield io.read_codes(frame_files(config, frame)[1])
             if progress:
