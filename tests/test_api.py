@@ -77,7 +77,7 @@ def test_a_run_reports_its_progress_and_resumes(tmp_path):
                              progress=lambda *said: calls.append(said))
     assert summary.rendered == (0, 1) and summary.video == folder / "config.mp4"
     assert ("frames", 2, 2) in calls and ("video", 2, 2) in calls and calls[0][0] == "cycle"
-    assert [said for said in calls if said[0] == "video"][0] == ("video", 0, 2)  # each stage's first call
+    assert next(said for said in calls if said[0] == "video") == ("video", 0, 2)  # each stage's first call
     assert {p.name for p in folder.glob("config.000?.*")} == {"config.0000.exr", "config.0000.png",
                                                              "config.0001.exr", "config.0001.png"}
     again = api.render_run(grove(), folder, cache=tmp_path / "cache", jobs=1)
